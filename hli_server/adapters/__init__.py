@@ -1,0 +1,1 @@
+"""hli_server/adapters"""

@@ -1,0 +1,151 @@
+"""The one table of alarms: number, severity, reaction, text.
+
+Numbers the documents give are used as given (FCT-C14: 120484, 120486, 120499, 50961, 50962, 50706;
+FCT-C3: 70092, 70162; FCT-A3: 70082). The project's own numbers live in the 9xxxxx range, grouped
+by subject, and are listed in ``docs/alarms.md`` (generated from this table: ``hli-server alarms``).
+
+Reactions:
+
+* ``PROGRAM_ABORT``: the channel's program is aborted, motion stops with the feedhold deceleration;
+* ``AXIS_STOP``: the axes named by the monitor stop at once (with their own deceleration);
+* ``REPORT``: warning only, nothing stops.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any
+
+__all__ = ["ALARMS", "Alarm", "AlarmDef", "Reaction", "Severity", "alarm_def"]
+
+
+class Severity(StrEnum):
+    ERROR = "error"
+    WARNING = "warning"
+
+
+class Reaction(StrEnum):
+    PROGRAM_ABORT = "program_abort"
+    AXIS_STOP = "axis_stop"
+    REPORT = "report"
+
+
+@dataclass(frozen=True, slots=True)
+class AlarmDef:
+    number: int
+    severity: Severity
+    reaction: Reaction
+    text: str
+    source: str
+    """Where the number comes from: the document (``FCT-C14``) or ``project``."""
+
+
+def _e(number: int, text: str, source: str, reaction: Reaction = Reaction.PROGRAM_ABORT) -> AlarmDef:
+    return AlarmDef(number, Severity.ERROR, reaction, text, source)
+
+
+def _w(number: int, text: str, source: str) -> AlarmDef:
+    return AlarmDef(number, Severity.WARNING, Reaction.REPORT, text, source)
+
+
+_TABLE: tuple[AlarmDef, ...] = (
+    # --- the documents' numbers -------------------------------------------------------------
+    _e(120484, "Point outside the work area", "FCT-C14"),
+    _e(120486, "Path leaves the work area", "FCT-C14"),
+    _w(120499, "Active work/protection area cannot be cleared", "FCT-C14"),
+    _e(50961, "Manual mode selected outside the work area", "FCT-C14 (P-CHAN-00442)"),
+    _e(50962, "Manual mode selected inside a protection area", "FCT-C14 (P-CHAN-00442)"),
+    _e(50706, "Measuring move reached the end of the travel range without a probe signal", "FCT-C14"),
+    _e(
+        70092,
+        "Axis collision monitoring: minimum distance of the pair violated",
+        "FCT-C3",
+        Reaction.AXIS_STOP,
+    ),
+    _w(70162, "Axis collision monitoring: the two coll_offset values differ, the larger applies", "FCT-C3"),
+    _e(
+        70082,
+        "Axis did not reach the exact-stop window within the settling time",
+        "FCT-A3",
+        Reaction.AXIS_STOP,
+    ),
+    # --- project's own: NC program syntax (910xxx) ------------------------------------------
+    _e(910100, "Unknown word in NC block", "project"),
+    _e(910101, "Malformed number in NC block", "project"),
+    _e(910102, "Unknown or unsupported G code", "project"),
+    _e(910103, "Word programmed twice in one block", "project"),
+    _e(910104, "Comment not closed", "project"),
+    _e(910105, "Malformed #CONTROL AREA command", "project"),
+    _e(910106, "Conflicting G codes in one block", "project"),
+    _e(910107, "Unknown axis name", "project"),
+    _e(910108, "Malformed block number", "project"),
+    _e(910109, "Unknown # command", "project"),
+    _e(910110, "Not supported by the simulator", "project"),
+    # --- project's own: decoder and motion (911xxx) -----------------------------------------
+    _e(911000, "No feed programmed for a feed move", "project"),
+    _e(911001, "Circle: centre or radius inconsistent", "project"),
+    _e(911002, "Circle: no centre programmed", "project"),
+    _e(911003, "Axis not in the active plane or not a main axis", "project"),
+    _e(911004, "Program end missing (no M30 / M02)", "project"),
+    _w(911005, "Program ended without M30 / M02", "project"),
+    _e(911010, "Programmed position beyond the negative software limit", "project (E-06)"),
+    _e(911011, "Programmed position beyond the positive software limit", "project (E-06)"),
+    _e(
+        911012,
+        "Actual position beyond the software limit plus tolerance",
+        "project (E-06)",
+        Reaction.AXIS_STOP,
+    ),
+    _w(911013, "Jog stopped at the software limit", "project (E-06)"),
+    _e(911020, "Axis not referenced", "project"),
+    _e(911021, "Command not allowed in this mode", "project"),
+    _e(911030, "Drive error", "project", Reaction.AXIS_STOP),
+    # --- project's own: work and protection areas (912xxx) ----------------------------------
+    _e(912000, "Point inside a protection area", "project (FCT-C14)"),
+    _e(912001, "Path enters a protection area", "project (FCT-C14)"),
+    _e(912002, "Area definition invalid", "project (FCT-C14)"),
+    _e(912003, "Area command invalid", "project (FCT-C14)"),
+    _w(912004, "Manual motion stopped at a work/protection area boundary", "project (FCT-C14, P-MANU-00014)"),
+)
+
+ALARMS: dict[int, AlarmDef] = {a.number: a for a in _TABLE}
+
+
+def alarm_def(number: int) -> AlarmDef:
+    return ALARMS[number]
+
+
+@dataclass(frozen=True, slots=True)
+class Alarm:
+    """One raised alarm (an event of the engine)."""
+
+    number: int
+    cycle: int
+    channel: int
+    message: str
+    line: int | None = None
+    block: str | None = None
+    axis: str | None = None
+    params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def definition(self) -> AlarmDef:
+        return ALARMS[self.number]
+
+    @property
+    def severity(self) -> Severity:
+        return self.definition.severity
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "id": self.number,
+            "severity": str(self.severity),
+            "cycle": self.cycle,
+            "channel": self.channel,
+            "line": self.line,
+            "block": self.block,
+            "axis": self.axis,
+            "message": self.message,
+            "params": dict(self.params),
+        }
