@@ -99,7 +99,7 @@ _TABLE: tuple[AlarmDef, ...] = (
     ),
     _w(911013, "Jog stopped at the software limit", "project (E-06)"),
     _e(911020, "Axis not referenced", "project"),
-    _e(911021, "Command not allowed in this mode", "project"),
+    _w(911021, "Command not allowed in this mode or state", "project"),
     _e(911030, "Drive error", "project", Reaction.AXIS_STOP),
     # --- project's own: work and protection areas (912xxx) ----------------------------------
     _e(912000, "Point inside a protection area", "project (FCT-C14)"),

@@ -1,0 +1,169 @@
+"""Axes: setpoint (from the interpolator or jog), the position-control loop and its faults (E-02).
+
+The drive model (project's own, configurable per axis in ``DriveModel``):
+
+    v_ff   = (setpoint_n - setpoint_n-1) / T_A                 velocity feed-forward
+    v_cmd  = feed_forward * v_ff + kv_eff * (setpoint_n - measured)
+    v     += (v_cmd - v) * T_A / (tau + T_A)                    first-order drive
+    v      = 0 if |v_cmd| <= friction (stiction)
+    actual += v * T_A
+    measured = actual + drift (or frozen, for a stuck encoder)
+
+so that following error in steady motion is about (1 - feed_forward) * v / kv and the axis settles
+into the exact-stop window after the setpoint stops. Faults are injected at run time (A3-05).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from schemas.config import AxisConfig, AxisType
+from schemas.units import mm_from_increments, mm_per_min_to_mm_per_s, s_from_us
+
+__all__ = ["Axis", "AxisFaults"]
+
+
+@dataclass(slots=True)
+class AxisFaults:
+    """Injected faults (A3-05): they make the position loop misbehave so a monitor can fire."""
+
+    friction: float = 0.0
+    """Stiction as a velocity dead band [mm/s]: commands below it do not move the axis."""
+    gain_factor: float = 1.0
+    """Multiplies kv (a worn or mistuned loop settles slower)."""
+    encoder_drift: float = 0.0
+    """Drift of the measuring system [mm/s]."""
+    encoder_stuck: bool = False
+    """The measuring system stops counting."""
+    drive_error: bool = False
+    """The drive reports an error: it stops at once (emergency deceleration)."""
+
+    def any(self) -> bool:
+        return (
+            self.friction > 0.0
+            or self.gain_factor != 1.0
+            or self.encoder_drift != 0.0
+            or self.encoder_stuck
+            or self.drive_error
+        )
+
+
+class Axis:
+    """One axis. ``index`` is its place in the configuration (gpAx[index]); ``number`` is A_ID."""
+
+    __slots__ = (
+        "_drift",
+        "a_emergency",
+        "a_max",
+        "actual",
+        "channel",
+        "config",
+        "drive_velocity",
+        "faults",
+        "index",
+        "jog_acceleration",
+        "jog_velocity",
+        "measured",
+        "name",
+        "number",
+        "prev_setpoint",
+        "referenced",
+        "rotary",
+        "setpoint",
+        "stop_deceleration",
+        "stop_velocity",
+        "stopping",
+        "swe_neg",
+        "swe_pos",
+        "swe_tol",
+        "v_max",
+        "v_rapid",
+    )
+
+    def __init__(self, config: AxisConfig, index: int) -> None:
+        self.config = config
+        self.index = index
+        self.number = config.number
+        self.name = config.name
+        self.channel = 0
+        self.rotary = config.axis_type == AxisType.ROTARY
+        self.a_max = config.a_max
+        self.a_emergency = config.a_emergency
+        self.v_max = mm_per_min_to_mm_per_s(config.v_max)
+        self.v_rapid = min(mm_per_min_to_mm_per_s(config.v_rapid), self.v_max)
+        self.jog_velocity = min(mm_per_min_to_mm_per_s(config.jog_velocity), self.v_max)
+        self.jog_acceleration = min(config.jog_acceleration, config.a_max)
+        self.swe_neg = mm_from_increments(config.swe_neg)
+        self.swe_pos = mm_from_increments(config.swe_pos)
+        self.swe_tol = mm_from_increments(config.swe_toleranz)
+        start = mm_from_increments(config.start_position)
+        self.setpoint = start
+        self.prev_setpoint = start
+        self.actual = start
+        self.measured = start
+        self._drift = 0.0
+        self.drive_velocity = 0.0
+        self.referenced = config.referenced
+        self.faults = AxisFaults()
+        self.stopping = False
+        self.stop_velocity = 0.0
+        self.stop_deceleration = 0.0
+
+    # --- setpoint side --------------------------------------------------------------------
+    @property
+    def setpoint_step(self) -> float:
+        """Setpoint travel of the last cycle [mm]; divided by T_A it is v_t of C3-08."""
+        return self.setpoint - self.prev_setpoint
+
+    def begin_cycle(self) -> None:
+        self.prev_setpoint = self.setpoint
+
+    def start_independent_stop(self, deceleration: float, t_a: float) -> None:
+        """Stop this axis on its own ramp, detached from the path (C3-01, A3-04, drive errors)."""
+        if self.stopping:
+            self.stop_deceleration = max(self.stop_deceleration, deceleration)
+            return
+        self.stopping = True
+        self.stop_velocity = (self.setpoint - self.prev_setpoint) / t_a
+        self.stop_deceleration = deceleration
+
+    def advance_independent_stop(self, t_a: float) -> None:
+        v = self.stop_velocity
+        dv = self.stop_deceleration * t_a
+        v = max(0.0, v - dv) if v > 0 else min(0.0, v + dv)
+        self.stop_velocity = v
+        self.setpoint += v * t_a
+
+    def release_stop(self) -> None:
+        self.stopping = False
+        self.stop_velocity = 0.0
+
+    # --- actual side: the position loop ---------------------------------------------------
+    def update_drive(self, t_a: float) -> None:
+        cfg = self.config.drive
+        f = self.faults
+        if f.drive_error:
+            # the drive is off: it coasts to a stop with the emergency deceleration
+            dv = self.a_emergency * t_a
+            v = self.drive_velocity
+            self.drive_velocity = max(0.0, v - dv) if v > 0 else min(0.0, v + dv)
+        else:
+            v_ff = (self.setpoint - self.prev_setpoint) / t_a
+            kv = cfg.kv * f.gain_factor
+            v_cmd = cfg.feed_forward * v_ff + kv * (self.setpoint - self.measured)
+            if f.friction > 0.0 and abs(v_cmd) <= f.friction:
+                v_cmd = 0.0
+                self.drive_velocity = 0.0
+            tau = s_from_us(cfg.time_constant_us)
+            self.drive_velocity += (v_cmd - self.drive_velocity) * t_a / (tau + t_a)
+        self.actual += self.drive_velocity * t_a
+        self._drift += f.encoder_drift * t_a
+        if not f.encoder_stuck:
+            self.measured = self.actual + self._drift
+
+    @property
+    def following_error(self) -> float:
+        return self.setpoint - self.measured
+
+    def reset_faults(self) -> None:
+        self.faults = AxisFaults()

@@ -1,0 +1,323 @@
+"""The decoder: modal NC state, machine coordinates, and the items for the planner (E-04, E-05).
+
+It pulls parsed blocks lazily, keeps the modal state (G0/G1/G2/G3, G90/G91, G17/G18/G19,
+G161/G162, G54..G59, G92, F), turns motion blocks into segments in machine coordinates (MCS = program
+coordinates + zero offset + G92 shift) and runs every path check before a block is queued: a block
+that fails a check is never queued; an error marker takes its place, so the path stops at the
+block's start point and the alarm is raised there (C14-15, E-06).
+
+Blocks between ``#CONTROL AREA BEGIN`` and ``END`` describe a contour: they go to the area handler
+and do not move the axes.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from hli_server.engine.geometry import LineSegment, Point, Segment, arc_from_centre
+from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
+from hli_server.engine.planner import Marker, MarkerKind, Motion
+
+__all__ = [
+    "AreaHandler",
+    "DecodeError",
+    "Decoder",
+    "ModalState",
+    "PathCheck",
+]
+
+ARC_RADIUS_TOLERANCE = 0.01
+"""mm: allowed difference of start and end radius of a programmed circle (project's own)."""
+
+
+@dataclass(frozen=True, slots=True)
+class DecodeError:
+    """What an error marker carries: the alarm number, its text and its parameters."""
+
+    alarm: int
+    message: str
+    params: dict[str, Any] = field(default_factory=dict)
+    axis: str | None = None
+
+
+class PathCheck(Protocol):
+    """A check of a whole block path before it is queued (soft limits, areas)."""
+
+    def __call__(self, segment: Segment, block: Block) -> DecodeError | None: ...
+
+
+class AreaHandler(Protocol):
+    """Receives the ``#CONTROL AREA`` commands and the contour blocks between BEGIN and END (FCT-C14).
+
+    ``command`` returns an error, or None; it may return a callable that the channel runs in
+    program order (at execution time) for effects a PLC must see then."""
+
+    def command(
+        self, cmd: AreaCommand, block: Block, position: Point, modal: ModalState
+    ) -> DecodeError | Callable[[], None] | None: ...
+
+    def contour(self, segment: Segment, block: Block, modal: ModalState) -> DecodeError | None: ...
+
+
+@dataclass(slots=True)
+class ModalState:
+    motion: int = 1
+    absolute: bool = True
+    plane: int = 17
+    centre_absolute: bool = False
+    feed: float | None = None
+    """mm/min"""
+    zero_offset: str | None = None
+    zero_offsets: dict[str, dict[str, float]] = field(default_factory=dict)
+    """G54..G59 -> axis -> mm"""
+    g92: dict[str, float] = field(default_factory=dict)
+    in_area_definition: bool = False
+
+    def offset(self, axis: str) -> float:
+        base = self.zero_offsets.get(self.zero_offset, {}).get(axis, 0.0) if self.zero_offset else 0.0
+        return base + self.g92.get(axis, 0.0)
+
+
+_PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}
+"""Indices into the main axes (first, second, third) of the plane's first and second axis."""
+_CENTRE_WORDS = {0: "I", 1: "J", 2: "K"}
+"""Circle centre word for the first, second, third main axis."""
+
+
+class Decoder:
+    """Turns blocks into planner items. ``axes`` is the channel's axis order (names)."""
+
+    def __init__(
+        self,
+        axes: list[str],
+        main_axes: tuple[str, str, str],
+        axis_limits: dict[str, tuple[float, float, float]],
+        zero_offsets: dict[str, dict[str, float]],
+    ) -> None:
+        self.axes = axes
+        self.index = {a: i for i, a in enumerate(axes)}
+        self.main = main_axes
+        self.axis_limits = axis_limits
+        """axis -> (v_max mm/s, v_rapid mm/s, a_max mm/s²)"""
+        self.modal = ModalState(zero_offsets=zero_offsets)
+        self.position: list[float] = [0.0] * len(axes)
+        self.blocks: Iterator[Block] | None = None
+        self.finished = False
+        self.path_checks: list[PathCheck] = []
+        self.area_handler: AreaHandler | None = None
+        self.current_block: Block | None = None
+
+    # --- program control -----------------------------------------------------------------
+    def start(self, blocks: Iterator[Block], position: list[float]) -> None:
+        self.blocks = blocks
+        self.position = list(position)
+        self.finished = False
+        self.modal.in_area_definition = False
+
+    def reset_modal(self) -> None:
+        """Reset: modal state back to its defaults, G92 cleared (zero offset table kept)."""
+        self.modal = ModalState(zero_offsets=self.modal.zero_offsets)
+        self.blocks = None
+        self.finished = True
+
+    def next_items(self) -> list[Motion | Marker]:
+        """Decode until at least one item is produced or the program ends."""
+        if self.finished or self.blocks is None:
+            return []
+        while True:
+            try:
+                block = next(self.blocks)
+            except StopIteration:
+                self.finished = True
+                return [Marker(MarkerKind.END, self.current_block, payload="eof")]
+            except NcError as exc:
+                self.finished = True
+                return [
+                    Marker(
+                        MarkerKind.ERROR,
+                        None,
+                        payload=DecodeError(exc.alarm, exc.message, {"line": exc.line, "block": exc.block}),
+                    )
+                ]
+            self.current_block = block
+            items = self._decode(block)
+            if items:
+                if any(isinstance(i, Marker) and i.kind in (MarkerKind.ERROR, MarkerKind.END) for i in items):
+                    self.finished = True
+                return items
+
+    # --- one block -------------------------------------------------------------------------
+    def _error(self, block: Block, alarm: int, message: str, **params: Any) -> list[Motion | Marker]:
+        return [Marker(MarkerKind.ERROR, block, payload=DecodeError(alarm, message, params))]
+
+    def _decode(self, block: Block) -> list[Motion | Marker]:
+        m = self.modal
+        if block.two_path:
+            return self._error(block, 910110, "two-path programming (': G0 ... : G0 ...') is not supported")
+        items: list[Motion | Marker] = []
+        if block.area is not None:
+            return self._area(block, block.area)
+        for g in block.g_codes:
+            if g in (0, 1, 2, 3):
+                m.motion = g
+            elif g == 90:
+                m.absolute = True
+            elif g == 91:
+                m.absolute = False
+            elif g in (17, 18, 19):
+                m.plane = g
+            elif g == 161:
+                m.centre_absolute = True
+            elif g == 162:
+                m.centre_absolute = False
+            elif 54 <= g <= 59:
+                m.zero_offset = f"G{g}"
+            elif g == 53:
+                m.zero_offset = None
+            elif g in (100, 200, 201, 202, 4):
+                return self._error(block, 910110, f"G{g} is not supported in this block context")
+        if block.feed is not None:
+            if block.feed <= 0:
+                return self._error(block, 911000, f"feed F{block.feed:g} must be positive")
+            m.feed = block.feed
+        if 92 in block.g_codes:
+            # G92: the current position gets the programmed program coordinates
+            for name, value in block.axes:
+                i = self.index[name]
+                base = m.zero_offsets.get(m.zero_offset, {}).get(name, 0.0) if m.zero_offset else 0.0
+                m.g92[name] = self.position[i] - base - value
+            return items
+        moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre))
+        if moves:
+            result = self._motion(block)
+            if isinstance(result, list):
+                return result
+            items.append(result)
+        for code in block.m_codes:
+            if code in (2, 30):
+                items.append(Marker(MarkerKind.END, block, payload=f"M{code:02d}"))
+        return items
+
+    def _target(self, block: Block) -> list[float]:
+        m = self.modal
+        target = list(self.position)
+        for name, value in block.axes:
+            i = self.index[name]
+            if m.absolute:
+                target[i] = value + m.offset(name)
+            else:
+                target[i] += value
+        return target
+
+    def _motion(self, block: Block) -> Motion | list[Motion | Marker]:
+        m = self.modal
+        start = tuple(self.position)
+        target = self._target(block)
+        segment: Segment
+        if m.motion in (0, 1):
+            segment = LineSegment(start, tuple(target))
+        else:
+            plane = _PLANE_AXES[m.plane]
+            first, second = self.main[plane[0]], self.main[plane[1]]
+            i, j = self.index[first], self.index[second]
+            cw = m.motion == 2
+            words = dict(block.centre)
+            wi, wj = _CENTRE_WORDS[plane[0]], _CENTRE_WORDS[plane[1]]
+            if wi not in words and wj not in words:
+                return self._error(block, 911002, f"circle G0{m.motion} without centre ({wi}/{wj})")
+            ci_val, cj_val = words.get(wi, 0.0), words.get(wj, 0.0)
+            if m.centre_absolute:
+                centre = (ci_val + m.offset(first), cj_val + m.offset(second))
+            else:
+                centre = (start[i] + ci_val, start[j] + cj_val)
+            arc, mismatch = arc_from_centre(start, tuple(target), (i, j), centre, cw)
+            if arc.radius <= 1e-9:
+                return self._error(block, 911001, "circle with radius 0")
+            if mismatch > ARC_RADIUS_TOLERANCE:
+                return self._error(
+                    block,
+                    911001,
+                    f"circle end point not on the circle: start radius {arc.radius:.4f} mm, "
+                    f"end radius differs by {mismatch:.4f} mm",
+                )
+            segment = arc
+        if m.in_area_definition:
+            if self.area_handler is not None:
+                err = self.area_handler.contour(segment, block, m)
+                if err is not None:
+                    return [Marker(MarkerKind.ERROR, block, payload=err)]
+            self.position = target
+            return []
+        if segment.length <= 1e-12:
+            self.position = target
+            return []
+        rapid = m.motion == 0
+        if not rapid and m.feed is None:
+            return self._error(block, 911000, "no feed (F word) programmed for a feed move")
+        for check in self.path_checks:
+            err = check(segment, block)
+            if err is not None:
+                return [Marker(MarkerKind.ERROR, block, payload=err)]
+        v_max, accel = self._limits(segment, rapid)
+        self.position = target
+        return Motion(
+            segment=segment,
+            block=block,
+            v_max=v_max,
+            accel=accel,
+            rapid=rapid,
+            exact_stop=60 in block.g_codes,
+        )
+
+    def _limits(self, segment: Segment, rapid: bool) -> tuple[float, float]:
+        """Path velocity and acceleration the axes allow along the segment (mm/s, mm/s²)."""
+        length = segment.length
+        v = math.inf if rapid else (self.modal.feed or 0.0) / 60.0
+        a = math.inf
+        if isinstance(segment, LineSegment):
+            for k, name in enumerate(self.axes):
+                share = abs(segment.end[k] - segment.start[k]) / length
+                if share <= 1e-12:
+                    continue
+                v_ax, v_rapid, a_ax = self.axis_limits[name]
+                v = min(v, (v_rapid if rapid else v_ax) / share)
+                a = min(a, a_ax / share)
+        else:
+            i, j = segment.plane
+            for k, name in enumerate(self.axes):
+                moving = k in (i, j) or abs(segment.end[k] - segment.start[k]) > 1e-12
+                if not moving:
+                    continue
+                v_ax, v_rapid, a_ax = self.axis_limits[name]
+                v = min(v, v_rapid if rapid else v_ax)
+                a = min(a, a_ax)
+            # share the acceleration between tangential and centripetal parts
+            a *= 0.5
+            v = min(v, math.sqrt(a * segment.radius))
+        if math.isinf(a):
+            a = 1000.0
+        return v, a
+
+    def _area(self, block: Block, cmd: AreaCommand) -> list[Motion | Marker]:
+        m = self.modal
+        if isinstance(cmd, AreaBegin):
+            if m.in_area_definition:
+                return self._error(
+                    block, 912002, "#CONTROL AREA BEGIN before the previous definition was closed by END"
+                )
+            m.in_area_definition = True
+        elif isinstance(cmd, AreaEnd):
+            if not m.in_area_definition:
+                return self._error(block, 912002, "#CONTROL AREA END without BEGIN")
+            m.in_area_definition = False
+        if self.area_handler is None:
+            return self._error(block, 910110, "#CONTROL AREA: work and protection areas are not configured")
+        result = self.area_handler.command(cmd, block, tuple(self.position), m)
+        if isinstance(result, DecodeError):
+            return [Marker(MarkerKind.ERROR, block, payload=result)]
+        if result is not None:
+            return [Marker(MarkerKind.ACTION, block, payload=result)]
+        return []

@@ -1,0 +1,147 @@
+"""Path segments of the channel's axes in machine coordinates (mm / °).
+
+A segment covers all axes of a channel: a point is a tuple with one coordinate per channel axis,
+in the channel's axis order. Lines move every axis linearly; arcs move two plane axes on a circle
+and the others linearly (helix).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+__all__ = ["ArcSegment", "LineSegment", "Point", "Segment", "arc_from_centre"]
+
+Point = tuple[float, ...]
+
+_TAU = 2.0 * math.pi
+
+
+@dataclass(frozen=True, slots=True)
+class LineSegment:
+    start: Point
+    end: Point
+
+    @property
+    def length(self) -> float:
+        return math.dist(self.start, self.end)
+
+    def point_at(self, s: float) -> Point:
+        """Point at path distance ``s`` from the start (clamped to the segment)."""
+        length = self.length
+        if length <= 0.0:
+            return self.end
+        f = min(max(s / length, 0.0), 1.0)
+        return tuple(a + (b - a) * f for a, b in zip(self.start, self.end, strict=True))
+
+    def direction_at(self, s: float) -> Point:
+        length = self.length
+        if length <= 0.0:
+            return tuple(0.0 for _ in self.start)
+        return tuple((b - a) / length for a, b in zip(self.start, self.end, strict=True))
+
+    def axis_extent(self, index: int) -> tuple[float, float]:
+        a, b = self.start[index], self.end[index]
+        return (min(a, b), max(a, b))
+
+
+@dataclass(frozen=True, slots=True)
+class ArcSegment:
+    """Circle (or helix) in the plane of axes ``plane`` = (first, second) index.
+
+    ``sweep`` is signed: positive counter-clockwise seen from the positive third axis (G03),
+    negative clockwise (G02); a full circle has |sweep| = 2π.
+    """
+
+    start: Point
+    end: Point
+    plane: tuple[int, int]
+    centre: tuple[float, float]
+    radius: float
+    start_angle: float
+    sweep: float
+
+    @property
+    def arc_length(self) -> float:
+        return abs(self.sweep) * self.radius
+
+    @property
+    def length(self) -> float:
+        i, j = self.plane
+        linear_sq = sum(
+            (b - a) ** 2 for k, (a, b) in enumerate(zip(self.start, self.end, strict=True)) if k not in (i, j)
+        )
+        return math.sqrt(self.arc_length**2 + linear_sq)
+
+    def point_at(self, s: float) -> Point:
+        length = self.length
+        f = 1.0 if length <= 0.0 else min(max(s / length, 0.0), 1.0)
+        if f >= 1.0:
+            return self.end
+        i, j = self.plane
+        angle = self.start_angle + self.sweep * f
+        p = [a + (b - a) * f for a, b in zip(self.start, self.end, strict=True)]
+        p[i] = self.centre[0] + self.radius * math.cos(angle)
+        p[j] = self.centre[1] + self.radius * math.sin(angle)
+        return tuple(p)
+
+    def direction_at(self, s: float) -> Point:
+        length = self.length
+        if length <= 0.0:
+            return tuple(0.0 for _ in self.start)
+        f = min(max(s / length, 0.0), 1.0)
+        i, j = self.plane
+        angle = self.start_angle + self.sweep * f
+        d = [(b - a) / length for a, b in zip(self.start, self.end, strict=True)]
+        k = self.sweep * self.radius / length
+        d[i] = -math.sin(angle) * k
+        d[j] = math.cos(angle) * k
+        return tuple(d)
+
+    def axis_extent(self, index: int) -> tuple[float, float]:
+        """Min and max of one axis over the whole arc (the arc's extremes count, E-06)."""
+        i, j = self.plane
+        lo = min(self.start[index], self.end[index])
+        hi = max(self.start[index], self.end[index])
+        if index not in (i, j):
+            return (lo, hi)
+        c = self.centre[0] if index == i else self.centre[1]
+        # extremes at angles where cos (first axis) or sin (second axis) is +-1
+        candidates = (0.0, math.pi) if index == i else (math.pi / 2, 3 * math.pi / 2)
+        for cand in candidates:
+            if _angle_on_sweep(cand, self.start_angle, self.sweep):
+                v = c + self.radius * (math.cos(cand) if index == i else math.sin(cand))
+                lo, hi = min(lo, v), max(hi, v)
+        return (lo, hi)
+
+
+def _angle_on_sweep(angle: float, start: float, sweep: float) -> bool:
+    if abs(sweep) >= _TAU - 1e-12:
+        return True
+    if sweep >= 0:
+        return (angle - start) % _TAU <= sweep
+    return (start - angle) % _TAU <= -sweep
+
+
+Segment = LineSegment | ArcSegment
+
+
+def arc_from_centre(
+    start: Point, end: Point, plane: tuple[int, int], centre: tuple[float, float], clockwise: bool
+) -> tuple[ArcSegment, float]:
+    """Build an arc; returns it and the radius mismatch |r_end - r_start| (the caller judges it)."""
+    i, j = plane
+    r0 = math.hypot(start[i] - centre[0], start[j] - centre[1])
+    r1 = math.hypot(end[i] - centre[0], end[j] - centre[1])
+    a0 = math.atan2(start[j] - centre[1], start[i] - centre[0])
+    a1 = math.atan2(end[j] - centre[1], end[i] - centre[0])
+    full = math.isclose(start[i], end[i], abs_tol=1e-9) and math.isclose(start[j], end[j], abs_tol=1e-9)
+    if clockwise:
+        sweep = -((a0 - a1) % _TAU)
+        if full or sweep == 0.0:
+            sweep = -_TAU
+    else:
+        sweep = (a1 - a0) % _TAU
+        if full or sweep == 0.0:
+            sweep = _TAU
+    return ArcSegment(start, end, plane, centre, r0, a0, sweep), abs(r1 - r0)

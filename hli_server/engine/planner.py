@@ -1,0 +1,229 @@
+"""Path interpolation with look-ahead (E-05).
+
+The decoder fills a queue of motion items (segments with their velocity and acceleration limits)
+and markers (program end, a pending error, an action to run in program order). Each cycle the path
+velocity follows
+
+    v_next = min(v + a*T_A, v_programmed * override, sqrt(v_exit^2 + 2 a s_remaining), stop limits)
+
+where v_exit is the highest velocity at the end of the current item from which every later item can
+still be reached within its own limits (a backward pass over the queue). The queue's end and every
+marker are points of standstill. Feedhold brakes with the channel's feedhold deceleration.
+
+Junctions: the velocity through a corner is limited as in a junction-deviation planner
+(``JUNCTION_DEVIATION`` mm); G60 (exact stop) and G00 blocks end in standstill.
+
+Other functions steer the path through ``stop_points``: an absolute path coordinate (mm travelled
+since the program start) at which the path must be at rest; the planner brakes with the feedhold
+deceleration so that it stops there (used by FCT-C43's dynamic limits).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from hli_server.engine.geometry import Point, Segment
+from hli_server.engine.nc.blocks import Block
+
+__all__ = ["JUNCTION_DEVIATION", "Marker", "MarkerKind", "Motion", "Planner"]
+
+JUNCTION_DEVIATION = 0.02
+"""mm: how far a corner may be cut in thought to bound the corner velocity (project's own)."""
+
+
+class MarkerKind:
+    END = "end"
+    ERROR = "error"
+    ACTION = "action"
+
+
+@dataclass(slots=True)
+class Motion:
+    segment: Segment
+    block: Block
+    v_max: float
+    """mm/s, programmed feed (or rapid) already limited by the axes."""
+    accel: float
+    """mm/s², path acceleration the axes allow."""
+    rapid: bool = False
+    exact_stop: bool = False
+    length: float = 0.0
+    s_start: float = 0.0
+    """Absolute path coordinate of the start (set when queued)."""
+    v_junction: float = 0.0
+    """Highest velocity at the end of this item given the direction change into the next."""
+    v_exit_max: float = 0.0
+    """Result of the backward pass."""
+    tag: Any = None
+
+
+@dataclass(slots=True)
+class Marker:
+    kind: str
+    block: Block | None
+    payload: Any = None
+    s_start: float = 0.0
+
+
+Item = Motion | Marker
+
+
+@dataclass(slots=True)
+class Planner:
+    t_a: float
+    feedhold_decel: float
+    queue: deque[Item] = field(default_factory=deque)
+    velocity: float = 0.0
+    position_in_item: float = 0.0
+    s_abs: float = 0.0
+    """Path travelled since the program start [mm]."""
+    s_queued_end: float = 0.0
+    feedhold: bool = False
+    override: float = 1.0
+    stop_points: dict[str, float] = field(default_factory=dict)
+    _dirty: bool = True
+
+    # --- filling -------------------------------------------------------------------------
+    def clear(self) -> None:
+        self.queue.clear()
+        self.velocity = 0.0
+        self.position_in_item = 0.0
+        self.s_abs = 0.0
+        self.s_queued_end = 0.0
+        self.stop_points.clear()
+        self._dirty = True
+
+    def push(self, item: Item) -> None:
+        if isinstance(item, Motion):
+            item.length = item.segment.length
+            item.s_start = self.s_queued_end
+            self.s_queued_end += item.length
+            prev = self._last_motion_before_end()
+            if prev is not None:
+                prev.v_junction = _junction_velocity(prev, item)
+        else:
+            item.s_start = self.s_queued_end
+        self.queue.append(item)
+        self._dirty = True
+
+    def _last_motion_before_end(self) -> Motion | None:
+        if not self.queue:
+            return None
+        last = self.queue[-1]
+        return last if isinstance(last, Motion) else None
+
+    @property
+    def motion_items(self) -> int:
+        return sum(1 for it in self.queue if isinstance(it, Motion))
+
+    @property
+    def queued_length(self) -> float:
+        """Path still queued ahead of the current position [mm]."""
+        return self.s_queued_end - self.s_abs
+
+    def _backward_pass(self) -> None:
+        v_next_entry = 0.0
+        for item in reversed(self.queue):
+            if isinstance(item, Marker):
+                v_next_entry = 0.0
+                continue
+            v_exit = min(item.v_junction, v_next_entry)
+            item.v_exit_max = v_exit
+            v_next_entry = min(item.v_max, math.sqrt(v_exit * v_exit + 2.0 * item.accel * item.length))
+        self._dirty = False
+
+    # --- queries for monitors ------------------------------------------------------------
+    def current(self) -> Item | None:
+        return self.queue[0] if self.queue else None
+
+    def position_at(self, s_abs: float) -> Point | None:
+        """Point of the queued path at absolute path coordinate ``s_abs`` (None beyond the queue)."""
+        for item in self.queue:
+            if (
+                isinstance(item, Motion)
+                and item.s_start - 1e-12 <= s_abs <= item.s_start + item.length + 1e-12
+            ):
+                return item.segment.point_at(s_abs - item.s_start)
+        return None
+
+    def brake_distance(self, decel: float | None = None) -> float:
+        a = decel if decel is not None else self.feedhold_decel
+        return self.velocity * self.velocity / (2.0 * a)
+
+    # --- one cycle -----------------------------------------------------------------------
+    def step(self) -> tuple[Point | None, list[Marker]]:
+        """Advance one cycle. Returns the new path point (None if nothing moved) and the markers
+        reached in this cycle, in order. A marker is reached only at standstill."""
+        if self._dirty:
+            self._backward_pass()
+        reached: list[Marker] = []
+        # markers at the head are executed at once when the path is at rest there
+        while self.queue and isinstance(self.queue[0], Marker):
+            marker = self.queue.popleft()
+            assert isinstance(marker, Marker)
+            reached.append(marker)
+            if marker.kind != MarkerKind.ACTION:
+                return None, reached
+        if not self.queue:
+            self.velocity = 0.0
+            return None, reached
+        item = self.queue[0]
+        assert isinstance(item, Motion)
+        t = self.t_a
+        v = self.velocity
+        s_rem = item.length - self.position_in_item
+        v_exit = item.v_exit_max
+        v_limit = math.sqrt(v_exit * v_exit + 2.0 * item.accel * max(s_rem, 0.0))
+        v_prog = item.v_max * self.override
+        for s_stop in self.stop_points.values():
+            d = s_stop - self.s_abs
+            v_limit = min(v_limit, math.sqrt(2.0 * self.feedhold_decel * d) if d > 0 else 0.0)
+        if self.feedhold:
+            v_next = max(0.0, v - self.feedhold_decel * t)
+        elif v_prog < v:
+            v_next = max(v_prog, v - max(item.accel, self.feedhold_decel) * t)
+        else:
+            v_next = min(v + item.accel * t, v_prog)
+        v_next = min(v_next, v_limit)
+        ds = v_next * t
+        self.velocity = v_next
+        if ds <= 0.0:
+            return (item.segment.point_at(self.position_in_item) if v > 0 else None), reached
+        # advance, possibly across junctions
+        while True:
+            s_rem = item.length - self.position_in_item
+            if ds < s_rem - 1e-12:
+                self.position_in_item += ds
+                self.s_abs += ds
+                return item.segment.point_at(self.position_in_item), reached
+            self.s_abs = item.s_start + item.length
+            ds -= max(s_rem, 0.0)
+            self.queue.popleft()
+            self.position_in_item = 0.0
+            nxt = self.queue[0] if self.queue else None
+            if not isinstance(nxt, Motion) or item.v_exit_max <= 1e-9:
+                self.velocity = 0.0  # standstill at the end of the item
+                return item.segment.end, reached
+            item = nxt
+            if ds <= 1e-12:
+                return item.segment.start, reached
+
+
+def _junction_velocity(a: Motion, b: Motion) -> float:
+    if a.exact_stop or a.rapid or b.rapid:
+        return 0.0
+    da = a.segment.direction_at(a.length)
+    db = b.segment.direction_at(0.0)
+    cos_theta = -sum(x * y for x, y in zip(da, db, strict=True))  # angle between -da and db
+    v_lim = min(a.v_max, b.v_max)
+    if cos_theta < -0.999999:  # straight on
+        return v_lim
+    if cos_theta > 0.999999:  # reversal
+        return 0.0
+    sin_half = math.sqrt(max(0.0, 0.5 * (1.0 - cos_theta)))
+    accel = min(a.accel, b.accel)
+    v = math.sqrt(accel * JUNCTION_DEVIATION * sin_half / (1.0 - sin_half))
+    return min(v, v_lim)
