@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from typing import TYPE_CHECKING, Protocol
 
 from hli_server.engine.axis import Axis
-from hli_server.engine.decoder import Decoder, DecodeError
+from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.geometry import Point
 from hli_server.engine.hli import ChannelHli, ModeRequest, ProgramState
 from hli_server.engine.nc.blocks import Block
