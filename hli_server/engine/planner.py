@@ -176,17 +176,18 @@ class Planner:
         v = self.velocity
         s_rem = item.length - self.position_in_item
         v_exit = item.v_exit_max
-        v_limit = math.sqrt(v_exit * v_exit + 2.0 * item.accel * max(s_rem, 0.0))
+        v_limit = _braking_limit(v_exit, item.accel, s_rem, t)
         v_prog = item.v_max * self.override
         for s_stop in self.stop_points.values():
-            d = s_stop - self.s_abs
-            v_limit = min(v_limit, math.sqrt(2.0 * self.feedhold_decel * d) if d > 0 else 0.0)
+            v_limit = min(v_limit, _braking_limit(0.0, self.feedhold_decel, s_stop - self.s_abs, t))
         if self.feedhold:
             v_next = max(0.0, v - self.feedhold_decel * t)
         elif v_prog < v:
             v_next = max(v_prog, v - max(item.accel, self.feedhold_decel) * t)
         else:
-            v_next = min(v + item.accel * t, v_prog)
+            # from rest the first cycle's mean velocity of a ramp is a*T/2, then +a*T per cycle
+            dv = item.accel * t * (0.5 if v <= 0.0 else 1.0)
+            v_next = min(v + dv, v_prog)
         v_next = min(v_next, v_limit)
         ds = v_next * t
         self.velocity = v_next
@@ -210,6 +211,15 @@ class Planner:
             item = nxt
             if ds <= 1e-12:
                 return item.segment.start, reached
+
+
+def _braking_limit(v_end: float, accel: float, distance: float, t: float) -> float:
+    """Highest velocity for the next cycle from which the discrete ramp (v falls by a*T per cycle)
+    still reaches ``v_end`` within ``distance``: v²/(2a) + v*T/2 <= distance + v_end²/(2a)."""
+    if distance <= 0.0:
+        return min(v_end, 0.0) if v_end <= 0.0 else 0.0
+    half = 0.5 * accel * t
+    return -half + math.sqrt(half * half + v_end * v_end + 2.0 * accel * distance)
 
 
 def _junction_velocity(a: Motion, b: Motion) -> float:
