@@ -109,12 +109,14 @@ class Decoder:
         self.path_checks: list[PathCheck] = []
         self.area_handler: AreaHandler | None = None
         self.current_block: Block | None = None
+        self.blocks_decoded = 0
 
     # --- program control -----------------------------------------------------------------
     def start(self, blocks: Iterator[Block], position: list[float]) -> None:
         self.blocks = blocks
         self.position = list(position)
         self.finished = False
+        self.blocks_decoded = 0
         self.modal.in_area_definition = False
 
     def reset_modal(self) -> None:
@@ -143,6 +145,7 @@ class Decoder:
                     )
                 ]
             self.current_block = block
+            self.blocks_decoded += 1
             items = self._decode(block)
             if items:
                 if any(isinstance(i, Marker) and i.kind in (MarkerKind.ERROR, MarkerKind.END) for i in items):
