@@ -1,0 +1,84 @@
+"""Speed of the engine (E-01) and of ``check --geometry-only``.
+
+1. Cycles per second of the demo machine running a long program (lines and arcs), in full simulation
+   with every monitor installed. Reference: real time at T_A = 1 ms (1000 cycles/s); printed as a
+   multiple of real time.
+2. NC blocks per second of ``check --geometry-only`` on a long program. Reference, same run, same
+   text: the parser alone (``iter_blocks``); the ratio shows what decoding and path checks cost on top.
+
+    .venv/bin/python -m benchmarks.bench_engine [--blocks N] [--seconds S]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from hli_server.commands.check import check_program
+from hli_server.configuration import load_machine
+from hli_server.engine import Machine
+from hli_server.engine.hli import ProgramState
+from hli_server.engine.nc.parser import iter_blocks
+
+
+def long_program(blocks: int) -> str:
+    """Squares of lines and quarter arcs inside +-200 mm, as a CAM system would emit them."""
+    out = ["N1 G90 G01 X0 Y0 Z0 F6000"]
+    n = 2
+    while n < blocks:
+        r = 20.0 + (n % 50)
+        out.append(f"N{n} G01 X{r:.3f} Y0")
+        out.append(f"N{n + 1} G03 X0 Y{r:.3f} I-{r:.3f} J0")
+        out.append(f"N{n + 2} G01 X-{r:.3f} Y{r:.3f}")
+        out.append(f"N{n + 3} G01 X0 Y0")
+        n += 4
+    out.append(f"N{n} M30")
+    return "\n".join(out) + "\n"
+
+
+def bench_cycles(seconds: float) -> None:
+    config = load_machine(None)
+    machine = Machine(config)
+    ch = machine.channel(1)
+    ch.load_program(long_program(200_000), "bench")
+    ch.request_start()
+    machine.step(1)
+    began = time.perf_counter()
+    cycles = 0
+    while time.perf_counter() - began < seconds and ch.state == ProgramState.RUNNING:
+        machine.step(1000)
+        cycles += 1000
+    elapsed = time.perf_counter() - began
+    rate = cycles / elapsed
+    realtime = 1e6 / config.cycle_time_us
+    print(f"engine: {rate:,.0f} cycles/s (demo machine, {len(machine.monitors)} monitors, program running)")
+    print(f"reference: real time at T_A = {config.cycle_time_us} us = {realtime:,.0f} cycles/s")
+    print(f"ratio: {rate / realtime:.2f}x real time")
+
+
+def bench_geometry(blocks: int) -> None:
+    text = long_program(blocks)
+    machine = Machine(load_machine(None))
+    axes = machine.channel(1).axis_names
+    began = time.perf_counter()
+    parsed = sum(1 for _ in iter_blocks(text, axes))
+    parse_rate = parsed / (time.perf_counter() - began)
+    result = check_program(machine, text, geometry_only=True)
+    check_rate = result.blocks / result.elapsed_s
+    assert result.completed, result.to_json()["alarms"]
+    print(f"check --geometry-only: {check_rate:,.0f} blocks/s ({result.blocks:,} blocks)")
+    print(f"reference: parser alone: {parse_rate:,.0f} blocks/s")
+    print(f"ratio: {check_rate / parse_rate:.2f} (check / parse)")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--blocks", type=int, default=200_000)
+    ap.add_argument("--seconds", type=float, default=5.0)
+    args = ap.parse_args()
+    bench_cycles(args.seconds)
+    bench_geometry(args.blocks)
+
+
+if __name__ == "__main__":
+    main()
