@@ -11,10 +11,11 @@ here; the text-list importer and the docs are derived from it.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from enum import StrEnum
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from schemas.units import DINT_MAX, DINT_MIN, UDINT_MAX
 
@@ -22,6 +23,7 @@ __all__ = [
     "AXIS_PARAMETERS",
     "CHANNEL_PARAMETERS",
     "COLLISION_MODE_BIT",
+    "MANUAL_PARAMETERS",
     "AxisConfig",
     "AxisType",
     "ChannelConfig",
@@ -30,6 +32,8 @@ __all__ = [
     "MachineConfig",
     "ManualConfig",
     "ParameterInfo",
+    "ParameterIssue",
+    "ParameterIssues",
     "ProgramEntry",
     "ZeroOffset",
 ]
@@ -38,6 +42,34 @@ COLLISION_MODE_BIT = 0x8000
 """P-AXIS-00015 ``kenngr.achs_mode`` bit that switches axis collision monitoring on (FCT-C3)."""
 
 Dint = Annotated[int, Field(ge=DINT_MIN, le=DINT_MAX)]
+
+
+@dataclass(frozen=True, slots=True)
+class ParameterIssue:
+    """One finding of a cross-field check, with what it is about (E-07).
+
+    ``field`` names the model field the finding is about; ``axis`` (an axis name) or ``channel``
+    (a channel number) say which axis or channel it belongs to when a machine-wide check finds it.
+    The configuration loader uses these to point at the file, line and key that set the value.
+    """
+
+    message: str
+    field: str | None = None
+    axis: str | None = None
+    channel: int | None = None
+
+
+class ParameterIssues(ValueError):  # noqa: N818 - a ValueError, so that pydantic reports it
+    """All findings of one model's cross-field checks (raised once, so that none is lost; E-07)."""
+
+    def __init__(self, issues: list[ParameterIssue]) -> None:
+        super().__init__("; ".join(i.message for i in issues))
+        self.issues = tuple(issues)
+
+
+def _raise_issues(issues: list[ParameterIssue]) -> None:
+    if issues:
+        raise ParameterIssues(issues)
 
 
 class _Strict(BaseModel):
@@ -66,7 +98,9 @@ class DriveModel(_Strict):
     """
 
     kv: float = Field(default=60.0, gt=0.0, le=10_000.0, description="position loop gain [1/s]")
-    feed_forward: float = Field(default=0.9, ge=0.0, le=1.0, description="velocity feed-forward [0..1]")
+    feed_forward: float = Field(
+        default=0.9, ge=0.0, le=1.0, description="velocity feed-forward factor (0 none .. 1 full)"
+    )
     time_constant_us: int = Field(
         default=2_000, ge=0, le=1_000_000, description="drive velocity time constant [µs]"
     )
@@ -78,24 +112,35 @@ class DriveModel(_Strict):
 class AxisConfig(_Strict):
     """One axis, in the documents' units."""
 
-    number: int = Field(ge=1, le=UDINT_MAX, description="kopf.achs_nr: logical axis number (A_ID)")
+    number: int = Field(ge=1, le=UDINT_MAX, description="logical axis number (A_ID), unique")
     name: str = Field(pattern=r"^[A-Z][A-Z0-9]{0,7}$", description="axis name in NC programs: X, Y, X2 ...")
-    axis_type: AxisType = AxisType.TRANSLATORY
+    axis_type: AxisType = Field(
+        default=AxisType.TRANSLATORY, description="axis type: T translatory, R rotary (0.0001° units)"
+    )
     achs_mode: int = Field(
-        default=0x00000001, ge=0x00000001, le=0x10000000, description="P-AXIS-00015 kenngr.achs_mode"
+        default=0x00000001,
+        ge=0x00000001,
+        le=0x10000000,
+        description="P-AXIS-00015 operating mode of the axis; bit 0x8000: collision monitoring (FCT-C3)",
     )
     a_emergency: float = Field(
         default=5000.0, gt=0.0, description="P-AXIS-00003 emergency deceleration [mm/s²]"
     )
     a_max: float = Field(default=2000.0, gt=0.0, description="P-AXIS-00008 maximum acceleration [mm/s²]")
     coll_check_ax_nr: int = Field(
-        default=0, ge=0, le=UDINT_MAX, description="P-AXIS-00043 logical number of the collision partner"
+        default=0,
+        ge=0,
+        lt=UDINT_MAX,
+        description="P-AXIS-00043 logical number of the collision partner (0: none)",
     )
     coll_decelerate_chan: bool = Field(
         default=False, description="P-AXIS-00044 stop both channels on a drive error of the pair"
     )
     coll_offset: int = Field(
-        default=0, ge=0, le=UDINT_MAX, description="P-AXIS-00045 minimum distance of the pair [0.1 µm]"
+        default=0,
+        ge=0,
+        lt=UDINT_MAX,
+        description="P-AXIS-00045 minimum distance of the pair [0.1 µm] (0: none, else > 1)",
     )
     settling_time_legacy_us: int = Field(
         default=0,
@@ -103,15 +148,37 @@ class AxisConfig(_Strict):
         le=DINT_MAX,
         description="P-AXIS-00151 older settling-time parameter, used when P-AXIS-00532 < 0 [µs]",
     )
-    swe_neg: Dint = Field(default=-100_000_000, description="P-AXIS-00177 negative software limit [0.1 µm]")
-    swe_pos: Dint = Field(default=100_000_000, description="P-AXIS-00178 positive software limit [0.1 µm]")
+    # FCT-C14 6.2: MIN(SGN32) < swe_neg < P-AXIS-00178 < swe_pos < MAX(SGN32)
+    swe_neg: int = Field(
+        default=-100_000_000,
+        gt=DINT_MIN,
+        le=DINT_MAX,
+        description="P-AXIS-00177 negative software limit [0.1 µm]",
+    )
+    swe_pos: int = Field(
+        default=100_000_000,
+        ge=DINT_MIN,
+        lt=DINT_MAX,
+        description="P-AXIS-00178 positive software limit [0.1 µm]",
+    )
     swe_toleranz: int = Field(
         default=0, ge=0, le=DINT_MAX, description="P-AXIS-00179 tolerance of actual positions [0.1 µm]"
     )
     window: int = Field(default=500, ge=0, le=DINT_MAX, description="P-AXIS-00236 exact-stop window [0.1 µm]")
-    coll_moving_dir_inverted: bool = Field(default=False, description="P-AXIS-00262")
-    coll_zero_position_offset: Dint = Field(default=0, description="P-AXIS-00263 [0.1 µm]")
-    coll_use_a_emergency: bool = Field(default=False, description="P-AXIS-00267")
+    coll_moving_dir_inverted: bool = Field(
+        default=False,
+        description="P-AXIS-00262 the pair moves mechanically in opposite directions (master axis)",
+    )
+    # FCT-C3 4.2: MIN(SGN32) < coll_zero_position_offset < MAX(SGN32)
+    coll_zero_position_offset: int = Field(
+        default=0,
+        gt=DINT_MIN,
+        lt=DINT_MAX,
+        description="P-AXIS-00263 zero point of the partner in the master axis' coordinates [0.1 µm]",
+    )
+    coll_use_a_emergency: bool = Field(
+        default=False, description="P-AXIS-00267 brake with a_emergency instead of a_max on a collision"
+    )
     position_settling_time_us: Dint = Field(
         default=-1, description="P-AXIS-00532 max settling time into the window [µs]; 0 off, <0 P-AXIS-00151"
     )
@@ -126,13 +193,34 @@ class AxisConfig(_Strict):
 
     @model_validator(mode="after")
     def _check_ranges(self) -> AxisConfig:
+        """E-06/E-07: the ranges that tie two fields together (FCT-C14 6.2, FCT-C3 4.2)."""
+        issues: list[ParameterIssue] = []
         if not self.swe_neg < self.swe_pos:
-            raise ValueError(
-                f"axis {self.name}: P-AXIS-00177 swe_neg ({self.swe_neg}) must be less than "
-                f"P-AXIS-00178 swe_pos ({self.swe_pos})"
+            issues.append(
+                ParameterIssue(
+                    f"axis {self.name}: P-AXIS-00177 swe_neg ({self.swe_neg}) must be less than "
+                    f"P-AXIS-00178 swe_pos ({self.swe_pos})",
+                    field="swe_neg",
+                )
             )
         if self.coll_offset == 1:
-            raise ValueError(f"axis {self.name}: P-AXIS-00045 coll_offset must be > 1 (1 < coll_offset)")
+            issues.append(
+                ParameterIssue(
+                    f"axis {self.name}: P-AXIS-00045 coll_offset must be 0 (none) or > 1 (1 < coll_offset)",
+                    field="coll_offset",
+                )
+            )
+        if self.axis_type is not AxisType.TRANSLATORY and (
+            self.coll_check_ax_nr or self.collision_monitoring
+        ):
+            issues.append(
+                ParameterIssue(
+                    f"axis {self.name}: axis collision monitoring (FCT-C3) is for translatory axes only "
+                    f"(axis type {self.axis_type.value})",
+                    field="achs_mode" if self.collision_monitoring else "coll_check_ax_nr",
+                )
+            )
+        _raise_issues(issues)
         return self
 
     @property
@@ -144,17 +232,17 @@ class AxisConfig(_Strict):
 class ZeroOffset(_Strict):
     """One settable zero offset G54..G59 [0.1 µm per axis name]."""
 
-    code: Literal["G54", "G55", "G56", "G57", "G58", "G59"]
-    offsets: dict[str, Dint] = Field(default_factory=dict)
+    code: Literal["G54", "G55", "G56", "G57", "G58", "G59"] = Field(description="the zero offset's G code")
+    offsets: dict[str, Dint] = Field(default_factory=dict, description="offset per axis name [0.1 µm]")
 
 
 class ProgramEntry(_Strict):
     """A program the PLC can select by number (project's own program table)."""
 
-    number: int = Field(ge=1, le=65535)
-    name: str
-    text: str | None = None
-    path: str | None = None
+    number: int = Field(ge=1, le=65535, description="program number the PLC selects")
+    name: str = Field(description="program name")
+    text: str | None = Field(default=None, description="the NC program text (DIN 66025)")
+    path: str | None = Field(default=None, description="file of the NC program")
 
     @model_validator(mode="after")
     def _one_source(self) -> ProgramEntry:
@@ -164,20 +252,37 @@ class ProgramEntry(_Strict):
 
 
 class ChannelConfig(_Strict):
-    number: int = Field(default=1, ge=1, le=12)
-    name: str = "Channel 1"
+    number: int = Field(default=1, ge=1, le=12, description="channel number (gpCh index + 1)")
+    name: str = Field(default="Channel 1", description="channel name")
     axes: list[str] = Field(min_length=1, description="names of the axes of this channel")
     main_axes: tuple[str, str, str] = Field(
         default=("X", "Y", "Z"), description="first, second and third main axis (G17: X/Y, Z)"
     )
     interpolator_function: list[InterpolatorFunction] = Field(
         default_factory=lambda: [InterpolatorFunction.FCT_IPO_DEFAULT],
-        description="P-STUP-00070 configuration.channel[i].interpolator.function",
+        description="P-STUP-00070 functions of the interpolator; FCT_DYN_POS_LIMIT enables FCT-C43",
     )
-    meas_soft_limit_move_path: bool = Field(default=False, description="P-CHAN-00268")
-    suppress_workspace_monitoring_manual_mode: int = Field(default=0, ge=0, le=2, description="P-CHAN-00442")
-    dpl_tol_limit_change: int = Field(default=0, ge=0, le=DINT_MAX, description="P-CHAN-00751 [0.1 µm]")
-    dpl_input_cycles: int = Field(default=1, ge=1, le=1000, description="P-CHAN-00874 [cycles]")
+    meas_soft_limit_move_path: bool = Field(
+        default=False, description="P-CHAN-00268 measuring moves (G100) may target beyond the software limits"
+    )
+    suppress_workspace_monitoring_manual_mode: int = Field(
+        default=0,
+        ge=0,
+        le=2,
+        description="P-CHAN-00442 work area monitoring in manual mode: 0 on, 1 off, 2 on without entry check",
+    )
+    dpl_tol_limit_change: int = Field(
+        default=0,
+        ge=0,
+        le=DINT_MAX,
+        description="P-CHAN-00751 tolerance for changing a dynamic position limit (FCT-C43) [0.1 µm]",
+    )
+    dpl_input_cycles: int = Field(
+        default=1,
+        ge=1,
+        le=1000,
+        description="P-CHAN-00874 input cycles of the dynamic position limits (FCT-C43) [cycles]",
+    )
     feedhold_deceleration: float = Field(
         default=1000.0, gt=0.0, description="path deceleration of feedhold [mm/s²] (project's own)"
     )
@@ -189,22 +294,82 @@ class ChannelConfig(_Strict):
         """C43-01: FCT_DYN_POS_LIMIT in P-STUP-00070."""
         return InterpolatorFunction.FCT_DYN_POS_LIMIT in self.interpolator_function
 
+    @field_validator("interpolator_function", mode="before")
+    @classmethod
+    def _split_keywords(cls, value: Any) -> Any:
+        """P-STUP-00070 as the documents write it: ``FCT_LOOK_AHEAD_STANDARD | FCT_DYN_POS_LIMIT``."""
+        if isinstance(value, str):
+            return [part.strip() for part in value.split("|")]
+        return value
+
     @model_validator(mode="after")
     def _check_axes(self) -> ChannelConfig:
+        issues: list[ParameterIssue] = []
         missing = [a for a in self.main_axes if a not in self.axes]
         if missing:
-            raise ValueError(f"channel {self.number}: main axes {missing} are not axes of the channel")
+            issues.append(
+                ParameterIssue(
+                    f"channel {self.number}: main axes {missing} are not axes of the channel {self.axes}",
+                    field="main_axes",
+                )
+            )
+        if len(set(self.main_axes)) != len(self.main_axes):
+            issues.append(
+                ParameterIssue(
+                    f"channel {self.number}: the three main axes must differ, got {list(self.main_axes)}",
+                    field="main_axes",
+                )
+            )
         if len(set(self.axes)) != len(self.axes):
-            raise ValueError(f"channel {self.number}: an axis is listed twice in {self.axes}")
+            issues.append(
+                ParameterIssue(f"channel {self.number}: an axis is listed twice in {self.axes}", field="axes")
+            )
+        if len(set(self.interpolator_function)) != len(self.interpolator_function):
+            issues.append(
+                ParameterIssue(
+                    f"channel {self.number}: P-STUP-00070 names a keyword twice: "
+                    + " | ".join(f.value for f in self.interpolator_function),
+                    field="interpolator_function",
+                )
+            )
+        program_numbers = [p.number for p in self.programs]
+        if len(set(program_numbers)) != len(program_numbers):
+            issues.append(
+                ParameterIssue(
+                    f"channel {self.number}: program numbers must be unique, got {program_numbers}",
+                    field="programs",
+                )
+            )
+        codes = [z.code for z in self.zero_offsets]
+        if len(set(codes)) != len(codes):
+            issues.append(
+                ParameterIssue(
+                    f"channel {self.number}: each zero offset G54..G59 may be given once, got {codes}",
+                    field="zero_offsets",
+                )
+            )
+        for z in self.zero_offsets:
+            unknown = sorted(set(z.offsets) - set(self.axes))
+            if unknown:
+                issues.append(
+                    ParameterIssue(
+                        f"channel {self.number}: zero offset {z.code} names axes {unknown} "
+                        f"that are not axes of the channel {self.axes}",
+                        field="zero_offsets",
+                    )
+                )
+        _raise_issues(issues)
         return self
 
 
 class ManualConfig(_Strict):
-    move_limit_warning: bool = Field(default=False, description="P-MANU-00014")
+    move_limit_warning: bool = Field(
+        default=False, description="P-MANU-00014 warn when a manual move stops at a limit or area boundary"
+    )
 
 
 class MachineConfig(_Strict):
-    name: str = "machine"
+    name: str = Field(default="machine", description="machine name (reports, MQTT topics)")
     cycle_time_us: int = Field(default=1000, ge=100, le=100_000, description="interpolation cycle T_A [µs]")
     axes: list[AxisConfig] = Field(min_length=1)
     channels: list[ChannelConfig] = Field(min_length=1)
@@ -212,44 +377,118 @@ class MachineConfig(_Strict):
 
     @model_validator(mode="after")
     def _check_machine(self) -> MachineConfig:
+        """E-07: machine-wide checks; C3-04: the collision pairs (FCT-C3 section 2 and 4.2)."""
+        issues: list[ParameterIssue] = []
         names = [a.name for a in self.axes]
-        numbers = [a.number for a in self.axes]
-        if len(set(names)) != len(names):
-            raise ValueError(f"axis names must be unique: {names}")
-        if len(set(numbers)) != len(numbers):
-            raise ValueError(f"logical axis numbers (kopf.achs_nr) must be unique: {numbers}")
+        seen_names: set[str] = set()
+        seen_numbers: dict[int, str] = {}
+        for a in self.axes:
+            if a.name in seen_names:
+                issues.append(
+                    ParameterIssue(f"axis names must be unique: {names}", field="name", axis=a.name)
+                )
+            seen_names.add(a.name)
+            if a.number in seen_numbers:
+                issues.append(
+                    ParameterIssue(
+                        f"axis {a.name}: logical axis number (kopf.achs_nr) {a.number} is already used "
+                        f"by axis {seen_numbers[a.number]}; the numbers must be unique",
+                        field="number",
+                        axis=a.name,
+                    )
+                )
+            else:
+                seen_numbers[a.number] = a.name
         owner: dict[str, int] = {}
         for ch in self.channels:
             for ax_name in ch.axes:
                 if ax_name not in names:
-                    raise ValueError(f"channel {ch.number}: unknown axis {ax_name!r} (axes: {names})")
-                if ax_name in owner:
-                    raise ValueError(
-                        f"axis {ax_name} belongs to channel {owner[ax_name]} and channel {ch.number}"
+                    issues.append(
+                        ParameterIssue(
+                            f"channel {ch.number}: unknown axis {ax_name!r} (axes: {names})",
+                            field="axes",
+                            channel=ch.number,
+                        )
                     )
-                owner[ax_name] = ch.number
+                elif ax_name in owner and owner[ax_name] != ch.number:
+                    issues.append(
+                        ParameterIssue(
+                            f"axis {ax_name} belongs to channel {owner[ax_name]} and channel {ch.number}",
+                            field="axes",
+                            channel=ch.number,
+                        )
+                    )
+                owner.setdefault(ax_name, ch.number)
         ch_numbers = [c.number for c in self.channels]
         if len(set(ch_numbers)) != len(ch_numbers):
-            raise ValueError(f"channel numbers must be unique: {ch_numbers}")
+            issues.append(
+                ParameterIssue(
+                    f"channel numbers must be unique: {ch_numbers}",
+                    field="number",
+                    channel=next(n for n in ch_numbers if ch_numbers.count(n) > 1),
+                )
+            )
         by_number = {a.number: a for a in self.axes}
         for ax in self.axes:
-            if ax.coll_check_ax_nr:
-                partner = by_number.get(ax.coll_check_ax_nr)
-                if partner is None:
-                    raise ValueError(
+            if not ax.coll_check_ax_nr:
+                continue
+            partner = by_number.get(ax.coll_check_ax_nr)
+            if partner is None:
+                issues.append(
+                    ParameterIssue(
                         f"axis {ax.name}: P-AXIS-00043 coll_check_ax_nr {ax.coll_check_ax_nr} "
-                        "is no logical axis number"
+                        f"is no logical axis number (numbers: {sorted(by_number)})",
+                        field="coll_check_ax_nr",
+                        axis=ax.name,
                     )
-                if partner.number == ax.number:
-                    raise ValueError(f"axis {ax.name}: P-AXIS-00043 names the axis itself")
-                if not (ax.collision_monitoring and partner.collision_monitoring):
-                    raise ValueError(
-                        f"axes {ax.name}/{partner.name}: a collision pair needs bit 0x8000 in "
-                        "P-AXIS-00015 kenngr.achs_mode of both axes"
+                )
+                continue
+            if partner is ax:
+                issues.append(
+                    ParameterIssue(
+                        f"axis {ax.name}: P-AXIS-00043 coll_check_ax_nr names the axis itself",
+                        field="coll_check_ax_nr",
+                        axis=ax.name,
                     )
-                if ax.coll_offset <= 1 and partner.coll_offset <= 1:
-                    raise ValueError(f"axis {ax.name}: a collision pair needs P-AXIS-00045 coll_offset > 1")
+                )
+                continue
+            for member in (ax, partner):
+                if not member.collision_monitoring:
+                    issues.append(
+                        ParameterIssue(
+                            f"axes {ax.name}/{partner.name}: a collision pair needs bit 0x8000 in "
+                            f"P-AXIS-00015 kenngr.achs_mode of both axes; axis {member.name} has "
+                            f"0x{member.achs_mode:X} (set 0x{member.achs_mode | COLLISION_MODE_BIT:X})",
+                            field="achs_mode",
+                            axis=member.name,
+                        )
+                    )
+            if ax.coll_offset <= 1 and partner.coll_offset <= 1:
+                issues.append(
+                    ParameterIssue(
+                        f"axis {ax.name}: a collision pair needs P-AXIS-00045 coll_offset > 1 "
+                        "(the minimum distance in 0.1 µm) on the master axis",
+                        field="coll_offset",
+                        axis=ax.name,
+                    )
+                )
+        _raise_issues(issues)
         return self
+
+    def collision_pairs(self) -> list[tuple[AxisConfig, AxisConfig]]:
+        """C3-03/C3-04: (master, partner) per pair; a two-sided pair (older configuration) once."""
+        by_number = {a.number: a for a in self.axes}
+        pairs: list[tuple[AxisConfig, AxisConfig]] = []
+        seen: set[frozenset[int]] = set()
+        for ax in self.axes:
+            partner = by_number.get(ax.coll_check_ax_nr) if ax.coll_check_ax_nr else None
+            if partner is None or partner is ax:
+                continue
+            key = frozenset((ax.number, partner.number))
+            if key not in seen:
+                seen.add(key)
+                pairs.append((ax, partner))
+        return pairs
 
     def axis(self, name: str) -> AxisConfig:
         for a in self.axes:
@@ -309,6 +548,13 @@ CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = tuple(
         ),
         ("dpl_tol_limit_change", "dpl_tol_limit_change", "P-CHAN-00751", "0.1 µm"),
         ("dpl_input_cycles", "dpl_input_cycles", "P-CHAN-00874", "cycles"),
+        # a start-up parameter (P-STUP) that belongs to one channel; [0] stands for the channel's index
+        ("configuration.channel[0].interpolator.function", "interpolator_function", "P-STUP-00070", "-"),
     )
 )
 """ISG text-list names of the channel parameters the documents name."""
+
+MANUAL_PARAMETERS: tuple[ParameterInfo, ...] = (
+    ParameterInfo(path="move_limit_warning", field="move_limit_warning", pid="P-MANU-00014", unit="0/1"),
+)
+"""ISG text-list names of the manual-mode parameters the documents name (FCT-C14 6.2)."""
