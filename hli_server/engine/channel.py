@@ -169,12 +169,21 @@ class Channel:
     def select_program(self, number: int) -> None:
         for entry in self.config.programs:
             if entry.number == number:
-                if entry.text is None:
+                text = entry.text
+                if text is None and self.machine.read_program is not None and entry.path is not None:
+                    try:
+                        text = self.machine.read_program(entry.path)
+                    except (OSError, UnicodeDecodeError) as exc:
+                        self.machine.raise_alarm(
+                            911021, self, f"program {number}: cannot read {entry.path}: {exc}"
+                        )
+                        return
+                if text is None:
                     self.machine.raise_alarm(
-                        911021, self, f"program {number} ({entry.path}) was not loaded with the configuration"
+                        911021, self, f"program {number}: no program text for {entry.path}"
                     )
                     return
-                self.load_program(entry.text, entry.name, number)
+                self.load_program(text, entry.name, number)
                 return
         self.machine.raise_alarm(911021, self, f"program number {number} is not in the program table")
 

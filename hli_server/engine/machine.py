@@ -60,8 +60,11 @@ class Monitor:
 
 
 class Machine:
-    def __init__(self, config: MachineConfig) -> None:
+    def __init__(self, config: MachineConfig, read_program: Callable[[str], str] | None = None) -> None:
+        """``read_program`` loads a program table entry given by path (the engine does no I/O itself;
+        the runtime passes a file reader)."""
         self.config = config
+        self.read_program = read_program
         self.t_a = s_from_us(config.cycle_time_us)
         self.cycle = 0
         self.axes = [Axis(cfg, i) for i, cfg in enumerate(config.axes)]
