@@ -1,0 +1,328 @@
+"""The process image in POSIX shared memory, server side (H-01, H-02).
+
+The server creates the segment, writes the header and the layout JSON, and then, once per cycle,
+
+1. :meth:`ProcessImage.latch_into` copies the PLC->CNC half with one memcpy and assigns the decoded
+   values to the engine's HLI objects;
+2. the runtime steps the engine;
+3. :meth:`ProcessImage.publish_from` packs the CNC->PLC fields of the engine objects into a private
+   buffer and publishes it through the double-buffered seqlock of :mod:`schemas.image_format`.
+
+The protocol adapters (Modbus, ADS) are PLC doors into the same image: :meth:`ProcessImage.write`
+writes one PLC->CNC field with a single store and refuses CNC->PLC fields (H-02);
+:meth:`ProcessImage.read` and :meth:`ProcessImage.snapshot` read. The segment is unlinked by
+:meth:`ProcessImage.close` (and, if the server dies, by the resource tracker of the server process).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import secrets
+import struct
+from multiprocessing import shared_memory
+from types import TracebackType
+from typing import Any, Final
+
+from hli_server.engine.hli import MachineHli
+from hli_server.image.projection import Projection, compile_projection, diagnose
+from schemas import image_format as fmt
+from schemas.layout import Direction, Layout, Signal, SignalType, SignalValueError
+
+__all__ = ["IMAGE_NAME_PREFIX", "ProcessImage", "default_image_name", "open_image_names"]
+
+log = logging.getLogger(__name__)
+
+IMAGE_NAME_PREFIX: Final = "hli_"
+"""Default names start with this (``/dev/shm/hli_...`` on Linux)."""
+
+_NAME_RE: Final = re.compile(r"^[A-Za-z0-9_.-]{1,200}$")
+_P2C: Final = Direction.PLC_TO_CNC
+_C2P: Final = Direction.CNC_TO_PLC
+
+_open_images: dict[str, ProcessImage] = {}
+"""Images this process created and has not closed yet (the test suite checks for leaks)."""
+
+
+def open_image_names() -> frozenset[str]:
+    """Names of the images this process created and has not closed."""
+    return frozenset(_open_images)
+
+
+def default_image_name() -> str:
+    """``hli_<pid>_<random>``: unique per server process."""
+    return f"{IMAGE_NAME_PREFIX}{os.getpid()}_{secrets.token_hex(3)}"
+
+
+def _check_name(name: str) -> str:
+    plain = name.removeprefix("/")
+    if not _NAME_RE.match(plain):
+        raise ValueError(
+            f"image name {name!r}: use 1..200 characters of A-Z a-z 0-9 _ . - (no '/'); "
+            f"e.g. {IMAGE_NAME_PREFIX}demo"
+        )
+    return plain
+
+
+def _buffer(shm: shared_memory.SharedMemory) -> memoryview:
+    buf = shm.buf
+    if buf is None:  # pragma: no cover - only after close()
+        raise ValueError(f"shared memory {shm.name!r} is closed")
+    return buf
+
+
+def _server_alive(pid: int) -> bool:
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class ProcessImage:
+    """The server's handle on the shared-memory image. Create with :meth:`create`."""
+
+    def __init__(self, shm: shared_memory.SharedMemory, layout: Layout, plan: fmt.SegmentPlan) -> None:
+        self._shm = shm
+        self._buf = _buffer(shm)
+        self.name: str = shm.name.removeprefix("/")
+        self.layout = layout
+        self.plan = plan
+        self._projection: Projection = compile_projection(layout)
+        self._p2c_struct = layout.struct(_P2C)
+        self._c2p_struct = struct.Struct("<Q" + layout.struct_format(_C2P).removeprefix("<"))
+        self._c2p_private = bytearray(self._c2p_struct.size)
+        self._seq = [0, 0]
+        self._publish_count = 0
+        self._cycle = 0
+        self._closed = False
+
+    # --- life cycle ----------------------------------------------------------------------
+    @classmethod
+    def create(cls, layout: Layout, name: str | None = None, *, replace_stale: bool = False) -> ProcessImage:
+        """Create the segment ``name`` (default :func:`default_image_name`) for ``layout``.
+
+        An existing segment of that name is an error, unless ``replace_stale`` is set and the
+        segment is not the image of a running server (it is then unlinked and made anew).
+        """
+        fmt.check_host()
+        plain = _check_name(name or default_image_name())
+        layout_json = layout.to_json(indent=None).encode("utf-8")
+        plan = fmt.plan_segment(len(layout_json), layout.p2c_size, layout.c2p_size)
+        try:
+            shm = shared_memory.SharedMemory(name=plain, create=True, size=plan.total_size)
+        except FileExistsError:
+            if not replace_stale:
+                raise FileExistsError(
+                    f"shared memory {plain!r} exists already: another server is running with this "
+                    f"image name, or one crashed. Choose another name, or remove /dev/shm/{plain} "
+                    "if no server uses it (the runtime's replace_stale option does that)"
+                ) from None
+            cls._remove_stale(plain)
+            shm = shared_memory.SharedMemory(name=plain, create=True, size=plan.total_size)
+        image = cls(shm, layout, plan)
+        try:
+            image._write_header(layout_json)
+        except BaseException:
+            image.close()
+            raise
+        _open_images[image.name] = image
+        log.info(
+            "process image %s created: %d bytes (PLC->CNC %d, CNC->PLC %d), layout %s",
+            image.name,
+            plan.total_size,
+            layout.p2c_size,
+            layout.c2p_size,
+            layout.hash[:12],
+        )
+        return image
+
+    @staticmethod
+    def _remove_stale(name: str) -> None:
+        old = shared_memory.SharedMemory(name=name, create=False)
+        try:
+            try:
+                header = fmt.read_header(_buffer(old), name)
+            except fmt.ImageError:
+                header = None
+            if header is not None and not header.closed and _server_alive(header.server_pid):
+                raise FileExistsError(
+                    f"shared memory {name!r} is the image of the running server pid {header.server_pid}: "
+                    "stop that server or choose another image name"
+                )
+            log.warning("removing stale shared memory %s", name)
+            old.unlink()
+        finally:
+            old.close()
+
+    def _write_header(self, layout_json: bytes) -> None:
+        plan = self.plan
+        buf = self._buf
+        buf[plan.layout_json_offset : plan.layout_json_offset + len(layout_json)] = layout_json
+        header = fmt.ImageHeader(
+            magic=b"\x00" * 8,
+            format_version=fmt.FORMAT_VERSION,
+            layout_version=self.layout.version,
+            layout_hash=self.layout.hash,
+            header_size=fmt.HEADER_SIZE,
+            total_size=plan.total_size,
+            plan=plan,
+            flags=0,
+            publish_count=0,
+            cycle=0,
+            server_pid=os.getpid(),
+        )
+        buf[: fmt.HEADER_SIZE] = header.pack()
+        buf[fmt.OFF_MAGIC : fmt.OFF_MAGIC + 8] = fmt.MAGIC  # last: the image is ready
+
+    def close(self) -> None:
+        """Mark the image closed for attached clients, unmap it and unlink it. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        _open_images.pop(self.name, None)
+        try:
+            flags = struct.unpack_from("<I", self._buf, fmt.OFF_FLAGS)[0]
+            struct.pack_into("<I", self._buf, fmt.OFF_FLAGS, flags | fmt.FLAG_CLOSED)
+        except (ValueError, TypeError):  # pragma: no cover - buffer already released
+            pass
+        self._shm.close()  # releases self._buf: later use raises "released memoryview"
+        try:
+            self._shm.unlink()
+        except FileNotFoundError:
+            log.warning("process image %s was already unlinked by someone else", self.name)
+        log.info("process image %s closed and unlinked", self.name)
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def __enter__(self) -> ProcessImage:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        state = "closed" if self._closed else f"cycle {self._cycle}"
+        return f"ProcessImage({self.name!r}, {self.plan.total_size} bytes, {state})"
+
+    # --- the cycle ---------------------------------------------------------------------------
+    def latch_into(self, machine: MachineHli) -> None:
+        """Copy the PLC->CNC half (one memcpy) and assign it to the engine's ``_w`` fields."""
+        off = self.plan.p2c_offset
+        data = bytes(self._buf[off : off + self.plan.p2c_size])
+        values = self._p2c_struct.unpack(data)
+        try:
+            self._projection.unpack[_P2C](machine, values)
+        except (IndexError, AttributeError) as exc:
+            raise diagnose(self.layout, machine, _P2C, exc) from exc
+
+    def publish_from(self, machine: MachineHli, cycle: int) -> None:
+        """Pack the engine's CNC->PLC fields and publish them as ``cycle`` (seqlock, one memcpy)."""
+        private = self._c2p_private
+        try:
+            self._projection.pack[_C2P](machine, self._c2p_struct.pack_into, private, 0, cycle)
+        except (struct.error, IndexError, AttributeError, TypeError) as exc:
+            if isinstance(exc, struct.error) and not 0 <= cycle < 2**64:
+                raise SignalValueError(f"cycle {cycle} does not fit the image's u64 cycle counter") from exc
+            raise diagnose(self.layout, machine, _C2P, exc) from exc
+        self._commit(private, cycle)
+
+    def publish_bytes(self, half: bytes | bytearray, cycle: int) -> None:
+        """Publish a ready-made CNC->PLC half (replay, tests); same protocol as :meth:`publish_from`."""
+        if len(half) != self.plan.c2p_size:
+            raise ValueError(f"CNC->PLC half is {self.plan.c2p_size} bytes, got {len(half)}")
+        self._commit(struct.pack("<Q", cycle) + bytes(half), cycle)
+
+    def _begin_publish(self) -> tuple[int, int]:
+        """Start writing the buffer of the next publish: its seq goes odd. Returns (buffer, data offset)."""
+        b = (self._publish_count + 1) & 1
+        self._seq[b] += 1
+        fmt.write_u64(self._buf, self.plan.c2p_offsets[b], self._seq[b])
+        return b, self.plan.c2p_data_offset(b)
+
+    def _end_publish(self, b: int, cycle: int) -> None:
+        self._seq[b] += 1
+        fmt.write_u64(self._buf, self.plan.c2p_offsets[b], self._seq[b])
+        self._publish_count += 1
+        self._cycle = cycle
+        fmt.write_u64(self._buf, fmt.OFF_PUBLISH_COUNT, self._publish_count)
+        fmt.write_u64(self._buf, fmt.OFF_CYCLE, cycle)
+
+    def _commit(self, cycle_and_half: bytes | bytearray, cycle: int) -> None:
+        b, _ = self._begin_publish()
+        start = self.plan.c2p_offsets[b] + 8  # the buffer's cycle word, then the half
+        self._buf[start : start + len(cycle_and_half)] = cycle_and_half
+        self._end_publish(b, cycle)
+
+    def init_from(self, machine: MachineHli, cycle: int = 0) -> None:
+        """Start-up: the PLC->CNC half takes the engine's ``_w`` values, the CNC->PLC half is published."""
+        p2c = bytearray(self.plan.p2c_size)
+        try:
+            self._projection.pack[_P2C](machine, self._p2c_struct.pack_into, p2c, 0)
+        except (struct.error, IndexError, AttributeError, TypeError) as exc:
+            raise diagnose(self.layout, machine, _P2C, exc) from exc
+        off = self.plan.p2c_offset
+        self._buf[off : off + len(p2c)] = p2c
+        self.publish_from(machine, cycle)
+
+    @property
+    def cycle(self) -> int:
+        """Cycle of the newest publish."""
+        return self._cycle
+
+    @property
+    def publish_count(self) -> int:
+        return self._publish_count
+
+    # --- the PLC door (adapters) ---------------------------------------------------------
+    def write(self, st_path: str, value: object) -> None:
+        """Write one PLC->CNC field (single store); CNC->PLC fields are refused (H-02)."""
+        self.write_signal(self.layout.signal(st_path), value)
+
+    def write_signal(self, signal: Signal, value: object) -> None:
+        signal.check_plc_write()
+        fmt.write_field(self._buf, self.plan.p2c_offset, signal, signal.coerce(value))
+
+    def write_bytes(self, offset: int, data: bytes) -> None:
+        """Raw write into the PLC->CNC half (ADS index group of the half): whole fields only,
+        every value checked before any is written; padding bytes in the range are ignored."""
+        signals = self.layout.signals_in_range(_P2C, offset, len(data))
+        values: list[tuple[Signal, bool | int | float]] = []
+        for s in signals:
+            raw = data[s.offset - offset : s.offset - offset + s.size]
+            if s.type is SignalType.BOOL:
+                if raw[0] > 1:
+                    raise SignalValueError(f"{s.st_path}: BOOL byte must be 0 or 1, got {raw[0]}")
+                value: bool | int | float = bool(raw[0])
+            else:
+                value = struct.unpack("<" + s.type.struct_char, raw)[0]
+            values.append((s, s.coerce(value)))
+        for s, v in values:
+            fmt.write_field(self._buf, self.plan.p2c_offset, s, v)
+
+    def read(self, st_path: str) -> Any:
+        """One field: PLC->CNC from the live half, CNC->PLC from the newest consistent publish."""
+        signal = self.layout.signal(st_path)
+        if signal.plc_writable:
+            return fmt.read_field(self._buf, self.plan.p2c_offset, signal)
+        return fmt.read_c2p_field(self._buf, self.plan, signal, self.name)
+
+    def read_half(self, direction: Direction) -> bytes:
+        """A copy of one half: PLC->CNC as it is now (one memcpy), CNC->PLC as last published."""
+        if direction is _P2C:
+            off = self.plan.p2c_offset
+            return bytes(self._buf[off : off + self.plan.p2c_size])
+        return self.snapshot()[1]
+
+    def snapshot(self) -> tuple[int, bytes]:
+        """``(cycle, CNC->PLC half)`` of the newest consistent publish."""
+        return fmt.read_c2p(self._buf, self.plan, self.name)

@@ -1,0 +1,377 @@
+"""The binary format of the shared-memory process image and its consistency protocol (H-01).
+
+Both sides import this module: the server (``hli_server/image``) writes the image, a PLC-side
+client (``plc_clients/shm.py``) attaches to it. The field layout of the halves comes from
+:mod:`schemas.layout`; this module adds the header, the placement of the halves in the segment
+and the read side of the protocol. ``docs/process-image.md`` describes the same in prose.
+
+Segment (all integers little-endian; the image is only supported on little-endian hosts)::
+
+    0      header (128 bytes, :data:`HEADER`)
+    128    layout JSON (UTF-8, compact; the contract, :meth:`schemas.layout.Layout.to_json`)
+    p2c    PLC->CNC half (64-byte aligned)
+    c2p0   CNC->PLC buffer 0: seq u64 | cycle u64 | half        (64-byte aligned)
+    c2p1   CNC->PLC buffer 1: seq u64 | cycle u64 | half        (64-byte aligned)
+
+Header::
+
+    off size field
+      0   8  magic               b"HLI-IMG\\0"   (written last: a segment without it is not ready)
+      8   4  format_version      FORMAT_VERSION (this header and protocol)
+     12   4  layout_version      schemas.layout.LAYOUT_VERSION
+     16  32  layout_hash         SHA-256 digest (raw bytes) of the layout, see Layout.hash
+     48   4  header_size         128
+     52   4  total_size          bytes of the segment the server uses
+     56   4  layout_json_offset
+     60   4  layout_json_size
+     64   4  p2c_offset
+     68   4  p2c_size
+     72   4  c2p_offset_0        offset of buffer 0 (its seq word)
+     76   4  c2p_offset_1
+     80   4  c2p_size            bytes of the half in each buffer (without the 16-byte buffer header)
+     84   4  flags               FLAG_CLOSED when the server has shut down
+     88   8  publish_count       number of completed publishes; the newest is in buffer count & 1
+     96   8  cycle               cycle of the newest publish (for information;
+                                 the consistent one is in the buffer)
+    104   4  server_pid
+    108  20  reserved
+
+Consistency:
+
+* **CNC->PLC: double buffer, each buffer guarded by a sequence counter (seqlock).** Publish number
+  ``k`` goes to buffer ``k & 1``: the writer makes that buffer's ``seq`` odd, copies the packed half
+  (and its cycle) in with one memcpy, makes ``seq`` even again and then sets ``publish_count = k``.
+  A reader takes buffer ``publish_count & 1``, reads ``seq``, copies the buffer, reads ``seq`` again
+  and accepts the copy only if both are equal and even; otherwise it tries the other buffer (which
+  holds the publish before), and retries. The writer only ever writes the buffer that is not the
+  newest, so a reader has a whole cycle to copy and never waits for the writer.
+* **PLC->CNC: single-field writes.** Every field is naturally aligned and written with one store of
+  its size (``struct`` native formats, which copy with one ``memcpy`` of 1/4/8 bytes); the server
+  copies the whole half with one memcpy per cycle and decodes the copy. A PLC that wants two fields
+  to take effect together writes the one that arms the other last (``command_w`` before ``enable_w``).
+
+The 8-byte counters are written and read with single aligned 8-byte accesses (native ``Q``).
+Store order is that of the program on x86-64 (TSO); on weakly ordered CPUs the protocol relies on
+the same order, which CPython does not formally guarantee (see the docs).
+"""
+
+from __future__ import annotations
+
+import struct
+import sys
+import time
+from dataclasses import dataclass
+from typing import Final
+
+from schemas.layout import LAYOUT_VERSION, Signal, SignalType
+
+__all__ = [
+    "C2P_BUFFER_HEADER",
+    "FLAG_CLOSED",
+    "FORMAT_VERSION",
+    "HEADER",
+    "HEADER_SIZE",
+    "MAGIC",
+    "OFF_CYCLE",
+    "OFF_FLAGS",
+    "OFF_MAGIC",
+    "OFF_PUBLISH_COUNT",
+    "ImageBusyError",
+    "ImageError",
+    "ImageHeader",
+    "ImageMismatchError",
+    "ImageNotReadyError",
+    "SegmentPlan",
+    "check_host",
+    "check_layout",
+    "header_construct",
+    "plan_segment",
+    "read_c2p",
+    "read_c2p_field",
+    "read_field",
+    "read_header",
+    "read_u64",
+    "write_field",
+    "write_u64",
+]
+
+MAGIC: Final = b"HLI-IMG\x00"
+FORMAT_VERSION: Final = 1
+HEADER_SIZE: Final = 128
+HEADER: Final = struct.Struct("<8sII32sIIIIIIIIIIQQI20x")
+"""The header as one ``struct`` (field order as in the module docstring)."""
+
+OFF_MAGIC: Final = 0
+OFF_FLAGS: Final = 84
+OFF_PUBLISH_COUNT: Final = 88
+OFF_CYCLE: Final = 96
+C2P_BUFFER_HEADER: Final = 16
+"""seq u64 + cycle u64 in front of each CNC->PLC buffer."""
+FLAG_CLOSED: Final = 0x1
+
+_ALIGN: Final = 64
+_U64: Final = struct.Struct("@Q")
+"""Native 8-byte access: CPython copies it with one memcpy of 8 bytes (a single load/store)."""
+_NATIVE: Final = {t: struct.Struct("@" + t.struct_char) for t in SignalType}
+"""Single-store access per type (1, 4 or 8 bytes)."""
+
+if HEADER.size != HEADER_SIZE:  # pragma: no cover - a typo in the format
+    raise RuntimeError(f"header format is {HEADER.size} bytes, expected {HEADER_SIZE}")
+
+
+class ImageError(RuntimeError):
+    """Base of the process image's errors."""
+
+
+class ImageNotReadyError(ImageError):
+    """The segment exists but the server has not finished writing its header."""
+
+
+class ImageMismatchError(ImageError):
+    """The segment is not an image, or its format/layout differs from what the reader expects."""
+
+
+class ImageBusyError(ImageError):
+    """No consistent CNC->PLC snapshot could be taken in time (the writer is stuck or too fast)."""
+
+
+def check_host() -> None:
+    """The image is little-endian and relies on native single stores having that byte order."""
+    if sys.byteorder != "little":  # pragma: no cover - no big-endian CI
+        raise ImageError("the process image needs a little-endian host (x86-64, aarch64)")
+
+
+def header_construct() -> object:
+    """The header as a ``construct.Struct`` (documentation and tests; the hot path uses HEADER)."""
+    import construct as cs
+
+    return cs.Struct(
+        "magic" / cs.Bytes(8),
+        "format_version" / cs.Int32ul,
+        "layout_version" / cs.Int32ul,
+        "layout_hash" / cs.Bytes(32),
+        "header_size" / cs.Int32ul,
+        "total_size" / cs.Int32ul,
+        "layout_json_offset" / cs.Int32ul,
+        "layout_json_size" / cs.Int32ul,
+        "p2c_offset" / cs.Int32ul,
+        "p2c_size" / cs.Int32ul,
+        "c2p_offset_0" / cs.Int32ul,
+        "c2p_offset_1" / cs.Int32ul,
+        "c2p_size" / cs.Int32ul,
+        "flags" / cs.Int32ul,
+        "publish_count" / cs.Int64ul,
+        "cycle" / cs.Int64ul,
+        "server_pid" / cs.Int32ul,
+        cs.Padding(20),
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class SegmentPlan:
+    """Where everything lies in the segment."""
+
+    layout_json_offset: int
+    layout_json_size: int
+    p2c_offset: int
+    p2c_size: int
+    c2p_offsets: tuple[int, int]
+    c2p_size: int
+    total_size: int
+
+    def c2p_data_offset(self, buffer: int) -> int:
+        return self.c2p_offsets[buffer] + C2P_BUFFER_HEADER
+
+
+def _align(value: int) -> int:
+    return -(-value // _ALIGN) * _ALIGN
+
+
+def plan_segment(layout_json_size: int, p2c_size: int, c2p_size: int) -> SegmentPlan:
+    """Place the layout JSON and the halves; halves and buffers start on 64-byte cache lines."""
+    p2c = _align(HEADER_SIZE + layout_json_size)
+    c2p0 = _align(p2c + p2c_size)
+    c2p1 = _align(c2p0 + C2P_BUFFER_HEADER + c2p_size)
+    total = _align(c2p1 + C2P_BUFFER_HEADER + c2p_size)
+    return SegmentPlan(HEADER_SIZE, layout_json_size, p2c, p2c_size, (c2p0, c2p1), c2p_size, total)
+
+
+@dataclass(frozen=True, slots=True)
+class ImageHeader:
+    magic: bytes
+    format_version: int
+    layout_version: int
+    layout_hash: str
+    """hex"""
+    header_size: int
+    total_size: int
+    plan: SegmentPlan
+    flags: int
+    publish_count: int
+    cycle: int
+    server_pid: int
+
+    @property
+    def closed(self) -> bool:
+        return bool(self.flags & FLAG_CLOSED)
+
+    def pack(self) -> bytes:
+        p = self.plan
+        return HEADER.pack(
+            self.magic,
+            self.format_version,
+            self.layout_version,
+            bytes.fromhex(self.layout_hash),
+            self.header_size,
+            self.total_size,
+            p.layout_json_offset,
+            p.layout_json_size,
+            p.p2c_offset,
+            p.p2c_size,
+            p.c2p_offsets[0],
+            p.c2p_offsets[1],
+            p.c2p_size,
+            self.flags,
+            self.publish_count,
+            self.cycle,
+            self.server_pid,
+        )
+
+
+def read_header(buf: memoryview | bytes, name: str = "?", *, segment_size: int | None = None) -> ImageHeader:
+    """Decode and check the header: magic, format version and that the offsets fit the segment.
+
+    The layout version and hash are checked by the caller, which knows what it expects.
+    """
+    if len(buf) < HEADER_SIZE:
+        raise ImageMismatchError(
+            f"shared memory {name!r} is {len(buf)} bytes, smaller than an image header: not an HLI image"
+        )
+    raw = HEADER.unpack_from(buf, 0)
+    magic = raw[0]
+    if magic != MAGIC:
+        if magic == b"\x00" * 8:
+            raise ImageNotReadyError(
+                f"shared memory {name!r} has no image header yet: the server is still starting; retry"
+            )
+        raise ImageMismatchError(
+            f"shared memory {name!r} is not an HLI process image (magic {magic!r}, expected {MAGIC!r})"
+        )
+    if raw[1] != FORMAT_VERSION:
+        raise ImageMismatchError(
+            f"image {name!r} has format version {raw[1]}, this code reads {FORMAT_VERSION}: "
+            "use a client from the same release as the server"
+        )
+    plan = SegmentPlan(raw[6], raw[7], raw[8], raw[9], (raw[10], raw[11]), raw[12], raw[5])
+    header = ImageHeader(
+        magic=magic,
+        format_version=raw[1],
+        layout_version=raw[2],
+        layout_hash=raw[3].hex(),
+        header_size=raw[4],
+        total_size=raw[5],
+        plan=plan,
+        flags=raw[13],
+        publish_count=raw[14],
+        cycle=raw[15],
+        server_pid=raw[16],
+    )
+    size = len(buf) if segment_size is None else segment_size
+    ends = (
+        plan.layout_json_offset + plan.layout_json_size,
+        plan.p2c_offset + plan.p2c_size,
+        plan.c2p_offsets[0] + C2P_BUFFER_HEADER + plan.c2p_size,
+        plan.c2p_offsets[1] + C2P_BUFFER_HEADER + plan.c2p_size,
+        header.total_size,
+    )
+    if header.header_size != HEADER_SIZE or max(ends) > size:
+        raise ImageMismatchError(f"image {name!r}: header offsets do not fit the segment ({size} bytes)")
+    return header
+
+
+def check_layout(header: ImageHeader, name: str, expected_hash: str | None) -> None:
+    """Layout version must be this code's; the hash must be the expected one when one is given."""
+    if header.layout_version != LAYOUT_VERSION:
+        raise ImageMismatchError(
+            f"image {name!r} has layout version {header.layout_version}, this client knows "
+            f"{LAYOUT_VERSION}: use a client from the same release as the server"
+        )
+    if expected_hash is not None and header.layout_hash != expected_hash:
+        raise ImageMismatchError(
+            f"image {name!r} has layout hash {header.layout_hash[:16]}..., expected "
+            f"{expected_hash[:16]}...: the server runs another machine configuration. Load the same "
+            "configuration, or attach without an expected layout to use the server's"
+        )
+
+
+# --------------------------------------------------------------------------------------------
+# Reading and writing (both sides)
+# --------------------------------------------------------------------------------------------
+
+
+def read_u64(buf: memoryview, offset: int) -> int:
+    value: int = _U64.unpack_from(buf, offset)[0]
+    return value
+
+
+def write_u64(buf: memoryview, offset: int, value: int) -> None:
+    _U64.pack_into(buf, offset, value)
+
+
+def write_field(buf: memoryview, half_offset: int, signal: Signal, value: bool | int | float) -> None:
+    """One store of the field's size (PLC->CNC single-field write). ``value`` must be coerced."""
+    _NATIVE[signal.type].pack_into(buf, half_offset + signal.offset, value)
+
+
+def read_field(buf: memoryview, half_offset: int, signal: Signal) -> bool | int | float:
+    """One load of the field's size."""
+    value: bool | int | float = _NATIVE[signal.type].unpack_from(buf, half_offset + signal.offset)[0]
+    return value
+
+
+_RETRY_LIMIT: Final = 100_000
+_RETRY_SECONDS: Final = 0.5
+
+
+def read_c2p(buf: memoryview, plan: SegmentPlan, name: str = "?") -> tuple[int, bytes]:
+    """A consistent copy of the CNC->PLC half: ``(cycle, half bytes)``.
+
+    Before the first publish both buffers are zeros (cycle 0). Raises
+    :class:`ImageBusyError` when no consistent copy could be taken within half a second.
+    """
+    size = plan.c2p_size
+    deadline = 0.0
+    for attempt in range(_RETRY_LIMIT):
+        newest = read_u64(buf, OFF_PUBLISH_COUNT) & 1
+        for b in (newest, newest ^ 1):
+            base = plan.c2p_offsets[b]
+            seq = read_u64(buf, base)
+            if seq & 1:
+                continue  # being written: the other buffer holds the publish before
+            data = bytes(buf[base + 8 : base + C2P_BUFFER_HEADER + size])
+            if read_u64(buf, base) == seq:
+                cycle: int = _U64.unpack_from(data, 0)[0]
+                return cycle, data[8:]
+        if attempt == 100:
+            deadline = time.monotonic() + _RETRY_SECONDS
+        elif attempt > 100 and time.monotonic() > deadline:
+            break
+    raise ImageBusyError(
+        f"image {name!r}: no consistent CNC->PLC snapshot within {_RETRY_SECONDS} s; "
+        "is the server stuck in a publish?"
+    )
+
+
+def read_c2p_field(buf: memoryview, plan: SegmentPlan, signal: Signal, name: str = "?") -> bool | int | float:
+    """One CNC->PLC field, consistent with the cycle it was published in (seqlock-protected)."""
+    for _ in range(_RETRY_LIMIT):
+        newest = read_u64(buf, OFF_PUBLISH_COUNT) & 1
+        for b in (newest, newest ^ 1):
+            base = plan.c2p_offsets[b]
+            seq = read_u64(buf, base)
+            if seq & 1:
+                continue
+            value = read_field(buf, base + C2P_BUFFER_HEADER, signal)
+            if read_u64(buf, base) == seq:
+                return value
+    raise ImageBusyError(f"image {name!r}: no consistent read of {signal.st_path}; is the server stuck?")

@@ -1,0 +1,1069 @@
+"""The one layout table of the process image (H-01, H-02, H-08).
+
+Every signal of the PLC interface (HLI) is listed once here, as a *template* per channel
+(:data:`CHANNEL_TEMPLATES`, ``gpCh[i]^...``) and per axis (:data:`AXIS_TEMPLATES`, ``gpAx[i]^...``).
+:func:`build_layout` expands the templates for the channels and axes of a
+:class:`~schemas.config.MachineConfig`; everything else is derived from the result and never
+written down a second time:
+
+* the byte layout of the two halves of the shared-memory image (``struct`` format and
+  ``construct`` description, :meth:`Layout.struct` / :meth:`Layout.construct`);
+* the Modbus map (table and 0-based address, 1-based reference);
+* the ADS addresses (port / index group / index offset) and symbol names (the ST paths);
+* the address map of ``hli-server map`` (Markdown, CSV, JSON: :meth:`Layout.to_json`).
+
+Names the documents give are used as given: ``bahn_state.area_mon_violation_detected_r`` and
+``bahn_mc_control.suppress_area_mon_manual_mode`` (FCT-C14 6.3), ``ipo_mc_control.dyn_pos_limit_low``
+/ ``_high`` (FCT-C43 3.1.1), the ``dyn_coll_mon`` CNC objects (FCT-C3 4.3, C3-10). The rest is the
+project's own (``origin="project"``).
+
+Addressing (documented in ``docs/process-image.md``):
+
+* **Image / ADS offsets.** Each half starts with :data:`MAX_CHANNELS` fixed channel slots, then one
+  fixed-size block per axis. The ADS index offset of an HLI signal is its byte offset in its half
+  (group :data:`ADS_GROUP_PLC_TO_CNC` or :data:`ADS_GROUP_CNC_TO_PLC`, port :data:`ADS_PORT_HLI`);
+  adding a channel or an axis moves no other signal. The ``dyn_coll_mon`` objects have the kernel's
+  address instead: port 551, group 0x120300, offset ``(A_ID << 16) | element`` (C3-10).
+* **Modbus.** In each of the four tables, channel ``i`` owns addresses
+  ``MODBUS_CHANNEL_BASE + 100 * i`` .. ``+99`` and axis ``j`` owns ``MODBUS_AXIS_BASE + 100 * j``
+  .. ``+99``. BOOL PLC->CNC = coil, BOOL CNC->PLC = discrete input, numbers PLC->CNC = holding
+  registers, numbers CNC->PLC = input registers; DINT/UDINT take two registers, LREAL four (the
+  word order is a setting of the Modbus adapter).
+
+Control units (H-02) keep the kernel's field order request_r, enable_w, command_w, state_r in the
+table and within each half; the image splits a unit between the halves (its ``_w`` fields are
+PLC->CNC, its ``_r`` fields CNC->PLC) because each half has its own consistency protocol.
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import json
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+from functools import cached_property
+from struct import Struct
+from typing import TYPE_CHECKING, Any, Final
+
+import construct as cs
+
+from schemas.units import DINT_MAX, DINT_MIN, UDINT_MAX
+
+if TYPE_CHECKING:
+    from schemas.config import MachineConfig
+
+__all__ = [
+    "ADS_GROUP_CNC_TO_PLC",
+    "ADS_GROUP_GEO_AXIS",
+    "ADS_GROUP_PLC_TO_CNC",
+    "ADS_PORT_GEO",
+    "ADS_PORT_HLI",
+    "AXIS_TEMPLATES",
+    "CHANNEL_TEMPLATES",
+    "LAYOUT_FORMAT",
+    "LAYOUT_VERSION",
+    "MAX_AXES",
+    "MAX_CHANNELS",
+    "MODBUS_AXIS_BASE",
+    "MODBUS_BLOCK_STRIDE",
+    "MODBUS_CHANNEL_BASE",
+    "AxisInfo",
+    "ChannelInfo",
+    "Direction",
+    "Layout",
+    "LayoutError",
+    "ModbusTable",
+    "ReadOnlySignalError",
+    "Scope",
+    "Signal",
+    "SignalTemplate",
+    "SignalType",
+    "SignalValueError",
+    "UnknownSignalError",
+    "build_layout",
+]
+
+LAYOUT_VERSION: Final = 1
+"""Bumped whenever the templates or the addressing rules change (the hash changes with any config)."""
+
+LAYOUT_FORMAT: Final = "hli-layout"
+"""The ``format`` key of the JSON export."""
+
+MAX_CHANNELS: Final = 12
+"""Channel slots reserved in each half (the configuration allows channel numbers 1..12)."""
+
+MODBUS_CHANNEL_BASE: Final = 0
+MODBUS_AXIS_BASE: Final = 2000
+MODBUS_BLOCK_STRIDE: Final = 100
+MAX_AXES: Final = (65536 - MODBUS_AXIS_BASE) // MODBUS_BLOCK_STRIDE
+"""635: the axes that fit the 16-bit Modbus address space with the fixed blocks."""
+
+ADS_PORT_HLI: Final = 851
+"""ADS port of the HLI image (the port where a TwinCAT PLC runtime serves its symbols; project's choice)."""
+ADS_GROUP_CNC_TO_PLC: Final = 0xF020
+"""CNC->PLC half: the PLC's inputs (TwinCAT's %I group; project's choice)."""
+ADS_GROUP_PLC_TO_CNC: Final = 0xF030
+"""PLC->CNC half: the PLC's outputs (TwinCAT's %Q group; project's choice)."""
+ADS_PORT_GEO: Final = 551
+"""Task GEO of the kernel (C3-10)."""
+ADS_GROUP_GEO_AXIS: Final = 0x120300
+"""Index group of the position-controller axis objects, the dyn_coll_mon objects (C3-10)."""
+
+_ALIGN_BLOCK: Final = 8
+
+
+class LayoutError(ValueError):
+    """The configuration does not fit the layout's addressing rules, or a JSON layout is damaged."""
+
+
+class UnknownSignalError(KeyError):
+    """No signal has this ST path; the message names the closest ones."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else "unknown signal"
+
+
+class ReadOnlySignalError(PermissionError):
+    """A write to a CNC->PLC field (``_r`` or a CNC object) through a PLC door (H-02)."""
+
+
+class SignalValueError(ValueError):
+    """A value that the signal's type cannot hold."""
+
+
+class SignalType(StrEnum):
+    """IEC 61131-3 elementary types used in the image. BOOL is one byte (0 or 1)."""
+
+    BOOL = "BOOL"
+    DINT = "DINT"
+    UDINT = "UDINT"
+    LREAL = "LREAL"
+
+    @property
+    def size(self) -> int:
+        return _TYPE_SIZE[self]
+
+    @property
+    def struct_char(self) -> str:
+        """The ``struct`` format character (with ``<`` in a layout format, ``@`` for single stores)."""
+        return _TYPE_CHAR[self]
+
+    @property
+    def modbus_count(self) -> int:
+        """Bits (BOOL) or 16-bit registers the type takes in its Modbus table."""
+        return 1 if self is SignalType.BOOL else self.size // 2
+
+
+_TYPE_SIZE: Final = {SignalType.BOOL: 1, SignalType.DINT: 4, SignalType.UDINT: 4, SignalType.LREAL: 8}
+_TYPE_CHAR: Final = {SignalType.BOOL: "?", SignalType.DINT: "i", SignalType.UDINT: "I", SignalType.LREAL: "d"}
+
+
+class Direction(StrEnum):
+    PLC_TO_CNC = "plc_to_cnc"
+    """Written by the PLC (``_w``), latched by the CNC once per cycle."""
+    CNC_TO_PLC = "cnc_to_plc"
+    """Written by the CNC only (``_r`` and the CNC objects), published once per cycle."""
+
+
+class Scope(StrEnum):
+    CHANNEL = "channel"
+    AXIS = "axis"
+
+
+class ModbusTable(StrEnum):
+    COIL = "coil"
+    DISCRETE_INPUT = "discrete_input"
+    HOLDING_REGISTER = "holding_register"
+    INPUT_REGISTER = "input_register"
+
+    @property
+    def reference_prefix(self) -> str:
+        """Leading digit of the 1-based reference: 0xxxx coils, 1xxxx, 3xxxx, 4xxxx."""
+        return _MODBUS_PREFIX[self]
+
+
+_MODBUS_PREFIX: Final = {
+    ModbusTable.COIL: "0",
+    ModbusTable.DISCRETE_INPUT: "1",
+    ModbusTable.INPUT_REGISTER: "3",
+    ModbusTable.HOLDING_REGISTER: "4",
+}
+
+
+def _modbus_table(sig_type: SignalType, direction: Direction) -> ModbusTable:
+    if sig_type is SignalType.BOOL:
+        return ModbusTable.COIL if direction is Direction.PLC_TO_CNC else ModbusTable.DISCRETE_INPUT
+    return ModbusTable.HOLDING_REGISTER if direction is Direction.PLC_TO_CNC else ModbusTable.INPUT_REGISTER
+
+
+# --------------------------------------------------------------------------------------------
+# The templates
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class SignalTemplate:
+    """One signal of a channel or an axis, relative to ``gpCh[i]^`` / ``gpAx[i]^``.
+
+    ``unit`` may contain ``{pos}`` (0.1 µm, rotary 0.0001°) and ``{acc}`` (mm/s², rotary °/s²),
+    resolved per axis type. ``ads_element`` is the kernel's element number of a CNC object
+    (dyn_coll_mon, C3-10); such a signal is addressed over ADS on port 551, not in the HLI groups.
+    """
+
+    path: str
+    type: SignalType
+    direction: Direction
+    unit: str
+    description: str
+    reqs: tuple[str, ...]
+    origin: str
+    ads_element: int | None = None
+
+
+_B, _DI, _UDI, _LR = SignalType.BOOL, SignalType.DINT, SignalType.UDINT, SignalType.LREAL
+_W, _R = Direction.PLC_TO_CNC, Direction.CNC_TO_PLC
+_C14, _C43, _C3, _OWN = "FCT-C14 6.3", "FCT-C43 3.1.1", "FCT-C3 4.3", "project"
+
+
+def _unit_templates(
+    path: str,
+    value_type: SignalType,
+    unit: str,
+    what: str,
+    reqs: tuple[str, ...],
+    origin: str,
+    request: str = "the value the CNC itself would use",
+    state: str = "the value in effect",
+    state_unit: str | None = None,
+) -> tuple[SignalTemplate, ...]:
+    """The four fields of a control unit in the kernel's order (H-02)."""
+    state_unit = unit if state_unit is None else state_unit
+    return (
+        SignalTemplate(f"{path}.request_r", value_type, _R, unit, f"{what}: {request}", reqs, origin),
+        SignalTemplate(
+            f"{path}.enable_w", _B, _W, "-", f"{what}: TRUE = the CNC uses command_w", reqs, origin
+        ),
+        SignalTemplate(f"{path}.command_w", value_type, _W, unit, f"{what}: the PLC's value", reqs, origin),
+        SignalTemplate(f"{path}.state_r", value_type, _R, state_unit, f"{what}: {state}", reqs, origin),
+    )
+
+
+_DYNPL_STATE = (
+    "monitoring state HLI_DYNPL_STATE_*: 0 INACTIVE, 1 ACTIVATION, 2 ACTIVE, 3 ACTIVE_BRAKING, 4 ACTIVE_BRAKE"
+)
+
+CHANNEL_TEMPLATES: Final[tuple[SignalTemplate, ...]] = (
+    # gpCh[i]^bahn_state: CNC -> PLC
+    SignalTemplate(
+        "bahn_state.area_mon_violation_detected_r",
+        _B, _R, "-", "work area monitoring detected a violation", ("C14-22", "H-01"), _C14,
+    ),
+    SignalTemplate(
+        "bahn_state.mode_r", _UDI, _R, "-", "active mode: 0 automatic, 1 manual", ("E-03", "H-01"), _OWN
+    ),
+    SignalTemplate(
+        "bahn_state.program_state_r",
+        _UDI, _R, "-", "program state: 0 idle, 1 running, 2 held, 3 aborted, 4 finished",
+        ("E-04", "H-01"), _OWN,
+    ),
+    SignalTemplate(
+        "bahn_state.program_number_r",
+        _UDI, _R, "-", "number of the selected program (program table), 0 = none", ("E-04", "H-01"), _OWN,
+    ),
+    SignalTemplate(
+        "bahn_state.block_nr_r",
+        _UDI, _R, "-", "N number of the active block, 0 = none", ("E-04", "H-01"), _OWN,
+    ),
+    SignalTemplate(
+        "bahn_state.line_nr_r",
+        _UDI, _R, "-", "program line of the active block (1-based), 0 = none", ("E-04", "H-01"), _OWN,
+    ),
+    SignalTemplate(
+        "bahn_state.feedhold_active_r",
+        _B, _R, "-", "feedhold in effect (PLC feedhold or a monitor's hold)", ("E-05", "C43-04"), _OWN,
+    ),
+    SignalTemplate(
+        "bahn_state.error_present_r", _B, _R, "-", "an error alarm is pending in the channel", ("H-01",), _OWN
+    ),
+    SignalTemplate(
+        "bahn_state.error_id_r", _UDI, _R, "-", "number of the last error alarm, 0 = none", ("H-01",), _OWN
+    ),
+    SignalTemplate(
+        "bahn_state.warning_id_r", _UDI, _R, "-", "number of the last warning, 0 = none", ("H-01",), _OWN
+    ),
+    SignalTemplate("bahn_state.alarm_count_r", _UDI, _R, "-", "number of pending alarms", ("H-01",), _OWN),
+    SignalTemplate(
+        "bahn_state.cycle_r",
+        _UDI, _R, "cycles", "interpolation cycle counter (wraps at 2^32)", ("E-01",), _OWN,
+    ),
+    # gpCh[i]^bahn_mc_control: control units
+    *_unit_templates(
+        "bahn_mc_control.suppress_area_mon_manual_mode",
+        _B, "-", "suppress work area errors in manual mode", ("C14-22", "C14-20", "H-02"), _C14,
+    ),
+    *_unit_templates("bahn_mc_control.feedhold", _B, "-", "feedhold", ("E-05", "H-02"), _OWN),
+    *_unit_templates("bahn_mc_control.override", _DI, "0.1 %", "feed override", ("E-05", "H-02"), _OWN),
+    # gpCh[i]^mc_command: the PLC's operator panel
+    SignalTemplate(
+        "mc_command.mode_w", _UDI, _W, "-", "requested mode: 0 automatic, 1 manual", ("E-03", "H-01"), _OWN
+    ),
+    SignalTemplate(
+        "mc_command.program_select_w",
+        _UDI, _W, "-", "number of the program (program table) to run on start, 0 = keep",
+        ("E-04", "H-01"), _OWN,
+    ),
+    SignalTemplate(
+        "mc_command.start_w", _B, _W, "-", "program start (rising edge)", ("E-04", "H-01"), _OWN
+    ),
+    SignalTemplate("mc_command.reset_w", _B, _W, "-", "channel reset (rising edge)", ("E-03", "H-01"), _OWN),
+    SignalTemplate(
+        "mc_command.probe_w", _B, _W, "-", "measuring input (probe) for G100 moves", ("C14-23",), _OWN
+    ),
+)  # fmt: skip
+"""Per channel, in the field order of ``hli_server/engine/hli.py`` (a unit test keeps them in step)."""
+
+AXIS_TEMPLATES: Final[tuple[SignalTemplate, ...]] = (
+    # gpAx[i]^ipo_mc_control (FCT-C43 3.1.1)
+    *_unit_templates(
+        "ipo_mc_control.dyn_pos_limit_low",
+        _DI, "{pos}", "dynamic lower position limit", ("C43-02", "C43-03", "H-02"), _C43,
+        request="not supported by the kernel (always 0)", state=_DYNPL_STATE, state_unit="-",
+    ),
+    *_unit_templates(
+        "ipo_mc_control.dyn_pos_limit_high",
+        _DI, "{pos}", "dynamic upper position limit", ("C43-02", "C43-03", "H-02"), _C43,
+        request="not supported by the kernel (always 0)", state=_DYNPL_STATE, state_unit="-",
+    ),
+    # gpAx[i]^ipo_state
+    SignalTemplate(
+        "ipo_state.cmd_pos_r", _DI, _R, "{pos}", "commanded position (setpoint)", ("E-02", "H-01"), _OWN
+    ),
+    SignalTemplate("ipo_state.act_pos_r", _DI, _R, "{pos}", "actual position", ("E-02", "H-01"), _OWN),
+    SignalTemplate("ipo_state.velocity_r", _DI, _R, "{pos}/s", "actual velocity", ("E-02", "H-01"), _OWN),
+    SignalTemplate(
+        "ipo_state.following_error_r",
+        _DI, _R, "{pos}", "following error (setpoint - actual)", ("E-02", "A3-02"), _OWN,
+    ),
+    SignalTemplate(
+        "ipo_state.referenced_r", _B, _R, "-", "axis is referenced (homed)", ("E-02", "C3-06"), _OWN
+    ),
+    SignalTemplate(
+        "ipo_state.in_position_r",
+        _B, _R, "-", "actual position inside the exact-stop window P-AXIS-00236", ("A3-02",), _OWN,
+    ),
+    SignalTemplate("ipo_state.moving_r", _B, _R, "-", "the setpoint is moving", ("E-02",), _OWN),
+    SignalTemplate("ipo_state.error_r", _B, _R, "-", "an axis error is pending", ("E-02", "A3-04"), _OWN),
+    # gpAx[i]^manual
+    SignalTemplate("manual.jog_plus_w", _B, _W, "-", "jog key + (manual mode)", ("E-05", "C14-19"), _OWN),
+    SignalTemplate("manual.jog_minus_w", _B, _W, "-", "jog key - (manual mode)", ("E-05", "C14-19"), _OWN),
+    # dyn_coll_mon: the CNC objects of FCT-C3 4.3 (read-only; ADS port 551, group 0x120300)
+    SignalTemplate(
+        "dyn_coll_mon.active", _B, _R, "-", "dynamic collision monitoring is active", ("C3-10",), _C3,
+        ads_element=0x0234,
+    ),
+    SignalTemplate(
+        "dyn_coll_mon.velocity", _LR, _R, "{pos}/s", "collision monitoring: current velocity",
+        ("C3-10",), _C3,
+        ads_element=0x0244,
+    ),
+    SignalTemplate(
+        "dyn_coll_mon.brake_dist", _LR, _R, "{pos}", "collision monitoring: current braking distance",
+        ("C3-10",), _C3, ads_element=0x0245,
+    ),
+    SignalTemplate(
+        "dyn_coll_mon.coll_offset", _UDI, _R, "{pos}", "collision monitoring: distance between the axes",
+        ("C3-10",), _C3, ads_element=0x0246,
+    ),
+    SignalTemplate(
+        "dyn_coll_mon.deceleration", _LR, _R, "{acc}", "collision monitoring: deceleration on collision",
+        ("C3-10",), _C3, ads_element=0x0247,
+    ),
+)  # fmt: skip
+"""Per axis, in the field order of ``hli_server/engine/hli.py`` (a unit test keeps them in step)."""
+
+
+# --------------------------------------------------------------------------------------------
+# Blocks: where each template lands inside a channel or axis block
+# --------------------------------------------------------------------------------------------
+
+
+def _round_up(value: int, step: int) -> int:
+    return -(-value // step) * step
+
+
+@dataclass(frozen=True, slots=True)
+class _Placed:
+    template: SignalTemplate
+    offset: int
+    """byte offset inside the block of its half"""
+    modbus: int
+    """address inside the block of its Modbus table"""
+
+
+@dataclass(frozen=True, slots=True)
+class _Block:
+    placed: tuple[_Placed, ...]
+    size: dict[Direction, int]
+    """bytes per half, rounded up to 8 (the stride of the block in that half)"""
+
+
+def _place(templates: Sequence[SignalTemplate], what: str) -> _Block:
+    """Natural alignment in the image (a field never straddles its own size), Modbus values of
+    two/four registers at even/multiple-of-four addresses inside the block."""
+    byte_cursor = dict.fromkeys(Direction, 0)
+    modbus_cursor = dict.fromkeys(ModbusTable, 0)
+    placed = []
+    seen: set[str] = set()
+    for t in templates:
+        if t.path in seen:
+            raise LayoutError(f"{what} template {t.path!r} is listed twice")
+        seen.add(t.path)
+        leaf = t.path.rsplit(".", 1)[-1]
+        if leaf.endswith("_w") and t.direction is not Direction.PLC_TO_CNC:
+            raise LayoutError(f"{what} template {t.path}: a _w field must be PLC->CNC (H-02)")
+        if leaf.endswith("_r") and t.direction is not Direction.CNC_TO_PLC:
+            raise LayoutError(f"{what} template {t.path}: a _r field must be CNC->PLC (H-02)")
+        size = t.type.size
+        offset = _round_up(byte_cursor[t.direction], size)
+        byte_cursor[t.direction] = offset + size
+        table = _modbus_table(t.type, t.direction)
+        count = t.type.modbus_count
+        address = _round_up(modbus_cursor[table], count)
+        modbus_cursor[table] = address + count
+        if modbus_cursor[table] > MODBUS_BLOCK_STRIDE:
+            raise LayoutError(f"{what} block overflows the Modbus stride {MODBUS_BLOCK_STRIDE} in {table}")
+        placed.append(_Placed(t, offset, address))
+    return _Block(tuple(placed), {d: _round_up(byte_cursor[d], _ALIGN_BLOCK) for d in Direction})
+
+
+_CHANNEL_BLOCK: Final = _place(CHANNEL_TEMPLATES, "channel")
+_AXIS_BLOCK: Final = _place(AXIS_TEMPLATES, "axis")
+
+
+def _axis_area_start(direction: Direction) -> int:
+    return MAX_CHANNELS * _CHANNEL_BLOCK.size[direction]
+
+
+# --------------------------------------------------------------------------------------------
+# Signals and the layout
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Signal:
+    """One signal of the image with all its addresses (H-08).
+
+    ``offset`` is the byte offset in its half; ``index`` is the 0-based channel or axis index of
+    the ST path (``gpCh[index]``/``gpAx[index]``); ``path`` is the template path below it.
+    """
+
+    name: str
+    st_path: str
+    scope: Scope
+    index: int
+    path: str
+    type: SignalType
+    direction: Direction
+    unit: str
+    description: str
+    reqs: tuple[str, ...]
+    origin: str
+    offset: int
+    modbus_table: ModbusTable
+    modbus_address: int
+    ads_port: int
+    ads_group: int
+    ads_offset: int
+
+    @property
+    def size(self) -> int:
+        return self.type.size
+
+    @property
+    def modbus_count(self) -> int:
+        return self.type.modbus_count
+
+    @property
+    def plc_writable(self) -> bool:
+        return self.direction is Direction.PLC_TO_CNC
+
+    @property
+    def access(self) -> str:
+        """The PLC's access: ``read/write`` for PLC->CNC fields, ``read`` for CNC->PLC (H-02)."""
+        return "read/write" if self.plc_writable else "read"
+
+    @property
+    def symbol(self) -> str:
+        """ADS symbol name: the ST path."""
+        return self.st_path
+
+    @property
+    def engine_path(self) -> str:
+        """Attribute path below ``MachineHli``: ``axes[1].ipo_mc_control.dyn_pos_limit_low.command_w``."""
+        container = "channels" if self.scope is Scope.CHANNEL else "axes"
+        return f"{container}[{self.index}].{self.path}"
+
+    @property
+    def image_ads_group(self) -> int:
+        """Index group of the signal's half on :data:`ADS_PORT_HLI` (raw reads of a half cover it)."""
+        return ADS_GROUP_PLC_TO_CNC if self.plc_writable else ADS_GROUP_CNC_TO_PLC
+
+    def coerce(self, value: object) -> bool | int | float:
+        """Check a value for this signal and return it in the signal's Python type.
+
+        BOOL takes ``bool`` or the integers 0/1; DINT/UDINT take integers in range (no bool,
+        no float); LREAL takes int or float.
+        """
+        t = self.type
+        if t is SignalType.BOOL:
+            if isinstance(value, bool):
+                return value
+            if isinstance(value, int) and value in (0, 1):
+                return bool(value)
+            raise SignalValueError(f"{self.st_path}: BOOL takes True/False or 0/1, got {value!r}")
+        if t is SignalType.LREAL:
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                return float(value)
+            raise SignalValueError(f"{self.st_path}: LREAL takes a number, got {value!r}")
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise SignalValueError(f"{self.st_path}: {t} takes an integer, got {value!r}")
+        low, high = (DINT_MIN, DINT_MAX) if t is SignalType.DINT else (0, UDINT_MAX)
+        if not low <= value <= high:
+            raise SignalValueError(f"{self.st_path}: {value} is out of range for {t} [{low}, {high}]")
+        return value
+
+    def check_plc_write(self) -> None:
+        """Raise :class:`ReadOnlySignalError` unless the PLC may write this field (H-02)."""
+        if not self.plc_writable:
+            raise ReadOnlySignalError(
+                f"{self.st_path} is CNC->PLC: only the CNC writes it (H-02). "
+                "The PLC writes the _w fields (command_w, enable_w, ...) and reads the _r fields."
+            )
+
+
+@dataclass(frozen=True, slots=True)
+class ChannelInfo:
+    index: int
+    number: int
+    name: str
+    axes: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class AxisInfo:
+    index: int
+    number: int
+    """logical axis number A_ID (kopf.achs_nr)"""
+    name: str
+    axis_type: str
+    """T translatory, R rotary"""
+
+
+_SIGNAL_KEYS: Final = (
+    "name",
+    "st_path",
+    "scope",
+    "index",
+    "path",
+    "type",
+    "direction",
+    "unit",
+    "description",
+    "reqs",
+    "origin",
+    "offset",
+    "modbus_table",
+    "modbus_address",
+    "ads_port",
+    "ads_group",
+    "ads_offset",
+)
+
+_HASHED_KEYS: Final = (
+    "st_path",
+    "type",
+    "direction",
+    "unit",
+    "offset",
+    "modbus_table",
+    "modbus_address",
+    "ads_port",
+    "ads_group",
+    "ads_offset",
+)
+"""What the layout hash covers: everything a peer relies on to read and write the right bytes.
+Names, descriptions, requirement IDs and origins are documentation and do not change it."""
+
+
+class Layout:
+    """The expanded table: all signals of one machine, with lookups and derived formats.
+
+    Immutable once built. Build it with :func:`build_layout` (server, tools, tests) or
+    :meth:`from_json` (a client that takes the layout from the image it attaches to).
+    """
+
+    def __init__(
+        self,
+        *,
+        machine: str,
+        channels: Sequence[ChannelInfo],
+        axes: Sequence[AxisInfo],
+        signals: Sequence[Signal],
+        sizes: Mapping[Direction, int],
+        version: int = LAYOUT_VERSION,
+    ) -> None:
+        self.machine = machine
+        self.version = version
+        self.channels: tuple[ChannelInfo, ...] = tuple(channels)
+        self.axes: tuple[AxisInfo, ...] = tuple(axes)
+        self.signals: tuple[Signal, ...] = tuple(signals)
+        self._sizes = dict(sizes)
+        self._by_path = {s.st_path: s for s in self.signals}
+        if len(self._by_path) != len(self.signals):
+            raise LayoutError("two signals share an ST path")
+        self._check_overlaps()
+
+    # --- lookups -------------------------------------------------------------------------
+    def __len__(self) -> int:
+        return len(self.signals)
+
+    def __iter__(self) -> Iterator[Signal]:
+        return iter(self.signals)
+
+    def __contains__(self, st_path: object) -> bool:
+        return st_path in self._by_path
+
+    def signal(self, st_path: str) -> Signal:
+        """The signal of an ST path (``gpAx[0]^ipo_mc_control.dyn_pos_limit_low.command_w``)."""
+        try:
+            return self._by_path[st_path]
+        except KeyError:
+            close = difflib.get_close_matches(st_path, self._by_path, n=3, cutoff=0.6)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise UnknownSignalError(
+                f"no signal {st_path!r} in the layout of machine {self.machine!r} "
+                f"({len(self.channels)} channels, {len(self.axes)} axes){hint} "
+                "(`hli-server map` lists them all)"
+            ) from None
+
+    def half(self, direction: Direction) -> tuple[Signal, ...]:
+        """The signals of one half in byte order."""
+        return self._halves[direction]
+
+    def size(self, direction: Direction) -> int:
+        """Bytes of one half (a multiple of 8)."""
+        return self._sizes[direction]
+
+    @property
+    def p2c_size(self) -> int:
+        return self._sizes[Direction.PLC_TO_CNC]
+
+    @property
+    def c2p_size(self) -> int:
+        return self._sizes[Direction.CNC_TO_PLC]
+
+    @cached_property
+    def _halves(self) -> dict[Direction, tuple[Signal, ...]]:
+        return {
+            d: tuple(sorted((s for s in self.signals if s.direction is d), key=lambda s: s.offset))
+            for d in Direction
+        }
+
+    def signals_in_range(self, direction: Direction, offset: int, size: int) -> tuple[Signal, ...]:
+        """The signals of a byte range of a half (for raw ADS access). A range must not cut a field
+        and must lie inside the half; padding bytes in it are allowed."""
+        end = offset + size
+        if offset < 0 or size < 0 or end > self.size(direction):
+            raise LayoutError(
+                f"bytes {offset}..{end} lie outside the {direction} half (0..{self.size(direction)})"
+            )
+        found = []
+        for s in self.half(direction):
+            s_end = s.offset + s.size
+            if s_end <= offset or s.offset >= end:
+                continue
+            if s.offset < offset or s_end > end:
+                raise LayoutError(
+                    f"bytes {offset}..{end} cut {s.st_path} (bytes {s.offset}..{s_end}): "
+                    "access whole fields only"
+                )
+            found.append(s)
+        return tuple(found)
+
+    @cached_property
+    def reference_digits(self) -> int:
+        """5 (40001 style) while every address fits, else 6 (400001 style) for the whole map."""
+        highest = max((s.modbus_address + s.modbus_count for s in self.signals), default=0)
+        return 5 if highest <= 9999 else 6
+
+    def modbus_reference(self, signal: Signal) -> str:
+        """The 1-based reference of the first register/bit: ``40001`` for holding address 0."""
+        width = self.reference_digits - 1
+        return f"{signal.modbus_table.reference_prefix}{signal.modbus_address + 1:0{width}d}"
+
+    def modbus_index(self, table: ModbusTable) -> dict[int, tuple[Signal, int]]:
+        """Every occupied address of a table -> (signal, number of the register inside the value)."""
+        index: dict[int, tuple[Signal, int]] = {}
+        for s in self.signals:
+            if s.modbus_table is table:
+                for k in range(s.modbus_count):
+                    index[s.modbus_address + k] = (s, k)
+        return index
+
+    def ads_index(self) -> dict[tuple[int, int, int], Signal]:
+        """(port, index group, index offset) -> signal, for the signals' own ADS addresses."""
+        return {(s.ads_port, s.ads_group, s.ads_offset): s for s in self.signals}
+
+    def control_units(self) -> dict[str, tuple[Signal, ...]]:
+        """ST path of each control unit -> its four fields in the kernel's order (H-02)."""
+        units: dict[str, list[Signal]] = {}
+        for s in self.signals:
+            head, _, leaf = s.st_path.rpartition(".")
+            if leaf in ("request_r", "enable_w", "command_w", "state_r"):
+                units.setdefault(head, []).append(s)
+        return {k: tuple(v) for k, v in units.items()}
+
+    # --- derived binary formats ----------------------------------------------------------
+    def struct_format(self, direction: Direction) -> str:
+        """``struct`` format of one half, little-endian with explicit padding."""
+        parts = ["<"]
+        cursor = 0
+        for s in self.half(direction):
+            if s.offset > cursor:
+                parts.append(f"{s.offset - cursor}x")
+            parts.append(s.type.struct_char)
+            cursor = s.offset + s.size
+        if self.size(direction) > cursor:
+            parts.append(f"{self.size(direction) - cursor}x")
+        return "".join(parts)
+
+    def struct(self, direction: Direction) -> Struct:
+        """Precompiled ``Struct`` of one half (values in :meth:`half` order)."""
+        compiled = Struct(self.struct_format(direction))
+        if compiled.size != self.size(direction):  # pragma: no cover - guarded by construction
+            raise LayoutError(f"{direction} format size {compiled.size} != half size {self.size(direction)}")
+        return compiled
+
+    @cached_property
+    def _structs(self) -> dict[Direction, Struct]:
+        return {d: self.struct(d) for d in Direction}
+
+    def unpack(self, direction: Direction, data: bytes | bytearray | memoryview) -> dict[str, Any]:
+        """Decode a copy of one half: ST path -> value (bool, int or float)."""
+        values = self._structs[direction].unpack_from(data)
+        return dict(zip((s.st_path for s in self.half(direction)), values, strict=True))
+
+    def pack(self, direction: Direction, values: Mapping[str, object]) -> bytes:
+        """Encode one half from ST path -> value; missing fields are zero. Values are checked."""
+        unknown = set(values) - {s.st_path for s in self.half(direction)}
+        if unknown:
+            raise UnknownSignalError(f"not in the {direction} half: {sorted(unknown)[:5]}")
+        half = self.half(direction)
+        args = [s.coerce(values[s.st_path]) if s.st_path in values else _ZERO[s.type] for s in half]
+        packed: bytes = self._structs[direction].pack(*args)
+        return packed
+
+    def construct(self, direction: Direction) -> Any:
+        """``conStruct`` of one half; the keys are the ST paths (for parsing, docs, tests)."""
+        fields: list[Any] = []
+        cursor = 0
+        for s in self.half(direction):
+            if s.offset > cursor:
+                fields.append(cs.Padding(s.offset - cursor))
+            fields.append(s.st_path / _CONSTRUCT_TYPE[s.type])
+            cursor = s.offset + s.size
+        if self.size(direction) > cursor:
+            fields.append(cs.Padding(self.size(direction) - cursor))
+        return cs.Struct(*fields)
+
+    # --- identity and export -------------------------------------------------------------
+    @cached_property
+    def hash(self) -> str:
+        """SHA-256 (hex) of the addressing content: version, half sizes and, per signal,
+        :data:`_HASHED_KEYS`. Stable across Python versions and runs."""
+        content = {
+            "version": self.version,
+            "sizes": {d.value: self._sizes[d] for d in Direction},
+            "signals": [[_plain(getattr(s, k)) for k in _HASHED_KEYS] for s in self.signals],
+        }
+        text = json.dumps(content, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+        return hashlib.sha256(text.encode("ascii")).hexdigest()
+
+    def to_dict(self) -> dict[str, Any]:
+        """The machine-readable contract (H-08): everything needed to rebuild this layout."""
+        return {
+            "format": LAYOUT_FORMAT,
+            "layout_version": self.version,
+            "layout_hash": self.hash,
+            "machine": self.machine,
+            "sizes": {d.value: self._sizes[d] for d in Direction},
+            "addressing": {
+                "max_channels": MAX_CHANNELS,
+                "modbus_channel_base": MODBUS_CHANNEL_BASE,
+                "modbus_axis_base": MODBUS_AXIS_BASE,
+                "modbus_block_stride": MODBUS_BLOCK_STRIDE,
+                "modbus_reference_digits": self.reference_digits,
+                "ads_port_hli": ADS_PORT_HLI,
+                "ads_group_plc_to_cnc": ADS_GROUP_PLC_TO_CNC,
+                "ads_group_cnc_to_plc": ADS_GROUP_CNC_TO_PLC,
+                "ads_port_geo": ADS_PORT_GEO,
+                "ads_group_geo_axis": ADS_GROUP_GEO_AXIS,
+            },
+            "channels": [
+                {"index": c.index, "number": c.number, "name": c.name, "axes": list(c.axes)}
+                for c in self.channels
+            ],
+            "axes": [
+                {"index": a.index, "number": a.number, "name": a.name, "axis_type": a.axis_type}
+                for a in self.axes
+            ],
+            "signals": [self._signal_dict(s) for s in self.signals],
+        }
+
+    def _signal_dict(self, s: Signal) -> dict[str, Any]:
+        d: dict[str, Any] = {k: _plain(getattr(s, k)) for k in _SIGNAL_KEYS}
+        d.update(
+            size=s.size,
+            access=s.access,
+            symbol=s.symbol,
+            modbus_count=s.modbus_count,
+            modbus_reference=self.modbus_reference(s),
+            image_ads_group=s.image_ads_group,
+        )
+        return d
+
+    def to_json(self, indent: int | None = 1) -> str:
+        return json.dumps(self.to_dict(), indent=indent, ensure_ascii=False)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Layout:
+        """Rebuild a layout from :meth:`to_dict`; the stored hash must match the content."""
+        if data.get("format") != LAYOUT_FORMAT:
+            raise LayoutError(f"not a layout: format is {data.get('format')!r}, expected {LAYOUT_FORMAT!r}")
+        try:
+            signals = [
+                Signal(
+                    name=d["name"],
+                    st_path=d["st_path"],
+                    scope=Scope(d["scope"]),
+                    index=int(d["index"]),
+                    path=d["path"],
+                    type=SignalType(d["type"]),
+                    direction=Direction(d["direction"]),
+                    unit=d["unit"],
+                    description=d["description"],
+                    reqs=tuple(d["reqs"]),
+                    origin=d["origin"],
+                    offset=int(d["offset"]),
+                    modbus_table=ModbusTable(d["modbus_table"]),
+                    modbus_address=int(d["modbus_address"]),
+                    ads_port=int(d["ads_port"]),
+                    ads_group=int(d["ads_group"]),
+                    ads_offset=int(d["ads_offset"]),
+                )
+                for d in data["signals"]
+            ]
+            layout = cls(
+                machine=data["machine"],
+                channels=[
+                    ChannelInfo(int(c["index"]), int(c["number"]), c["name"], tuple(c["axes"]))
+                    for c in data["channels"]
+                ],
+                axes=[
+                    AxisInfo(int(a["index"]), int(a["number"]), a["name"], a["axis_type"])
+                    for a in data["axes"]
+                ],
+                signals=signals,
+                sizes={Direction(k): int(v) for k, v in data["sizes"].items()},
+                version=int(data["layout_version"]),
+            )
+        except LayoutError as exc:
+            raise LayoutError(f"damaged layout JSON: {exc}") from exc
+        except (KeyError, TypeError, ValueError) as exc:
+            raise LayoutError(f"damaged layout JSON: {exc!r}") from exc
+        if layout.hash != data.get("layout_hash"):
+            raise LayoutError(
+                f"layout JSON hash {data.get('layout_hash')!r} does not match its content ({layout.hash}): "
+                "the file was edited or damaged; export it again with `hli-server map --format json`"
+            )
+        return layout
+
+    @classmethod
+    def from_json(cls, text: str | bytes) -> Layout:
+        try:
+            data = json.loads(text)
+        except ValueError as exc:
+            raise LayoutError(f"layout JSON does not parse: {exc}") from exc
+        if not isinstance(data, dict):
+            raise LayoutError("layout JSON must be an object")
+        return cls.from_dict(data)
+
+    def __repr__(self) -> str:
+        return (
+            f"Layout(machine={self.machine!r}, channels={len(self.channels)}, axes={len(self.axes)}, "
+            f"signals={len(self.signals)}, p2c={self.p2c_size} B, c2p={self.c2p_size} B, "
+            f"hash={self.hash[:12]})"
+        )
+
+    def _check_overlaps(self) -> None:
+        """No two signals share bytes of a half, Modbus addresses of a table, or an ADS address."""
+        for d in Direction:
+            end = 0
+            for s in self.half(d):
+                if s.offset < end or s.offset % s.size:
+                    raise LayoutError(f"{s.st_path}: offset {s.offset} overlaps or is misaligned")
+                end = s.offset + s.size
+            if end > self._sizes[d]:
+                raise LayoutError(f"{d} half ({self._sizes[d]} bytes) is too small for its signals ({end})")
+        for table in ModbusTable:
+            taken: set[int] = set()
+            for s in self.signals:
+                if s.modbus_table is table:
+                    span = set(range(s.modbus_address, s.modbus_address + s.modbus_count))
+                    if span & taken or s.modbus_address + s.modbus_count > 65536:
+                        raise LayoutError(f"{s.st_path}: Modbus {table} address {s.modbus_address} collides")
+                    taken |= span
+        if len(self.ads_index()) != len(self.signals):
+            raise LayoutError("two signals share an ADS address")
+
+
+_ZERO: Final[dict[SignalType, bool | int | float]] = {
+    SignalType.BOOL: False,
+    SignalType.DINT: 0,
+    SignalType.UDINT: 0,
+    SignalType.LREAL: 0.0,
+}
+
+_CONSTRUCT_TYPE: Final[dict[SignalType, Any]] = {
+    SignalType.BOOL: cs.Flag,
+    SignalType.DINT: cs.Int32sl,
+    SignalType.UDINT: cs.Int32ul,
+    SignalType.LREAL: cs.Float64l,
+}
+
+
+def _plain(value: object) -> object:
+    if isinstance(value, StrEnum):
+        return value.value
+    if isinstance(value, tuple):
+        return list(value)
+    return value
+
+
+def _resolve_unit(unit: str, axis_type: str) -> str:
+    rotary = axis_type == "R"
+    return unit.replace("{pos}", "0.0001°" if rotary else "0.1 µm").replace(
+        "{acc}", "°/s²" if rotary else "mm/s²"
+    )
+
+
+def build_layout(config: MachineConfig) -> Layout:
+    """Expand the templates for the channels and axes of ``config`` (H-01, H-08).
+
+    Channel ``i`` and axis ``j`` are the positions in ``config.channels`` / ``config.axes``
+    (0-based, the ``gpCh[i]``/``gpAx[j]`` indices); the logical axis number A_ID addresses the
+    dyn_coll_mon objects over ADS.
+    """
+    if len(config.channels) > MAX_CHANNELS:
+        raise LayoutError(f"{len(config.channels)} channels: the image has slots for {MAX_CHANNELS}")
+    if len(config.axes) > MAX_AXES:
+        raise LayoutError(
+            f"{len(config.axes)} axes: the Modbus map has blocks for {MAX_AXES} "
+            f"(base {MODBUS_AXIS_BASE}, stride {MODBUS_BLOCK_STRIDE})"
+        )
+    signals: list[Signal] = []
+    for i, ch in enumerate(config.channels):
+        for p in _CHANNEL_BLOCK.placed:
+            t = p.template
+            base = _CHANNEL_BLOCK.size[t.direction] * i
+            offset = base + p.offset
+            signals.append(
+                _signal(
+                    t,
+                    name=f"ch{ch.number}.{t.path}",
+                    st_path=f"gpCh[{i}]^{t.path}",
+                    scope=Scope.CHANNEL,
+                    index=i,
+                    unit=_resolve_unit(t.unit, "T"),
+                    offset=offset,
+                    modbus_address=MODBUS_CHANNEL_BASE + MODBUS_BLOCK_STRIDE * i + p.modbus,
+                    ads=(ADS_PORT_HLI, _hli_group(t.direction), offset),
+                )
+            )
+    for j, ax in enumerate(config.axes):
+        a_id = ax.number
+        if a_id > 0xFFFF:
+            raise LayoutError(
+                f"axis {ax.name}: logical axis number {a_id} does not fit the 16 bits the ADS index "
+                "offset of the dyn_coll_mon objects has for it (FCT-C3 4.3); use numbers up to 65535"
+            )
+        for p in _AXIS_BLOCK.placed:
+            t = p.template
+            offset = _axis_area_start(t.direction) + _AXIS_BLOCK.size[t.direction] * j + p.offset
+            if t.ads_element is not None:
+                ads = (ADS_PORT_GEO, ADS_GROUP_GEO_AXIS, (a_id << 16) | t.ads_element)
+            else:
+                ads = (ADS_PORT_HLI, _hli_group(t.direction), offset)
+            signals.append(
+                _signal(
+                    t,
+                    name=f"{ax.name}.{t.path}",
+                    st_path=f"gpAx[{j}]^{t.path}",
+                    scope=Scope.AXIS,
+                    index=j,
+                    unit=_resolve_unit(t.unit, str(ax.axis_type.value)),
+                    offset=offset,
+                    modbus_address=MODBUS_AXIS_BASE + MODBUS_BLOCK_STRIDE * j + p.modbus,
+                    ads=ads,
+                )
+            )
+    sizes = {
+        d: _axis_area_start(d) + _AXIS_BLOCK.size[d] * len(config.axes)  # multiples of 8 already
+        for d in Direction
+    }
+    return Layout(
+        machine=config.name,
+        channels=[ChannelInfo(i, c.number, c.name, tuple(c.axes)) for i, c in enumerate(config.channels)],
+        axes=[AxisInfo(j, a.number, a.name, str(a.axis_type.value)) for j, a in enumerate(config.axes)],
+        signals=signals,
+        sizes=sizes,
+    )
+
+
+def _hli_group(direction: Direction) -> int:
+    return ADS_GROUP_PLC_TO_CNC if direction is Direction.PLC_TO_CNC else ADS_GROUP_CNC_TO_PLC
+
+
+def _signal(
+    t: SignalTemplate,
+    *,
+    name: str,
+    st_path: str,
+    scope: Scope,
+    index: int,
+    unit: str,
+    offset: int,
+    modbus_address: int,
+    ads: tuple[int, int, int],
+) -> Signal:
+    return Signal(
+        name=name,
+        st_path=st_path,
+        scope=scope,
+        index=index,
+        path=t.path,
+        type=t.type,
+        direction=t.direction,
+        unit=unit,
+        description=t.description,
+        reqs=t.reqs,
+        origin=t.origin,
+        offset=offset,
+        modbus_table=_modbus_table(t.type, t.direction),
+        modbus_address=modbus_address,
+        ads_port=ads[0],
+        ads_group=ads[1],
+        ads_offset=ads[2],
+    )
