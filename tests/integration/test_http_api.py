@@ -1,0 +1,333 @@
+"""The HTTP control API over a real socket: uvicorn on port 0 inside the runtime's loop, httpx as
+the client, the stepped clock for exact cycles (E-01, H-01, H-02, H-07)."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from typing import Any
+
+import httpx
+import pytest
+
+from hli_server.configuration import load_machine
+from hli_server.engine.hli import ProgramState
+from hli_server.runtime import Runtime
+
+PROGRAM = "N10 G01 X20 Y10 F6000\nN20 G01 X0 Y0\nN30 M30\n"
+OVERRIDE = "gpCh[0]^bahn_mc_control.override"
+
+
+@pytest.fixture
+async def runtime() -> AsyncIterator[Runtime]:
+    async with Runtime(load_machine(None), clock="stepped", http_port=0) as rt:
+        yield rt
+
+
+@pytest.fixture
+async def client(runtime: Runtime) -> AsyncIterator[httpx.AsyncClient]:
+    async with httpx.AsyncClient(base_url=runtime.http_url, timeout=10) as c:
+        yield c
+
+
+async def step(client: httpx.AsyncClient, cycles: int) -> dict[str, Any]:
+    r = await client.post("/api/step", json={"cycles": cycles})
+    assert r.status_code == 200, r.text
+    body: dict[str, Any] = r.json()
+    return body
+
+
+def url_path(st_path: str) -> str:
+    return "/api/image/" + st_path.replace("^", "%5E")
+
+
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.req("H-07", "E-01")
+async def test_server_listens_on_the_port_it_was_given(runtime: Runtime, client: httpx.AsyncClient) -> None:
+    port = int(runtime.http_url.rsplit(":", 1)[1])
+    assert port > 0
+    r = await client.get("/api/state")
+    assert r.status_code == 200
+    state = r.json()
+    assert state["cycle"] == 0
+    assert state["clock"] == "stepped"
+    assert [c["number"] for c in state["channels"]] == [1, 2]
+    assert "X" in state["axes"]
+
+
+@pytest.mark.req("H-07", "E-01", "E-04")
+async def test_load_program_start_step_and_see_positions_change(client: httpx.AsyncClient) -> None:
+    r = await client.post(
+        "/api/channels/1/program?name=zigzag", content=PROGRAM, headers={"content-type": "text/plain"}
+    )
+    assert r.status_code == 200, r.text
+    assert r.json()["lines"] == 3
+    r = await client.post("/api/channels/1/start")
+    assert r.status_code == 202
+    assert r.json() == {"channel": 1, "request": "start", "cycle": 0, "effective_cycle": 1}
+    assert (await step(client, 100))["cycle"] == 100
+    state = (await client.get("/api/state")).json()
+    ch1 = state["channels"][0]
+    assert ch1["program"] == "zigzag"
+    assert ch1["program_state"] == ProgramState.RUNNING
+    x = state["axes"]["X"]["setpoint_mm"]
+    assert x > 0.0
+    # the same position through the image (0.1 µm)
+    r = await client.get(url_path("gpAx[0]^ipo_state.cmd_pos_r"))
+    assert r.status_code == 200
+    assert r.json()["value"] == round(x * 10_000)
+    await step(client, 100)
+    later = (await client.get("/api/state")).json()["axes"]["X"]["setpoint_mm"]
+    assert later > x
+
+
+async def test_program_as_json_and_refused_while_running(client: httpx.AsyncClient) -> None:
+    r = await client.post("/api/channels/1/program", json={"text": PROGRAM, "name": "json"})
+    assert r.status_code == 200
+    assert r.json()["program"] == "json"
+    await client.post("/api/channels/1/start")
+    await step(client, 5)
+    r = await client.post("/api/channels/1/program", json={"text": PROGRAM})
+    assert r.status_code == 409
+    assert "reset the channel" in r.json()["detail"]
+
+
+async def test_program_body_errors_are_422(client: httpx.AsyncClient) -> None:
+    r = await client.post("/api/channels/1/program", json={"txt": PROGRAM})
+    assert r.status_code == 422
+    locs = [e["loc"] for e in r.json()["detail"]]
+    assert ["text"] in locs
+    assert ["txt"] in locs
+    r = await client.post("/api/channels/1/program", content="  \n", headers={"content-type": "text/plain"})
+    assert r.status_code == 422
+    assert "empty program" in r.json()["detail"]
+
+
+async def test_select_a_program_of_the_table_and_run_it(client: httpx.AsyncClient) -> None:
+    r = await client.post("/api/channels/1/select", json={"number": 2})
+    assert r.status_code == 200
+    assert r.json()["program"] == "circle"
+    await client.post("/api/channels/1/start")
+    await step(client, 50)
+    ch1 = (await client.get("/api/state")).json()["channels"][0]
+    assert ch1["program"] == "circle"
+    assert ch1["program_state"] == ProgramState.RUNNING
+    r = await client.post("/api/channels/1/select", json={"number": 99})
+    assert r.status_code == 404
+    assert "not in the program table" in r.json()["detail"]
+
+
+async def test_feedhold_holds_the_path_and_releases_it(client: httpx.AsyncClient) -> None:
+    await client.post("/api/channels/1/program", json={"text": PROGRAM})
+    await client.post("/api/channels/1/start")
+    await step(client, 50)
+    r = await client.post("/api/channels/1/feedhold", json={"on": True})
+    assert r.status_code == 202
+    await step(client, 300)
+    held = (await client.get("/api/state")).json()
+    assert held["channels"][0]["program_state"] == ProgramState.HELD
+    await step(client, 10)
+    assert (await client.get("/api/state")).json()["axes"]["X"]["setpoint_mm"] == held["axes"]["X"][
+        "setpoint_mm"
+    ]
+    await client.post("/api/channels/1/feedhold", json={"on": False})
+    await step(client, 20)
+    assert (await client.get("/api/state")).json()["channels"][0]["program_state"] == ProgramState.RUNNING
+    r = await client.post("/api/channels/1/feedhold", json={"on": "yes"})
+    assert r.status_code == 422
+
+
+async def test_override_is_latched_into_the_control_unit(client: httpx.AsyncClient) -> None:
+    r = await client.post("/api/channels/1/override", json={"percent": 55.5})
+    assert r.status_code == 202
+    await step(client, 1)
+    assert (await client.get(url_path(OVERRIDE + ".request_r"))).json()["value"] == 555
+    assert (await client.get(url_path(OVERRIDE + ".state_r"))).json()["value"] == 555
+    assert (await client.post("/api/channels/1/override", json={"percent": 130})).status_code == 422
+
+
+async def test_manual_mode_and_jog(client: httpx.AsyncClient) -> None:
+    r = await client.post("/api/channels/1/mode", json={"mode": "manual"})
+    assert r.status_code == 202
+    await step(client, 1)
+    assert (await client.get("/api/state")).json()["channels"][0]["mode"] == "manual"
+    r = await client.post("/api/channels/1/jog", json={"axis": "Y", "direction": -1})
+    assert r.status_code == 202
+    await step(client, 200)
+    assert (await client.get("/api/state")).json()["axes"]["Y"]["setpoint_mm"] < -1.0
+    await client.post("/api/channels/1/jog", json={"axis": "Y", "direction": 0})
+    # the bare string is accepted too
+    assert (await client.post("/api/channels/1/mode", json="automatic")).status_code == 202
+    r = await client.post("/api/channels/1/jog", json={"axis": "X1", "direction": 1})
+    assert r.status_code == 404
+    assert "its axes are X, Y, Z" in r.json()["detail"]
+    assert (await client.post("/api/channels/1/jog", json={"axis": "X", "direction": 2})).status_code == 422
+    assert (await client.post("/api/channels/1/mode", json={"mode": "auto"})).status_code == 422
+
+
+async def test_reset_clears_the_channel(client: httpx.AsyncClient) -> None:
+    await client.post("/api/channels/1/program", json={"text": PROGRAM})
+    await client.post("/api/channels/1/start")
+    await step(client, 20)
+    assert (await client.post("/api/channels/1/reset")).status_code == 202
+    await step(client, 1)
+    assert (await client.get("/api/state")).json()["channels"][0]["program_state"] == ProgramState.IDLE
+
+
+async def test_unknown_channel_is_404(client: httpx.AsyncClient) -> None:
+    r = await client.post("/api/channels/7/start")
+    assert r.status_code == 404
+    assert r.json()["detail"] == "no channel 7; the machine has channels 1, 2"
+
+
+@pytest.mark.req("E-01", "H-07")
+async def test_step_validation(client: httpx.AsyncClient) -> None:
+    assert (await client.post("/api/step", json={"cycles": 0})).status_code == 422
+    assert (await client.post("/api/step", json={"cycles": 5, "extra": 1})).status_code == 422
+    r = await client.post("/api/step")  # no body: one cycle
+    assert r.status_code == 200
+    assert r.json()["cycle"] == 1
+
+
+@pytest.mark.req("E-01")
+async def test_step_outside_the_stepped_clock_is_409() -> None:
+    async with (
+        Runtime(load_machine(None), clock="realtime", http_port=0) as rt,
+        httpx.AsyncClient(base_url=rt.http_url) as c,
+    ):
+        r = await c.post("/api/step", json={"cycles": 1})
+        assert r.status_code == 409
+        assert "stepped clock" in r.json()["detail"]
+        timing = (await c.get("/api/timing")).json()
+        assert timing["clock"] == "realtime"
+        assert set(timing["lateness_us"] or {}) <= {"p50", "p99", "max"}
+
+
+# --------------------------------------------------------------------------------------------
+# The image by ST path (H-01, H-02)
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.req("H-01", "H-02")
+async def test_image_write_command_and_enable_then_state_follows(client: httpx.AsyncClient) -> None:
+    r = await client.put(url_path(OVERRIDE + ".command_w"), json={"value": 250})
+    assert r.status_code == 200, r.text
+    assert r.json()["effective_cycle"] == 1
+    await step(client, 1)
+    # not enabled: the CNC keeps its own request
+    assert (await client.get(url_path(OVERRIDE + ".state_r"))).json()["value"] == 1000
+    await client.put(url_path(OVERRIDE + ".enable_w"), json={"value": True})
+    assert (await client.get(url_path(OVERRIDE + ".enable_w"))).json()["value"] is True
+    await step(client, 1)
+    field = (await client.get(url_path(OVERRIDE + ".state_r"))).json()
+    assert field["value"] == 250
+    assert field["access"] == "read"
+    assert field["cycle"] == 2
+
+
+@pytest.mark.req("H-02")
+async def test_image_write_to_an_r_field_is_403(client: httpx.AsyncClient) -> None:
+    r = await client.put(url_path(OVERRIDE + ".state_r"), json={"value": 1})
+    assert r.status_code == 403
+    assert "only the CNC writes it" in r.json()["detail"]
+
+
+async def test_image_unknown_path_is_404_and_bad_value_422(client: httpx.AsyncClient) -> None:
+    r = await client.get(url_path("gpAx[0]^ipo_state.act_pos"))
+    assert r.status_code == 404
+    assert "act_pos_r" in r.json()["detail"]  # the closest names are suggested
+    assert (await client.put(url_path("gpAx[99]^manual.jog_plus_w"), json={"value": True})).status_code == 404
+    r = await client.put(url_path(OVERRIDE + ".command_w"), json={"value": 1.5})
+    assert r.status_code == 422
+    assert "integer" in r.json()["detail"]
+    r = await client.put(url_path(OVERRIDE + ".command_w"), json={"value": 2**31})
+    assert r.status_code == 422
+    assert (await client.put(url_path(OVERRIDE + ".command_w"), json={})).status_code == 422
+
+
+async def test_image_path_with_a_dot_instead_of_the_caret(client: httpx.AsyncClient) -> None:
+    r = await client.get("/api/image/gpAx[1].ipo_state.referenced_r")
+    assert r.status_code == 200
+    assert r.json()["st_path"] == "gpAx[1]^ipo_state.referenced_r"
+    assert r.json()["value"] is True
+
+
+async def test_layout_is_served(runtime: Runtime, client: httpx.AsyncClient) -> None:
+    layout = (await client.get("/api/layout")).json()
+    assert layout["layout_hash"] == runtime.layout.hash
+    assert any(s["st_path"] == OVERRIDE + ".command_w" for s in layout["signals"])
+
+
+# --------------------------------------------------------------------------------------------
+# Faults, alarms, events, OpenAPI
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.req("A3-05")
+async def test_fault_injection(runtime: Runtime, client: httpx.AsyncClient) -> None:
+    r = await client.post("/api/axes/X/faults", json={"friction": 0.5, "encoder_stuck": True})
+    assert r.status_code == 200
+    assert r.json()["friction"] == 0.5
+    assert r.json()["gain_factor"] == 1.0
+    assert runtime.machine.axis("X").faults.encoder_stuck is True
+    r = await client.post("/api/axes/X/faults", json={"gain_factor": 0.5})
+    assert r.json()["friction"] == 0.5  # omitted fields keep their value
+    assert (await client.get("/api/axes/X/faults")).json()["gain_factor"] == 0.5
+    r = await client.delete("/api/axes/X/faults")
+    assert r.json() == {
+        "axis": "X",
+        "friction": 0.0,
+        "gain_factor": 1.0,
+        "encoder_stuck": False,
+        "encoder_drift": 0.0,
+        "drive_error": False,
+    }
+    assert (await client.post("/api/axes/X/faults", json={"gain_factor": 0})).status_code == 422
+    assert (await client.post("/api/axes/X/faults", json={"drive_eror": True})).status_code == 422
+    r = await client.post("/api/axes/Q/faults", json={"friction": 1})
+    assert r.status_code == 404
+    assert "X, Y, Z, X1, X2, Z1" in r.json()["detail"]
+
+
+async def test_faults_take_effect_in_the_position_loop(runtime: Runtime, client: httpx.AsyncClient) -> None:
+    await client.post("/api/axes/Y/faults", json={"encoder_drift": 10.0})
+    await step(client, 100)
+    y = (await client.get("/api/state")).json()["axes"]["Y"]
+    assert y["setpoint_mm"] == 0.0
+    assert y["actual_mm"] != 0.0  # the loop follows the drifting encoder
+
+
+async def test_alarms_and_events(client: httpx.AsyncClient) -> None:
+    await client.post("/api/channels/1/start")  # no program: refused with a warning
+    await step(client, 1)
+    alarms = (await client.get("/api/alarms")).json()
+    assert alarms["active"] == []
+    assert alarms["history"][-1]["id"] == 911021
+    assert "no program selected" in alarms["history"][-1]["message"]
+    events = (await client.get("/api/events")).json()
+    assert events["events"][-1]["kind"] == "alarm"
+    assert events["latest"] == events["next"] >= 1
+    again = (await client.get("/api/events", params={"since": events["next"]})).json()
+    assert again["events"] == []
+    assert (await client.get("/api/events", params={"since": -1})).status_code == 422
+
+
+async def test_openapi_is_published(client: httpx.AsyncClient) -> None:
+    spec = (await client.get("/openapi.json")).json()
+    paths = spec["paths"]
+    for path in (
+        "/api/state",
+        "/api/channels/{number}/program",
+        "/api/channels/{number}/start",
+        "/api/step",
+        "/api/axes/{name}/faults",
+        "/api/alarms",
+        "/api/events",
+        "/api/image/{st_path}",
+        "/api/timing",
+    ):
+        assert path in paths, path
+    content = paths["/api/channels/{number}/program"]["post"]["requestBody"]["content"]
+    assert set(content) == {"text/plain", "application/json"}
+    assert (await client.get("/docs")).status_code == 200
