@@ -1,0 +1,658 @@
+"""Modbus TCP view of the process image (H-03).
+
+The four Modbus tables are views on the two halves of the image, addressed as the one layout table
+says (:mod:`schemas.layout`: ``Signal.modbus_table`` / ``modbus_address``):
+
+=================== ===================== ======================================== ===========
+table               function codes        signals                                  half
+=================== ===================== ======================================== ===========
+coils               1 read, 5, 15 write   BOOL PLC->CNC (``enable_w``, ``start_w``) PLC->CNC
+discrete inputs     2 read                BOOL CNC->PLC (``state_r``, flags)        CNC->PLC
+holding registers   3, 23 read; 6, 16, 23 DINT/UDINT PLC->CNC (``command_w``)       PLC->CNC
+input registers     4 read                DINT/UDINT/LREAL CNC->PLC                 CNC->PLC
+=================== ===================== ======================================== ===========
+
+* **Live.** A read of coils or holding registers returns the PLC->CNC half as it is now (what any
+  PLC door, shared memory, ADS or Modbus, wrote last); a read of discrete inputs or input registers
+  returns the newest consistent publish of the CNC->PLC half. A write lands in the PLC->CNC half at
+  once (one store per field) and is latched by the engine at the start of the next cycle.
+* **32-bit and 64-bit values** take two (four) registers. Word order ``ABCD`` (default: the most
+  significant word first, each word big-endian, as pymodbus and most devices) or ``CDAB`` (the
+  least significant word first: Schneider style, mbpoll's default). Example: DINT -2 = 0xFFFFFFFE
+  is ``[0xFFFF, 0xFFFE]`` in ABCD and ``[0xFFFE, 0xFFFF]`` in CDAB; 100000 = 0x000186A0 is
+  ``[0x0001, 0x86A0]`` / ``[0x86A0, 0x0001]``.
+* **Exceptions** (each carries its wire code from where it is raised): an address no signal
+  occupies, a range that cuts a 32/64-bit value, a write to a CNC->PLC value (its address is not in
+  the written table) = 0x02; a value the field cannot take (FC5 other than 0xFF00/0x0000, a value
+  the image refuses) or a malformed request PDU = 0x03; a function code other than 1, 2, 3, 4, 5,
+  6, 15, 16, 23 = 0x01; an unexpected fault while serving = 0x04 (logged with a traceback).
+* **Unit id.** The server answers its unit id (default 1), 0 and 255 (the Implementation Guide's
+  value for "the device addressed by its IP address"). Other unit ids get exception 0x0B (gateway
+  target device failed to respond), the answer of a Modbus TCP gateway that has no such device
+  behind it, so that a client with a wrong unit id fails at once instead of waiting for a time-out
+  (``unknown_unit="exception"``, the default); ``unknown_unit="ignore"`` drops them without an
+  answer, as a serial slave that is not addressed does.
+* **Pipelining.** Requests are answered one by one, in the order they arrived, however they are
+  split into TCP segments: several in one segment, one across several. The framing is the sans-I/O
+  :class:`~hli_server.codecs.modbus_frames.MbapDecoder`; each request is served synchronously from
+  the image (no awaits between a request and its answer), so answers cannot overtake each other.
+  A plain pymodbus 3.16 server answers only the first of several pipelined requests (its transport
+  keeps one pending request; pymodbus-dev/pymodbus#1949), which is why this adapter frames and
+  serves requests itself.
+* **Malformed input never stops the server.** A bad PDU gets its exception and the next request on
+  the connection is served; an ADU with a protocol id other than 0 is dropped; an MBAP length field
+  out of range (the stream cannot be resynchronised) closes that connection only.
+
+pymodbus: this adapter does not need pymodbus' server, datastore or PDU classes (the PDU codec
+lives in :mod:`hli_server.codecs.modbus_frames`, which checks what pymodbus 3.16's request classes
+let through: coil values other than 0xFF00/0x0000, byte counts). pymodbus is the client of the
+integration tests, the oracle of the codec's unit tests and the reference server of the benchmark.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import struct
+from array import array
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from operator import itemgetter
+from typing import TYPE_CHECKING, Any, Final, Protocol
+
+from hli_server.codecs.modbus_frames import (
+    ExceptionCode,
+    Frame,
+    MbapDecoder,
+    ModbusError,
+    ReadBits,
+    ReadRegisters,
+    ReadWriteRegisters,
+    Request,
+    WriteCoils,
+    WriteRegisters,
+    WriteSingleCoil,
+    WriteSingleRegister,
+    decode_request,
+    encode_adu,
+    encode_exception,
+    encode_read_registers,
+    encode_write_multiple,
+)
+from schemas.layout import (
+    Direction,
+    Layout,
+    ModbusTable,
+    ReadOnlySignalError,
+    Signal,
+    SignalValueError,
+)
+
+if TYPE_CHECKING:
+    from hli_server.runtime import Runtime
+
+__all__ = [
+    "DEFAULT_PORT",
+    "WORD_ORDERS",
+    "ModbusAdapter",
+    "ModbusImage",
+    "ModbusServer",
+    "RegisterMap",
+]
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_PORT: Final = 5020
+"""Not 502: binding ports below 1024 needs privileges. ``--modbus-port 502`` where allowed."""
+WORD_ORDERS: Final = ("ABCD", "CDAB")
+UNKNOWN_UNIT_POLICIES: Final = ("exception", "ignore")
+ANY_UNIT_IDS: Final = frozenset({0, 255})
+"""Unit ids answered besides the configured one: 0 and 255 mean "this device" on Modbus TCP."""
+READER_CACHE_SIZE: Final = 4096
+"""Compiled readers kept per server (one per distinct read request); cleared when full."""
+
+_P2C: Final = Direction.PLC_TO_CNC
+_C2P: Final = Direction.CNC_TO_PLC
+_TABLE_OF_FC: Final = {
+    1: ModbusTable.COIL,
+    2: ModbusTable.DISCRETE_INPUT,
+    3: ModbusTable.HOLDING_REGISTER,
+    4: ModbusTable.INPUT_REGISTER,
+}
+_TABLE_TEXT: Final = {
+    ModbusTable.COIL: "coil",
+    ModbusTable.DISCRETE_INPUT: "discrete input",
+    ModbusTable.HOLDING_REGISTER: "holding register",
+    ModbusTable.INPUT_REGISTER: "input register",
+}
+
+
+class ModbusImage(Protocol):
+    """What the adapter needs of the process image (:class:`hli_server.image.ProcessImage`)."""
+
+    @property
+    def layout(self) -> Layout: ...
+
+    @property
+    def publish_count(self) -> int: ...
+
+    def read_half(self, direction: Direction) -> bytes: ...
+
+    def snapshot(self) -> tuple[int, bytes]: ...
+
+    def write_signal(self, signal: Signal, value: object) -> None: ...
+
+
+# --------------------------------------------------------------------------------------------
+# The register map: Modbus requests against the image (no I/O)
+# --------------------------------------------------------------------------------------------
+
+Reader = Callable[[], bytes]
+"""A compiled read: returns the response PDU (or an exception PDU) from the image as it is now."""
+
+
+def _swap_words(data: bytes) -> bytes:
+    """Swap the two bytes of every 16-bit word: little-endian image bytes <-> CDAB registers."""
+    words = array("H", data)
+    words.byteswap()
+    return words.tobytes()
+
+
+@dataclass(slots=True)
+class _Span:
+    signal: Signal
+    first: int
+    """address of the first register/bit of the signal"""
+
+
+class RegisterMap:
+    """Serves decoded Modbus requests from a :class:`ModbusImage` (H-03). Synchronous, no I/O.
+
+    ``execute(request)`` returns the response PDU or raises :class:`ModbusError`. ``read(pdu)``
+    is the fast path of FC 1-4: the request PDU's bytes select a compiled reader (cached), which
+    checks nothing at run time because the layout does not change while the server runs.
+    """
+
+    def __init__(self, image: ModbusImage, word_order: str = "ABCD") -> None:
+        order = word_order.upper()
+        if order not in WORD_ORDERS:
+            raise ValueError(f"Modbus word order {word_order!r}: use one of {', '.join(WORD_ORDERS)}")
+        self.image = image
+        self.layout: Layout = image.layout
+        self.word_order = order
+        self._index = {t: self.layout.modbus_index(t) for t in ModbusTable}
+        self._readers: dict[bytes, Reader] = {}
+        self._c2p_count = -1
+        self._c2p = b""
+
+    # --- the halves --------------------------------------------------------------------------
+    def _p2c_half(self) -> bytes:
+        return self.image.read_half(_P2C)
+
+    def _c2p_half(self) -> bytes:
+        """The newest consistent CNC->PLC publish; copied again only after a new publish."""
+        count = self.image.publish_count
+        if count != self._c2p_count:
+            self._c2p = self.image.snapshot()[1]
+            self._c2p_count = count
+        return self._c2p
+
+    # --- addressing --------------------------------------------------------------------------
+    def reference(self, table: ModbusTable, address: int) -> str:
+        """``address 2000 (reference 42001)``: both numbers, as a PLC programmer may think of either."""
+        width = self.layout.reference_digits - 1
+        reference = f"{table.reference_prefix}{address + 1:0{width}d}"
+        return f"{_TABLE_TEXT[table]} address {address} (reference {reference})"
+
+    def spans(self, table: ModbusTable, address: int, count: int) -> list[_Span]:
+        """The signals that exactly cover ``address .. address + count - 1`` of ``table``.
+
+        Raises 0x02 when an address is unoccupied, or when the range starts or ends inside a
+        32/64-bit value (a partial access would tear the value).
+        """
+        index = self._index[table]
+        spans: list[_Span] = []
+        a = address
+        end = address + count
+        while a < end:
+            slot = index.get(a)
+            if slot is None:
+                raise ModbusError(
+                    ExceptionCode.ILLEGAL_DATA_ADDRESS,
+                    f"no signal at {self.reference(table, a)}; `hli-server map` lists the addresses",
+                )
+            signal, part = slot
+            width = signal.modbus_count
+            if part != 0 or a + width > end:
+                first = a - part
+                raise ModbusError(
+                    ExceptionCode.ILLEGAL_DATA_ADDRESS,
+                    f"{self.reference(table, address)} x {count} cuts {signal.st_path} "
+                    f"({signal.type}, {width} registers from address {first}): "
+                    "read and write 32/64-bit values whole",
+                )
+            spans.append(_Span(signal, a))
+            a += width
+        return spans
+
+    # --- reads -------------------------------------------------------------------------------
+    def read(self, pdu: bytes) -> bytes | None:
+        """Response PDU of a read request PDU (FC 1-4, exactly 5 bytes), or None for other PDUs."""
+        reader = self._readers.get(pdu)
+        if reader is None:
+            if len(pdu) != 5 or pdu[0] not in _TABLE_OF_FC:
+                return None
+            reader = self._compile_read(pdu)
+            if len(self._readers) >= READER_CACHE_SIZE:
+                self._readers.clear()
+            self._readers[bytes(pdu)] = reader
+        return reader()
+
+    def _compile_read(self, pdu: bytes) -> Reader:
+        fc = pdu[0]
+        try:
+            request = decode_request(pdu)
+            assert isinstance(request, (ReadBits, ReadRegisters))
+            table = _TABLE_OF_FC[fc]
+            spans = self.spans(table, request.address, request.count)
+        except ModbusError as exc:
+            answer = encode_exception(fc, exc.code)
+            message = str(exc)
+
+            def refuse() -> bytes:
+                logger.debug("refused: %s", message)
+                return answer
+
+            return refuse
+        half = self._p2c_half if table in (ModbusTable.COIL, ModbusTable.HOLDING_REGISTER) else self._c2p_half
+        if table in (ModbusTable.COIL, ModbusTable.DISCRETE_INPUT):
+            return self._bit_reader(fc, half, [s.signal.offset for s in spans])
+        return self._register_reader(fc, half, [s.signal for s in spans])
+
+    @staticmethod
+    def _bit_reader(fc: int, half: Callable[[], bytes], offsets: list[int]) -> Reader:
+        count = len(offsets)
+        nbytes = (count + 7) // 8
+        head = bytes((fc, nbytes))
+        if count == 1:
+            (only,) = offsets
+
+            def read_one() -> bytes:
+                return head + (b"\x01" if half()[only] else b"\x00")
+
+            return read_one
+        getter = itemgetter(*offsets)
+
+        def read_bits() -> bytes:
+            acc = 0
+            for i, byte in enumerate(getter(half())):
+                if byte:
+                    acc |= 1 << i
+            return head + acc.to_bytes(nbytes, "little")
+
+        return read_bits
+
+    def _register_reader(self, fc: int, half: Callable[[], bytes], signals: list[Signal]) -> Reader:
+        """One ``unpack_from`` of the fields (in byte order, with padding), one ``pack`` of the
+        registers (in address order); CDAB swaps the bytes of each word of the little-endian pack."""
+        by_offset = sorted(range(len(signals)), key=lambda i: signals[i].offset)
+        start = signals[by_offset[0]].offset
+        fmt = ["<"]
+        cursor = start
+        for i in by_offset:
+            s = signals[i]
+            if s.offset > cursor:
+                fmt.append(f"{s.offset - cursor}x")
+            fmt.append(s.type.struct_char)
+            cursor = s.offset + s.size
+        unpack_from = struct.Struct("".join(fmt)).unpack_from
+        chars = "".join(s.type.struct_char for s in signals)
+        order = [by_offset.index(i) for i in range(len(signals))]
+        permute = None if order == sorted(order) else itemgetter(*order)
+        nbytes = 2 * sum(s.modbus_count for s in signals)
+        head = bytes((fc, nbytes))
+        if self.word_order == "ABCD":
+            pack = struct.Struct(">" + chars).pack
+
+            def read_abcd() -> bytes:
+                values = unpack_from(half(), start)
+                if permute is not None:
+                    values = permute(values)
+                return head + pack(*values)
+
+            return read_abcd
+        pack_le = struct.Struct("<" + chars).pack
+
+        def read_cdab() -> bytes:
+            values = unpack_from(half(), start)
+            if permute is not None:
+                values = permute(values)
+            return head + _swap_words(pack_le(*values))
+
+        return read_cdab
+
+    def read_registers(self, fc: int, address: int, count: int) -> bytes:
+        """Response PDU of a register read (FC 3/4, and the read half of FC 23)."""
+        pdu = bytes((fc,)) + struct.pack(">HH", address, count)
+        answer = self.read(pdu)
+        assert answer is not None
+        if answer[0] & 0x80:
+            raise ModbusError(ExceptionCode(answer[1]), self._refusal(fc, address, count))
+        return answer
+
+    def _refusal(self, fc: int, address: int, count: int) -> str:
+        try:
+            self.spans(_TABLE_OF_FC[fc], address, count)
+        except ModbusError as exc:
+            return str(exc.args[0])
+        return f"read of {count} at {address} refused"  # pragma: no cover - spans() raised before
+
+    # --- writes ------------------------------------------------------------------------------
+    def _decode_register_value(self, signal: Signal, data: bytes) -> int | float:
+        char = signal.type.struct_char
+        if self.word_order == "ABCD":
+            value: int | float = struct.unpack(">" + char, data)[0]
+        else:
+            value = struct.unpack("<" + char, _swap_words(data))[0]
+        return value
+
+    def _commit(self, fc: int, writes: list[tuple[Signal, object]]) -> None:
+        """Check every value first, then write them all: a refused request changes nothing."""
+        checked: list[tuple[Signal, bool | int | float]] = []
+        for signal, value in writes:
+            try:
+                signal.check_plc_write()
+                checked.append((signal, signal.coerce(value)))
+            except ReadOnlySignalError as exc:  # pragma: no cover - CNC->PLC signals are in other tables
+                raise ModbusError(ExceptionCode.ILLEGAL_DATA_ADDRESS, f"function {fc}: {exc}") from None
+            except SignalValueError as exc:
+                raise ModbusError(ExceptionCode.ILLEGAL_DATA_VALUE, f"function {fc}: {exc}") from None
+        write = self.image.write_signal
+        for signal, value in checked:
+            try:
+                write(signal, value)
+            except SignalValueError as exc:  # the image's own range checks, if it has any
+                raise ModbusError(ExceptionCode.ILLEGAL_DATA_VALUE, f"function {fc}: {exc}") from None
+            except ReadOnlySignalError as exc:  # pragma: no cover - see above
+                raise ModbusError(ExceptionCode.ILLEGAL_DATA_ADDRESS, f"function {fc}: {exc}") from None
+
+    def _register_writes(self, fc: int, address: int, data: bytes) -> list[tuple[Signal, object]]:
+        spans = self.spans(ModbusTable.HOLDING_REGISTER, address, len(data) // 2)
+        writes: list[tuple[Signal, object]] = []
+        for span in spans:
+            pos = 2 * (span.first - address)
+            chunk = data[pos : pos + 2 * span.signal.modbus_count]
+            writes.append((span.signal, self._decode_register_value(span.signal, chunk)))
+        return writes
+
+    def execute(self, request: Request, pdu: bytes) -> bytes:
+        """Serve one decoded request; ``pdu`` is its raw PDU (FC 5/6 echo it)."""
+        if isinstance(request, (ReadBits, ReadRegisters)):
+            answer = self.read(pdu)
+            assert answer is not None
+            return answer
+        if isinstance(request, WriteSingleCoil):
+            spans = self.spans(ModbusTable.COIL, request.address, 1)
+            self._commit(request.function_code, [(spans[0].signal, request.value)])
+            return pdu
+        if isinstance(request, WriteCoils):
+            spans = self.spans(ModbusTable.COIL, request.address, request.count)
+            self._commit(
+                request.function_code,
+                [(s.signal, v) for s, v in zip(spans, request.values, strict=True)],
+            )
+            return encode_write_multiple(request.function_code, request.address, request.count)
+        if isinstance(request, WriteSingleRegister):
+            writes = self._register_writes(request.function_code, request.address, request.data)
+            self._commit(request.function_code, writes)
+            return pdu
+        if isinstance(request, WriteRegisters):
+            writes = self._register_writes(request.function_code, request.address, request.data)
+            self._commit(request.function_code, writes)
+            return encode_write_multiple(request.function_code, request.address, request.count)
+        if isinstance(request, ReadWriteRegisters):
+            fc = request.function_code
+            writes = self._register_writes(fc, request.write_address, request.data)
+            self.spans(ModbusTable.HOLDING_REGISTER, request.read_address, request.read_count)
+            self._commit(fc, writes)  # V1.1b3 6.17: the write is performed before the read
+            registers = self.read_registers(3, request.read_address, request.read_count)
+            return encode_read_registers(fc, registers[2:])
+        raise ModbusError(ExceptionCode.ILLEGAL_FUNCTION, f"function {request.function_code} is not served")
+
+
+# --------------------------------------------------------------------------------------------
+# The server: frames in, answers out, in order
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(slots=True)
+class ServerStats:
+    """Counters since start (for the log, tests and ``GET /api/...`` later)."""
+
+    connections: int = 0
+    requests: int = 0
+    exceptions: dict[int, int] = field(default_factory=dict)
+    dropped: int = 0
+    """frames not answered: protocol id not 0, or an unknown unit id with ``unknown_unit="ignore"``"""
+    broken_streams: int = 0
+    """connections closed because an MBAP length field could not be resynchronised"""
+
+
+class ModbusServer:
+    """Answers Modbus TCP frames from a :class:`RegisterMap` (no I/O; :meth:`answer` is sync)."""
+
+    def __init__(
+        self,
+        register_map: RegisterMap,
+        *,
+        unit_id: int = 1,
+        unknown_unit: str = "exception",
+    ) -> None:
+        if not 0 <= unit_id <= 255:
+            raise ValueError(f"Modbus unit id {unit_id} is outside 0..255")
+        if unknown_unit not in UNKNOWN_UNIT_POLICIES:
+            raise ValueError(f"unknown_unit={unknown_unit!r}: use one of {', '.join(UNKNOWN_UNIT_POLICIES)}")
+        self.map = register_map
+        self.unit_id = unit_id
+        self.unknown_unit = unknown_unit
+        self.units = frozenset({unit_id}) | ANY_UNIT_IDS
+        self.stats = ServerStats()
+
+    def answer(self, frame: Frame) -> bytes | None:
+        """The response ADU of one frame, or None when the frame gets no answer."""
+        tid, pid, unit, pdu = frame
+        self.stats.requests += 1
+        if pid != 0:
+            self.stats.dropped += 1
+            logger.debug("dropped an ADU with protocol id %d (not Modbus)", pid)
+            return None
+        fc = pdu[0] if pdu else 0
+        if unit not in self.units:
+            if self.unknown_unit == "ignore":
+                self.stats.dropped += 1
+                return None
+            return self._exception(tid, unit, fc, ExceptionCode.GATEWAY_TARGET_FAILED_TO_RESPOND)
+        try:
+            answer = self.map.read(pdu)
+            if answer is None:
+                answer = self.map.execute(decode_request(pdu), pdu)
+            elif answer[0] & 0x80:
+                self._count(answer[1])
+        except ModbusError as exc:
+            logger.debug("unit %d, transaction %d: %s", unit, tid, exc)
+            return self._exception(tid, unit, fc, exc.code)
+        except Exception:
+            logger.exception("Modbus request %s (unit %d, transaction %d) failed", pdu.hex(" "), unit, tid)
+            return self._exception(tid, unit, fc, ExceptionCode.SERVER_DEVICE_FAILURE)
+        return encode_adu(tid, unit, answer)
+
+    def _count(self, code: int) -> None:
+        self.stats.exceptions[code] = self.stats.exceptions.get(code, 0) + 1
+
+    def _exception(self, tid: int, unit: int, fc: int, code: ExceptionCode) -> bytes:
+        self._count(code)
+        return encode_adu(tid, unit, encode_exception(fc, code))
+
+
+class _Connection(asyncio.Protocol):
+    """One client: decode whatever arrived, answer every complete frame in order, one write."""
+
+    def __init__(self, adapter: ModbusAdapter) -> None:
+        self._adapter = adapter
+        self._server = adapter.server
+        self._decoder = MbapDecoder()
+        self._transport: asyncio.Transport | None = None
+        self._peer: Any = None
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self._transport = transport
+        self._peer = transport.get_extra_info("peername")
+        if not self._adapter._accept(self):
+            logger.warning(
+                "Modbus: refused connection from %s: %d connections open (max_connections)",
+                self._peer,
+                self._adapter.max_connections,
+            )
+            transport.abort()
+            return
+        self._server.stats.connections += 1
+        logger.debug("Modbus: connection from %s", self._peer)
+
+    def data_received(self, data: bytes) -> None:
+        transport = self._transport
+        if transport is None or transport.is_closing():
+            return
+        answer = self._server.answer
+        out = [a for a in map(answer, self._decoder.feed(data)) if a is not None]
+        if out:
+            transport.write(out[0] if len(out) == 1 else b"".join(out))
+        if self._decoder.broken is not None:
+            self._server.stats.broken_streams += 1
+            logger.warning("Modbus: closing connection from %s: %s", self._peer, self._decoder.broken)
+            transport.close()
+
+    def pause_writing(self) -> None:
+        """The client does not read its answers: stop reading its requests until it does."""
+        if self._transport is not None:
+            self._transport.pause_reading()
+
+    def resume_writing(self) -> None:
+        if self._transport is not None and not self._transport.is_closing():
+            self._transport.resume_reading()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._adapter._forget(self)
+        self._transport = None
+
+    def abort(self) -> None:
+        if self._transport is not None:
+            self._transport.abort()
+
+
+class ModbusAdapter:
+    """Modbus TCP on ``bind:port`` for the runtime's process image (H-03).
+
+    Options (``--adapter modbus:port=5020,word_order=CDAB`` or the ``run`` flags): ``port``
+    (0 = a free port; :attr:`port` tells which after start), ``word_order`` ``ABCD``/``CDAB``,
+    ``unit_id`` (1), ``unknown_unit`` ``exception``/``ignore``, ``max_connections`` (32).
+    """
+
+    name = "modbus"
+
+    def __init__(
+        self,
+        *,
+        bind: str = "127.0.0.1",
+        port: int = DEFAULT_PORT,
+        word_order: str = "ABCD",
+        unit_id: int = 1,
+        unknown_unit: str = "exception",
+        max_connections: int = 32,
+    ) -> None:
+        if not 0 <= port <= 65535:
+            raise ValueError(f"Modbus port {port} is outside 0..65535 (0 = a free port)")
+        if str(word_order).upper() not in WORD_ORDERS:
+            raise ValueError(f"Modbus word order {word_order!r}: use one of {', '.join(WORD_ORDERS)}")
+        if not 0 <= unit_id <= 255:
+            raise ValueError(f"Modbus unit id {unit_id} is outside 0..255")
+        if unknown_unit not in UNKNOWN_UNIT_POLICIES:
+            raise ValueError(f"unknown_unit={unknown_unit!r}: use one of {', '.join(UNKNOWN_UNIT_POLICIES)}")
+        if max_connections < 1:
+            raise ValueError(f"max_connections must be at least 1, got {max_connections}")
+        self.bind = bind
+        self.requested_port = port
+        self.word_order = str(word_order).upper()
+        self.unit_id = unit_id
+        self.unknown_unit = unknown_unit
+        self.max_connections = max_connections
+        self.port: int | None = None
+        self.server: ModbusServer
+        self._listener: asyncio.Server | None = None
+        self._connections: set[_Connection] = set()
+
+    @property
+    def host(self) -> str:
+        return f"[{self.bind}]" if ":" in self.bind else self.bind
+
+    def endpoints(self) -> list[str]:
+        if self.port is None:
+            return ["Modbus TCP: not listening"]
+        return [
+            f"Modbus TCP: {self.host}:{self.port}  (unit id {self.unit_id}, "
+            f"32-bit word order {self.word_order}, 0-based addresses as in `hli-server map`)"
+        ]
+
+    def serve_image(self, image: ModbusImage) -> None:
+        """Bind the protocol logic to an image (done by :meth:`start`; tests may call it directly)."""
+        self.server = ModbusServer(
+            RegisterMap(image, self.word_order), unit_id=self.unit_id, unknown_unit=self.unknown_unit
+        )
+
+    async def start(self, runtime: Runtime) -> None:
+        image: Any = runtime.image
+        missing = [
+            n for n in ("read_half", "snapshot", "write_signal", "publish_count") if not hasattr(image, n)
+        ]
+        if missing:
+            raise TypeError(f"Modbus adapter: the runtime's image {image!r} lacks {', '.join(missing)}")
+        await self.start_for(image)
+
+    async def start_for(self, image: ModbusImage) -> None:
+        """Listen for an image without a runtime (tests, tools)."""
+        self.serve_image(image)
+        loop = asyncio.get_running_loop()
+        try:
+            self._listener = await loop.create_server(
+                lambda: _Connection(self), host=self.bind, port=self.requested_port, reuse_address=True
+            )
+        except OSError as exc:
+            raise OSError(
+                exc.errno,
+                f"Modbus TCP: cannot listen on {self.bind}:{self.requested_port}: {exc.strerror}; "
+                "choose another --modbus-port (0 = any free port) or --bind address",
+            ) from None
+        self.port = self._listener.sockets[0].getsockname()[1]
+        logger.info("Modbus TCP listening on %s:%d", self.bind, self.port)
+
+    async def stop(self) -> None:
+        listener, self._listener = self._listener, None
+        if listener is not None:
+            listener.close()
+        for connection in list(self._connections):
+            connection.abort()
+        self._connections.clear()
+        if listener is not None:
+            with contextlib.suppress(Exception):
+                await listener.wait_closed()
+        self.port = None
+
+    def _accept(self, connection: _Connection) -> bool:
+        if len(self._connections) >= self.max_connections:
+            return False
+        self._connections.add(connection)
+        return True
+
+    def _forget(self, connection: _Connection) -> None:
+        self._connections.discard(connection)
