@@ -2,6 +2,7 @@
 
     hli-server run [--config FILE] [--clock realtime|stepped|free] [--bind 127.0.0.1]
                    [--http-port N] [--image-name NAME] [--adapter NAME[:key=value,...]] [--cycles N]
+                   [--modbus-port N] [--modbus-word-order ABCD|CDAB] [--modbus-unit-id N] [--no-modbus]
 
 Prints where everything listens (shared-memory image name, HTTP URL, the ports of further adapters)
 and the clock, then runs until SIGINT/SIGTERM, or for ``--cycles`` cycles (scripts). On the way out
@@ -99,6 +100,24 @@ def _farewell(runtime: Runtime) -> None:
     help="start another adapter, e.g. --adapter modbus:port=5020 (repeatable)",
 )
 @click.option(
+    "--modbus-port",
+    type=click.IntRange(0, 65535),
+    default=5020,
+    show_default=True,
+    help="port of the Modbus TCP view of the image (H-03; 0: any free port)",
+)
+@click.option(
+    "--modbus-word-order",
+    type=click.Choice(["ABCD", "CDAB"], case_sensitive=False),
+    default="ABCD",
+    show_default=True,
+    help="Modbus: order of the two registers of a 32-bit value (ABCD: high word first)",
+)
+@click.option(
+    "--modbus-unit-id", type=click.IntRange(0, 255), default=1, show_default=True, help="Modbus unit id"
+)
+@click.option("--no-modbus", is_flag=True, help="do not start the Modbus TCP server")
+@click.option(
     "--max-catch-up",
     type=click.IntRange(1, 1_000_000),
     default=50,
@@ -116,6 +135,10 @@ def run(
     no_http: bool,
     image_name: str | None,
     adapter_specs: tuple[str, ...],
+    modbus_port: int,
+    modbus_word_order: str,
+    modbus_unit_id: int,
+    no_modbus: bool,
     max_catch_up: int,
     cycles: int | None,
 ) -> None:
@@ -141,6 +164,9 @@ def run(
             if name not in available_adapters():
                 raise AdapterError(f"unknown adapter {name!r}; available: {', '.join(available_adapters())}")
             adapters.append((name, options))
+        if not no_modbus and not any(name == "modbus" for name, _ in adapters):
+            modbus = {"port": modbus_port, "word_order": modbus_word_order.upper(), "unit_id": modbus_unit_id}
+            adapters.append(("modbus", modbus))
         runtime = Runtime(
             config,
             clock=clock,

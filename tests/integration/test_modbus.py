@@ -18,8 +18,10 @@ import importlib.util
 import os
 import random
 import struct
+import sys
 import time
 from collections.abc import AsyncIterator, Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -737,3 +739,55 @@ async def test_dyn_pos_limit_set_over_modbus_stops_the_axis(
     await runtime.step(3000)
     pos = ok(await rt_client.read_input_registers(addr(layout, "gpAx[0]^ipo_state.cmd_pos_r"), count=2))
     assert int32(pos.registers) == 1_000_000
+
+
+# ================================================================================================
+# `hli-server run` serves Modbus
+# ================================================================================================
+
+
+async def test_run_serves_modbus_on_a_free_port_with_the_given_options() -> None:
+    cli = str(Path(sys.executable).parent / "hli-server")
+    proc = await asyncio.create_subprocess_exec(
+        cli,
+        "run",
+        "--no-http",
+        "--modbus-port",
+        "0",
+        "--modbus-word-order",
+        "cdab",
+        "--modbus-unit-id",
+        "9",
+        "--image-name",
+        image_name("run"),
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    try:
+        assert proc.stdout is not None
+        port = 0
+        while True:
+            line = (await asyncio.wait_for(proc.stdout.readline(), 20)).decode()
+            assert line, "hli-server run ended before its banner"
+            if "Modbus TCP:" in line:
+                port = int(line.split("Modbus TCP:")[1].split()[0].rsplit(":", 1)[1])
+                assert "unit id 9" in line
+                assert "word order CDAB" in line
+            if "stop with" in line:
+                break
+        assert port > 0
+        client = AsyncModbusTcpClient("127.0.0.1", port=port, timeout=2, retries=0)
+        assert await client.connect()
+        layout = build_layout(load_machine(None))
+        cycle_address = addr(layout, INPUT_UDINT)
+        first = ok(await client.read_input_registers(cycle_address, count=2, device_id=9)).registers
+        await asyncio.sleep(0.05)
+        second = ok(await client.read_input_registers(cycle_address, count=2, device_id=9)).registers
+        as_cycle = [r[1] << 16 | r[0] for r in (first, second)]  # CDAB: low word first
+        assert 0 < as_cycle[0] < as_cycle[1]  # the realtime clock runs; reads are live
+        assert exception_code(await client.read_input_registers(cycle_address, count=2, device_id=1)) == 0x0B
+        client.close()
+    finally:
+        proc.terminate()
+        await asyncio.wait_for(proc.wait(), 15)
+    assert proc.returncode == 0

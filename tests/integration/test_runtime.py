@@ -456,7 +456,7 @@ def read_banner(proc: subprocess.Popen[str], timeout: float = 20.0) -> dict[str,
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_run_process_shuts_down_cleanly_on_signal(sig: signal.Signals) -> None:
     name = unique_name("sig")
-    proc = start_server("--http-port", "0", "--image-name", name)
+    proc = start_server("--http-port", "0", "--modbus-port", "0", "--image-name", name)
     try:
         banner = read_banner(proc)
         assert banner["image"] == name
@@ -480,7 +480,18 @@ def test_run_process_shuts_down_cleanly_on_signal(sig: signal.Signals) -> None:
 @pytest.mark.req("E-01")
 def test_run_with_cycles_stops_by_itself() -> None:
     result = subprocess.run(
-        [*hli_server_cmd(), "run", "--http-port", "0", "--clock", "free", "--cycles", "500"],
+        [
+            *hli_server_cmd(),
+            "run",
+            "--http-port",
+            "0",
+            "--modbus-port",
+            "0",
+            "--clock",
+            "free",
+            "--cycles",
+            "500",
+        ],
         capture_output=True,
         text=True,
         timeout=60,
@@ -497,7 +508,7 @@ def test_run_reports_a_port_in_use_with_exit_2() -> None:
         busy.listen()
         port = busy.getsockname()[1]
         result = subprocess.run(
-            [*hli_server_cmd(), "run", "--http-port", str(port)],
+            [*hli_server_cmd(), "run", "--http-port", str(port), "--modbus-port", "0"],
             capture_output=True,
             text=True,
             timeout=60,
@@ -510,7 +521,7 @@ def test_run_reports_a_port_in_use_with_exit_2() -> None:
 
 def test_run_reports_a_bad_config_with_exit_2(tmp_path: Path) -> None:
     result = subprocess.run(
-        [*hli_server_cmd(), "run", "--config", str(tmp_path / "missing.toml")],
+        [*hli_server_cmd(), "run", "--config", str(tmp_path / "missing.toml"), "--modbus-port", "0"],
         capture_output=True,
         text=True,
         timeout=60,
