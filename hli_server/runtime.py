@@ -38,6 +38,7 @@ from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
@@ -130,6 +131,12 @@ def _default_image_factory(config: MachineConfig, name: str | None) -> ProcessIm
     # running server never is (ProcessImage.create checks its pid)
     image: ProcessImageLike = ProcessImage.create(build_layout(config), name=name, replace_stale=True)
     return image
+
+
+def _read_program_file(path: str) -> str:
+    """Program table entries given by ``path`` (absolute after loading the configuration) are read
+    when the PLC or the API selects them; the engine itself does no I/O."""
+    return Path(path).read_text(encoding="utf-8")
 
 
 # --------------------------------------------------------------------------------------------
@@ -272,6 +279,7 @@ class Runtime:
         max_catch_up: int = 50,
         image_factory: ImageFactory | None = None,
         stop_after_cycles: int | None = None,
+        read_program: Callable[[str], str] | None = _read_program_file,
     ) -> None:
         try:
             self.clock = Clock(clock)
@@ -289,7 +297,7 @@ class Runtime:
         self.image_name = image_name
         self.max_catch_up = max_catch_up
         self.stop_after_cycles = stop_after_cycles
-        self.machine = Machine(config)
+        self.machine = Machine(config, read_program=read_program)
         self.t_a = self.machine.t_a
         self.stats = PacingStats(self.t_a)
         self._image_factory = image_factory or _default_image_factory

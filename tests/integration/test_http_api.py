@@ -4,6 +4,7 @@ the client, the stepped clock for exact cycles (E-01, H-01, H-02, H-07)."""
 from __future__ import annotations
 
 from collections.abc import AsyncIterator
+from pathlib import Path
 from typing import Any
 
 import httpx
@@ -12,6 +13,7 @@ import pytest
 from hli_server.configuration import load_machine
 from hli_server.engine.hli import ProgramState
 from hli_server.runtime import Runtime
+from schemas.config import ProgramEntry
 
 PROGRAM = "N10 G01 X20 Y10 F6000\nN20 G01 X0 Y0\nN30 M30\n"
 OVERRIDE = "gpCh[0]^bahn_mc_control.override"
@@ -331,3 +333,21 @@ async def test_openapi_is_published(client: httpx.AsyncClient) -> None:
     content = paths["/api/channels/{number}/program"]["post"]["requestBody"]["content"]
     assert set(content) == {"text/plain", "application/json"}
     assert (await client.get("/docs")).status_code == 200
+
+
+async def test_select_a_program_given_by_path_reads_the_file(tmp_path: Path) -> None:
+    """Program table entries with ``path`` are read by the runtime when selected (the engine does no I/O)."""
+    nc = tmp_path / "file.nc"
+    nc.write_text(PROGRAM, encoding="utf-8")
+    config = load_machine(None).model_copy(deep=True)
+    config.channels[0].programs.append(ProgramEntry(number=7, name="from file", path=str(nc)))
+    async with (
+        Runtime(config, clock="stepped", http_port=0) as rt,
+        httpx.AsyncClient(base_url=rt.http_url) as c,
+    ):
+        r = await c.post("/api/channels/1/select", json={"number": 7})
+        assert r.status_code == 200, r.text
+        assert rt.machine.channel(1).program_text == PROGRAM
+        await c.post("/api/channels/1/start")
+        await step(c, 50)
+        assert rt.machine.axis("X").setpoint > 0.0
