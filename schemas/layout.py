@@ -296,7 +296,7 @@ CHANNEL_TEMPLATES: Final[tuple[SignalTemplate, ...]] = (
     SignalTemplate("bahn_state.alarm_count_r", _UDI, _R, "-", "number of pending alarms", ("H-01",), _OWN),
     SignalTemplate(
         "bahn_state.cycle_r",
-        _UDI, _R, "cycles", "interpolation cycle counter (wraps at 2^32)", ("E-01",), _OWN,
+        _UDI, _R, "cycles", "interpolation cycle counter (wraps around)", ("E-01",), _OWN,
     ),
     # gpCh[i]^bahn_mc_control: control units
     *_unit_templates(
@@ -311,7 +311,7 @@ CHANNEL_TEMPLATES: Final[tuple[SignalTemplate, ...]] = (
     ),
     SignalTemplate(
         "mc_command.program_select_w",
-        _UDI, _W, "-", "number of the program (program table) to run on start, 0 = keep",
+        _UDI, _W, "-", "program (number in the program table) to select when it changes, 0 = keep",
         ("E-04", "H-01"), _OWN,
     ),
     SignalTemplate(

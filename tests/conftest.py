@@ -24,7 +24,10 @@ def _our_segments() -> set[str]:
 
 @pytest.fixture(autouse=True)
 def _no_leaked_shared_memory():
-    """No process image created by a test outlives it (H-01): every one is closed and unlinked."""
+    """No process image created by a test outlives it (H-01): every one is closed and unlinked.
+
+    Images belong to function-scoped fixtures; one kept by a module-scoped fixture is reported here.
+    """
     before = _our_segments()
     yield
     shm_module = sys.modules.get("hli_server.image.shm")
