@@ -1,0 +1,311 @@
+"""Modbus TCP: requests per second and latency of FC 3 reads (H-03).
+
+Two servers, each in its own process, measured in the same run with the same clients:
+
+* **hli-server**: the runtime with the demo machine, the engine running in real time (T_A = 1 ms,
+  every monitor installed) and the ``modbus`` adapter; reads come from the live process image.
+* **plain pymodbus 3.16**: ``pymodbus.server.ModbusTcpServer`` with a static ``SimDevice``
+  datastore (no engine, no image): the reference.
+
+Clients are raw sockets in separate processes (pre-built request, one request in flight per
+client: send, wait for the whole answer, repeat), 1 client and 10 concurrent clients, a few seconds
+each. Printed: requests/s, latency p50/p99 per server, and the ratio hli-server / plain (goal >= 1.5),
+plus how the realtime clock fared under the load (lateness, dropped cycles).
+
+    .venv/bin/python -m benchmarks.bench_modbus [--seconds 3] [--clients 1 10] [--count 6]
+
+Client and servers share the machine's cores: the figures are noisy, the ratio is what to compare.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import multiprocessing as mp
+import os
+import signal
+import socket
+import struct
+import time
+from array import array
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from typing import Any
+
+HOLDING_ADDRESS = 0
+"""Channel 1's holding registers: override.command_w, mode_w, program_select_w (6 registers)."""
+GOAL = 1.5
+
+_CTX = mp.get_context("fork")
+
+
+# --------------------------------------------------------------------------------------------
+# Servers (child processes)
+# --------------------------------------------------------------------------------------------
+
+
+def _serve_hli(conn: Connection) -> None:
+    from hli_server.configuration import load_machine
+    from hli_server.runtime import Runtime
+
+    runtime = Runtime(
+        load_machine(None),
+        clock="realtime",
+        http_port=None,
+        image_name=f"hli_bench_modbus_{os.getpid()}",
+        adapters=[("modbus", {"port": 0})],
+    )
+
+    def ready(rt: Runtime) -> None:
+        conn.send(getattr(rt.adapter("modbus"), "port"))  # noqa: B009 - the Modbus adapter's attribute
+
+    asyncio.run(runtime.serve(ready=ready))
+    conn.send(runtime.timing())
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def _serve_plain(conn: Connection) -> None:
+    import logging
+
+    from pymodbus.server import ModbusTcpServer
+    from pymodbus.simulator import SimData, SimDevice
+    from pymodbus.simulator.simdata import DataType
+
+    logging.getLogger("pymodbus").setLevel(logging.ERROR)
+    port = _free_port()
+    device = SimDevice(
+        id=0, simdata=[SimData(address=0, count=200, values=0x1234, datatype=DataType.REGISTERS)]
+    )
+
+    async def main() -> None:
+        server = ModbusTcpServer(device, address=("127.0.0.1", port))
+        stop = asyncio.Event()
+        asyncio.get_running_loop().add_signal_handler(signal.SIGTERM, stop.set)
+        task = asyncio.create_task(server.serve_forever())
+        for _ in range(200):  # until it accepts connections
+            with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=1):
+                break
+            await asyncio.sleep(0.01)
+        conn.send(port)
+        await stop.wait()
+        await server.shutdown()
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
+
+    asyncio.run(main())
+    conn.send(None)
+
+
+@dataclass
+class Server:
+    name: str
+    process: Any
+    conn: Connection
+    port: int
+
+    @classmethod
+    def start(cls, name: str, target: Callable[[Connection], None]) -> Server:
+        parent, child = _CTX.Pipe()
+        process = _CTX.Process(target=target, args=(child,), daemon=True)
+        process.start()
+        if not parent.poll(30):
+            process.kill()
+            raise RuntimeError(f"{name}: the server did not start within 30 s")
+        return cls(name, process, parent, parent.recv())
+
+    def stop(self) -> Any:
+        """SIGTERM, then what the server reports on its way out (the runtime's timing)."""
+        self.process.terminate()
+        report = self.conn.recv() if self.conn.poll(15) else None
+        self.process.join(15)
+        if self.process.is_alive():
+            self.process.kill()
+        return report
+
+
+# --------------------------------------------------------------------------------------------
+# Clients (worker processes)
+# --------------------------------------------------------------------------------------------
+
+
+def _client(
+    port: int, frame: bytes, answer_size: int, start_at: float, seconds: float
+) -> tuple[int, int, bytes]:
+    """Closed loop until ``start_at + seconds``: (answers, exception answers, latencies in ns)."""
+    sock = socket.create_connection(("127.0.0.1", port))
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    buf = bytearray(answer_size)
+    view = memoryview(buf)
+    latencies = array("Q")
+    errors = 0
+    clock = time.perf_counter
+    while clock() < start_at:
+        time.sleep(0.001)
+    stop_at = start_at + seconds
+    ns = time.perf_counter_ns
+    send, recv_into, record = sock.sendall, sock.recv_into, latencies.append
+    while True:
+        t0 = ns()
+        send(frame)
+        got = recv_into(view, answer_size)
+        need = answer_size
+        while got < need:
+            if got == 0:
+                raise ConnectionError("the server closed the connection")
+            if got >= 6:
+                need = 6 + (buf[4] << 8 | buf[5])  # MBAP length: an exception answer is shorter
+                if got >= need:
+                    break
+            n = recv_into(view[got:], need - got)
+            if n == 0:
+                raise ConnectionError("the server closed the connection")
+            got += n
+        if buf[7] & 0x80:
+            errors += 1
+        record(ns() - t0)
+        if clock() >= stop_at:
+            break
+    sock.close()
+    return len(latencies), errors, latencies.tobytes()
+
+
+@dataclass
+class Result:
+    server: str
+    clients: int
+    seconds: float
+    answers: int
+    errors: int
+    p50_us: float
+    p99_us: float
+    cpu_us: float
+    """server CPU time per answer, less what the server burns idle (the engine's cycles)"""
+
+    @property
+    def rate(self) -> float:
+        return self.answers / self.seconds
+
+
+def _percentile(data: array[int], q: float) -> float:
+    if not data:
+        return float("nan")
+    k = max(0, min(len(data) - 1, int(q / 100 * len(data) + 0.5) - 1))
+    return data[k] / 1000
+
+
+def _cpu_seconds(pid: int) -> float:
+    """utime + stime of a process (Linux /proc)."""
+    with open(f"/proc/{pid}/stat") as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def _sleep_until(t: float) -> None:
+    delay = t - time.perf_counter()
+    if delay > 0:
+        time.sleep(delay)
+
+
+def measure(server: Server, clients: int, seconds: float, count: int) -> Result:
+    frame = struct.pack(">HHHBBHH", 1, 0, 6, 1, 3, HOLDING_ADDRESS, count)
+    answer_size = 9 + 2 * count
+    pid = server.process.pid
+    idle_from, idle_cpu = time.perf_counter(), _cpu_seconds(pid)
+    with ProcessPoolExecutor(max_workers=clients, mp_context=_CTX) as pool:
+        start_at = time.perf_counter() + 0.5 + 0.05 * clients  # every client connected and waiting
+        futures = [
+            pool.submit(_client, server.port, frame, answer_size, start_at, seconds) for _ in range(clients)
+        ]
+        _sleep_until(start_at - 0.1)
+        idle_rate = (_cpu_seconds(pid) - idle_cpu) / (time.perf_counter() - idle_from)
+        _sleep_until(start_at)
+        cpu_start = _cpu_seconds(pid)
+        _sleep_until(start_at + seconds)
+        busy_cpu = _cpu_seconds(pid) - cpu_start - idle_rate * seconds
+        outcomes = [f.result(timeout=seconds + 60) for f in futures]
+    latencies: array[int] = array("Q")
+    answers = errors = 0
+    for n, e, raw in outcomes:
+        answers += n
+        errors += e
+        latencies.frombytes(raw)
+    ordered = array("Q", sorted(latencies))
+    return Result(
+        server.name,
+        clients,
+        seconds,
+        answers,
+        errors,
+        _percentile(ordered, 50),
+        _percentile(ordered, 99),
+        1e6 * busy_cpu / answers if answers else float("nan"),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=3.0, help="length of each run [s]")
+    parser.add_argument("--clients", type=int, nargs="+", default=[1, 10], help="concurrent clients per run")
+    parser.add_argument("--count", type=int, default=6, help="registers per FC 3 read (1..6)")
+    args = parser.parse_args()
+    if not 1 <= args.count <= 6:
+        parser.error("--count: the demo machine's channel block has 6 holding registers at address 0")
+
+    print(
+        f"FC 3 read of {args.count} holding registers at address {HOLDING_ADDRESS}, raw-socket clients "
+        f"(one request in flight each), {args.seconds:g} s per run, {os.cpu_count()} CPUs shared"
+    )
+    results: dict[tuple[str, int], Result] = {}
+    timing: Any = None
+    for name, target in (("hli-server", _serve_hli), ("plain pymodbus", _serve_plain)):
+        server = Server.start(name, target)
+        try:
+            for clients in args.clients:
+                results[name, clients] = measure(server, clients, args.seconds, args.count)
+        finally:
+            report = server.stop()
+        if name == "hli-server":
+            timing = report
+
+    print(
+        f"{'server':<44} {'clients':>7} {'req/s':>9} {'p50 us':>8} {'p99 us':>8} "
+        f"{'CPU us/req':>10} {'errors':>6}"
+    )
+    labels = {
+        "hli-server": "hli-server modbus adapter (engine realtime)",
+        "plain pymodbus": "plain pymodbus 3.16 server (static data)",
+    }
+    for (name, clients), r in results.items():
+        print(
+            f"{labels[name]:<44} {clients:>7} {r.rate:>9.0f} {r.p50_us:>8.1f} {r.p99_us:>8.1f} "
+            f"{r.cpu_us:>10.1f} {r.errors:>6}"
+        )
+    for clients in args.clients:
+        ours, plain = results["hli-server", clients], results["plain pymodbus", clients]
+        ratio = ours.rate / plain.rate if plain.rate else float("inf")
+        verdict = "meets" if ratio >= GOAL else "MISSES"
+        print(f"ratio hli-server / plain, {clients} client(s): {ratio:.2f}x ({verdict} the goal >= {GOAL}x)")
+    if timing:
+        lateness = timing["lateness_us"]
+        print(
+            f"engine under the load: {timing['cycles']} cycles in {timing['wall_s']:.1f} s, lateness "
+            f"p50 {lateness['p50']:.0f} us, p99 {lateness['p99']:.0f} us, max {lateness['max']:.0f} us, "
+            f"{timing['slipped_cycles']} cycles dropped"
+        )
+
+
+if __name__ == "__main__":
+    main()
