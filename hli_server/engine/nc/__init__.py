@@ -12,8 +12,10 @@ from hli_server.engine.nc.blocks import (
     Block,
     NcError,
 )
+from hli_server.engine.nc.parser import KNOWN_G_CODES, iter_blocks, parse_line, parse_program
 
 __all__ = [
+    "KNOWN_G_CODES",
     "AreaBegin",
     "AreaClear",
     "AreaCommand",
@@ -24,4 +26,7 @@ __all__ = [
     "AreaShape",
     "Block",
     "NcError",
+    "iter_blocks",
+    "parse_line",
+    "parse_program",
 ]
