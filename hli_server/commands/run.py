@@ -2,6 +2,7 @@
 
     hli-server run [--config FILE] [--clock realtime|stepped|free] [--bind 127.0.0.1]
                    [--http-port N] [--image-name NAME] [--adapter NAME[:key=value,...]] [--cycles N]
+                   [--event-loop select|default] [--max-catch-up N]
                    [--modbus-port N] [--modbus-word-order ABCD|CDAB] [--modbus-unit-id N] [--no-modbus]
 
 Prints where everything listens (shared-memory image name, HTTP URL, the ports of further adapters)
@@ -22,7 +23,7 @@ import click
 
 from hli_server.adapters.registry import AdapterError, available_adapters, parse_adapter_spec
 from hli_server.configuration import ConfigError, ConfigFileError, load_machine, machine_summary
-from hli_server.runtime import Clock, Runtime
+from hli_server.runtime import Clock, Runtime, precise_event_loop
 
 __all__ = ["run"]
 
@@ -32,10 +33,10 @@ _EXIT_FAILED = 1
 _EXIT_START = 2
 
 
-def _banner(runtime: Runtime) -> None:
+def _banner(runtime: Runtime, event_loop: str) -> None:
     config = runtime.config
     click.echo(f"hli-server: {machine_summary(config)}")
-    click.echo(f"  clock: {runtime.clock} (T_A = {config.cycle_time_us} µs)")
+    click.echo(f"  clock: {runtime.clock} (T_A = {config.cycle_time_us} µs, event loop: {event_loop})")
     image = runtime.image
     layout = runtime.layout
     click.echo(
@@ -124,6 +125,13 @@ def _farewell(runtime: Runtime) -> None:
     show_default=True,
     help="realtime: most cycles run at once when the loop was late (beyond: simulated time slips)",
 )
+@click.option(
+    "--event-loop",
+    type=click.Choice(["select", "default"]),
+    default="select",
+    show_default=True,
+    help="select: microsecond timers (realtime lateness ~0.1 ms); default: asyncio's (epoll, whole ms)",
+)
 @click.option("--cycles", type=click.IntRange(min=0), default=None, help="stop after N cycles (for scripts)")
 @click.pass_context
 def run(
@@ -140,6 +148,7 @@ def run(
     modbus_unit_id: int,
     no_modbus: bool,
     max_catch_up: int,
+    event_loop: str,
     cycles: int | None,
 ) -> None:
     """Run the machine with its process image and control API until stopped."""
@@ -182,7 +191,9 @@ def run(
         ctx.exit(_EXIT_START)
 
     try:
-        asyncio.run(runtime.serve(ready=_banner))
+        loop_factory = precise_event_loop if event_loop == "select" else None
+        with asyncio.Runner(loop_factory=loop_factory) as runner:
+            runner.run(runtime.serve(ready=lambda rt: _banner(rt, event_loop)))
     except KeyboardInterrupt:  # Ctrl+C before the signal handlers were installed
         pass
     except Exception as exc:

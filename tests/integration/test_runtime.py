@@ -478,7 +478,10 @@ def test_run_process_shuts_down_cleanly_on_signal(sig: signal.Signals) -> None:
 
 
 @pytest.mark.req("E-01")
-def test_run_with_cycles_stops_by_itself() -> None:
+@pytest.mark.parametrize(
+    ("clock", "event_loop"), [("free", "select"), ("realtime", "select"), ("realtime", "default")]
+)
+def test_run_with_cycles_stops_by_itself(clock: str, event_loop: str) -> None:
     result = subprocess.run(
         [
             *hli_server_cmd(),
@@ -488,9 +491,11 @@ def test_run_with_cycles_stops_by_itself() -> None:
             "--modbus-port",
             "0",
             "--clock",
-            "free",
+            clock,
+            "--event-loop",
+            event_loop,
             "--cycles",
-            "500",
+            "300",
         ],
         capture_output=True,
         text=True,
@@ -498,8 +503,10 @@ def test_run_with_cycles_stops_by_itself() -> None:
         check=False,
     )
     assert result.returncode == 0, result.stderr
-    assert "clock: free" in result.stdout
-    assert "stopped at cycle 500 " in result.stdout
+    assert f"clock: {clock} (T_A = 1000 µs, event loop: {event_loop})" in result.stdout
+    assert "stopped at cycle 300 " in result.stdout
+    if clock == "realtime":
+        assert "lateness p50" in result.stdout
 
 
 def test_run_reports_a_port_in_use_with_exit_2() -> None:
