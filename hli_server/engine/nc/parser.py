@@ -22,9 +22,9 @@ Syntax (DIN 66025 as used by the ISG documents FCT-C14 sections 2.4 and 3, and t
 Error messages show the offending word upper-cased (the parser works on the upper-cased code).
 
 Speed: :func:`iter_blocks` is lazy and meant for multi-million-line programs. A plain motion line
-costs one ``str.upper``, one anchored regex match for the block number and one ``findall`` over
-the words; everything unusual (comments, ``#``, ``:``, errors) leaves the fast path
-(``benchmarks/bench_parser.py`` measures it).
+(no comment, ``#``, ``:``, ``/``) costs a ``strip``, an ``upper`` and one ``findall`` over its words,
+the N number being read as the first word; everything unusual leaves this fast path, and errors
+are explained by a second, slower pass over the bad line only (``benchmarks/bench_parser.py``).
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ import functools
 import io
 import math
 import re
+import types
 from collections.abc import Callable, Collection, Iterator
 from typing import NoReturn
 
@@ -192,7 +193,7 @@ def _unclosed_comment(text: str, code: str, open_at: int, line: int) -> NoReturn
         _OPEN_COMMENT,
         line,
         _leading_number(code),
-        f"comment not closed: {text[open_at : open_at + 30]!r} has no ')'; close it or use ';'",
+        f"comment not closed: {_short(text[open_at:])!r} has no ')'; close it or use ';'",
     )
 
 
@@ -251,11 +252,14 @@ def _block_maker() -> Callable[
     """A constructor for word blocks (no area, no second path) that is twice as fast as ``Block()``.
 
     The frozen dataclass ``__init__`` assigns each of its 11 fields through ``object.__setattr__``,
-    which is half the parser's time per simple line; the slots' own descriptors do the same
-    assignment directly. Used only while ``Block`` has exactly these fields and no
-    ``__post_init__``; otherwise it is the ordinary constructor (a unit test compares the two).
+    which was a third of the parser's time per simple line; the slots' own descriptors do the same
+    assignment directly (the instance stays frozen: ``__setattr__`` still refuses). Used only while
+    ``Block`` is a slots dataclass with exactly these fields and no ``__post_init__``; otherwise this
+    is the ordinary constructor (a unit test compares the two).
     """
-    if tuple(f.name for f in dataclasses.fields(Block)) != _BLOCK_FIELDS or hasattr(Block, "__post_init__"):
+    fields_match = tuple(f.name for f in dataclasses.fields(Block)) == _BLOCK_FIELDS
+    slotted = all(isinstance(getattr(Block, n, None), types.MemberDescriptorType) for n in _BLOCK_FIELDS)
+    if not (fields_match and slotted) or hasattr(Block, "__post_init__"):
         return lambda line, number, text, g, m, axes, centre, feed, extra: Block(  # pragma: no cover
             line, number, text, g, m, axes, centre, feed, None, (), extra
         )
@@ -375,7 +379,7 @@ class _LineParser:
         ``lenient`` accepts any axis-like word (a second path, C14-18)."""
         axes = self._axes if not lenient else _AXIS_LETTERS
         g_codes: list[int] = []
-        m_codes: list[int] = []
+        m_codes: list[int] | None = None  # rare words: their containers only when needed
         axis_words: dict[str, float] = {}
         centre: dict[str, float] | None = None
         extra: dict[str, float] | None = None
@@ -417,7 +421,7 @@ class _LineParser:
                     not n_first
                     or number is not None
                     or g_codes
-                    or m_codes
+                    or m_codes is not None
                     or axis_words
                     or feed is not None
                     or centre is not None
@@ -430,6 +434,8 @@ class _LineParser:
                     _fail(
                         _BAD_NUMBER, line, number, f"M{_short(num)}: an M function takes a whole number (M30)"
                     )
+                if m_codes is None:
+                    m_codes = []
                 m_codes.append(int(num))
             elif letter in _CENTRE_LETTERS:
                 if centre is None:
@@ -452,7 +458,7 @@ class _LineParser:
             number,
             text,
             tuple(g_codes),
-            tuple(m_codes),
+            tuple(m_codes) if m_codes is not None else (),
             tuple(axis_words.items()),
             tuple(centre.items()) if centre else (),
             feed,
