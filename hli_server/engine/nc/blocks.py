@@ -131,4 +131,5 @@ class NcError(Exception):
         self.message = message
 
     def __str__(self) -> str:
-        return f"line {self.line}, {self.block}: {self.message} [{self.alarm}]"
+        where = f"line {self.line}" if self.block == f"line {self.line}" else f"line {self.line}, {self.block}"
+        return f"{where}: {self.message} [{self.alarm}]"
