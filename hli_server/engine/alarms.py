@@ -107,6 +107,8 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(912002, "Area definition invalid", "project (FCT-C14)"),
     _e(912003, "Area command invalid", "project (FCT-C14)"),
     _w(912004, "Manual motion stopped at a work/protection area boundary", "project (FCT-C14, P-MANU-00014)"),
+    _e(912010, "Measuring move (G100) ended without a probe signal", "project (FCT-C14, C14-23)"),
+    _e(912011, "Measuring move (G100) invalid", "project (FCT-C14, C14-23)"),
 )
 
 ALARMS: dict[int, AlarmDef] = {a.number: a for a in _TABLE}

@@ -25,6 +25,8 @@ __all__ = [
     "AreaHandler",
     "DecodeError",
     "Decoder",
+    "MeasureHandler",
+    "MeasuringMove",
     "ModalState",
     "PathCheck",
 ]
@@ -60,6 +62,25 @@ class AreaHandler(Protocol):
     ) -> DecodeError | Callable[[], None] | None: ...
 
     def contour(self, segment: Segment, block: Block, modal: ModalState) -> DecodeError | None: ...
+
+
+@dataclass(frozen=True, slots=True)
+class MeasuringMove:
+    """What a :class:`MeasureHandler` makes of a G100 block: the (possibly shortened) line to move,
+    a tag the monitor recognises the queued motion by, and the action run when the move is over.
+    The decoder decodes nothing after the block until ``done`` calls :meth:`Decoder.resume`."""
+
+    segment: LineSegment
+    done: Callable[[], None]
+    tag: Any = None
+
+
+class MeasureHandler(Protocol):
+    """Receives G100 measuring moves (C14-23, P-CHAN-00268)."""
+
+    def measuring_move(
+        self, segment: LineSegment, block: Block, modal: ModalState
+    ) -> DecodeError | MeasuringMove: ...
 
 
 @dataclass(slots=True)
@@ -108,7 +129,9 @@ class Decoder:
         self.finished = False
         self.path_checks: list[PathCheck] = []
         self.area_handler: AreaHandler | None = None
+        self.measure_handler: MeasureHandler | None = None
         self.current_block: Block | None = None
+        self._position_before_area: list[float] | None = None
         self.blocks_decoded = 0
 
     # --- program control -----------------------------------------------------------------
@@ -118,6 +141,11 @@ class Decoder:
         self.finished = False
         self.blocks_decoded = 0
         self.modal.in_area_definition = False
+
+    def resume(self, position: list[float]) -> None:
+        """Continue decoding from ``position`` (after a measuring move stopped where the probe fired)."""
+        self.position = list(position)
+        self.finished = False
 
     def reset_modal(self) -> None:
         """Reset: modal state back to its defaults, G92 cleared (zero offset table kept)."""
@@ -163,6 +191,7 @@ class Decoder:
         items: list[Motion | Marker] = []
         if block.area is not None:
             return self._area(block, block.area)
+        measuring = False
         for g in block.g_codes:
             if g in (0, 1, 2, 3):
                 m.motion = g
@@ -180,6 +209,8 @@ class Decoder:
                 m.zero_offset = f"G{g}"
             elif g == 53:
                 m.zero_offset = None
+            elif g == 100 and self.measure_handler is not None:
+                measuring = True
             elif g in (100, 200, 201, 202, 4):
                 return self._error(block, 910110, f"G{g} is not supported in this block context")
         if block.feed is not None:
@@ -193,6 +224,8 @@ class Decoder:
                 base = m.zero_offsets.get(m.zero_offset, {}).get(name, 0.0) if m.zero_offset else 0.0
                 m.g92[name] = self.position[i] - base - value
             return items
+        if measuring:
+            return self._measuring_move(block)
         moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre))
         if moves:
             result = self._motion(block)
@@ -275,6 +308,32 @@ class Decoder:
             exact_stop=60 in block.g_codes,
         )
 
+    def _measuring_move(self, block: Block) -> list[Motion | Marker]:
+        """G100 (C14-23): a linear feed move toward the target, then decoding waits for its end."""
+        assert self.measure_handler is not None
+        if not block.axes:
+            return self._error(block, 912011, "G100 measuring move without a target position")
+        if self.modal.in_area_definition:
+            return self._error(block, 912011, "G100 is not allowed inside an area definition")
+        if self.modal.feed is None:
+            return self._error(block, 911000, "no feed (F word) programmed for the G100 measuring move")
+        segment = LineSegment(tuple(self.position), tuple(self._target(block)))
+        if segment.length <= 1e-12:
+            return self._error(block, 912011, "G100 measuring move: the target is the current position")
+        result = self.measure_handler.measuring_move(segment, block, self.modal)
+        if isinstance(result, DecodeError):
+            return [Marker(MarkerKind.ERROR, block, payload=result)]
+        for check in self.path_checks:
+            err = check(result.segment, block)
+            if err is not None:
+                return [Marker(MarkerKind.ERROR, block, payload=err)]
+        v_max, accel = self._limits(result.segment, rapid=False)
+        motion = Motion(
+            segment=result.segment, block=block, v_max=v_max, accel=accel, exact_stop=True, tag=result.tag
+        )
+        self.finished = True  # until result.done resumes from where the move ended
+        return [motion, Marker(MarkerKind.ACTION, block, payload=result.done)]
+
     def _limits(self, segment: Segment, rapid: bool) -> tuple[float, float]:
         """Path velocity and acceleration the axes allow along the segment (mm/s, mm/s²)."""
         length = segment.length
@@ -312,10 +371,15 @@ class Decoder:
                     block, 912002, "#CONTROL AREA BEGIN before the previous definition was closed by END"
                 )
             m.in_area_definition = True
+            # the contour blocks do not move the axes: END puts the position back
+            self._position_before_area = list(self.position)
         elif isinstance(cmd, AreaEnd):
             if not m.in_area_definition:
                 return self._error(block, 912002, "#CONTROL AREA END without BEGIN")
             m.in_area_definition = False
+            if self._position_before_area is not None:
+                self.position = self._position_before_area
+                self._position_before_area = None
         if self.area_handler is None:
             return self._error(block, 910110, "#CONTROL AREA: work and protection areas are not configured")
         result = self.area_handler.command(cmd, block, tuple(self.position), m)

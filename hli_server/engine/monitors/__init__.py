@@ -14,6 +14,8 @@ __all__ = ["install_default_monitors"]
 
 
 def install_default_monitors(machine: Machine) -> None:
+    from hli_server.engine.areas.monitor import AreaMonitor
     from hli_server.engine.monitors.soft_limits import SoftLimits
 
     machine.monitors.append(SoftLimits(machine))
+    machine.monitors.append(AreaMonitor(machine))
