@@ -22,7 +22,7 @@ protection area may never be touched (on its boundary is a violation). "On" mean
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from hli_server.engine.geometry import ArcSegment, LineSegment, Point, Segment
 
@@ -77,14 +77,21 @@ def _clamp01(f: float) -> float:
 class Polygon:
     """A simple polygon (need not be convex), vertices without the closing repetition."""
 
-    __slots__ = ("bbox", "edges", "points")
+    __slots__ = ("bbox", "edges", "near", "points")
 
     def __init__(self, points: list[tuple[float, float]]) -> None:
         self.points = tuple(points)
         n = len(points)
+        pairs = [(points[k], points[(k + 1) % n]) for k in range(n)]
+        # (x0, y0, dx, dy, |d|², |d|, y1)
         self.edges = tuple(
-            (x0, y0, x1 - x0, y1 - y0, (x1 - x0) ** 2 + (y1 - y0) ** 2)
-            for (x0, y0), (x1, y1) in ((points[k], points[(k + 1) % n]) for k in range(n))
+            (x0, y0, x1 - x0, y1 - y0, (x1 - x0) ** 2 + (y1 - y0) ** 2, math.hypot(x1 - x0, y1 - y0), y1)
+            for (x0, y0), (x1, y1) in pairs
+        )
+        # each edge's box grown by EPS: only a point inside it can be on the edge
+        self.near = tuple(
+            (min(x0, x1) - EPS, max(x0, x1) + EPS, min(y0, y1) - EPS, max(y0, y1) + EPS)
+            for (x0, y0), (x1, y1) in pairs
         )
         xs = [p[0] for p in points]
         ys = [p[1] for p in points]
@@ -95,14 +102,14 @@ class Polygon:
         if x < x0 - EPS or x > x1 + EPS or y < y0 - EPS or y > y1 + EPS:
             return OUTSIDE
         inside = False
-        for ex, ey, dx, dy, l2 in self.edges:
-            wx, wy = x - ex, y - ey
-            t = (wx * dx + wy * dy) / l2
-            t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
-            px, py = wx - t * dx, wy - t * dy
-            if px * px + py * py <= _EPS2:
-                return ON
-            ey1 = ey + dy
+        for (ex, ey, dx, dy, l2, _, ey1), (nx0, nx1, ny0, ny1) in zip(self.edges, self.near, strict=True):
+            if nx0 <= x <= nx1 and ny0 <= y <= ny1:
+                wx, wy = x - ex, y - ey
+                t = (wx * dx + wy * dy) / l2
+                t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+                px, py = wx - t * dx, wy - t * dy
+                if px * px + py * py <= _EPS2:
+                    return ON
             if (ey > y) != (ey1 > y) and x < ex + (y - ey) * dx / dy:
                 inside = not inside
         return INSIDE if inside else OUTSIDE
@@ -112,18 +119,24 @@ class Polygon:
         dd = dx * dx + dy * dy
         dlen = math.sqrt(dd)
         tf = EPS / dlen
-        for ex, ey, gx, gy, gg in self.edges:
+        eps_d = EPS * dlen
+        qx, qy = ax + dx, ay + dy
+        sx0, sx1 = (ax, qx) if ax <= qx else (qx, ax)
+        sy0, sy1 = (ay, qy) if ay <= qy else (qy, ay)
+        for (ex, ey, gx, gy, _, glen, _), (nx0, nx1, ny0, ny1) in zip(self.edges, self.near, strict=True):
+            if sx1 < nx0 or sx0 > nx1 or sy1 < ny0 or sy0 > ny1:
+                continue  # boxes apart: the edge is farther than EPS from the path
             wx, wy = ex - ax, ey - ay
             den = dx * gy - dy * gx
-            glen = math.sqrt(gg)
+            cross = wx * dy - wy * dx  # |cross| / |D|: distance of the corner from the path's line
             if abs(den) > 1e-12 * dlen * glen:
                 f = (wx * gy - wy * gx) / den
                 if -tf <= f <= 1.0 + tf:
-                    g = (wx * dy - wy * dx) / den
+                    g = cross / den
                     tg = EPS / glen
                     if -tg <= g <= 1.0 + tg:
                         out.append(_clamp01(f))
-            elif abs(dx * wy - dy * wx) <= EPS * dlen:
+            elif abs(cross) <= eps_d:
                 # collinear: the overlap's two ends
                 f0 = (wx * dx + wy * dy) / dd
                 f1 = ((wx + gx) * dx + (wy + gy) * dy) / dd
@@ -131,16 +144,17 @@ class Polygon:
                 if hi >= -tf and lo <= 1.0 + tf:
                     out.append(_clamp01(lo))
                     out.append(_clamp01(hi))
-            # a vertex that the path passes within EPS (a touch at a corner)
-            t = (wx * dx + wy * dy) / dd
-            if 0.0 <= t <= 1.0:
-                px, py = ax + t * dx - ex, ay + t * dy - ey
-                if px * px + py * py <= _EPS2:
+            # a corner that the path passes within EPS (a touch at a corner, at any angle)
+            if abs(cross) <= eps_d:
+                t = (wx * dx + wy * dy) / dd
+                if 0.0 <= t <= 1.0:
                     out.append(t)
 
     def arc_events(self, cx: float, cy: float, r: float, a0: float, sweep: float, out: list[float]) -> None:
-        for ex, ey, gx, gy, gg in self.edges:
-            glen = math.sqrt(gg)
+        sx0, sx1, sy0, sy1 = cx - r, cx + r, cy - r, cy + r
+        for (ex, ey, gx, gy, gg, glen, _), (nx0, nx1, ny0, ny1) in zip(self.edges, self.near, strict=True):
+            if sx1 < nx0 or sx0 > nx1 or sy1 < ny0 or sy0 > ny1:
+                continue  # the edge is farther than EPS from the whole circle
             t0 = ((cx - ex) * gx + (cy - ey) * gy) / gg
             fx, fy = ex + t0 * gx, ey + t0 * gy
             d = math.hypot(cx - fx, cy - fy)
@@ -335,14 +349,54 @@ def _chords(arc: ArcSegment) -> list[LineSegment]:
     return [LineSegment(pts[k], pts[k + 1]) for k in range(n)]
 
 
+_Box = tuple[Prism, int, int, int, float, float, float, float, float, float]
+"""A prism with its axes and its box grown by EPS: (prism, a, b, c, x0, x1, y0, y1, h0, h1)."""
+
+
+def _box_of(q: Prism) -> _Box:
+    x0, y0, x1, y1 = q.region.bbox
+    return (q, q.a, q.b, q.c, x0 - EPS, x1 + EPS, y0 - EPS, y1 + EPS, q.lo - EPS, q.hi + EPS)
+
+
+def _segment_box(seg: Segment) -> tuple[Point, Point]:
+    """Per channel axis the range the path covers (arcs: their full circle in the plane, conservative)."""
+    s, e = seg.start, seg.end
+    lo = tuple(map(min, s, e))
+    hi = tuple(map(max, s, e))
+    if isinstance(seg, ArcSegment):
+        i, j = seg.plane
+        r = seg.radius
+        lo_l, hi_l = list(lo), list(hi)
+        lo_l[i], hi_l[i] = seg.centre[0] - r, seg.centre[0] + r
+        lo_l[j], hi_l[j] = seg.centre[1] - r, seg.centre[1] + r
+        return tuple(lo_l), tuple(hi_l)
+    return lo, hi
+
+
+def _candidates(boxes: list[_Box], lo: Point, hi: Point) -> list[Prism]:
+    """The prisms whose box the path's box meets (the others are OUTSIDE along the whole path)."""
+    return [
+        q
+        for q, a, b, c, x0, x1, y0, y1, h0, h1 in boxes
+        if not (hi[a] < x0 or lo[a] > x1 or hi[b] < y0 or lo[b] > y1 or hi[c] < h0 or lo[c] > h1)
+    ]
+
+
 @dataclass(slots=True)
 class Group:
     """The active areas that watch one set of three axes: their allowed space is the union of the
-    work prisms (everything if there is none) minus the protection prisms (C14-14)."""
+    work prisms (everything if there is none) minus the protection prisms (C14-14). Build it from
+    complete lists: the prisms' boxes are indexed once, at construction."""
 
     axes: frozenset[int]
     works: list[Prism]
     prots: list[Prism]
+    work_boxes: list[_Box] = field(init=False, repr=False)
+    prot_boxes: list[_Box] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.work_boxes = [_box_of(q) for q in self.works]
+        self.prot_boxes = [_box_of(q) for q in self.prots]
 
     def verdict(self, p: Point) -> Prism | None:
         """None if ``p`` is allowed; else the violated prism (a protection prism first; for "outside
@@ -373,15 +427,21 @@ def _piece_violation(group: Group, seg: Segment) -> tuple[float, Prism, bool] | 
     events: list[float] = []
     live_works: list[Prism] = []
     live_prots: list[Prism] = []
-    mid = point_at(seg, 0.5)
-    for q in group.prots:
+    lo, hi = _segment_box(seg)
+    for q in _candidates(group.prot_boxes, lo, hi):
         if q.events(seg, events):
             live_prots.append(q)
     works_needed = bool(group.works)
-    for w in group.works:
+    mid: Point | None = None
+    for w in _candidates(group.work_boxes, lo, hi):
         n_before = len(events)
         if w.events(seg, events):
-            if len(events) == n_before and w.classify(mid) == INSIDE:
+            if len(events) == n_before:
+                mid = mid or point_at(seg, 0.5)
+                inside_all_along = w.classify(mid) == INSIDE
+            else:
+                inside_all_along = False
+            if inside_all_along:
                 # strictly inside this work prism all along: the work areas are satisfied
                 works_needed = False
                 del events[n_before:]

@@ -930,6 +930,11 @@ class AreaMonitor(Monitor):
     def handler(self, channel_number: int) -> ChannelAreas:
         return self.channels[channel_number]
 
+    def areas_json(self, channel: Channel) -> list[dict[str, Any]]:
+        """The channel's area table (effective states) as ``check`` lists it: ``[{"id", "kind",
+        "shape", "state", "points" | "center"/"radius", "min", "max", "axes", "height_axis"}]``."""
+        return self.channels[channel.number].effective.to_json()
+
     def _on_event(self, event: Event) -> None:
         if event.kind != "alarm" or event.channel is None:
             return

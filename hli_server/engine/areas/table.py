@@ -208,13 +208,13 @@ class AreaTable:
     def groups(self) -> list[Group]:
         """The active areas, grouped by the three axes they watch (C14-14, C14-17)."""
         if self._groups_version != self.version:
-            by_axes: dict[frozenset[int], Group] = {}
+            by_axes: dict[frozenset[int], tuple[list[Prism], list[Prism]]] = {}
             for area_id in self.active_ids:
                 d = self.definitions[area_id]
-                key = frozenset(d.indices)
-                group = by_axes.setdefault(key, Group(key, [], []))
-                (group.prots if d.kind == AreaKind.PROT else group.works).append(d.prism)
-            self._groups = list(by_axes.values())
+                works, prots = by_axes.setdefault(frozenset(d.indices), ([], []))
+                (prots if d.kind == AreaKind.PROT else works).append(d.prism)
+            # a Group is built from complete lists (it indexes their boxes once)
+            self._groups = [Group(key, works, prots) for key, (works, prots) in by_axes.items()]
             self._groups_version = self.version
         return self._groups
 

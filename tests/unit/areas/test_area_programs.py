@@ -580,3 +580,18 @@ def test_start_point_outside_gives_120484() -> None:
     assert alarm.block == "N10"
     assert f"start point (X{x:.4f}".rstrip("0") in alarm.message
     assert "of N10 is outside the work area(s) 1" in alarm.message
+
+
+@pytest.mark.req("C14-17", "C14-15")
+def test_arc_of_the_main_axes_with_a_linear_additional_axis() -> None:
+    """For an area on X2/Y2/Z2 an XY circle with X2 moving along is a straight line: exact too."""
+    m = make_machine()
+    run(m, EXTRA_AXES_AREA + "#CONTROL AREA ON ALL\nM30\n")
+    run(m, "N10 G02 X10 Y0 I5 J0 X2=150 F30000\nM30\n")
+    alarm = only_alarm(m, 120486)
+    assert alarm.block == "N10"
+    p = alarm.params["intersection"]
+    assert p[3] == pytest.approx(100.0, abs=1e-9)
+    angle = math.pi - math.pi * (100.0 / 150.0)  # clockwise from 180° over the top
+    assert p[:2] == pytest.approx([5.0 + 5.0 * math.cos(angle), 5.0 * math.sin(angle)], abs=1e-9)
+    assert "(X2=100, Y2=0, Z2=0)" in alarm.message
