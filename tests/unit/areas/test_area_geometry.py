@@ -249,7 +249,7 @@ def paths(draw: st.DrawFn) -> LineSegment | ArcSegment:
 
 
 @pytest.mark.req("C14-14", "C14-15")
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(st.lists(regions, min_size=0, max_size=2), st.lists(regions, min_size=0, max_size=2), paths())
 def test_line_and_arc_entry_points_match_the_sampling_oracle(
     works: list[list[tuple[float, float]] | tuple[float, float, float]],
