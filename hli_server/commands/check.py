@@ -132,6 +132,8 @@ def check_program(
     ch = machine.channel(channel)
     meter = _Progress(text.count("\n") + 1, progress)
     history_start = len(machine.alarm_history)
+    if record_path:
+        result.path.append(tuple(ch.setpoints()))
     if geometry_only:
         _decode_only(machine, text, channel, result, meter, record_path)
     else:
