@@ -70,8 +70,11 @@ def read_everything(name: str, conn: Any, write_values: dict[str, Any] | None = 
     conn.close()
 
 
-def torn_reader(name: str, conn: Any, max_snapshots: int, max_seconds: float) -> None:
-    """Take snapshots while the parent publishes; count any that is not one uniform cycle."""
+def torn_reader(name: str, conn: Any, max_snapshots: int, max_seconds: float, min_cycles: int = 100) -> None:
+    """Take snapshots while the parent publishes; count any that is not one uniform cycle.
+
+    Reads at least ``max_snapshots`` snapshots covering ``min_cycles`` distinct cycles (on a loaded
+    machine that takes longer), or until ``max_seconds`` have passed."""
     from plc_clients.shm import ImageClient
 
     with ImageClient.attach(name, timeout=5.0) as client:
@@ -82,7 +85,7 @@ def torn_reader(name: str, conn: Any, max_snapshots: int, max_seconds: float) ->
         cycles: set[int] = set()
         first_torn: dict[str, Any] | None = None
         deadline = time.monotonic() + max_seconds
-        while snapshots < max_snapshots and time.monotonic() < deadline:
+        while (snapshots < max_snapshots or len(cycles) < min_cycles) and time.monotonic() < deadline:
             snap = client.snapshot()
             values = layout.struct(Direction.CNC_TO_PLC).unpack(snap.data)
             snapshots += 1

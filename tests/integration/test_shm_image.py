@@ -119,13 +119,13 @@ def test_a_concurrent_reader_never_sees_a_half_written_cycle(layout, image, writ
     half = layout.half(C2P)
     buf = image._shm.buf
     parent, child = SPAWN.Pipe()
-    reader = SPAWN.Process(target=children.torn_reader, args=(image.name, child, 30_000, 1.5))
+    reader = SPAWN.Process(target=children.torn_reader, args=(image.name, child, 5_000, 15.0))
     reader.start()
     try:
         assert parent.poll(60)
         assert parent.recv() == "ready"
         cycle = 0
-        deadline = time.monotonic() + 20.0
+        deadline = time.monotonic() + 30.0
         while not parent.poll() and time.monotonic() < deadline:
             cycle += 1
             if writer == "publish_from":
