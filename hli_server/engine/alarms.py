@@ -109,6 +109,8 @@ _TABLE: tuple[AlarmDef, ...] = (
     _w(912004, "Manual motion stopped at a work/protection area boundary", "project (FCT-C14, P-MANU-00014)"),
     _e(912010, "Measuring move (G100) ended without a probe signal", "project (FCT-C14, C14-23)"),
     _e(912011, "Measuring move (G100) invalid", "project (FCT-C14, C14-23)"),
+    # --- project's own: axis collision and position monitoring (913xxx) ----------------------
+    _e(913000, "Collision pair may only move apart after a collision stop", "project (FCT-C3, C3-02)"),
 )
 
 ALARMS: dict[int, AlarmDef] = {a.number: a for a in _TABLE}

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hli_server.engine.alarms import ALARMS, Alarm, Reaction, Severity
-from hli_server.engine.axis import Axis
+from hli_server.engine.axis import Axis, AxisFaults
 from hli_server.engine.channel import Channel, Mode
 from hli_server.engine.hli import AxisHli, ChannelHli, MachineHli
 from schemas.config import MachineConfig
@@ -100,6 +100,26 @@ class Machine:
 
     def axis(self, name: str) -> Axis:
         return self.axes_by_name[name]
+
+    def inject_fault(self, axis_name: str, **fields: float | bool) -> None:
+        """Fault injection (A3-05): set fields of the axis' :class:`AxisFaults` (friction,
+        gain_factor, encoder_drift, encoder_stuck, drive_error); effective from the next cycle.
+        ``inject_fault("X", friction=5.0)``; ``inject_fault("X")`` with no fields clears all faults."""
+        axis = self.axes_by_name.get(axis_name)
+        if axis is None:
+            raise KeyError(f"inject_fault: no axis {axis_name!r} (axes: {', '.join(self.axes_by_name)})")
+        if not fields:
+            axis.reset_faults()
+            return
+        known = AxisFaults.__dataclass_fields__
+        unknown = sorted(set(fields) - set(known))
+        if unknown:
+            raise ValueError(
+                f"inject_fault({axis_name!r}): unknown fault field(s) {unknown}; known: {', '.join(known)}"
+            )
+        for name, value in fields.items():
+            setattr(axis.faults, name, value)
+        self.emit("fault", self.channels[axis.channel], axis=axis_name, **fields)
 
     @property
     def time(self) -> float:

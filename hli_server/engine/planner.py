@@ -15,13 +15,20 @@ Junctions: the velocity through a corner is limited as in a junction-deviation p
 
 Other functions steer the path through ``stop_points``: an absolute path coordinate (mm travelled
 since the program start) at which the path must be at rest; the planner brakes with the feedhold
-deceleration so that it stops there (used by FCT-C43's dynamic limits).
+deceleration so that it stops there, exactly: the last cycle's step is cut at the stop point, so the
+path neither passes it nor creeps towards it (used by FCT-C43's dynamic limits). ``generation``
+counts :meth:`Planner.clear`, so that a function holding path coordinates notices a new path.
+
+G60 (exact stop, FCT-A3 section 2): after a G60 block the next item starts only when
+``exact_stop_gate(motion)`` says the axes are in their exact-stop window (the position monitor
+installs the gate; without one, the path goes on at once).
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -84,6 +91,11 @@ class Planner:
     feedhold: bool = False
     override: float = 1.0
     stop_points: dict[str, float] = field(default_factory=dict)
+    generation: int = 0
+    """Incremented by :meth:`clear`: path coordinates of an older generation mean nothing any more."""
+    exact_stop_gate: Callable[[Motion], bool] | None = None
+    """Asked at standstill after a G60 block: may the next item start? (FCT-A3: axes in the window)"""
+    _exact_stop_pending: Motion | None = None
     _dirty: bool = True
 
     # --- filling -------------------------------------------------------------------------
@@ -94,6 +106,8 @@ class Planner:
         self.s_abs = 0.0
         self.s_queued_end = 0.0
         self.stop_points.clear()
+        self._exact_stop_pending = None
+        self.generation += 1
         self._dirty = True
 
     def push(self, item: Item) -> None:
@@ -149,6 +163,47 @@ class Planner:
                 return item.segment.point_at(s_abs - item.s_start)
         return None
 
+    def points_at(self, s_values: Sequence[float]) -> list[Point | None]:
+        """:meth:`position_at` for ascending ``s_values`` in one walk over the queue."""
+        out: list[Point | None] = []
+        items = iter(self.queue)
+        item = next(items, None)
+        for s in s_values:
+            while item is not None and (
+                not isinstance(item, Motion) or s > item.s_start + item.length + 1e-12
+            ):
+                item = next(items, None)
+            if item is None or s < item.s_start - 1e-12:
+                out.append(None)
+                continue
+            out.append(item.segment.point_at(s - item.s_start))
+        return out
+
+    def next_motion(self) -> Motion | None:
+        """The item the path moves on next: the head, past action markers; None if the path is at
+        an end or error marker (or the queue is empty), i.e. will not move this cycle."""
+        for item in self.queue:
+            if isinstance(item, Motion):
+                return item
+            if item.kind != MarkerKind.ACTION:
+                return None
+        return None
+
+    def next_standstill(self, until: float = math.inf) -> float:
+        """Path coordinate of the next point where the planned path comes to rest on its own: the end
+        of an item with exit velocity 0 (reversal, G00, G60), a marker, or the end of the queue;
+        ``until`` if there is none before it (the search stops there)."""
+        if self._dirty:
+            self._backward_pass()
+        for item in self.queue:
+            if item.s_start > until:
+                return until
+            if isinstance(item, Marker):
+                return max(item.s_start, self.s_abs)
+            if item.v_exit_max <= 1e-9:
+                return item.s_start + item.length
+        return min(self.s_queued_end, until)
+
     def brake_distance(self, decel: float | None = None) -> float:
         a = decel if decel is not None else self.feedhold_decel
         return self.velocity * self.velocity / (2.0 * a)
@@ -160,6 +215,13 @@ class Planner:
         if self._dirty:
             self._backward_pass()
         reached: list[Marker] = []
+        pending = self._exact_stop_pending
+        if pending is not None:
+            # G60: hold at the block end until the axes are in their exact-stop window
+            if self.exact_stop_gate is not None and not self.exact_stop_gate(pending):
+                self.velocity = 0.0
+                return None, reached
+            self._exact_stop_pending = None
         # markers at the head are executed at once when the path is at rest there
         while self.queue and isinstance(self.queue[0], Marker):
             marker = self.queue.popleft()
@@ -178,8 +240,11 @@ class Planner:
         v_exit = item.v_exit_max
         v_limit = _braking_limit(v_exit, item.accel, s_rem, t)
         v_prog = item.v_max * self.override
+        d_stop = math.inf
         for s_stop in self.stop_points.values():
-            v_limit = min(v_limit, _braking_limit(0.0, self.feedhold_decel, s_stop - self.s_abs, t))
+            d_stop = min(d_stop, s_stop - self.s_abs)
+        if d_stop < math.inf:
+            v_limit = min(v_limit, _braking_limit(0.0, self.feedhold_decel, d_stop, t))
         if self.feedhold:
             v_next = max(0.0, v - self.feedhold_decel * t)
         elif v_prog < v:
@@ -190,7 +255,12 @@ class Planner:
             v_next = min(v + dv, v_prog)
         v_next = min(v_next, v_limit)
         ds = v_next * t
-        self.velocity = v_next
+        at_stop_point = False
+        if ds >= d_stop - 1e-12:
+            # the discrete ramp's last step would pass the stop point: cut it there, at rest
+            ds = max(d_stop, 0.0)
+            at_stop_point = True
+        self.velocity = 0.0 if at_stop_point else v_next
         if ds <= 0.0:
             return (item.segment.point_at(self.position_in_item) if v > 0 else None), reached
         # advance, possibly across junctions
@@ -207,6 +277,8 @@ class Planner:
             nxt = self.queue[0] if self.queue else None
             if not isinstance(nxt, Motion) or item.v_exit_max <= 1e-9:
                 self.velocity = 0.0  # standstill at the end of the item
+                if item.exact_stop:
+                    self._exact_stop_pending = item
                 return item.segment.end, reached
             item = nxt
             if ds <= 1e-12:

@@ -19,3 +19,12 @@ def install_default_monitors(machine: Machine) -> None:
 
     machine.monitors.append(SoftLimits(machine))
     machine.monitors.append(AreaMonitor(machine))
+    from hli_server.engine.monitors.dyn_pos_limit import DynPosLimits
+
+    machine.monitors.append(DynPosLimits(machine))
+    from hli_server.engine.monitors.collision import CollisionMonitor
+
+    machine.monitors.append(CollisionMonitor(machine))
+    from hli_server.engine.monitors.position import PositionMonitor
+
+    machine.monitors.append(PositionMonitor(machine))
