@@ -131,5 +131,7 @@ class NcError(Exception):
         self.message = message
 
     def __str__(self) -> str:
-        where = f"line {self.line}" if self.block == f"line {self.line}" else f"line {self.line}, {self.block}"
+        where = (
+            f"line {self.line}" if self.block == f"line {self.line}" else f"line {self.line}, {self.block}"
+        )
         return f"{where}: {self.message} [{self.alarm}]"
