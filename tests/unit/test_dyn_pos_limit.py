@@ -419,3 +419,21 @@ def test_monitor_state_lookup():
     assert mon.state("X", "low") == DplState.ACTIVE
     with pytest.raises(KeyError):
         mon.state("Q", "low")
+
+
+@pytest.mark.req("C43-03", "C43-07")
+def test_reset_while_held_drops_the_stop_and_a_restart_stops_again():
+    m = machine()
+    ch = m.channel(1)
+    set_limit(m, 25.0)
+    m.step(2)
+    start(m, "N10 G01 X100 F6000\nN20 M30\n")
+    step_until(m, lambda: unit(m).state_r == BRAKE)
+    ch.request_reset()
+    m.step(2)
+    assert unit(m).state_r == ACTIVE  # still enabled, nothing to brake for
+    assert not ch.planner.stop_points
+    start(m, "N10 G01 X0 F6000\nN20 X100\nN30 M30\n")  # away first, then towards the limit again
+    m.step(2)
+    step_until(m, lambda: unit(m).state_r == BRAKE)
+    assert m.axis("X").setpoint == pytest.approx(25.0, abs=1e-6)
