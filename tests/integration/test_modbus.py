@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import importlib.util
 import os
 import random
 import struct
@@ -697,15 +696,8 @@ async def test_input_registers_follow_the_engine(runtime: Runtime, rt_client: As
 # C43 over Modbus: a dynamic position limit set by a Modbus client stops the axis
 # ================================================================================================
 
-_C43_MONITOR = importlib.util.find_spec("hli_server.engine.monitors.dyn_pos_limit") is not None
-
 
 @pytest.mark.req("H-03", "C43-02", "C43-03", "C43-04")
-@pytest.mark.xfail(
-    not _C43_MONITOR,
-    reason="the C43 monitor (hli_server/engine/monitors/dyn_pos_limit.py) is not there yet",
-    strict=True,
-)
 async def test_dyn_pos_limit_set_over_modbus_stops_the_axis(
     runtime: Runtime, rt_client: AsyncModbusTcpClient
 ) -> None:

@@ -378,26 +378,7 @@ def changed_at(rt: Runtime, condition: Callable[[], bool]) -> list[int]:
     return first
 
 
-def _c43_installed() -> bool:
-    """True once the FCT-C43 monitor reflects a PLC's dyn_pos_limit command in state_r."""
-    from hli_server.engine.machine import Machine
-
-    config = load_machine(None)
-    if not config.channels[0].dyn_pos_limit_enabled:
-        return False
-    machine = Machine(config)
-    unit = machine.hli.axes[0].ipo_mc_control.dyn_pos_limit_low
-    unit.command_w = -1_000_000
-    unit.enable_w = True
-    machine.step(2)
-    return bool(unit.state_r)
-
-
 @pytest.mark.req("H-01", "H-02", "C43-03")
-@pytest.mark.skipif(
-    not _c43_installed(),
-    reason="waits for the FCT-C43 monitor (dyn_pos_limit state_r stays 0 without it); runs once it lands",
-)
 async def test_second_process_writes_dyn_pos_limit_and_sees_state_r_within_two_cycles(
     demo: MachineConfig,
 ) -> None:
