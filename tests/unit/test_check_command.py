@@ -68,3 +68,66 @@ def test_missing_file_and_bad_config_are_usage_errors(tmp_path):
     result = CliRunner().invoke(main, ["check", str(prog), "--config", str(bad)])
     assert result.exit_code == 2
     assert "configuration" in result.output
+
+
+COLLISION = "N10 G01 X1=100 F6000\nN20 X1=490\nN30 M30\n"
+
+AREAS = """\
+N10 #CONTROL AREA BEGIN [ID3 WORK POLY MIN_EXCUR=-50 MAX_EXCUR=50]
+N20 G01 F1000 G90 X-150 Y75
+N30 X-50 Y150
+N40 X50 Y150
+N50 X150 Y75
+N60 X150 Y0
+N70 X50 Y0
+N80 X50 Y75
+N90 X-50 Y75
+N100 X-50 Y0
+N120 X-150 Y0
+N130 X-150 Y75
+N140 #CONTROL AREA END
+N150 G01 X-100 Y50 F3000
+N160 #CONTROL AREA ON [ID3]
+N170 G01 X100 Y50
+N180 M30
+"""
+
+
+@pytest.mark.req("C3-01")
+def test_check_stops_the_demo_collision_pair_at_the_right_block(tmp_path):
+    result = invoke(tmp_path, COLLISION, "--channel", "2", "--format", "json")
+    assert result.exit_code == 1
+    report = json.loads(result.output)
+    (alarm,) = report["alarms"]
+    assert alarm["id"] == 70092
+    assert (alarm["line"], alarm["block"]) == (2, "N20")
+    # the pair stopped before the minimum distance (20 mm) was reached
+    pos = report["final_position"]
+    assert pos["X2"] - pos["X1"] >= 20.0
+
+
+@pytest.mark.req("C14-15")
+@pytest.mark.parametrize("mode", [[], ["--geometry-only"]])
+def test_check_reports_the_area_violation_and_the_area_table(tmp_path, mode):
+    result = invoke(tmp_path, AREAS, "--format", "json", *mode)
+    assert result.exit_code == 1
+    report = json.loads(result.output)
+    (alarm,) = report["alarms"]
+    assert alarm["id"] == 120486
+    assert (alarm["line"], alarm["block"]) == (16, "N170")
+    # the path leaves the U through its inner corner at X-50 Y50
+    assert alarm["params"]["intersection"][:2] == pytest.approx([-50.0, 50.0])
+    assert report["final_position"]["X"] == pytest.approx(-100.0)
+    (area,) = report["areas"]
+    assert (area["id"], area["kind"], area["shape"], area["state"]) == (3, "WORK", "POLY", "active")
+    assert (area["min"], area["max"]) == (-50.0, 50.0)
+
+
+@pytest.mark.req("C14-15")
+def test_check_plot_draws_areas_and_path(tmp_path):
+    out = tmp_path / "plot.svg"
+    result = invoke(tmp_path, AREAS, "--plot", str(out))
+    assert result.exit_code == 1
+    svg = out.read_text()
+    assert svg.startswith("<?xml")
+    assert "ID3" in svg
