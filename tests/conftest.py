@@ -37,3 +37,43 @@ def _no_leaked_shared_memory():
     left = sorted(_our_segments() - before)
     assert not still_open, f"process images not closed by the test: {still_open}"
     assert not left, f"shared memory left in /dev/shm by the test: {left}"
+
+
+# --------------------------------------------------------------------------------------------
+# Requirement coverage: which IDs of REQUIREMENTS.md the collected tests prove
+# --------------------------------------------------------------------------------------------
+
+_REQ_IDS: dict[str, int] = {}
+_REQ_PATTERN = r"^- ((?:E|C14|C43|C3|A3|H)-\d+) "
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        for mark in item.iter_markers("req"):
+            for req_id in mark.args:
+                _REQ_IDS[req_id] = _REQ_IDS.get(req_id, 0) + 1
+
+
+def _known_requirements() -> list[str]:
+    """IDs from ../shared/spec/REQUIREMENTS.md when the checkout sits beside it (CI does)."""
+    import re
+
+    spec = Path(__file__).resolve().parents[2] / "shared" / "spec" / "REQUIREMENTS.md"
+    if not spec.is_file():
+        return []
+    return re.findall(_REQ_PATTERN, spec.read_text(encoding="utf-8"), flags=re.MULTILINE)
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    if not _REQ_IDS:
+        return
+    known = _known_requirements()
+    unknown = sorted(set(_REQ_IDS) - set(known)) if known else []
+    missing = [r for r in known if r not in _REQ_IDS]
+    tr = terminalreporter
+    tr.section("requirements")
+    tr.write_line(f"{len(_REQ_IDS)} requirement IDs carried by {sum(_REQ_IDS.values())} test marks")
+    if known:
+        tr.write_line(f"not yet proven by a test: {', '.join(missing) if missing else 'none'}")
+    if unknown:
+        tr.write_line(f"marks with IDs not in REQUIREMENTS.md: {', '.join(unknown)}")
