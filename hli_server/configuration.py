@@ -45,6 +45,7 @@ from schemas.config import (
     AXIS_PARAMETERS,
     CHANNEL_PARAMETERS,
     MANUAL_PARAMETERS,
+    AdapterEntry,
     AxisConfig,
     ChannelConfig,
     DriveModel,
@@ -869,13 +870,14 @@ def machine_summary(config: MachineConfig) -> str:
 
 
 _SECTIONS: tuple[tuple[str, type[BaseModel], frozenset[str]], ...] = (
-    ("Machine (top level)", MachineConfig, frozenset({"axes", "channels", "manual"})),
+    ("Machine (top level)", MachineConfig, frozenset({"axes", "channels", "manual", "adapters"})),
     ("Axis `[[axes]]`", AxisConfig, frozenset({"drive"})),
     ("Drive model `[axes.drive]` (project's own, E-02)", DriveModel, frozenset()),
     ("Channel `[[channels]]`", ChannelConfig, frozenset({"zero_offsets", "programs"})),
     ("Zero offsets `[[channels.zero_offsets]]`", ZeroOffset, frozenset()),
     ("Programs `[[channels.programs]]` (project's own program table)", ProgramEntry, frozenset()),
     ("Manual mode `[manual]`", ManualConfig, frozenset()),
+    ("Adapters `[[adapters]]` (project's own; `hli-server run`)", AdapterEntry, frozenset()),
 )
 
 _RANGE_NOTES: dict[tuple[type[BaseModel], str], str] = {

@@ -24,6 +24,7 @@ __all__ = [
     "CHANNEL_PARAMETERS",
     "COLLISION_MODE_BIT",
     "MANUAL_PARAMETERS",
+    "AdapterEntry",
     "AxisConfig",
     "AxisType",
     "ChannelConfig",
@@ -368,12 +369,26 @@ class ManualConfig(_Strict):
     )
 
 
+class AdapterEntry(_Strict):
+    """An adapter ``hli-server run`` starts besides the HTTP API (project's own), e.g.
+    ``[[adapters]]`` ``name = "modbus"`` ``options = { port = 5020, word_order = "CDAB" }``."""
+
+    name: str = Field(pattern=r"^[a-z][a-z0-9_]*$", description="adapter name (modbus, ...)")
+    options: dict[str, str | int | float | bool] = Field(
+        default_factory=dict, description="the adapter's options, as for --adapter NAME:key=value"
+    )
+
+
 class MachineConfig(_Strict):
     name: str = Field(default="machine", description="machine name (reports, MQTT topics)")
     cycle_time_us: int = Field(default=1000, ge=100, le=100_000, description="interpolation cycle T_A [µs]")
     axes: list[AxisConfig] = Field(min_length=1)
     channels: list[ChannelConfig] = Field(min_length=1)
     manual: ManualConfig = Field(default_factory=ManualConfig)
+    adapters: list[AdapterEntry] = Field(
+        default_factory=list,
+        description="adapters `hli-server run` starts (its --adapter options add to or replace them by name)",
+    )
 
     @model_validator(mode="after")
     def _check_machine(self) -> MachineConfig:

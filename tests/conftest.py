@@ -47,8 +47,8 @@ _REQ_IDS: dict[str, int] = {}
 _REQ_PATTERN = r"^- ((?:E|C14|C43|C3|A3|H)-\d+) "
 
 
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    for item in items:
+def pytest_collection_finish(session: pytest.Session) -> None:
+    for item in session.items:  # after -k / -m deselection
         for mark in item.iter_markers("req"):
             for req_id in mark.args:
                 _REQ_IDS[req_id] = _REQ_IDS.get(req_id, 0) + 1

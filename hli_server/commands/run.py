@@ -168,10 +168,15 @@ def run(
     if not no_http:
         adapters.append(("http", {"port": http_port}))
     try:
-        for spec in adapter_specs:
-            name, options = parse_adapter_spec(spec)
+        from_cli = [parse_adapter_spec(spec) for spec in adapter_specs]
+        cli_names = {name for name, _ in from_cli}
+        # the machine file's adapters first; an --adapter of the same name replaces its entry
+        configured = [(a.name, dict(a.options)) for a in config.adapters if a.name not in cli_names]
+        for name, options in [*configured, *from_cli]:
             if name not in available_adapters():
                 raise AdapterError(f"unknown adapter {name!r}; available: {', '.join(available_adapters())}")
+            if no_modbus and name == "modbus":
+                continue
             adapters.append((name, options))
         if not no_modbus and not any(name == "modbus" for name, _ in adapters):
             modbus = {"port": modbus_port, "word_order": modbus_word_order.upper(), "unit_id": modbus_unit_id}

@@ -15,6 +15,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -517,3 +518,47 @@ def test_run_reports_a_bad_config_with_exit_2(tmp_path: Path) -> None:
     )
     assert result.returncode == 2
     assert "missing.toml" in result.stderr
+
+
+@pytest.mark.req("E-07", "H-03")
+def test_run_starts_the_adapters_the_machine_file_names(tmp_path: Path) -> None:
+    """``[[adapters]]`` in the machine file: Modbus with the file's options; an --adapter of the
+    same name replaces the entry."""
+    demo = resources.files("hli_server.machines").joinpath("demo.toml").read_text(encoding="utf-8")
+    machine = tmp_path / "machine.toml"
+    lists = resources.files("hli_server.machines")
+    for entry in lists.iterdir():
+        if entry.name.endswith(".lis"):
+            (tmp_path / entry.name).write_text(entry.read_text(encoding="utf-8"), encoding="utf-8")
+    machine.write_text(
+        demo + '\n[[adapters]]\nname = "modbus"\noptions = { port = 0, word_order = "CDAB", unit_id = 7 }\n',
+        encoding="utf-8",
+    )
+
+    def run(*extra: str) -> str:
+        result = subprocess.run(
+            [
+                *hli_server_cmd(),
+                "run",
+                "--config",
+                str(machine),
+                "--http-port",
+                "0",
+                "--cycles",
+                "50",
+                *extra,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+        )
+        assert result.returncode == 0, result.stderr
+        return result.stdout
+
+    out = run()
+    assert "unit id 7, 32-bit word order CDAB" in out
+    out = run("--adapter", "modbus:port=0,word_order=ABCD")
+    assert "word order ABCD" in out
+    assert "unit id 7" not in out
+    assert "Modbus" not in run("--no-modbus")
