@@ -5,6 +5,10 @@
    multiple of real time.
 2. NC blocks per second of ``check --geometry-only`` on a long program. Reference, same run, same
    text: the parser alone (``iter_blocks``); the ratio shows what decoding and path checks cost on top.
+3. The same with 20 active areas (FCT-C14, issue 3): a million blocks of lines and arcs inside a work
+   polygon, past 19 protection areas (polygons and circles). ``check --geometry-only`` blocks/s,
+   against the same program without areas (same run); and the program's cycles/s in the full
+   simulation, against real time.
 
     .venv/bin/python -m benchmarks.bench_engine [--blocks N] [--seconds S]
 """
@@ -71,13 +75,99 @@ def bench_geometry(blocks: int) -> None:
     print(f"ratio: {check_rate / parse_rate:.2f} (check / parse)")
 
 
+def area_header() -> str:
+    """One work polygon around the tool path and 19 protection areas (10 circles, 9 squares) outside it."""
+    import math
+
+    out = [
+        "N1 #CONTROL AREA BEGIN [ID=1 WORK POLY MIN_EXCUR=-100 MAX_EXCUR=100]",
+        "N2 G01 G90 F1000 X-300 Y-300",
+        "N3 X300 Y-300",
+        "N4 X300 Y300",
+        "N5 X-300 Y300",
+        "N6 X-300 Y-300",
+        "N7 #CONTROL AREA END",
+    ]
+    for k in range(19):
+        area_id = k + 2
+        angle = 2 * math.pi * k / 19
+        cx, cy = 200 * math.cos(angle), 200 * math.sin(angle)
+        if k % 2 == 0:
+            out += [
+                f"#CONTROL AREA BEGIN [ID={area_id} PROT CIRC MIN_EXCUR=-100 MAX_EXCUR=100]",
+                f"G01 X{cx + 10:.3f} Y{cy:.3f}",
+                "G02 I-10 J0",
+                "#CONTROL AREA END",
+            ]
+        else:
+            out += [
+                f"#CONTROL AREA BEGIN [ID={area_id} PROT POLY MIN_EXCUR=-100 MAX_EXCUR=100]",
+                f"G01 X{cx - 8:.3f} Y{cy - 8:.3f}",
+                f"X{cx + 8:.3f} Y{cy - 8:.3f}",
+                f"X{cx + 8:.3f} Y{cy + 8:.3f}",
+                f"X{cx - 8:.3f} Y{cy + 8:.3f}",
+                f"X{cx - 8:.3f} Y{cy - 8:.3f}",
+                "#CONTROL AREA END",
+            ]
+    out += ["G01 X0 Y0 F6000", "#CONTROL AREA ON ALL"]
+    return "\n".join(out) + "\n"
+
+
+def bench_areas(blocks: int, seconds: float) -> None:
+    body = long_program(blocks)
+    with_areas = area_header() + body
+    plain_machine = Machine(load_machine(None))
+    plain = check_program(plain_machine, body, geometry_only=True)
+    machine = Machine(load_machine(None))
+    result = check_program(machine, with_areas, geometry_only=True)
+    assert result.completed, result.to_json()["alarms"]
+    active = sum(1 for a in result.to_json().get("areas", []) if a["state"] == "active")
+    rate = result.blocks / result.elapsed_s
+    plain_rate = plain.blocks / plain.elapsed_s
+    print(
+        f"check --geometry-only with {active} active areas: {rate:,.0f} blocks/s ({result.blocks:,} blocks)"
+    )
+    print(f"reference: the same program without areas: {plain_rate:,.0f} blocks/s")
+    print(f"ratio: {rate / plain_rate:.2f} (with / without areas)")
+    full = Machine(load_machine(None))
+    ch = full.channel(1)
+    ch.load_program(with_areas, "bench-areas")
+    ch.request_start()
+    full.step(1)
+    while ch.state == ProgramState.RUNNING and not any(a["state"] == "active" for a in _areas(full)):
+        full.step(100)
+    began = time.perf_counter()
+    cycles = 0
+    while time.perf_counter() - began < seconds and ch.state == ProgramState.RUNNING:
+        full.step(1000)
+        cycles += 1000
+    elapsed = time.perf_counter() - began
+    assert not full.active_alarms, full.active_alarms
+    realtime = 1e6 / full.config.cycle_time_us
+    print(f"full simulation of that program, {active} areas active: {cycles / elapsed:,.0f} cycles/s")
+    print(
+        f"reference: real time {realtime:,.0f} cycles/s; ratio {cycles / elapsed / realtime:.2f}x real time"
+    )
+
+
+def _areas(machine: Machine) -> list[dict[str, object]]:
+    for mon in machine.monitors:
+        table = getattr(mon, "areas_json", None)
+        if callable(table):
+            result: list[dict[str, object]] = table(machine.channel(1))
+            return result
+    return []
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--blocks", type=int, default=200_000)
+    ap.add_argument("--area-blocks", type=int, default=1_000_000)
     ap.add_argument("--seconds", type=float, default=5.0)
     args = ap.parse_args()
     bench_cycles(args.seconds)
     bench_geometry(args.blocks)
+    bench_areas(args.area_blocks, args.seconds)
 
 
 if __name__ == "__main__":
