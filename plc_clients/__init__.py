@@ -1,1 +1,70 @@
-"""plc_clients"""
+"""PLC-side clients of the HLI process image (H-06): transports, the cyclic task, PLCopen blocks.
+
+Imports ``schemas`` only, never ``hli_server`` (an import-linter contract): PLC logic written with
+these modules runs against any server that serves the same layout.
+
+* :mod:`plc_clients.transports`: :class:`ShmTransport`, :class:`ModbusTransport`,
+  :class:`AsyncModbusTransport`, the in-memory twin :class:`MemoryImage` / :class:`MemoryTransport`;
+* :mod:`plc_clients.task`: :class:`PlcTask` (read inputs, run the program, write outputs);
+* :mod:`plc_clients.plcopen`: :class:`MCV_DynPosLimitLow`, :class:`MCV_DynPosLimitHigh`,
+  :class:`ControlUnitBlock` and its BOOL / SGN32 variants, :class:`AXIS_REF`;
+* :mod:`plc_clients.shm`: the low-level shared-memory handle :class:`ImageClient`.
+
+See docs/plc-clients.md.
+"""
+
+from plc_clients.plcopen import (
+    AXIS_REF,
+    ControlBoolUnit,
+    ControlSgn32Unit,
+    ControlUnitBlock,
+    DynPosLimitState,
+    ErrorID,
+    FunctionBlock,
+    MCV_DynPosLimitHigh,
+    MCV_DynPosLimitLow,
+)
+from plc_clients.shm import ImageClient
+from plc_clients.task import InputNotReadyError, IoImage, PlcTask, TaskStats, current_image
+from plc_clients.transports import (
+    AsyncMemoryTransport,
+    AsyncModbusTransport,
+    AsyncTransport,
+    Inputs,
+    MemoryImage,
+    MemoryTransport,
+    ModbusTransport,
+    ShmTransport,
+    Transport,
+    TransportError,
+    load_layout,
+)
+
+__all__ = [
+    "AXIS_REF",
+    "AsyncMemoryTransport",
+    "AsyncModbusTransport",
+    "AsyncTransport",
+    "ControlBoolUnit",
+    "ControlSgn32Unit",
+    "ControlUnitBlock",
+    "DynPosLimitState",
+    "ErrorID",
+    "FunctionBlock",
+    "ImageClient",
+    "InputNotReadyError",
+    "Inputs",
+    "IoImage",
+    "MCV_DynPosLimitHigh",
+    "MCV_DynPosLimitLow",
+    "MemoryImage",
+    "MemoryTransport",
+    "ModbusTransport",
+    "PlcTask",
+    "ShmTransport",
+    "TaskStats",
+    "Transport",
+    "TransportError",
+    "current_image",
+    "load_layout",
+]
