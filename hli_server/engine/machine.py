@@ -230,12 +230,11 @@ class Machine:
 
     # --- outputs -------------------------------------------------------------------------
     def publish(self) -> None:
-        t_a = self.t_a
         for axis, hli in zip(self.axes, self.hli.axes, strict=True):
             st = hli.ipo_state
             st.cmd_pos_r = increments_from_mm(axis.setpoint)
             st.act_pos_r = increments_from_mm(axis.measured)
-            st.velocity_r = increments_from_mm(axis.setpoint_step / t_a)
+            st.velocity_r = increments_from_mm(axis.drive_velocity)
             st.following_error_r = increments_from_mm(axis.following_error)
             st.referenced_r = axis.referenced
             st.moving_r = axis.setpoint_step != 0.0

@@ -343,3 +343,18 @@ def test_unreferenced_axis_refuses_program_start():
     start(m, "N10 G01 X10 F1000\nN20 M30\n")
     assert m.alarm_history[-1].number == 911020
     assert m.channel(1).state == ProgramState.IDLE
+
+
+@pytest.mark.req("E-02", "H-01")
+def test_published_axis_state_in_interface_units():
+    m = mill()
+    start(m, "N10 G01 X400 F12000\nN20 M30\n")
+    m.step(1500)  # constant 200 mm/s after the ramp
+    st = m.hli.axes[0].ipo_state
+    x = m.axis("X")
+    assert st.velocity_r == pytest.approx(2_000_000, rel=1e-3)  # 200 mm/s in 0.1 µm/s
+    assert st.cmd_pos_r == round(x.setpoint * 10_000)
+    assert st.act_pos_r == round(x.measured * 10_000)
+    assert st.following_error_r == round(x.following_error * 10_000)
+    assert st.moving_r
+    assert not st.in_position_r
