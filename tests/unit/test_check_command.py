@@ -8,6 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from hli_server.cli import main
+from tests.spec_examples import U_AREA
 
 GOOD = "N10 G01 X100 Y50 F6000\nN20 G02 X150 Y100 I50 J0\nN30 G01 X0 Y0\nN40 M30\n"
 BEYOND_LIMIT = "N10 G01 X100 Y50 F6000\nN20 G01 X100 Y800\nN30 M30\n"
@@ -72,25 +73,15 @@ def test_missing_file_and_bad_config_are_usage_errors(tmp_path):
 
 COLLISION = "N10 G01 X1=100 F6000\nN20 X1=490\nN30 M30\n"
 
-AREAS = """\
-N10 #CONTROL AREA BEGIN [ID3 WORK POLY MIN_EXCUR=-50 MAX_EXCUR=50]
-N20 G01 F1000 G90 X-150 Y75
-N30 X-50 Y150
-N40 X50 Y150
-N50 X150 Y75
-N60 X150 Y0
-N70 X50 Y0
-N80 X50 Y75
-N90 X-50 Y75
-N100 X-50 Y0
-N120 X-150 Y0
-N130 X-150 Y75
-N140 #CONTROL AREA END
+AREAS = (
+    U_AREA
+    + """\
 N150 G01 X-100 Y50 F3000
 N160 #CONTROL AREA ON [ID3]
 N170 G01 X100 Y50
 N180 M30
 """
+)
 
 
 @pytest.mark.req("C3-01")

@@ -28,6 +28,14 @@ from hli_server.engine.nc import (
     parse_program,
 )
 from hli_server.engine.nc import parser as parser_module
+from tests.spec_examples import (
+    CIRC_PROT,
+    CIRC_PROT_OLD,
+    EXTRA_AXES_PROGRAM,
+    SELECT_EXAMPLES,
+    TWO_PATH_AREA,
+    U_AREA,
+)
 
 AXES = ("X", "Y", "Z")
 AXES_2 = ("X", "Y", "Z", "X2", "Y2", "Z2")
@@ -47,72 +55,11 @@ def error(text: str, axes: tuple[str, ...] = AXES, line: int = 14) -> NcError:
 
 # --- the documents' example programs ----------------------------------------------------------------
 
-POLY_U_SHAPE = """\
-N10 #CONTROL AREA BEGIN [ID3 WORK POLY MIN_EXCUR=-50 MAX_EXCUR=50]
-N20 G01 F1000 G90 X-150 Y75 (Startpunkt)
-N30 X-50 Y150
-N40 X50 Y150
-N50 X150 Y75
-N60 X150 Y0
-N70 X50 Y0
-N80 X50 Y75
-N90 X-50 Y75
-N100 X-50 Y0
-N120 X-150 Y0
-N130 X-150 Y75 (Endpunkt identisch mit Startpunkt)
-N140 #CONTROL AREA END
-"""
-
-CIRC_FCT_C14 = """\
-N10 #CONTROL AREA BEGIN [ID4 PROT CIRC MIN_EXCUR=-70 MAX_EXCUR=70]
-N20 G01 X0 Y0 F10000      (Startpunkt für zylindrischen Schutzraum)
-N30 G02 G162 I0 J75      ( Definition des Vollkreises)
-N40 #CONTROL AREA END
-"""
-
-CIRC_OLD = """\
-N10 #CONTROL AREA START [ID4 PROT CIRC MIN_EXCUR=-70 MAX_EXCUR=70]
-N20 G01 X100 Y0 F10000 (Startpunkt für zylindrischen Schutzraum)
-N30 G02 G162 I50 J0
-N40 #CONTROL AREA END
-"""
-
-ADDITIONAL_AXES = """\
-:
-N10 #CONTROL AREA BEGIN [ID4 WORK POLY MIN_EXCUR=-50 MAX_EXCUR=50]
-N20 G01 F1000 G90 X2=100 Y2=100 ;Startpunkt
-N30 X2=-100
-N40 Y2=-100
-N50 X2=100
-N60 X2=100 Y2=100 ;Endpunkt identisch mit Startpunkt
-N70 #CONTROL AREA END
-:
-N500 #CONTROL AREA ON ALL
-:
-N1000 M30
-"""
-
-TWO_PATH = """\
-N040 #CONTROL AREA START [ID=1 WORK MONITOR_LVL = "IMCS" POLY MIN_EXCUR
-= -100 MAX_EXCUR = 100]
-N050 : G0 X200 Y0 : G0 U150 V0
-N060 : G0 X200 Y200 : G0 U150 V150
-N070 : G0 X-200 Y200 : G0 U-150 V150
-N080 : G0 X-200 Y-200 : G0 U-150 V-150
-N090 : G0 X200 Y-200 : G0 U150 V-150
-N100 : G0 X200 Y0 : G0 U150 V0
-N110 #CONTROL AREA END
-"""
-
-SELECT_EXAMPLES = """\
-#CONTROL AREA ON [ID3] (Aktiviere spezifischen Ü.-raum)
-#CONTROL AREA ON ALL (Aktiviere alle definierten Ü.-räume)
-#CONTROL AREA OFF [ID3] (Deaktiviere spezifischen Ü.-raum)
-#CONTROL AREA OFF (Deaktiviere zuletzt angewählten Ü.-raum)
-#CONTROL AREA OFF ALL (Deaktiviere alle aktiven Ü.-räume)
-#CONTROL AREA CLEAR [ID3]
-#CONTROL AREA CLEAR ALL
-"""
+POLY_U_SHAPE = U_AREA
+CIRC_FCT_C14 = CIRC_PROT
+CIRC_OLD = CIRC_PROT_OLD
+ADDITIONAL_AXES = EXTRA_AXES_PROGRAM
+TWO_PATH = TWO_PATH_AREA
 
 
 @pytest.mark.req("E-04", "C14-02", "C14-04")
