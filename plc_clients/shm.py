@@ -23,17 +23,21 @@ It imports ``schemas`` only, never ``hli_server``.
 from __future__ import annotations
 
 import struct
-import sys
-import threading
 import time
-from collections.abc import Iterator, Mapping, Sized
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from multiprocessing import resource_tracker, shared_memory
+from multiprocessing import shared_memory
 from types import TracebackType
 from typing import Any
 
 from schemas import image_format as fmt
-from schemas.image_format import ImageBusyError, ImageError, ImageMismatchError, ImageNotReadyError
+from schemas.image_format import (
+    ImageBusyError,
+    ImageError,
+    ImageMismatchError,
+    ImageNotReadyError,
+    attach_untracked,
+)
 from schemas.layout import Direction, Layout, LayoutError, ReadOnlySignalError, Signal, SignalType
 
 __all__ = [
@@ -47,32 +51,7 @@ __all__ = [
     "attach_untracked",
 ]
 
-_TRACKER_LOCK = threading.Lock()
 _LE = {t: struct.Struct("<" + t.struct_char) for t in SignalType}
-
-
-def attach_untracked(name: str) -> shared_memory.SharedMemory:
-    """Map an existing segment without registering it with the resource tracker.
-
-    Python < 3.13 registers every ``SharedMemory`` it opens, and the tracker unlinks (and warns
-    about) registered segments when the process ends: an attaching client would remove the
-    server's image. 3.13 has ``track=False``; before that the registration is skipped here.
-    """
-    plain = name.removeprefix("/")
-    if sys.version_info >= (3, 13):  # pragma: no cover - the project runs 3.11
-        return shared_memory.SharedMemory(name=plain, create=False, track=False)  # type: ignore[call-arg]
-    with _TRACKER_LOCK:
-        original = resource_tracker.register
-
-        def _skip_shared_memory(name: Sized, rtype: str) -> None:
-            if rtype != "shared_memory":
-                original(name, rtype)
-
-        resource_tracker.register = _skip_shared_memory
-        try:
-            return shared_memory.SharedMemory(name=plain, create=False)
-        finally:
-            resource_tracker.register = original
 
 
 @dataclass(frozen=True, slots=True)

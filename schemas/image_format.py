@@ -59,8 +59,11 @@ from __future__ import annotations
 
 import struct
 import sys
+import threading
 import time
+from collections.abc import Sized
 from dataclasses import dataclass
+from multiprocessing import resource_tracker, shared_memory
 from typing import Final
 
 from schemas.layout import LAYOUT_VERSION, Signal, SignalType
@@ -82,6 +85,7 @@ __all__ = [
     "ImageMismatchError",
     "ImageNotReadyError",
     "SegmentPlan",
+    "attach_untracked",
     "check_host",
     "check_layout",
     "header_construct",
@@ -375,3 +379,30 @@ def read_c2p_field(buf: memoryview, plan: SegmentPlan, signal: Signal, name: str
             if read_u64(buf, base) == seq:
                 return value
     raise ImageBusyError(f"image {name!r}: no consistent read of {signal.st_path}; is the server stuck?")
+
+
+_TRACKER_LOCK = threading.Lock()
+
+
+def attach_untracked(name: str) -> shared_memory.SharedMemory:
+    """Map an existing segment without registering it with the resource tracker.
+
+    Python < 3.13 registers every ``SharedMemory`` it opens, and the tracker unlinks (and warns
+    about) registered segments when the process ends: an attaching client would remove the
+    server's image. 3.13 has ``track=False``; before that the registration is skipped here.
+    """
+    plain = name.removeprefix("/")
+    if sys.version_info >= (3, 13):  # pragma: no cover - the project runs 3.11
+        return shared_memory.SharedMemory(name=plain, create=False, track=False)  # type: ignore[call-arg]
+    with _TRACKER_LOCK:
+        original = resource_tracker.register
+
+        def _skip_shared_memory(name: Sized, rtype: str) -> None:
+            if rtype != "shared_memory":
+                original(name, rtype)
+
+        resource_tracker.register = _skip_shared_memory
+        try:
+            return shared_memory.SharedMemory(name=plain, create=False)
+        finally:
+            resource_tracker.register = original

@@ -144,7 +144,9 @@ class ProcessImage:
 
     @staticmethod
     def _remove_stale(name: str) -> None:
-        old = shared_memory.SharedMemory(name=name, create=False)
+        # look without registering with the resource tracker: a tracked mapping would be unlinked
+        # when this process ends, even when it belongs to a running server and is left alone
+        old = fmt.attach_untracked(name)
         try:
             try:
                 header = fmt.read_header(_buffer(old), name)
@@ -155,10 +157,12 @@ class ProcessImage:
                     f"shared memory {name!r} is the image of the running server pid {header.server_pid}: "
                     "stop that server or choose another image name"
                 )
-            log.warning("removing stale shared memory %s", name)
-            old.unlink()
         finally:
             old.close()
+        log.warning("removing stale shared memory %s", name)
+        stale = shared_memory.SharedMemory(name=name, create=False)
+        stale.close()
+        stale.unlink()
 
     def _write_header(self, layout_json: bytes) -> None:
         plan = self.plan

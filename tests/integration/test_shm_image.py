@@ -338,6 +338,34 @@ def test_an_attaching_process_neither_unlinks_the_image_nor_warns(layout, image)
 
 
 @pytest.mark.req("H-01")
+def test_a_refused_second_server_leaves_the_running_servers_image_alone(layout, image):
+    """Another process asks to replace the running server's image, is refused, and exits: the
+    segment must survive it (its resource tracker must not unlink what it only looked at)."""
+    code = textwrap.dedent(
+        f"""
+        import sys
+        from hli_server.image import ProcessImage
+        from schemas.layout import build_layout
+        from tests.integration._shm_children import demo_config
+        try:
+            ProcessImage.create(build_layout(demo_config()), {image.name!r}, replace_stale=True)
+        except FileExistsError as exc:
+            print(exc)
+            sys.exit(3)
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.returncode == 3, done.stderr
+    assert "running server pid" in done.stdout
+    assert "leaked" not in done.stderr, done.stderr
+    assert _dev_shm(image.name).exists()
+    with ImageClient.attach(image.name, expect=layout) as client:
+        assert client.layout.hash == layout.hash
+
+
+@pytest.mark.req("H-01")
 def test_an_existing_segment_is_not_taken_over_unless_it_is_stale(layout, image):
     with pytest.raises(FileExistsError, match="exists already"):
         ProcessImage.create(layout, image.name)
