@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 import uvicorn
 from fastapi import FastAPI, HTTPException, Query, Request
 from fastapi.exceptions import RequestValidationError
-from pydantic import BaseModel, ConfigDict, Field, StrictBool, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, ValidationError
 
 from hli_server.engine.channel import Mode
 from hli_server.engine.hli import ProgramState
@@ -101,7 +101,9 @@ class FaultsBody(_Body):
 
 
 class ImageWriteBody(_Body):
-    value: bool | int | float = Field(
+    # strict: "yes" or "300" are refused (422), not read as true or 300; the field's type is checked
+    # by the layout afterwards (Signal.coerce), with its own one-line message
+    value: StrictBool | StrictInt | StrictFloat = Field(
         description="BOOL: true/false or 0/1; DINT/UDINT: integer; LREAL: number"
     )
 

@@ -246,6 +246,11 @@ async def test_image_unknown_path_is_404_and_bad_value_422(client: httpx.AsyncCl
     r = await client.put(url_path(OVERRIDE + ".command_w"), json={"value": 2**31})
     assert r.status_code == 422
     assert (await client.put(url_path(OVERRIDE + ".command_w"), json={})).status_code == 422
+    # strings are no numbers and no booleans, whatever they spell
+    assert (await client.put(url_path(OVERRIDE + ".command_w"), json={"value": "300"})).status_code == 422
+    assert (await client.put(url_path(OVERRIDE + ".enable_w"), json={"value": "yes"})).status_code == 422
+    assert (await client.get(url_path(OVERRIDE + ".enable_w"))).json()["value"] is False
+    assert (await client.put(url_path(OVERRIDE + ".enable_w"), json={"value": 1})).status_code == 200
 
 
 async def test_image_path_with_a_dot_instead_of_the_caret(client: httpx.AsyncClient) -> None:
