@@ -194,6 +194,7 @@ def _decode_only(
                 if item.kind == MarkerKind.ACTION:
                     item.payload()
                 elif item.kind == MarkerKind.END:
+                    ch.warn_missing_program_end(item)
                     result.completed = True
                 elif item.kind == MarkerKind.ERROR:
                     err: DecodeError = item.payload

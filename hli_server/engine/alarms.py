@@ -87,7 +87,6 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(911001, "Circle: centre or radius inconsistent", "project"),
     _e(911002, "Circle: no centre programmed", "project"),
     _e(911003, "Axis not in the active plane or not a main axis", "project"),
-    _e(911004, "Program end missing (no M30 / M02)", "project"),
     _w(911005, "Program ended without M30 / M02", "project"),
     _e(911010, "Programmed position beyond the negative software limit", "project (E-06)"),
     _e(911011, "Programmed position beyond the positive software limit", "project (E-06)"),

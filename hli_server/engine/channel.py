@@ -303,6 +303,7 @@ class Channel:
         if marker.kind == MarkerKind.ACTION:
             marker.payload()
         elif marker.kind == MarkerKind.END:
+            self.warn_missing_program_end(marker)
             self.state = ProgramState.FINISHED
             self.planner.clear()
             self.machine.emit("program_state", self, state="finished", program=self.program_name)
@@ -316,6 +317,18 @@ class Channel:
             )
             self.state = ProgramState.ABORTED
             self.planner.clear()
+
+    def warn_missing_program_end(self, marker: Marker) -> None:
+        """Warning 911005 when the program ran off the end of its text without M30 / M02."""
+        if marker.payload == "eof":
+            block = marker.block
+            self.machine.raise_alarm(
+                911005,
+                self,
+                "program ended at the end of its text without M30 / M02",
+                line=block.line if block is not None else None,
+                block=block.label if block is not None else None,
+            )
 
     # --- manual mode ---------------------------------------------------------------------
     def _jog(self) -> None:

@@ -122,3 +122,16 @@ def test_check_plot_draws_areas_and_path(tmp_path):
     svg = out.read_text()
     assert svg.startswith("<?xml")
     assert "ID3" in svg
+
+
+@pytest.mark.req("E-04")
+@pytest.mark.parametrize("mode", [[], ["--geometry-only"]])
+def test_program_without_m30_runs_to_its_end_with_a_warning(tmp_path, mode):
+    result = invoke(tmp_path, "N10 G01 X10 F1000\nN20 X20\n", "--format", "json", *mode)
+    assert result.exit_code == 0
+    report = json.loads(result.output)
+    assert report["completed"] is True
+    (alarm,) = report["alarms"]
+    assert (alarm["id"], alarm["severity"]) == (911005, "warning")
+    assert (alarm["line"], alarm["block"]) == (2, "N20")
+    assert report["final_position"]["X"] == pytest.approx(20.0)
