@@ -22,8 +22,10 @@ here, or :func:`register_adapter` at run time (plugins, tests).
 
 from __future__ import annotations
 
+import difflib
 import importlib
 import importlib.util
+import inspect
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
@@ -101,10 +103,34 @@ def _resolve(name: str) -> AdapterFactory:
 def create_adapter(name: str, *, bind: str, options: Mapping[str, Any] | None = None) -> Adapter:
     """Build adapter ``name`` with ``bind`` and its ``options``; unknown options are an error."""
     factory = _resolve(name)
+    given = dict(options or {})
+    accepted = _option_names(factory)
+    unknown = sorted(set(given) - accepted) if accepted is not None else []
+    if unknown:
+        hints = []
+        for key in unknown:
+            match = difflib.get_close_matches(key, sorted(accepted or []), 1)
+            hints.append(f"{key!r} (did you mean {match[0]!r}?)" if match else repr(key))
+        raise AdapterError(
+            f"adapter {name!r}: unknown option {', '.join(hints)}; "
+            f"its options are: {', '.join(sorted(accepted or []))}"
+        )
     try:
-        return factory(bind=bind, **dict(options or {}))
+        return factory(bind=bind, **given)
     except TypeError as exc:
-        raise AdapterError(f"adapter {name!r}: bad options {dict(options or {})}: {exc}") from exc
+        raise AdapterError(f"adapter {name!r}: bad options {given}: {exc}") from exc
+
+
+def _option_names(factory: AdapterFactory) -> set[str] | None:
+    """The keyword options a factory takes (besides ``bind``); None when it takes any (``**kwargs``)."""
+    try:
+        params = inspect.signature(factory).parameters.values()
+    except (TypeError, ValueError):
+        return None
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
+        return None
+    named = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+    return {p.name for p in params if p.kind in named and p.name != "bind"}
 
 
 def parse_adapter_spec(spec: str) -> tuple[str, dict[str, Any]]:

@@ -22,6 +22,7 @@ from typing import Any
 import httpx
 import pytest
 
+from hli_server.adapters.registry import AdapterError, create_adapter
 from hli_server.configuration import load_machine
 from hli_server.engine.hli import ProgramState
 from hli_server.runtime import Clock, ClockError, Runtime, RuntimeStateError
@@ -282,6 +283,13 @@ async def test_a_failing_adapter_undoes_the_start(demo: MachineConfig) -> None:
 async def test_adapters_by_registered_name(demo: MachineConfig) -> None:
     async with Runtime(demo, clock="stepped", adapters=[("http", {"port": 0})]) as rt:
         assert rt.http_url.startswith("http://127.0.0.1:")
+
+
+def test_a_misspelled_adapter_option_names_the_options() -> None:
+    with pytest.raises(
+        AdapterError, match=r"unknown option 'prot' \(did you mean 'port'\?\); its options are: .*port"
+    ):
+        create_adapter("modbus", bind="127.0.0.1", options={"prot": 0})
 
 
 async def test_events_are_logged_with_sequence_numbers_and_listeners_called(demo: MachineConfig) -> None:
