@@ -108,11 +108,13 @@ _RANGE_ERRORS = {"greater_than", "greater_than_equal", "less_than", "less_than_e
 
 
 class ConfigError(Exception):
-    """The configuration is invalid; ``messages`` holds every finding as ``file:line: key: text``."""
+    """The configuration is invalid; ``messages`` holds every finding as ``file:line: key: text``,
+    ``notes`` what the user should know besides (printed after them, not counted)."""
 
-    def __init__(self, messages: list[str]) -> None:
-        super().__init__("\n".join(messages))
+    def __init__(self, messages: list[str], notes: list[str] | None = None) -> None:
         self.messages = list(messages)
+        self.notes = list(notes or [])
+        super().__init__("\n".join([*self.messages, *self.notes]))
 
 
 class ConfigFileError(ConfigError):
@@ -539,6 +541,7 @@ class _Loader:
         self.path = path
         self.display = str(path)
         self.errors: list[str] = []
+        self.single_value_errors = False
         self.warnings: list[str] = []
         self.origins: dict[Loc, Origin] = {}
         self.failed: set[Loc] = set()
@@ -574,7 +577,13 @@ class _Loader:
         except ValidationError as exc:
             self._translate(exc)
         if self.errors or config is None:
-            raise ConfigError(sorted(self.errors, key=self._file_order))
+            notes = []
+            if self.single_value_errors:
+                notes.append(
+                    "note: the checks across the machine (collision pairs, which axes belong to which "
+                    "channel) run once the findings above are fixed: validate again then"
+                )
+            raise ConfigError(sorted(self.errors, key=self._file_order), notes)
         self._machine_warnings(config)
         return config, self.warnings
 
@@ -677,6 +686,9 @@ class _Loader:
     # -- pydantic errors -> file:line: key: text ---------------------------------------------
 
     def _translate(self, exc: ValidationError) -> None:
+        # an error below the top level means the machine-wide checks (collision pairs, channel
+        # axes) did not run: pydantic runs a model's own checks only when all its fields are valid
+        self.single_value_errors = any(tuple(err["loc"]) != () for err in exc.errors())
         found: list[tuple[Origin, str]] = []
         for err in exc.errors():
             loc: Loc = tuple(err["loc"])

@@ -38,7 +38,7 @@ def _load(ctx: click.Context, path: Path | None) -> tuple[MachineConfig, list[st
             click.echo(f"error: {message}", err=True)
         ctx.exit(_EXIT_FILE)
     except ConfigError as exc:
-        for message in exc.messages:
+        for message in [*exc.messages, *exc.notes]:
             click.echo(message, err=True)
         count = len(exc.messages)
         click.echo(f"{count} error{'s' if count != 1 else ''}: configuration is invalid", err=True)

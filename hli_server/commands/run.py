@@ -159,7 +159,7 @@ def run(
             click.echo(f"error: {message}", err=True)
         ctx.exit(_EXIT_START)
     except ConfigError as exc:
-        for message in exc.messages:
+        for message in [*exc.messages, *exc.notes]:
             click.echo(message, err=True)
         click.echo("the configuration is invalid: check it with `hli-server config validate FILE`", err=True)
         ctx.exit(_EXIT_START)
