@@ -875,10 +875,15 @@ def machine_summary(config: MachineConfig) -> str:
         f"{m.name}-{p.name} {mm_from_increments(max(m.coll_offset, p.coll_offset)):g} mm" for m, p in pairs
     )
     return (
-        f"machine {config.name!r}, cycle {config.cycle_time_us} µs, {len(config.axes)} axes, "
-        f"{len(config.channels)} channels ({channels}), "
-        f"{len(pairs)} collision pair{'s' if len(pairs) != 1 else ''}" + (f" ({pair_text})" if pairs else "")
+        f"machine {config.name!r}, cycle {config.cycle_time_us} µs, "
+        f"{_count(len(config.axes), 'axis', 'axes')}, "
+        f"{_count(len(config.channels), 'channel', 'channels')} ({channels}), "
+        f"{_count(len(pairs), 'collision pair', 'collision pairs')}" + (f" ({pair_text})" if pairs else "")
     )
+
+
+def _count(n: int, one: str, many: str) -> str:
+    return f"{n} {one if n == 1 else many}"
 
 
 _SECTIONS: tuple[tuple[str, type[BaseModel], frozenset[str]], ...] = (

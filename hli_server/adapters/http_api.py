@@ -316,7 +316,8 @@ def create_app(runtime: Runtime) -> FastAPI:
                 404, f"channel {number} has no axis {body.axis!r}; its axes are {', '.join(ch.axis_names)}"
             )
         ch.request_jog(body.axis, body.direction)
-        return accepted(r, ch, f"jog {body.axis} {body.direction:+d}")
+        key = {1: "+", -1: "-"}.get(body.direction, " released")
+        return accepted(r, ch, f"jog {body.axis}{key}")
 
     # --- clock ------------------------------------------------------------------------
     @app.post(

@@ -156,9 +156,11 @@ async def test_manual_mode_and_jog(client: httpx.AsyncClient) -> None:
     assert (await client.get("/api/state")).json()["channels"][0]["mode"] == "manual"
     r = await client.post("/api/channels/1/jog", json={"axis": "Y", "direction": -1})
     assert r.status_code == 202
+    assert r.json()["request"] == "jog Y-"
     await step(client, 200)
     assert (await client.get("/api/state")).json()["axes"]["Y"]["setpoint_mm"] < -1.0
-    await client.post("/api/channels/1/jog", json={"axis": "Y", "direction": 0})
+    r = await client.post("/api/channels/1/jog", json={"axis": "Y", "direction": 0})
+    assert r.json()["request"] == "jog Y released"
     # the bare string is accepted too
     assert (await client.post("/api/channels/1/mode", json="automatic")).status_code == 202
     r = await client.post("/api/channels/1/jog", json={"axis": "X1", "direction": 1})
