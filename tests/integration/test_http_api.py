@@ -45,7 +45,7 @@ def url_path(st_path: str) -> str:
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.mark.req("H-07", "E-01")
+@pytest.mark.req("E-01")
 async def test_server_listens_on_the_port_it_was_given(runtime: Runtime, client: httpx.AsyncClient) -> None:
     port = int(runtime.http_url.rsplit(":", 1)[1])
     assert port > 0
@@ -58,7 +58,7 @@ async def test_server_listens_on_the_port_it_was_given(runtime: Runtime, client:
     assert "X" in state["axes"]
 
 
-@pytest.mark.req("H-07", "E-01", "E-04")
+@pytest.mark.req("E-01", "E-04")
 async def test_load_program_start_step_and_see_positions_change(client: httpx.AsyncClient) -> None:
     r = await client.post(
         "/api/channels/1/program?name=zigzag", content=PROGRAM, headers={"content-type": "text/plain"}
@@ -185,7 +185,7 @@ async def test_unknown_channel_is_404(client: httpx.AsyncClient) -> None:
     assert r.json()["detail"] == "no channel 7; the machine has channels 1, 2"
 
 
-@pytest.mark.req("E-01", "H-07")
+@pytest.mark.req("E-01")
 async def test_step_validation(client: httpx.AsyncClient) -> None:
     assert (await client.post("/api/step", json={"cycles": 0})).status_code == 422
     assert (await client.post("/api/step", json={"cycles": 5, "extra": 1})).status_code == 422
