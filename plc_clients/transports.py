@@ -509,12 +509,13 @@ class _ModbusCommon:
 
     def __init__(
         self,
-        host: str,
-        port: int,
+        host: str = "127.0.0.1",
+        port: int = 5020,
+        *,
         layout: Layout | str | os.PathLike[str],
-        word_order: str,
-        unit_id: int,
-        timeout: float,
+        word_order: str = "ABCD",
+        unit_id: int = 1,
+        timeout: float = 2.0,
     ) -> None:
         self.host = host
         self.port = port
@@ -529,6 +530,11 @@ class _ModbusCommon:
         self._cycle_signal = self.layout.signal(CYCLE_SIGNAL)
         self._counter = _CycleCounter()
         self._plans: dict[frozenset[str] | None, list[ReadRequest]] = {}
+        self._client = self._make_client(host, port, timeout)
+
+    def _make_client(self, host: str, port: int, timeout: float) -> Any:
+        """pymodbus' sync or asyncio client (imported only when a Modbus transport is made)."""
+        raise NotImplementedError
 
     @property
     def where(self) -> str:
@@ -597,20 +603,10 @@ class ModbusTransport(_ModbusCommon):
     is_async: ClassVar[bool] = False
     blocking: ClassVar[bool] = True
 
-    def __init__(
-        self,
-        host: str = "127.0.0.1",
-        port: int = 5020,
-        *,
-        layout: Layout | str | os.PathLike[str],
-        word_order: str = "ABCD",
-        unit_id: int = 1,
-        timeout: float = 2.0,
-    ) -> None:
-        super().__init__(host, port, layout, word_order, unit_id, timeout)
+    def _make_client(self, host: str, port: int, timeout: float) -> Any:
         from pymodbus.client import ModbusTcpClient
 
-        self._client = ModbusTcpClient(host, port=port, timeout=timeout, retries=0)
+        return ModbusTcpClient(host, port=port, timeout=timeout, retries=0)
 
     @classmethod
     def connect(
@@ -625,7 +621,7 @@ class ModbusTransport(_ModbusCommon):
     ) -> ModbusTransport:
         """Connect (raises :class:`TransportError` when no server answers)."""
         transport = cls(host, port, layout=layout, word_order=word_order, unit_id=unit_id, timeout=timeout)
-        if not transport._client.connect():  # type: ignore[no-untyped-call]
+        if not transport._client.connect():
             transport.close()
             raise transport._failed("connecting", ConnectionRefusedError("no answer"))
         return transport
@@ -687,7 +683,7 @@ class ModbusTransport(_ModbusCommon):
         return self._counter.update(int(self._read(self._cycle_request())[CYCLE_SIGNAL]))
 
     def close(self) -> None:
-        self._client.close()  # type: ignore[no-untyped-call]
+        self._client.close()
 
     def __enter__(self) -> Self:
         return self
@@ -714,20 +710,10 @@ class AsyncModbusTransport(_ModbusCommon):
     is_async: ClassVar[bool] = True
     blocking: ClassVar[bool] = False
 
-    def __init__(
-        self,
-        host: str = "127.0.0.1",
-        port: int = 5020,
-        *,
-        layout: Layout | str | os.PathLike[str],
-        word_order: str = "ABCD",
-        unit_id: int = 1,
-        timeout: float = 2.0,
-    ) -> None:
-        super().__init__(host, port, layout, word_order, unit_id, timeout)
+    def _make_client(self, host: str, port: int, timeout: float) -> Any:
         from pymodbus.client import AsyncModbusTcpClient
 
-        self._client = AsyncModbusTcpClient(host, port=port, timeout=timeout, retries=0)
+        return AsyncModbusTcpClient(host, port=port, timeout=timeout, retries=0)
 
     @classmethod
     async def connect(
