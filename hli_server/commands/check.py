@@ -25,7 +25,6 @@ import click
 
 from hli_server.engine import Machine
 from hli_server.engine.alarms import Alarm, Severity
-from hli_server.engine.decoder import DecodeError
 from hli_server.engine.hli import ProgramState
 from hli_server.engine.nc.parser import iter_blocks
 from hli_server.engine.planner import Marker, MarkerKind, Motion
@@ -197,17 +196,7 @@ def _decode_only(
                     ch.warn_missing_program_end(item)
                     result.completed = True
                 elif item.kind == MarkerKind.ERROR:
-                    err: DecodeError = item.payload
-                    block = item.block
-                    machine.raise_alarm(
-                        err.alarm,
-                        ch,
-                        err.message,
-                        line=block.line if block is not None else err.params.get("line"),
-                        block=block.label if block is not None else err.params.get("block"),
-                        params=err.params,
-                        axis=err.axis,
-                    )
+                    ch.raise_decode_error(item)
         if motions % 4096 == 0:
             meter.update(line)
     result.blocks = decoder.blocks_decoded

@@ -308,15 +308,20 @@ class Channel:
             self.planner.clear()
             self.machine.emit("program_state", self, state="finished", program=self.program_name)
         elif marker.kind == MarkerKind.ERROR:
-            err: DecodeError = marker.payload
-            block = marker.block
-            line = block.line if block is not None else err.params.get("line")
-            label = block.label if block is not None else err.params.get("block")
-            self.machine.raise_alarm(
-                err.alarm, self, err.message, line=line, block=label, params=err.params, axis=err.axis
-            )
+            self.raise_decode_error(marker)
             self.state = ProgramState.ABORTED
             self.planner.clear()
+
+    def raise_decode_error(self, marker: Marker) -> None:
+        """The alarm an error marker carries, with the line and block of the refused block (or, for
+        a line the parser could not read, the place the parser named)."""
+        err: DecodeError = marker.payload
+        block = marker.block
+        line = block.line if block is not None else err.params.get("line")
+        label = block.label if block is not None else err.params.get("block")
+        self.machine.raise_alarm(
+            err.alarm, self, err.message, line=line, block=label, params=err.params, axis=err.axis
+        )
 
     def warn_missing_program_end(self, marker: Marker) -> None:
         """Warning 911005 when the program ran off the end of its text without M30 / M02."""
