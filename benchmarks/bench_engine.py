@@ -21,8 +21,8 @@ import time
 from hli_server.commands.check import check_program
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine
-from hli_server.engine.hli import ProgramState
 from hli_server.engine.nc.parser import iter_blocks
+from schemas.wire import ProgramState
 
 
 def long_program(blocks: int) -> str:

@@ -18,10 +18,10 @@ import time
 from benchmarks.bench_engine import long_program
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine
-from hli_server.engine.hli import ProgramState
 from hli_server.engine.monitors.collision import CollisionMonitor
-from hli_server.engine.monitors.dyn_pos_limit import DplState, DynPosLimits
+from hli_server.engine.monitors.dyn_pos_limit import DynPosLimits
 from hli_server.engine.monitors.position import PositionMonitor
+from schemas.wire import DynPosLimitState, ProgramState
 
 MONITORS = (DynPosLimits, CollisionMonitor, PositionMonitor)
 COLLISION = CollisionMonitor.__module__
@@ -71,7 +71,10 @@ def main() -> None:
     full, bare = build(True), build(False)
     limits = next(m for m in full.monitors if isinstance(m, DynPosLimits))
     active = sum(
-        1 for a in full.axes for side in ("low", "high") if limits.state(a.name, side) == DplState.ACTIVE
+        1
+        for a in full.axes
+        for side in ("low", "high")
+        if limits.state(a.name, side) == DynPosLimitState.ACTIVE
     )
     pairs = len(next(m for m in full.monitors if isinstance(m, CollisionMonitor)).pairs)
     spent = {id(full): 0.0, id(bare): 0.0}

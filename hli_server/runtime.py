@@ -43,7 +43,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
 from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
-from hli_server.engine.machine import Event, Machine
+from hli_server.engine.machine import Machine
+from schemas.events import Event
 
 if TYPE_CHECKING:
     from types import TracebackType
@@ -264,8 +265,7 @@ class LoggedEvent:
     event: Event
 
     def to_json(self) -> dict[str, Any]:
-        e = self.event
-        return {"seq": self.seq, "cycle": e.cycle, "kind": e.kind, "channel": e.channel, "data": e.data}
+        return {"seq": self.seq, **self.event.to_json()}
 
 
 AdapterSpec = Adapter | str | tuple[str, Mapping[str, Any]]

@@ -190,6 +190,11 @@ class AxisConfig(_Strict):
     jog_acceleration: float = Field(default=1000.0, gt=0.0, description="jog acceleration [mm/s²]")
     referenced: bool = Field(default=True, description="axis is homed at start-up")
     start_position: Dint = Field(default=0, description="position at start-up [0.1 µm]")
+    reference_position: Dint | None = Field(
+        default=None,
+        description="where the referencing (homing) move ends and the axis counts as referenced [0.1 µm]; "
+        "default: start_position",
+    )
     drive: DriveModel = Field(default_factory=DriveModel)
 
     @model_validator(mode="after")

@@ -50,6 +50,7 @@ from typing import TYPE_CHECKING, Any, Final
 import construct as cs
 
 from schemas.units import DINT_MAX, DINT_MIN, UDINT_MAX
+from schemas.wire import DynPosLimitState, HoldSource, Mode, ProgramState, describe
 
 if TYPE_CHECKING:
     from schemas.config import MachineConfig
@@ -85,7 +86,7 @@ __all__ = [
     "build_layout",
 ]
 
-LAYOUT_VERSION: Final = 1
+LAYOUT_VERSION: Final = 2
 """Bumped whenever the templates or the addressing rules change (the hash changes with any config)."""
 
 LAYOUT_FORMAT: Final = "hli-layout"
@@ -250,9 +251,7 @@ def _unit_templates(
     )
 
 
-_DYNPL_STATE = (
-    "monitoring state HLI_DYNPL_STATE_*: 0 INACTIVE, 1 ACTIVATION, 2 ACTIVE, 3 ACTIVE_BRAKING, 4 ACTIVE_BRAKE"
-)
+_DYNPL_STATE = describe(DynPosLimitState, "monitoring state HLI_DYNPL_STATE_*", lower=False)
 
 CHANNEL_TEMPLATES: Final[tuple[SignalTemplate, ...]] = (
     # gpCh[i]^bahn_state: CNC -> PLC
@@ -261,12 +260,11 @@ CHANNEL_TEMPLATES: Final[tuple[SignalTemplate, ...]] = (
         _B, _R, "-", "work area monitoring detected a violation", ("C14-22", "H-01"), _C14,
     ),
     SignalTemplate(
-        "bahn_state.mode_r", _UDI, _R, "-", "active mode: 0 automatic, 1 manual", ("E-03", "H-01"), _OWN
+        "bahn_state.mode_r", _UDI, _R, "-", describe(Mode, "active mode"), ("E-03", "H-01"), _OWN
     ),
     SignalTemplate(
         "bahn_state.program_state_r",
-        _UDI, _R, "-", "program state: 0 idle, 1 running, 2 held, 3 aborted, 4 finished",
-        ("E-04", "H-01"), _OWN,
+        _UDI, _R, "-", describe(ProgramState, "program state"), ("E-04", "H-01"), _OWN,
     ),
     SignalTemplate(
         "bahn_state.program_number_r",
@@ -282,7 +280,12 @@ CHANNEL_TEMPLATES: Final[tuple[SignalTemplate, ...]] = (
     ),
     SignalTemplate(
         "bahn_state.feedhold_active_r",
-        _B, _R, "-", "feedhold in effect (PLC feedhold or a monitor's hold)", ("E-05", "C43-04"), _OWN,
+        _B, _R, "-", "a hold is in effect (the feedhold unit or a monitor's hold: see hold_source_r)",
+        ("E-05", "C43-04"), _OWN,
+    ),
+    SignalTemplate(
+        "bahn_state.hold_source_r",
+        _UDI, _R, "-", describe(HoldSource, "what holds the path (bits)"), ("E-05", "C43-04"), _OWN,
     ),
     SignalTemplate(
         "bahn_state.error_present_r", _B, _R, "-", "an error alarm is pending in the channel", ("H-01",), _OWN
@@ -307,7 +310,7 @@ CHANNEL_TEMPLATES: Final[tuple[SignalTemplate, ...]] = (
     *_unit_templates("bahn_mc_control.override", _DI, "0.1 %", "feed override", ("E-05", "H-02"), _OWN),
     # gpCh[i]^mc_command: the PLC's operator panel
     SignalTemplate(
-        "mc_command.mode_w", _UDI, _W, "-", "requested mode: 0 automatic, 1 manual", ("E-03", "H-01"), _OWN
+        "mc_command.mode_w", _UDI, _W, "-", describe(Mode, "requested mode"), ("E-03", "H-01"), _OWN
     ),
     SignalTemplate(
         "mc_command.program_select_w",
@@ -350,6 +353,9 @@ AXIS_TEMPLATES: Final[tuple[SignalTemplate, ...]] = (
         "ipo_state.referenced_r", _B, _R, "-", "axis is referenced (homed)", ("E-02", "C3-06"), _OWN
     ),
     SignalTemplate(
+        "ipo_state.referencing_r", _B, _R, "-", "the referencing (homing) move runs", ("E-02", "C3-06"), _OWN
+    ),
+    SignalTemplate(
         "ipo_state.in_position_r",
         _B, _R, "-", "actual position inside the exact-stop window P-AXIS-00236", ("A3-02",), _OWN,
     ),
@@ -358,6 +364,10 @@ AXIS_TEMPLATES: Final[tuple[SignalTemplate, ...]] = (
     # gpAx[i]^manual
     SignalTemplate("manual.jog_plus_w", _B, _W, "-", "jog key + (manual mode)", ("E-05", "C14-19"), _OWN),
     SignalTemplate("manual.jog_minus_w", _B, _W, "-", "jog key - (manual mode)", ("E-05", "C14-19"), _OWN),
+    SignalTemplate(
+        "manual.reference_w",
+        _B, _W, "-", "reference (home) the axis (rising edge; no program may run)", ("E-02", "C3-06"), _OWN,
+    ),
     # dyn_coll_mon: the CNC objects of FCT-C3 4.3 (read-only; ADS port 551, group 0x120300)
     SignalTemplate(
         "dyn_coll_mon.active", _B, _R, "-", "dynamic collision monitoring is active", ("C3-10",), _C3,

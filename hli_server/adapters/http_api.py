@@ -20,7 +20,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-import math
 import socket
 from collections.abc import Generator
 from typing import TYPE_CHECKING, Annotated, Any, Literal
@@ -30,10 +29,9 @@ from fastapi import FastAPI, HTTPException, Query, Request
 from fastapi.exceptions import RequestValidationError
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, ValidationError
 
-from hli_server.engine.channel import Mode
-from hli_server.engine.hli import ProgramState
 from hli_server.runtime import Clock, ClockError
 from schemas.layout import ReadOnlySignalError, SignalValueError, UnknownSignalError
+from schemas.wire import Mode
 
 if TYPE_CHECKING:
     from hli_server.engine.axis import Axis
@@ -237,11 +235,9 @@ def create_app(runtime: Runtime) -> FastAPI:
             prog_name = name
             if not text.strip():
                 raise HTTPException(422, "empty program: send the NC text as the body (text/plain)")
-        if ch.state in (ProgramState.RUNNING, ProgramState.HELD):
-            raise HTTPException(
-                409, f"channel {number}: a program is running ({ch.program_name!r}); reset the channel first"
-            )
-        ch.load_program(text, prog_name)
+        refused = ch.load_program(text, prog_name)
+        if refused is not None:
+            raise HTTPException(409, f"channel {number}: {refused.message}; reset the channel first")
         lines = text.count("\n") + (0 if text.endswith("\n") else 1)
         return {"channel": number, "program": prog_name, "lines": lines, "cycle": r.machine.cycle}
 
@@ -255,9 +251,9 @@ def create_app(runtime: Runtime) -> FastAPI:
             raise HTTPException(
                 404, f"channel {number}: program {body.number} is not in the program table (have: {have})"
             )
-        if ch.state in (ProgramState.RUNNING, ProgramState.HELD):
-            raise HTTPException(409, f"channel {number}: a program is running; reset the channel first")
-        ch.select_program(body.number)
+        refused = ch.select_program(body.number)
+        if refused is not None:
+            raise HTTPException(409, f"channel {number}: {refused.message}; reset the channel first")
         return {"channel": number, "program": entry.name, "number": body.number, "cycle": r.machine.cycle}
 
     @app.post("/api/channels/{number}/start", tags=["channels"], status_code=202, summary="Program start")
@@ -358,17 +354,19 @@ def create_app(runtime: Runtime) -> FastAPI:
 
     @app.post("/api/axes/{name}/faults", tags=["axes"], summary="Inject faults (A3-05); omitted fields stay")
     async def post_faults(request: Request, name: str, body: FaultsBody) -> dict[str, Any]:
-        axis = axis_of(rt(request), name)
-        for key, value in body.model_dump(exclude_none=True).items():
-            if isinstance(value, float) and not math.isfinite(value):
-                raise HTTPException(422, f"{key} must be a finite number, got {value}")
-            setattr(axis.faults, key, value)
+        r = rt(request)
+        axis = axis_of(r, name)
+        try:
+            r.machine.inject_fault(axis.name, **body.model_dump(exclude_none=True))
+        except ValueError as exc:
+            raise HTTPException(422, str(exc)) from None
         return faults_json(axis)
 
     @app.delete("/api/axes/{name}/faults", tags=["axes"], summary="Clear all injected faults of an axis")
     async def delete_faults(request: Request, name: str) -> dict[str, Any]:
-        axis = axis_of(rt(request), name)
-        axis.reset_faults()
+        r = rt(request)
+        axis = axis_of(r, name)
+        r.machine.inject_fault(axis.name)
         return faults_json(axis)
 
     # --- the process image ------------------------------------------------------------

@@ -25,9 +25,9 @@ import click
 
 from hli_server.engine import Machine
 from hli_server.engine.alarms import Alarm, Severity
-from hli_server.engine.hli import ProgramState
 from hli_server.engine.nc.parser import iter_blocks
 from hli_server.engine.planner import Marker, MarkerKind, Motion
+from schemas.wire import ProgramState
 
 __all__ = ["CheckResult", "check", "check_program"]
 

@@ -13,11 +13,13 @@ Reactions:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import StrEnum
-from typing import Any
+
+from schemas.events import Alarm
 
 __all__ = ["ALARMS", "Alarm", "AlarmDef", "Reaction", "Severity", "alarm_def"]
+# Alarm (one raised alarm) is a wire record: schemas.events.Alarm, re-exported here.
 
 
 class Severity(StrEnum):
@@ -97,8 +99,9 @@ _TABLE: tuple[AlarmDef, ...] = (
         Reaction.AXIS_STOP,
     ),
     _w(911013, "Jog stopped at the software limit", "project (E-06)"),
-    _e(911020, "Axis not referenced", "project"),
+    _w(911020, "Program start refused: axes not referenced (reference them first)", "project"),
     _w(911021, "Command not allowed in this mode or state", "project"),
+    _w(911022, "Program start refused: the axes still brake (after a reset or a stop)", "project"),
     _e(911030, "Drive error", "project", Reaction.AXIS_STOP),
     # --- project's own: work and protection areas (912xxx) ----------------------------------
     _e(912000, "Point inside a protection area", "project (FCT-C14)"),
@@ -117,38 +120,3 @@ ALARMS: dict[int, AlarmDef] = {a.number: a for a in _TABLE}
 
 def alarm_def(number: int) -> AlarmDef:
     return ALARMS[number]
-
-
-@dataclass(frozen=True, slots=True)
-class Alarm:
-    """One raised alarm (an event of the engine)."""
-
-    number: int
-    cycle: int
-    channel: int
-    message: str
-    line: int | None = None
-    block: str | None = None
-    axis: str | None = None
-    params: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def definition(self) -> AlarmDef:
-        return ALARMS[self.number]
-
-    @property
-    def severity(self) -> Severity:
-        return self.definition.severity
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "id": self.number,
-            "severity": str(self.severity),
-            "cycle": self.cycle,
-            "channel": self.channel,
-            "line": self.line,
-            "block": self.block,
-            "axis": self.axis,
-            "message": self.message,
-            "params": dict(self.params),
-        }

@@ -11,16 +11,39 @@ The drive model (project's own, configurable per axis in ``DriveModel``):
 
 so that following error in steady motion is about (1 - feed_forward) * v / kv and the axis settles
 into the exact-stop window after the setpoint stops. Faults are injected at run time (A3-05).
+
+Referencing (homing, E-02, C3-06; project's own model): :meth:`Axis.start_referencing` moves the
+setpoint to the reference position (``reference_position``, default the start position) with the jog
+velocity and acceleration, like a search for the reference mark; when it arrives there the axis is
+referenced. The per-cycle code reads plain values copied once from the configuration (the pydantic
+model is not touched per cycle).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from schemas.config import AxisConfig, AxisType
 from schemas.units import mm_from_increments, mm_per_min_to_mm_per_s, s_from_us
 
-__all__ = ["Axis", "AxisFaults"]
+__all__ = ["Axis", "AxisFaults", "DriveParams"]
+
+
+@dataclass(frozen=True, slots=True)
+class DriveParams:
+    """The drive model's parameters (``DriveModel`` of the configuration) in engine units."""
+
+    kv: float
+    """1/s"""
+    feed_forward: float
+    tau: float
+    """s"""
+
+    @classmethod
+    def from_config(cls, config: AxisConfig) -> DriveParams:
+        d = config.drive
+        return cls(kv=d.kv, feed_forward=d.feed_forward, tau=s_from_us(d.time_constant_us))
 
 
 @dataclass(slots=True)
@@ -38,6 +61,15 @@ class AxisFaults:
     drive_error: bool = False
     """The drive reports an error: it stops at once (emergency deceleration)."""
 
+    def as_dict(self) -> dict[str, float | bool]:
+        return {
+            "friction": self.friction,
+            "gain_factor": self.gain_factor,
+            "encoder_drift": self.encoder_drift,
+            "encoder_stuck": self.encoder_stuck,
+            "drive_error": self.drive_error,
+        }
+
     def any(self) -> bool:
         return (
             self.friction > 0.0
@@ -48,18 +80,33 @@ class AxisFaults:
         )
 
 
+def check_fault_value(axis: Axis, name: str, value: float | bool) -> float | bool:
+    """A fault value the drive model can take, or ValueError naming the field and the allowed range."""
+    default = getattr(AxisFaults(), name)
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ValueError(f"fault {name} of axis {axis.name}: true or false, got {value!r}")
+        return value
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"fault {name} of axis {axis.name}: a finite number, got {value!r}")
+    return float(value)
+
+
 class Axis:
     """One axis. ``index`` is its place in the configuration (gpAx[index]); ``number`` is A_ID."""
 
     __slots__ = (
         "_drift",
+        "_home_velocity",
         "a_emergency",
         "a_max",
         "actual",
         "channel",
         "config",
+        "drive",
         "drive_velocity",
         "faults",
+        "home_position",
         "index",
         "jog_acceleration",
         "jog_velocity",
@@ -68,6 +115,7 @@ class Axis:
         "number",
         "prev_setpoint",
         "referenced",
+        "referencing",
         "rotary",
         "setpoint",
         "stop_deceleration",
@@ -78,6 +126,8 @@ class Axis:
         "swe_tol",
         "v_max",
         "v_rapid",
+        "window",
+        "window_inc",
     )
 
     def __init__(self, config: AxisConfig, index: int) -> None:
@@ -104,6 +154,14 @@ class Axis:
         self._drift = 0.0
         self.drive_velocity = 0.0
         self.referenced = config.referenced
+        self.referencing = False
+        home = config.reference_position if config.reference_position is not None else config.start_position
+        self.home_position = mm_from_increments(home)
+        self._home_velocity = 0.0
+        self.window = mm_from_increments(config.window)
+        """P-AXIS-00236 exact-stop window [mm]"""
+        self.window_inc = config.window
+        self.drive = DriveParams.from_config(config)
         self.faults = AxisFaults()
         self.stopping = False
         self.stop_velocity = 0.0
@@ -138,9 +196,42 @@ class Axis:
         self.stopping = False
         self.stop_velocity = 0.0
 
+    # --- referencing (homing) ---------------------------------------------------------------
+    def start_referencing(self) -> None:
+        """Begin the homing move; the axis is unreferenced until it ends (E-02)."""
+        self.referencing = True
+        self.referenced = False
+        self._home_velocity = 0.0
+
+    def cancel_referencing(self) -> None:
+        self.referencing = False
+        self._home_velocity = 0.0
+
+    def advance_referencing(self, t_a: float) -> bool:
+        """One cycle of the homing move (a jog to the reference position that stops there exactly);
+        True in the cycle the axis arrives and is referenced."""
+        remaining = self.home_position - self.setpoint
+        v = abs(self._home_velocity)
+        a = self.jog_acceleration
+        distance = abs(remaining)
+        # discrete braking curve: highest velocity from which v falls by a*T per cycle to 0 within distance
+        half = 0.5 * a * t_a
+        v_brake = -half + math.sqrt(half * half + 2.0 * a * distance)
+        v = min(v + a * t_a, self.jog_velocity, v_brake)
+        step = v * t_a
+        if step >= distance - 1e-12:
+            self.setpoint = self.home_position
+            self.referencing = False
+            self.referenced = True
+            self._home_velocity = 0.0
+            return True
+        self._home_velocity = math.copysign(v, remaining)
+        self.setpoint += math.copysign(step, remaining)
+        return False
+
     # --- actual side: the position loop ---------------------------------------------------
     def update_drive(self, t_a: float) -> None:
-        cfg = self.config.drive
+        cfg = self.drive
         f = self.faults
         if f.drive_error:
             # the drive is off: it coasts to a stop with the emergency deceleration
@@ -154,8 +245,7 @@ class Axis:
             if f.friction > 0.0 and abs(v_cmd) <= f.friction:
                 v_cmd = 0.0
                 self.drive_velocity = 0.0
-            tau = s_from_us(cfg.time_constant_us)
-            self.drive_velocity += (v_cmd - self.drive_velocity) * t_a / (tau + t_a)
+            self.drive_velocity += (v_cmd - self.drive_velocity) * t_a / (cfg.tau + t_a)
         self.actual += self.drive_velocity * t_a
         self._drift += f.encoder_drift * t_a
         if not f.encoder_stuck:

@@ -1,38 +1,45 @@
-"""A channel: mode, program, decoder, path interpolation and jog (E-03, E-05).
+"""A channel: mode, program, decoder, path interpolation, jog and referencing (E-03, E-05).
 
 Inputs come from two doors, both latched at the start of a cycle: the PLC's HLI fields
-(``mc_command``, ``bahn_mc_control``, ``manual``) and the operator's requests (API, CLI, tests:
-:meth:`Channel.request_start` and friends). Outputs are published into ``bahn_state`` at the end.
+(``mc_command``, ``bahn_mc_control``, the axes' ``manual``) and the operator's requests (HTTP API,
+CLI, tests: :meth:`Channel.request_start` and friends). Outputs are published into ``bahn_state``
+at the end of the cycle.
+
+The program state and the mode are assigned in one place, :mod:`~hli_server.engine.channel_state`
+(a table of every transition); this module decides *when* a cause happens (a start edge was
+accepted, the path reached M30, an error reaction, ...) and tells the table.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
-from typing import TYPE_CHECKING, Protocol
+from collections.abc import Iterator, Sequence
+from typing import Protocol
 
 from hli_server.engine.axis import Axis
+from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
 from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.geometry import Point
-from hli_server.engine.hli import ChannelHli, ModeRequest, ProgramState
+from hli_server.engine.hli import AxisHli, ChannelHli
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.parser import iter_blocks
 from hli_server.engine.planner import Marker, MarkerKind, Planner
+from hli_server.engine.ports import MachinePort
 from schemas.config import ChannelConfig
+from schemas.events import Alarm, ControlUnitChanged, HoldChanged, ModeChanged, ProgramStateChanged
 from schemas.units import mm_from_increments
+from schemas.wire import HoldSource, Mode, ProgramState
 
-if TYPE_CHECKING:
-    from hli_server.engine.machine import Machine
-
-__all__ = ["LOOKAHEAD_ITEMS", "Channel", "JogGuard", "Mode"]
+__all__ = ["LOOKAHEAD_ITEMS", "Channel", "JogGuard"]
 
 LOOKAHEAD_ITEMS = 64
 """Motion blocks decoded ahead of the interpolator (the look-ahead buffer, P-STUP-00070's size)."""
 
-
-class Mode:
-    AUTOMATIC = ModeRequest.AUTOMATIC
-    MANUAL = ModeRequest.MANUAL
+ALARM_REFUSED = 911021
+"""Warning: a command not allowed in this mode or state (the text says which and why)."""
+ALARM_NOT_REFERENCED = 911020
+ALARM_STILL_BRAKING = 911022
+"""Warning: program start refused while the channel's axes still brake (after a reset or a stop)."""
 
 
 class JogGuard(Protocol):
@@ -43,17 +50,25 @@ class JogGuard(Protocol):
 
 
 class Channel:
-    def __init__(self, machine: Machine, config: ChannelConfig, index: int, axes: list[Axis]) -> None:
+    def __init__(
+        self,
+        machine: MachinePort,
+        config: ChannelConfig,
+        index: int,
+        axes: list[Axis],
+        hli: ChannelHli,
+        axis_hli: Sequence[AxisHli],
+    ) -> None:
         self.machine = machine
         self.config = config
         self.index = index
         self.number = config.number
         self.axes = axes
         self.axis_names = [a.name for a in axes]
-        self.hli: ChannelHli = machine.hli.channels[index]
+        self.hli = hli
+        self._axis_hli = [axis_hli[a.index] for a in axes]
         self.t_a = machine.t_a
-        self.mode = Mode.AUTOMATIC
-        self.state = ProgramState.IDLE
+        self._state = ChannelState(self._program_changed, self._mode_changed)
         self.program_text: str | None = None
         self.program_name = ""
         self.program_number = 0
@@ -72,6 +87,10 @@ class Channel:
         self.jog_velocity: list[float] = [0.0] * len(axes)
         self.current_block: Block | None = None
         self.aborting = False
+        """An error ended the program and the path still brakes to rest."""
+        self.monitor_holds = HoldSource.NONE
+        """Holds that monitors put on the path this cycle (set before interpolation)."""
+        self.hold_source = HoldSource.NONE
         # operator requests (API), latched at the next cycle
         self._req_start = False
         self._req_reset = False
@@ -79,25 +98,73 @@ class Channel:
         self._req_feedhold: bool | None = None
         self._req_override: int | None = None
         self._req_jog: dict[int, int] = {}
+        self._req_reference: set[int] = set()
         self._jog_keys: list[int] = [0] * len(axes)
         self._op_feedhold = False
         self._op_override = 1000
         self._prev_start_w = False
         self._prev_reset_w = False
-        self._prev_mode_w = ModeRequest.AUTOMATIC
+        self._prev_mode_w: int = Mode.AUTOMATIC
+        self._prev_reference_w = [False] * len(axes)
         self.feedhold_active = False
         self.override_permille = 1000
 
+    # --- state ---------------------------------------------------------------------------
+    @property
+    def state(self) -> ProgramState:
+        """The program state (``bahn_state.program_state_r``)."""
+        return self._state.program
+
+    @property
+    def mode(self) -> Mode:
+        """The mode (``bahn_state.mode_r``)."""
+        return self._state.mode
+
+    @property
+    def program_running(self) -> bool:
+        """A program runs (RUNNING or HELD): no other program, no mode change."""
+        return self._state.running
+
+    def _program_changed(self, new: ProgramState, previous: ProgramState, cause: Cause) -> None:
+        m = self.machine
+        m.emit(
+            ProgramStateChanged(
+                cycle=m.cycle,
+                time_s=m.cycle * self.t_a,
+                channel=self.number,
+                state=new.label,
+                code=int(new),
+                previous=previous.label,
+                cause=cause.value,
+                program=self.program_name,
+            )
+        )
+
+    def _mode_changed(self, new: Mode, previous: Mode) -> None:
+        m = self.machine
+        m.emit(
+            ModeChanged(
+                cycle=m.cycle,
+                time_s=m.cycle * self.t_a,
+                channel=self.number,
+                mode=new.label,
+                previous=previous.label,
+            )
+        )
+
+    def _refuse(self, message: str, number: int = ALARM_REFUSED) -> Alarm:
+        return self.machine.raise_alarm(number, self, message)
+
     # --- operator requests ---------------------------------------------------------------
-    def load_program(self, text: str, name: str = "program", number: int = 0) -> None:
-        """Select a program (text). Refused while a program runs."""
-        if self.state in (ProgramState.RUNNING, ProgramState.HELD):
-            self.machine.raise_alarm(911021, self, f"cannot load {name!r}: a program is running")
-            return
+    def load_program(self, text: str, name: str = "program", number: int = 0) -> Alarm | None:
+        """Select a program (text). Refused (the alarm is returned) while a program runs."""
+        if self.program_running:
+            return self._refuse(f"cannot load {name!r}: a program is running ({self.program_name!r})")
         self.program_text = text
         self.program_name = name
         self.program_number = number
-        self.state = ProgramState.IDLE
+        self._state.apply(Cause.LOAD)
+        return None
 
     def request_start(self) -> None:
         self._req_start = True
@@ -117,6 +184,10 @@ class Channel:
     def request_jog(self, axis: str, direction: int) -> None:
         """direction +1, -1, or 0 (release the key)."""
         self._req_jog[self.axis_names.index(axis)] = max(-1, min(1, direction))
+
+    def request_reference(self, axis: str) -> None:
+        """Reference (home) ``axis`` at the next cycle, as a rising edge of ``manual.reference_w``."""
+        self._req_reference.add(self.axis_names.index(axis))
 
     # --- positions -----------------------------------------------------------------------
     def setpoints(self) -> list[float]:
@@ -147,6 +218,7 @@ class Channel:
         self._req_start = False
         if start:
             self.start()
+        self._latch_references()
         # feedhold and override: control units; the CNC's own request is the operator's
         if self._req_feedhold is not None:
             self._op_feedhold = self._req_feedhold
@@ -159,108 +231,153 @@ class Channel:
         ctl.override.request_r = self._op_override
         self.feedhold_active = ctl.feedhold.effective()
         self.override_permille = max(0, min(1200, ctl.override.effective()))
-        ctl.feedhold.state_r = self.feedhold_active
-        ctl.override.state_r = self.override_permille
-        ctl.suppress_area_mon_manual_mode.state_r = ctl.suppress_area_mon_manual_mode.effective()
+        suppress = ctl.suppress_area_mon_manual_mode.effective()
+        if (
+            ctl.feedhold.state_r != self.feedhold_active
+            or ctl.override.state_r != self.override_permille
+            or ctl.suppress_area_mon_manual_mode.state_r != suppress
+        ):
+            self._unit_changed("feedhold", ctl.feedhold.state_r, self.feedhold_active)
+            self._unit_changed("override", ctl.override.state_r, self.override_permille)
+            self._unit_changed(
+                "suppress_area_mon_manual_mode", ctl.suppress_area_mon_manual_mode.state_r, suppress
+            )
+            ctl.feedhold.state_r = self.feedhold_active
+            ctl.override.state_r = self.override_permille
+            ctl.suppress_area_mon_manual_mode.state_r = suppress
         for k, direction in self._req_jog.items():
             self._jog_keys[k] = direction
         self._req_jog.clear()
+        self.monitor_holds = HoldSource.NONE
 
-    def select_program(self, number: int) -> None:
+    def _unit_changed(self, unit: str, previous: int | bool, state: int | bool) -> None:
+        if previous == state:
+            return
+        m = self.machine
+        m.emit(
+            ControlUnitChanged(
+                cycle=m.cycle,
+                time_s=m.cycle * self.t_a,
+                channel=self.number,
+                unit=f"gpCh[{self.index}]^bahn_mc_control.{unit}",
+                state=state,
+                previous=previous,
+            )
+        )
+
+    def select_program(self, number: int) -> Alarm | None:
+        """Select program ``number`` of the program table; the refusal alarm, or None."""
         for entry in self.config.programs:
-            if entry.number == number:
-                text = entry.text
-                if text is None and self.machine.read_program is not None and entry.path is not None:
-                    try:
-                        text = self.machine.read_program(entry.path)
-                    except (OSError, UnicodeDecodeError) as exc:
-                        self.machine.raise_alarm(
-                            911021, self, f"program {number}: cannot read {entry.path}: {exc}"
-                        )
-                        return
-                if text is None:
-                    self.machine.raise_alarm(
-                        911021, self, f"program {number}: no program text for {entry.path}"
-                    )
-                    return
-                self.load_program(text, entry.name, number)
-                return
-        self.machine.raise_alarm(911021, self, f"program number {number} is not in the program table")
+            if entry.number != number:
+                continue
+            if self.program_running:
+                return self._refuse(f"cannot select program {number}: a program is running")
+            text = entry.text
+            read = self.machine.read_program
+            if text is None and read is not None and entry.path is not None:
+                try:
+                    text = read(entry.path)
+                except (OSError, UnicodeDecodeError) as exc:
+                    return self._refuse(f"program {number}: cannot read {entry.path}: {exc}")
+            if text is None:
+                return self._refuse(f"program {number}: no program text for {entry.path}")
+            return self.load_program(text, entry.name, number)
+        return self._refuse(f"program number {number} is not in the program table")
 
     def start(self) -> None:
+        """A start edge: the program starts when the channel can run it, else a warning says why."""
         if self.mode != Mode.AUTOMATIC:
-            self.machine.raise_alarm(911021, self, "program start refused: channel is in manual mode")
+            self._refuse("program start refused: channel is in manual mode")
             return
-        if self.state == ProgramState.HELD or (self.state == ProgramState.RUNNING and self.feedhold_active):
-            return
-        if self.state == ProgramState.RUNNING:
-            return
+        if self.program_running:
+            return  # a start while the program runs changes nothing
         if self.machine.channel_has_error(self):
-            self.machine.raise_alarm(911021, self, "program start refused: reset the error first")
+            self._refuse("program start refused: reset the error first")
+            return
+        if (self.state, Cause.START) not in PROGRAM_TRANSITIONS:
+            self._refuse(f"program start refused: the program is {self.state.label}; reset the channel first")
             return
         if self.program_text is None:
-            self.machine.raise_alarm(911021, self, "program start refused: no program selected")
+            self._refuse("program start refused: no program selected")
             return
         not_referenced = [a.name for a in self.axes if not a.referenced]
         if not_referenced:
-            self.machine.raise_alarm(911020, self, f"axes not referenced: {', '.join(not_referenced)}")
+            self.machine.raise_alarm(
+                ALARM_NOT_REFERENCED,
+                self,
+                f"program start refused: axes not referenced: {', '.join(not_referenced)}; reference them "
+                "first (gpAx[i]^manual.reference_w or POST /api/axes/{name}/reference)",
+            )
+            return
+        still = [a.name for a in self.axes if a.stopping or a.referencing]
+        if still:
+            self._refuse(
+                f"program start refused: axes {', '.join(still)} still brake or reference; start again once "
+                "they are at rest (gpAx[i]^ipo_state.moving_r FALSE)",
+                ALARM_STILL_BRAKING,
+            )
             return
         blocks: Iterator[Block] = iter_blocks(self.program_text, self.axis_names)
         self.planner.clear()
         self.decoder.start(blocks, self.setpoints())
         self.aborting = False
         self.current_block = None
-        self.state = ProgramState.RUNNING
-        self.machine.emit("program_state", self, state="running", program=self.program_name)
+        self._state.apply(Cause.START)
 
     def reset(self) -> None:
         """E-03: stop motion, clear the channel's errors, reset modal state; hooks for the monitors."""
         for axis in self.axes:
+            if axis.referencing:
+                axis.cancel_referencing()
             axis.start_independent_stop(axis.a_max, self.t_a)
         self.planner.clear()
         self.decoder.reset_modal()
         self.aborting = False
         self.jog_velocity = [0.0] * len(self.axes)
         self._jog_keys = [0] * len(self.axes)
-        self.state = ProgramState.IDLE
         self.current_block = None
-        self.machine.on_channel_reset(self)
-        self.machine.emit("program_state", self, state="reset")
+        self._state.apply(Cause.RESET)
+        self.machine.channel_reset(self)
 
     def change_mode(self, mode: int) -> None:
-        if mode not in (Mode.AUTOMATIC, Mode.MANUAL):
-            self.machine.raise_alarm(911021, self, f"unknown mode {mode}")
+        try:
+            target = Mode(mode)
+        except ValueError:
+            self._refuse(f"unknown mode {mode} (0 automatic, 1 manual)")
             return
-        if self.state in (ProgramState.RUNNING, ProgramState.HELD):
-            self.machine.raise_alarm(911021, self, "mode change refused: a program is running")
+        if self.program_running:
+            self._refuse("mode change refused: a program is running")
             return
         if any(abs(v) > 0 for v in self.jog_velocity):
-            self.machine.raise_alarm(911021, self, "mode change refused: axes are jogging")
+            self._refuse("mode change refused: axes are jogging")
             return
-        if not self.machine.allow_mode_change(self, mode):
+        if not self.machine.allow_mode_change(self, target):
             return
-        self.mode = mode
-        self.machine.emit("mode", self, mode="manual" if mode == Mode.MANUAL else "automatic")
+        self._state.set_mode(target)
 
     def abort(self) -> None:
-        """Program abort: the path brakes with the feedhold deceleration and the program ends."""
-        if self.state in (ProgramState.RUNNING, ProgramState.HELD):
-            self.state = ProgramState.ABORTED
+        """Program abort (an error reaction): the path brakes with the feedhold deceleration."""
+        if self.program_running:
             self.aborting = True
-            self.machine.emit("program_state", self, state="aborted")
+            self._state.apply(Cause.ERROR)
+
+    def hold(self, source: HoldSource) -> None:
+        """A monitor holds the path this cycle (call before interpolation, every cycle it holds)."""
+        self.monitor_holds |= source
 
     def interpolate(self) -> None:
+        holds = self.monitor_holds | (HoldSource.FEEDHOLD if self.feedhold_active else HoldSource.NONE)
+        self._set_holds(holds)
+        if any(a.referencing for a in self.axes):
+            self._reference()
         if any(a.stopping for a in self.axes):
             # axes brake on their own (collision, drive error, reset): the path is lost
             self.planner.clear()
-            if self.state in (ProgramState.RUNNING, ProgramState.HELD):
-                self.abort()
+            self.abort()
             self.aborting = False
             return
         if self.mode == Mode.MANUAL:
             self._jog()
-            return
-        if self.state not in (ProgramState.RUNNING, ProgramState.HELD, ProgramState.ABORTED):
             return
         if self.aborting:
             self.planner.feedhold = True
@@ -270,6 +387,8 @@ class Channel:
                 self.planner.clear()
                 self.aborting = False
             return
+        if not self.program_running:
+            return
         self._fill()
         self.planner.feedhold = self.feedhold_active
         self.planner.override = self.override_permille / 1000.0
@@ -278,13 +397,24 @@ class Channel:
         head = self.planner.current()
         if head is not None and head.block is not None:
             self.current_block = head.block
-        self.state = (
-            ProgramState.HELD
-            if self.feedhold_active and self.planner.velocity == 0.0
-            else ProgramState.RUNNING
-        )
         for marker in markers:
             self._marker(marker)
+        self._state.set_held(bool(holds) and self.planner.velocity == 0.0)
+
+    def _set_holds(self, holds: HoldSource) -> None:
+        if holds == self.hold_source:
+            return
+        self.hold_source = holds
+        m = self.machine
+        m.emit(
+            HoldChanged(
+                cycle=m.cycle,
+                time_s=m.cycle * self.t_a,
+                channel=self.number,
+                hold_source=int(holds),
+                sources=tuple(holds.labels),
+            )
+        )
 
     def _fill(self) -> None:
         while self.planner.motion_items < LOOKAHEAD_ITEMS and not self.decoder.finished:
@@ -304,12 +434,11 @@ class Channel:
             marker.payload()
         elif marker.kind == MarkerKind.END:
             self.warn_missing_program_end(marker)
-            self.state = ProgramState.FINISHED
             self.planner.clear()
-            self.machine.emit("program_state", self, state="finished", program=self.program_name)
+            if self.program_running:
+                self._state.apply(Cause.END)
         elif marker.kind == MarkerKind.ERROR:
             self.raise_decode_error(marker)
-            self.state = ProgramState.ABORTED
             self.planner.clear()
 
     def raise_decode_error(self, marker: Marker) -> None:
@@ -335,15 +464,44 @@ class Channel:
                 block=block.label if block is not None else None,
             )
 
+    # --- referencing (homing) ------------------------------------------------------------
+    def _latch_references(self) -> None:
+        for k, hli in enumerate(self._axis_hli):
+            level = hli.manual.reference_w
+            edge = (level and not self._prev_reference_w[k]) or k in self._req_reference
+            self._prev_reference_w[k] = level
+            if edge:
+                self._begin_reference(self.axes[k])
+        self._req_reference.clear()
+
+    def _begin_reference(self, axis: Axis) -> None:
+        if self.program_running:
+            self._refuse(f"referencing {axis.name} refused: a program is running")
+            return
+        if axis.stopping or self.jog_velocity[self.axes.index(axis)] != 0.0:
+            self._refuse(f"referencing {axis.name} refused: the axis is moving")
+            return
+        if axis.referencing:
+            return
+        axis.start_referencing()
+        self.machine.referencing_changed(axis.index)
+
+    def _reference(self) -> None:
+        for axis in self.axes:
+            if axis.referencing and not axis.stopping and axis.advance_referencing(self.t_a):
+                self.machine.referencing_changed(axis.index)
+
     # --- manual mode ---------------------------------------------------------------------
     def _jog(self) -> None:
         """E-05 jog: each axis ramps to its jog velocity while its key is held; guards may brake."""
         t = self.t_a
         req = list(self._jog_keys)
-        for k, axis in enumerate(self.axes):
-            man = self.machine.hli.axes[axis.index].manual
+        for k, hli in enumerate(self._axis_hli):
+            man = hli.manual
             if man.jog_plus_w != man.jog_minus_w:
                 req[k] = 1 if man.jog_plus_w else -1
+            if self.axes[k].referencing:
+                req[k] = 0
         current = tuple(self.setpoints())
         proposed = list(self.jog_velocity)
         for k, axis in enumerate(self.axes):
@@ -366,7 +524,7 @@ class Channel:
             axis.setpoint += v * t
 
     # --- outputs -------------------------------------------------------------------------
-    def publish(self) -> None:
+    def publish(self, cycle: int) -> None:
         st = self.hli.bahn_state
         st.mode_r = self.mode
         st.program_state_r = self.state
@@ -374,5 +532,6 @@ class Channel:
         block = self.current_block
         st.block_nr_r = block.number or 0 if block is not None else 0
         st.line_nr_r = block.line if block is not None else 0
-        st.feedhold_active_r = self.feedhold_active
-        st.cycle_r = self.machine.cycle % (2**31)
+        st.feedhold_active_r = bool(self.hold_source)
+        st.hold_source_r = self.hold_source
+        st.cycle_r = cycle % (2**31)

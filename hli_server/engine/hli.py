@@ -17,6 +17,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from schemas.wire import Mode, ProgramState
+
 __all__ = [
     "AxisHli",
     "AxisIpoMcControl",
@@ -30,8 +32,6 @@ __all__ = [
     "DynCollMon",
     "MachineHli",
     "McCommand",
-    "ModeRequest",
-    "ProgramState",
 ]
 
 
@@ -62,34 +62,18 @@ class ControlUnitSgn32:
         return self.command_w if self.enable_w else self.request_r
 
 
-class ProgramState:
-    """``gpCh[i]^bahn_state.program_state_r`` (project's own)."""
-
-    IDLE = 0
-    RUNNING = 1
-    HELD = 2
-    ABORTED = 3
-    FINISHED = 4
-
-
-class ModeRequest:
-    """``gpCh[i]^mc_command.mode_w`` and ``bahn_state.mode_r`` (project's own)."""
-
-    AUTOMATIC = 0
-    MANUAL = 1
-
-
 @dataclass(slots=True)
 class BahnState:
     """``gpCh[i]^bahn_state``: channel state, CNC -> PLC."""
 
     area_mon_violation_detected_r: bool = False  # FCT-C14 6.3
-    mode_r: int = ModeRequest.AUTOMATIC
+    mode_r: int = Mode.AUTOMATIC
     program_state_r: int = ProgramState.IDLE
     program_number_r: int = 0
     block_nr_r: int = 0
     line_nr_r: int = 0
     feedhold_active_r: bool = False
+    hold_source_r: int = 0
     error_present_r: bool = False
     error_id_r: int = 0
     warning_id_r: int = 0
@@ -112,7 +96,7 @@ class McCommand:
     """``gpCh[i]^mc_command``: the PLC's operator panel (project's own). Start and reset act on a
     rising edge; ``probe_w`` is the measuring input for G100 (C14-23)."""
 
-    mode_w: int = ModeRequest.AUTOMATIC
+    mode_w: int = Mode.AUTOMATIC
     program_select_w: int = 0
     start_w: bool = False
     reset_w: bool = False
@@ -144,6 +128,7 @@ class AxisState:
     velocity_r: int = 0
     following_error_r: int = 0
     referenced_r: bool = False
+    referencing_r: bool = False
     in_position_r: bool = False
     moving_r: bool = False
     error_r: bool = False
@@ -151,10 +136,12 @@ class AxisState:
 
 @dataclass(slots=True)
 class AxisManual:
-    """``gpAx[i]^manual``: jog keys, PLC -> CNC (project's own). Effective in manual mode."""
+    """``gpAx[i]^manual``: jog keys (effective in manual mode) and the referencing (homing) command,
+    PLC -> CNC (project's own)."""
 
     jog_plus_w: bool = False
     jog_minus_w: bool = False
+    reference_w: bool = False
 
 
 @dataclass(slots=True)

@@ -4,65 +4,73 @@ One cycle::
 
     latch inputs (HLI _w fields and operator requests)
     -> monitors.before_interpolation (look-ahead checks that steer the path, e.g. FCT-C43)
-    -> interpolate (path or jog), independent axis stops
-    -> monitors.after_interpolation (soft limits, collision, position monitoring, areas)
+    -> interpolate (path, jog or referencing), independent axis stops
+    -> monitors.after_interpolation (soft limits, collision, areas: this cycle's setpoints)
     -> position loop (actual positions)
-    -> publish (HLI _r fields) and events
+    -> monitors.after_position_loop (position monitoring, FCT-A3: this cycle's actual positions)
+    -> publish (HLI _r fields)
 
 Nothing here knows a wall clock: ``cycle * T_A`` is the time. The same configuration, programs and
-inputs give the same outputs, cycle for cycle.
+inputs give the same outputs, cycle for cycle. Events (``schemas.events``) go to the listeners
+synchronously, inside the cycle; the machine keeps none of them.
+
+The machine builds the channels and the monitors and does all the wiring: each monitor declares
+what it plugs in (:class:`~hli_server.engine.monitors.base.Monitor`), and the machine calls only
+the hooks a monitor overrides.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any
+from collections.abc import Callable, Iterable
+from typing import Any, TypeVar
 
-from hli_server.engine.alarms import ALARMS, Alarm, Reaction, Severity
-from hli_server.engine.axis import Axis, AxisFaults
-from hli_server.engine.channel import Channel, Mode
+from hli_server.engine.alarms import ALARMS, Reaction, Severity
+from hli_server.engine.axis import Axis, AxisFaults, check_fault_value
+from hli_server.engine.channel import Channel
 from hli_server.engine.hli import AxisHli, ChannelHli, MachineHli
+from hli_server.engine.monitors.base import Monitor, MonitorFactory
+from hli_server.engine.monitors.defaults import DEFAULT_MONITORS
+from hli_server.engine.ports import ChannelRef
 from schemas.config import MachineConfig
+from schemas.events import (
+    Alarm,
+    AlarmRaised,
+    AlarmsCleared,
+    Event,
+    FaultInjected,
+    ReferenceChanged,
+)
 from schemas.units import increments_from_mm, s_from_us
+from schemas.wire import Mode
 
-__all__ = ["Event", "Machine", "Monitor"]
+__all__ = ["ALARM_HISTORY", "EventListener", "Machine"]
 
-EVENT_BUFFER = 10_000
 ALARM_HISTORY = 1_000
+"""Alarms kept in :attr:`Machine.alarm_history` (the newest; ``GET /api/alarms`` shows them)."""
+
+EventListener = Callable[[Event], None]
+M = TypeVar("M", bound=Monitor)
 
 
-@dataclass(frozen=True, slots=True)
-class Event:
-    """Something a subscriber (MQTT, the control API, a test) may want to know."""
-
-    cycle: int
-    kind: str
-    channel: int | None
-    data: dict[str, Any] = field(default_factory=dict)
-
-
-class Monitor:
-    """A monitoring function. Subclasses override what they need; the defaults do nothing."""
-
-    def before_interpolation(self, machine: Machine) -> None:
-        return None
-
-    def after_interpolation(self, machine: Machine) -> None:
-        return None
-
-    def on_reset(self, channel: Channel) -> None:
-        return None
-
-    def allow_mode_change(self, channel: Channel, mode: int) -> bool:
-        return True
+def _overrides(monitor: Monitor, hook: str) -> bool:
+    return getattr(type(monitor), hook) is not getattr(Monitor, hook)
 
 
 class Machine:
-    def __init__(self, config: MachineConfig, read_program: Callable[[str], str] | None = None) -> None:
-        """``read_program`` loads a program table entry given by path (the engine does no I/O itself;
-        the runtime passes a file reader)."""
+    """The simulated CNC. ``Machine(config).step(n)`` runs n interpolation cycles.
+
+    ``monitors`` builds the monitoring functions (default: all of them, ``DEFAULT_MONITORS``);
+    ``read_program`` loads a program-table entry given by path (the engine does no I/O itself; the
+    runtime passes a file reader)."""
+
+    def __init__(
+        self,
+        config: MachineConfig,
+        read_program: Callable[[str], str] | None = None,
+        *,
+        monitors: Iterable[MonitorFactory] | None = None,
+    ) -> None:
         self.config = config
         self.read_program = read_program
         self.t_a = s_from_us(config.cycle_time_us)
@@ -79,47 +87,99 @@ class Machine:
             ch_axes = [self.axes_by_name[n] for n in ch_cfg.axes]
             for a in ch_axes:
                 a.channel = i
-            self.channels.append(Channel(self, ch_cfg, i, ch_axes))
+            self.channels.append(Channel(self, ch_cfg, i, ch_axes, self.hli.channels[i], self.hli.axes))
+        self._channel_by_number = {ch.number: ch for ch in self.channels}
         self.active_alarms: list[Alarm] = []
         self.alarm_history: deque[Alarm] = deque(maxlen=ALARM_HISTORY)
-        self.events: deque[Event] = deque(maxlen=EVENT_BUFFER)
-        self.event_listeners: list[Callable[[Event], None]] = []
-        self.monitors: list[Monitor] = []
-        from hli_server.engine.monitors import install_default_monitors
-
-        install_default_monitors(self)
+        self.event_listeners: list[EventListener] = []
+        self.monitors: tuple[Monitor, ...] = ()
+        self._by_type: dict[type[Monitor], Monitor] = {}
+        self._before: list[Callable[[], None]] = []
+        self._after: list[Callable[[], None]] = []
+        self._after_loop: list[Callable[[], None]] = []
+        self._on_alarm: list[Callable[[Alarm], None]] = []
+        self._install(DEFAULT_MONITORS if monitors is None else tuple(monitors))
         self.publish()
+
+    def _install(self, factories: tuple[MonitorFactory, ...]) -> None:
+        """Build the monitors and wire what each declares (design: the machine does all the wiring)."""
+        monitors: list[Monitor] = []
+        for factory in factories:
+            mon = factory(self)
+            monitors.append(mon)
+            self._by_type[type(mon)] = mon
+            for ch in self.channels:
+                hooks = mon.channel_hooks(ch)
+                if hooks.path_check is not None:
+                    ch.decoder.path_checks.append(hooks.path_check)
+                if hooks.jog_guard is not None:
+                    ch.jog_guards.append(hooks.jog_guard)
+                if hooks.area_handler is not None:
+                    ch.decoder.area_handler = hooks.area_handler
+                if hooks.measure_handler is not None:
+                    ch.decoder.measure_handler = hooks.measure_handler
+                if hooks.exact_stop_gate is not None:
+                    ch.planner.exact_stop_gate = hooks.exact_stop_gate
+        self.monitors = tuple(monitors)
+        self._before = [m.before_interpolation for m in monitors if _overrides(m, "before_interpolation")]
+        self._after = [m.after_interpolation for m in monitors if _overrides(m, "after_interpolation")]
+        self._after_loop = [m.after_position_loop for m in monitors if _overrides(m, "after_position_loop")]
+        self._on_alarm = [m.on_alarm for m in monitors if _overrides(m, "on_alarm")]
 
     # --- access --------------------------------------------------------------------------
     def channel(self, number: int = 1) -> Channel:
         """Channel by its number (1-based, as configured)."""
-        for ch in self.channels:
-            if ch.number == number:
-                return ch
-        raise KeyError(f"no channel {number}")
+        try:
+            return self._channel_by_number[number]
+        except KeyError:
+            raise KeyError(f"no channel {number} (channels: {sorted(self._channel_by_number)})") from None
 
     def axis(self, name: str) -> Axis:
         return self.axes_by_name[name]
 
+    def monitor(self, kind: type[M]) -> M:
+        """The installed monitor of class ``kind``: ``machine.monitor(AreaMonitor)``."""
+        mon = self._by_type.get(kind)
+        if mon is None:
+            raise LookupError(f"the machine has no {kind.__name__} installed")
+        assert isinstance(mon, kind)
+        return mon
+
+    def has_monitor(self, kind: type[Monitor]) -> bool:
+        return kind in self._by_type
+
+    def channel_of(self, axis: Axis) -> Channel:
+        return self.channels[axis.channel]
+
     def inject_fault(self, axis_name: str, **fields: float | bool) -> None:
         """Fault injection (A3-05): set fields of the axis' :class:`AxisFaults` (friction,
         gain_factor, encoder_drift, encoder_stuck, drive_error); effective from the next cycle.
-        ``inject_fault("X", friction=5.0)``; ``inject_fault("X")`` with no fields clears all faults."""
+        ``inject_fault("X", friction=5.0)``; ``inject_fault("X")`` with no fields clears all faults.
+        Values out of range raise ValueError and change nothing."""
         axis = self.axes_by_name.get(axis_name)
         if axis is None:
             raise KeyError(f"inject_fault: no axis {axis_name!r} (axes: {', '.join(self.axes_by_name)})")
-        if not fields:
-            axis.reset_faults()
-            return
         known = AxisFaults.__dataclass_fields__
         unknown = sorted(set(fields) - set(known))
         if unknown:
             raise ValueError(
                 f"inject_fault({axis_name!r}): unknown fault field(s) {unknown}; known: {', '.join(known)}"
             )
-        for name, value in fields.items():
+        checked = {name: check_fault_value(axis, name, value) for name, value in fields.items()}
+        if not checked:
+            axis.reset_faults()
+        for name, value in checked.items():
             setattr(axis.faults, name, value)
-        self.emit("fault", self.channels[axis.channel], axis=axis_name, **fields)
+        self.emit(
+            FaultInjected(
+                cycle=self.cycle,
+                time_s=self.time,
+                channel=self.channels[axis.channel].number,
+                axis=axis_name,
+                faults=axis.faults.as_dict(),
+                changed=checked,
+            )
+        )
 
     @property
     def time(self) -> float:
@@ -133,34 +193,37 @@ class Machine:
 
     def _cycle(self) -> None:
         self.cycle += 1
+        t_a = self.t_a
         for ch in self.channels:
             ch.latch_inputs()
         for axis in self.axes:
             axis.begin_cycle()
-        for mon in self.monitors:
-            mon.before_interpolation(self)
+        for hook in self._before:
+            hook()
         for ch in self.channels:
             ch.interpolate()
         for axis in self.axes:
             if axis.stopping:
-                axis.advance_independent_stop(self.t_a)
-        for mon in self.monitors:
-            mon.after_interpolation(self)
+                axis.advance_independent_stop(t_a)
+        for hook in self._after:
+            hook()
         for axis in self.axes:
-            axis.update_drive(self.t_a)
+            axis.update_drive(t_a)
             if (
                 axis.stopping
                 and axis.stop_velocity == 0.0
                 and not self.channel_has_error(self.channels[axis.channel])
             ):
                 axis.release_stop()
+        for hook in self._after_loop:
+            hook()
         self.publish()
 
     # --- alarms and events ---------------------------------------------------------------
     def raise_alarm(
         self,
         number: int,
-        channel: Channel | None,
+        channel: ChannelRef | None,
         message: str,
         *,
         line: int | None = None,
@@ -170,10 +233,12 @@ class Machine:
     ) -> Alarm:
         """Raise an alarm of the table and apply its reaction."""
         definition = ALARMS[number]
+        ch = self._channel_by_number[channel.number] if channel is not None else None
         alarm = Alarm(
             number=number,
+            severity=str(definition.severity),
             cycle=self.cycle,
-            channel=channel.number if channel is not None else 0,
+            channel=ch.number if ch is not None else 0,
             message=message,
             line=line,
             block=block,
@@ -183,50 +248,65 @@ class Machine:
         if definition.severity == Severity.ERROR:
             self.active_alarms.append(alarm)
         self.alarm_history.append(alarm)
-        if channel is not None:
-            st = channel.hli.bahn_state
+        if ch is not None:
+            st = ch.hli.bahn_state
             st.alarm_count_r += 1
             if definition.severity == Severity.ERROR:
                 st.error_present_r = True
                 st.error_id_r = number
             else:
                 st.warning_id_r = number
+        self.emit(AlarmRaised(cycle=self.cycle, time_s=self.time, channel=alarm.channel or None, alarm=alarm))
+        for hook in self._on_alarm:
+            hook(alarm)
+        if ch is not None:  # the reaction last: its events (program aborted) follow the alarm's
             if definition.reaction == Reaction.PROGRAM_ABORT:
-                channel.abort()
+                ch.abort()
             elif definition.reaction == Reaction.AXIS_STOP and axis is None:
-                for ax in channel.axes:
+                for ax in ch.axes:
                     ax.start_independent_stop(ax.a_emergency, self.t_a)
-        self.emit("alarm", channel, alarm=alarm.to_json())
         return alarm
 
-    def channel_has_error(self, channel: Channel) -> bool:
-        return any(a.channel == channel.number for a in self.active_alarms)
+    def channel_has_error(self, channel: ChannelRef) -> bool:
+        number = channel.number
+        return any(a.channel == number for a in self.active_alarms)
 
-    def emit(self, kind: str, channel: Channel | None, **data: Any) -> None:
-        event = Event(self.cycle, kind, channel.number if channel is not None else None, data)
-        self.events.append(event)
+    def emit(self, event: Event) -> None:
         for listener in self.event_listeners:
             listener(event)
 
-    def drain_events(self) -> list[Event]:
-        out = list(self.events)
-        self.events.clear()
-        return out
-
-    # --- hooks the channels call ---------------------------------------------------------
-    def on_channel_reset(self, channel: Channel) -> None:
-        self.active_alarms = [a for a in self.active_alarms if a.channel != channel.number]
-        st = channel.hli.bahn_state
+    # --- what the channels report (MachinePort) -----------------------------------------
+    def channel_reset(self, channel: ChannelRef) -> None:
+        ch = self._channel_by_number[channel.number]
+        cleared = tuple(a.number for a in self.active_alarms if a.channel == ch.number)
+        self.active_alarms = [a for a in self.active_alarms if a.channel != ch.number]
+        st = ch.hli.bahn_state
         st.error_present_r = False
         st.error_id_r = 0
         st.warning_id_r = 0
-        for axis in channel.axes:
+        for axis in ch.axes:
             axis.faults.drive_error = False
         for mon in self.monitors:
-            mon.on_reset(channel)
+            mon.on_reset(ch)
+        if cleared:
+            self.emit(AlarmsCleared(cycle=self.cycle, time_s=self.time, channel=ch.number, numbers=cleared))
 
-    def allow_mode_change(self, channel: Channel, mode: int) -> bool:
-        return all(mon.allow_mode_change(channel, mode) for mon in self.monitors)
+    def allow_mode_change(self, channel: ChannelRef, mode: Mode) -> bool:
+        ch = self._channel_by_number[channel.number]
+        return all(mon.allow_mode_change(ch, mode) for mon in self.monitors)
+
+    def referencing_changed(self, axis_index: int) -> None:
+        axis = self.axes[axis_index]
+        state = "referencing" if axis.referencing else "referenced" if axis.referenced else "unreferenced"
+        self.emit(
+            ReferenceChanged(
+                cycle=self.cycle,
+                time_s=self.time,
+                channel=self.channels[axis.channel].number,
+                axis=axis.name,
+                state=state,
+            )
+        )
 
     # --- outputs -------------------------------------------------------------------------
     def publish(self) -> None:
@@ -237,11 +317,12 @@ class Machine:
             st.velocity_r = increments_from_mm(axis.drive_velocity)
             st.following_error_r = increments_from_mm(axis.following_error)
             st.referenced_r = axis.referenced
+            st.referencing_r = axis.referencing
             st.moving_r = axis.setpoint_step != 0.0
-            st.in_position_r = abs(st.following_error_r) <= axis.config.window and not st.moving_r
+            st.in_position_r = abs(st.following_error_r) <= axis.window_inc and not st.moving_r
             st.error_r = axis.faults.drive_error
         for ch in self.channels:
-            ch.publish()
+            ch.publish(self.cycle)
 
     def snapshot(self) -> dict[str, Any]:
         """A JSON-able picture of the machine (for the API, ``check`` and tests)."""
@@ -251,8 +332,11 @@ class Machine:
             "channels": [
                 {
                     "number": ch.number,
-                    "mode": "manual" if ch.mode == Mode.MANUAL else "automatic",
-                    "program_state": ch.state,
+                    "mode": ch.mode.label,
+                    "program_state": int(ch.state),
+                    "program_state_name": ch.state.label,
+                    "hold_source": int(ch.hold_source),
+                    "holds": ch.hold_source.labels,
                     "program": ch.program_name,
                     "block": ch.current_block.label if ch.current_block else None,
                     "line": ch.current_block.line if ch.current_block else None,
@@ -265,6 +349,7 @@ class Machine:
                     "actual_mm": a.measured,
                     "following_error_mm": a.following_error,
                     "referenced": a.referenced,
+                    "referencing": a.referencing,
                 }
                 for a in self.axes
             },

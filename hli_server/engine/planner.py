@@ -30,21 +30,25 @@ import math
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any
 
 from hli_server.engine.geometry import Point, Segment
 from hli_server.engine.nc.blocks import Block
 
-__all__ = ["JUNCTION_DEVIATION", "Marker", "MarkerKind", "Motion", "Planner"]
+__all__ = ["JUNCTION_DEVIATION", "ExactStopGate", "Marker", "MarkerKind", "Motion", "Planner"]
 
 JUNCTION_DEVIATION = 0.02
 """mm: how far a corner may be cut in thought to bound the corner velocity (project's own)."""
 
 
-class MarkerKind:
+class MarkerKind(StrEnum):
     END = "end"
+    """Program end (M30 / M02, or the end of the text: payload ``"eof"``)."""
     ERROR = "error"
+    """A refused block: its :class:`~hli_server.engine.decoder.DecodeError` is the payload."""
     ACTION = "action"
+    """A callable run in program order when the path reaches it."""
 
 
 @dataclass(slots=True)
@@ -69,13 +73,16 @@ class Motion:
 
 @dataclass(slots=True)
 class Marker:
-    kind: str
+    kind: MarkerKind
     block: Block | None
     payload: Any = None
     s_start: float = 0.0
 
 
 Item = Motion | Marker
+
+ExactStopGate = Callable[[Motion], bool]
+"""Asked at standstill after a G60 block: may the next item start? (FCT-A3: axes in their window)"""
 
 
 @dataclass(slots=True)
@@ -93,7 +100,7 @@ class Planner:
     stop_points: dict[str, float] = field(default_factory=dict)
     generation: int = 0
     """Incremented by :meth:`clear`: path coordinates of an older generation mean nothing any more."""
-    exact_stop_gate: Callable[[Motion], bool] | None = None
+    exact_stop_gate: ExactStopGate | None = None
     """Asked at standstill after a G60 block: may the next item start? (FCT-A3: axes in the window)"""
     _exact_stop_pending: Motion | None = None
     _dirty: bool = True

@@ -27,7 +27,6 @@ import pytest
 
 from hli_server.adapters.modbus import ModbusAdapter
 from hli_server.configuration import load_machine
-from hli_server.engine.hli import ProgramState
 from hli_server.runtime import Runtime
 from plc_clients import (
     AXIS_REF,
@@ -38,6 +37,7 @@ from plc_clients import (
     PlcTask,
     ShmTransport,
 )
+from schemas.wire import ProgramState
 
 pytestmark = [pytest.mark.req("C43-10", "H-06"), pytest.mark.timeout(60)]
 

@@ -11,9 +11,9 @@ import httpx
 import pytest
 
 from hli_server.configuration import load_machine
-from hli_server.engine.hli import ProgramState
 from hli_server.runtime import Runtime
 from schemas.config import ProgramEntry
+from schemas.wire import ProgramState
 
 PROGRAM = "N10 G01 X20 Y10 F6000\nN20 G01 X0 Y0\nN30 M30\n"
 OVERRIDE = "gpCh[0]^bahn_mc_control.override"

@@ -29,11 +29,11 @@ from pymodbus.pdu import ModbusPDU
 
 from hli_server.adapters.modbus import ModbusAdapter
 from hli_server.configuration import load_machine
-from hli_server.engine.hli import ProgramState
 from hli_server.image import ProcessImage
 from hli_server.runtime import Runtime
 from schemas.config import MachineConfig
 from schemas.layout import Direction, Layout, ModbusTable, build_layout
+from schemas.wire import ProgramState
 
 pytestmark = pytest.mark.req("H-03")
 

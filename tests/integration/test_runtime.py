@@ -24,9 +24,9 @@ import pytest
 
 from hli_server.adapters.registry import AdapterError, create_adapter
 from hli_server.configuration import load_machine
-from hli_server.engine.hli import ProgramState
 from hli_server.runtime import Clock, ClockError, Runtime, RuntimeStateError
 from schemas.config import MachineConfig
+from schemas.wire import ProgramState
 
 PROGRAM = "N10 G01 X20 Y10 F6000\nN20 G01 X0 Y0\nN30 M30\n"
 
@@ -200,21 +200,14 @@ def test_unknown_clock_is_refused(demo: MachineConfig) -> None:
 async def test_an_engine_failure_stops_the_runtime_and_is_raised(demo: MachineConfig) -> None:
     rt = Runtime(demo, clock="free", http_port=None)
 
-    def broken(_machine: Any) -> None:
+    def broken() -> None:
         raise ZeroDivisionError("monitor bug")
-
-    class Broken:
-        def __init__(self) -> None:
-            self.after_interpolation = broken
-
-        def before_interpolation(self, machine: Any) -> None:
-            return None
 
     name_holder: list[str] = []
 
     def ready(r: Runtime) -> None:
         name_holder.append(r.image.name)
-        r.machine.monitors.append(Broken())  # type: ignore[arg-type]
+        r.machine.channels[0].interpolate = broken  # type: ignore[method-assign]
 
     with pytest.raises(ZeroDivisionError, match="monitor bug"):
         await asyncio.wait_for(rt.serve(install_signal_handlers=False, ready=ready), timeout=10)

@@ -5,8 +5,9 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 
 from hli_server.engine import Machine
-from hli_server.engine.hli import ProgramState
 from schemas.config import AxisConfig, ChannelConfig, MachineConfig, ManualConfig, ZeroOffset
+from schemas.events import Event
+from schemas.wire import ProgramState
 
 RUNNING = (ProgramState.RUNNING, ProgramState.HELD)
 
@@ -62,6 +63,13 @@ def run(
     for _ in cycles_until_done(machine, channel=channel):
         if each is not None:
             each(machine)
+
+
+def record_events(machine: Machine) -> list[Event]:
+    """Every event the machine emits from now on, in order (a listener, as the runtime's log is)."""
+    seen: list[Event] = []
+    machine.event_listeners.append(seen.append)
+    return seen
 
 
 def settle(machine: Machine, cycles: int = 300) -> None:

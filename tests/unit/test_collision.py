@@ -13,16 +13,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hli_server.engine import Machine
-from hli_server.engine.channel import Mode
-from hli_server.engine.hli import ProgramState
 from hli_server.engine.monitors.collision import (
-    CNC_OBJECT_INDEX_GROUP,
-    CNC_OBJECTS,
     CollisionMonitor,
-    cnc_object_offset,
-    read_cnc_object,
 )
+from hli_server.image.projection import engine_value
 from schemas.config import AxisConfig, ChannelConfig, MachineConfig
+from schemas.layout import build_layout
+from schemas.wire import Mode, ProgramState
 
 RUNNING = (ProgramState.RUNNING, ProgramState.HELD)
 PAIR = 0x8001
@@ -100,11 +97,14 @@ def distance(m: Machine) -> float:
 
 
 def monitor(m: Machine) -> CollisionMonitor:
-    return next(x for x in m.monitors if isinstance(x, CollisionMonitor))
+    return m.monitor(CollisionMonitor)
 
 
 def obj(m: Machine, a_id: int, element: int) -> bool | int | float:
-    return read_cnc_object(m, CNC_OBJECT_INDEX_GROUP, cnc_object_offset(a_id, element))[1]
+    """The CNC object at ADS port 551, group 0x120300, offset (A_ID << 16) | element (C3-10): the
+    layout names the field, the engine keeps its value."""
+    signal = build_layout(m.config).ads_index()[(551, 0x120300, (a_id << 16) | element)]
+    return engine_value(m.hli, signal)
 
 
 ACTIVE, VELOCITY, BRAKE_DIST, OFFSET, DECEL = 0x0234, 0x0244, 0x0245, 0x0246, 0x0247
@@ -178,23 +178,24 @@ def test_each_axis_brakes_with_its_own_deceleration_and_leaves_the_contour():
 def test_cnc_objects_by_index_group_and_offset():
     m = one_channel()
     m.step(1)
-    assert {o.name: (o.type_name, o.size) for o in CNC_OBJECTS.values()} == {
-        "active": ("BOOLEAN", 1),
-        "velocity": ("REAL64", 8),
-        "brake_dist": ("REAL64", 8),
-        "coll_offset": ("UNS32", 4),
-        "deceleration": ("REAL64", 8),
+    layout = build_layout(m.config)
+    objects = {s.path.split(".")[1]: s for s in layout if s.path.startswith("dyn_coll_mon.") and s.index == 0}
+    assert {
+        name: (str(s.type), s.size, s.ads_port, s.ads_group, s.ads_offset & 0xFFFF)
+        for name, s in objects.items()
+    } == {
+        "active": ("BOOL", 1, 551, 0x120300, 0x0234),
+        "velocity": ("LREAL", 8, 551, 0x120300, 0x0244),
+        "brake_dist": ("LREAL", 8, 551, 0x120300, 0x0245),
+        "coll_offset": ("UDINT", 4, 551, 0x120300, 0x0246),
+        "deceleration": ("LREAL", 8, 551, 0x120300, 0x0247),
     }
-    assert read_cnc_object(m, 0x120300, 0x00020234) == ("BOOLEAN", True)
-    assert read_cnc_object(m, 0x120300, 0x00010246) == ("UNS32", 200_000)
-    assert read_cnc_object(m, 0x120300, 0x00020247) == ("REAL64", 2000.0)
-    assert read_cnc_object(m, 0x120300, 0x00030234) == ("BOOLEAN", False)  # Z1: no pair
-    with pytest.raises(KeyError, match="index group"):
-        read_cnc_object(m, 0x120301, 0x00010234)
-    with pytest.raises(KeyError, match="element"):
-        read_cnc_object(m, 0x120300, 0x00010235)
-    with pytest.raises(KeyError, match="A_ID"):
-        read_cnc_object(m, 0x120300, 0x00090234)
+    assert obj(m, 2, 0x0234) is True
+    assert obj(m, 1, 0x0246) == 200_000
+    assert obj(m, 2, 0x0247) == 2000.0
+    assert obj(m, 3, 0x0234) is False  # Z1: no pair
+    for address in ((551, 0x120301, 0x00010234), (551, 0x120300, 0x00010235), (551, 0x120300, 0x00090234)):
+        assert address not in layout.ads_index()
 
 
 @pytest.mark.req("C3-06")

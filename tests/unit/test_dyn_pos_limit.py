@@ -13,20 +13,21 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hli_server.engine import Machine
-from hli_server.engine.channel import Mode
-from hli_server.engine.hli import ControlUnitSgn32, ProgramState
+from hli_server.engine.hli import ControlUnitSgn32
 from hli_server.engine.monitors.dyn_pos_limit import (
     RAMP_SAMPLES,
     TRANSITIONS,
     DplEvent,
-    DplState,
     DynPosLimits,
     _braking_ramp,
     next_state,
 )
 from schemas.config import AxisConfig, ChannelConfig, MachineConfig
+from schemas.events import DynPosLimitChanged
+from schemas.wire import DynPosLimitState, HoldSource, Mode, ProgramState
+from tests.unit.engine_helpers import record_events
 
-INACTIVE, ACTIVATION, ACTIVE, BRAKING, BRAKE = (int(s) for s in DplState)
+INACTIVE, ACTIVATION, ACTIVE, BRAKING, BRAKE = (int(s) for s in DynPosLimitState)
 FCT = "FCT_LOOK_AHEAD_STANDARD | FCT_DYN_POS_LIMIT"
 
 
@@ -87,19 +88,20 @@ def compress(values: list[int]) -> list[int]:
 
 @pytest.mark.req("C43-03")
 def test_transition_table_covers_the_documented_states():
-    assert [int(s) for s in DplState] == [0, 1, 2, 3, 4]
-    reachable = {DplState.INACTIVE} | set(TRANSITIONS.values())
-    assert reachable == set(DplState)
+    assert [int(s) for s in DynPosLimitState] == [0, 1, 2, 3, 4]
+    reachable = {DynPosLimitState.INACTIVE} | set(TRANSITIONS.values())
+    assert reachable == set(DynPosLimitState)
     # every state can be left by lifting the limit
-    for state in DplState:
-        assert next_state(state, DplEvent.DISABLE) == DplState.INACTIVE
+    for state in DynPosLimitState:
+        assert next_state(state, DplEvent.DISABLE) == DynPosLimitState.INACTIVE
     with pytest.raises(RuntimeError, match="standstill"):
-        next_state(DplState.ACTIVE, DplEvent.STANDSTILL)
+        next_state(DynPosLimitState.ACTIVE, DplEvent.STANDSTILL)
 
 
 @pytest.mark.req("C43-02", "C43-03", "C43-04", "C43-07")
 def test_state_sequence_a_plc_sees_cycle_by_cycle():
     m = machine()
+    events = record_events(m)
     ch = m.channel(1)
     u = unit(m)
     states: list[int] = [u.state_r]
@@ -117,7 +119,14 @@ def test_state_sequence_a_plc_sees_cycle_by_cycle():
         m.step(1)
         states.append(u.state_r)
     assert m.axis("X").setpoint == held_at
-    assert ch.state == ProgramState.RUNNING
+    # the hold is visible at the channel, and what holds it (FCT-C43: "bereichsspezifischer Feedhold")
+    bahn = m.hli.channels[0].bahn_state
+    assert ch.state == ProgramState.HELD
+    assert (bahn.program_state_r, bahn.feedhold_active_r, bahn.hold_source_r) == (
+        ProgramState.HELD,
+        True,
+        HoldSource.DYN_POS_LIMIT,
+    )
     set_limit(m, 50.0, enable=False)  # the PLC lifts the limit
     step_until(m, lambda: states.append(u.state_r) or ch.state == ProgramState.FINISHED)
     assert compress(states) == [INACTIVE, ACTIVATION, ACTIVE, BRAKING, BRAKE, INACTIVE]
@@ -125,7 +134,7 @@ def test_state_sequence_a_plc_sees_cycle_by_cycle():
     assert m.axis("X").setpoint == pytest.approx(100.0)  # the program continued (C43-07)
     assert u.request_r == 0  # not supported (FCT-C43 3.1.1)
     assert not m.active_alarms
-    kinds = [(e.data["state_name"]) for e in m.events if e.kind == "dyn_pos_limit"]
+    kinds = [e.state_name for e in events if isinstance(e, DynPosLimitChanged)]
     assert kinds == ["ACTIVATION", "ACTIVE", "ACTIVE_BRAKING", "ACTIVE_BRAKE", "INACTIVE"]
 
 
@@ -413,10 +422,10 @@ def test_property_a_dynamic_limit_is_never_passed_by_more_than_one_cycle(
 
 def test_monitor_state_lookup():
     m = machine()
-    mon = next(x for x in m.monitors if isinstance(x, DynPosLimits))
+    mon = m.monitor(DynPosLimits)
     set_limit(m, 1.0, side="low")
     m.step(2)
-    assert mon.state("X", "low") == DplState.ACTIVE
+    assert mon.state("X", "low") == DynPosLimitState.ACTIVE
     with pytest.raises(KeyError):
         mon.state("Q", "low")
 

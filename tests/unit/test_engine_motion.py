@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from hli_server.engine.hli import ModeRequest, ProgramState
+from hli_server.engine.hli import Mode, ProgramState
 from schemas.config import ZeroOffset
 from tests.unit.engine_helpers import cycles_until_done, mill, positions, run, settle, start
 
@@ -247,9 +247,9 @@ def test_reset_stops_motion_and_mode_change_needs_a_stopped_program():
     ch = m.channel(1)
     start(m, "N10 G01 X400 F12000\nN20 M30\n")
     m.step(300)
-    ch.request_mode(ModeRequest.MANUAL)
+    ch.request_mode(Mode.MANUAL)
     m.step(1)
-    assert ch.mode == ModeRequest.AUTOMATIC
+    assert ch.mode == Mode.AUTOMATIC
     assert m.alarm_history[-1].number == 911021
     ch.request_reset()
     m.step(1)
@@ -261,17 +261,17 @@ def test_reset_stops_motion_and_mode_change_needs_a_stopped_program():
     x = m.axis("X").setpoint
     m.step(50)
     assert m.axis("X").setpoint == x
-    ch.request_mode(ModeRequest.MANUAL)
+    ch.request_mode(Mode.MANUAL)
     m.step(1)
-    assert ch.mode == ModeRequest.MANUAL
-    assert m.hli.channels[0].bahn_state.mode_r == ModeRequest.MANUAL
+    assert ch.mode == Mode.MANUAL
+    assert m.hli.channels[0].bahn_state.mode_r == Mode.MANUAL
 
 
 @pytest.mark.req("E-03", "E-05")
 def test_jog_in_manual_mode_ramps_with_jog_acceleration():
     m = mill()
     ch = m.channel(1)
-    ch.request_mode(ModeRequest.MANUAL)
+    ch.request_mode(Mode.MANUAL)
     m.step(1)
     m.hli.axes[1].manual.jog_plus_w = True  # Y+ through the PLC's jog key
     m.step(200)
@@ -325,7 +325,7 @@ def test_jog_stops_at_the_soft_limit_without_passing_it():
     # the drive may overshoot the setpoint by some µm: that is what swe_toleranz (P-AXIS-00179) is for
     m = mill(move_limit_warning=True, swe_toleranz=500)
     ch = m.channel(1)
-    ch.request_mode(ModeRequest.MANUAL)
+    ch.request_mode(Mode.MANUAL)
     m.step(1)
     ch.request_jog("X", +1)
     for _ in range(20_000):

@@ -5,10 +5,11 @@ from __future__ import annotations
 import pytest
 
 from hli_server.engine import Machine
-from hli_server.engine.channel import Mode
-from hli_server.engine.hli import ProgramState
 from hli_server.engine.monitors.position import PositionMonitor, settling_time_us
 from schemas.config import AxisConfig, ChannelConfig, MachineConfig
+from schemas.events import FaultInjected
+from schemas.wire import Mode, ProgramState
+from tests.unit.engine_helpers import record_events
 
 RUNNING = (ProgramState.RUNNING, ProgramState.HELD)
 
@@ -29,11 +30,12 @@ def start(m: Machine, program: str) -> None:
 
 
 def monitor(m: Machine) -> PositionMonitor:
-    return next(x for x in m.monitors if isinstance(x, PositionMonitor))
+    return m.monitor(PositionMonitor)
 
 
 def cycle_target_reached(m: Machine, axis: str, limit: int = 20_000) -> int:
-    """Step until ``axis``' setpoint stands still after moving; returns that cycle (t1)."""
+    """Step until ``axis``' setpoint stands still after moving; returns t1, the cycle in which the
+    setpoint reached its target (the last cycle it moved; the machine stands one cycle later)."""
     ax = m.axis(axis)
     moved = False
     for _ in range(limit):
@@ -41,7 +43,7 @@ def cycle_target_reached(m: Machine, axis: str, limit: int = 20_000) -> int:
         if ax.setpoint_step != 0.0:
             moved = True
         elif moved:
-            return m.cycle
+            return m.cycle - 1
     raise AssertionError(f"{axis} did not reach a target")
 
 
@@ -80,7 +82,7 @@ def test_slow_settling_raises_70082_exactly_after_the_settling_time():
         m.step(1)
     (alarm,) = m.active_alarms
     assert (alarm.number, alarm.axis) == (70082, "X")
-    assert m.cycle - t1 == 101  # first cycle later than 100 000 µs after t1 (T_A = 1 ms)
+    assert m.cycle - t1 == 100  # the cycle in which 100 000 µs after t1 have run out (T_A = 1 ms)
     assert alarm.params["settling_time_us"] == 100_000
     assert abs(alarm.params["deviation"]) > 500
     assert m.axis("X").stopping
@@ -90,6 +92,23 @@ def test_slow_settling_raises_70082_exactly_after_the_settling_time():
     m.step(2)
     assert not m.active_alarms
     assert not m.axis("X").stopping
+
+
+@pytest.mark.req("A3-01", "A3-03", "A3-04")
+@pytest.mark.parametrize("settling_ms", [20, 30, 50])
+def test_70082_fires_in_the_cycle_the_settling_time_runs_out(settling_ms: int):
+    """t1 + t3: at 1 ms per cycle, 70082 comes exactly ``settling_ms`` cycles after the setpoint
+    reached its target, judged on the actual position of that cycle (the monitor runs after the
+    position loop)."""
+    m = machine(position_settling_time_us=settling_ms * 1000)
+    m.inject_fault("X", gain_factor=0.05)
+    start(m, "N10 G01 X50 F6000\nN20 M30\n")
+    t1 = cycle_target_reached(m, "X")
+    while not m.alarm_history and m.cycle < t1 + 1000:
+        m.step(1)
+    assert alarms(m) == [(70082, "X")]
+    assert m.cycle - t1 == settling_ms
+    assert m.alarm_history[0].cycle == t1 + settling_ms
 
 
 @pytest.mark.req("A3-03")
@@ -103,7 +122,7 @@ def test_settling_time_zero_switches_the_check_off():
 
 
 @pytest.mark.req("A3-03")
-@pytest.mark.parametrize(("legacy_us", "expected"), [(50_000, 51), (0, None)])
+@pytest.mark.parametrize(("legacy_us", "expected"), [(50_000, 50), (0, None)])
 def test_negative_settling_time_uses_p_axis_00151(legacy_us: int, expected: int | None):
     m = machine(position_settling_time_us=-1, settling_time_legacy_us=legacy_us)
     assert settling_time_us(m.axis("X")) == legacy_us
@@ -197,6 +216,7 @@ def test_g60_that_never_reaches_the_window_ends_with_70082():
 )
 def test_injected_faults_trigger_the_position_monitor(fault: dict[str, float | bool]):
     m = machine()
+    events = record_events(m)
     start(m, "N10 G01 X50 F6000\nN20 M30\n")
     m.step(100)  # faults strike during the move
     m.inject_fault("X", **fault)
@@ -205,7 +225,7 @@ def test_injected_faults_trigger_the_position_monitor(fault: dict[str, float | b
         if m.alarm_history:
             break
     assert alarms(m) == [(70082, "X")]
-    assert [e.kind for e in m.events].count("fault") == 1
+    assert [type(e) for e in events].count(FaultInjected) == 1
 
 
 @pytest.mark.req("A3-05", "A3-04")

@@ -39,8 +39,7 @@ from hli_server.engine.areas.geometry import (
 from hli_server.engine.areas.table import MAX_AREAS, AreaDefinition, AreaEvent, AreaState, AreaTable, Refusal
 from hli_server.engine.decoder import DecodeError, MeasuringMove, ModalState
 from hli_server.engine.geometry import ArcSegment, LineSegment, Point, Segment
-from hli_server.engine.hli import ModeRequest, ProgramState
-from hli_server.engine.machine import Event, Monitor
+from hli_server.engine.monitors.base import ChannelHooks, MachineView, Monitor
 from hli_server.engine.nc.blocks import (
     AreaBegin,
     AreaClear,
@@ -52,10 +51,12 @@ from hli_server.engine.nc.blocks import (
     Block,
 )
 from hli_server.engine.planner import Marker, Motion
+from schemas.events import Alarm, AreasChanged, AreaViolation, Measurement
+from schemas.units import increments_from_mm
+from schemas.wire import Mode, ProgramState
 
 if TYPE_CHECKING:
     from hli_server.engine.channel import Channel
-    from hli_server.engine.machine import Machine
 
 __all__ = [
     "MAX_CONTOUR_BLOCKS",
@@ -157,9 +158,8 @@ class _Measuring:
 class ChannelAreas:
     """Area table, area handler, path check, measuring-move handler and jog guard of one channel."""
 
-    def __init__(self, monitor: AreaMonitor, channel: Channel) -> None:
-        self.monitor = monitor
-        self.machine = monitor.machine
+    def __init__(self, machine: MachineView, channel: Channel) -> None:
+        self.machine = machine
         self.channel = channel
         self.names = list(channel.axis_names)
         self.planned = AreaTable()
@@ -610,9 +610,21 @@ class ChannelAreas:
             op(self.effective)
             if warning is not None:
                 self.machine.raise_alarm(ALARM_ACTIVE_CLEAR, self.channel, warning, **self._where())
-            self.machine.emit("areas", self.channel, areas=self.effective.to_json())
+            self.emit_table()
 
         return run
+
+    def emit_table(self) -> None:
+        """Tell the listeners the effective area table (it changed)."""
+        m = self.machine
+        m.emit(
+            AreasChanged(
+                cycle=m.cycle,
+                time_s=m.cycle * m.t_a,
+                channel=self.channel.number,
+                areas=tuple(self.effective.to_json()),
+            )
+        )
 
     def _where(self) -> dict[str, Any]:
         block = self.channel.current_block
@@ -767,7 +779,18 @@ class ChannelAreas:
             "position": {a.name: a.measured for a in ch.axes},
             "setpoint": {a.name: a.setpoint for a in ch.axes},
         }
-        self.machine.emit("measurement", ch, **self.measurement)
+        m = self.machine
+        m.emit(
+            Measurement(
+                cycle=m.cycle,
+                time_s=m.cycle * m.t_a,
+                channel=ch.number,
+                block=tag.block.label,
+                line=tag.block.line,
+                position={a.name: a.measured for a in ch.axes},
+                setpoint={a.name: a.setpoint for a in ch.axes},
+            )
+        )
         # brake to a stop on the remaining path and end the move there
         planner = ch.planner
         v = planner.velocity
@@ -880,7 +903,7 @@ class ChannelAreas:
         self.sync_planned()
         self.violation_auto = False
         self._release_manual()
-        self.machine.emit("areas", self.channel, areas=self.effective.to_json())
+        self.emit_table()
 
     def before_cycle(self) -> None:
         ch = self.channel
@@ -888,7 +911,7 @@ class ChannelAreas:
         if blocks is not self._blocks_seen:
             self._blocks_seen = blocks
             self.sync_planned()
-        if ch.mode == ModeRequest.AUTOMATIC:
+        if ch.mode == Mode.AUTOMATIC:
             self.probe_cycle()
         else:
             self._probe_prev = ch.hli.mc_command.probe_w or self._probe_request
@@ -908,24 +931,27 @@ class ChannelAreas:
                 block=begin.label,
             )
         ch.hli.bahn_state.area_mon_violation_detected_r = self.violation_auto or (
-            ch.mode == ModeRequest.MANUAL and self.violation_manual
+            ch.mode == Mode.MANUAL and self.violation_manual
         )
 
 
 class AreaMonitor(Monitor):
     """FCT-C14 for every channel of the machine."""
 
-    def __init__(self, machine: Machine) -> None:
+    def __init__(self, machine: MachineView) -> None:
         self.machine = machine
-        self.channels: dict[int, ChannelAreas] = {}
-        for ch in machine.channels:
-            handler = ChannelAreas(self, ch)
-            self.channels[ch.number] = handler
-            ch.decoder.area_handler = handler
-            ch.decoder.measure_handler = handler
-            ch.decoder.path_checks.append(handler.path_check)
-            ch.jog_guards.append(handler)
-        machine.event_listeners.append(self._on_event)
+        self.channels: dict[int, ChannelAreas] = {
+            ch.number: ChannelAreas(machine, ch) for ch in machine.channels
+        }
+
+    def channel_hooks(self, channel: Channel) -> ChannelHooks:
+        handler = self.channels[channel.number]
+        return ChannelHooks(
+            path_check=handler.path_check,
+            jog_guard=handler,
+            area_handler=handler,
+            measure_handler=handler,
+        )
 
     def handler(self, channel_number: int) -> ChannelAreas:
         return self.channels[channel_number]
@@ -935,35 +961,56 @@ class AreaMonitor(Monitor):
         "shape", "state", "points" | "center"/"radius", "min", "max", "axes", "height_axis"}]``."""
         return self.channels[channel.number].effective.to_json()
 
-    def _on_event(self, event: Event) -> None:
-        if event.kind != "alarm" or event.channel is None:
+    def on_alarm(self, alarm: Alarm) -> None:
+        """C14-22: a violation alarm sets ``area_mon_violation_detected_r`` until the reset; it is
+        also told as an :class:`~schemas.events.AreaViolation` with its block and points."""
+        if alarm.number not in VIOLATION_ALARMS or not alarm.channel:
             return
-        alarm = event.data.get("alarm", {})
-        if alarm.get("id") in VIOLATION_ALARMS:
-            self.channels[event.channel].violation_auto = True
+        self.channels[alarm.channel].violation_auto = True
+        p = alarm.params
 
-    def before_interpolation(self, machine: Machine) -> None:
+        def point(key: str) -> tuple[int, ...] | None:
+            value = p.get(key)
+            return tuple(increments_from_mm(v) for v in value) if isinstance(value, list | tuple) else None
+
+        m = self.machine
+        axes = p.get("axes")
+        m.emit(
+            AreaViolation(
+                cycle=m.cycle,
+                time_s=m.cycle * m.t_a,
+                channel=alarm.channel,
+                alarm=alarm.number,
+                area=p.get("area"),
+                area_kind=p.get("kind"),
+                line=alarm.line,
+                block=alarm.block,
+                axes=tuple(axes) if isinstance(axes, list) else tuple(self.channels[alarm.channel].names),
+                start=point("start"),
+                end=point("end"),
+                point=point("intersection") or point("position"),
+            )
+        )
+
+    def before_interpolation(self) -> None:
         for handler in self.channels.values():
             handler.before_cycle()
 
-    def after_interpolation(self, machine: Machine) -> None:
+    def after_interpolation(self) -> None:
         for handler in self.channels.values():
             handler.after_cycle()
 
     def on_reset(self, channel: Channel) -> None:
         self.channels[channel.number].reset()
 
-    def allow_mode_change(self, channel: Channel, mode: int) -> bool:
+    def allow_mode_change(self, channel: Channel, mode: Mode) -> bool:
         handler = self.channels[channel.number]
-        if mode == ModeRequest.MANUAL:
+        if mode == Mode.MANUAL:
             return handler.mode_check()
         handler._release_manual()
         return True
 
 
-def channel_areas(machine: Machine, channel: int = 1) -> ChannelAreas:
+def channel_areas(machine: MachineView, channel: int = 1) -> ChannelAreas:
     """The area monitoring of one channel (by its number): ``channel_areas(m, 1).to_json()``."""
-    for mon in machine.monitors:
-        if isinstance(mon, AreaMonitor):
-            return mon.handler(channel)
-    raise LookupError("the machine has no area monitoring installed")
+    return machine.monitor(AreaMonitor).handler(channel)

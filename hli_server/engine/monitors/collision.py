@@ -42,9 +42,10 @@ than that distance.
 P-AXIS-00044 ``coll_decelerate_chan`` (C3-05): when the axes of a pair are in different channels
 and one reports a drive error, the other channel is stopped too (911030 there).
 
-The CNC objects of FCT-C3 4.3 (C3-10) are kept in ``machine.hli.axes[i].dyn_coll_mon`` every cycle
-and read by index group / offset with :func:`read_cnc_object` (the ADS adapter serves them on port
-551).
+The CNC objects of FCT-C3 4.3 (C3-10) are kept in ``machine.hli.axes[i].dyn_coll_mon`` every cycle;
+the layout table (``schemas/layout.py``, ``dyn_coll_mon.*``) is the one list of them with their ADS
+addresses (port 551, index group 0x120300, offset ``(A_ID << 16) | element``), and the ADS adapter
+serves them from the process image like every other signal.
 """
 
 from __future__ import annotations
@@ -53,90 +54,21 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from hli_server.engine.channel import Channel
 from hli_server.engine.decoder import DecodeError
 from hli_server.engine.geometry import LineSegment, Point, Segment
-from hli_server.engine.machine import Monitor
+from hli_server.engine.monitors.base import ChannelHooks, MachineView, Monitor
 from hli_server.engine.nc.blocks import Block
+from schemas.events import CollisionStop
 from schemas.units import INCREMENTS_PER_MM, increments_from_mm, mm_from_increments
 
 if TYPE_CHECKING:
     from hli_server.engine.axis import Axis
-    from hli_server.engine.channel import Channel
-    from hli_server.engine.machine import Machine
 
-__all__ = [
-    "CNC_OBJECTS",
-    "CNC_OBJECT_INDEX_GROUP",
-    "CNC_OBJECT_PORT",
-    "CncObject",
-    "CollisionMonitor",
-    "CollisionPair",
-    "cnc_object_offset",
-    "read_cnc_object",
-]
-
-CNC_OBJECT_PORT = 551
-"""ADS port of the GEO task that serves the CNC objects (FCT-C3 4.3)."""
-CNC_OBJECT_INDEX_GROUP = 0x120300
-"""Index group of the ``dyn_coll_mon`` CNC objects (FCT-C3 4.3)."""
+__all__ = ["CollisionMonitor", "CollisionPair"]
 
 _EPS = 1e-9
 _ARC_SAMPLES = 64
-
-
-@dataclass(frozen=True, slots=True)
-class CncObject:
-    """One ``dyn_coll_mon`` CNC object (C3-10): index offset = (A_ID << 16) | element."""
-
-    element: int
-    name: str
-    """Field of :class:`~hli_server.engine.hli.DynCollMon`."""
-    type_name: str
-    size: int
-    unit: str
-    description: str
-
-
-CNC_OBJECTS: dict[int, CncObject] = {
-    o.element: o
-    for o in (
-        CncObject(0x0234, "active", "BOOLEAN", 1, "-", "dynamic collision monitoring is active"),
-        CncObject(0x0244, "velocity", "REAL64", 8, "0.1 µm/s", "current velocity v_t"),
-        CncObject(0x0245, "brake_dist", "REAL64", 8, "0.1 µm", "current braking distance"),
-        CncObject(0x0246, "coll_offset", "UNS32", 4, "0.1 µm", "minimum distance of the pair"),
-        CncObject(0x0247, "deceleration", "REAL64", 8, "mm/s²", "deceleration in case of collision"),
-    )
-}
-"""FCT-C3 4.3, read-only, task GEO (port 551), index group 0x120300."""
-
-
-def cnc_object_offset(axis_number: int, element: int) -> int:
-    """Index offset ``0x<A_ID><element>`` of a CNC object (A_ID in the upper 16 bits)."""
-    return (axis_number << 16) | element
-
-
-def read_cnc_object(machine: Machine, index_group: int, index_offset: int) -> tuple[str, bool | int | float]:
-    """C3-10: (type name, value) of a ``dyn_coll_mon`` CNC object, as published in the last cycle.
-
-    Raises KeyError (saying what is unknown) for another index group, an unknown element or an
-    unknown logical axis number."""
-    if index_group != CNC_OBJECT_INDEX_GROUP:
-        raise KeyError(
-            f"index group 0x{index_group:X} is not the collision monitoring's 0x{CNC_OBJECT_INDEX_GROUP:X}"
-        )
-    axis_number, element = index_offset >> 16, index_offset & 0xFFFF
-    obj = CNC_OBJECTS.get(element)
-    if obj is None:
-        known = ", ".join(f"0x{e:04X}" for e in CNC_OBJECTS)
-        raise KeyError(f"index offset 0x{index_offset:X}: unknown element 0x{element:04X} (known: {known})")
-    axis = machine.axes_by_number.get(axis_number)
-    if axis is None:
-        raise KeyError(
-            f"index offset 0x{index_offset:X}: no axis with logical number (A_ID) {axis_number} "
-            f"(numbers: {sorted(machine.axes_by_number)})"
-        )
-    value: bool | int | float = getattr(machine.hli.axes[axis.index].dyn_coll_mon, obj.name)
-    return obj.type_name, value
 
 
 @dataclass(slots=True)
@@ -175,7 +107,7 @@ class CollisionPair:
 class CollisionMonitor(Monitor):
     """FCT-C3 (C3-01..C3-10) for every configured pair."""
 
-    def __init__(self, machine: Machine) -> None:
+    def __init__(self, machine: MachineView) -> None:
         self.machine = machine
         self.pairs: list[CollisionPair] = []
         by_number = machine.axes_by_number
@@ -233,19 +165,20 @@ class CollisionMonitor(Monitor):
             )
             for index, pairs in self._pairs_of.items()
         ]
-        for ch in machine.channels:
-            if any(ch.index in (p.master.channel, p.partner.channel) for p in self.pairs):
-                ch.decoder.path_checks.append(_MoveApartCheck(self, ch))
-                ch.jog_guards.append(_MoveApartGuard(self))
         self._publish()
+
+    def channel_hooks(self, channel: Channel) -> ChannelHooks:
+        if any(channel.index in (p.master.channel, p.partner.channel) for p in self.pairs):
+            return ChannelHooks(path_check=_MoveApartCheck(self, channel), jog_guard=_MoveApartGuard(self))
+        return ChannelHooks()
 
     def a_coll(self, axis: Axis) -> float:
         """C3-07: the deceleration for braking distance and stop of ``axis``."""
         return self._a_coll[axis.index]
 
     # --- the cycle -----------------------------------------------------------------------
-    def after_interpolation(self, machine: Machine) -> None:
-        t = machine.t_a
+    def after_interpolation(self) -> None:
+        t = self.machine.t_a
         for pair in self.pairs:
             self._drive_errors(pair)
             m, p = pair.master, pair.partner
@@ -327,6 +260,18 @@ class CollisionMonitor(Monitor):
                     "coll_offset": pair.offset_inc,
                 },
             )
+        machine.emit(
+            CollisionStop(
+                cycle=machine.cycle,
+                time_s=machine.cycle * t,
+                channel=machine.channels[pair.master.channel].number,
+                master=pair.master.name,
+                partner=pair.partner.name,
+                distance=increments_from_mm(d),
+                brake_dist=increments_from_mm(brake),
+                coll_offset=pair.offset_inc,
+            )
+        )
 
     def _drive_errors(self, pair: CollisionPair) -> None:
         """C3-05: a drive error of one axis of a two-channel pair stops the other channel too."""

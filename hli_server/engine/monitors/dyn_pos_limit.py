@@ -47,25 +47,24 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from enum import IntEnum, StrEnum
+from enum import StrEnum
 from typing import TYPE_CHECKING
 
-from hli_server.engine.channel import Mode
-from hli_server.engine.hli import ControlUnitSgn32, ProgramState
-from hli_server.engine.machine import Monitor
+from hli_server.engine.channel import Channel
+from hli_server.engine.hli import ControlUnitSgn32
+from hli_server.engine.monitors.base import MachineView, Monitor
+from schemas.events import DynPosLimitChanged
 from schemas.units import mm_from_increments
+from schemas.wire import DynPosLimitState, HoldSource, Mode
 
 if TYPE_CHECKING:
     from hli_server.engine.axis import Axis
-    from hli_server.engine.channel import Channel
-    from hli_server.engine.machine import Machine
     from hli_server.engine.planner import Planner
 
 __all__ = [
     "RAMP_SAMPLES",
     "TRANSITIONS",
     "DplEvent",
-    "DplState",
     "DynPosLimits",
     "next_state",
 ]
@@ -76,16 +75,6 @@ RAMP_SAMPLES = 20
 _EPS = 1e-9
 """mm: positions closer than this to the limit count as on it."""
 _BISECT_STEPS = 48
-
-
-class DplState(IntEnum):
-    """``state_r`` of the control units, HLI_DYNPL_STATE_* (FCT-C43 3.1.1, C43-03)."""
-
-    INACTIVE = 0
-    ACTIVATION = 1
-    ACTIVE = 2
-    ACTIVE_BRAKING = 3
-    ACTIVE_BRAKE = 4
 
 
 class DplEvent(StrEnum):
@@ -103,29 +92,32 @@ class DplEvent(StrEnum):
     """The stop point was dropped: limit moved, path cleared (reset, program end), manual mode."""
 
 
-TRANSITIONS: dict[tuple[DplState, DplEvent], DplState] = {
-    (DplState.INACTIVE, DplEvent.ENABLE): DplState.ACTIVATION,
-    (DplState.INACTIVE, DplEvent.DISABLE): DplState.INACTIVE,
-    (DplState.ACTIVATION, DplEvent.ADOPTED): DplState.ACTIVE,
-    (DplState.ACTIVATION, DplEvent.DISABLE): DplState.INACTIVE,
-    (DplState.ACTIVE, DplEvent.VIOLATION): DplState.ACTIVE_BRAKING,
-    (DplState.ACTIVE, DplEvent.RELEASE): DplState.ACTIVE,
-    (DplState.ACTIVE, DplEvent.DISABLE): DplState.INACTIVE,
-    (DplState.ACTIVE_BRAKING, DplEvent.STANDSTILL): DplState.ACTIVE_BRAKE,
-    (DplState.ACTIVE_BRAKING, DplEvent.RELEASE): DplState.ACTIVE,
-    (DplState.ACTIVE_BRAKING, DplEvent.DISABLE): DplState.INACTIVE,
-    (DplState.ACTIVE_BRAKE, DplEvent.RELEASE): DplState.ACTIVE,
-    (DplState.ACTIVE_BRAKE, DplEvent.DISABLE): DplState.INACTIVE,
+TRANSITIONS: dict[tuple[DynPosLimitState, DplEvent], DynPosLimitState] = {
+    (DynPosLimitState.INACTIVE, DplEvent.ENABLE): DynPosLimitState.ACTIVATION,
+    (DynPosLimitState.INACTIVE, DplEvent.DISABLE): DynPosLimitState.INACTIVE,
+    (DynPosLimitState.ACTIVATION, DplEvent.ADOPTED): DynPosLimitState.ACTIVE,
+    (DynPosLimitState.ACTIVATION, DplEvent.DISABLE): DynPosLimitState.INACTIVE,
+    (DynPosLimitState.ACTIVE, DplEvent.VIOLATION): DynPosLimitState.ACTIVE_BRAKING,
+    (DynPosLimitState.ACTIVE, DplEvent.RELEASE): DynPosLimitState.ACTIVE,
+    (DynPosLimitState.ACTIVE, DplEvent.DISABLE): DynPosLimitState.INACTIVE,
+    (DynPosLimitState.ACTIVE_BRAKING, DplEvent.STANDSTILL): DynPosLimitState.ACTIVE_BRAKE,
+    (DynPosLimitState.ACTIVE_BRAKING, DplEvent.RELEASE): DynPosLimitState.ACTIVE,
+    (DynPosLimitState.ACTIVE_BRAKING, DplEvent.DISABLE): DynPosLimitState.INACTIVE,
+    (DynPosLimitState.ACTIVE_BRAKE, DplEvent.RELEASE): DynPosLimitState.ACTIVE,
+    (DynPosLimitState.ACTIVE_BRAKE, DplEvent.DISABLE): DynPosLimitState.INACTIVE,
 }
 """Everything that moves ``state_r`` (C43-03). A PLC sees, cycle by cycle:
 0 -(enable)-> 1 -(adopted next cycle)-> 2 -(limit on the ramp)-> 3 -(at rest)-> 4
--(moved: release)-> 2 ... -(lifted)-> 0."""
+-(moved: release)-> 2 ... -(lifted)-> 0. When the limit is violated in the cycle it is adopted
+(the axis already beyond it, C43-05, or the crossing already on the ramp), ADOPTED and VIOLATION
+happen in the same cycle: the image shows 1 -> 3 (2 only lives inside that cycle; the events show
+both transitions with the same cycle number)."""
 
 
-_INACTIVE, _ACTIVATION, _ACTIVE, _BRAKING, _BRAKE = DplState
+_INACTIVE, _ACTIVATION, _ACTIVE, _BRAKING, _BRAKE = DynPosLimitState
 
 
-def next_state(state: DplState, event: DplEvent) -> DplState:
+def next_state(state: DynPosLimitState, event: DplEvent) -> DynPosLimitState:
     """The one place that decides a state change; an event a state does not expect is a bug."""
     try:
         return TRANSITIONS[(state, event)]
@@ -144,7 +136,7 @@ class _Limit:
     side: int
     unit: ControlUnitSgn32
     key: str
-    state: DplState = DplState.INACTIVE
+    state: DynPosLimitState = DynPosLimitState.INACTIVE
     command: int = 0
     """Adopted limit [0.1 µm]."""
     limit: float = 0.0
@@ -201,7 +193,7 @@ class _Ramp:
 class DynPosLimits(Monitor):
     """FCT-C43 for every axis of the machine (C43-01..C43-09)."""
 
-    def __init__(self, machine: Machine) -> None:
+    def __init__(self, machine: MachineView) -> None:
         self.machine = machine
         self._by_channel: list[list[_Limit]] = []
         for ch in machine.channels:
@@ -221,7 +213,7 @@ class DynPosLimits(Monitor):
         ]
 
     # --- the cycle -----------------------------------------------------------------------
-    def before_interpolation(self, machine: Machine) -> None:
+    def before_interpolation(self) -> None:
         for ch, limits in self._effective:
             planner = ch.planner
             monitoring: bool | None = None
@@ -263,8 +255,10 @@ class DynPosLimits(Monitor):
                     ramp_done = True
                 if self._look_ahead(lim, planner, ramp) and lim.stop_s is not None:
                     planner.stop_points[lim.key] = lim.stop_s
+            if any(lim.stop_s is not None for lim in limits):
+                ch.hold(HoldSource.DYN_POS_LIMIT)  # "ein bereichsspezifischer Feedhold" (FCT-C43)
 
-    def after_interpolation(self, machine: Machine) -> None:
+    def after_interpolation(self) -> None:
         for ch, limits in self._effective:
             planner = ch.planner
             for lim in limits:
@@ -277,10 +271,6 @@ class DynPosLimits(Monitor):
                     self._fire(lim, DplEvent.RELEASE)
                 elif lim.state == _BRAKING and planner.velocity == 0.0 and planner.s_abs >= lim.stop_s - _EPS:
                     self._fire(lim, DplEvent.STANDSTILL)
-
-    def on_reset(self, channel: Channel) -> None:
-        # the planner was cleared: the next cycle drops the stop points (generation changed)
-        return None
 
     # --- pieces --------------------------------------------------------------------------
     def _adopt(self, lim: _Limit, command: int) -> None:
@@ -295,7 +285,10 @@ class DynPosLimits(Monitor):
         return abs(command - lim.command) >= max(1, ch.config.dpl_tol_limit_change)
 
     def _release(self, lim: _Limit, planner: Planner) -> None:
-        if lim.stop_s is not None or lim.state in (DplState.ACTIVE_BRAKING, DplState.ACTIVE_BRAKE):
+        if lim.stop_s is not None or lim.state in (
+            DynPosLimitState.ACTIVE_BRAKING,
+            DynPosLimitState.ACTIVE_BRAKE,
+        ):
             self._drop_stop(lim, planner)
             self._fire(lim, DplEvent.RELEASE)
 
@@ -340,18 +333,22 @@ class DynPosLimits(Monitor):
             return
         lim.state = new
         lim.unit.state_r = int(new)
-        self.machine.emit(
-            "dyn_pos_limit",
-            lim.channel,
-            axis=lim.axis.name,
-            side="high" if lim.side > 0 else "low",
-            state=int(new),
-            state_name=new.name,
-            limit=lim.command,
+        m = self.machine
+        m.emit(
+            DynPosLimitChanged(
+                cycle=m.cycle,
+                time_s=m.cycle * m.t_a,
+                channel=lim.channel.number,
+                axis=lim.axis.name,
+                side="high" if lim.side > 0 else "low",
+                state=int(new),
+                state_name=new.name,
+                limit=lim.command,
+            )
         )
 
     # --- for tests and tools ------------------------------------------------------------
-    def state(self, axis: str, side: str) -> DplState:
+    def state(self, axis: str, side: str) -> DynPosLimitState:
         """Current state of ``axis``' ``"low"`` or ``"high"`` limit."""
         for limits in self._by_channel:
             for lim in limits:
@@ -364,7 +361,7 @@ def _path_monitored(ch: Channel) -> bool:
     """C43-09: only a running program in automatic mode is looked ahead on."""
     return (
         ch.mode == Mode.AUTOMATIC
-        and ch.state in (ProgramState.RUNNING, ProgramState.HELD)
+        and ch.program_running
         and not ch.aborting
         and not any(a.stopping for a in ch.axes)
     )

@@ -34,14 +34,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from hli_server.engine.machine import Monitor
+from hli_server.engine.channel import Channel
+from hli_server.engine.monitors.base import ChannelHooks, MachineView, Monitor
 from hli_server.engine.planner import Motion
-from schemas.units import increments_from_mm, mm_from_increments
+from schemas.events import PositionError
+from schemas.units import increments_from_mm
 
 if TYPE_CHECKING:
     from hli_server.engine.axis import Axis
-    from hli_server.engine.channel import Channel
-    from hli_server.engine.machine import Machine
 
 __all__ = ["PositionMonitor", "settling_time_us"]
 
@@ -71,21 +71,23 @@ class _AxisWatch:
 class PositionMonitor(Monitor):
     """FCT-A3 for every axis, the G60 gate for every channel, and drive errors."""
 
-    def __init__(self, machine: Machine) -> None:
+    def __init__(self, machine: MachineView) -> None:
         self.machine = machine
-        self.watches = [
-            _AxisWatch(a, mm_from_increments(a.config.window), settling_time_us(a)) for a in machine.axes
-        ]
-        for ch in machine.channels:
-            ch.planner.exact_stop_gate = _ExactStopGate(self, ch)
+        self.watches = [_AxisWatch(a, a.window, settling_time_us(a)) for a in machine.axes]
+        self._cycle_us = machine.config.cycle_time_us
+
+    def channel_hooks(self, channel: Channel) -> ChannelHooks:
+        return ChannelHooks(exact_stop_gate=_ExactStopGate(self, channel))
 
     def in_window(self, axis: Axis) -> bool:
         """A3-02: the actual position lies in the exact-stop window around the setpoint."""
         return abs(axis.measured - axis.setpoint) <= self.watches[axis.index].window + 1e-12
 
     # --- the cycle -----------------------------------------------------------------------
-    def after_interpolation(self, machine: Machine) -> None:
-        cycle_us = machine.config.cycle_time_us
+    def after_position_loop(self) -> None:
+        """Runs after the position loop, so that it judges this cycle's actual positions."""
+        machine = self.machine
+        cycle_us = self._cycle_us
         for w in self.watches:
             axis = w.axis
             if axis.faults.drive_error:
@@ -98,14 +100,15 @@ class PositionMonitor(Monitor):
             if moving:
                 w.timer_start = None  # interpolated: no target reached yet
             elif w.was_moving and not w.failed:
-                w.timer_start = machine.cycle  # t1 (A3-01)
+                # t1 (A3-01): the setpoint reached its target at the end of the previous cycle
+                w.timer_start = machine.cycle - 1
             w.was_moving = moving
             if w.timer_start is None:
                 continue
             if self.in_window(axis):
                 w.timer_start = None  # t2 (A3-02)
-            elif w.settling_us > 0 and (machine.cycle - w.timer_start) * cycle_us > w.settling_us:
-                self._fail(w)
+            elif w.settling_us > 0 and (machine.cycle - w.timer_start) * cycle_us >= w.settling_us:
+                self._fail(w)  # t1 + t3 has come and the actual position is not in the window
 
     def on_reset(self, channel: Channel) -> None:
         for w in self.watches:
@@ -136,11 +139,22 @@ class PositionMonitor(Monitor):
             params={
                 "axis": axis.name,
                 "deviation": increments_from_mm(error),
-                "window": axis.config.window,
+                "window": axis.window_inc,
                 "settling_time_us": w.settling_us,
             },
         )
         t = machine.t_a
+        machine.emit(
+            PositionError(
+                cycle=machine.cycle,
+                time_s=machine.cycle * t,
+                channel=ch.number,
+                axis=axis.name,
+                deviation=increments_from_mm(error),
+                window=axis.window_inc,
+                settling_time_us=w.settling_us,
+            )
+        )
         axis.start_independent_stop(axis.a_emergency, t)
         for other in ch.axes:
             if other is not axis and not other.stopping and other.setpoint_step != 0.0:

@@ -11,17 +11,12 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
+from hli_server.engine.channel import Channel
 from hli_server.engine.decoder import DecodeError
 from hli_server.engine.geometry import Point, Segment
-from hli_server.engine.machine import Monitor
+from hli_server.engine.monitors.base import ChannelHooks, MachineView, Monitor
 from hli_server.engine.nc.blocks import Block
 from schemas.units import increments_from_mm
-
-if TYPE_CHECKING:
-    from hli_server.engine.channel import Channel
-    from hli_server.engine.machine import Machine
 
 __all__ = ["SoftLimits"]
 
@@ -29,16 +24,14 @@ _EPS = 1e-9
 
 
 class SoftLimits(Monitor):
-    def __init__(self, machine: Machine) -> None:
+    def __init__(self, machine: MachineView) -> None:
         self.machine = machine
         self._tripped: set[str] = set()
         self._warned: set[str] = set()
-        for ch in machine.channels:
-            ch.decoder.path_checks.append(self._path_check_for(ch))
-            ch.jog_guards.append(self)
+        self._warn = machine.config.manual.move_limit_warning
 
-    def _path_check_for(self, channel: Channel) -> _PathCheck:
-        return _PathCheck(channel)
+    def channel_hooks(self, channel: Channel) -> ChannelHooks:
+        return ChannelHooks(path_check=_PathCheck(channel), jog_guard=self)
 
     # --- jog guard -----------------------------------------------------------------------
     def must_brake(self, channel: Channel, current: Point, stop_point: Point) -> bool:
@@ -46,7 +39,7 @@ class SoftLimits(Monitor):
         for axis, p0, p1 in zip(channel.axes, current, stop_point, strict=True):
             if (p1 > axis.swe_pos and p1 > p0) or (p1 < axis.swe_neg and p1 < p0):
                 brake = True
-                if self.machine.config.manual.move_limit_warning and axis.name not in self._warned:
+                if self._warn and axis.name not in self._warned:
                     self._warned.add(axis.name)
                     self.machine.raise_alarm(
                         911013,
@@ -59,7 +52,8 @@ class SoftLimits(Monitor):
         return brake
 
     # --- actual positions ----------------------------------------------------------------
-    def after_interpolation(self, machine: Machine) -> None:
+    def after_interpolation(self) -> None:
+        machine = self.machine
         for axis in machine.axes:
             if not axis.referenced:
                 continue

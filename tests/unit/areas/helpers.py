@@ -8,9 +8,9 @@ from typing import Any
 from hli_server.engine.alarms import Alarm
 from hli_server.engine.areas import ChannelAreas, channel_areas
 from hli_server.engine.channel import Channel
-from hli_server.engine.hli import ProgramState
 from hli_server.engine.machine import Machine
 from schemas.config import AxisConfig, ChannelConfig, MachineConfig, ManualConfig
+from schemas.wire import ProgramState
 from tests.spec_examples import (  # noqa: F401 - the documents' programs, re-exported for the area tests
     CIRC_PROT,
     CIRC_PROT_OLD,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from hli_server.engine.hli import ProgramState
+from schemas.wire import ProgramState
 
 from .helpers import U_AREA, areas, make_machine, only_alarm, run
 

@@ -10,9 +10,8 @@ import pytest
 from shapely.geometry import Point as ShapelyPoint
 from shapely.geometry import Polygon as ShapelyPolygon
 
-from hli_server.engine.channel import Mode
-from hli_server.engine.hli import ProgramState
 from hli_server.engine.machine import Machine
+from schemas.wire import Mode, ProgramState
 
 from .helpers import alarm_ids, errors, make_machine, run
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from hli_server.engine.hli import ProgramState
 from hli_server.engine.machine import Machine
+from schemas.wire import ProgramState
 
 from .helpers import areas, errors, make_machine, only_alarm
 

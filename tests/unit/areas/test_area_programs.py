@@ -6,8 +6,7 @@ import math
 
 import pytest
 
-from hli_server.engine.channel import Mode
-from hli_server.engine.hli import ProgramState
+from schemas.wire import Mode, ProgramState
 
 from .helpers import (
     CIRC_PROT,
