@@ -59,7 +59,9 @@ from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from operator import itemgetter
-from typing import TYPE_CHECKING, Any, Final, Protocol
+from typing import TYPE_CHECKING, Any, Final, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from hli_server.codecs.modbus_frames import (
     ExceptionCode,
@@ -90,13 +92,13 @@ from schemas.layout import (
 )
 
 if TYPE_CHECKING:
-    from hli_server.runtime import Runtime
+    from hli_server.adapters.host import AdapterHost, ImagePort
 
 __all__ = [
     "DEFAULT_PORT",
     "WORD_ORDERS",
     "ModbusAdapter",
-    "ModbusImage",
+    "ModbusOptions",
     "ModbusServer",
     "RegisterMap",
 ]
@@ -128,22 +130,6 @@ _TABLE_TEXT: Final = {
 }
 
 
-class ModbusImage(Protocol):
-    """What the adapter needs of the process image (:class:`hli_server.image.ProcessImage`)."""
-
-    @property
-    def layout(self) -> Layout: ...
-
-    @property
-    def publish_count(self) -> int: ...
-
-    def read_half(self, direction: Direction) -> bytes: ...
-
-    def snapshot(self) -> tuple[int, bytes]: ...
-
-    def write_signal(self, signal: Signal, value: object) -> None: ...
-
-
 # --------------------------------------------------------------------------------------------
 # The register map: Modbus requests against the image (no I/O)
 # --------------------------------------------------------------------------------------------
@@ -167,14 +153,14 @@ class _Span:
 
 
 class RegisterMap:
-    """Serves decoded Modbus requests from a :class:`ModbusImage` (H-03). Synchronous, no I/O.
+    """Serves decoded Modbus requests from a :class:`ImagePort` (H-03). Synchronous, no I/O.
 
     ``execute(request)`` returns the response PDU or raises :class:`ModbusError`. ``read(pdu)``
     is the fast path of FC 1-4: the request PDU's bytes select a compiled reader (cached), which
     checks nothing at run time because the layout does not change while the server runs.
     """
 
-    def __init__(self, image: ModbusImage, word_order: str = "ABCD") -> None:
+    def __init__(self, image: ImagePort, word_order: str = "ABCD") -> None:
         order = word_order.upper()
         if order not in WORD_ORDERS:
             raise ValueError(f"Modbus word order {word_order!r}: use one of {', '.join(WORD_ORDERS)}")
@@ -551,6 +537,27 @@ class _Connection(asyncio.Protocol):
             self._transport.abort()
 
 
+class ModbusOptions(BaseModel):
+    """``[[adapters]] name = "modbus"`` / ``--adapter modbus:KEY=VALUE`` / ``--modbus-port`` and friends."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    port: int = Field(default=DEFAULT_PORT, ge=0, le=65535, description="TCP port (0: any free port)")
+    word_order: Literal["ABCD", "CDAB"] = Field(
+        default="ABCD", description="order of the two registers of a 32-bit value (ABCD: high word first)"
+    )
+    unit_id: int = Field(default=1, ge=0, le=255, description="the unit id answered (besides 0 and 255)")
+    unknown_unit: Literal["exception", "ignore"] = Field(
+        default="exception", description="other unit ids: exception 0x0B, or no answer"
+    )
+    max_connections: int = Field(default=32, ge=1, le=10_000, description="connections served at once")
+
+    @field_validator("word_order", mode="before")
+    @classmethod
+    def _upper(cls, value: object) -> object:
+        return value.upper() if isinstance(value, str) else value
+
+
 class ModbusAdapter:
     """Modbus TCP on ``bind:port`` for the runtime's process image (H-03).
 
@@ -561,32 +568,22 @@ class ModbusAdapter:
 
     name = "modbus"
 
-    def __init__(
-        self,
-        *,
-        bind: str = "127.0.0.1",
-        port: int = DEFAULT_PORT,
-        word_order: str = "ABCD",
-        unit_id: int = 1,
-        unknown_unit: str = "exception",
-        max_connections: int = 32,
-    ) -> None:
-        if not 0 <= port <= 65535:
-            raise ValueError(f"Modbus port {port} is outside 0..65535 (0 = a free port)")
-        if str(word_order).upper() not in WORD_ORDERS:
-            raise ValueError(f"Modbus word order {word_order!r}: use one of {', '.join(WORD_ORDERS)}")
-        if not 0 <= unit_id <= 255:
-            raise ValueError(f"Modbus unit id {unit_id} is outside 0..255")
-        if unknown_unit not in UNKNOWN_UNIT_POLICIES:
-            raise ValueError(f"unknown_unit={unknown_unit!r}: use one of {', '.join(UNKNOWN_UNIT_POLICIES)}")
-        if max_connections < 1:
-            raise ValueError(f"max_connections must be at least 1, got {max_connections}")
+    Options = ModbusOptions
+
+    def __init__(self, *, bind: str = "127.0.0.1", **options: object) -> None:
+        try:
+            self.options = ModbusOptions.model_validate(options)
+        except ValidationError as exc:
+            first = exc.errors()[0]
+            where = ".".join(str(p) for p in first["loc"])
+            got = first.get("input")
+            raise ValueError(f"Modbus adapter: {where}: {first['msg']} (got {got!r})") from None
         self.bind = bind
-        self.requested_port = port
-        self.word_order = str(word_order).upper()
-        self.unit_id = unit_id
-        self.unknown_unit = unknown_unit
-        self.max_connections = max_connections
+        self.requested_port = self.options.port
+        self.word_order = self.options.word_order
+        self.unit_id = self.options.unit_id
+        self.unknown_unit = self.options.unknown_unit
+        self.max_connections = self.options.max_connections
         self.port: int | None = None
         self.server: ModbusServer
         self._listener: asyncio.Server | None = None
@@ -604,22 +601,16 @@ class ModbusAdapter:
             f"32-bit word order {self.word_order}, 0-based addresses as in `hli-server map`)"
         ]
 
-    def serve_image(self, image: ModbusImage) -> None:
+    def serve_image(self, image: ImagePort) -> None:
         """Bind the protocol logic to an image (done by :meth:`start`; tests may call it directly)."""
         self.server = ModbusServer(
             RegisterMap(image, self.word_order), unit_id=self.unit_id, unknown_unit=self.unknown_unit
         )
 
-    async def start(self, runtime: Runtime) -> None:
-        image: Any = runtime.image
-        missing = [
-            n for n in ("read_half", "snapshot", "write_signal", "publish_count") if not hasattr(image, n)
-        ]
-        if missing:
-            raise TypeError(f"Modbus adapter: the runtime's image {image!r} lacks {', '.join(missing)}")
-        await self.start_for(image)
+    async def start(self, host: AdapterHost) -> None:
+        await self.start_for(host.image)
 
-    async def start_for(self, image: ModbusImage) -> None:
+    async def start_for(self, image: ImagePort) -> None:
         """Listen for an image without a runtime (tests, tools)."""
         self.serve_image(image)
         loop = asyncio.get_running_loop()

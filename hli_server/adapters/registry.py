@@ -1,23 +1,26 @@
-"""How adapters plug into the runtime (H-03, H-04, H-05 later; the HTTP control API now).
+"""The adapters, their options, and the one function that plans what ``run`` starts (H-03..H-05).
 
 An adapter is a door onto the running machine: the HTTP control API, Modbus TCP, ADS, MQTT. The
-runtime starts the adapters in the order they are given after the process image exists and before
-the first cycle, and stops them in the reverse order before the image is unlinked.
+runtime starts them in order after the process image exists and before the first cycle, and stops
+them in reverse order before the image is unlinked. Each is handed the host
+(:mod:`hli_server.adapters.host`), never the runtime or the machine.
 
 The contract (:class:`Adapter`)::
 
     class MyAdapter:
         name = "modbus"
-        def __init__(self, *, bind: str, port: int = 502, **more_options) -> None: ...
-        async def start(self, runtime: Runtime) -> None: ...   # open sockets, start tasks; raise on failure
+        Options = ModbusOptions                  # a pydantic model: every option, its default, its help
+        def __init__(self, *, bind: str, **options) -> None: ...
+        async def start(self, host: AdapterHost) -> None: ...  # open sockets, start tasks; raise on failure
         async def stop(self) -> None: ...                      # close everything; safe to call twice
-        def endpoints(self) -> list[str]: ...                  # "modbus://127.0.0.1:5020" (for the banner)
+        def endpoints(self) -> list[str]: ...                  # "Modbus TCP: 127.0.0.1:5020" (for the banner)
 
-Adapters are named in :data:`ADAPTERS` (``name -> "module:factory"``, imported only when used, so a
-missing optional dependency of one adapter does not break the others). The factory is called with
-``bind=<address>`` and the adapter's options (``--adapter modbus:port=5020`` on the command line, or
-``adapter_options`` of :class:`~hli_server.runtime.Runtime`). Registering an adapter is one line
-here, or :func:`register_adapter` at run time (plugins, tests).
+:data:`ADAPTERS` names each adapter with its class and its options model (``"module:attr"``, imported
+only when used, so a missing optional dependency of one adapter does not break the others; the
+options modules are light). :data:`CLI_ALIASES` are the documented short flags of ``hli-server run``
+(``--http-port`` is ``http:port``). :func:`plan_adapters` decides, in one place, what starts with which
+options: the adapters' own defaults, then the machine file's ``[[adapters]]``, then ``--adapter
+NAME:KEY=VALUE``, then the aliases.
 """
 
 from __future__ import annotations
@@ -25,20 +28,27 @@ from __future__ import annotations
 import difflib
 import importlib
 import importlib.util
-import inspect
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
+from pydantic import BaseModel, ValidationError
+
 if TYPE_CHECKING:
-    from hli_server.runtime import Runtime
+    from hli_server.adapters.host import AdapterHost
 
 __all__ = [
     "ADAPTERS",
+    "CLI_ALIASES",
     "Adapter",
     "AdapterError",
+    "AdapterKind",
+    "CliAlias",
     "available_adapters",
     "create_adapter",
+    "options_model",
     "parse_adapter_spec",
+    "plan_adapters",
     "register_adapter",
 ]
 
@@ -49,7 +59,7 @@ class Adapter(Protocol):
 
     name: str
 
-    async def start(self, runtime: Runtime) -> None: ...
+    async def start(self, host: AdapterHost) -> None: ...
 
     async def stop(self) -> None: ...
 
@@ -58,83 +68,190 @@ class Adapter(Protocol):
         ...
 
 
-AdapterFactory = Callable[..., Adapter]
+@dataclass(frozen=True, slots=True)
+class AdapterKind:
+    """One registered adapter."""
 
-ADAPTERS: dict[str, str | AdapterFactory] = {
-    "http": "hli_server.adapters.http_api:HttpApiAdapter",
-    "modbus": "hli_server.adapters.modbus:ModbusAdapter",
-    "ads": "hli_server.adapters.ads:AdsAdapter",
-    "mqtt": "hli_server.adapters.mqtt:MqttAdapter",
+    name: str
+    target: str
+    """``"module:Class"`` of the adapter (imported when it is started)."""
+    options: str
+    """``"module:Model"`` of its options (a light module: ``run --help`` imports it)."""
+    default: bool
+    """Started by ``hli-server run`` unless switched off (``--no-http``)."""
+    summary: str
+
+
+@dataclass(frozen=True, slots=True)
+class CliAlias:
+    """A documented short flag of ``hli-server run`` for an adapter option (or a switch)."""
+
+    flag: str
+    adapter: str
+    option: str | None
+    """The option the flag sets; None: a switch that turns the adapter on or off (``switch``)."""
+    switch: bool | None = None
+    """For a switch: True starts the adapter, False does not start it."""
+    kind: type | tuple[str, ...] = int
+    """The value's type, or the allowed values (a choice, case-insensitive)."""
+    metavar: str = ""
+    help: str = ""
+
+
+ADAPTERS: dict[str, AdapterKind] = {
+    kind.name: kind
+    for kind in (
+        AdapterKind(
+            "http",
+            "hli_server.adapters.http.server:HttpApiAdapter",
+            "hli_server.adapters.http.options:HttpOptions",
+            default=True,
+            summary="the HTTP control API (operator panel, remote control of tests)",
+        ),
+        AdapterKind(
+            "modbus",
+            "hli_server.adapters.modbus:ModbusAdapter",
+            "hli_server.adapters.modbus:ModbusOptions",
+            default=True,
+            summary="Modbus TCP view of the process image (H-03)",
+        ),
+    )
 }
-"""Adapter name -> ``"module:factory"`` (imported lazily) or the factory itself."""
+"""Adapter name -> :class:`AdapterKind`, in the order ``run`` starts the default ones."""
+
+CLI_ALIASES: tuple[CliAlias, ...] = (
+    CliAlias(
+        "--http-port", "http", "port", metavar="N", help="port of the HTTP control API (0: any free port)"
+    ),
+    CliAlias("--no-http", "http", None, switch=False, help="do not start the HTTP control API"),
+    CliAlias(
+        "--modbus-port",
+        "modbus",
+        "port",
+        metavar="N",
+        help="port of the Modbus TCP view (H-03; 0: any free port)",
+    ),
+    CliAlias(
+        "--modbus-word-order",
+        "modbus",
+        "word_order",
+        kind=("ABCD", "CDAB"),
+        help="Modbus: order of the two registers of a 32-bit value (ABCD: high word first)",
+    ),
+    CliAlias("--modbus-unit-id", "modbus", "unit_id", metavar="N", help="Modbus unit id"),
+    CliAlias("--no-modbus", "modbus", None, switch=False, help="do not start the Modbus TCP server"),
+)
+"""The short flags of ``hli-server run``; each is the same as ``--adapter NAME:OPTION=VALUE``."""
 
 
 class AdapterError(ValueError):
     """An adapter name or option that cannot be used; the message says which and what exists."""
 
 
-def register_adapter(name: str, factory: str | AdapterFactory) -> None:
-    """Add (or replace) an adapter under ``name``."""
-    ADAPTERS[name] = factory
+def register_adapter(kind: AdapterKind) -> None:
+    """Add (or replace) an adapter (plugins, tests)."""
+    ADAPTERS[kind.name] = kind
 
 
-def _module_exists(target: str | AdapterFactory) -> bool:
-    if not isinstance(target, str):
-        return True
+def _module_exists(target: str) -> bool:
     return importlib.util.find_spec(target.split(":", maxsplit=1)[0]) is not None
 
 
 def available_adapters() -> list[str]:
     """The registered adapters whose module is present in this installation."""
-    return sorted(name for name, target in ADAPTERS.items() if _module_exists(target))
+    return [name for name, kind in ADAPTERS.items() if _module_exists(kind.target)]
 
 
-def _resolve(name: str) -> AdapterFactory:
-    target = ADAPTERS.get(name)
-    if target is None or not _module_exists(target):
-        raise AdapterError(f"unknown adapter {name!r}; available: {', '.join(available_adapters())}")
-    if not isinstance(target, str):
-        return target
+def _load(target: str) -> Any:
     module, attr = target.split(":")
-    factory: AdapterFactory = getattr(importlib.import_module(module), attr)
-    return factory
+    return getattr(importlib.import_module(module), attr)
 
 
-def create_adapter(name: str, *, bind: str, options: Mapping[str, Any] | None = None) -> Adapter:
-    """Build adapter ``name`` with ``bind`` and its ``options``; unknown options are an error."""
-    factory = _resolve(name)
-    given = dict(options or {})
-    accepted = _option_names(factory)
-    unknown = sorted(set(given) - accepted) if accepted is not None else []
+def _kind(name: str) -> AdapterKind:
+    kind = ADAPTERS.get(name)
+    if kind is None or not _module_exists(kind.target):
+        match = difflib.get_close_matches(name, available_adapters(), 1)
+        hint = f" (did you mean {match[0]!r}?)" if match else ""
+        raise AdapterError(f"unknown adapter {name!r}{hint}; available: {', '.join(available_adapters())}")
+    return kind
+
+
+def options_model(name: str) -> type[BaseModel]:
+    """The options model of adapter ``name`` (its fields are its options, with defaults and help)."""
+    model: type[BaseModel] = _load(_kind(name).options)
+    return model
+
+
+def check_options(name: str, options: Mapping[str, Any]) -> dict[str, Any]:
+    """``options`` validated by the adapter's model (defaults filled in), or AdapterError saying what
+    is wrong, with a did-you-mean for misspelled options and the list of the adapter's options."""
+    model = options_model(name)
+    known = sorted(model.model_fields)
+    unknown = sorted(set(options) - set(known))
     if unknown:
         hints = []
         for key in unknown:
-            match = difflib.get_close_matches(key, sorted(accepted or []), 1)
+            match = difflib.get_close_matches(key, known, 1)
             hints.append(f"{key!r} (did you mean {match[0]!r}?)" if match else repr(key))
         raise AdapterError(
-            f"adapter {name!r}: unknown option {', '.join(hints)}; "
-            f"its options are: {', '.join(sorted(accepted or []))}"
+            f"adapter {name!r}: unknown option {', '.join(hints)}; its options are: {', '.join(known)}"
         )
     try:
-        return factory(bind=bind, **given)
-    except TypeError as exc:
-        raise AdapterError(f"adapter {name!r}: bad options {given}: {exc}") from exc
+        return model.model_validate(dict(options)).model_dump()
+    except ValidationError as exc:
+        problems = "; ".join(
+            f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']} (got {e.get('input')!r})" for e in exc.errors()
+        )
+        raise AdapterError(f"adapter {name!r}: {problems}") from None
 
 
-def _option_names(factory: AdapterFactory) -> set[str] | None:
-    """The keyword options a factory takes (besides ``bind``); None when it takes any (``**kwargs``)."""
-    try:
-        params = inspect.signature(factory).parameters.values()
-    except (TypeError, ValueError):
-        return None
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params):
-        return None
-    named = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
-    return {p.name for p in params if p.kind in named and p.name != "bind"}
+def create_adapter(name: str, *, bind: str, options: Mapping[str, Any] | None = None) -> Adapter:
+    """Build adapter ``name`` with ``bind`` and its ``options`` (checked first: unknown or bad
+    options are an :class:`AdapterError`)."""
+    checked = check_options(name, options or {})
+    cls = _load(_kind(name).target)
+    adapter: Adapter = cls(bind=bind, **checked)
+    return adapter
+
+
+def plan_adapters(
+    configured: Sequence[tuple[str, Mapping[str, Any]]] = (),
+    specs: Sequence[str] = (),
+    aliases: Mapping[str, Any] | None = None,
+) -> list[tuple[str, dict[str, Any]]]:
+    """What ``hli-server run`` starts, in order, with which options (each checked by its model).
+
+    1. every adapter whose kind is ``default`` (HTTP, Modbus), with its own defaults;
+    2. the machine file's ``[[adapters]]`` (``configured``), in the file's order, add or replace by name;
+    3. ``--adapter NAME:KEY=VALUE`` (``specs``) replace an entry of the same name, or add one;
+    4. the short flags (``aliases``: flag -> value, None or absent = not given) set one option of
+       their adapter, adding it if needed; a switch off (``--no-modbus``) removes it.
+    """
+    plan: dict[str, dict[str, Any]] = {name: {} for name, kind in ADAPTERS.items() if kind.default}
+    for name, options in configured:
+        _kind(name)
+        plan[name] = dict(options)
+    for spec in specs:
+        name, options = parse_adapter_spec(spec)
+        _kind(name)
+        plan[name] = options
+    for alias in CLI_ALIASES:
+        value = (aliases or {}).get(alias.flag)
+        if value is None or value is False:
+            continue
+        if alias.option is None:
+            if alias.switch:
+                plan.setdefault(alias.adapter, {})
+            else:
+                plan.pop(alias.adapter, None)
+            continue
+        if alias.adapter in ADAPTERS and _module_exists(ADAPTERS[alias.adapter].target):
+            plan.setdefault(alias.adapter, {})[alias.option] = value
+    return [(name, check_options(name, options)) for name, options in plan.items()]
 
 
 def parse_adapter_spec(spec: str) -> tuple[str, dict[str, Any]]:
-    """``"modbus:port=5020,word_order=little"`` -> ``("modbus", {"port": 5020, "word_order": "little"})``.
+    """``"modbus:port=5020,word_order=CDAB"`` -> ``("modbus", {"port": 5020, "word_order": "CDAB"})``.
 
     Values that look like integers become ``int``, ``true``/``false`` become ``bool``; the rest stay text.
     """

@@ -1,9 +1,13 @@
-"""``hli-server run``: the machine, its process image and the control API, until stopped (E-01, H-01).
+"""``hli-server run``: the machine, its process image and its adapters, until stopped (E-01, H-01).
 
     hli-server run [--config FILE] [--clock realtime|stepped|free] [--bind 127.0.0.1]
-                   [--http-port N] [--image-name NAME] [--adapter NAME[:key=value,...]] [--cycles N]
+                   [--image-name NAME] [--adapter NAME[:key=value,...]] [--cycles N]
                    [--event-loop select|default] [--max-catch-up N]
-                   [--modbus-port N] [--modbus-word-order ABCD|CDAB] [--modbus-unit-id N] [--no-modbus]
+                   [the adapters' short flags: --http-port N, --no-http, --modbus-port N, ...]
+
+The adapters and their options are planned in one place, ``hli_server.adapters.registry.plan_adapters``
+(defaults, the machine file's ``[[adapters]]``, ``--adapter``, the short flags of ``CLI_ALIASES``);
+this command has no code of its own for any adapter.
 
 Prints where everything listens (shared-memory image name, HTTP URL, the ports of further adapters)
 and the clock, then runs until SIGINT/SIGTERM, or for ``--cycles`` cycles (scripts). On the way out
@@ -16,12 +20,13 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import click
 
-from hli_server.adapters.registry import AdapterError, available_adapters, parse_adapter_spec
+from hli_server.adapters.registry import CLI_ALIASES, AdapterError, options_model, plan_adapters
 from hli_server.configuration import ConfigError, ConfigFileError, load_machine, machine_summary
 from hli_server.runtime import Clock, Runtime, precise_event_loop
 
@@ -63,6 +68,32 @@ def _farewell(runtime: Runtime) -> None:
     click.echo(text)
 
 
+def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
+    """The adapters' short flags (``CLI_ALIASES``) as click options; their values go to ``plan_adapters``."""
+    for alias in reversed(CLI_ALIASES):
+        dest = "alias_" + alias.flag.removeprefix("--").replace("-", "_")
+        if alias.option is None:
+            option = click.option(alias.flag, dest, is_flag=True, default=False, help=alias.help)
+        else:
+            kind: Any = (
+                click.Choice(list(alias.kind), case_sensitive=False)
+                if isinstance(alias.kind, tuple)
+                else alias.kind
+            )
+            default_value = options_model(alias.adapter).model_fields[alias.option].default
+            option = click.option(
+                alias.flag,
+                dest,
+                type=kind,
+                default=None,
+                metavar=alias.metavar or None,
+                help=f"{alias.help} [default: {default_value}; "
+                f"same as --adapter {alias.adapter}:{alias.option}=...]",
+            )
+        command = option(command)
+    return command
+
+
 @click.command()
 @click.option(
     "--config",
@@ -81,14 +112,6 @@ def _farewell(runtime: Runtime) -> None:
 )
 @click.option("--bind", default="127.0.0.1", show_default=True, help="address the network adapters listen on")
 @click.option(
-    "--http-port",
-    type=click.IntRange(0, 65535),
-    default=8080,
-    show_default=True,
-    help="port of the HTTP control API (0: any free port)",
-)
-@click.option("--no-http", is_flag=True, help="do not start the HTTP control API")
-@click.option(
     "--image-name",
     default=None,
     help="name of the shared-memory image (/dev/shm/NAME); default: a unique hli_<pid>_<random>",
@@ -98,26 +121,9 @@ def _farewell(runtime: Runtime) -> None:
     "adapter_specs",
     multiple=True,
     metavar="NAME[:KEY=VALUE,...]",
-    help="start another adapter, e.g. --adapter modbus:port=5020 (repeatable)",
+    help="start an adapter or set its options, e.g. --adapter modbus:port=5020 (repeatable)",
 )
-@click.option(
-    "--modbus-port",
-    type=click.IntRange(0, 65535),
-    default=5020,
-    show_default=True,
-    help="port of the Modbus TCP view of the image (H-03; 0: any free port)",
-)
-@click.option(
-    "--modbus-word-order",
-    type=click.Choice(["ABCD", "CDAB"], case_sensitive=False),
-    default="ABCD",
-    show_default=True,
-    help="Modbus: order of the two registers of a 32-bit value (ABCD: high word first)",
-)
-@click.option(
-    "--modbus-unit-id", type=click.IntRange(0, 255), default=1, show_default=True, help="Modbus unit id"
-)
-@click.option("--no-modbus", is_flag=True, help="do not start the Modbus TCP server")
+@_alias_options
 @click.option(
     "--max-catch-up",
     type=click.IntRange(1, 1_000_000),
@@ -139,19 +145,14 @@ def run(
     config_path: Path | None,
     clock: str,
     bind: str,
-    http_port: int,
-    no_http: bool,
     image_name: str | None,
     adapter_specs: tuple[str, ...],
-    modbus_port: int,
-    modbus_word_order: str,
-    modbus_unit_id: int,
-    no_modbus: bool,
     max_catch_up: int,
     event_loop: str,
     cycles: int | None,
+    **alias_values: Any,
 ) -> None:
-    """Run the machine with its process image and control API until stopped."""
+    """Run the machine with its process image and adapters until stopped."""
     try:
         config = load_machine(config_path)
     except ConfigFileError as exc:
@@ -164,28 +165,16 @@ def run(
         click.echo("the configuration is invalid: check it with `hli-server config validate FILE`", err=True)
         ctx.exit(_EXIT_START)
 
-    adapters: list[tuple[str, dict[str, Any]]] = []
-    if not no_http:
-        adapters.append(("http", {"port": http_port}))
+    aliases = {
+        alias.flag: alias_values.get("alias_" + alias.flag.removeprefix("--").replace("-", "_"))
+        for alias in CLI_ALIASES
+    }
     try:
-        from_cli = [parse_adapter_spec(spec) for spec in adapter_specs]
-        cli_names = {name for name, _ in from_cli}
-        # the machine file's adapters first; an --adapter of the same name replaces its entry
-        configured = [(a.name, dict(a.options)) for a in config.adapters if a.name not in cli_names]
-        for name, options in [*configured, *from_cli]:
-            if name not in available_adapters():
-                raise AdapterError(f"unknown adapter {name!r}; available: {', '.join(available_adapters())}")
-            if no_modbus and name == "modbus":
-                continue
-            adapters.append((name, options))
-        if not no_modbus and not any(name == "modbus" for name, _ in adapters):
-            modbus = {"port": modbus_port, "word_order": modbus_word_order.upper(), "unit_id": modbus_unit_id}
-            adapters.append(("modbus", modbus))
+        adapters = plan_adapters([(a.name, dict(a.options)) for a in config.adapters], adapter_specs, aliases)
         runtime = Runtime(
             config,
             clock=clock,
             bind=bind,
-            http_port=None if no_http else http_port,
             image_name=image_name,
             adapters=adapters,
             max_catch_up=max_catch_up,

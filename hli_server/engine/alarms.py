@@ -113,6 +113,8 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(912011, "Measuring move (G100) invalid", "project (FCT-C14, C14-23)"),
     # --- project's own: axis collision and position monitoring (913xxx) ----------------------
     _e(913000, "Collision pair may only move apart after a collision stop", "project (FCT-C3, C3-02)"),
+    # --- project's own: the simulator itself (919xxx) -----------------------------------------
+    _e(919000, "Internal error: a cycle failed; the axes were stopped", "project", Reaction.AXIS_STOP),
 )
 
 ALARMS: dict[int, AlarmDef] = {a.number: a for a in _TABLE}

@@ -21,6 +21,7 @@ the hooks a monitor overrides.
 
 from __future__ import annotations
 
+import contextlib
 from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
@@ -46,6 +47,8 @@ from schemas.wire import Mode
 
 __all__ = ["ALARM_HISTORY", "EventListener", "Machine"]
 
+ALARM_INTERNAL = 919000
+"""Error: a cycle failed inside the simulator (a bug); the channels stop, the server goes on."""
 ALARM_HISTORY = 1_000
 """Alarms kept in :attr:`Machine.alarm_history` (the newest; ``GET /api/alarms`` shows them)."""
 
@@ -218,6 +221,25 @@ class Machine:
         for hook in self._after_loop:
             hook()
         self.publish()
+
+    def cycle_failed(self, exc: Exception) -> None:
+        """The runtime caught ``exc`` from a cycle: every channel takes alarm 919000 (once, until its
+        reset), its axes stop with a_emergency and its program is aborted. The engine itself lets
+        exceptions through (tests want to see them); the runtime decides that the server goes on."""
+        for ch in self.channels:
+            if any(a.number == ALARM_INTERNAL and a.channel == ch.number for a in self.active_alarms):
+                continue
+            self.raise_alarm(
+                ALARM_INTERNAL,
+                ch,
+                f"internal error in cycle {self.cycle}: {type(exc).__name__}: {exc}; the axes were stopped. "
+                "Reset the channel; please report this with the server log",
+                params={"exception": type(exc).__name__},
+            )
+        # best effort: the PLC should see the alarm even if publishing is what failed (the runtime
+        # has logged the cycle's failure already)
+        with contextlib.suppress(Exception):
+            self.publish()
 
     # --- alarms and events ---------------------------------------------------------------
     def raise_alarm(

@@ -197,22 +197,34 @@ def test_unknown_clock_is_refused(demo: MachineConfig) -> None:
     assert Clock("stepped") is Clock.STEPPED
 
 
-async def test_an_engine_failure_stops_the_runtime_and_is_raised(demo: MachineConfig) -> None:
-    rt = Runtime(demo, clock="free", http_port=None)
+@pytest.mark.req("E-01")
+async def test_a_failing_cycle_does_not_end_the_server(demo: MachineConfig) -> None:
+    """Issue 12: a failure inside a cycle never ends the server: the channels take alarm 919000 (their
+    axes stop), the failed cycles are counted, the clock goes on, and a reset brings the machine back."""
+    async with Runtime(demo, clock="stepped", http_port=None) as rt:
+        ch = rt.machine.channel(1)
+        working = ch.interpolate
 
-    def broken() -> None:
-        raise ZeroDivisionError("monitor bug")
+        def broken() -> None:
+            raise ZeroDivisionError("monitor bug")
 
-    name_holder: list[str] = []
-
-    def ready(r: Runtime) -> None:
-        name_holder.append(r.image.name)
-        r.machine.channels[0].interpolate = broken  # type: ignore[method-assign]
-
-    with pytest.raises(ZeroDivisionError, match="monitor bug"):
-        await asyncio.wait_for(rt.serve(install_signal_handlers=False, ready=ready), timeout=10)
-    assert rt.stopped
-    assert not shm_exists(name_holder[0])
+        ch.interpolate = broken  # type: ignore[method-assign]
+        await rt.step(50)
+        assert rt.cycle == 50
+        assert rt.timing()["failed_cycles"] == 50
+        raised = [(a.number, a.channel) for a in rt.machine.active_alarms]
+        assert raised == [(919000, 1), (919000, 2)]  # once per channel, not once per failed cycle
+        assert rt.image.read("gpCh[0]^bahn_state.error_id_r") == 919000
+        assert rt.image.read("gpCh[0]^bahn_state.cycle_r") == 50  # the image is still published
+        ch.interpolate = working  # type: ignore[method-assign]
+        rt.operator.reset(1)
+        rt.operator.reset(2)
+        rt.operator.load_program(1, "N10 G01 X5 F6000\nN20 M30\n")
+        await rt.step(2)
+        rt.operator.start(1)
+        await rt.step(400)
+        assert not rt.machine.active_alarms
+        assert rt.image.read("gpCh[0]^bahn_state.program_state_r") == ProgramState.FINISHED
 
 
 # --------------------------------------------------------------------------------------------
@@ -376,7 +388,7 @@ def changed_at(rt: Runtime, condition: Callable[[], bool]) -> list[int]:
         if not first and condition():
             first.append(cycle)
 
-    rt.cycle_listeners.append(listener)
+    rt.on_cycle(listener)
     return first
 
 

@@ -1,0 +1,243 @@
+"""The one door an adapter gets: the host (design.md, point 2).
+
+An adapter never sees the runtime or the machine. It is handed an :class:`AdapterHost` with
+
+* ``image`` (:class:`ImagePort`): the process image, the PLC's door. Modbus, ADS and the HTTP image
+  endpoints read and write it exactly as a PLC attached to the shared memory does; a value reaches
+  each of them the same way, from the same publish;
+* ``operator`` (:class:`OperatorPort`): what an operator panel may do: load and select programs,
+  start, reset, feedhold, mode, jog, override, referencing, fault injection, and the state to show.
+  Requests are latched by the channel at the next cycle, as a PLC's are. The HTTP API and the
+  dashboard use it; the PLC doors do not;
+* ``events`` (:class:`EventFeed`): the typed events of ``schemas.events``, live and as a log;
+* ``step(n)`` for the stepped clock, and ``on_cycle`` for work that must follow every published cycle
+  (ADS device notifications).
+
+The runtime implements these protocols (``hli_server/runtime/host.py``). ``make lint`` forbids
+``hli_server.adapters`` to import ``hli_server.engine`` or ``hli_server.runtime``: everything an
+adapter may use is named here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from schemas.events import Event
+from schemas.layout import Direction, Layout, Signal
+from schemas.wire import Mode
+
+__all__ = [
+    "Accepted",
+    "AdapterHost",
+    "ConflictError",
+    "EventFeed",
+    "ImagePort",
+    "InvalidRequestError",
+    "LoggedEvent",
+    "NotFoundError",
+    "OperatorError",
+    "OperatorPort",
+    "StepRefusedError",
+    "Value",
+]
+
+Value = bool | int | float
+
+
+class OperatorError(Exception):
+    """An operator request the machine cannot take; the message says what and why."""
+
+
+class NotFoundError(OperatorError, LookupError):
+    """No such channel, axis, program or signal."""
+
+
+class ConflictError(OperatorError):
+    """Not now: a program runs, the channel is in the wrong mode, ..."""
+
+
+class InvalidRequestError(OperatorError, ValueError):
+    """A value the machine cannot take (out of range, unknown field)."""
+
+
+class StepRefusedError(OperatorError):
+    """``step()`` outside the stepped clock, or while the runtime does not run."""
+
+
+@dataclass(frozen=True, slots=True)
+class Accepted:
+    """An operator request the channel latches at ``effective_cycle``."""
+
+    channel: int
+    request: str
+    cycle: int
+    effective_cycle: int
+
+
+@dataclass(frozen=True, slots=True)
+class LoggedEvent:
+    """An event with its sequence number in the runtime's log (``GET /api/events?since=seq``)."""
+
+    seq: int
+    event: Event
+
+    def to_json(self) -> dict[str, Any]:
+        return {"seq": self.seq, **self.event.to_json()}
+
+
+class ImagePort(Protocol):
+    """The process image as the PLC doors see it (``hli_server.image.ProcessImage`` and the
+    buffer-backed image implement it)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def layout(self) -> Layout: ...
+
+    @property
+    def cycle(self) -> int:
+        """Cycle of the newest publish."""
+        ...
+
+    @property
+    def publish_count(self) -> int: ...
+
+    def read(self, st_path: str) -> Value:
+        """A field by ST path: PLC->CNC from the live half, CNC->PLC from the newest publish."""
+        ...
+
+    def write(self, st_path: str, value: object) -> None:
+        """A PLC->CNC field by ST path (latched at the next cycle); CNC->PLC fields are refused."""
+        ...
+
+    def write_signal(self, signal: Signal, value: object) -> None: ...
+
+    def write_bytes(self, offset: int, data: bytes) -> None:
+        """Raw write into the PLC->CNC half: whole fields only, every value checked first."""
+        ...
+
+    def read_half(self, direction: Direction) -> bytes:
+        """A copy of one half: PLC->CNC as it is now, CNC->PLC as last published."""
+        ...
+
+    def snapshot(self) -> tuple[int, bytes]:
+        """``(cycle, CNC->PLC half)`` of the newest consistent publish."""
+        ...
+
+
+class OperatorPort(Protocol):
+    """The operator panel's door (the HTTP API, the dashboard, the test harness).
+
+    Every method raises :class:`OperatorError` subclasses with a message for people:
+    :class:`NotFoundError` (unknown channel, axis, program), :class:`ConflictError` (not in this
+    state), :class:`InvalidRequestError` (a value out of range)."""
+
+    @property
+    def cycle(self) -> int: ...
+
+    @property
+    def time_s(self) -> float: ...
+
+    @property
+    def t_a_us(self) -> int: ...
+
+    @property
+    def machine_name(self) -> str: ...
+
+    def channel_numbers(self) -> list[int]: ...
+
+    def axis_names(self, channel: int | None = None) -> list[str]:
+        """All axes, or those of one channel, in their order."""
+        ...
+
+    def load_program(self, channel: int, text: str, name: str = "program") -> dict[str, Any]: ...
+
+    def select_program(self, channel: int, number: int) -> dict[str, Any]: ...
+
+    def start(self, channel: int) -> Accepted: ...
+
+    def reset(self, channel: int) -> Accepted: ...
+
+    def feedhold(self, channel: int, on: bool) -> Accepted: ...
+
+    def mode(self, channel: int, mode: Mode) -> Accepted: ...
+
+    def override(self, channel: int, permille: int) -> Accepted: ...
+
+    def jog(self, channel: int, axis: str, direction: int) -> Accepted: ...
+
+    def probe(self, channel: int, on: bool) -> Accepted: ...
+
+    def reference(self, axis: str) -> Accepted: ...
+
+    def faults(self, axis: str) -> dict[str, Any]: ...
+
+    def inject_faults(self, axis: str, **fields: float | bool) -> dict[str, Any]: ...
+
+    def clear_faults(self, axis: str) -> dict[str, Any]: ...
+
+    def snapshot(self) -> dict[str, Any]:
+        """Channels, axes, active alarms: ``GET /api/state``."""
+        ...
+
+    def alarms(self, history: int = 200) -> dict[str, Any]:
+        """``{"active": [...], "history": [...]}`` (the newest ``history`` of the history)."""
+        ...
+
+    def areas(self, channel: int) -> dict[str, Any]:
+        """The channel's area table (FCT-C14) as ``check`` lists it."""
+        ...
+
+    def timing(self) -> dict[str, Any]:
+        """Pacing statistics of the clock (``GET /api/timing``)."""
+        ...
+
+
+class EventFeed(Protocol):
+    """The typed events (``schemas.events``): live, and the runtime's log."""
+
+    def subscribe(self, listener: Callable[[Event], None]) -> Callable[[], None]:
+        """Call ``listener`` for every event from now on, synchronously inside the cycle (keep it
+        short: queue the event, do the I/O in a task of your own). Returns the unsubscribe call."""
+        ...
+
+    def since(self, seq: int = 0, limit: int = 1000) -> tuple[Sequence[LoggedEvent], int]:
+        """Logged events with ``seq`` greater than ``seq`` (oldest first, at most ``limit``) and the
+        newest sequence number."""
+        ...
+
+
+class AdapterHost(Protocol):
+    """What the runtime hands an adapter's ``start()``."""
+
+    @property
+    def image(self) -> ImagePort: ...
+
+    @property
+    def operator(self) -> OperatorPort: ...
+
+    @property
+    def events(self) -> EventFeed: ...
+
+    @property
+    def clock(self) -> str:
+        """``realtime``, ``stepped`` or ``free``."""
+        ...
+
+    @property
+    def bind(self) -> str:
+        """The address the network doors listen on (``--bind``)."""
+        ...
+
+    async def step(self, cycles: int = 1) -> int:
+        """Run ``cycles`` cycles now (stepped clock only; else :class:`StepRefusedError`); returns
+        the machine's cycle counter."""
+        ...
+
+    def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
+        """Call ``listener(cycle)`` after every published cycle (keep it short). Returns the
+        unsubscribe call."""
+        ...

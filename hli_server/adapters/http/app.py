@@ -1,0 +1,42 @@
+"""The control API as a FastAPI application on an adapter host (OpenAPI at ``/openapi.json``, ``/docs``).
+
+The operator panel of the simulated machine and the remote control of the integration tests (H-07):
+machine state, programs, start/feedhold/reset, mode, jog, override, referencing, stepping the stepped
+clock, fault injection (A3-05), alarms and events, and every image field by its ST path (H-01, H-02).
+Each concern is a router of its own (``routers/``); each takes the host as a dependency and knows
+nothing of the runtime or the engine.
+
+Operator requests (start, reset, mode, jog, ...) are latched by the channel at the next cycle, as a
+PLC's are; the answers say from which cycle they take effect (``202 Accepted``). Image writes go to
+the PLC->CNC half of the image exactly like a PLC's write and are latched the same way; writes to
+CNC->PLC fields (``_r``) are refused with 403 (H-02).
+"""
+
+from __future__ import annotations
+
+from fastapi import FastAPI
+
+from hli_server.adapters.host import AdapterHost
+from hli_server.adapters.http.deps import install_error_handlers
+from hli_server.adapters.http.routers import ROUTERS
+
+__all__ = ["create_app"]
+
+
+def create_app(host: AdapterHost) -> FastAPI:
+    """The FastAPI application for ``host`` (usable without a socket, e.g. with an ASGI client)."""
+    app = FastAPI(
+        title="hli-server control API",
+        version="1",
+        description=(
+            "Operator panel and remote control of the simulated CNC kernel: state, programs, "
+            "start/feedhold/reset, mode, jog, override, referencing, stepping (stepped clock), fault "
+            "injection, alarms, events and the process image by ST path. Requests to a channel are "
+            "latched at the next cycle (202). See docs/api.md."
+        ),
+    )
+    app.state.host = host
+    install_error_handlers(app)
+    for router in ROUTERS:
+        app.include_router(router)
+    return app

@@ -1,0 +1,89 @@
+"""Request and response bodies of the control API (pydantic at the edge)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt
+
+__all__ = [
+    "MAX_STEP",
+    "AcceptedBody",
+    "FaultsBody",
+    "FeedholdBody",
+    "ImageWriteBody",
+    "JogBody",
+    "ModeBody",
+    "OverrideBody",
+    "ProbeBody",
+    "ProgramBody",
+    "SelectBody",
+    "StepBody",
+]
+
+MAX_STEP = 10_000_000
+"""Most cycles one ``POST /api/step`` may ask for (10 000 s of simulated time at 1 ms)."""
+
+
+class _Body(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class ProgramBody(_Body):
+    text: str = Field(min_length=1, description="the NC program (DIN 66025 blocks, one per line)")
+    name: str = Field(default="program", min_length=1, max_length=200, description="shown in the state")
+
+
+class SelectBody(_Body):
+    number: int = Field(ge=1, le=65535, description="program number in the channel's program table")
+
+
+class FeedholdBody(_Body):
+    on: StrictBool = Field(description="true: hold the path; false: release it")
+
+
+class ProbeBody(_Body):
+    on: StrictBool = Field(description="the probe input for G100 measuring moves (C14-23)")
+
+
+class ModeBody(_Body):
+    mode: Literal["automatic", "manual"]
+
+
+class OverrideBody(_Body):
+    percent: float = Field(ge=0.0, le=120.0, description="feed override 0..120 %, in steps of 0.1 %")
+
+
+class JogBody(_Body):
+    axis: str = Field(description="axis name of this channel, e.g. X")
+    direction: Literal[-1, 0, 1] = Field(description="+1 / -1: key pressed; 0: key released")
+
+
+class StepBody(_Body):
+    cycles: int = Field(default=1, ge=1, le=MAX_STEP, description="cycles of T_A to run")
+
+
+class FaultsBody(_Body):
+    """Fault injection (A3-05), units of the engine: mm/s for friction and drift. Fields left out
+    keep their value; the engine checks the ranges (422 with the allowed range)."""
+
+    friction: float | None = Field(default=None, ge=0.0, description="stiction dead band [mm/s]")
+    gain_factor: float | None = Field(default=None, gt=0.0, le=100.0, description="multiplies kv")
+    encoder_stuck: StrictBool | None = Field(default=None, description="the encoder stops counting")
+    encoder_drift: float | None = Field(default=None, description="encoder drift [mm/s]")
+    drive_error: StrictBool | None = Field(default=None, description="the drive reports an error")
+
+
+class ImageWriteBody(_Body):
+    # strict: "yes" or "300" are refused (422), not read as true or 300; the field's type is checked
+    # by the layout afterwards (Signal.coerce), with its own one-line message
+    value: StrictBool | StrictInt | StrictFloat = Field(
+        description="BOOL: true/false or 0/1; DINT/UDINT: integer; LREAL: number"
+    )
+
+
+class AcceptedBody(BaseModel):
+    channel: int
+    request: str
+    cycle: int = Field(description="the machine's cycle when the request was taken")
+    effective_cycle: int = Field(description="the cycle that latches the request")

@@ -1,0 +1,121 @@
+"""The HTTP adapter: serves :func:`~hli_server.adapters.http.app.create_app` with uvicorn.
+
+It is served *inside the runtime's event loop* (``uvicorn.Server.serve()`` as a task on a socket the
+adapter binds itself); the runtime owns the signals. Every handler is ``async def``: a plain ``def``
+handler would run in a worker thread and touch the machine from outside the loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import socket
+from collections.abc import Generator
+
+import uvicorn
+
+from hli_server.adapters.host import AdapterHost
+from hli_server.adapters.http.app import create_app
+from hli_server.adapters.http.options import HttpOptions
+
+__all__ = ["HttpApiAdapter"]
+
+logger = logging.getLogger(__name__)
+
+
+class _Server(uvicorn.Server):
+    """uvicorn without its own signal handling: the runtime owns SIGINT/SIGTERM."""
+
+    @contextlib.contextmanager
+    def capture_signals(self) -> Generator[None, None, None]:
+        yield
+
+
+class HttpApiAdapter:
+    """Serves the control API on ``bind:port`` (0 = a free port; :attr:`port` tells which)."""
+
+    name = "http"
+    Options = HttpOptions
+
+    def __init__(self, *, bind: str = "127.0.0.1", **options: object) -> None:
+        self.options = HttpOptions.model_validate(options)
+        self.bind = bind
+        self.requested_port = self.options.port
+        self.port: int | None = None
+        self.graceful_timeout = self.options.graceful_timeout
+        self._server: _Server | None = None
+        self._task: asyncio.Task[None] | None = None
+        self._socket: socket.socket | None = None
+
+    @property
+    def url(self) -> str:
+        if self.port is None:
+            raise RuntimeError("the HTTP API is not listening (start it first)")
+        host = f"[{self.bind}]" if ":" in self.bind else self.bind
+        return f"http://{host}:{self.port}"
+
+    def endpoints(self) -> list[str]:
+        if self.port is None:
+            return ["HTTP control API: not listening"]
+        return [f"HTTP control API: {self.url}  (OpenAPI: {self.url}/docs)"]
+
+    async def start(self, host: AdapterHost) -> None:
+        self._socket = sock = _listen(self.bind, self.requested_port)
+        self.port = sock.getsockname()[1]
+        config = uvicorn.Config(
+            create_app(host),
+            log_config=None,
+            access_log=False,
+            lifespan="off",
+            ws="none",
+            timeout_graceful_shutdown=self.graceful_timeout,
+        )
+        self._server = server = _Server(config)
+        self._task = task = asyncio.create_task(server.serve(sockets=[sock]), name="hli-http-api")
+        while not server.started:
+            if task.done():
+                sock.close()
+                task.result()  # raises what went wrong
+                raise RuntimeError(f"HTTP control API on {self.bind}:{self.port} stopped during start-up")
+            await asyncio.sleep(0.005)
+
+    async def stop(self) -> None:
+        server, task = self._server, self._task
+        self._server = self._task = None
+        if server is not None and task is not None:
+            server.should_exit = True
+            try:
+                await asyncio.wait_for(asyncio.shield(task), self.graceful_timeout + 3.0)
+            except TimeoutError:
+                logger.warning("HTTP control API did not stop in time; closing its connections")
+                server.force_exit = True
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+        if self._socket is not None:
+            self._socket.close()
+            self._socket = None
+        self.port = None
+
+
+def _listen(bind: str, port: int) -> socket.socket:
+    try:
+        infos = socket.getaddrinfo(bind, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except socket.gaierror as exc:
+        raise OSError(f"HTTP control API: cannot resolve bind address {bind!r}: {exc.strerror}") from None
+    family, kind, proto, _, address = infos[0]
+    sock = socket.socket(family, kind, proto)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(address)
+        sock.listen(128)
+    except OSError as exc:
+        sock.close()
+        raise OSError(
+            exc.errno,
+            f"HTTP control API: cannot listen on {bind}:{port}: {exc.strerror}; "
+            "choose another --http-port (0 = any free port) or --bind address",
+        ) from None
+    sock.setblocking(False)
+    return sock

@@ -1,0 +1,31 @@
+"""The runtime: pacing the engine (stepped / real time / free), its image, its adapters (E-01, H-01).
+
+``Runtime`` (``core.py``) ties the pieces together: ``pacing.py`` (clocks and their statistics),
+``events.py`` (the event log), ``image.py`` (creating the process image), ``programs.py`` (program
+files) and ``host.py`` (the door the adapters get: image, operator panel, events, step).
+"""
+
+from hli_server.adapters.host import LoggedEvent
+from hli_server.runtime.core import AdapterSpec, Runtime, RuntimeStateError
+from hli_server.runtime.events import EVENT_LOG, EventLog
+from hli_server.runtime.host import OperatorPanel, RuntimeHost
+from hli_server.runtime.image import ImageFactory, RuntimeImage, shared_memory_image
+from hli_server.runtime.pacing import Clock, ClockError, PacingStats, precise_event_loop
+
+__all__ = [
+    "EVENT_LOG",
+    "AdapterSpec",
+    "Clock",
+    "ClockError",
+    "EventLog",
+    "ImageFactory",
+    "LoggedEvent",
+    "OperatorPanel",
+    "PacingStats",
+    "Runtime",
+    "RuntimeHost",
+    "RuntimeImage",
+    "RuntimeStateError",
+    "precise_event_loop",
+    "shared_memory_image",
+]

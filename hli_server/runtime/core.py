@@ -1,0 +1,462 @@
+"""The runtime: owns the engine and the process image, paces the cycle, hosts the adapters (E-01, H-01).
+
+One asyncio event loop, no threads for the engine. Every cycle::
+
+    image.latch_into(machine.hli)                  PLC->CNC half into the engine (one consistent copy)
+    machine.step(1)                                one interpolation cycle of T_A
+    image.publish_from(machine.hli, machine.cycle) CNC->PLC half out (never half-written)
+
+The pieces live beside this module: ``pacing.py`` (the clocks and their statistics), ``events.py``
+(the event log), ``image.py`` (creating the image), ``programs.py`` (program files) and ``host.py``
+(what the adapters get: image, operator panel, events, step).
+
+Adapters start in order after the image exists and before the first cycle and stop in reverse
+order; then the image is closed and unlinked. :meth:`Runtime.serve` does all of it and stops
+cleanly on SIGINT/SIGTERM.
+
+A failure inside a cycle never ends the server (issue 12): the cycle's exception is logged with its
+traceback, every channel takes alarm 919000 (its axes stop, its program is aborted), the failed
+cycles are counted (``GET /api/timing``), and the clock keeps pacing. A reset clears the alarm.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import signal
+import time
+from collections.abc import Callable, Iterable, Mapping
+from typing import TYPE_CHECKING, Any
+
+from hli_server.adapters.host import LoggedEvent
+from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
+from hli_server.engine.machine import Machine
+from hli_server.runtime.events import EventLog
+from hli_server.runtime.host import OperatorPanel, RuntimeHost
+from hli_server.runtime.image import ImageFactory, RuntimeImage, shared_memory_image
+from hli_server.runtime.pacing import (
+    FREE_SLICE_S,
+    STEP_BATCH,
+    Clock,
+    ClockError,
+    PacingStats,
+    run_free,
+    run_realtime,
+)
+from hli_server.runtime.programs import read_program_file
+
+if TYPE_CHECKING:
+    from types import TracebackType
+
+    from schemas.config import MachineConfig
+    from schemas.events import Event
+    from schemas.layout import Layout
+
+__all__ = ["AdapterSpec", "Runtime", "RuntimeStateError"]
+
+logger = logging.getLogger(__name__)
+
+FAILURE_LOG_INTERVAL_S = 5.0
+"""A cycle that keeps failing is logged with its traceback at most this often."""
+
+
+class RuntimeStateError(RuntimeError):
+    """The runtime is not in the state the call needs (not started, already stopped)."""
+
+
+AdapterSpec = Adapter | str | tuple[str, Mapping[str, Any]]
+
+
+class Runtime:
+    """The machine, its image and its adapters, paced by one clock (E-01, H-01, H-07).
+
+    ``adapters`` lists what to start: adapter objects, registered names (``"modbus"``) or
+    ``(name, options)``. ``None`` means the HTTP control API on ``bind:http_port`` when
+    ``http_port`` is not None. ``http_port`` 0 binds a free port (ask :attr:`http_url`).
+
+    Use it as ``async with Runtime(config, clock="stepped", http_port=None) as rt: await rt.step(10)``,
+    or :meth:`serve` for a process that runs until a signal.
+    """
+
+    def __init__(
+        self,
+        config: MachineConfig,
+        clock: Clock | str = Clock.REALTIME,
+        bind: str = "127.0.0.1",
+        http_port: int | None = 8080,
+        image_name: str | None = None,
+        adapters: Iterable[AdapterSpec] | None = None,
+        *,
+        max_catch_up: int = 50,
+        image_factory: ImageFactory | None = None,
+        stop_after_cycles: int | None = None,
+        read_program: Callable[[str], str] | None = read_program_file,
+    ) -> None:
+        try:
+            self.clock = Clock(clock)
+        except ValueError:
+            raise ValueError(
+                f"unknown clock {clock!r}; use one of {', '.join(c.value for c in Clock)}"
+            ) from None
+        if max_catch_up < 1:
+            raise ValueError(f"max_catch_up must be at least 1 cycle, got {max_catch_up}")
+        if http_port is not None and not 0 <= http_port <= 65535:
+            raise ValueError(f"HTTP port {http_port} is out of range 0..65535 (0 = a free port)")
+        self.config = config
+        self.bind = bind
+        self.http_port = http_port
+        self.image_name = image_name
+        self.max_catch_up = max_catch_up
+        self.stop_after_cycles = stop_after_cycles
+        self.machine = Machine(config, read_program=read_program)
+        self.t_a = self.machine.t_a
+        self.stats = PacingStats(self.t_a)
+        self.event_log = EventLog()
+        self.machine.event_listeners.append(self.event_log)
+        self.operator = OperatorPanel(self.machine, self.timing)
+        self.host = RuntimeHost(self, self.operator)
+        self._image_factory = image_factory or shared_memory_image
+        self._image: RuntimeImage | None = None
+        specs: list[AdapterSpec]
+        if adapters is None:
+            specs = [("http", {"port": http_port})] if http_port is not None else []
+        else:
+            specs = list(adapters)
+        self._adapter_specs = specs
+        self.adapters: list[Adapter] = []
+        self._started_adapters: list[Adapter] = []
+        self._cycle_listeners: list[Callable[[int], None]] = []
+        self._pacer: asyncio.Task[None] | None = None
+        self._stop_event: asyncio.Event | None = None
+        self._step_lock: asyncio.Lock | None = None
+        self._cycle_waiters: list[tuple[int, asyncio.Future[None]]] = []
+        self._failure: BaseException | None = None
+        self._stop_cycle: int | None = None
+        self.failed_cycles = 0
+        self._last_failure_log = -FAILURE_LOG_INTERVAL_S
+        self.started = False
+        self.stopped = False
+
+    # --- properties -----------------------------------------------------------------------
+    @property
+    def image(self) -> RuntimeImage:
+        if self._image is None:
+            raise RuntimeStateError("the process image exists only while the runtime runs (await start())")
+        return self._image
+
+    @property
+    def layout(self) -> Layout:
+        return self.image.layout
+
+    @property
+    def cycle(self) -> int:
+        return self.machine.cycle
+
+    def adapter(self, name: str) -> Adapter:
+        for a in self.adapters:
+            if a.name == name:
+                return a
+        raise KeyError(f"no adapter {name!r} is running (running: {[a.name for a in self.adapters]})")
+
+    @property
+    def http_url(self) -> str:
+        """Base URL of the HTTP control API (after start)."""
+        url: str = getattr(self.adapter("http"), "url")  # noqa: B009 - the HTTP adapter's own attribute
+        return url
+
+    def endpoints(self) -> list[str]:
+        """Where everything listens, one line each (the ``run`` banner)."""
+        lines = [f"shared memory image: {self.image.name}"]
+        for a in self.adapters:
+            lines.extend(a.endpoints())
+        return lines
+
+    # --- events and cycle listeners --------------------------------------------------------
+    def events_since(self, since: int = 0, limit: int = 1000) -> tuple[list[LoggedEvent], int]:
+        """Events with ``seq > since`` (oldest first, at most ``limit``) and the newest seq."""
+        events, latest = self.event_log.since(since, limit)
+        return list(events), latest
+
+    def add_event_listener(self, listener: Callable[[Event], None]) -> Callable[[], None]:
+        """Called synchronously, inside the cycle, for every engine event (MQTT, H-05). Keep it
+        short: queue the event and do the I/O in a task of your own. Returns the unsubscribe call."""
+        return self.event_log.subscribe(listener)
+
+    def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
+        """``listener(cycle)`` after every published cycle (harnesses, ADS notifications); keep it short.
+        Returns the unsubscribe call."""
+        self._cycle_listeners.append(listener)
+
+        def unsubscribe() -> None:
+            with contextlib.suppress(ValueError):
+                self._cycle_listeners.remove(listener)
+
+        return unsubscribe
+
+    # --- life cycle -----------------------------------------------------------------------
+    async def __aenter__(self) -> Runtime:
+        await self.start()
+        return self
+
+    async def __aexit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        await self.stop()
+
+    async def start(self) -> None:
+        """Create the image, start the adapters in order, then the clock. On failure, undo all."""
+        if self.started:
+            raise RuntimeStateError("the runtime was started already; build a new Runtime to run again")
+        self.started = True
+        self._stop_event = asyncio.Event()
+        self._step_lock = asyncio.Lock()
+        if self.stop_after_cycles is not None:
+            self._stop_cycle = self.machine.cycle + self.stop_after_cycles
+        try:
+            self._image = self._image_factory(self.config, self.image_name)
+            self._image.init_from(self.machine.hli, self.machine.cycle)
+            for spec in self._adapter_specs:
+                adapter = self._make_adapter(spec)
+                self.adapters.append(adapter)
+                await adapter.start(self.host)
+                self._started_adapters.append(adapter)
+                logger.info("adapter %s started: %s", adapter.name, "; ".join(adapter.endpoints()))
+        except BaseException:
+            await self.stop()
+            raise
+        self.stats.started_at = time.monotonic()
+        self.stats.cycles_at_start = self.machine.cycle
+        if self.clock is Clock.REALTIME:
+            self._pacer = asyncio.create_task(
+                run_realtime(
+                    self._one_cycle,
+                    self._after_cycles,
+                    self._cycles_left,
+                    self.stats,
+                    max_catch_up=self.max_catch_up,
+                ),
+                name="hli-runtime-realtime",
+            )
+        elif self.clock is Clock.FREE:
+            self._pacer = asyncio.create_task(
+                run_free(self._one_cycle, self._after_cycles, self._cycles_left, self.stats),
+                name="hli-runtime-free",
+            )
+        if self._pacer is not None:
+            self._pacer.add_done_callback(self._pacer_done)
+        self._check_stop_cycle()
+
+    def _make_adapter(self, spec: AdapterSpec) -> Adapter:
+        if isinstance(spec, str):
+            return create_adapter(spec, bind=self.bind)
+        if isinstance(spec, tuple):
+            name, options = spec
+            return create_adapter(name, bind=self.bind, options=options)
+        if not isinstance(spec, Adapter):
+            raise AdapterError(f"not an adapter: {spec!r} (needs name, start(host), stop(), endpoints())")
+        return spec
+
+    async def stop(self) -> None:
+        """Stop the clock, the adapters (reverse order), then close and unlink the image. Idempotent."""
+        if self.stopped:
+            return
+        self.stopped = True
+        if self._stop_event is not None:
+            self._stop_event.set()
+        if self._pacer is not None:
+            self._pacer.cancel()
+            # a failure of the clock was recorded by _pacer_done and is raised by wait_stopped/serve;
+            # here it must not keep the adapters and the image from being closed
+            await asyncio.wait([self._pacer])
+        errors: list[BaseException] = []
+        for adapter in reversed(self._started_adapters):
+            try:
+                await adapter.stop()
+            except Exception as exc:  # one adapter's failure must not leave the others running
+                logger.exception("adapter %s failed to stop cleanly", adapter.name)
+                errors.append(exc)
+        self._started_adapters.clear()
+        for _, fut in self._cycle_waiters:
+            if not fut.done():
+                fut.cancel()
+        self._cycle_waiters.clear()
+        if self._image is not None:
+            image, self._image = self._image, None
+            image.close()
+        with contextlib.suppress(ValueError):
+            self.machine.event_listeners.remove(self.event_log)
+        if errors:
+            raise errors[0]
+
+    def request_stop(self) -> None:
+        """Ask :meth:`wait_stopped` / :meth:`serve` to shut down (signal handlers, ``--cycles``)."""
+        if self._stop_event is not None:
+            self._stop_event.set()
+
+    async def wait_stopped(self) -> None:
+        """Until :meth:`request_stop` (or a failure of the clock); re-raises the clock's failure."""
+        if self._stop_event is None:
+            raise RuntimeStateError("the runtime is not started")
+        await self._stop_event.wait()
+        if self._failure is not None:
+            raise self._failure
+
+    async def serve(
+        self, *, install_signal_handlers: bool = True, ready: Callable[[Runtime], None] | None = None
+    ) -> None:
+        """Start, run until SIGINT/SIGTERM (or ``stop_after_cycles``), stop cleanly.
+
+        ``ready`` is called once everything listens (the CLI prints its banner there).
+        """
+        loop = asyncio.get_running_loop()
+        handled: list[signal.Signals] = []
+        try:
+            await self.start()
+            if install_signal_handlers:
+                for sig in (signal.SIGINT, signal.SIGTERM):
+                    with contextlib.suppress(NotImplementedError, RuntimeError):
+                        loop.add_signal_handler(sig, self._on_signal, sig)
+                        handled.append(sig)
+            if ready is not None:
+                ready(self)
+            await self.wait_stopped()
+        finally:
+            for sig in handled:
+                loop.remove_signal_handler(sig)
+            await self.stop()
+
+    def _on_signal(self, sig: int) -> None:
+        logger.info("received %s: shutting down", signal.Signals(sig).name)
+        self.request_stop()
+
+    def _pacer_done(self, task: asyncio.Task[None]) -> None:
+        if task.cancelled():
+            return
+        exc = task.exception()
+        if exc is not None:
+            logger.error("the %s clock stopped at cycle %d: %r", self.clock, self.machine.cycle, exc)
+            self._failure = exc
+        self.request_stop()
+
+    # --- the cycle ------------------------------------------------------------------------
+    def _one_cycle(self) -> int:
+        image = self._image
+        if image is None:
+            raise RuntimeStateError("the runtime is stopped")
+        machine = self.machine
+        try:
+            image.latch_into(machine.hli)
+            machine.step(1)
+        except Exception as exc:  # the server outlives a failing cycle: the channels take an error
+            self._cycle_failed(exc)
+        try:
+            image.publish_from(machine.hli, machine.cycle)
+        except Exception as exc:
+            self._cycle_failed(exc)
+        for listener in self._cycle_listeners:
+            try:
+                listener(machine.cycle)
+            except Exception:  # an adapter's bug must not stop the clock
+                logger.exception("cycle listener %r failed at cycle %d", listener, machine.cycle)
+        return machine.cycle
+
+    def _cycle_failed(self, exc: Exception) -> None:
+        self.failed_cycles += 1
+        now = time.monotonic()
+        if now - self._last_failure_log >= FAILURE_LOG_INTERVAL_S:
+            self._last_failure_log = now
+            logger.error(
+                "cycle %d failed (%d failed cycles so far); the channels were stopped with alarm 919000 and "
+                "the clock goes on. Please report this with the traceback:",
+                self.machine.cycle,
+                self.failed_cycles,
+                exc_info=exc,
+            )
+        self.machine.cycle_failed(exc)
+
+    def _after_cycles(self) -> None:
+        cycle = self.machine.cycle
+        if self._cycle_waiters:
+            keep: list[tuple[int, asyncio.Future[None]]] = []
+            for target, fut in self._cycle_waiters:
+                if fut.done():
+                    continue
+                if cycle >= target:
+                    fut.set_result(None)
+                else:
+                    keep.append((target, fut))
+            self._cycle_waiters = keep
+        self._check_stop_cycle()
+
+    def _check_stop_cycle(self) -> None:
+        if self._stop_cycle is not None and self.machine.cycle >= self._stop_cycle:
+            self.request_stop()
+
+    def _cycles_left(self) -> int:
+        """Cycles until ``stop_after_cycles`` (a large number without it)."""
+        if self._stop_cycle is None:
+            return 1 << 62
+        return max(0, self._stop_cycle - self.machine.cycle)
+
+    def _running_or_raise(self) -> None:
+        if not self.started or self.stopped or self._image is None:
+            raise RuntimeStateError("the runtime is not running (await start() first, or it was stopped)")
+
+    async def step(self, cycles: int = 1) -> int:
+        """Run ``cycles`` cycles now (stepped clock only); returns the machine's cycle counter.
+
+        Long runs yield to the event loop now and then, so the adapters stay responsive; concurrent
+        calls run one after the other.
+        """
+        if self.clock is not Clock.STEPPED:
+            raise ClockError(
+                f"step() needs the stepped clock; this runtime runs the {self.clock} clock "
+                "(start it with clock='stepped' / --clock stepped)"
+            )
+        if cycles < 0:
+            raise ValueError(f"cycles must be >= 0, got {cycles}")
+        self._running_or_raise()
+        assert self._step_lock is not None
+        async with self._step_lock:
+            left = cycles
+            while left > 0:
+                self._running_or_raise()
+                slice_end = time.monotonic() + FREE_SLICE_S
+                batch = min(left, STEP_BATCH)
+                done = 0
+                while done < batch:
+                    self._one_cycle()
+                    done += 1
+                    if time.monotonic() > slice_end:
+                        break
+                left -= done
+                self.stats.wakeup(done)
+                self._after_cycles()
+                if left > 0:
+                    await asyncio.sleep(0)
+        return self.machine.cycle
+
+    async def wait_cycle(self, cycle: int, timeout: float | None = None) -> int:
+        """Until the machine has run ``cycle`` (any clock; in stepped mode someone must step)."""
+        self._running_or_raise()
+        if self.machine.cycle >= cycle:
+            return self.machine.cycle
+        fut: asyncio.Future[None] = asyncio.get_running_loop().create_future()
+        self._cycle_waiters.append((cycle, fut))
+        await asyncio.wait_for(fut, timeout)
+        return self.machine.cycle
+
+    # --- reporting ------------------------------------------------------------------------
+    def timing(self) -> dict[str, Any]:
+        """Pacing statistics (``GET /api/timing``)."""
+        out = self.stats.summary(self.clock, self.machine.cycle)
+        out["failed_cycles"] = self.failed_cycles
+        return out
+
+    def __repr__(self) -> str:
+        state = "stopped" if self.stopped else "running" if self.started else "new"
+        return f"Runtime({self.config.name!r}, {self.clock} clock, cycle {self.machine.cycle}, {state})"

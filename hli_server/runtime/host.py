@@ -1,0 +1,239 @@
+"""The host the runtime hands its adapters (``hli_server.adapters.host``): image, operator, events, step.
+
+:class:`OperatorPanel` is the operator panel's door onto the machine: every request goes through
+the channel's own methods (latched at the next cycle, refused with the channel's own alarm), faults
+through ``Machine.inject_fault`` (so that the ``fault`` event is emitted), so no adapter repeats an
+engine rule.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from hli_server.adapters.host import (
+    Accepted,
+    ConflictError,
+    EventFeed,
+    ImagePort,
+    InvalidRequestError,
+    NotFoundError,
+    OperatorPort,
+    StepRefusedError,
+)
+from hli_server.engine.areas.monitor import AreaMonitor
+from hli_server.engine.axis import Axis
+from hli_server.engine.channel import Channel
+from hli_server.engine.machine import Machine
+from schemas.wire import Mode
+
+if TYPE_CHECKING:
+    from hli_server.runtime.core import Runtime
+
+__all__ = ["OperatorPanel", "RuntimeHost"]
+
+
+class OperatorPanel(OperatorPort):
+    """:class:`~hli_server.adapters.host.OperatorPort` on a :class:`Machine`."""
+
+    def __init__(self, machine: Machine, timing: Callable[[], dict[str, Any]]) -> None:
+        self._m = machine
+        self._timing = timing
+
+    # --- what and where -------------------------------------------------------------------
+    @property
+    def cycle(self) -> int:
+        return self._m.cycle
+
+    @property
+    def time_s(self) -> float:
+        return self._m.time
+
+    @property
+    def t_a_us(self) -> int:
+        return self._m.config.cycle_time_us
+
+    @property
+    def machine_name(self) -> str:
+        return self._m.config.name
+
+    def channel_numbers(self) -> list[int]:
+        return [ch.number for ch in self._m.channels]
+
+    def axis_names(self, channel: int | None = None) -> list[str]:
+        if channel is None:
+            return [a.name for a in self._m.axes]
+        return list(self._channel(channel).axis_names)
+
+    def _channel(self, number: int) -> Channel:
+        try:
+            return self._m.channel(number)
+        except KeyError:
+            have = ", ".join(str(n) for n in self.channel_numbers())
+            raise NotFoundError(f"no channel {number}; the machine has channels {have}") from None
+
+    def _axis(self, name: str) -> Axis:
+        axis = self._m.axes_by_name.get(name)
+        if axis is None:
+            raise NotFoundError(f"no axis {name!r}; the machine has axes {', '.join(self._m.axes_by_name)}")
+        return axis
+
+    def _accepted(self, ch: Channel, what: str) -> Accepted:
+        cycle = self._m.cycle
+        return Accepted(channel=ch.number, request=what, cycle=cycle, effective_cycle=cycle + 1)
+
+    # --- programs -------------------------------------------------------------------------
+    def load_program(self, channel: int, text: str, name: str = "program") -> dict[str, Any]:
+        ch = self._channel(channel)
+        refused = ch.load_program(text, name)
+        if refused is not None:
+            raise ConflictError(f"channel {channel}: {refused.message}; reset the channel first")
+        lines = text.count("\n") + (0 if text.endswith("\n") else 1)
+        return {"channel": channel, "program": name, "lines": lines, "cycle": self._m.cycle}
+
+    def select_program(self, channel: int, number: int) -> dict[str, Any]:
+        ch = self._channel(channel)
+        entry = next((p for p in ch.config.programs if p.number == number), None)
+        if entry is None:
+            have = ", ".join(str(p.number) for p in ch.config.programs) or "none"
+            raise NotFoundError(
+                f"channel {channel}: program {number} is not in the program table (have: {have})"
+            )
+        refused = ch.select_program(number)
+        if refused is not None:
+            raise ConflictError(f"channel {channel}: {refused.message}")
+        return {"channel": channel, "program": entry.name, "number": number, "cycle": self._m.cycle}
+
+    # --- channel requests (latched at the next cycle) --------------------------------------
+    def start(self, channel: int) -> Accepted:
+        ch = self._channel(channel)
+        ch.request_start()
+        return self._accepted(ch, "start")
+
+    def reset(self, channel: int) -> Accepted:
+        ch = self._channel(channel)
+        ch.request_reset()
+        return self._accepted(ch, "reset")
+
+    def feedhold(self, channel: int, on: bool) -> Accepted:
+        ch = self._channel(channel)
+        ch.request_feedhold(on)
+        return self._accepted(ch, f"feedhold {'on' if on else 'off'}")
+
+    def mode(self, channel: int, mode: Mode) -> Accepted:
+        ch = self._channel(channel)
+        ch.request_mode(Mode(mode))
+        return self._accepted(ch, f"mode {Mode(mode).label}")
+
+    def override(self, channel: int, permille: int) -> Accepted:
+        if not 0 <= permille <= 1200:
+            raise InvalidRequestError(f"override {permille / 10:g} % is outside 0..120 %")
+        ch = self._channel(channel)
+        ch.request_override(permille)
+        return self._accepted(ch, f"override {permille / 10:g} %")
+
+    def jog(self, channel: int, axis: str, direction: int) -> Accepted:
+        ch = self._channel(channel)
+        if axis not in ch.axis_names:
+            raise NotFoundError(
+                f"channel {channel} has no axis {axis!r}; its axes are {', '.join(ch.axis_names)}"
+            )
+        if direction not in (-1, 0, 1):
+            raise InvalidRequestError(f"jog direction {direction}: use +1, -1 or 0 (release)")
+        ch.request_jog(axis, direction)
+        key = {1: "+", -1: "-"}.get(direction, " released")
+        return self._accepted(ch, f"jog {axis}{key}")
+
+    def probe(self, channel: int, on: bool) -> Accepted:
+        ch = self._channel(channel)
+        if not self._m.has_monitor(AreaMonitor):
+            raise ConflictError("the machine has no area monitoring (no G100 measuring moves)")
+        self._m.monitor(AreaMonitor).handler(ch.number).request_probe(on)
+        return self._accepted(ch, f"probe {'on' if on else 'off'}")
+
+    def reference(self, axis: str) -> Accepted:
+        ax = self._axis(axis)
+        ch = self._m.channel_of(ax)
+        ch.request_reference(ax.name)
+        return self._accepted(ch, f"reference {ax.name}")
+
+    # --- faults (A3-05) -------------------------------------------------------------------
+    def faults(self, axis: str) -> dict[str, Any]:
+        ax = self._axis(axis)
+        return {"axis": ax.name, **ax.faults.as_dict()}
+
+    def inject_faults(self, axis: str, **fields: float | bool) -> dict[str, Any]:
+        ax = self._axis(axis)
+        if not fields:
+            raise InvalidRequestError("give at least one fault field (DELETE clears them all)")
+        try:
+            self._m.inject_fault(ax.name, **fields)
+        except ValueError as exc:
+            raise InvalidRequestError(str(exc)) from None
+        return self.faults(axis)
+
+    def clear_faults(self, axis: str) -> dict[str, Any]:
+        ax = self._axis(axis)
+        self._m.inject_fault(ax.name)
+        return self.faults(axis)
+
+    # --- state ----------------------------------------------------------------------------
+    def snapshot(self) -> dict[str, Any]:
+        return self._m.snapshot()
+
+    def alarms(self, history: int = 200) -> dict[str, Any]:
+        m = self._m
+        newest = list(m.alarm_history)[-history:] if history > 0 else []
+        return {"active": [a.to_json() for a in m.active_alarms], "history": [a.to_json() for a in newest]}
+
+    def areas(self, channel: int) -> dict[str, Any]:
+        ch = self._channel(channel)
+        if not self._m.has_monitor(AreaMonitor):
+            return {"channel": ch.number, "axes": list(ch.axis_names), "areas": []}
+        return self._m.monitor(AreaMonitor).handler(ch.number).to_json()
+
+    def timing(self) -> dict[str, Any]:
+        return self._timing()
+
+
+class RuntimeHost:
+    """The :class:`~hli_server.adapters.host.AdapterHost` of a running :class:`Runtime`."""
+
+    def __init__(self, runtime: Runtime, operator: OperatorPanel) -> None:
+        self._rt = runtime
+        self._operator = operator
+
+    @property
+    def image(self) -> ImagePort:
+        return self._rt.image
+
+    @property
+    def operator(self) -> OperatorPort:
+        return self._operator
+
+    @property
+    def events(self) -> EventFeed:
+        return self._rt.event_log
+
+    @property
+    def clock(self) -> str:
+        return str(self._rt.clock)
+
+    @property
+    def bind(self) -> str:
+        return self._rt.bind
+
+    async def step(self, cycles: int = 1) -> int:
+        from hli_server.runtime.core import RuntimeStateError
+        from hli_server.runtime.pacing import ClockError
+
+        try:
+            return await self._rt.step(cycles)
+        except (ClockError, RuntimeStateError) as exc:
+            raise StepRefusedError(str(exc)) from None
+
+    def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
+        return self._rt.on_cycle(listener)
+
+    def __repr__(self) -> str:
+        return f"RuntimeHost({self._rt!r})"
