@@ -47,8 +47,9 @@ _LOCAL_NET_ID = bytes((192, 168, 1, 50, 1, 1))  # what we assign on 0x1000 port 
 def _symbol_entry(name: str) -> bytes:
     group, offset, size, data_type, type_name = _SYMBOLS.get(name, (0x4040, 0x2000, 4, 3, "DINT"))
     comment = b""
+    flags = 0  # no type GUID, no attributes: the entry ends after the comment
     body = struct.pack(
-        "<IIIIHHHHH", group, offset, size, data_type, 0x0008, 0, len(name), len(type_name), len(comment)
+        "<IIIIHHHHH", group, offset, size, data_type, flags, 0, len(name), len(type_name), len(comment)
     )
     body += name.encode() + b"\0" + type_name.encode() + b"\0" + comment + b"\0"
     return struct.pack("<I", 4 + len(body)) + body
