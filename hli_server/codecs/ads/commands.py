@@ -339,8 +339,8 @@ class ReadDeviceInfoResponse:
 
     def encode(self) -> bytes:
         raw = self.name.encode("cp1252")
-        if len(raw) > 16:
-            raise ValueError(f"ADS device name {self.name!r} is {len(raw)} bytes, at most 16 fit")
+        if len(raw) > 16 or b"\0" in raw:
+            raise ValueError(f"ADS device name {self.name!r} must fit 16 bytes and be free of NUL")
         return _DEVICE_INFO.pack(self.result, self.major, self.minor, self.build, raw)
 
     @classmethod

@@ -54,7 +54,7 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Final, Literal, NamedTuple
 
-from hli_server.codecs.ads.constants import RESPONSE_FLAGS, AmsTcpCommand, ErrorCode
+from hli_server.codecs.ads.constants import REQUEST_FLAGS, RESPONSE_FLAGS, AmsTcpCommand, ErrorCode
 from hli_server.codecs.ads.errors import AdsError, AmsStreamError
 
 __all__ = [
@@ -128,6 +128,20 @@ class NetId(bytes):
         return f"NetId('{self}')"
 
 
+_NET_IDS: dict[bytes, NetId] = {}
+_NET_ID_CACHE_SIZE: Final = 4096
+
+
+def _net_id(octets: bytes) -> NetId:
+    """The NetId of 6 octets, shared: a connection sends the same two NetIds in every frame."""
+    net_id = _NET_IDS.get(octets)
+    if net_id is None:
+        if len(_NET_IDS) >= _NET_ID_CACHE_SIZE:  # a peer cycling through NetIds: stay bounded
+            _NET_IDS.clear()
+        net_id = _NET_IDS[octets] = NetId(octets)
+    return net_id
+
+
 class AmsAddress(NamedTuple):
     """NetId and AMS port: where a request goes to or comes from."""
 
@@ -138,9 +152,12 @@ class AmsAddress(NamedTuple):
         return f"{self.net_id}:{self.port}"
 
 
-@dataclass(frozen=True, slots=True)
-class AmsHeader:
-    """The 32-byte AMS header, field by field (flat: this is decoded for every request)."""
+class AmsHeader(NamedTuple):
+    """The 32-byte AMS header, field by field.
+
+    A NamedTuple, flat, unlike the payload dataclasses: one is made for every frame, and a frozen
+    dataclass of 9 fields costs ~2 us to build against ~0.3 us (a third of a Read's whole decode).
+    """
 
     target_net_id: NetId
     target_port: int
@@ -166,9 +183,9 @@ class AmsHeader:
         return bool(self.state_flags & 0x0001)
 
 
-@dataclass(frozen=True, slots=True)
-class AmsPacket:
-    """One AMS frame: header and the raw ADS payload (decode it with :mod:`.commands`)."""
+class AmsPacket(NamedTuple):
+    """One AMS frame: header and the raw ADS payload (decode it with :mod:`.commands`); a NamedTuple
+    for the reason :class:`AmsHeader` is one."""
 
     header: AmsHeader
     data: bytes
@@ -301,7 +318,7 @@ class AmsStreamDecoder:
                     f"AMS header at stream byte {pos} announces {data_length} data bytes, its AMS/TCP "
                     f"length {length} leaves {length - AMS_HEADER_SIZE}: the frame cannot be delimited"
                 )
-            header = AmsHeader(NetId(tn), tp, NetId(sn), sp, cmd, flags, data_length, error, invoke)
+            header = AmsHeader(_net_id(tn), tp, _net_id(sn), sp, cmd, flags, data_length, error, invoke)
             frame = AmsPacket(header, bytes(buf[pos + 38 : stop]))
         else:
             frame = AmsTcpFrame(reserved, bytes(buf[pos + AMS_TCP_HEADER_SIZE : stop]))
@@ -327,7 +344,12 @@ class AmsStreamDecoder:
 
 
 def encode_request(
-    target: AmsAddress, source: AmsAddress, command: int, invoke_id: int, payload: bytes, state_flags: int = 4
+    target: AmsAddress,
+    source: AmsAddress,
+    command: int,
+    invoke_id: int,
+    payload: bytes,
+    state_flags: int = REQUEST_FLAGS,
 ) -> bytes:
     """A request frame (state flags 0x0004); the server uses it for DeviceNotification (command 8)."""
     return (

@@ -85,6 +85,9 @@ __all__ = [
     "datetime_to_filetime",
     "decode_data_type_upload",
     "decode_name",
+    "decode_sum_read_reply",
+    "decode_sum_read_write_reply",
+    "decode_sum_write_reply",
     "decode_symbol_upload",
     "encode_handle_reply",
     "encode_sum_read_reply",
@@ -507,6 +510,19 @@ def encode_sum_read_reply(request: SumRead, results: Sequence[tuple[int, bytes]]
     return head + body
 
 
+def decode_sum_read_reply(request: SumRead, data: bytes) -> list[tuple[int, bytes]]:
+    """Client side of :func:`encode_sum_read_reply`: (result, data) per sub read."""
+    if len(data) != request.reply_length:
+        raise _short(f"sum read reply is {len(data)} bytes, its request asks {request.reply_length}")
+    n = len(request.items)
+    results: list[tuple[int, bytes]] = []
+    pos = 4 * n
+    for i, item in enumerate(request.items):
+        results.append((_U32.unpack_from(data, 4 * i)[0], bytes(data[pos : pos + item.length])))
+        pos += item.length
+    return results
+
+
 @dataclass(frozen=True, slots=True)
 class SumWriteItem:
     index_group: int
@@ -547,6 +563,13 @@ class SumWrite:
 def encode_sum_write_reply(results: Sequence[int]) -> bytes:
     """The 0xF081 read data: one u32 result per sub write."""
     return b"".join(_U32.pack(code) for code in results)
+
+
+def decode_sum_write_reply(count: int, data: bytes) -> list[int]:
+    """Client side of :func:`encode_sum_write_reply`: the result of each sub write."""
+    if len(data) != 4 * count:
+        raise _short(f"sum write reply is {len(data)} bytes, {count} results need {4 * count}")
+    return [code for (code,) in _U32.iter_unpack(data)]
 
 
 @dataclass(frozen=True, slots=True)
@@ -595,6 +618,21 @@ def encode_sum_read_write_reply(results: Sequence[tuple[int, bytes]]) -> bytes:
     """The 0xF082 read data: N (result, length), then each sub request's data (its own length)."""
     head = b"".join(_U32x2.pack(code, len(data)) for code, data in results)
     return head + b"".join(data for _, data in results)
+
+
+def decode_sum_read_write_reply(count: int, data: bytes) -> list[tuple[int, bytes]]:
+    """Client side of :func:`encode_sum_read_write_reply`: (result, data) per sub request."""
+    if len(data) < 8 * count:
+        raise _short(f"sum read/write reply is {len(data)} bytes, {count} heads need {8 * count}")
+    heads = list(_U32x2.iter_unpack(data[: 8 * count]))
+    if len(data) != 8 * count + sum(length for _, length in heads):
+        raise _short(f"sum read/write reply is {len(data)} bytes, its heads announce a different length")
+    results: list[tuple[int, bytes]] = []
+    pos = 8 * count
+    for code, length in heads:
+        results.append((code, bytes(data[pos : pos + length])))
+        pos += length
+    return results
 
 
 # --------------------------------------------------------------------------------------------
