@@ -172,6 +172,7 @@ def typed(g: Golden) -> Any:
 
 
 def test_golden_file_covers_both_clients_and_the_operations_of_the_brief() -> None:
+    assert len(NOTIFICATIONS) >= 4
     labels = {(g.client.split()[0], g.label) for g in GOLDEN}
     for label in (
         "read",
@@ -217,6 +218,22 @@ def test_codec_builds_every_reply_the_clients_accepted(request_: Golden, reply: 
             assert encode_port_close_reply(port) == reply.raw
         return
     assert encode_response(frame.header, typed(reply).encode()) == reply.raw
+
+
+NOTIFICATIONS = [
+    g
+    for g in GOLDEN
+    if isinstance(frame := g.frame(), AmsPacket) and frame.header.command == CommandId.DEVICE_NOTIFICATION
+]
+
+
+@pytest.mark.parametrize("g", NOTIFICATIONS, ids=str)
+def test_codec_builds_every_notification_the_clients_decoded(g: Golden) -> None:
+    """pyads and ads-client decoded these samples to the value and time sent (the recorder checked)."""
+    header = g.packet().header
+    stamps = typed(g).stamps
+    payload = DeviceNotification(stamps).encode()
+    assert encode_request(header.target, header.source, CommandId.DEVICE_NOTIFICATION, 0, payload) == g.raw
 
 
 def test_pyads_read_write_and_read_write() -> None:

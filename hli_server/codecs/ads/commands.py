@@ -35,7 +35,9 @@ Responses (server -> client)::
     (:func:`error_reply_payload`): AdsLib waits for 8 bytes from Read and ReadWrite and times out
     (1861) on a 4-byte reply instead of raising the error (``../shared/reference/ads.md``).
 
-DeviceNotification (command 8, server -> client, state flags 0x0004, no reply)::
+DeviceNotification (command 8, server -> client, state flags 0x0004, no reply; its AMS source must be
+the NetId and port the client sent AddDeviceNotification to: AdsLib finds the dispatcher by that
+source and the target port, ads-client by the handle; neither reads the invoke id)::
 
     | length u32 | stamps u32 | stamp ... |            length = bytes after this field
     stamp:  | timestamp u64 (FILETIME) | samples u32 | sample ... |
