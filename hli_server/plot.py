@@ -191,21 +191,24 @@ def _draw_top(fig: Figure, ax: Any, scene: Mapping[str, Any]) -> None:
             color=colour,
             fontsize=9,
         )
+    all_heights = [p[2] for line in scene["path"] for p in line if p[2] is not None]
+    coloured = vh is not None and bool(all_heights) and max(all_heights) - min(all_heights) > 1e-9
     for k, line in enumerate(scene["path"]):
         xs = [p[0] for p in line]
         ys = [p[1] for p in line]
         hs = [p[2] for p in line]
-        label = "path" if k == 0 else None
-        if vh is not None and len(line) > 1 and max(hs) - min(hs) > 1e-9:
+        path_label: str | None = "path" if k == 0 else None
+        if coloured and len(line) > 1:
             segments, heights = _coloured_segments(xs, ys, hs)
-            coll = LineCollection(segments, cmap="viridis", linewidths=1.6, label=label)
+            coll = LineCollection(segments, cmap="viridis", linewidths=1.6, label=path_label)
             coll.set_array(heights)
-            coll.set_clim(min(hs), max(hs))
+            coll.set_clim(min(all_heights), max(all_heights))
             ax.add_collection(coll)
-            fig.colorbar(coll, ax=ax, label=f"path height {vh} [mm]", shrink=0.8)
+            if k == 0:
+                fig.colorbar(coll, ax=ax, label=f"path height {vh} [mm]", shrink=0.8)
         else:
             height = f" ({vh} {_num(hs[0])})" if vh is not None and hs else ""
-            ax.plot(xs, ys, color=_PATH, linewidth=1.4, label=f"path{height}" if label else None)
+            ax.plot(xs, ys, color=_PATH, linewidth=1.4, label=f"path{height}" if path_label else None)
         ax.plot(xs[:1], ys[:1], marker="o", color=_PATH, linestyle="none", label="start" if k == 0 else None)
     refused = scene.get("refused")
     if refused is not None:
@@ -226,7 +229,9 @@ def _draw_top(fig: Figure, ax: Any, scene: Mapping[str, Any]) -> None:
     ax.set_ylabel(f"{vb} [mm]")
     ax.grid(True, linewidth=0.3)
     if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="best", fontsize=7)
+        # "best" measures every drawn point against every place: seconds for a long program's path
+        few = sum(len(line) for line in scene["path"]) < 5000
+        ax.legend(loc="best" if few else "upper right", fontsize=7)
 
 
 def _coloured_segments(
@@ -234,7 +239,7 @@ def _coloured_segments(
 ) -> tuple[list[list[tuple[float, float]]], list[float]]:
     """The path's segments for colouring by height, a long climb cut into pieces so that its colour
     changes along it (the scene's simplified path has few points on a straight climb)."""
-    step = (max(hs) - min(hs)) / 64.0
+    step = max((max(hs) - min(hs)) / 64.0, 1e-9)
     segments: list[list[tuple[float, float]]] = []
     heights: list[float] = []
     for k in range(len(xs) - 1):

@@ -9,8 +9,15 @@ Two modes:
   blocks. Cycle-based monitors (dynamic limits, collision, position monitoring) need cycles and are
   not evaluated in this mode.
 
+Output: the report on stdout (text, or ``--format json``), numbers rounded to the machine's resolution
+(0.1 µm) where they are shown, not in the engine's math. On stderr: a progress bar (tqdm) when stderr is
+a terminal, and with ``--plot PATH`` ``plot written: PATH`` or ``error: plot not written: ...``. The
+picture is the scene of :mod:`hli_server.scene` drawn by :mod:`hli_server.plot` (docs/areas.md); its
+format and place are checked before the run, and it is drawn after the report is printed, so a failing
+drawing never costs the report or changes the exit code.
+
 Exit codes: 0 ran to the end without an error alarm; 1 an error alarm stopped it; 2 usage, file or
-configuration errors.
+configuration errors (an unusable ``--plot`` target included).
 """
 
 from __future__ import annotations
@@ -98,6 +105,9 @@ class _Progress:
     """Progress of a long check on stderr, only when stderr is a terminal (tqdm): lines of the program
     done, lines/s, blocks/s and the time left (E-04: programs of millions of blocks)."""
 
+    refresh_s = 0.2
+    """Least time between two redraws (tqdm's ``mininterval``)."""
+
     def __init__(self, total_lines: int, enabled: bool) -> None:
         self._bar: Any = None
         if enabled and sys.stderr.isatty():
@@ -107,9 +117,10 @@ class _Progress:
                 total=max(total_lines, 1),
                 desc="checking",
                 unit=" lines",
+                unit_scale=True,
                 file=sys.stderr,
                 leave=False,
-                mininterval=0.2,
+                mininterval=self.refresh_s,
                 dynamic_ncols=True,
                 bar_format="{desc} {percentage:3.0f}%|{bar}| line {n_fmt}/{total_fmt} "
                 "[{elapsed}<{remaining}, {rate_fmt}{postfix}]",
@@ -121,7 +132,7 @@ class _Progress:
             return
         elapsed = bar.format_dict["elapsed"]
         if elapsed > 0.0:
-            bar.set_postfix_str(f"{blocks / elapsed:,.0f} blocks/s", refresh=False)
+            bar.set_postfix_str(f"{bar.format_sizeof(blocks / elapsed)} blocks/s", refresh=False)
         bar.update(line - bar.n)
 
     def done(self) -> None:
@@ -221,6 +232,7 @@ def _decode_only(
     decoder = ch.decoder
     decoder.start(iter_blocks(text, ch.axis_names), ch.setpoints())
     motions = 0
+    next_update = 4096
     line = 0
     while not decoder.finished:
         for item in decoder.next_items():
@@ -239,7 +251,8 @@ def _decode_only(
                     result.completed = True
                 elif item.kind == MarkerKind.ERROR:
                     ch.raise_decode_error(item)
-        if motions % 4096 == 0:
+        if motions >= next_update:  # the decoder hands out items in batches: a threshold, not a modulo
+            next_update = motions + 4096
             meter.update(line, decoder.blocks_decoded)
     result.blocks = decoder.blocks_decoded
     result.final_position = dict(zip(ch.axis_names, decoder.position, strict=True))
