@@ -88,7 +88,7 @@ def check_plot_target(path: str | Path) -> None:
     except Exception as exc:  # whatever the backend raises: missing TeX, missing codec, ...
         raise PlotTargetError(
             f"{out}: matplotlib cannot write .{suffix} on this installation ({exc}); "
-            f"use another format ({listed})"
+            f"use another format ({', '.join(f'.{k}' for k in sorted(formats) if k != suffix)})"
         ) from exc
     if out.exists():
         if out.is_dir():
