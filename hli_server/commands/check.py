@@ -9,13 +9,21 @@ Two modes:
   blocks. Cycle-based monitors (dynamic limits, collision, position monitoring) need cycles and are
   not evaluated in this mode.
 
+Output: the report on stdout (text, or ``--format json``), numbers rounded to the machine's resolution
+(0.1 µm) where they are shown, not in the engine's math. On stderr: a progress bar (tqdm) when stderr is
+a terminal, and with ``--plot PATH`` ``plot written: PATH`` or ``error: plot not written: ...``. The
+picture is the scene of :mod:`hli_server.scene` drawn by :mod:`hli_server.plot` (docs/areas.md); its
+format and place are checked before the run, and it is drawn after the report is printed, so a failing
+drawing never costs the report or changes the exit code.
+
 Exit codes: 0 ran to the end without an error alarm; 1 an error alarm stopped it; 2 usage, file or
-configuration errors.
+configuration errors (an unusable ``--plot`` target included).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -25,11 +33,14 @@ import click
 
 from hli_server.engine import Machine
 from hli_server.engine.alarms import Alarm, Severity
+from hli_server.engine.areas.monitor import AreaMonitor
+from hli_server.engine.geometry import ArcSegment, Segment
 from hli_server.engine.nc.parser import iter_blocks
 from hli_server.engine.planner import Marker, MarkerKind, Motion
+from hli_server.scene import build_scene, round_mm, round_numbers
 from schemas.wire import ProgramState
 
-__all__ = ["CheckResult", "check", "check_program"]
+__all__ = ["CheckResult", "check", "check_program", "scene_of"]
 
 DEFAULT_MAX_CYCLES = 50_000_000
 
@@ -52,6 +63,7 @@ class CheckResult:
         return any(a.severity == Severity.ERROR for a in self.alarms)
 
     def to_json(self) -> dict[str, Any]:
+        """The JSON report; positions and the floats of alarm params rounded to 0.1 µm (1e-4 mm)."""
         out: dict[str, Any] = {
             "completed": self.completed,
             "mode": self.mode,
@@ -66,53 +78,64 @@ class CheckResult:
                     "line": a.line,
                     "block": a.block,
                     "message": a.message,
-                    "params": a.params,
+                    "params": round_numbers(a.params),
                     "cycle": a.cycle,
                 }
                 for a in self.alarms
             ],
-            "final_position": self.final_position,
+            "final_position": {k: round_mm(v) for k, v in self.final_position.items()},
             "elapsed_s": round(self.elapsed_s, 3),
         }
         areas = _areas_json(self.machine, self.channel)
         if areas is not None:
-            out["areas"] = areas
+            out["areas"] = round_numbers(areas)
         return out
 
 
 def _areas_json(machine: Machine, channel: int) -> list[dict[str, Any]] | None:
     """The channel's area table, when the area monitor is installed (FCT-C14)."""
-    for mon in machine.monitors:
-        table = getattr(mon, "areas_json", None)
-        if callable(table):
-            result: list[dict[str, Any]] = table(machine.channel(channel))
-            return result
-    return None
+    if not machine.has_monitor(AreaMonitor):
+        return None
+    return machine.monitor(AreaMonitor).areas_json(machine.channel(channel))
 
 
 class _Progress:
-    """Progress on stderr, only when stderr is a terminal."""
+    """Progress of a long check on stderr, only when stderr is a terminal (tqdm): lines of the program
+    done, lines/s, blocks/s and the time left (E-04: programs of millions of blocks)."""
+
+    refresh_s = 0.2
+    """Least time between two redraws (tqdm's ``mininterval``)."""
 
     def __init__(self, total_lines: int, enabled: bool) -> None:
-        self.total = max(total_lines, 1)
-        self.enabled = enabled and sys.stderr.isatty()
-        self._last = 0.0
+        self._bar: Any = None
+        if enabled and sys.stderr.isatty():
+            from tqdm import tqdm
 
-    def update(self, line: int) -> None:
-        if not self.enabled:
+            self._bar = tqdm(
+                total=max(total_lines, 1),
+                desc="checking",
+                unit=" lines",
+                unit_scale=True,
+                file=sys.stderr,
+                leave=False,
+                mininterval=self.refresh_s,
+                dynamic_ncols=True,
+                bar_format="{desc} {percentage:3.0f}%|{bar}| line {n_fmt}/{total_fmt} "
+                "[{elapsed}<{remaining}, {rate_fmt}{postfix}]",
+            )
+
+    def update(self, line: int, blocks: int) -> None:
+        bar = self._bar
+        if bar is None or line <= bar.n:
             return
-        now = time.monotonic()
-        if now - self._last < 0.2:
-            return
-        self._last = now
-        pct = 100.0 * line / self.total
-        sys.stderr.write(f"\rchecking: line {line}/{self.total} ({pct:5.1f} %)")
-        sys.stderr.flush()
+        elapsed = bar.format_dict["elapsed"]
+        if elapsed > 0.0:
+            bar.set_postfix_str(f"{bar.format_sizeof(blocks / elapsed)} blocks/s", refresh=False)
+        bar.update(line - bar.n)
 
     def done(self) -> None:
-        if self.enabled:
-            sys.stderr.write("\r" + " " * 60 + "\r")
-            sys.stderr.flush()
+        if self._bar is not None:
+            self._bar.close()
 
 
 def check_program(
@@ -125,7 +148,10 @@ def check_program(
     record_path: bool = False,
     progress: bool = False,
 ) -> CheckResult:
-    """Run (or decode) ``text`` on ``machine`` and collect the result."""
+    """Run (or decode) ``text`` on ``machine`` and collect the result.
+
+    ``record_path``: keep the path for the picture (``--plot``): every 10th cycle's setpoints in a full
+    check, every block's end (arcs every few degrees) with ``geometry_only``."""
     began = time.perf_counter()
     result = CheckResult(machine, channel, "geometry" if geometry_only else "full")
     ch = machine.channel(channel)
@@ -145,12 +171,12 @@ def check_program(
         while ch.state in running and machine.cycle < max_cycles:
             step(1)
             if record_path and machine.cycle % 10 == 0:
-                result.path.append(tuple(ch.setpoints()))
+                _record(result.path, tuple(ch.setpoints()))
             countdown -= 1
             if countdown <= 0:
                 countdown = 1000
                 if ch.current_block is not None:
-                    meter.update(ch.current_block.line)
+                    meter.update(ch.current_block.line, ch.decoder.blocks_decoded)
         # let the axes come to rest after an abort
         for _ in range(100_000):
             if all(a.setpoint_step == 0.0 for a in ch.axes):
@@ -158,7 +184,9 @@ def check_program(
             step(1)
         result.completed = ch.state == ProgramState.FINISHED
         result.blocks = ch.decoder.blocks_decoded
-        result.final_position = {a.name: round(a.setpoint, 6) for a in ch.axes}
+        result.final_position = {a.name: a.setpoint for a in ch.axes}
+        if record_path:
+            _record(result.path, tuple(ch.setpoints()))
         if ch.state in running:
             result.completed = False
     meter.done()
@@ -172,6 +200,29 @@ def check_program(
     return result
 
 
+def _record(path: list[tuple[float, ...]], point: tuple[float, ...]) -> None:
+    """Append ``point`` unless the axes stand where the last one was (dwell, waiting at a marker)."""
+    if not path or path[-1] != point:
+        path.append(point)
+
+
+_ARC_CHORD_MM = 0.01
+"""Largest sagitta of the chords an arc is recorded with in a geometry check's path (a picture's
+precision), with at most :data:`_ARC_MAX_POINTS` points per arc."""
+_ARC_MAX_POINTS = 90
+
+
+def _segment_points(segment: Segment) -> list[tuple[float, ...]]:
+    """A block's path for the picture: the end of a line; an arc (helix) every few degrees, so the
+    picture does not draw its chord (the path check itself is exact, C14-15)."""
+    if not isinstance(segment, ArcSegment) or segment.radius <= _ARC_CHORD_MM:
+        return [segment.end]
+    step = 2.0 * math.acos(1.0 - _ARC_CHORD_MM / segment.radius)
+    n = min(_ARC_MAX_POINTS, max(2, math.ceil(abs(segment.sweep) / step)))
+    length = segment.length
+    return [segment.point_at(length * k / n) for k in range(1, n + 1)]
+
+
 def _decode_only(
     machine: Machine, text: str, channel: int, result: CheckResult, meter: _Progress, record_path: bool
 ) -> None:
@@ -179,6 +230,7 @@ def _decode_only(
     decoder = ch.decoder
     decoder.start(iter_blocks(text, ch.axis_names), ch.setpoints())
     motions = 0
+    next_update = 4096
     line = 0
     while not decoder.finished:
         for item in decoder.next_items():
@@ -186,7 +238,7 @@ def _decode_only(
                 motions += 1
                 line = item.block.line
                 if record_path:
-                    result.path.append(item.segment.end)
+                    result.path.extend(_segment_points(item.segment))
             elif isinstance(item, Marker):
                 if item.block is not None:
                     line = item.block.line
@@ -197,13 +249,15 @@ def _decode_only(
                     result.completed = True
                 elif item.kind == MarkerKind.ERROR:
                     ch.raise_decode_error(item)
-        if motions % 4096 == 0:
-            meter.update(line)
+        if motions >= next_update:  # the decoder hands out items in batches: a threshold, not a modulo
+            next_update = motions + 4096
+            meter.update(line, decoder.blocks_decoded)
     result.blocks = decoder.blocks_decoded
-    result.final_position = {n: round(v, 6) for n, v in zip(ch.axis_names, decoder.position, strict=True)}
+    result.final_position = dict(zip(ch.axis_names, decoder.position, strict=True))
 
 
 def _text_report(result: CheckResult, program: str) -> str:
+    """The report for people: positions and the floats of alarm params rounded to 0.1 µm."""
     lines = []
     verdict = "OK: ran to the end" if result.completed else "STOPPED"
     lines.append(
@@ -213,15 +267,34 @@ def _text_report(result: CheckResult, program: str) -> str:
         where = f"line {a.line}, {a.block}: " if a.line is not None else ""
         lines.append(f"  {a.severity} {a.number}: {where}{a.message}")
         if a.params:
-            lines.append(f"      params: {json.dumps(a.params)}")
-    pos = ", ".join(f"{k}={v:.4f}" for k, v in result.final_position.items())
+            lines.append(f"      params: {json.dumps(round_numbers(a.params))}")
+    pos = ", ".join(f"{k}={round_mm(v):.4f}" for k, v in result.final_position.items())
     lines.append(f"  final position (mm): {pos}")
     areas = _areas_json(result.machine, result.channel)
     if areas:
         lines.append("  areas:")
         for area in areas:
-            lines.append(f"    ID{area.get('id')} {area.get('kind')} {area.get('shape')} {area.get('state')}")
+            band = f"{area.get('height_axis')} {round_mm(area['min']):g}..{round_mm(area['max']):g}"
+            lines.append(
+                f"    ID{area.get('id')} {area.get('kind')} {area.get('shape')} {area.get('state')}, "
+                f"{'/'.join(area.get('axes', []))} plane, height {band}"
+            )
     return "\n".join(lines)
+
+
+def scene_of(result: CheckResult) -> dict[str, Any]:
+    """The scene (:mod:`hli_server.scene`) of a check run with ``record_path``: what ``--plot`` draws
+    and what the dashboard draws for the same channel."""
+    ch = result.machine.channel(result.channel)
+    return build_scene(
+        _areas_json(result.machine, result.channel) or [],
+        result.path,
+        axis_names=ch.axis_names,
+        main_axes=ch.config.main_axes,
+        alarms=[a.to_json() for a in result.alarms],
+        stop=result.stop_point,
+        channel=result.channel,
+    )
 
 
 @click.command()
@@ -244,7 +317,9 @@ def _text_report(result: CheckResult, program: str) -> str:
     "plot_path",
     type=click.Path(dir_okay=False, path_type=Path),
     default=None,
-    help="draw areas, path and stop point into an .svg or .png file",
+    help="draw the areas, the path with its height (top and side view), the refused block, the violation "
+    "and the stop point into this file; its suffix chooses the format (.pdf, .svg, .png, ...: any "
+    "matplotlib writes)",
 )
 def check(
     program: Path,
@@ -255,9 +330,13 @@ def check(
     max_cycles: int,
     plot_path: Path | None,
 ) -> None:
-    """Run PROGRAM on the machine and report alarms (exit 0 ok, 1 error alarm, 2 usage/config)."""
+    """Run PROGRAM on the machine and report alarms (exit 0 ok, 1 error alarm, 2 usage/config).
+
+    The report goes to stdout (text or JSON); progress, ``plot written: PATH`` and errors to stderr."""
     from hli_server.configuration import ConfigError, load_machine
 
+    if plot_path is not None:
+        _check_plot_target(plot_path)
     try:
         text = program.read_text(encoding="utf-8", errors="strict")
     except (OSError, UnicodeDecodeError) as exc:
@@ -286,24 +365,39 @@ def check(
         record_path=plot_path is not None,
         progress=True,
     )
-    if plot_path is not None:
-        _plot(result, plot_path)
+    # the report first: whatever the drawing does, the user has the verdict
     if fmt == "json":
         click.echo(json.dumps(result.to_json(), indent=2))
     else:
         click.echo(_text_report(result, str(program)))
+    if plot_path is not None:
+        _plot(result, plot_path, str(program))
     sys.exit(0 if result.completed and not result.stopped_by_error else 1)
 
 
-def _plot(result: CheckResult, out: Path) -> None:
+def _check_plot_target(plot_path: Path) -> None:
+    """Before the run: a format matplotlib cannot write here, or a place that is not writable, is a
+    usage error (exit 2), not a traceback after a long check."""
     try:
-        from hli_server.plot import plot_areas
-    except ImportError:
-        click.echo("error: plotting needs hli_server.plot (matplotlib)", err=True)
+        from hli_server.plot import PlotTargetError, check_plot_target
+    except ImportError as exc:
+        click.echo(
+            f"error: --plot needs matplotlib ({exc}); install hli-server with its dependencies", err=True
+        )
         sys.exit(2)
-    ch = result.machine.channel(result.channel)
-    main = ch.config.main_axes
-    idx = (ch.axis_names.index(main[0]), ch.axis_names.index(main[1]))
-    path = [(p[idx[0]], p[idx[1]]) for p in result.path]
-    stop = (result.stop_point[idx[0]], result.stop_point[idx[1]]) if result.stop_point else None
-    plot_areas(_areas_json(result.machine, result.channel) or [], path, stop, out)
+    try:
+        check_plot_target(plot_path)
+    except PlotTargetError as exc:
+        raise click.BadParameter(str(exc), param_hint="'--plot'") from exc
+
+
+def _plot(result: CheckResult, out: Path, program: str) -> None:
+    """Draw after the report; a failure is said on stderr and leaves the check's exit code alone."""
+    from hli_server.plot import plot_scene
+
+    try:
+        written = plot_scene(scene_of(result), out, title=None)
+    except Exception as exc:  # the report is out; any drawing failure is only reported
+        click.echo(f"error: plot not written: {out}: {type(exc).__name__}: {exc}", err=True)
+        return
+    click.echo(f"plot written: {written}", err=True)

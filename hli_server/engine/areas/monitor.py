@@ -652,6 +652,14 @@ class ChannelAreas:
             "area": prism.area_id,
             "kind": "PROT" if prism.protection else "WORK",
         }
+        if isinstance(segment, ArcSegment):
+            # start and end alone do not say where an arc goes; the picture of the refused block needs it
+            i, j = segment.plane
+            params["arc"] = {
+                "plane": [names[i], names[j]],
+                "centre": list(segment.centre),
+                "sweep_deg": math.degrees(segment.sweep),
+            }
         span = f"{block.label} from {_fmt(names, segment.start, ks)} to {_fmt(names, segment.end, ks)}"
         if hit.point_violation and hit.f == 0.0:
             if prism.protection:
