@@ -13,21 +13,21 @@ the process image, kept apart from the sockets so that it can be tested without 
 * :meth:`ModbusCodec.decode` turns an answer's registers or bits into values per ST path.
 * :meth:`ModbusCodec.registers` encodes a value for FC 16 (holding registers).
 
-Word order (must match the server's ``--modbus-word-order``): ``ABCD`` = the most significant
-16-bit word first, each word big-endian (the server's default); ``CDAB`` = the least significant
-word first. DINT -2 is ``[0xFFFF, 0xFFFE]`` in ABCD, ``[0xFFFE, 0xFFFF]`` in CDAB; an LREAL's
-four words are fully reversed in CDAB.
+Word order (must match the server's ``--modbus-word-order``): the server's own codec,
+:mod:`hli_server.codecs.modbus_words` (``ABCD`` most significant word first, ``CDAB`` least
+significant first), so that it exists once.
 
-Imports ``schemas`` only (the layout is the one source of every address, H-08).
+Imports ``schemas`` (the layout is the one source of every address, H-08) and the server's codecs.
 """
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Final
 
+from hli_server.codecs import modbus_words
+from hli_server.codecs.modbus_words import WORD_ORDERS
 from schemas.layout import Layout, ModbusTable, Signal, SignalType
 
 __all__ = [
@@ -42,13 +42,6 @@ MAX_READ_REGISTERS: Final = 125
 """FC 3/4: at most 125 registers per request (Modbus application protocol, 6.3/6.4)."""
 MAX_READ_BITS: Final = 2000
 """FC 1/2: at most 2000 bits per request."""
-WORD_ORDERS: Final = ("ABCD", "CDAB")
-
-_BIG_ENDIAN: Final = {
-    SignalType.DINT: struct.Struct(">i"),
-    SignalType.UDINT: struct.Struct(">I"),
-    SignalType.LREAL: struct.Struct(">d"),
-}
 _BIT_TABLES: Final = (ModbusTable.COIL, ModbusTable.DISCRETE_INPUT)
 
 Value = bool | int | float
@@ -81,12 +74,10 @@ class ModbusCodec:
     """Read planning and value encoding for one layout and word order (no I/O)."""
 
     def __init__(self, layout: Layout, word_order: str = "ABCD") -> None:
-        order = word_order.upper()
-        if order not in WORD_ORDERS:
-            raise ValueError(
-                f"Modbus word order {word_order!r}: use one of {', '.join(WORD_ORDERS)} "
-                "(the same as the server's --modbus-word-order)"
-            )
+        try:
+            order = modbus_words.check_word_order(word_order)
+        except ValueError as exc:
+            raise ValueError(f"{exc} (the same as the server's --modbus-word-order)") from None
         self.layout = layout
         self.word_order = order
         self._run_of: dict[ModbusTable, dict[int, int]] = {}
@@ -149,22 +140,14 @@ class ModbusCodec:
         words = list(registers)
         if len(words) != signal.modbus_count:
             raise ValueError(f"{signal.st_path}: {len(words)} registers, expected {signal.modbus_count}")
-        if self.word_order == "CDAB":
-            words.reverse()
-        raw = struct.pack(f">{len(words)}H", *words)
-        value: int | float = _BIG_ENDIAN[signal.type].unpack(raw)[0]
-        return value
+        return modbus_words.value(signal.type.struct_char, words, self.word_order)
 
     # --- writes ------------------------------------------------------------------------------
     def registers(self, signal: Signal, value: int | float) -> list[int]:
         """The registers of a (coerced) DINT/UDINT/LREAL value in this codec's word order."""
         if signal.type is SignalType.BOOL:
             raise ValueError(f"{signal.st_path} is a BOOL: it is a coil, not registers")
-        raw = _BIG_ENDIAN[signal.type].pack(value)
-        words = list(struct.unpack(f">{len(raw) // 2}H", raw))
-        if self.word_order == "CDAB":
-            words.reverse()
-        return words
+        return modbus_words.registers(signal.type.struct_char, value, self.word_order)
 
 
 def _address(s: Signal) -> int:

@@ -55,7 +55,6 @@ import asyncio
 import contextlib
 import logging
 import struct
-from array import array
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from operator import itemgetter
@@ -82,6 +81,7 @@ from hli_server.codecs.modbus_frames import (
     encode_read_registers,
     encode_write_multiple,
 )
+from hli_server.codecs.modbus_words import WORD_ORDERS, check_word_order, decode_value, swap_words
 from schemas.layout import (
     Direction,
     Layout,
@@ -107,7 +107,6 @@ logger = logging.getLogger(__name__)
 
 DEFAULT_PORT: Final = 5020
 """Not 502: binding ports below 1024 needs privileges. ``--modbus-port 502`` where allowed."""
-WORD_ORDERS: Final = ("ABCD", "CDAB")
 UNKNOWN_UNIT_POLICIES: Final = ("exception", "ignore")
 ANY_UNIT_IDS: Final = frozenset({0, 255})
 """Unit ids answered besides the configured one: 0 and 255 mean "this device" on Modbus TCP."""
@@ -138,13 +137,6 @@ Reader = Callable[[], bytes]
 """A compiled read: returns the response PDU (or an exception PDU) from the image as it is now."""
 
 
-def _swap_words(data: bytes) -> bytes:
-    """Swap the two bytes of every 16-bit word: little-endian image bytes <-> CDAB registers."""
-    words = array("H", data)
-    words.byteswap()
-    return words.tobytes()
-
-
 @dataclass(slots=True)
 class _Span:
     signal: Signal
@@ -161,9 +153,7 @@ class RegisterMap:
     """
 
     def __init__(self, image: ImagePort, word_order: str = "ABCD") -> None:
-        order = word_order.upper()
-        if order not in WORD_ORDERS:
-            raise ValueError(f"Modbus word order {word_order!r}: use one of {', '.join(WORD_ORDERS)}")
+        order = check_word_order(word_order)
         self.image = image
         self.layout: Layout = image.layout
         self.word_order = order
@@ -314,7 +304,7 @@ class RegisterMap:
             values = unpack_from(half(), start)
             if permute is not None:
                 values = permute(values)
-            return head + _swap_words(pack_le(*values))
+            return head + swap_words(pack_le(*values))
 
         return read_cdab
 
@@ -336,12 +326,7 @@ class RegisterMap:
 
     # --- writes ------------------------------------------------------------------------------
     def _decode_register_value(self, signal: Signal, data: bytes) -> int | float:
-        char = signal.type.struct_char
-        if self.word_order == "ABCD":
-            value: int | float = struct.unpack(">" + char, data)[0]
-        else:
-            value = struct.unpack("<" + char, _swap_words(data))[0]
-        return value
+        return decode_value(signal.type.struct_char, data, self.word_order)
 
     def _commit(self, fc: int, writes: list[tuple[Signal, object]]) -> None:
         """Check every value first, then write them all: a refused request changes nothing."""
