@@ -20,7 +20,7 @@ run: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/mypy schemas hli_server/engine
+	$(BIN)/mypy
 	$(BIN)/lint-imports
 
 format: $(STAMP)

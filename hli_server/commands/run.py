@@ -142,6 +142,7 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
 @click.pass_context
 def run(
     ctx: click.Context,
+    /,
     config_path: Path | None,
     clock: str,
     bind: str,

@@ -253,8 +253,9 @@ class DynPosLimits(Monitor):
                 if not ramp_done:
                     ramp = _braking_ramp(planner)
                     ramp_done = True
-                if self._look_ahead(lim, planner, ramp) and lim.stop_s is not None:
-                    planner.stop_points[lim.key] = lim.stop_s
+                stop_s = self._look_ahead(lim, planner, ramp)
+                if stop_s is not None:
+                    planner.stop_points[lim.key] = stop_s
             if any(lim.stop_s is not None for lim in limits):
                 ch.hold(HoldSource.DYN_POS_LIMIT)  # "ein bereichsspezifischer Feedhold" (FCT-C43)
 
@@ -296,24 +297,24 @@ class DynPosLimits(Monitor):
         lim.stop_s = None
         planner.stop_points.pop(lim.key, None)
 
-    def _brake(self, lim: _Limit, stop_s: float) -> None:
+    def _brake(self, lim: _Limit, stop_s: float) -> float:
         lim.stop_s = stop_s
         self._fire(lim, DplEvent.VIOLATION)
+        return stop_s
 
-    def _look_ahead(self, lim: _Limit, planner: Planner, ramp: _Ramp | None) -> bool:
-        """C43-04..C43-06 for one limit; True if braking is due (``lim.stop_s`` set)."""
+    def _look_ahead(self, lim: _Limit, planner: Planner, ramp: _Ramp | None) -> float | None:
+        """C43-04..C43-06 for one limit: the stop point when braking is due (also kept in ``lim.stop_s``)."""
         check_current, lim.check_current = lim.check_current, False
         if ramp is None:
-            return False  # the path does not move this cycle
+            return None  # the path does not move this cycle
         s0, v0 = ramp.s0, ramp.v0
         a_fh = planner.feedhold_decel
         depth0 = lim.side * (lim.axis.setpoint - lim.limit)
         if check_current and depth0 > _EPS and v0 > 0.0:
             # C43-05: already in the forbidden zone when the limit becomes active: stop at once
-            self._brake(lim, s0 + _feedhold_distance(v0, a_fh, planner.t_a))
-            return True
+            return self._brake(lim, s0 + _feedhold_distance(v0, a_fh, planner.t_a))
         if -depth0 > ramp.reach + _EPS:
-            return False  # out of reach before the ramp ends: no sample can hit (saves the lookup)
+            return None  # out of reach before the ramp ends: no sample can hit (saves the lookup)
         # beyond the limit already (e.g. at rest there): only going deeper is a violation
         threshold = max(0.0, depth0)
         s_good = s0
@@ -322,10 +323,9 @@ class DynPosLimits(Monitor):
                 crossing = _first_bad(
                     planner.position_at, lim.k, lambda x: lim.beyond(x, threshold), s_good, s_k
                 )
-                self._brake(lim, max(crossing, s0 + _feedhold_distance(v0, a_fh, planner.t_a)))
-                return True
+                return self._brake(lim, max(crossing, s0 + _feedhold_distance(v0, a_fh, planner.t_a)))
             s_good = s_k
-        return False
+        return None
 
     def _fire(self, lim: _Limit, event: DplEvent) -> None:
         new = next_state(lim.state, event)
