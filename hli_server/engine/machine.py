@@ -27,11 +27,15 @@ from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
 from hli_server.engine.alarms import ALARMS, Reaction, Severity
+from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis, AxisFaults, check_fault_value
 from hli_server.engine.channel import Channel
 from hli_server.engine.hli import AxisHli, ChannelHli, MachineHli
 from hli_server.engine.monitors.base import Monitor, MonitorFactory
-from hli_server.engine.monitors.defaults import DEFAULT_MONITORS
+from hli_server.engine.monitors.collision import CollisionMonitor
+from hli_server.engine.monitors.dyn_pos_limit import DynPosLimits
+from hli_server.engine.monitors.position import PositionMonitor
+from hli_server.engine.monitors.soft_limits import SoftLimits
 from hli_server.engine.ports import ChannelRef
 from schemas.config import MachineConfig
 from schemas.events import (
@@ -45,7 +49,7 @@ from schemas.events import (
 from schemas.units import increments_from_mm, s_from_us
 from schemas.wire import Mode
 
-__all__ = ["ALARM_HISTORY", "EventListener", "Machine"]
+__all__ = ["ALARM_HISTORY", "DEFAULT_MONITORS", "EventListener", "Machine"]
 
 ALARM_INTERNAL = 919000
 """Error: a cycle failed inside the simulator (a bug); the channels stop, the server goes on."""
@@ -53,6 +57,17 @@ ALARM_HISTORY = 1_000
 """Alarms kept in :attr:`Machine.alarm_history` (the newest; ``GET /api/alarms`` shows them)."""
 
 EventListener = Callable[[Event], None]
+
+DEFAULT_MONITORS: tuple[MonitorFactory, ...] = (
+    SoftLimits,  # E-06
+    AreaMonitor,  # FCT-C14
+    DynPosLimits,  # FCT-C43
+    CollisionMonitor,  # FCT-C3
+    PositionMonitor,  # FCT-A3
+)
+"""The monitoring functions a machine gets by default, in the order they run each cycle: soft limits
+first (a block beyond them is refused before the areas look at it), then the areas, the dynamic
+limits (they steer the path before interpolation), collision and position monitoring."""
 M = TypeVar("M", bound=Monitor)
 
 
