@@ -13,7 +13,7 @@ import pytest
 from hli_server.configuration import load_machine
 from hli_server.runtime import Runtime
 from schemas.config import ProgramEntry
-from schemas.wire import ProgramState
+from schemas.wire import HoldSource, ProgramState
 
 PROGRAM = "N10 G01 X20 Y10 F6000\nN20 G01 X0 Y0\nN30 M30\n"
 OVERRIDE = "gpCh[0]^bahn_mc_control.override"
@@ -358,3 +358,163 @@ async def test_select_a_program_given_by_path_reads_the_file(tmp_path: Path) -> 
         await c.post("/api/channels/1/start")
         await step(c, 50)
         assert rt.machine.axis("X").setpoint > 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# The channel's states, as a PLC reads them from the image and an operator from the API (issue 9)
+# --------------------------------------------------------------------------------------------
+
+PROGRAM_STATE = "gpCh[0]^bahn_state.program_state_r"
+
+
+async def image_value(client: httpx.AsyncClient, st_path: str) -> Any:
+    r = await client.get(url_path(st_path))
+    assert r.status_code == 200, r.text
+    return r.json()["value"]
+
+
+async def channel_state(client: httpx.AsyncClient) -> dict[str, Any]:
+    channels: list[dict[str, Any]] = (await client.get("/api/state")).json()["channels"]
+    return channels[0]
+
+
+@pytest.mark.req("E-04", "E-06", "H-01")
+async def test_an_error_abort_reads_aborted_until_reset_and_a_new_program_loads(
+    client: httpx.AsyncClient,
+) -> None:
+    """Issue 9, defect 1: after a soft-limit error the program reads 3 (aborted), not 1, in the image
+    and in the API; a new program is accepted; the reset brings 0."""
+    program = "N10 G01 X10 F6000\nN20 X700\nN30 M30\n"  # X700 lies beyond the software limit (600 mm)
+    assert (await client.post("/api/channels/1/program", content=program)).status_code == 200
+    await client.post("/api/channels/1/start")
+    await step(client, 3000)
+    assert await image_value(client, PROGRAM_STATE) == ProgramState.ABORTED
+    assert await image_value(client, "gpCh[0]^bahn_state.error_id_r") == 911011
+    state = await channel_state(client)
+    assert (state["program_state"], state["program_state_name"]) == (3, "aborted")
+    r = await client.post("/api/channels/1/program", content="N10 G01 X5 F6000\nN20 M30\n")
+    assert r.status_code == 200, r.text  # no "a program is running"
+    assert await image_value(client, PROGRAM_STATE) == ProgramState.ABORTED  # published next cycle
+    await client.post("/api/channels/1/reset")
+    await step(client, 1)
+    assert await image_value(client, PROGRAM_STATE) == ProgramState.IDLE
+    events = (await client.get("/api/events")).json()["events"]
+    states = [(e["data"]["state"], e["data"]["cause"]) for e in events if e["kind"] == "program_state"]
+    assert states == [
+        ("idle", "load"),
+        ("running", "start"),
+        ("aborted", "error"),
+        ("idle", "load"),
+        ("idle", "reset"),
+    ]
+
+
+@pytest.mark.req("E-03", "E-04", "H-01")
+async def test_a_start_while_the_reset_still_brakes_is_refused_and_nothing_restarts_by_itself(
+    runtime: Runtime, client: httpx.AsyncClient
+) -> None:
+    """Issue 9, defect 2: reset while moving, start one cycle later: the start is refused with warning
+    911022 (the axes still brake), the program state stays 0, and X never moves again by itself."""
+    await client.post("/api/channels/1/program", content="N10 G01 X300 F12000\nN20 M30\n")
+    await client.post("/api/channels/1/start")
+    await step(client, 500)
+    assert await image_value(client, "gpAx[0]^ipo_state.moving_r") is True
+    await client.post("/api/channels/1/reset")
+    await step(client, 1)
+    await client.post("/api/channels/1/start")
+    await step(client, 1)
+    assert await image_value(client, PROGRAM_STATE) == ProgramState.IDLE
+    assert await image_value(client, "gpCh[0]^bahn_state.warning_id_r") == 911022
+    history = (await client.get("/api/alarms")).json()["history"]
+    assert history[-1]["id"] == 911022
+    assert "still brake" in history[-1]["message"]
+    await step(client, 300)
+    x_at_rest = await image_value(client, "gpAx[0]^ipo_state.cmd_pos_r")
+    await step(client, 300)
+    assert await image_value(client, PROGRAM_STATE) == ProgramState.IDLE
+    assert await image_value(client, "gpAx[0]^ipo_state.cmd_pos_r") == x_at_rest  # nothing restarted
+    await client.post("/api/channels/1/start")  # at rest now: the start is taken
+    await step(client, 2)
+    assert await image_value(client, PROGRAM_STATE) == ProgramState.RUNNING
+
+
+@pytest.mark.req("C43-04", "C43-07", "E-05", "H-01")
+async def test_a_dynamic_limit_hold_is_visible_at_the_channel(client: httpx.AsyncClient) -> None:
+    """Issue 9, defect 3: while a dynamic position limit holds the path, the channel reads HELD (2),
+    feedhold_active_r TRUE and hold_source_r = 0x2 (dyn_pos_limit); lifting it continues the program."""
+    unit = "gpAx[0]^ipo_mc_control.dyn_pos_limit_high"
+    await client.put(url_path(f"{unit}.command_w"), json={"value": 500_000})  # 50 mm
+    await client.put(url_path(f"{unit}.enable_w"), json={"value": True})
+    await client.post("/api/channels/1/program", content="N10 G01 X100 F6000\nN20 M30\n")
+    await client.post("/api/channels/1/start")
+    await step(client, 2000)
+    assert await image_value(client, f"{unit}.state_r") == 4  # ACTIVE_BRAKE
+    assert await image_value(client, PROGRAM_STATE) == ProgramState.HELD
+    assert await image_value(client, "gpCh[0]^bahn_state.feedhold_active_r") is True
+    assert await image_value(client, "gpCh[0]^bahn_state.hold_source_r") == HoldSource.DYN_POS_LIMIT
+    state = await channel_state(client)
+    assert (state["program_state_name"], state["holds"]) == ("held", ["dyn_pos_limit"])
+    await client.put(url_path(f"{unit}.enable_w"), json={"value": False})
+    await step(client, 3000)
+    assert await image_value(client, PROGRAM_STATE) == ProgramState.FINISHED
+    assert await image_value(client, "gpCh[0]^bahn_state.hold_source_r") == 0
+    events = (await client.get("/api/events")).json()["events"]
+    holds = [e["data"]["sources"] for e in events if e["kind"] == "hold"]
+    assert holds == [["dyn_pos_limit"], []]
+
+
+@pytest.mark.req("E-02", "C3-06", "H-01")
+async def test_referencing_through_the_api_and_the_image_starts_collision_monitoring(tmp_path: Path) -> None:
+    """An unreferenced collision pair: programs are refused (911020), FCT-C3 monitoring is off; the
+    operator references X1 (HTTP), the PLC X2 (manual.reference_w); monitoring starts in the cycle the
+    second axis is referenced."""
+    config = load_machine(None)
+    homes = {"X1": -500_000, "X2": 5_200_000}  # the reference marks: 50 mm and 20 mm from the start
+    axes = [
+        a.model_copy(update={"referenced": False, "reference_position": homes[a.name]})
+        if a.name in homes
+        else a
+        for a in config.axes
+    ]
+    config = config.model_copy(update={"axes": axes})
+    async with (
+        Runtime(config, clock="stepped", http_port=0) as rt,
+        httpx.AsyncClient(base_url=rt.http_url, timeout=10) as c,
+    ):
+        x1 = next(i for i, a in enumerate(config.axes) if a.name == "X1")
+        x2 = next(i for i, a in enumerate(config.axes) if a.name == "X2")
+        await c.post("/api/channels/2/program", content="N10 G01 X1=10 F6000\nN20 M30\n")
+        await c.post("/api/channels/2/start")
+        await step(c, 1)
+        assert (await c.get("/api/alarms")).json()["history"][-1]["id"] == 911020
+        assert await image_value(c, "gpCh[1]^bahn_state.program_state_r") == ProgramState.IDLE
+        active = f"gpAx[{x2}]^dyn_coll_mon.active"
+        assert await image_value(c, active) is False
+        r = await c.post("/api/axes/X1/reference")
+        assert r.status_code == 202, r.text
+        await step(c, 1)
+        assert await image_value(c, f"gpAx[{x1}]^ipo_state.referencing_r") is True
+        await c.put(url_path(f"gpAx[{x2}]^manual.reference_w"), json={"value": True})
+        seen: list[tuple[int, bool, bool, bool]] = []
+
+        def watch(cycle: int) -> None:
+            m = rt.machine
+            seen.append(
+                (cycle, m.axis("X1").referenced, m.axis("X2").referenced, m.hli.axes[x2].dyn_coll_mon.active)
+            )
+
+        rt.on_cycle(watch)
+        await step(c, 3000)
+        both = next(cycle for cycle, r1, r2, _ in seen if r1 and r2)
+        first_active = next(cycle for cycle, _, _, on in seen if on)
+        assert first_active == both  # monitoring starts in the cycle both are referenced (C3-06)
+        assert all(not on for cycle, _, _, on in seen if cycle < both)
+        assert await image_value(c, f"gpAx[{x1}]^ipo_state.referenced_r") is True
+        events = (await c.get("/api/events")).json()["events"]
+        refs = [(e["data"]["axis"], e["data"]["state"]) for e in events if e["kind"] == "reference"]
+        assert sorted(refs) == sorted(
+            [("X1", "referencing"), ("X1", "referenced"), ("X2", "referencing"), ("X2", "referenced")]
+        )
+        await c.post("/api/channels/2/start")
+        await step(c, 2)
+        assert await image_value(c, "gpCh[1]^bahn_state.program_state_r") == ProgramState.RUNNING
