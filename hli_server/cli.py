@@ -1,4 +1,4 @@
-"""The command line: ``hli-server run | check | config | map | alarms``.
+"""The command line: ``hli-server run | check | config | map | alarms | events``.
 
 Each command lives in its own module under ``hli_server/commands``; this file only assembles them.
 Exit codes: 0 success, 1 the checked program or the validated file has an error, 2 usage, file or
@@ -21,6 +21,7 @@ _COMMANDS = {
     "run": "hli_server.commands.run:run",
     "map": "hli_server.commands.map:map_command",
     "alarms": "hli_server.commands.alarms:alarms",
+    "events": "hli_server.commands.events:events",
 }
 
 

@@ -65,8 +65,8 @@ class AxisFaults:
         return {
             "friction": self.friction,
             "gain_factor": self.gain_factor,
-            "encoder_drift": self.encoder_drift,
             "encoder_stuck": self.encoder_stuck,
+            "encoder_drift": self.encoder_drift,
             "drive_error": self.drive_error,
         }
 
