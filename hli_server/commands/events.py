@@ -28,7 +28,9 @@ def _fields(kind: type[Event]) -> str:
 def _type_name(tp: object) -> str:
     if tp is Alarm:
         return "object {" + ", ".join(Alarm(0, "", 0, 0, "").to_json()) + "}"
-    text = str(tp).replace("typing.", "").replace("schemas.events.", "").replace("<class '", "").replace("'>", "")
+    text = str(tp)
+    for noise in ("typing.", "schemas.events.", "<class '", "'>"):
+        text = text.replace(noise, "")
     return text.replace("|", "\\|")
 
 
