@@ -41,6 +41,7 @@ __all__ = [
     "ProgramStateChanged",
     "ReferenceChanged",
     "event_type",
+    "place",
 ]
 
 _ENVELOPE = frozenset({"cycle", "time_s", "channel"})
@@ -60,6 +61,16 @@ def _plain(value: Any) -> Any:
     return value
 
 
+def place(line: int | None, block: str | None) -> str:
+    """Where in the program: ``line 14, N130``; ``line 14`` when the block has no N number (its label
+    is then ``line 14`` itself); ``""`` when neither is known."""
+    if line is None:
+        return block or ""
+    if block is None or block == f"line {line}":
+        return f"line {line}"
+    return f"line {line}, {block}"
+
+
 @dataclass(frozen=True, slots=True)
 class Alarm:
     """One raised alarm, as the channel, the HTTP API and the events show it.
@@ -76,6 +87,11 @@ class Alarm:
     block: str | None = None
     axis: str | None = None
     params: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def place(self) -> str:
+        """``line 14, N130``, or ``line 14`` for a block without a number, or ``""``."""
+        return place(self.line, self.block)
 
     def to_json(self) -> dict[str, Any]:
         return {

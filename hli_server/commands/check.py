@@ -264,7 +264,7 @@ def _text_report(result: CheckResult, program: str) -> str:
         f"{program}: {verdict} ({result.mode} check, {result.blocks} blocks, {result.machine.cycle} cycles)"
     )
     for a in result.alarms:
-        where = f"line {a.line}, {a.block}: " if a.line is not None else ""
+        where = f"{a.place}: " if a.place else ""
         lines.append(f"  {a.severity} {a.number}: {where}{a.message}")
         if a.params:
             lines.append(f"      params: {json.dumps(round_numbers(a.params))}")

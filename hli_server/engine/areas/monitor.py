@@ -167,6 +167,8 @@ class ChannelAreas:
         self.pending: _Pending | None = None
         self.violation_auto = False
         self.violation_manual = False
+        self._stop_warning: tuple[bool, int, tuple[int, int, int]] | None = None
+        """A P-MANU-00014 warning due when the braking axes have come to rest (protection, id, axes)."""
         self._blocked_direction: tuple[float, ...] | None = None
         self._blocks_seen: object = None
         self._probe_request = False
@@ -852,13 +854,8 @@ class ChannelAreas:
         norm = math.hypot(*direction)
         self._blocked_direction = tuple(x / norm for x in direction) if norm > 0.0 else blocked
         if not self.violation_manual and self.machine.config.manual.move_limit_warning:
-            what = f"{'protection' if prism.protection else 'work'} area {prism.area_id}"
-            self.machine.raise_alarm(
-                ALARM_MANUAL_STOP,
-                channel,
-                f"manual motion stopped before {what} at "
-                f"{_fmt(self.names, current, (prism.a, prism.b, prism.c))} (P-MANU-00014)",
-            )
+            # P-MANU-00014: said once the axes are at rest, with the place where they stopped
+            self._stop_warning = (prism.protection, prism.area_id, (prism.a, prism.b, prism.c))
         self.violation_manual = True
         return True
 
@@ -937,6 +934,16 @@ class ChannelAreas:
                 "#CONTROL AREA END missing; the area was not defined",
                 line=begin.line,
                 block=begin.label,
+            )
+        if self._stop_warning is not None and not any(ch.jog_velocity):
+            protection, area_id, ks = self._stop_warning
+            self._stop_warning = None
+            what = f"{'protection' if protection else 'work'} area {area_id}"
+            self.machine.raise_alarm(
+                ALARM_MANUAL_STOP,
+                ch,
+                f"manual motion stopped before {what} at {_fmt(self.names, tuple(ch.setpoints()), ks)} "
+                "(P-MANU-00014)",
             )
         ch.hli.bahn_state.area_mon_violation_detected_r = self.violation_auto or (
             ch.mode == Mode.MANUAL and self.violation_manual

@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from enum import StrEnum
 
+from schemas.events import place
+
 __all__ = [
     "AreaBegin",
     "AreaClear",
@@ -131,7 +133,4 @@ class NcError(Exception):
         self.message = message
 
     def __str__(self) -> str:
-        where = (
-            f"line {self.line}" if self.block == f"line {self.line}" else f"line {self.line}, {self.block}"
-        )
-        return f"{where}: {self.message} [{self.alarm}]"
+        return f"{place(self.line, self.block)}: {self.message} [{self.alarm}]"

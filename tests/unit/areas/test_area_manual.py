@@ -187,6 +187,8 @@ def test_warning_with_p_manu_00014_and_flag_clears_when_jogging_away() -> None:
     assert len(warnings) == 1
     assert warnings[0].severity == "warning"
     assert "work area 1" in warnings[0].message
+    x = m.channel(1).axis("X").setpoint  # the warning names where the axes came to rest
+    assert f"at (X{round(x, 4):g}, " in warnings[0].message
     assert errors(m) == []
     ch = m.channel(1)
     ch.request_jog("X", -1)
