@@ -296,12 +296,13 @@ class Machine:
         self.emit(AlarmRaised(cycle=self.cycle, time_s=self.time, channel=alarm.channel or None, alarm=alarm))
         for hook in self._on_alarm:
             hook(alarm)
-        if ch is not None:  # the reaction last: its events (program aborted) follow the alarm's
-            if definition.reaction == Reaction.PROGRAM_ABORT:
-                ch.abort()
-            elif definition.reaction == Reaction.AXIS_STOP and axis is None:
+        if ch is not None and definition.severity == Severity.ERROR:
+            # the reaction last, so that its events (program aborted) follow the alarm's; an error
+            # aborts the channel's program in the cycle it is raised, whatever stops the axes
+            if definition.reaction == Reaction.AXIS_STOP and axis is None:
                 for ax in ch.axes:
                     ax.start_independent_stop(ax.a_emergency, self.t_a)
+            ch.abort()
         return alarm
 
     def channel_has_error(self, channel: ChannelRef) -> bool:
