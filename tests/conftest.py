@@ -1,6 +1,7 @@
 """Shared test configuration.
 
-Every test that proves a requirement carries its IDs: ``@pytest.mark.req("C14-11")``.
+Every test that proves a requirement carries its IDs: ``@pytest.mark.req("C14-11")`` (the list:
+docs/requirements.md).
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ def _no_leaked_shared_memory():
 
 
 # --------------------------------------------------------------------------------------------
-# Requirement coverage: which IDs of REQUIREMENTS.md the collected tests prove
+# Requirement coverage: which IDs of docs/requirements.md the collected tests prove
 # --------------------------------------------------------------------------------------------
 
 _REQ_IDS: dict[str, int] = {}
@@ -55,10 +56,10 @@ def pytest_collection_finish(session: pytest.Session) -> None:
 
 
 def _known_requirements() -> list[str]:
-    """IDs from ../shared/spec/REQUIREMENTS.md when the checkout sits beside it (CI does)."""
+    """The IDs of the project's own requirement list, docs/requirements.md (in every clone)."""
     import re
 
-    spec = Path(__file__).resolve().parents[2] / "shared" / "spec" / "REQUIREMENTS.md"
+    spec = Path(__file__).resolve().parents[1] / "docs" / "requirements.md"
     if not spec.is_file():
         return []
     return re.findall(_REQ_PATTERN, spec.read_text(encoding="utf-8"), flags=re.MULTILINE)
@@ -76,4 +77,4 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
     if known:
         tr.write_line(f"not yet proven by a test: {', '.join(missing) if missing else 'none'}")
     if unknown:
-        tr.write_line(f"marks with IDs not in REQUIREMENTS.md: {', '.join(unknown)}")
+        tr.write_line(f"marks with IDs not in docs/requirements.md: {', '.join(unknown)}")

@@ -19,3 +19,19 @@ def test_api_doc_lists_every_kind_of_event() -> None:
 
     doc = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
     assert events_markdown() in doc, "docs/api.md is stale: paste `hli-server events` between the markers"
+
+
+def test_the_requirement_list_has_every_id_once_in_order() -> None:
+    import re
+
+    doc = (ROOT / "docs" / "requirements.md").read_text(encoding="utf-8")
+    ids = re.findall(r"^- ((?:E|C14|C43|C3|A3|H)-\d+) ", doc, flags=re.MULTILINE)
+    expected = (
+        [f"E-{i:02d}" for i in range(1, 8)]
+        + [f"C14-{i:02d}" for i in range(1, 24)]
+        + [f"C43-{i:02d}" for i in range(1, 11)]
+        + [f"C3-{i:02d}" for i in range(1, 11)]
+        + [f"A3-{i:02d}" for i in range(1, 6)]
+        + [f"H-{i:02d}" for i in range(1, 10)]
+    )
+    assert ids == expected
