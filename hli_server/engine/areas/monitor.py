@@ -161,6 +161,10 @@ class ChannelAreas:
     def __init__(self, machine: MachineView, channel: Channel) -> None:
         self.machine = machine
         self.channel = channel
+        self._manual_mode_setting = channel.config.suppress_workspace_monitoring_manual_mode
+        """P-CHAN-00442 (0, 1, 2), read once: the manual-mode checks run every cycle."""
+        self._move_limit_warning = machine.config.manual.move_limit_warning
+        """P-MANU-00014"""
         self.names = list(channel.axis_names)
         self.planned = AreaTable()
         self.effective = AreaTable()
@@ -820,7 +824,7 @@ class ChannelAreas:
     # --- manual mode (C14-19..C14-22) --------------------------------------------------------
     def manual_monitoring(self) -> bool:
         """Is the area monitoring effective in manual mode now (P-CHAN-00442, control unit)?"""
-        if self.channel.config.suppress_workspace_monitoring_manual_mode == 1:
+        if self._manual_mode_setting == 1:
             return False
         return not self.channel.hli.bahn_mc_control.suppress_area_mon_manual_mode.state_r
 
@@ -853,7 +857,7 @@ class ChannelAreas:
             return False
         norm = math.hypot(*direction)
         self._blocked_direction = tuple(x / norm for x in direction) if norm > 0.0 else blocked
-        if not self.violation_manual and self.machine.config.manual.move_limit_warning:
+        if not self.violation_manual and self._move_limit_warning:
             # P-MANU-00014: said once the axes are at rest, with the place where they stopped
             self._stop_warning = (prism.protection, prism.area_id, (prism.a, prism.b, prism.c))
         self.violation_manual = True
@@ -865,7 +869,7 @@ class ChannelAreas:
 
     def mode_check(self) -> bool:
         """Entering manual mode (C14-20, P-CHAN-00442 = 0): the TCP must be in the allowed space."""
-        if self.channel.config.suppress_workspace_monitoring_manual_mode != 0 or not self.manual_monitoring():
+        if self._manual_mode_setting != 0 or not self.manual_monitoring():
             return True
         position = tuple(self.channel.setpoints())
         for group in self.effective.groups():

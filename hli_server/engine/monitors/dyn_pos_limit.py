@@ -211,6 +211,11 @@ class DynPosLimits(Monitor):
             for ch, limits in zip(machine.channels, self._by_channel, strict=True)
             if ch.config.dyn_pos_limit_enabled
         ]
+        # P-CHAN-00874 / P-CHAN-00751 per channel, read once (the cycle reads no pydantic model)
+        self._adoption = {
+            ch.index: (ch.config.dpl_input_cycles, max(1, ch.config.dpl_tol_limit_change))
+            for ch in machine.channels
+        }
 
     # --- the cycle -----------------------------------------------------------------------
     def before_interpolation(self) -> None:
@@ -281,9 +286,10 @@ class DynPosLimits(Monitor):
 
     def _change_due(self, lim: _Limit, ch: Channel, command: int) -> bool:
         """P-CHAN-00874 / P-CHAN-00751: is a new command value taken over in this cycle?"""
-        if self.machine.cycle % ch.config.dpl_input_cycles != 0:
+        every, tolerance = self._adoption[ch.index]
+        if self.machine.cycle % every != 0:
             return False
-        return abs(command - lim.command) >= max(1, ch.config.dpl_tol_limit_change)
+        return abs(command - lim.command) >= tolerance
 
     def _release(self, lim: _Limit, planner: Planner) -> None:
         if lim.stop_s is not None or lim.state in (
