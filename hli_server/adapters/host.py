@@ -29,7 +29,9 @@ from schemas.layout import Direction, Layout, Signal
 from schemas.wire import Mode
 
 __all__ = [
+    "LOOPBACK_NAMES",
     "Accepted",
+    "AccessPolicy",
     "AdapterHost",
     "ConflictError",
     "EventFeed",
@@ -44,6 +46,30 @@ __all__ = [
 ]
 
 Value = bool | int | float
+
+
+LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "::1", "[::1]"})
+
+
+@dataclass(frozen=True, slots=True)
+class AccessPolicy:
+    """Who may do what through the network doors (issue 12; ``hli-server run`` flags).
+
+    * ``api_token``: state-changing HTTP requests need ``Authorization: Bearer <token>``
+      (``--api-token`` or ``HLI_API_TOKEN``); ``run`` requires one when it binds beyond loopback,
+      unless ``--insecure``.
+    * ``read_only``: no network door accepts a write (HTTP state changes 403, Modbus writes exception
+      0x01, ADS writes 0x704); the PLC on shared memory still works (``--read-only``).
+    * ``allowed_hosts``: host names the HTTP ``Host`` header may carry besides loopback names and IP
+      literals (DNS rebinding: a page of another site that resolves to this server is refused).
+    * ``allowed_origins``: origins (``http://host:port``) whose pages may send state-changing requests
+      besides the server's own (a page of another site in the user's browser is refused).
+    """
+
+    api_token: str | None = None
+    read_only: bool = False
+    allowed_hosts: tuple[str, ...] = ()
+    allowed_origins: tuple[str, ...] = ()
 
 
 class OperatorError(Exception):
@@ -230,6 +256,11 @@ class AdapterHost(Protocol):
     @property
     def bind(self) -> str:
         """The address the network doors listen on (``--bind``)."""
+        ...
+
+    @property
+    def policy(self) -> AccessPolicy:
+        """Who may do what through the network doors."""
         ...
 
     async def step(self, cycles: int = 1) -> int:

@@ -152,8 +152,10 @@ class RegisterMap:
     checks nothing at run time because the layout does not change while the server runs.
     """
 
-    def __init__(self, image: ImagePort, word_order: str = "ABCD") -> None:
+    def __init__(self, image: ImagePort, word_order: str = "ABCD", *, read_only: bool = False) -> None:
         order = check_word_order(word_order)
+        self.read_only = read_only
+        """``--read-only``: every write function is refused with exception 0x01 (issue 12)."""
         self.image = image
         self.layout: Layout = image.layout
         self.word_order = order
@@ -330,6 +332,10 @@ class RegisterMap:
 
     def _commit(self, fc: int, writes: list[tuple[Signal, object]]) -> None:
         """Check every value first, then write them all: a refused request changes nothing."""
+        if self.read_only:
+            raise ModbusError(
+                ExceptionCode.ILLEGAL_FUNCTION, f"FC {fc}: the server runs --read-only, writes are refused"
+            )
         checked: list[tuple[Signal, bool | int | float]] = []
         for signal, value in writes:
             try:
@@ -586,18 +592,20 @@ class ModbusAdapter:
             f"32-bit word order {self.word_order}, 0-based addresses as in `hli-server map`)"
         ]
 
-    def serve_image(self, image: ImagePort) -> None:
+    def serve_image(self, image: ImagePort, *, read_only: bool = False) -> None:
         """Bind the protocol logic to an image (done by :meth:`start`; tests may call it directly)."""
         self.server = ModbusServer(
-            RegisterMap(image, self.word_order), unit_id=self.unit_id, unknown_unit=self.unknown_unit
+            RegisterMap(image, self.word_order, read_only=read_only),
+            unit_id=self.unit_id,
+            unknown_unit=self.unknown_unit,
         )
 
     async def start(self, host: AdapterHost) -> None:
-        await self.start_for(host.image)
+        await self.start_for(host.image, read_only=host.policy.read_only)
 
-    async def start_for(self, image: ImagePort) -> None:
+    async def start_for(self, image: ImagePort, *, read_only: bool = False) -> None:
         """Listen for an image without a runtime (tests, tools)."""
-        self.serve_image(image)
+        self.serve_image(image, read_only=read_only)
         loop = asyncio.get_running_loop()
         try:
             self._listener = await loop.create_server(

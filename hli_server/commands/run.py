@@ -19,6 +19,7 @@ port in use, image name taken).
 from __future__ import annotations
 
 import asyncio
+import ipaddress
 import logging
 from collections.abc import Callable
 from pathlib import Path
@@ -26,6 +27,7 @@ from typing import Any
 
 import click
 
+from hli_server.adapters.host import AccessPolicy
 from hli_server.adapters.registry import CLI_ALIASES, AdapterError, options_model, plan_adapters
 from hli_server.configuration import ConfigError, ConfigFileError, load_machine, machine_summary
 from hli_server.runtime import Clock, Runtime, precise_event_loop
@@ -51,9 +53,25 @@ def _banner(runtime: Runtime, event_loop: str) -> None:
     for adapter in runtime.adapters:
         for line in adapter.endpoints():
             click.echo(f"  {line}")
+    policy = runtime.policy
+    guards = [
+        "read-only" if policy.read_only else "",
+        "API token required for changes" if policy.api_token else "",
+    ]
+    if any(guards):
+        click.echo(f"  access: {', '.join(g for g in guards if g)}")
     if runtime.stop_after_cycles is not None:
         click.echo(f"  stops after {runtime.stop_after_cycles} cycles")
     click.echo("  stop with Ctrl+C or SIGTERM")
+
+
+def _is_loopback(bind: str) -> bool:
+    if bind.lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(bind.strip("[]")).is_loopback
+    except ValueError:
+        return False
 
 
 def _farewell(runtime: Runtime) -> None:
@@ -112,6 +130,30 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
 )
 @click.option("--bind", default="127.0.0.1", show_default=True, help="address the network adapters listen on")
 @click.option(
+    "--api-token",
+    envvar="HLI_API_TOKEN",
+    default=None,
+    metavar="TOKEN",
+    help="state-changing HTTP requests need 'Authorization: Bearer TOKEN' (or env HLI_API_TOKEN); "
+    "required with a --bind beyond loopback",
+)
+@click.option("--insecure", is_flag=True, help="allow a --bind beyond loopback without --api-token")
+@click.option("--read-only", is_flag=True, help="the network doors accept no writes (HTTP, Modbus, ADS)")
+@click.option(
+    "--allow-host",
+    "allow_hosts",
+    multiple=True,
+    metavar="NAME",
+    help="a host name the HTTP Host header may carry besides localhost and IP addresses (repeatable)",
+)
+@click.option(
+    "--allow-origin",
+    "allow_origins",
+    multiple=True,
+    metavar="ORIGIN",
+    help="a web origin (http://host:port) whose pages may change the state (repeatable)",
+)
+@click.option(
     "--image-name",
     default=None,
     help="name of the shared-memory image (/dev/shm/NAME); default: a unique hli_<pid>_<random>",
@@ -146,6 +188,11 @@ def run(
     config_path: Path | None,
     clock: str,
     bind: str,
+    api_token: str | None,
+    insecure: bool,
+    read_only: bool,
+    allow_hosts: tuple[str, ...],
+    allow_origins: tuple[str, ...],
     image_name: str | None,
     adapter_specs: tuple[str, ...],
     max_catch_up: int,
@@ -166,6 +213,20 @@ def run(
         click.echo("the configuration is invalid: check it with `hli-server config validate FILE`", err=True)
         ctx.exit(_EXIT_START)
 
+    if not _is_loopback(bind) and not api_token and not insecure:
+        click.echo(
+            f"error: --bind {bind} lets other machines in: give an --api-token (or HLI_API_TOKEN) so that "
+            "only holders of the token can change the machine's state, or --insecure if this network is "
+            "yours alone",
+            err=True,
+        )
+        ctx.exit(_EXIT_START)
+    policy = AccessPolicy(
+        api_token=api_token or None,
+        read_only=read_only,
+        allowed_hosts=tuple(allow_hosts),
+        allowed_origins=tuple(allow_origins),
+    )
     aliases = {
         alias.flag: alias_values.get("alias_" + alias.flag.removeprefix("--").replace("-", "_"))
         for alias in CLI_ALIASES
@@ -180,6 +241,7 @@ def run(
             adapters=adapters,
             max_catch_up=max_catch_up,
             stop_after_cycles=cycles,
+            policy=policy,
         )
     except (AdapterError, ValueError) as exc:
         click.echo(f"error: {exc}", err=True)

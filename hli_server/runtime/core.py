@@ -29,7 +29,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping
 from typing import TYPE_CHECKING, Any
 
-from hli_server.adapters.host import LoggedEvent
+from hli_server.adapters.host import AccessPolicy, LoggedEvent
 from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
 from hli_server.engine.machine import Machine
 from hli_server.runtime.events import EventLog
@@ -92,6 +92,7 @@ class Runtime:
         image_factory: ImageFactory | None = None,
         stop_after_cycles: int | None = None,
         read_program: Callable[[str], str] | None = read_program_file,
+        policy: AccessPolicy | None = None,
     ) -> None:
         try:
             self.clock = Clock(clock)
@@ -105,6 +106,7 @@ class Runtime:
             raise ValueError(f"HTTP port {http_port} is out of range 0..65535 (0 = a free port)")
         self.config = config
         self.bind = bind
+        self.policy = policy or AccessPolicy()
         self.http_port = http_port
         self.image_name = image_name
         self.max_catch_up = max_catch_up

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 
 from hli_server.adapters.host import (
     Accepted,
+    AccessPolicy,
     ConflictError,
     EventFeed,
     ImagePort,
@@ -222,6 +223,10 @@ class RuntimeHost:
     @property
     def bind(self) -> str:
         return self._rt.bind
+
+    @property
+    def policy(self) -> AccessPolicy:
+        return self._rt.policy
 
     async def step(self, cycles: int = 1) -> int:
         from hli_server.runtime.core import RuntimeStateError

@@ -24,6 +24,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import select
 import selectors
 import time
 from collections.abc import Callable, Sequence
@@ -36,6 +37,7 @@ __all__ = [
     "Clock",
     "ClockError",
     "PacingStats",
+    "PreciseEpollSelector",
     "precise_event_loop",
     "run_free",
     "run_realtime",
@@ -62,17 +64,34 @@ class ClockError(RuntimeError):
     """An operation that the current clock does not allow (e.g. ``step`` outside stepped mode)."""
 
 
-def precise_event_loop() -> asyncio.AbstractEventLoop:
-    """An asyncio loop whose timers wake to the microsecond: ``select(2)`` instead of ``epoll``.
+class PreciseEpollSelector(selectors.EpollSelector):
+    """epoll for readiness, ``select(2)`` on the epoll descriptor for a timeout to the microsecond.
 
     asyncio's default loop on Linux waits in ``epoll_wait``, whose timeout is whole milliseconds
-    (Python rounds it up): with T_A = 1 ms every wake-up comes up to a millisecond late, and the
-    realtime clock's lateness is about half a cycle at the median. ``select`` takes microseconds,
-    which leaves the kernel's wake-up latency (about 0.1 ms). ``hli-server run`` uses this loop
-    (``--event-loop select``, the default). Its limit: file descriptors must be below FD_SETSIZE
-    (1024), plenty for one simulated CNC and its clients.
+    (Python rounds it up): with T_A = 1 ms every wake-up would come up to a millisecond late. A plain
+    ``select(2)`` loop takes microseconds but cannot watch a descriptor numbered 1024 or above
+    (FD_SETSIZE): about a thousand open connections crashed such a server (issue 12). This selector
+    waits with ``select(2)`` on one descriptor only, the epoll instance itself (created with the loop,
+    so its number is small; it is readable when any registered descriptor is ready), then collects the
+    ready descriptors with a non-blocking ``epoll_wait``. Precise timers, no descriptor limit.
     """
-    return asyncio.SelectorEventLoop(selectors.SelectSelector())
+
+    def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
+        if timeout is not None and timeout > 0:
+            epoll_fd = self._selector.fileno()  # type: ignore[attr-defined]
+            select.select([epoll_fd], [], [], timeout)
+            timeout = 0
+        return super().select(timeout)
+
+
+def precise_event_loop() -> asyncio.AbstractEventLoop:
+    """An asyncio loop whose timers wake to the microsecond and that takes any number of descriptors
+    (:class:`PreciseEpollSelector`; plain ``select(2)`` where epoll does not exist). ``hli-server run``
+    uses it (``--event-loop select``, the default): the realtime clock's lateness is then the kernel's
+    wake-up latency (about 0.1 ms) instead of up to a millisecond."""
+    if hasattr(selectors, "EpollSelector"):
+        return asyncio.SelectorEventLoop(PreciseEpollSelector())
+    return asyncio.SelectorEventLoop(selectors.SelectSelector())  # pragma: no cover - not Linux
 
 
 # --------------------------------------------------------------------------------------------

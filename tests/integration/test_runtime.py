@@ -27,6 +27,7 @@ from hli_server.configuration import load_machine
 from hli_server.runtime import Clock, ClockError, Runtime, RuntimeStateError
 from schemas.config import MachineConfig
 from schemas.wire import ProgramState
+from tests.integration.servers import hli_server_cmd, read_banner, start_server
 
 PROGRAM = "N10 G01 X20 Y10 F6000\nN20 G01 X0 Y0\nN30 M30\n"
 
@@ -410,41 +411,6 @@ async def test_second_process_writes_dyn_pos_limit_and_sees_state_r_within_two_c
 # --------------------------------------------------------------------------------------------
 # `hli-server run` as a process
 # --------------------------------------------------------------------------------------------
-
-
-def hli_server_cmd() -> list[str]:
-    """The installed console script next to this interpreter (the venv's)."""
-    return [str(Path(sys.executable).parent / "hli-server")]
-
-
-def start_server(*args: str) -> subprocess.Popen[str]:
-    return subprocess.Popen(
-        [*hli_server_cmd(), "run", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-
-
-def read_banner(proc: subprocess.Popen[str], timeout: float = 20.0) -> dict[str, str]:
-    """The banner lines up to 'stop with ...': returns the HTTP URL and the image name."""
-    assert proc.stdout is not None
-    found: dict[str, str] = {}
-    deadline = time.monotonic() + timeout
-    lines = []
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        if not line:
-            break
-        lines.append(line)
-        if "HTTP control API:" in line:
-            found["url"] = line.split("HTTP control API:")[1].split()[0]
-        if "shared memory image:" in line:
-            found["image"] = line.split("shared memory image:")[1].split()[0]
-        if "stop with" in line:
-            return found
-    stderr = proc.stderr.read() if proc.stderr and proc.poll() is not None else ""
-    raise AssertionError(f"no banner from hli-server run: {''.join(lines)} {stderr}")
 
 
 @pytest.mark.req("H-01", "E-01")

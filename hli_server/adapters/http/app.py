@@ -17,15 +17,19 @@ from __future__ import annotations
 from fastapi import FastAPI
 
 from hli_server.adapters.host import AdapterHost
-from hli_server.adapters.http.deps import install_error_handlers
+from hli_server.adapters.http.deps import SafeJSONResponse, install_error_handlers
+from hli_server.adapters.http.guard import Guard
+from hli_server.adapters.http.options import DEFAULT_MAX_BODY_BYTES
 from hli_server.adapters.http.routers import ROUTERS
 
 __all__ = ["create_app"]
 
 
-def create_app(host: AdapterHost) -> FastAPI:
-    """The FastAPI application for ``host`` (usable without a socket, e.g. with an ASGI client)."""
+def create_app(host: AdapterHost, *, max_body_bytes: int = DEFAULT_MAX_BODY_BYTES) -> FastAPI:
+    """The FastAPI application for ``host`` (usable without a socket, e.g. with an ASGI client), behind
+    the guard (Host, Origin, token, read-only, body size: ``guard.py``)."""
     app = FastAPI(
+        default_response_class=SafeJSONResponse,
         title="hli-server control API",
         version="1",
         description=(
@@ -39,4 +43,5 @@ def create_app(host: AdapterHost) -> FastAPI:
     install_error_handlers(app)
     for router in ROUTERS:
         app.include_router(router)
+    app.add_middleware(Guard, policy=host.policy, bind=host.bind, max_body_bytes=max_body_bytes)
     return app

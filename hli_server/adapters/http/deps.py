@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+import json
+import math
+from typing import Annotated, Any
 
-from fastapi import Depends, FastAPI, Request
+from fastapi import Depends, FastAPI, HTTPException, Request
+from fastapi.encoders import jsonable_encoder
+from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 
 from hli_server.adapters.host import (
@@ -18,7 +22,29 @@ from hli_server.adapters.host import (
 )
 from hli_server.adapters.http.models import AcceptedBody
 
-__all__ = ["HostDep", "accepted", "get_host", "install_error_handlers"]
+__all__ = ["HostDep", "SafeJSONResponse", "accepted", "get_host", "install_error_handlers"]
+
+
+def _json_safe(value: Any) -> Any:
+    """NaN and infinities (a client may send them: Python's JSON reader takes ``NaN``, ``Infinity`` and
+    ``1e400``) become their names, so that an answer that quotes the input is still JSON."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    return value
+
+
+class SafeJSONResponse(JSONResponse):
+    """JSON that always renders: non-finite numbers named (see :func:`_json_safe`), text escaped to ASCII
+    (a lone surrogate in a client's string cannot break the answer). Issue 12, finding 6: these made 500s."""
+
+    def render(self, content: Any) -> bytes:
+        return json.dumps(
+            _json_safe(content), ensure_ascii=True, allow_nan=False, separators=(",", ":")
+        ).encode("ascii")
 
 
 def get_host(request: Request) -> AdapterHost:
@@ -51,6 +77,16 @@ def install_error_handlers(app: FastAPI) -> None:
 
     async def operator_error(_request: Request, exc: Exception) -> JSONResponse:
         status = next((code for kind, code in _STATUS if isinstance(exc, kind)), 400)
-        return JSONResponse({"detail": str(exc)}, status_code=status)
+        return SafeJSONResponse({"detail": str(exc)}, status_code=status)
+
+    async def validation_error(_request: Request, exc: Exception) -> JSONResponse:
+        assert isinstance(exc, RequestValidationError)
+        return SafeJSONResponse({"detail": jsonable_encoder(exc.errors())}, status_code=422)
+
+    async def http_error(_request: Request, exc: Exception) -> JSONResponse:
+        assert isinstance(exc, HTTPException)
+        return SafeJSONResponse({"detail": exc.detail}, status_code=exc.status_code, headers=exc.headers)
 
     app.add_exception_handler(OperatorError, operator_error)
+    app.add_exception_handler(RequestValidationError, validation_error)
+    app.add_exception_handler(HTTPException, http_error)

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field
 
-__all__ = ["DEFAULT_PORT", "HttpOptions"]
+__all__ = ["DEFAULT_MAX_BODY_BYTES", "DEFAULT_PORT", "HttpOptions"]
 
 DEFAULT_PORT = 8080
+DEFAULT_MAX_BODY_BYTES = 16 * 1024 * 1024
 
 
 class HttpOptions(BaseModel):
@@ -17,4 +18,19 @@ class HttpOptions(BaseModel):
     port: int = Field(default=DEFAULT_PORT, ge=0, le=65535, description="TCP port (0: any free port)")
     graceful_timeout: int = Field(
         default=2, ge=0, le=60, description="seconds open requests get to finish at shutdown"
+    )
+    max_connections: int = Field(
+        default=256,
+        ge=1,
+        le=4096,
+        description="connections at once; beyond, the longest idle one is closed, else 503",
+    )
+    idle_timeout: float = Field(
+        default=30.0, ge=0.0, le=3600.0, description="seconds a connection may stay silent (0: no limit)"
+    )
+    keep_alive: int = Field(
+        default=5, ge=1, le=300, description="seconds an idle keep-alive connection stays open"
+    )
+    max_body_bytes: int = Field(
+        default=DEFAULT_MAX_BODY_BYTES, ge=1024, le=1 << 30, description="largest request body (else 413)"
     )

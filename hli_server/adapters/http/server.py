@@ -18,6 +18,7 @@ import uvicorn
 from hli_server.adapters.host import AdapterHost
 from hli_server.adapters.http.app import create_app
 from hli_server.adapters.http.options import HttpOptions
+from hli_server.adapters.http.protocol import bounded_protocol
 
 __all__ = ["HttpApiAdapter"]
 
@@ -63,12 +64,15 @@ class HttpApiAdapter:
     async def start(self, host: AdapterHost) -> None:
         self._socket = sock = _listen(self.bind, self.requested_port)
         self.port = sock.getsockname()[1]
+        options = self.options
         config = uvicorn.Config(
-            create_app(host),
+            create_app(host, max_body_bytes=options.max_body_bytes),
             log_config=None,
             access_log=False,
             lifespan="off",
             ws="none",
+            http=bounded_protocol(options.max_connections, options.idle_timeout),
+            timeout_keep_alive=options.keep_alive,
             timeout_graceful_shutdown=self.graceful_timeout,
         )
         self._server = server = _Server(config)

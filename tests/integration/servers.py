@@ -1,0 +1,56 @@
+"""`hli-server run` as a separate process, for the tests that need the real command line."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+__all__ = ["hli_server_cmd", "read_banner", "start_server", "stop_server"]
+
+
+def hli_server_cmd() -> list[str]:
+    """The installed console script next to this interpreter (the venv's)."""
+    return [str(Path(sys.executable).parent / "hli-server")]
+
+
+def start_server(*args: str) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [*hli_server_cmd(), "run", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def read_banner(proc: subprocess.Popen[str], timeout: float = 20.0) -> dict[str, str]:
+    """The banner lines up to 'stop with ...': returns the HTTP URL and the image name."""
+    assert proc.stdout is not None
+    found: dict[str, str] = {}
+    deadline = time.monotonic() + timeout
+    lines = []
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        lines.append(line)
+        if "HTTP control API:" in line:
+            found["url"] = line.split("HTTP control API:")[1].split()[0]
+        if "shared memory image:" in line:
+            found["image"] = line.split("shared memory image:")[1].split()[0]
+        if "stop with" in line:
+            return found
+    stderr = proc.stderr.read() if proc.stderr and proc.poll() is not None else ""
+    raise AssertionError(f"no banner from hli-server run: {''.join(lines)} {stderr}")
+
+
+def stop_server(proc: subprocess.Popen[str], timeout: float = 10.0) -> None:
+    """SIGTERM, then wait; kill if it does not stop."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout)

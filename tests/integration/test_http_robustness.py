@@ -1,0 +1,207 @@
+"""The HTTP door under bad input, many clients and hostile pages (issue 12, findings 3, 5, 6, 8).
+
+Each finding of the issue has its regression test here, through the real door: a socket, HTTP, or the
+command line. Traffic goes to loopback only and every test is bounded in count and time.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import time
+from collections.abc import AsyncIterator
+
+import httpx
+import pytest
+
+from hli_server.adapters.host import AccessPolicy
+from hli_server.configuration import load_machine
+from hli_server.runtime import Runtime
+from tests.integration.servers import read_banner, start_server, stop_server
+
+PROGRAM = "N10 G01 X20 Y10 F6000\nN20 M30\n"
+
+
+@pytest.fixture
+async def guarded() -> AsyncIterator[Runtime]:
+    policy = AccessPolicy(api_token="s3cret", allowed_origins=("http://dashboard.example:9000",))
+    async with Runtime(load_machine(None), clock="stepped", http_port=0, policy=policy) as rt:
+        yield rt
+
+
+@pytest.fixture
+async def open_runtime() -> AsyncIterator[Runtime]:
+    async with Runtime(load_machine(None), clock="stepped", http_port=0) as rt:
+        yield rt
+
+
+# --- finding 6: NaN, Infinity, 1e400, a lone surrogate ----------------------------------------
+
+
+@pytest.mark.req("H-01")
+@pytest.mark.parametrize(
+    ("path", "body"),
+    [
+        ("/api/channels/1/override", '{"percent": NaN}'),
+        ("/api/channels/1/override", '{"percent": Infinity}'),
+        ("/api/channels/1/override", '{"percent": -Infinity}'),
+        ("/api/channels/1/override", '{"percent": 1e400}'),
+        ("/api/axes/X/faults", '{"encoder_drift": NaN}'),
+        ("/api/axes/X/faults", '{"friction": 1e400}'),
+        ("/api/step", '{"cycles": NaN}'),
+        ("/api/channels/1/jog", '{"axis": "\\ud800", "direction": 1}'),
+        ("/api/channels/1/program", '{"text": "N10 G01 X1 F100 (\\ud800)", "name": "x"}'),
+        ("/api/channels/1/program", '{"text": "N10 G01 X1 F100", "name": "\\udfff"}'),
+    ],
+)
+async def test_non_finite_numbers_and_lone_surrogates_get_422_not_500(
+    open_runtime: Runtime, path: str, body: str
+) -> None:
+    async with httpx.AsyncClient(base_url=open_runtime.http_url, timeout=10) as c:
+        r = await c.post(path, content=body, headers={"content-type": "application/json"})
+        assert r.status_code in (404, 422), (r.status_code, r.text)
+        json.loads(r.text)  # the answer is JSON (no bare NaN in it)
+        faults = (await c.get("/api/axes/X/faults")).json()
+        assert faults["encoder_drift"] == 0.0  # nothing was taken over
+        assert faults["friction"] == 0.0
+        assert (
+            await c.post("/api/step", json={"cycles": 2})
+        ).status_code == 200  # the next request is served
+
+
+# --- finding 5: a body too large ---------------------------------------------------------------
+
+
+@pytest.mark.req("H-01")
+async def test_a_body_larger_than_the_bound_is_413_before_it_is_read(open_runtime: Runtime) -> None:
+    async with httpx.AsyncClient(base_url=open_runtime.http_url, timeout=30) as c:
+        huge = b"N10 G01 X1 F100\n" * (2 * 1024 * 1024)  # 32 MiB > 16 MiB
+        began = time.monotonic()
+        r = await c.post("/api/channels/1/program", content=huge, headers={"content-type": "text/plain"})
+        assert r.status_code == 413, r.text
+        assert "16777216 bytes" in r.json()["detail"]
+        assert time.monotonic() - began < 10
+
+        async def chunks() -> AsyncIterator[bytes]:  # no Content-Length: the bound applies while streaming
+            for _ in range(40):
+                yield b"N10 G01 X1 F100\n" * 32768
+
+        r = await c.post("/api/channels/1/program", content=chunks(), headers={"content-type": "text/plain"})
+        assert r.status_code == 413
+        assert open_runtime.machine.channel(1).program_text is None  # nothing was loaded
+        r = await c.post("/api/channels/1/program", content=PROGRAM, headers={"content-type": "text/plain"})
+        assert r.status_code == 200
+
+
+# --- finding 8: Host, Origin, token, read-only --------------------------------------------------
+
+
+@pytest.mark.req("H-01")
+async def test_a_foreign_host_name_is_refused_dns_rebinding(guarded: Runtime) -> None:
+    async with httpx.AsyncClient(base_url=guarded.http_url, timeout=10) as c:
+        r = await c.get("/api/state", headers={"host": "evil.example:8080"})
+        assert r.status_code == 421
+        assert "--allow-host" in r.json()["detail"]
+        assert (await c.get("/api/state", headers={"host": "localhost:8080"})).status_code == 200
+        assert (await c.get("/api/state", headers={"host": "10.1.2.3:8080"})).status_code == 200
+
+
+@pytest.mark.req("H-01")
+async def test_state_changes_need_the_token_and_no_foreign_origin(guarded: Runtime) -> None:
+    async with httpx.AsyncClient(base_url=guarded.http_url, timeout=10) as c:
+        assert (await c.get("/api/state")).status_code == 200  # reading stays open
+        r = await c.post("/api/channels/1/program", content=PROGRAM)
+        assert r.status_code == 401
+        assert r.headers["www-authenticate"].startswith("Bearer")
+        bad = {"authorization": "Bearer wrong"}
+        assert (await c.post("/api/channels/1/start", headers=bad)).status_code == 401
+        auth = {"authorization": "Bearer s3cret"}
+        evil = {**auth, "origin": "http://evil.example"}
+        r = await c.post("/api/channels/1/program", content=PROGRAM, headers=evil)
+        assert r.status_code == 403
+        assert "cross-site" in r.json()["detail"]
+        assert guarded.machine.channel(1).program_text is None
+        own = {**auth, "origin": guarded.http_url}
+        assert (await c.post("/api/channels/1/program", content=PROGRAM, headers=own)).status_code == 200
+        allowed = {**auth, "origin": "http://dashboard.example:9000"}
+        assert (await c.post("/api/channels/1/start", headers=allowed)).status_code == 202
+        assert (await c.post("/api/step", json={"cycles": 5}, headers=auth)).status_code == 200
+        assert guarded.machine.channel(1).program_running
+
+
+@pytest.mark.req("H-01", "H-03")
+async def test_read_only_refuses_every_write_at_http_and_modbus() -> None:
+    from pymodbus.client import AsyncModbusTcpClient
+
+    policy = AccessPolicy(read_only=True)
+    async with Runtime(
+        load_machine(None),
+        clock="stepped",
+        adapters=[("http", {"port": 0}), ("modbus", {"port": 0})],
+        policy=policy,
+    ) as rt:
+        async with httpx.AsyncClient(base_url=rt.http_url, timeout=10) as c:
+            assert (await c.get("/api/state")).status_code == 200
+            r = await c.post("/api/channels/1/program", content=PROGRAM)
+            assert r.status_code == 403
+            assert "--read-only" in r.json()["detail"]
+            r = await c.put("/api/image/gpCh[0].bahn_mc_control.override.command_w", json={"value": 500})
+            assert r.status_code == 403
+        port = rt.adapter("modbus").port  # type: ignore[attr-defined]
+        client = AsyncModbusTcpClient("127.0.0.1", port=port)
+        await client.connect()
+        try:
+            reply = await client.write_coil(0, True, device_id=1)
+            assert reply.isError()
+            assert reply.exception_code == 0x01
+            assert (await client.read_input_registers(0, count=2, device_id=1)).registers is not None
+        finally:
+            client.close()
+
+
+@pytest.mark.req("H-01")
+def test_binding_beyond_loopback_needs_a_token_or_insecure() -> None:
+    proc = start_server("--bind", "0.0.0.0", "--cycles", "1")
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 2
+    assert "--api-token" in err
+    assert "--insecure" in err
+
+
+# --- finding 3: a thousand idle connections -------------------------------------------------------
+
+
+@pytest.mark.req("H-01", "E-01")
+def test_over_a_thousand_idle_connections_do_not_take_the_server_down() -> None:
+    """The earlier select() loop crashed at a descriptor above 1024. Now: the door holds at most
+    ``max_connections`` (256), makes room by closing the longest-idle, and keeps serving."""
+    proc = start_server("--http-port", "0", "--modbus-port", "0")
+    sockets: list[socket.socket] = []
+    try:
+        url = read_banner(proc)["url"]
+        host, port = url.removeprefix("http://").rsplit(":", 1)
+        for _ in range(1100):
+            s = socket.create_connection((host, int(port)), timeout=5)
+            sockets.append(s)
+        time.sleep(0.5)
+        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+        r = httpx.get(url + "/api/state", timeout=10)
+        assert r.status_code == 200
+        assert r.json()["cycle"] > 0
+        timing = httpx.get(url + "/api/timing", timeout=10).json()
+        assert timing["failed_cycles"] == 0
+        closed = 0
+        for s in sockets:  # the ones beyond the bound were closed by the server
+            s.setblocking(False)
+            try:
+                closed += s.recv(1) == b""
+            except BlockingIOError:
+                pass
+            except OSError:
+                closed += 1
+        assert closed >= 1100 - 256
+    finally:
+        for s in sockets:
+            s.close()
+        stop_server(proc)
+    assert proc.returncode == 0
