@@ -55,6 +55,8 @@ import asyncio
 import contextlib
 import logging
 import struct
+import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from operator import itemgetter
@@ -110,6 +112,8 @@ DEFAULT_PORT: Final = 5020
 UNKNOWN_UNIT_POLICIES: Final = ("exception", "ignore")
 ANY_UNIT_IDS: Final = frozenset({0, 255})
 """Unit ids answered besides the configured one: 0 and 255 mean "this device" on Modbus TCP."""
+BATCH: Final = 32
+"""Frames answered per turn of one connection before the others (and the clock) get theirs."""
 READER_CACHE_SIZE: Final = 4096
 """Compiled readers kept per server (one per distinct read request); cleared when full."""
 
@@ -414,6 +418,12 @@ class ServerStats:
     """frames not answered: protocol id not 0, or an unknown unit id with ``unknown_unit="ignore"``"""
     broken_streams: int = 0
     """connections closed because an MBAP length field could not be resynchronised"""
+    refused: int = 0
+    """connections refused at max_connections (none of the others idle long enough to make room)"""
+    evicted: int = 0
+    """idle connections closed to make room for a new client"""
+    idle_closed: int = 0
+    """connections closed after idle_timeout seconds of silence"""
 
 
 class ModbusServer:
@@ -473,7 +483,15 @@ class ModbusServer:
 
 
 class _Connection(asyncio.Protocol):
-    """One client: decode whatever arrived, answer every complete frame in order, one write."""
+    """One client: its requests are answered in order, in turns of at most ``BATCH`` frames.
+
+    A client that pipelines thousands of requests (or never reads its answers) must neither delay the
+    cycle nor starve another client (issue 12, finding 5): after a turn of ``BATCH`` frames the rest
+    waits in this connection's queue, reading from the socket is paused, and the next turn is scheduled
+    behind every other ready callback (the clock's wake-up and the other connections' turns included).
+    Reading resumes when the queue is empty and the client reads its answers (asyncio's write
+    high-water mark pauses us too). Input held per connection is therefore bounded by one socket read.
+    """
 
     def __init__(self, adapter: ModbusAdapter) -> None:
         self._adapter = adapter
@@ -481,6 +499,11 @@ class _Connection(asyncio.Protocol):
         self._decoder = MbapDecoder()
         self._transport: asyncio.Transport | None = None
         self._peer: Any = None
+        self._queue: deque[Frame] = deque()
+        self._turn: asyncio.Handle | None = None
+        self._write_paused = False
+        self.last_active = time.monotonic()
+        self._idle: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
@@ -488,40 +511,102 @@ class _Connection(asyncio.Protocol):
         self._peer = transport.get_extra_info("peername")
         if not self._adapter._accept(self):
             logger.warning(
-                "Modbus: refused connection from %s: %d connections open (max_connections)",
+                "Modbus: refused connection from %s: %d connections open and none idle (max_connections)",
                 self._peer,
                 self._adapter.max_connections,
             )
             transport.abort()
+            self._transport = None
             return
         self._server.stats.connections += 1
         logger.debug("Modbus: connection from %s", self._peer)
+        self._arm_idle()
+
+    def _arm_idle(self) -> None:
+        timeout = self._adapter.idle_timeout
+        if timeout > 0:
+            self._idle = asyncio.get_running_loop().call_later(timeout, self._idle_check)
+
+    def _idle_check(self) -> None:
+        self._idle = None
+        if self._transport is None:
+            return
+        quiet = time.monotonic() - self.last_active
+        timeout = self._adapter.idle_timeout
+        if quiet >= timeout and not self._queue:
+            logger.info(
+                "Modbus: closing connection from %s: silent for %.0f s (idle_timeout)", self._peer, quiet
+            )
+            self._server.stats.idle_closed += 1
+            self._transport.close()
+            return
+        self._idle = asyncio.get_running_loop().call_later(max(timeout - quiet, 0.05), self._idle_check)
 
     def data_received(self, data: bytes) -> None:
         transport = self._transport
         if transport is None or transport.is_closing():
             return
-        answer = self._server.answer
-        out = [a for a in map(answer, self._decoder.feed(data)) if a is not None]
-        if out:
-            transport.write(out[0] if len(out) == 1 else b"".join(out))
+        self.last_active = time.monotonic()
+        self._queue.extend(self._decoder.feed(data))
         if self._decoder.broken is not None:
             self._server.stats.broken_streams += 1
             logger.warning("Modbus: closing connection from %s: %s", self._peer, self._decoder.broken)
-            transport.close()
+        if self._turn is None:
+            self._serve()
+
+    def _serve(self) -> None:
+        """One turn: answer up to BATCH queued frames with one write, then yield if more wait."""
+        self._turn = None
+        transport = self._transport
+        if transport is None or transport.is_closing():
+            self._queue.clear()
+            return
+        queue, answer = self._queue, self._server.answer
+        out: list[bytes] = []
+        for _ in range(min(BATCH, len(queue))):
+            reply = answer(queue.popleft())
+            if reply is not None:
+                out.append(reply)
+        if out:
+            transport.write(out[0] if len(out) == 1 else b"".join(out))
+        if queue and not self._write_paused:
+            transport.pause_reading()
+            self._turn = asyncio.get_running_loop().call_soon(self._serve)
+        elif not queue:
+            if self._decoder.broken is not None:
+                transport.close()
+            elif not self._write_paused:
+                transport.resume_reading()
 
     def pause_writing(self) -> None:
-        """The client does not read its answers: stop reading its requests until it does."""
+        """The client does not read its answers: stop reading and answering until it does."""
+        self._write_paused = True
         if self._transport is not None:
             self._transport.pause_reading()
+        if self._turn is not None:
+            self._turn.cancel()
+            self._turn = None
 
     def resume_writing(self) -> None:
+        self._write_paused = False
         if self._transport is not None and not self._transport.is_closing():
-            self._transport.resume_reading()
+            if self._queue:
+                self._serve()
+            else:
+                self._transport.resume_reading()
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._adapter._forget(self)
         self._transport = None
+        self._queue.clear()
+        for handle in (self._turn, self._idle):
+            if handle is not None:
+                handle.cancel()
+        self._turn = self._idle = None
+
+    @property
+    def idle(self) -> bool:
+        return not self._queue and self._turn is None
 
     def abort(self) -> None:
         if self._transport is not None:
@@ -541,7 +626,21 @@ class ModbusOptions(BaseModel):
     unknown_unit: Literal["exception", "ignore"] = Field(
         default="exception", description="other unit ids: exception 0x0B, or no answer"
     )
-    max_connections: int = Field(default=32, ge=1, le=10_000, description="connections served at once")
+    max_connections: int = Field(
+        default=256,
+        ge=1,
+        le=10_000,
+        description="connections at once; beyond, the longest-idle one (silent for evict_after s) makes room",
+    )
+    idle_timeout: float = Field(
+        default=120.0, ge=0.0, le=86_400.0, description="seconds a connection may stay silent (0: no limit)"
+    )
+    evict_after: float = Field(
+        default=5.0,
+        ge=0.0,
+        le=3600.0,
+        description="at max_connections, a connection silent this long is closed for a new client",
+    )
 
     @field_validator("word_order", mode="before")
     @classmethod
@@ -554,7 +653,8 @@ class ModbusAdapter:
 
     Options (``--adapter modbus:port=5020,word_order=CDAB`` or the ``run`` flags): ``port``
     (0 = a free port; :attr:`port` tells which after start), ``word_order`` ``ABCD``/``CDAB``,
-    ``unit_id`` (1), ``unknown_unit`` ``exception``/``ignore``, ``max_connections`` (32).
+    ``unit_id`` (1), ``unknown_unit`` ``exception``/``ignore``, ``max_connections`` (256), ``idle_timeout``
+    (120 s), ``evict_after`` (5 s).
     """
 
     name = "modbus"
@@ -575,6 +675,8 @@ class ModbusAdapter:
         self.unit_id = self.options.unit_id
         self.unknown_unit = self.options.unknown_unit
         self.max_connections = self.options.max_connections
+        self.idle_timeout = self.options.idle_timeout
+        self.evict_after = self.options.evict_after
         self.port: int | None = None
         self.server: ModbusServer
         self._listener: asyncio.Server | None = None
@@ -633,8 +735,19 @@ class ModbusAdapter:
         self.port = None
 
     def _accept(self, connection: _Connection) -> bool:
+        """Admit ``connection``; at the limit, close the connection silent the longest (at least
+        ``evict_after`` seconds) to make room, else refuse (issue 12, finding 4)."""
         if len(self._connections) >= self.max_connections:
-            return False
+            now = time.monotonic()
+            idle = [c for c in self._connections if c.idle and now - c.last_active >= self.evict_after]
+            if not idle:
+                self.server.stats.refused += 1
+                return False
+            victim = min(idle, key=lambda c: c.last_active)
+            logger.info("Modbus: closing the connection idle longest to make room for a new client")
+            self.server.stats.evicted += 1
+            victim.abort()
+            self._connections.discard(victim)
         self._connections.add(connection)
         return True
 
