@@ -106,6 +106,7 @@ class _Connection(asyncio.Protocol):
         self._write_paused = False
         self._read_paused = False
         self._scheduled = False
+        self._eof = False
         self._client_port = 0
 
     # --- asyncio.Protocol ---------------------------------------------------------------------
@@ -142,7 +143,11 @@ class _Connection(asyncio.Protocol):
         self._serve()
 
     def eof_received(self) -> bool | None:
-        return None  # close our side too
+        """The client sent all it will send: answer what is buffered, then close."""
+        self._eof = True
+        if not self._scheduled and not self._write_paused and self._transport is not None:
+            self._serve()
+        return True  # keep the transport open until the answers are written (closed in _serve)
 
     def pause_writing(self) -> None:
         self._write_paused = True
@@ -200,6 +205,8 @@ class _Connection(asyncio.Protocol):
             self._pause_reading()
             if not self._write_paused:
                 self._schedule()
+        elif self._eof:
+            transport.close()  # everything the client sent is answered
         elif self._read_paused:
             self._read_paused = False
             transport.resume_reading()
