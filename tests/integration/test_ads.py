@@ -608,10 +608,10 @@ async def test_router_messages_and_pipelined_requests(runtime: Runtime) -> None:
     try:
         raw.writer.write(encode_router_frame(0x1000, b"\x00\x00"))  # port connect, any port
         reply = await raw.next()
-        assert isinstance(reply, AmsTcpFrame) and reply.command == 0x1000
-        assert (
-            reply.data[:6] == bytes(NetId.parse(SERVER)) and struct.unpack("<H", reply.data[6:])[0] >= 32768
-        )
+        assert isinstance(reply, AmsTcpFrame)
+        assert reply.command == 0x1000
+        assert reply.data[:6] == bytes(NetId.parse(SERVER))
+        assert struct.unpack("<H", reply.data[6:])[0] >= 32768
         raw.writer.write(encode_router_frame(0x1002, b""))
         assert await raw.next() == AmsTcpFrame(0x1002, bytes(NetId.parse(SERVER)))
         # 40 requests in one write, the last one split over two writes: 40 answers in order
@@ -879,4 +879,5 @@ def test_layout_names_every_symbol_once() -> None:
     assert len(table) == len(layout.signals)
     for s in layout.signals:
         found = table.find(s.st_path.replace("]^", "]."))
-        assert found is not None and found.signal is s
+        assert found is not None
+        assert found.signal is s
