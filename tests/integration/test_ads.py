@@ -43,6 +43,7 @@ from hli_server.codecs.ads import (
 )
 from hli_server.configuration import load_machine
 from hli_server.runtime import Runtime
+from plc_clients.ads import close_pyads, open_pyads
 from schemas.layout import Direction, build_layout
 from schemas.wire import ProgramState
 
@@ -102,49 +103,23 @@ def ads(rt: Runtime) -> AdsAdapter:
 
 
 class Plc:
-    """A pyads connection whose blocking calls run in a worker thread.
-
-    pyads' ``Connection.close`` deletes AdsLib's route (and with it the TCP connection) before it
-    closes its AMS port; with a second Connection on the same route that had notifications, AdsLib
-    then crashes closing the second port. :meth:`close` closes the port first and deletes the route
-    with the last Connection of the process (what ``plc_clients.ads`` does too).
-    """
-
-    open_count = 0
+    """A pyads connection whose blocking calls run in a worker thread (opened and closed as
+    ``plc_clients.ads`` does: one AdsLib route per NetId, deleted with the last connection)."""
 
     def __init__(self, port: int, ams_port: int = 851, timeout_ms: int = 2000) -> None:
-        self.conn = pyads.Connection(SERVER, ams_port, f"127.0.0.1:{port}")
+        self.address = f"127.0.0.1:{port}"
+        self.ams_port = ams_port
         self.timeout_ms = timeout_ms
+        self.conn: Any = None
 
     async def open(self) -> None:
-        def open_() -> None:
-            try:
-                self.conn.open()
-            except pyads.ADSError as exc:  # a route left by a failed test: drop it, try once more
-                if exc.err_code != 1286 or Plc.open_count:
-                    raise
-                pyads.pyads_ex.adsDelRoute(self.conn._adr.netIdStruct())
-                self.conn.open()
-
-        await asyncio.to_thread(open_)
-        Plc.open_count += 1
-        self.conn.set_timeout(self.timeout_ms)  # AdsLib's timeout is the open port's
+        self.conn = await asyncio.to_thread(
+            open_pyads, SERVER, self.ams_port, self.address, self.timeout_ms / 1000
+        )
 
     async def close(self) -> None:
-        conn = self.conn
-        if not conn._open:
-            return
-
-        def close() -> None:
-            if conn._port is not None:
-                pyads.pyads_ex.adsPortCloseEx(conn._port)
-                conn._port = None
-            Plc.open_count -= 1
-            if Plc.open_count == 0:
-                pyads.pyads_ex.adsDelRoute(conn._adr.netIdStruct())
-            conn._open = False
-
-        await asyncio.to_thread(close)
+        if self.conn is not None:
+            await asyncio.to_thread(close_pyads, self.conn)
 
     async def __call__(self, fn: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         return await asyncio.to_thread(fn, *args, **kwargs)
