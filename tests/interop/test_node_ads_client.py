@@ -9,6 +9,7 @@ is missing: ``cd tests/interop/node && npm ci`` installs it.
 from __future__ import annotations
 
 import asyncio
+import itertools
 import json
 import os
 import shutil
@@ -104,7 +105,7 @@ async def test_ads_client_without_a_local_net_id_gets_one_from_the_server_and_su
     assert result["localAdsPort"] >= 32768
     cycles = [struct.unpack("<I", bytes.fromhex(s["hex"]))[0] for s in result["samples"]]
     assert len(cycles) == 4
-    assert all(b > a for a, b in zip(cycles, cycles[1:], strict=False)), cycles
+    assert all(b > a for a, b in itertools.pairwise(cycles)), cycles
     for _ in range(100):  # ads-client unsubscribed and disconnected: nothing is left behind
         if getattr(runtime.adapter("ads"), "connection_count") == 0:  # noqa: B009
             break
