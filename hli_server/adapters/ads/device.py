@@ -237,7 +237,7 @@ class Session:
         self._next_handle = 0x1000_0001
         self.notifications: dict[int, Subscription] = {}
         self._next_notification = 0x100
-        self._pending: dict[tuple[AmsAddress, AmsAddress], list[NotificationStamp]] = {}
+        self._pending: dict[tuple[AmsAddress, AmsAddress], list[tuple[int, list[NotificationSample]]]] = {}
         self.closed = False
 
     def new_handle(self, symbol: Symbol) -> int:
@@ -260,12 +260,13 @@ class Session:
         return bool(self._pending)
 
     def queue(self, sub: Subscription, filetime: int, data: bytes) -> None:
-        stamps = self._pending.setdefault((sub.client, sub.server), [])
-        if stamps and stamps[-1].timestamp == filetime:
-            last = stamps[-1]
-            stamps[-1] = NotificationStamp(filetime, (*last.samples, NotificationSample(sub.handle, data)))
+        stamps = self._pending.get((sub.client, sub.server))
+        if stamps is None:
+            stamps = self._pending[(sub.client, sub.server)] = []
+        if stamps and stamps[-1][0] == filetime:
+            stamps[-1][1].append(NotificationSample(sub.handle, data))
         else:
-            stamps.append(NotificationStamp(filetime, (NotificationSample(sub.handle, data),)))
+            stamps.append((filetime, [NotificationSample(sub.handle, data)]))
 
     def flush(self) -> tuple[int, int]:
         """Write the queued samples, one DeviceNotification per (client, server) address pair;
@@ -276,10 +277,10 @@ class Session:
         pending, self._pending = self._pending, {}
         frames = samples = 0
         for (client, server), stamps in pending.items():
-            payload = encode_notification(stamps)
+            payload = encode_notification([NotificationStamp(t, tuple(batch)) for t, batch in stamps])
             self.send(encode_request(client, server, CommandId.DEVICE_NOTIFICATION, 0, payload))
             frames += 1
-            samples += sum(len(s.samples) for s in stamps)
+            samples += sum(len(batch) for _, batch in stamps)
         return frames, samples
 
 
@@ -332,7 +333,7 @@ class AdsDevice:
         self.stats = DeviceStats()
         self.first_sample_delay_s = first_sample_delay_s
         self._call_later = call_later
-        self._request_flush = request_flush or (lambda session: session.flush())
+        self._request_flush = request_flush or (lambda session: None)  # no loop: call session.flush()
         self._geo: dict[int, Signal] = {
             s.ads_offset: s for s in self.layout.signals if s.ads_port == ADS_PORT_GEO
         }
