@@ -83,7 +83,10 @@ def _serve_hli(conn: Connection) -> None:
 
     with asyncio.Runner(loop_factory=precise_event_loop) as runner:
         runner.run(runtime.serve(ready=ready))
-    conn.send(runtime.timing())
+    report = runtime.timing()
+    adapter: Any = runtime.adapters[0]
+    report["ads"] = {"requests": adapter.device.stats.requests, **adapter.stats.as_dict()}
+    conn.send(report)
 
 
 def _free_port() -> int:
