@@ -12,8 +12,8 @@ and runs for ``--seconds``:
   CNC->PLC half in flight and reads the answers as fast as it can (the most work one client can ask).
 
 Printed per phase: the runtime's lateness p50/p99/max and dropped cycles (``GET /api/timing``'s
-figures), the honest client's calls/s and p50/p99, what the flooder got answered, the bytes the
-server read from the flooder.
+figures), the honest client's calls/s and p50/p99, the requests the server answered in all and
+what the flooder read of them.
 
     .venv/bin/python -m benchmarks.bench_ads_flood [--seconds 5]
 """
@@ -50,7 +50,7 @@ def _c2p_size() -> int:
 
 
 def _flood(conn: Connection, port: int, mode: str, seconds: float) -> None:
-    """Raw flooder; reports (requests sent, answers read, bytes sent)."""
+    """Raw flooder; reports (requests written to its socket, answers read, bytes written)."""
     size = _c2p_size()
     chunk = b"".join(_read_frame(i, HALF_GROUP, 0, size) for i in range(64))
     answer = 38 + 8 + size
@@ -184,7 +184,8 @@ def main() -> None:
             else f"{'-':>8} {'-':>8} {'-':>8}"
         )
         flood = r.get("flood")
-        f = f"{flood[0]} requests sent ({flood[2] / 1e6:.1f} MB), {flood[1]} answered" if flood else "-"
+        served = (t.get("ads") or {}).get("requests", 0)
+        f = f"server answered {served} requests" + (f", the flooder read {flood[1]}" if flood else "")
         print(
             f"{name:<20} {late.get('p50', float('nan')):>11.0f} {late.get('p99', float('nan')):>8.0f} "
             f"{late.get('max', float('nan')):>8.0f} {t.get('slipped_cycles', '?'):>7} {h}  {f}"
