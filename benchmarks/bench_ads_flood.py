@@ -184,8 +184,13 @@ def main() -> None:
             else f"{'-':>8} {'-':>8} {'-':>8}"
         )
         flood = r.get("flood")
-        served = (t.get("ads") or {}).get("requests", 0)
-        f = f"server answered {served} requests" + (f", the flooder read {flood[1]}" if flood else "")
+        door = t.get("ads") or {}
+        f = (
+            f"server answered {door.get('requests', 0)} requests"
+            + (f", the flooder read {flood[1]}" if flood else "")
+            + f"; longest turn of the door {door.get('longest_turn_us', 0)} us, "
+            f"{door.get('turns_over_1ms', 0)} of {door.get('turns', 0)} turns over 1 ms"
+        )
         print(
             f"{name:<20} {late.get('p50', float('nan')):>11.0f} {late.get('p99', float('nan')):>8.0f} "
             f"{late.get('max', float('nan')):>8.0f} {t.get('slipped_cycles', '?'):>7} {h}  {f}"
