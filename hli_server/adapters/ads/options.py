@@ -112,6 +112,13 @@ class AdsOptions(BaseModel):
         le=10_000,
         description="requests of one connection served before the others and the clock get a turn",
     )
+    max_turn_ms: float = Field(
+        default=0.25,
+        gt=0,
+        le=100,
+        description="time one connection's requests may hold the event loop before the others and the "
+        "clock get a turn (checked after each request)",
+    )
     max_handles: int = Field(default=2048, ge=1, le=1_000_000, description="symbol handles per connection")
     max_notifications: int = Field(
         default=256, ge=1, le=100_000, description="device notifications per connection"

@@ -23,8 +23,9 @@ docs/reliability.md):
 * ``max_connections`` at once (512). When all are taken, a new client replaces the connection idle
   the longest if that one has been idle ``evict_idle_after_s``; else the new one is closed at once.
   A connection that sent nothing and took no notification for ``idle_timeout_s`` is closed.
-* ``max_requests_per_turn``: a connection's pipelined requests are served that many at a time; then
-  the loop turns (other clients, the clock) before the rest. Requests waiting for their turn stay
+* ``max_requests_per_turn`` and ``max_turn_ms``: a connection's pipelined requests are served that
+  many at a time, for at most that long; then the loop turns (other clients, the clock) before the
+  rest. Requests waiting for their turn stay
   in the decoder's buffer, which holds at most one read of the socket plus one frame: reading is
   paused meanwhile, so a flood waits in the client's own socket buffer.
 * ``max_queued_output``: the transport's high-water mark. Above it the connection is not read (no
@@ -191,11 +192,12 @@ class _Connection(asyncio.Protocol):
         out: list[bytes] = []
         budget = self._options.max_requests_per_turn
         limit = self._options.max_queued_output
+        deadline = time.perf_counter() + self._adapter.turn_s
         queued = transport.get_write_buffer_size()
         more = False
         broken: str | None = None
         while True:
-            if budget <= 0 or queued >= limit:
+            if budget <= 0 or queued >= limit or time.perf_counter() >= deadline:
                 more = True
                 break
             try:
@@ -326,6 +328,7 @@ class AdsAdapter:
         self.net_id = NetId.parse(self.options.ams_net_id)
         self.allowlist = self.options.allowlist()
         self.requested_port = self.options.port
+        self.turn_s = self.options.max_turn_ms / 1000.0
         self.port: int | None = None
         self.stats = ServerStats()
         self.device: AdsDevice
