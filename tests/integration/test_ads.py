@@ -190,9 +190,11 @@ class RawClient:
     async def request(self, command: int, payload: bytes, port: int = 851, net_id: str = SERVER) -> AmsPacket:
         self.writer.write(self.frame(command, payload, port, net_id))
         await self.writer.drain()
-        frame = await self.next()
-        assert isinstance(frame, AmsPacket)
-        return frame
+        while True:  # the reply, past any DeviceNotification the server sent meanwhile
+            frame = await self.next()
+            assert isinstance(frame, AmsPacket)
+            if frame.header.command != CommandId.DEVICE_NOTIFICATION or frame.header.is_response:
+                return frame
 
     async def closed(self, timeout: float = 3.0) -> bool:
         """True when the server closed the connection (EOF or reset) within ``timeout``."""
@@ -661,6 +663,23 @@ async def test_idle_clients_are_closed_and_never_lock_out_a_new_one() -> None:
         assert ads(rt).stats.idle_closed >= 3
         for c in [*idle, newcomer]:
             c.close()
+    finally:
+        await rt.stop()
+
+
+async def test_a_client_that_only_watches_notifications_is_not_idle() -> None:
+    rt = await start_runtime(idle_timeout_s=0.2)
+    try:
+        port = ads(rt).port or 0
+        watcher, idle = await RawClient.connect(port), await RawClient.connect(port)
+        x = rt.layout.signal(X_POS)
+        payload = struct.pack("<IIIIII16s", F020, x.offset, 4, 4, 0, 0, bytes(16))  # on change: silent
+        assert result_of(await watcher.request(CommandId.ADD_DEVICE_NOTIFICATION, payload)) == 0
+        assert result_of(await idle.request(CommandId.READ_STATE, b"")) == 0
+        assert await idle.closed(2.0)
+        assert result_of(await watcher.request(CommandId.READ_STATE, b"")) == 0
+        watcher.close()
+        idle.close()
     finally:
         await rt.stop()
 

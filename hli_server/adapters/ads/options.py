@@ -91,7 +91,7 @@ class AdsOptions(BaseModel):
         default=120.0,
         gt=0,
         le=86_400,
-        description="close a connection that sent nothing and took no notification for this long",
+        description="close a connection that sent nothing for this long and has no notification it reads",
     )
     evict_idle_after_s: float = Field(
         default=5.0,

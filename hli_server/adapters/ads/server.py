@@ -22,7 +22,7 @@ docs/reliability.md):
 
 * ``max_connections`` at once (512). When all are taken, a new client replaces the connection idle
   the longest if that one has been idle ``evict_idle_after_s``; else the new one is closed at once.
-  A connection that sent nothing and took no notification for ``idle_timeout_s`` is closed.
+  A connection that sent nothing for ``idle_timeout_s`` and has no notification it reads is closed.
 * ``max_requests_per_turn`` and ``max_turn_ms``: a connection's pipelined requests are served that
   many at a time, for at most that long; then the loop turns (other clients, the clock) before the
   rest. Requests waiting for their turn stay
@@ -299,6 +299,14 @@ class _Connection(asyncio.Protocol):
             or transport.get_write_buffer_size() >= self._options.max_queued_output
         )
 
+    def idle_since(self, now: float) -> float:
+        """When this client was last active. A client with notifications that reads them is
+        active (AdsLib sends no keep-alives: an HMI watching a value that does not change sends and
+        receives nothing for as long as it likes); one whose output is full is not."""
+        if self.session.notifications and not self._backlogged():
+            return now
+        return self.last_activity
+
     def abort(self) -> None:
         transport, self._transport = self._transport, None
         if transport is not None:
@@ -436,8 +444,9 @@ class AdsAdapter:
     # --- connections --------------------------------------------------------------------------
     def _accept(self, connection: _Connection) -> bool:
         if len(self._connections) >= self.options.max_connections:
-            oldest = min(self._connections, key=lambda c: c.last_activity)
-            idle = time.monotonic() - oldest.last_activity
+            now = time.monotonic()
+            oldest = min(self._connections, key=lambda c: c.idle_since(now))
+            idle = now - oldest.idle_since(now)
             if idle < self.options.evict_idle_after_s:
                 self.stats.refused_full += 1
                 logger.warning(
@@ -476,7 +485,7 @@ class AdsAdapter:
         while True:
             await asyncio.sleep(period)
             now = time.monotonic()
-            for connection in [c for c in self._connections if now - c.last_activity > timeout]:
+            for connection in [c for c in self._connections if now - c.idle_since(now) > timeout]:
                 self.stats.idle_closed += 1
                 logger.info(
                     "ADS: closing %s: idle for %.0f s (idle_timeout_s)", connection.session.name, timeout
