@@ -355,3 +355,22 @@ def test_notification_refusals(image: ProcessImage, layout: Layout) -> None:
     device.close_session(one)
     assert device.notification_count == 1
     assert add(device, two, watch).result == 0
+
+
+def test_samples_queued_between_two_turns_of_the_loop_are_bounded(
+    image: ProcessImage, layout: Layout
+) -> None:
+    """A long ``step(n)`` runs many cycles before the loop turns and the samples are written."""
+    from hli_server.adapters.ads.device import MAX_PENDING_SAMPLES
+
+    device, session = make_device(image), Session()
+    x = layout.signal(X_POS)
+    add(device, session, AddDeviceNotificationRequest(0xF020, x.offset, 4, 3, 0, 0))  # cyclic, every cycle
+    for cycle in range(1, MAX_PENDING_SAMPLES + 100):
+        device.on_cycle(cycle)
+    assert session.pending_samples == MAX_PENDING_SAMPLES
+    assert device.stats.samples_skipped > 0
+    session.flush()
+    assert session.pending_samples == 0
+    device.on_cycle(MAX_PENDING_SAMPLES + 100)
+    assert session.pending_samples == 1

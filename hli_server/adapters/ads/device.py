@@ -119,6 +119,10 @@ DEVICE_NAMES: Final = {ADS_PORT_HLI: "HLI-Server", ADS_PORT_GEO: "HLI-Server GEO
 DEVICE_VERSION: Final = (0, 1, 0)
 """ReadDeviceInfo: major, minor, build (the package's version)."""
 
+MAX_PENDING_SAMPLES: Final = 8192
+"""Samples queued for one connection between two turns of the loop (a long ``step(n)`` runs many
+cycles without one); beyond, its notifications are skipped as for a client that does not read."""
+
 _P2C: Final = Direction.PLC_TO_CNC
 _C2P: Final = Direction.CNC_TO_PLC
 _U32: Final = struct.Struct("<I")
@@ -238,6 +242,7 @@ class Session:
         self.notifications: dict[int, Subscription] = {}
         self._next_notification = 0x100
         self._pending: dict[tuple[AmsAddress, AmsAddress], list[tuple[int, list[NotificationSample]]]] = {}
+        self.pending_samples = 0
         self.closed = False
 
     def new_handle(self, symbol: Symbol) -> int:
@@ -263,6 +268,7 @@ class Session:
         stamps = self._pending.get((sub.client, sub.server))
         if stamps is None:
             stamps = self._pending[(sub.client, sub.server)] = []
+        self.pending_samples += 1
         if stamps and stamps[-1][0] == filetime:
             stamps[-1][1].append(NotificationSample(sub.handle, data))
         else:
@@ -271,6 +277,7 @@ class Session:
     def flush(self) -> tuple[int, int]:
         """Write the queued samples, one DeviceNotification per (client, server) address pair;
         returns (frames, samples)."""
+        self.pending_samples = 0
         if not self._pending or self.closed:
             self._pending.clear()
             return 0, 0
@@ -855,7 +862,7 @@ class AdsDevice:
                     continue
                 self._schedule(sub, cycle + sub.period)
                 session = sub.session
-                if session.backlogged():
+                if session.pending_samples >= MAX_PENDING_SAMPLES or session.backlogged():
                     self.stats.samples_skipped += 1
                     continue
                 data = self._sample(sub, halves)
