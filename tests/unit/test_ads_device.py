@@ -27,6 +27,7 @@ from hli_server.codecs.ads import (
     DeviceNotification,
     ErrorCode,
     NetId,
+    ReadRequest,
     ReadWriteRequest,
     SumRead,
     SumReadItem,
@@ -374,3 +375,26 @@ def test_samples_queued_between_two_turns_of_the_loop_are_bounded(
     assert session.pending_samples == 0
     device.on_cycle(MAX_PENDING_SAMPLES + 100)
     assert session.pending_samples == 1
+
+
+def test_upload_infos_data_types_and_symbol_version(image: ProcessImage, layout: Layout) -> None:
+    from hli_server.codecs.ads import UploadInfo2, decode_data_type_upload
+
+    device, session = make_device(image), Session()
+    info24 = answer(device, session, CommandId.READ, ReadRequest(0xF00F, 0, 24).encode())
+    info64 = answer(device, session, CommandId.READ, ReadRequest(0xF00F, 0, 64).encode())
+    assert (len(info24.data), len(info64.data)) == (24, 64)  # ads-client asks 64, older clients 24
+    info = UploadInfo2.decode(info64.data)
+    assert info.symbol_count == len(layout.signals)
+    types = answer(device, session, CommandId.READ, ReadRequest(0xF00E, 0, info.data_type_length).encode())
+    assert [t.name for t in decode_data_type_upload(types.data)] == ["BOOL", "DINT", "UDINT", "LREAL"]
+    dint = answer(
+        device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF011, 0, 0xFFFF, b"dint\0").encode()
+    )
+    assert (dint.result, decode_data_type_upload(dint.data)[0].size) == (0, 4)
+    unknown = ReadWriteRequest(0xF011, 0, 0xFFFF, b"ST_Axis\0").encode()
+    assert answer(device, session, CommandId.READ_WRITE, unknown).result == 0x710
+    version = answer(device, session, CommandId.READ, ReadRequest(0xF008, 0, 1).encode())
+    assert version.data == b"\x01"
+    short = answer(device, session, CommandId.READ, ReadRequest(0xF00C, 0, 4).encode())
+    assert short.result == 0x705  # the 8-byte upload info does not fit a 4-byte read
