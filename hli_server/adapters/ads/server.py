@@ -197,7 +197,8 @@ class _Connection(asyncio.Protocol):
         more = False
         broken: str | None = None
         while True:
-            if budget <= 0 or queued >= limit or time.perf_counter() >= deadline:
+            # queued above the limit means the transport paused us (its high-water mark is the limit)
+            if budget <= 0 or queued > limit or time.perf_counter() >= deadline:
                 more = True
                 break
             try:
