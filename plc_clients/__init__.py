@@ -5,6 +5,7 @@ these modules runs against any server that serves the same layout.
 
 * :mod:`plc_clients.transports`: :class:`ShmTransport`, :class:`ModbusTransport`,
   :class:`AsyncModbusTransport`, the in-memory twin :class:`MemoryImage` / :class:`MemoryTransport`;
+* :mod:`plc_clients.ads`: :class:`AdsTransport`, :class:`AsyncAdsTransport` (pyads, H-04);
 * :mod:`plc_clients.task`: :class:`PlcTask` (read inputs, run the program, write outputs);
 * :mod:`plc_clients.plcopen`: :class:`MCV_DynPosLimitLow`, :class:`MCV_DynPosLimitHigh`,
   :class:`ControlUnitBlock` and its BOOL / SGN32 variants, :class:`AXIS_REF`;
@@ -13,6 +14,7 @@ these modules runs against any server that serves the same layout.
 See docs/plc-clients.md.
 """
 
+from plc_clients.ads import AdsTransport, AdsTransportError, AsyncAdsTransport
 from plc_clients.plcopen import (
     AXIS_REF,
     ControlBoolUnit,
@@ -42,6 +44,9 @@ from plc_clients.transports import (
 
 __all__ = [
     "AXIS_REF",
+    "AdsTransport",
+    "AdsTransportError",
+    "AsyncAdsTransport",
     "AsyncMemoryTransport",
     "AsyncModbusTransport",
     "AsyncTransport",

@@ -115,6 +115,13 @@ ADAPTERS: dict[str, AdapterKind] = {
             default=True,
             summary="Modbus TCP view of the process image (H-03)",
         ),
+        AdapterKind(
+            "ads",
+            "hli_server.adapters.ads.server:AdsAdapter",
+            "hli_server.adapters.ads.options:AdsOptions",
+            default=False,
+            summary="ADS over TCP: HLI symbols on AMS port 851, FCT-C3 CNC objects on port 551 (H-04, C3-10)",
+        ),
     )
 }
 """Adapter name -> :class:`AdapterKind`, in the order ``run`` starts the default ones."""
@@ -140,6 +147,21 @@ CLI_ALIASES: tuple[CliAlias, ...] = (
     ),
     CliAlias("--modbus-unit-id", "modbus", "unit_id", metavar="N", help="Modbus unit id"),
     CliAlias("--no-modbus", "modbus", None, switch=False, help="do not start the Modbus TCP server"),
+    CliAlias(
+        "--ads-port",
+        "ads",
+        "port",
+        metavar="N",
+        help="start the ADS server (H-04) on this AMS/TCP port (0: any free port)",
+    ),
+    CliAlias(
+        "--ams-net-id",
+        "ads",
+        "ams_net_id",
+        kind=str,
+        metavar="NETID",
+        help="start the ADS server with this AMS NetId (the clients' target NetId)",
+    ),
 )
 """The short flags of ``hli-server run``; each is the same as ``--adapter NAME:OPTION=VALUE``."""
 

@@ -134,11 +134,14 @@ def _markdown(layout: Layout, rows: list[dict[str, str]]) -> str:
         "- **Word order** of 32/64-bit values is a setting of the Modbus adapter. Example: DINT -500000 "
         f"= 0x{example:08X} is `0x{hi:04X} 0x{lo:04X}` in ABCD (high word first) and "
         f"`0x{lo:04X} 0x{hi:04X}` in CDAB.",
-        f"- **ADS**: port {ADS_PORT_HLI}, index group 0x{ADS_GROUP_PLC_TO_CNC:X} (PLC->CNC half) or "
+        f"- **ADS** (`hli-server run --ads-port 48898`, AMS NetId 127.0.0.1.1.1 by default, docs/ads.md): "
+        f"port {ADS_PORT_HLI}, index group 0x{ADS_GROUP_PLC_TO_CNC:X} (PLC->CNC half) or "
         f"0x{ADS_GROUP_CNC_TO_PLC:X} (CNC->PLC half), index offset = byte offset in the half; the "
         f"dyn_coll_mon objects (FCT-C3 4.3) on port {ADS_PORT_GEO}, group 0x{ADS_GROUP_GEO_AXIS:X}, "
-        "offset (A_ID << 16) | element. Symbols are the ST paths. Each half begins with "
-        f"{MAX_CHANNELS} channel slots, so adding a channel or an axis moves no other address.",
+        "offset (A_ID << 16) | element, and as symbols on port 851 at their byte offset in "
+        f"0x{ADS_GROUP_CNC_TO_PLC:X}. Symbols are the ST paths (also spelt `gpAx[0].x` and "
+        f"`gpAx[0]^.x`). Each half begins with {MAX_CHANNELS} channel slots, so adding a channel or an "
+        "axis moves no other address.",
         "- **Access** is the PLC's: `read` fields are written by the CNC only; writes to them are "
         "refused on every door (H-02).",
         "",

@@ -324,13 +324,14 @@ class Runtime:
                     with contextlib.suppress(NotImplementedError, RuntimeError):
                         loop.add_signal_handler(sig, self._on_signal, sig)
                         handled.append(sig)
-            if ready is not None:
-                ready(self)
             # everything built so far lives as long as the process: keep it out of the cyclic garbage
             # collector's full passes, which otherwise scan it again and again and delay cycles by
-            # tens of milliseconds (measured under a flooding client, issue 12)
+            # tens of milliseconds (measured under a flooding client, issue 12). Before the banner: a
+            # client that reads it finds the clock already running.
             gc.collect()
             gc.freeze()
+            if ready is not None:
+                ready(self)
             await self.wait_stopped()
         finally:
             gc.unfreeze()

@@ -6,10 +6,11 @@ One behaviour, run over each door to the same server (asyncua's ``opc`` fixture 
 * ``shm``: :class:`ShmTransport`, the PLC task in the server's event loop;
 * ``modbus``: :class:`AsyncModbusTransport` (pymodbus' AsyncModbusTcpClient), same loop;
 * ``modbus-sync``: :class:`ModbusTransport` (pymodbus' ModbusTcpClient) in a worker thread,
-  playing a PLC that is a separate device (a blocking client cannot share the server's loop).
+  playing a PLC that is a separate device (a blocking client cannot share the server's loop);
+* ``ads``: :class:`AsyncAdsTransport` (pyads, its calls in worker threads), same loop.
 
 The server is the real one: :class:`Runtime` with the realtime clock (T_A = 1 ms), the demo machine
-and the Modbus adapter on a free port. Its layout reaches the Modbus clients as a JSON file, as
+and the Modbus and ADS adapters on free ports. Its layout reaches the Modbus clients as a JSON file, as
 ``hli-server map --format json`` writes it.
 """
 
@@ -30,6 +31,7 @@ from hli_server.configuration import load_machine
 from hli_server.runtime import Runtime
 from plc_clients import (
     AXIS_REF,
+    AsyncAdsTransport,
     AsyncModbusTransport,
     IoImage,
     MCV_DynPosLimitHigh,
@@ -41,7 +43,7 @@ from schemas.wire import ProgramState
 
 pytestmark = [pytest.mark.req("C43-10", "H-06"), pytest.mark.timeout(60)]
 
-TRANSPORTS = ("shm", "modbus", "modbus-sync")
+TRANSPORTS = ("shm", "modbus", "modbus-sync", "ads")
 UNIT = "gpAx[0]^ipo_mc_control.dyn_pos_limit_high"
 X_POS = "gpAx[0]^ipo_state.cmd_pos_r"
 X_MOVING = "gpAx[0]^ipo_state.moving_r"
@@ -63,7 +65,7 @@ async def runtime() -> AsyncIterator[Runtime]:
         clock="realtime",
         http_port=None,
         image_name=image_name("rt"),
-        adapters=[("modbus", {"port": 0})],
+        adapters=[("modbus", {"port": 0}), ("ads", {"port": 0})],
     )
     async with rt:
         yield rt
@@ -96,6 +98,11 @@ async def plc(request: pytest.FixtureRequest, runtime: Runtime, tmp_path: Path) 
         shm = ShmTransport.attach(runtime.image.name)
         yield Plc(kind, shm)
         shm.close()
+    elif kind == "ads":
+        ads_port = int(getattr(runtime.adapter("ads"), "port", 0) or 0)
+        ads = await AsyncAdsTransport.connect("127.0.0.1", ads_port, layout=layout_file)
+        yield Plc(kind, ads)
+        await ads.close()
     elif kind == "modbus":
         amb = await AsyncModbusTransport.connect("127.0.0.1", port, layout=layout_file)
         yield Plc(kind, amb)

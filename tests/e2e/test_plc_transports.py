@@ -1,4 +1,4 @@
-"""The PLC-side transports against the real server (H-06; H-01 shared memory, H-03 Modbus).
+"""The PLC-side transports against the real server (H-06; H-01 shared memory, H-03 Modbus, H-04 ADS).
 
 Stepped clock, so that every value is known to the cycle. Sync Modbus calls run in a worker thread:
 a blocking client must not wait inside the event loop that serves it.
@@ -20,6 +20,8 @@ from hli_server.configuration import load_machine
 from hli_server.runtime import Runtime
 from plc_clients import (
     AXIS_REF,
+    AdsTransport,
+    AsyncAdsTransport,
     AsyncModbusTransport,
     ErrorID,
     MCV_DynPosLimitHigh,
@@ -48,7 +50,7 @@ async def start_runtime(**modbus: Any) -> Runtime:
         clock="stepped",
         http_port=None,
         image_name=image_name("rt"),
-        adapters=[("modbus", {"port": 0, **modbus})],
+        adapters=[("modbus", {"port": 0, **modbus}), ("ads", {"port": 0})],
     )
     await rt.start()
     return rt
@@ -61,6 +63,10 @@ async def runtime() -> AsyncIterator[Runtime]:
         yield rt
     finally:
         await rt.stop()
+
+
+def ads_port(rt: Runtime) -> int:
+    return int(getattr(rt.adapter("ads"), "port", 0) or 0)
 
 
 def modbus_port(rt: Runtime) -> int:
@@ -78,7 +84,7 @@ class Door:
 
     async def call(self, method: str, *args: Any) -> Any:
         fn = getattr(self.t, method)
-        if self.kind == "modbus-sync":
+        if self.kind.endswith("-sync"):
             return await asyncio.to_thread(fn, *args)
         result = fn(*args)
         return await result if asyncio.iscoroutine(result) else result
@@ -87,6 +93,15 @@ class Door:
 async def open_door(kind: str, rt: Runtime, **options: Any) -> Door:
     if kind == "shm":
         return Door(kind, ShmTransport.attach(rt.image.name))
+    if kind == "ads":
+        return Door(
+            kind, await AsyncAdsTransport.connect("127.0.0.1", ads_port(rt), layout=rt.layout, **options)
+        )
+    if kind == "ads-sync":
+        sync_ads = await asyncio.to_thread(
+            AdsTransport.connect, "127.0.0.1", ads_port(rt), layout=rt.layout, **options
+        )
+        return Door(kind, sync_ads)
     if kind == "modbus":
         return Door(
             kind,
@@ -98,8 +113,8 @@ async def open_door(kind: str, rt: Runtime, **options: Any) -> Door:
     return Door(kind, sync)
 
 
-@pytest.mark.req("H-01", "H-03")
-@pytest.mark.parametrize("kind", ["shm", "modbus", "modbus-sync"])
+@pytest.mark.req("H-01", "H-03", "H-04")
+@pytest.mark.parametrize("kind", ["shm", "modbus", "modbus-sync", "ads", "ads-sync"])
 async def test_snapshot_write_and_read_through_every_transport(runtime: Runtime, kind: str) -> None:
     door = await open_door(kind, runtime)
     try:
@@ -165,11 +180,11 @@ async def test_no_server_is_a_transport_error(runtime: Runtime) -> None:
 
 
 @pytest.mark.req("C43-10")
-@pytest.mark.parametrize("kind", ["shm", "modbus"])
+@pytest.mark.parametrize("kind", ["shm", "modbus", "ads"])
 async def test_a_server_that_goes_away_makes_the_block_report_a_transport_failure(kind: str) -> None:
     rt = await start_runtime()
     try:
-        door = await open_door(kind, rt, **({"timeout": 0.5} if kind == "modbus" else {}))
+        door = await open_door(kind, rt, **({"timeout": 0.5} if kind != "shm" else {}))
         block = MCV_DynPosLimitHigh()
         block.set_inputs(Axis=AXIS_REF(0, "X"), Enable=True, Position=300_000)
         task = PlcTask(door.t, 0.001, block)
@@ -181,7 +196,11 @@ async def test_a_server_that_goes_away_makes_the_block_report_a_transport_failur
         await task.run_cycle_async()
         assert (block.Valid, block.Error, block.ErrorID) == (False, True, ErrorID.TRANSPORT_FAILURE)
         assert task.stats.input_faults == 1
-        expected = "the server closed the image" if kind == "shm" else "Modbus TCP 127.0.0.1"
+        expected = {
+            "shm": "the server closed the image",
+            "modbus": "Modbus TCP 127.0.0.1",
+            "ads": "ADS 127.0.0.1",
+        }[kind]
         assert expected in block.ErrorText
         await door.call("close")
     finally:

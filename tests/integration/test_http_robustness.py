@@ -6,6 +6,7 @@ command line. Traffic goes to loopback only and every test is bounded in count a
 
 from __future__ import annotations
 
+import asyncio
 import json
 import socket
 import time
@@ -129,17 +130,15 @@ async def test_state_changes_need_the_token_and_no_foreign_origin(guarded: Runti
         assert guarded.machine.channel(1).program_running
 
 
-@pytest.mark.req("H-01", "H-03")
-async def test_read_only_refuses_every_write_at_http_and_modbus() -> None:
+@pytest.mark.req("H-01", "H-03", "H-04")
+async def test_read_only_refuses_every_write_at_http_modbus_and_ads() -> None:
     from pymodbus.client import AsyncModbusTcpClient
 
+    from plc_clients.ads import AdsTransport, AdsTransportError
+
     policy = AccessPolicy(read_only=True)
-    async with Runtime(
-        load_machine(None),
-        clock="stepped",
-        adapters=[("http", {"port": 0}), ("modbus", {"port": 0})],
-        policy=policy,
-    ) as rt:
+    doors = [("http", {"port": 0}), ("modbus", {"port": 0}), ("ads", {"port": 0})]
+    async with Runtime(load_machine(None), clock="stepped", adapters=doors, policy=policy) as rt:
         async with httpx.AsyncClient(base_url=rt.http_url, timeout=10) as c:
             assert (await c.get("/api/state")).status_code == 200
             r = await c.post("/api/channels/1/program", content=PROGRAM)
@@ -157,6 +156,16 @@ async def test_read_only_refuses_every_write_at_http_and_modbus() -> None:
             assert (await client.read_input_registers(0, count=2, device_id=1)).registers is not None
         finally:
             client.close()
+        ads_port = rt.adapter("ads").port  # type: ignore[attr-defined]
+        ads = await asyncio.to_thread(AdsTransport.connect, "127.0.0.1", ads_port, layout=rt.layout)
+        try:
+            with pytest.raises(AdsTransportError) as refused:
+                await asyncio.to_thread(ads.write, "gpCh[0]^bahn_mc_control.override.command_w", 500)
+            assert refused.value.ads_error == 0x704
+            assert await asyncio.to_thread(ads.read, "gpCh[0]^bahn_state.cycle_r") >= 0
+        finally:
+            await asyncio.to_thread(ads.close)
+        assert rt.image.read("gpCh[0]^bahn_mc_control.override.command_w") == 0  # no door wrote
 
 
 @pytest.mark.req("H-01")

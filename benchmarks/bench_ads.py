@@ -1,0 +1,336 @@
+"""ADS/TCP: reads per second and latency with one pyads client (H-04).
+
+Two servers, each in its own process, measured in the same run, interleaved (hli-server, reference,
+hli-server, reference, ...) so that a change of load on the shared machine hits both alike:
+
+* **hli-server**: the runtime with the demo machine, the engine running in real time (T_A = 1 ms,
+  every monitor installed), the ``ads`` adapter, the event loop ``hli-server run`` uses; reads come
+  from the live process image.
+* **pyads.testserver**: ``AdsTestServer`` with an ``AdvancedHandler`` holding one DINT variable at
+  the same index group/offset and name: the reference (no engine).
+
+The client is pyads 3.6 (Beckhoff's AdsLib) in a separate process, one call in flight:
+
+* raw reads: ``Connection.read(group, offset, PLCTYPE_DINT)`` (one round trip each);
+* read_by_name: ``Connection.read_by_name(name, PLCTYPE_DINT)`` (handle, read, release: three
+  round trips each, as pyads does it).
+
+A third server, the **floor**, answers every request with a canned reply (no decoding, a blocking
+thread per connection): what the pyads client itself allows, the ceiling no server can pass.
+
+Printed: calls/s, latency p50/p99 per server and mode, the ratio hli-server / reference (goal
+>= 3x on both) beside the ratio floor / reference (the most any server could reach with this
+client), and how the realtime clock fared under the load.
+
+    .venv/bin/python -m benchmarks.bench_ads [--seconds 2] [--rounds 2]
+
+Client and servers share the machine's cores: the figures are noisy, the ratio is what to compare.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import multiprocessing as mp
+import os
+import signal
+import socket
+import time
+from array import array
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from typing import Any
+
+GOAL = 3.0
+SYMBOL = "gpAx[0]^ipo_state.cmd_pos_r"
+"""A DINT of the CNC->PLC half; the reference holds a variable of the same name and address."""
+SERVER_NET_ID = "127.0.0.1.1.1"
+_CTX = mp.get_context("fork")
+
+
+def _address() -> tuple[int, int]:
+    from hli_server.configuration import load_machine
+    from schemas.layout import build_layout
+
+    s = build_layout(load_machine(None)).signal(SYMBOL)
+    return s.image_ads_group, s.offset
+
+
+# --------------------------------------------------------------------------------------------
+# Servers (child processes)
+# --------------------------------------------------------------------------------------------
+
+
+CLOCK = ["realtime"]
+
+
+def _serve_hli(conn: Connection) -> None:
+    from hli_server.configuration import load_machine
+    from hli_server.runtime import Runtime, precise_event_loop
+
+    runtime = Runtime(
+        load_machine(None),
+        clock=CLOCK[0],
+        http_port=None,
+        image_name=f"hli_bench_ads_{os.getpid()}",
+        adapters=[("ads", {"port": 0})],
+    )
+
+    def ready(rt: Runtime) -> None:
+        conn.send(getattr(rt.adapter("ads"), "port"))  # noqa: B009 - the ADS adapter's attribute
+
+    with asyncio.Runner(loop_factory=precise_event_loop) as runner:
+        runner.run(runtime.serve(ready=ready))
+    report = runtime.timing()
+    adapter: Any = runtime.adapters[0]
+    report["ads"] = {"requests": adapter.device.stats.requests, **adapter.stats.as_dict()}
+    conn.send(report)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port: int = s.getsockname()[1]
+        return port
+
+
+def _serve_testserver(conn: Connection) -> None:
+    import pyads
+    from pyads.testserver import AdsTestServer
+    from pyads.testserver.advanced_handler import AdvancedHandler, PLCVariable
+
+    group, offset = _address()
+    handler = AdvancedHandler()
+    handler.add_variable(PLCVariable(SYMBOL, 123_456, pyads.constants.ADST_INT32, "DINT", group, offset))
+    port = _free_port()
+    server = AdsTestServer(handler=handler, ip_address="127.0.0.1", port=port, logging=False)
+    stop = [False]
+    signal.signal(signal.SIGTERM, lambda *_: stop.__setitem__(0, True))
+    server.start()
+    for _ in range(200):  # until it accepts connections
+        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=1):
+            break
+        time.sleep(0.01)
+    conn.send(port)
+    while not stop[0]:
+        time.sleep(0.05)
+    with contextlib.suppress(Exception):
+        server.stop()
+    conn.send(None)
+
+
+def _serve_floor(conn: Connection) -> None:
+    """The client's floor: a blocking socket per connection answering every request with a canned
+    reply of the right size, no decoding beyond the length (what no real server can beat)."""
+    import struct
+    import threading
+
+    def serve(sock: socket.socket) -> None:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        buf = b""
+        while True:
+            data = sock.recv(65536)
+            if not data:
+                return
+            buf += data
+            while len(buf) >= 38 and len(buf) >= 6 + struct.unpack_from("<I", buf, 2)[0]:
+                n = 6 + struct.unpack_from("<I", buf, 2)[0]
+                frame, buf = buf[:n], buf[n:]
+                command, invoke = struct.unpack_from("<H", frame, 22)[0], frame[34:38]
+                if command in {2, 9}:  # Read, ReadWrite (a handle): result, length, data
+                    size = struct.unpack_from("<I", frame, 46)[0]
+                    payload = struct.pack("<II", 0, size) + bytes(size)
+                else:
+                    payload = bytes(4)
+                header = frame[14:22] + frame[6:14] + frame[22:24] + b"\x05\x00"
+                header += struct.pack("<II", len(payload), 0) + invoke
+                sock.sendall(struct.pack("<HI", 0, 32 + len(payload)) + header + payload)
+
+    listener = socket.create_server(("127.0.0.1", 0))
+    conn.send(listener.getsockname()[1])
+
+    def accept() -> None:
+        while True:
+            client, _ = listener.accept()
+            threading.Thread(target=serve, args=(client,), daemon=True).start()
+
+    threading.Thread(target=accept, daemon=True).start()
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop.wait()
+    conn.send(None)
+
+
+@dataclass
+class Server:
+    name: str
+    process: Any
+    conn: Connection
+    port: int
+
+    @classmethod
+    def start(cls, name: str, target: Callable[[Connection], None]) -> Server:
+        parent, child = _CTX.Pipe()
+        process = _CTX.Process(target=target, args=(child,), daemon=True)
+        process.start()
+        if not parent.poll(30):
+            process.kill()
+            raise RuntimeError(f"{name}: the server did not start within 30 s")
+        return cls(name, process, parent, parent.recv())
+
+    def stop(self) -> Any:
+        self.process.terminate()
+        report = self.conn.recv() if self.conn.poll(15) else None
+        self.process.join(15)
+        if self.process.is_alive():
+            self.process.kill()
+        return report
+
+
+# --------------------------------------------------------------------------------------------
+# The client (a fresh process per run: AdsLib keeps one route per NetId per process)
+# --------------------------------------------------------------------------------------------
+
+
+def _client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
+    import pyads
+
+    group, offset = _address()
+    pyads.open_port()
+    pyads.set_local_address("10.1.2.3.1.1")
+    pyads.close_port()
+    plc = pyads.Connection(SERVER_NET_ID, 851, f"127.0.0.1:{port}")
+    plc.open()
+    plc.set_timeout(2000)
+    dint = pyads.PLCTYPE_DINT
+    if mode == "raw":
+
+        def call() -> Any:
+            return plc.read(group, offset, dint)
+    else:
+
+        def call() -> Any:
+            return plc.read_by_name(SYMBOL, dint)
+
+    for _ in range(200):  # warm up
+        call()
+    latencies = array("Q")
+    ns = time.perf_counter_ns
+    record = latencies.append
+    stop_at = time.perf_counter() + seconds
+    clock = time.perf_counter
+    while clock() < stop_at:
+        t0 = ns()
+        call()
+        record(ns() - t0)
+    plc.close()
+    return len(latencies), latencies.tobytes()
+
+
+def _client_process(conn: Connection, port: int, mode: str, seconds: float) -> None:
+    conn.send(_client(port, mode, seconds))
+
+
+def _run_client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
+    """One run in a fresh process (AdsLib's router is per process)."""
+    parent, child = _CTX.Pipe()
+    process = _CTX.Process(target=_client_process, args=(child, port, mode, seconds), daemon=True)
+    process.start()
+    try:
+        if not parent.poll(seconds + 60):
+            raise RuntimeError(f"the pyads client ({mode}, port {port}) did not finish")
+        result: tuple[int, bytes] = parent.recv()
+        return result
+    finally:
+        process.join(10)
+        if process.is_alive():
+            process.kill()
+
+
+@dataclass
+class Result:
+    seconds: float = 0.0
+    calls: int = 0
+    latencies: array[int] = field(default_factory=lambda: array("Q"))
+
+    @property
+    def rate(self) -> float:
+        return self.calls / self.seconds if self.seconds else 0.0
+
+    def percentile(self, q: float) -> float:
+        data = sorted(self.latencies)
+        if not data:
+            return float("nan")
+        k = max(0, min(len(data) - 1, int(q / 100 * len(data) + 0.5) - 1))
+        return data[k] / 1000
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=2.0, help="length of each run [s]")
+    parser.add_argument("--rounds", type=int, default=2, help="interleaved rounds per server and mode")
+    parser.add_argument(
+        "--clock",
+        choices=["realtime", "stepped"],
+        default="realtime",
+        help="clock of the hli-server: realtime (the engine runs; the goal) or stepped (the door alone)",
+    )
+    args = parser.parse_args()
+    CLOCK[0] = args.clock
+    group, offset = _address()
+    print(
+        f"one pyads {__import__('pyads').__version__} client, one call in flight; raw read of a DINT at "
+        f"0x{group:X}/{offset} and read_by_name({SYMBOL!r}); {args.rounds} x {args.seconds:g} s per server "
+        f"and mode, interleaved; {os.cpu_count()} CPUs shared"
+    )
+    servers = {"hli-server": Server.start("hli-server", _serve_hli)}
+    servers["pyads.testserver"] = Server.start("pyads.testserver", _serve_testserver)
+    servers["floor"] = Server.start("floor", _serve_floor)
+    results = {(s, m): Result() for s in servers for m in ("raw", "by_name")}
+    timing: Any = None
+    try:
+        for _ in range(args.rounds):
+            for mode in ("raw", "by_name"):
+                for name, server in servers.items():
+                    calls, raw = _run_client(server.port, mode, args.seconds)
+                    r = results[name, mode]
+                    r.seconds += args.seconds
+                    r.calls += calls
+                    r.latencies.frombytes(raw)
+    finally:
+        timing = servers["hli-server"].stop()
+        servers["pyads.testserver"].stop()
+        servers["floor"].stop()
+
+    labels = {
+        "hli-server": f"hli-server ads adapter (engine {'realtime' if args.clock == 'realtime' else 'idle'})",
+        "pyads.testserver": "pyads.testserver + AdvancedHandler",
+        "floor": "floor: canned replies, no decoding",
+    }
+    print(f"{'server':<42} {'mode':<8} {'calls/s':>9} {'p50 us':>8} {'p99 us':>8}")
+    for (name, mode), r in results.items():
+        print(
+            f"{labels[name]:<42} {mode:<8} {r.rate:>9.0f} {r.percentile(50):>8.1f} {r.percentile(99):>8.1f}"
+        )
+    for mode in ("raw", "by_name"):
+        ours, ref = results["hli-server", mode], results["pyads.testserver", mode]
+        ratio = ours.rate / ref.rate if ref.rate else float("inf")
+        verdict = "meets" if ratio >= GOAL else "MISSES"
+        floor = results["floor", mode].rate
+        print(
+            f"ratio hli-server / pyads.testserver, {mode}: {ratio:.2f}x ({verdict} the goal >= {GOAL:g}x); "
+            f"the client's floor allows at most {floor / ref.rate:.2f}x"
+        )
+    if timing and timing.get("lateness_us"):
+        lateness = timing["lateness_us"]
+        print(
+            f"engine under the load: {timing['cycles']} cycles in {timing['wall_s']:.1f} s, lateness "
+            f"p50 {lateness['p50']:.0f} us, p99 {lateness['p99']:.0f} us, max {lateness['max']:.0f} us, "
+            f"{timing['slipped_cycles']} cycles dropped"
+        )
+
+
+if __name__ == "__main__":
+    main()

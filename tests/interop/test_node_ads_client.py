@@ -1,0 +1,113 @@
+"""Interoperability with a second, independent ADS client: Node's ``ads-client`` (H-04).
+
+ads-client 2.x (npm, pinned by ``tests/interop/node/package-lock.json``, installed by ``.ci/run``
+with ``npm ci``) in raw mode reads and writes by index group/offset and subscribes, against the
+real server (realtime clock, the demo machine). Skipped, with the reason, where Node or the package
+is missing: ``cd tests/interop/node && npm ci`` installs it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import json
+import os
+import shutil
+import struct
+import time
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from hli_server.configuration import load_machine
+from hli_server.runtime import Runtime
+
+NODE_DIR = Path(__file__).parent / "node"
+NODE = shutil.which("node")
+MISSING = (
+    "node is not installed (apt-get install nodejs)"
+    if NODE is None
+    else "ads-client is not installed: cd tests/interop/node && npm ci"
+    if not (NODE_DIR / "node_modules" / "ads-client" / "package.json").is_file()
+    else None
+)
+
+pytestmark = [
+    pytest.mark.req("H-04"),
+    pytest.mark.timeout(60),
+    pytest.mark.skipif(MISSING is not None, reason=MISSING or ""),
+]
+
+CMD_LOW = "gpAx[0]^ipo_mc_control.dyn_pos_limit_low.command_w"
+CYCLE = "gpCh[0]^bahn_state.cycle_r"
+
+
+@pytest.fixture
+async def runtime() -> AsyncIterator[Runtime]:
+    rt = Runtime(
+        load_machine(None),
+        clock="realtime",
+        http_port=None,
+        image_name=f"hli_test_node_{os.getpid()}_{time.monotonic_ns() % 1_000_000}",
+        adapters=[("ads", {"port": 0})],
+    )
+    async with rt:
+        yield rt
+
+
+async def node(rt: Runtime, job: dict[str, Any]) -> dict[str, Any]:
+    assert NODE is not None
+    port = getattr(rt.adapter("ads"), "port")  # noqa: B009 - the ADS adapter's attribute
+    proc = await asyncio.create_subprocess_exec(
+        NODE,
+        "interop.js",
+        str(port),
+        json.dumps(job),
+        cwd=NODE_DIR,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    out, err = await asyncio.wait_for(proc.communicate(), 30)
+    assert proc.returncode == 0, err.decode()
+    result: dict[str, Any] = json.loads(out.decode().strip().splitlines()[-1])
+    return result
+
+
+async def test_ads_client_reads_and_writes_by_group_and_offset(runtime: Runtime) -> None:
+    layout = runtime.layout
+    cmd = layout.signal(CMD_LOW)
+    coll = (5 << 16) | 0x0246  # X2's coll_offset at its kernel address, which is port 551's
+    x2_coll = layout.signal("gpAx[4]^dyn_coll_mon.coll_offset")
+    result = await node(
+        runtime,
+        {
+            "write": [0xF030, cmd.offset, struct.pack("<i", -98_765).hex()],
+            "read": [0xF020, x2_coll.offset, 4],
+            "error": [0x120300, coll, 4],
+        },
+    )
+    assert runtime.image.read(CMD_LOW) == -98_765
+    assert struct.unpack("<I", bytes.fromhex(result["read"]))[0] == 200_000
+    assert result["error"] == 0x702  # group 0x120300 lives on port 551, not on 851
+    assert result["localAmsNetId"] == "192.168.1.60.1.1"
+
+
+async def test_ads_client_without_a_local_net_id_gets_one_from_the_server_and_subscribes(
+    runtime: Runtime,
+) -> None:
+    """rawClient without localAmsNetId: ads-client sends 0x1000 port connect first and takes the
+    server's NetId and port; its subscription to cycle_r (cyclic, 10 ms) delivers rising cycles."""
+    cycle = runtime.layout.signal(CYCLE)
+    result = await node(runtime, {"router": True, "subscribe": [0xF020, cycle.offset, 4, 10], "samples": 4})
+    assert result["localAmsNetId"] == "127.0.0.1.1.1"
+    assert result["localAdsPort"] >= 32768
+    cycles = [struct.unpack("<I", bytes.fromhex(s["hex"]))[0] for s in result["samples"]]
+    assert len(cycles) == 4
+    assert all(b > a for a, b in itertools.pairwise(cycles)), cycles
+    for _ in range(100):  # ads-client unsubscribed and disconnected: nothing is left behind
+        if getattr(runtime.adapter("ads"), "connection_count") == 0:  # noqa: B009
+            break
+        await asyncio.sleep(0.02)
+    assert getattr(runtime.adapter("ads"), "device").notification_count == 0  # noqa: B009

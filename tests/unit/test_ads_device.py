@@ -1,0 +1,400 @@
+"""The ADS device without sockets: symbols, options, the registry entry, notifications, sums (H-04).
+
+The device (``hli_server/adapters/ads/device.py``) is sans-I/O: frames in, replies out. These tests
+feed it frames built with the codec and a real shared-memory image whose CNC->PLC half they publish
+themselves; the socket tests are in ``tests/integration/test_ads.py``.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+
+from hli_server.adapters.ads import AdsDevice, AdsOptions, DeviceLimits, Session, SymbolTable, normalize_name
+from hli_server.adapters.ads.symbols import MAX_SYMBOL_INFO
+from hli_server.adapters.registry import AdapterError, plan_adapters
+from hli_server.codecs.ads import (
+    AddDeviceNotificationRequest,
+    AmsAddress,
+    AmsPacket,
+    AmsStreamDecoder,
+    CommandId,
+    DeviceNotification,
+    ErrorCode,
+    NetId,
+    ReadRequest,
+    ReadWriteRequest,
+    SumRead,
+    SumReadItem,
+    WriteRequest,
+    decode_response,
+    decode_symbol_upload,
+    encode_request,
+)
+from hli_server.configuration import load_machine
+from hli_server.image import ProcessImage
+from schemas.layout import Direction, Layout, build_layout
+
+pytestmark = pytest.mark.req("H-04")
+
+SERVER = NetId.parse("127.0.0.1.1.1")
+CLIENT = AmsAddress(NetId.parse("10.1.2.3.1.1"), 30001)
+CMD_LOW = "gpAx[0]^ipo_mc_control.dyn_pos_limit_low.command_w"
+EN_LOW = "gpAx[0]^ipo_mc_control.dyn_pos_limit_low.enable_w"
+X_POS = "gpAx[0]^ipo_state.cmd_pos_r"
+
+
+@pytest.fixture(scope="module")
+def layout() -> Layout:
+    return build_layout(load_machine(None))
+
+
+class CountingImage:
+    """The image, counting the copies the device takes of the CNC->PLC half."""
+
+    def __init__(self, image: ProcessImage) -> None:
+        self._image = image
+        self.snapshots = 0
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._image, name)
+
+    def snapshot(self) -> tuple[int, bytes]:
+        self.snapshots += 1
+        return self._image.snapshot()
+
+
+@pytest.fixture
+def image(layout: Layout) -> Iterator[ProcessImage]:
+    img = ProcessImage.create(layout, name=f"hli_test_adsdev_{os.getpid()}_{time.monotonic_ns() % 10**6}")
+    try:
+        yield img
+    finally:
+        img.close()
+
+
+def publish(image: ProcessImage, cycle: int, **values: Any) -> None:
+    layout = image.layout
+    image.publish_bytes(layout.pack(Direction.CNC_TO_PLC, values), cycle)
+
+
+def request(command: int, payload: bytes, port: int = 851, invoke: int = 1) -> AmsPacket:
+    frame = encode_request(AmsAddress(SERVER, port), CLIENT, command, invoke, payload)
+    (packet,) = list(AmsStreamDecoder().feed(frame))
+    assert isinstance(packet, AmsPacket)
+    return packet
+
+
+def answer(device: AdsDevice, session: Session, command: int, payload: bytes, port: int = 851) -> Any:
+    reply = device.handle(session, request(command, payload, port))
+    assert reply is not None
+    (packet,) = list(AmsStreamDecoder().feed(reply))
+    assert isinstance(packet, AmsPacket)
+    if packet.header.error_code:
+        return packet.header.error_code
+    return decode_response(command, packet.data)
+
+
+# ================================================================================================
+# Symbols
+# ================================================================================================
+
+
+@pytest.mark.parametrize(
+    "spelling",
+    [
+        "gpAx[0]^ipo_mc_control.dyn_pos_limit_high.command_w",
+        "gpAx[0]^.ipo_mc_control.dyn_pos_limit_high.command_w",
+        "gpAx[0].ipo_mc_control.dyn_pos_limit_high.command_w",
+        "  GPAX[0].IPO_MC_CONTROL.DYN_POS_LIMIT_HIGH.COMMAND_W ",
+    ],
+)
+def test_every_spelling_of_a_symbol_finds_it(layout: Layout, spelling: str) -> None:
+    found = SymbolTable(layout).find(spelling)
+    assert found is not None
+    assert found.signal.st_path == "gpAx[0]^ipo_mc_control.dyn_pos_limit_high.command_w"
+
+
+def test_names_that_are_no_symbol(layout: Layout) -> None:
+    table = SymbolTable(layout)
+    for name in (
+        "gpAx[0]ipo_state.cmd_pos_r",
+        "gpAx[9]^ipo_state.cmd_pos_r",
+        "gpAx[0]^^ipo_state.cmd_pos_r",
+        "",
+    ):
+        assert table.find(name) is None, name
+    assert normalize_name("MAIN.counter") == "main.counter"  # only the gpCh/gpAx dereference is rewritten
+
+
+def test_symbol_upload_is_the_layout_and_every_entry_fits_pyads_read(layout: Layout) -> None:
+    table = SymbolTable(layout)
+    entries = decode_symbol_upload(table.upload)
+    assert [(e.name, e.index_group, e.index_offset, e.size, e.type_name) for e in entries] == [
+        (s.st_path, s.image_ads_group, s.offset, s.size, s.type.value) for s in layout.signals
+    ]
+    assert max(len(table.find(s.st_path).entry) for s in layout.signals) <= MAX_SYMBOL_INFO  # type: ignore[union-attr]
+    assert struct.unpack("<II", table.upload_info) == (len(layout.signals), len(table.upload))
+
+
+# ================================================================================================
+# Options and the registry
+# ================================================================================================
+
+
+def test_allowlist_entries() -> None:
+    allow = AdsOptions(allow="loopback 10.0.0.0/8;192.168.1.50.1.1").allowlist()
+    assert allow.allows_ip("127.0.0.5")
+    assert allow.allows_ip("::1")
+    assert allow.allows_ip("10.4.5.6")
+    assert not allow.allows_ip("192.168.1.50")
+    assert allow.allows_net_id(bytes(NetId.parse("192.168.1.50.1.1")))
+    assert not allow.allows_net_id(bytes(NetId.parse("192.168.1.51.1.1")))
+    everybody = AdsOptions(allow=[]).allowlist()
+    assert everybody.allows_ip("203.0.113.9")
+    assert everybody.allows_net_id(b"\x01" * 6)
+    only_net_ids = AdsOptions(allow=["5.6.7.8.1.1"]).allowlist()
+    assert only_net_ids.allows_ip("203.0.113.9")  # no IP entries: any peer, but only that NetId
+    assert AdsOptions().allowlist().allows_ip("127.0.0.1")
+    assert not AdsOptions().allowlist().allows_ip("192.0.2.1")  # default: loopback only
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"allow": "example.org"}, "neither an AMS NetId"),
+        ({"ams_net_id": "127.0.0.1"}, "six numbers"),
+        ({"port": 70000}, "less than or equal to 65535"),
+    ],
+)
+def test_bad_options_say_what_is_wrong(options: dict[str, Any], message: str) -> None:
+    with pytest.raises(AdapterError, match=message):
+        plan_adapters([("ads", options)])
+
+
+def test_ads_is_planned_by_flag_by_spec_and_by_machine_file() -> None:
+    assert "ads" not in dict(plan_adapters())  # not started unless asked for
+    by_flag = dict(plan_adapters(aliases={"--ads-port": 0, "--ams-net-id": "10.0.0.1.1.1"}))
+    assert (by_flag["ads"]["port"], by_flag["ads"]["ams_net_id"]) == (0, "10.0.0.1.1.1")
+    assert dict(plan_adapters(specs=["ads"]))["ads"]["port"] == 48898
+    configured = dict(plan_adapters([("ads", {"port": 1234, "allow": "loopback 10.1.2.3.1.1"})]))
+    assert configured["ads"]["allow"] == ["loopback", "10.1.2.3.1.1"]
+
+
+# ================================================================================================
+# The device
+# ================================================================================================
+
+
+def make_device(image: Any, **limits: Any) -> AdsDevice:
+    return AdsDevice(image, SERVER, t_a_us=1000, limits=DeviceLimits(**limits))
+
+
+def test_a_refused_raw_write_changes_nothing(image: ProcessImage, layout: Layout) -> None:
+    device, session = make_device(image), Session()
+    cmd, en = layout.signal(CMD_LOW), layout.signal(EN_LOW)
+    assert cmd.offset == en.offset + 4  # enable_w (BOOL, 3 bytes of padding), then command_w (DINT)
+    before = image.read_half(Direction.PLC_TO_CNC)
+    data = b"\x02\x00\x00\x00" + struct.pack("<i", 1234)  # a BOOL byte of 2, then a valid DINT
+    reply = answer(device, session, CommandId.WRITE, WriteRequest(0xF030, en.offset, data).encode())
+    assert reply.result == ErrorCode.INVALID_VALUE
+    assert image.read_half(Direction.PLC_TO_CNC) == before
+    ok = answer(
+        device, session, CommandId.WRITE, WriteRequest(0xF030, en.offset, b"\x01" + data[1:]).encode()
+    )
+    assert ok.result == 0
+    assert (image.read(CMD_LOW), image.read(EN_LOW)) == (1234, True)
+
+
+def test_sum_read_answers_each_sub_read(image: ProcessImage, layout: Layout) -> None:
+    publish(image, 3, **{X_POS: -42})
+    device, session = make_device(image, max_sum_items=3), Session()
+    x = layout.signal(X_POS)
+    items = (SumReadItem(0xF020, x.offset, 4), SumReadItem(0x4020, 0, 4), SumReadItem(0xF020, 1 << 20, 2))
+    sub = SumRead(items)
+    reply = answer(
+        device,
+        session,
+        CommandId.READ_WRITE,
+        ReadWriteRequest(0xF080, 3, sub.reply_length, sub.encode()).encode(),
+    )
+    assert reply.result == 0
+    codes = struct.unpack_from("<3I", reply.data)
+    assert codes == (0, 0x702, 0x703)
+    assert struct.unpack_from("<i", reply.data, 12)[0] == -42
+    too_many = SumRead(items + items[:1])
+    reply = answer(
+        device,
+        session,
+        CommandId.READ_WRITE,
+        ReadWriteRequest(0xF080, 4, too_many.reply_length, too_many.encode()).encode(),
+    )
+    assert reply.result == ErrorCode.SIZE_WRONG
+
+
+def add(device: AdsDevice, session: Session, payload: AddDeviceNotificationRequest, port: int = 851) -> Any:
+    return answer(device, session, CommandId.ADD_DEVICE_NOTIFICATION, payload.encode(), port)
+
+
+def samples(session: Session) -> list[tuple[AmsPacket, DeviceNotification]]:
+    out = []
+    for frame in session.sent:
+        (packet,) = list(AmsStreamDecoder().feed(frame))
+        assert isinstance(packet, AmsPacket)
+        out.append((packet, DeviceNotification.decode(packet.data)))
+    session.sent.clear()
+    return out
+
+
+def test_notification_samples_come_from_the_address_subscribed_to(
+    image: ProcessImage, layout: Layout
+) -> None:
+    publish(image, 0, **{"gpAx[4]^dyn_coll_mon.coll_offset": 200_000})
+    device, session = make_device(image), Session()
+    reply = add(
+        device, session, AddDeviceNotificationRequest(0x120300, (5 << 16) | 0x0246, 4, 4, 0, 0), port=551
+    )
+    assert reply.result == 0
+    session.flush()  # without a loop, queued samples go out when flushed
+    ((packet, notification),) = samples(session)  # the first sample
+    assert packet.header.command == CommandId.DEVICE_NOTIFICATION
+    assert packet.header.state_flags == 0x0004
+    assert (packet.header.source_net_id, packet.header.source_port) == (
+        SERVER,
+        551,
+    )  # AdsLib dispatches by it
+    assert (packet.header.target_net_id, packet.header.target_port) == CLIENT
+    ((sample,),) = [stamp.samples for stamp in notification.stamps]
+    assert (sample.handle, struct.unpack("<I", sample.data)[0]) == (reply.handle, 200_000)
+
+
+def test_the_cycle_takes_one_copy_per_cycle_and_only_when_something_is_due(
+    image: ProcessImage, layout: Layout
+) -> None:
+    counting = CountingImage(image)
+    device = make_device(counting, max_notifications=600, max_notifications_total=600)
+    x = layout.signal(X_POS)
+    for cycle in range(1, 4):
+        device.on_cycle(cycle)
+    assert counting.snapshots == 0  # no notification: the cycle callback returns at once
+    sessions = [Session() for _ in range(3)]
+    for session in sessions:
+        for _ in range(200):  # on change, checked every cycle (cycle time 0)
+            assert (
+                add(device, session, AddDeviceNotificationRequest(0xF020, x.offset, 4, 4, 0, 0)).result == 0
+            )
+        session.flush()  # the first samples
+        session.sent.clear()
+    counting.snapshots = 0
+    for cycle in range(4, 14):
+        publish(image, cycle, **{X_POS: cycle * 10})
+        device.on_cycle(cycle)
+        for session in sessions:
+            session.flush()
+    assert counting.snapshots == 10  # one copy per cycle for 600 notifications
+    got = samples(sessions[0])
+    assert len(got) == 10  # one frame per cycle per connection, 200 samples in it
+    assert [sum(len(s.samples) for s in n.stamps) for _, n in got] == [200] * 10
+
+
+def test_a_client_that_does_not_read_is_skipped_and_gets_the_newest_value_after(
+    image: ProcessImage, layout: Layout
+) -> None:
+    device = make_device(image)
+    full = [False]
+    session = Session(backlogged=lambda: full[0])
+    x = layout.signal(X_POS)
+    add(device, session, AddDeviceNotificationRequest(0xF020, x.offset, 4, 4, 0, 0))
+    session.flush()
+    session.sent.clear()
+    full[0] = True
+    for cycle in range(1, 6):
+        publish(image, cycle, **{X_POS: cycle})
+        device.on_cycle(cycle)
+    assert session.sent == []
+    assert not session.has_pending
+    assert device.stats.samples_skipped == 5
+    full[0] = False
+    device.on_cycle(6)  # cycle 5's publish is the newest
+    session.flush()
+    ((_, notification),) = samples(session)
+    assert struct.unpack("<i", notification.stamps[0].samples[0].data)[0] == 5
+
+
+def test_cycle_time_in_100ns_becomes_whole_cycles(image: ProcessImage, layout: Layout) -> None:
+    device, session = make_device(image), Session()
+    x = layout.signal(X_POS)
+    add(device, session, AddDeviceNotificationRequest(0xF020, x.offset, 4, 3, 0, 100_000))  # cyclic 10 ms
+    session.flush()
+    session.sent.clear()
+    for cycle in range(1, 31):
+        device.on_cycle(cycle)
+        session.flush()
+    assert len(samples(session)) == 3  # cycles 10, 20, 30
+
+
+def test_notification_refusals(image: ProcessImage, layout: Layout) -> None:
+    device = make_device(image, max_notifications=2, max_notifications_total=3)
+    x = layout.signal(X_POS)
+    one, two = Session(), Session()
+    watch = AddDeviceNotificationRequest(0xF020, x.offset, 4, 4, 0, 0)
+    assert add(device, one, AddDeviceNotificationRequest(0xF020, x.offset, 4, 1, 0, 0)).result == 0x713
+    assert add(device, one, AddDeviceNotificationRequest(0xF020, x.offset, 0, 4, 0, 0)).result == 0x705
+    assert add(device, one, AddDeviceNotificationRequest(0x4020, 0, 4, 4, 0, 0)).result == 0x702
+    handles = [add(device, one, watch).handle for _ in range(2)]
+    assert len(set(handles)) == 2
+    assert add(device, one, watch).result == 0x716  # max_notifications
+    assert add(device, two, watch).result == 0
+    assert add(device, two, watch).result == 0x716  # max_notifications_total
+    delete = struct.pack("<I", 0xDEAD)
+    assert answer(device, one, CommandId.DELETE_DEVICE_NOTIFICATION, delete).result == 0x714
+    device.close_session(one)
+    assert device.notification_count == 1
+    assert add(device, two, watch).result == 0
+
+
+def test_samples_queued_between_two_turns_of_the_loop_are_bounded(
+    image: ProcessImage, layout: Layout
+) -> None:
+    """A long ``step(n)`` runs many cycles before the loop turns and the samples are written."""
+    from hli_server.adapters.ads.device import MAX_PENDING_SAMPLES
+
+    device, session = make_device(image), Session()
+    x = layout.signal(X_POS)
+    add(device, session, AddDeviceNotificationRequest(0xF020, x.offset, 4, 3, 0, 0))  # cyclic, every cycle
+    for cycle in range(1, MAX_PENDING_SAMPLES + 100):
+        device.on_cycle(cycle)
+    assert session.pending_samples == MAX_PENDING_SAMPLES
+    assert device.stats.samples_skipped > 0
+    session.flush()
+    assert session.pending_samples == 0
+    device.on_cycle(MAX_PENDING_SAMPLES + 100)
+    assert session.pending_samples == 1
+
+
+def test_upload_infos_data_types_and_symbol_version(image: ProcessImage, layout: Layout) -> None:
+    from hli_server.codecs.ads import UploadInfo2, decode_data_type_upload
+
+    device, session = make_device(image), Session()
+    info24 = answer(device, session, CommandId.READ, ReadRequest(0xF00F, 0, 24).encode())
+    info64 = answer(device, session, CommandId.READ, ReadRequest(0xF00F, 0, 64).encode())
+    assert (len(info24.data), len(info64.data)) == (24, 64)  # ads-client asks 64, older clients 24
+    info = UploadInfo2.decode(info64.data)
+    assert info.symbol_count == len(layout.signals)
+    types = answer(device, session, CommandId.READ, ReadRequest(0xF00E, 0, info.data_type_length).encode())
+    assert [t.name for t in decode_data_type_upload(types.data)] == ["BOOL", "DINT", "UDINT", "LREAL"]
+    dint = answer(
+        device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF011, 0, 0xFFFF, b"dint\0").encode()
+    )
+    assert (dint.result, decode_data_type_upload(dint.data)[0].size) == (0, 4)
+    unknown = ReadWriteRequest(0xF011, 0, 0xFFFF, b"ST_Axis\0").encode()
+    assert answer(device, session, CommandId.READ_WRITE, unknown).result == 0x710
+    version = answer(device, session, CommandId.READ, ReadRequest(0xF008, 0, 1).encode())
+    assert version.data == b"\x01"
+    short = answer(device, session, CommandId.READ, ReadRequest(0xF00C, 0, 4).encode())
+    assert short.result == 0x705  # the 8-byte upload info does not fit a 4-byte read
