@@ -115,6 +115,13 @@ ADAPTERS: dict[str, AdapterKind] = {
             default=True,
             summary="Modbus TCP view of the process image (H-03)",
         ),
+        AdapterKind(
+            "mqtt",
+            "hli_server.adapters.mqtt:MqttAdapter",
+            "hli_server.adapters.mqtt:MqttOptions",
+            default=False,
+            summary="MQTT events to a broker, JSON per event kind (H-05; docs/mqtt.md)",
+        ),
     )
 }
 """Adapter name -> :class:`AdapterKind`, in the order ``run`` starts the default ones."""
@@ -140,6 +147,14 @@ CLI_ALIASES: tuple[CliAlias, ...] = (
     ),
     CliAlias("--modbus-unit-id", "modbus", "unit_id", metavar="N", help="Modbus unit id"),
     CliAlias("--no-modbus", "modbus", None, switch=False, help="do not start the Modbus TCP server"),
+    CliAlias(
+        "--mqtt",
+        "mqtt",
+        "broker",
+        kind=str,
+        metavar="HOST[:PORT]",
+        help="publish the events to this MQTT broker (H-05; docs/mqtt.md)",
+    ),
 )
 """The short flags of ``hli-server run``; each is the same as ``--adapter NAME:OPTION=VALUE``."""
 
