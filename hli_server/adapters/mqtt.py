@@ -54,7 +54,7 @@ from collections import deque
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any, Final, cast
 
 from pydantic import (
     BaseModel,
@@ -355,6 +355,8 @@ class MqttAdapter:
         self._away_since: float | None = None
         self._last_away_log = -math.inf
         self.last_error: str | None = None
+        self.library_said: str | None = None
+        """The last warning of paho/aiomqtt (the reason behind a bare time-out)."""
 
     # --- what the runtime and the tests see ---------------------------------------------------
     @property
@@ -506,6 +508,9 @@ class MqttAdapter:
 
     def _connection_failed(self, exc: BaseException) -> None:
         text = _describe(exc)
+        if self.library_said and self.library_said not in text:
+            text = f"{text}: {self.library_said}"
+        self.library_said = None
         first = self.last_error is None or self._connected
         self.last_error = text
         self.connect_failures += 1
@@ -556,13 +561,14 @@ class MqttAdapter:
             tls_context=self._tls,
             max_inflight_messages=WINDOW,
             clean_session=True,
-            logger=logging.getLogger(f"{__name__}.paho"),
+            logger=cast("logging.Logger", _PahoLog(self)),
         )
 
     async def _session(self) -> bool:
         """One connection: ``online``, the snapshot, a drop report, then the queue until the
         connection ends (raises) or a stop was requested and the queue is flushed (returns)."""
         client = self._client()
+        self.library_said = None
         async with client:
             self._connected = True
             self._connected_event.set()
@@ -721,6 +727,23 @@ class MqttAdapter:
 
     def __repr__(self) -> str:
         return f"MqttAdapter({self.url}, prefix={self.prefix!r}, {self.stats()})"
+
+
+class _PahoLog(logging.LoggerAdapter):  # type: ignore[type-arg]
+    """paho's and aiomqtt's log lines, for one adapter: a warning or error (a TLS alert, a socket
+    error) is kept as the reason of the next failure, which the adapter reports rate-limited, and is
+    logged at debug only (paho would repeat it at every reconnect)."""
+
+    def __init__(self, owner: MqttAdapter) -> None:
+        super().__init__(logging.getLogger(f"{__name__}.paho"), {})
+        self.owner = owner
+
+    def log(self, level: int, msg: object, *args: object, **kwargs: Any) -> None:
+        if level >= logging.WARNING:
+            with contextlib.suppress(Exception):
+                self.owner.library_said = str(msg) % args if args else str(msg)
+            level = logging.DEBUG
+        super().log(level, msg, *args, **kwargs)
 
 
 async def _watch(client: aiomqtt.Client) -> None:
