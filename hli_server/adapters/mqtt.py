@@ -48,6 +48,7 @@ import math
 import os
 import random
 import secrets
+import socket
 import ssl
 import time
 from collections import deque
@@ -98,9 +99,13 @@ DROPPED_TOPIC: Final = "dropped"
 """JSON report of the events the bounded queue dropped, below the prefix."""
 STATE_KINDS: Final = frozenset({"program_state", "mode", "hold", "control_unit", "alarm", "alarms_cleared"})
 """Event kinds after which the retained snapshot is published again."""
-WINDOW: Final = 32
-"""Publishes in flight at once (each waits for its acknowledgement). Small enough that encoding a
-window costs well under a cycle, large enough for thousands of events per second on loopback."""
+WINDOW: Final = 64
+"""Publishes in flight at once, each waiting for its acknowledgement (a sliding window). A broker that
+delays its acknowledgements (Mosquitto without ``set_tcp_nodelay``: Nagle against the client's
+delayed ACK, ~40 ms) allows about a window per 40 ms; docs/mqtt.md has the figures."""
+YIELD_EVERY: Final = 8
+"""Publishes started before the pump yields to the event loop, so that a burst (the queue after a
+reconnect) never holds the clock's timer for more than a few hundred microseconds."""
 RECONNECT_MIN_S: Final = 0.1
 SNAPSHOT_INTERVAL_S: Final = 0.25
 """The retained snapshot is published at most this often (and once the queue is drained)."""
@@ -332,7 +337,8 @@ class MqttAdapter:
         self._host: AdapterHost | None = None
         self._tls: ssl.SSLContext | None = None
         self._pending: deque[_Queued] = deque()
-        self._inflight: list[_Queued] = []
+        self._inflight: dict[int, _Queued] = {}
+        """Published, not yet acknowledged, by seq (in the order they were sent)."""
         self._wakeup = asyncio.Event()
         self._stop_requested = asyncio.Event()
         self._task: asyncio.Task[None] | None = None
@@ -539,8 +545,8 @@ class MqttAdapter:
     def _requeue(self) -> None:
         """Events in flight go back to the front of the queue (their order kept), then the bound."""
         if self._inflight:
-            self._pending.extendleft(reversed(self._inflight))
-            self._inflight = []
+            self._pending.extendleft(sorted(self._inflight.values(), key=lambda q: q.seq, reverse=True))
+            self._inflight = {}
         if len(self._pending) > self.bound:
             self._drop(len(self._pending) - self.bound)
 
@@ -561,6 +567,7 @@ class MqttAdapter:
             tls_context=self._tls,
             max_inflight_messages=WINDOW,
             clean_session=True,
+            socket_options=((socket.IPPROTO_TCP, socket.TCP_NODELAY, 1),),  # small messages, now
             logger=cast("logging.Logger", _PahoLog(self)),
         )
 
@@ -568,6 +575,7 @@ class MqttAdapter:
         """One connection: ``online``, the snapshot, a drop report, then the queue until the
         connection ends (raises) or a stop was requested and the queue is flushed (returns)."""
         client = self._client()
+        client.pending_calls_threshold = 2 * WINDOW  # aiomqtt warns above this; the window is bounded
         self.library_said = None
         async with client:
             self._connected = True
@@ -605,73 +613,112 @@ class MqttAdapter:
             raise _BrokerGoneError(_describe(error) if error is not None else "connection closed")
 
     async def _pump(self, client: aiomqtt.Client) -> None:
-        """Publish the queue, :data:`WINDOW` at a time; return when asked to stop and drained."""
-        stop_deadline: float | None = None
-        while True:
-            if self._stop_requested.is_set() and stop_deadline is None:
-                stop_deadline = time.monotonic() + STOP_FLUSH_S
-            if not self._pending:
-                await self._report_drops(client)
-                timeout = None
-                if self._snapshot_due and self.options.snapshot:
-                    timeout = SNAPSHOT_INTERVAL_S - (time.monotonic() - self._last_snapshot)
-                    if timeout <= 0 or self._stop_requested.is_set():
-                        await self._publish_snapshot(client)
-                        continue
-                if self._stop_requested.is_set():
-                    return
-                self._wakeup.clear()
-                with contextlib.suppress(TimeoutError):
-                    await asyncio.wait_for(self._wakeup.wait(), timeout)
-                continue
-            if stop_deadline is not None and time.monotonic() > stop_deadline:
-                return
-            await self._publish_window(client)
-            now = time.monotonic()
-            if (
-                self._snapshot_due
-                and self.options.snapshot
-                and now - self._last_snapshot >= SNAPSHOT_INTERVAL_S
-            ):
-                await self._publish_snapshot(client)
-            if self._unreported_drops and now - self._last_drop_report >= DROP_REPORT_INTERVAL_S:
-                await self._report_drops(client)
+        """Publish the queue with up to :data:`WINDOW` publishes in flight (a sliding window: a new
+        one starts as soon as one is acknowledged); return when asked to stop and drained.
 
-    async def _publish_window(self, client: aiomqtt.Client) -> None:
-        batch = [self._pending.popleft() for _ in range(min(WINDOW, len(self._pending)))]
-        self._inflight = batch
-        messages: list[tuple[str, bytes]] = []
-        sent: list[_Queued] = []
-        for queued in batch:
-            try:
-                messages.append(
-                    encode_event(
+        A failed publish ends the session (raised here); what is still in flight is cancelled and,
+        with the session, goes back to the front of the queue."""
+        slots = asyncio.Semaphore(WINDOW)
+        sends: set[asyncio.Task[None]] = set()
+        failures: list[BaseException] = []
+        stop_deadline: float | None = None
+        started_in_slice = 0
+        try:
+            while True:
+                if failures:
+                    raise failures[0]
+                if self._stop_requested.is_set() and stop_deadline is None:
+                    stop_deadline = time.monotonic() + STOP_FLUSH_S
+                if stop_deadline is not None and time.monotonic() > stop_deadline:
+                    return
+                if not self._pending:
+                    if await self._idle(client, sends, stop_deadline):
+                        return
+                    continue
+                await slots.acquire()
+                if failures or not self._pending:
+                    slots.release()
+                    continue
+                queued = self._pending.popleft()
+                try:
+                    topic, payload = encode_event(
                         queued.event,
                         prefix=self.prefix,
                         machine=self.machine,
                         seq=queued.seq,
                         wall=queued.wall,
                     )
-                )
-                sent.append(queued)
-            except Exception:  # a bad event must not stop the others
-                self.unencodable += 1
-                logger.exception(
-                    "MQTT: cannot encode event %s (seq %d); skipped", queued.event.kind, queued.seq
-                )
-        self._inflight = sent
-        results = await asyncio.gather(
-            *(client.publish(topic, payload, qos=self.qos) for topic, payload in messages),
-            return_exceptions=True,
-        )
-        for index, result in enumerate(results):
-            if isinstance(result, BaseException):
-                # acknowledged ones are done; the rest go back to the queue with the session
-                self.published += index
-                self._inflight = sent[index:]
-                raise result
-        self.published += len(sent)
-        self._inflight = []
+                except Exception:  # a bad event must not stop the others
+                    slots.release()
+                    self.unencodable += 1
+                    logger.exception(
+                        "MQTT: cannot encode event %s (seq %d); skipped", queued.event.kind, queued.seq
+                    )
+                    continue
+                self._inflight[queued.seq] = queued
+                send = asyncio.ensure_future(self._send(client, queued, topic, payload, slots, failures))
+                sends.add(send)
+                send.add_done_callback(sends.discard)
+                started_in_slice += 1
+                if (
+                    started_in_slice >= YIELD_EVERY
+                ):  # let the clock's timer in between (a burst after a reconnect)
+                    started_in_slice = 0
+                    await asyncio.sleep(0)
+                await self._now_and_then(client)
+        finally:
+            for send in list(sends):
+                send.cancel()
+            if sends:
+                await asyncio.gather(*sends, return_exceptions=True)
+
+    async def _send(
+        self,
+        client: aiomqtt.Client,
+        queued: _Queued,
+        topic: str,
+        payload: bytes,
+        slots: asyncio.Semaphore,
+        failures: list[BaseException],
+    ) -> None:
+        try:
+            await client.publish(topic, payload, qos=self.qos)
+            del self._inflight[queued.seq]
+            self.published += 1
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # stays in flight: requeued with the session
+            failures.append(exc)
+            self._wakeup.set()
+        finally:
+            slots.release()
+
+    async def _idle(self, client: aiomqtt.Client, sends: set[asyncio.Task[None]], stop: float | None) -> bool:
+        """Nothing waits: the drop report, the throttled snapshot, then wait for an event (or, at a
+        stop, for the acknowledgements of what is in flight). True: stopped and drained."""
+        await self._report_drops(client)
+        timeout: float | None = None
+        if self._snapshot_due and self.options.snapshot:
+            timeout = SNAPSHOT_INTERVAL_S - (time.monotonic() - self._last_snapshot)
+            if timeout <= 0 or stop is not None:
+                await self._publish_snapshot(client)
+                return False
+        if stop is not None:
+            if sends:
+                await asyncio.wait(set(sends), timeout=max(0.0, stop - time.monotonic()))
+            return not self._pending
+        self._wakeup.clear()
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._wakeup.wait(), timeout)
+        return False
+
+    async def _now_and_then(self, client: aiomqtt.Client) -> None:
+        """While events flow: the snapshot and the drop report, each at most at its interval."""
+        now = time.monotonic()
+        if self._snapshot_due and self.options.snapshot and now - self._last_snapshot >= SNAPSHOT_INTERVAL_S:
+            await self._publish_snapshot(client)
+        if self._unreported_drops and now - self._last_drop_report >= DROP_REPORT_INTERVAL_S:
+            await self._report_drops(client)
 
     async def _publish_snapshot(self, client: aiomqtt.Client) -> None:
         host = self._host
