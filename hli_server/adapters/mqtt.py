@@ -50,6 +50,7 @@ import random
 import secrets
 import socket
 import ssl
+import threading
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -335,6 +336,8 @@ class MqttAdapter:
         self.prefix = self.options.topic_prefix or "hli/machine/"
         self.client_id = self.options.client_id or ""
         self._host: AdapterHost | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._loop_thread = threading.get_ident()
         self._tls: ssl.SSLContext | None = None
         self._pending: deque[_Queued] = deque()
         self._inflight: dict[int, _Queued] = {}
@@ -415,6 +418,8 @@ class MqttAdapter:
             self.client_id = f"hli-{topic_safe(self.machine)}-{secrets.token_hex(4)}"
         if self.options.use_tls:
             self._tls = self._tls_context()
+        self._loop = asyncio.get_running_loop()
+        self._loop_thread = threading.get_ident()
         self._unsubscribe = host.events.subscribe(self._on_event)
         self._task = asyncio.create_task(self._run(), name=f"hli-mqtt-{self.machine}")
         logger.info("MQTT: publishing events of %s to %s under %s", self.machine, self.url, self.prefix)
@@ -466,9 +471,18 @@ class MqttAdapter:
 
     # --- inside the cycle -----------------------------------------------------------------------
     def _on_event(self, event: Event) -> None:
-        """The event feed's listener, called inside the cycle: queue and return (never blocks)."""
+        """The event feed's listener, called inside the cycle: queue and return (never blocks).
+
+        An event emitted in another thread (an operator request made there) is handed to the event
+        loop's thread first, in order; the queue is only ever touched there."""
+        if threading.get_ident() != self._loop_thread and self._loop is not None:
+            self._loop.call_soon_threadsafe(self._queue, event, time.time())
+            return
+        self._queue(event, time.time())
+
+    def _queue(self, event: Event, wall: float) -> None:
         self._seq += 1
-        self._pending.append(_Queued(self._seq, time.time(), event))
+        self._pending.append(_Queued(self._seq, wall, event))
         if len(self._pending) > self.bound:
             self._drop(len(self._pending) - self.bound)
         if event.KIND in STATE_KINDS:
