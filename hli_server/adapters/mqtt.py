@@ -580,6 +580,7 @@ class MqttAdapter:
             timeout=OPERATION_TIMEOUT_S,
             tls_context=self._tls,
             max_inflight_messages=WINDOW,
+            max_queued_incoming_messages=16,  # nothing is subscribed: a broker that sends anyway is bounded
             clean_session=True,
             socket_options=((socket.IPPROTO_TCP, socket.TCP_NODELAY, 1),),  # small messages, now
             logger=cast("logging.Logger", _PahoLog(self)),

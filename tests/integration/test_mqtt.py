@@ -669,3 +669,26 @@ async def test_a_stepped_runtime_runs_on_with_a_dead_broker(demo: MachineConfig)
     assert adapter.stats()["queued"] == 10
     assert adapter.dropped == 190
     assert elapsed < 20, f"2000 stepped cycles took {elapsed:.1f} s with the broker away"
+
+
+def test_run_without_a_broker_says_so_retries_and_runs_to_the_end(tmp_path: Path) -> None:
+    """``hli-server run --mqtt`` with nothing listening: a clear warning, retries, a clean exit."""
+    hli_server = str(Path(sys.executable).parent / "hli-server")
+    port = _closed_port()
+    result = subprocess.run(
+        [hli_server, "run", "--mqtt", f"127.0.0.1:{port}", "--no-http", "--no-modbus", "--cycles", "1500"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+        check=False,
+    )
+    assert result.returncode == 0, result.stderr
+    assert f"MQTT: events to mqtt://127.0.0.1:{port} under hli/demo/" in result.stdout
+    assert (
+        f"MQTT: broker mqtt://127.0.0.1:{port} not reachable: [Errno 111] Connection refused; retrying"
+        in (result.stderr)
+    )
+    assert result.stderr.count("not reachable") == 1  # once, not at every retry
+    assert "stopped at cycle 1500" in result.stdout
+    assert "Traceback" not in result.stderr
