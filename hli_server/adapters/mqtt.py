@@ -443,8 +443,7 @@ class MqttAdapter:
             logger.exception("MQTT: the client task failed")
         finally:
             task.cancel()
-            with contextlib.suppress(BaseException):
-                await task
+            await asyncio.gather(task, return_exceptions=True)
         left = len(self._pending) + len(self._inflight)
         if left:
             logger.warning(
@@ -501,6 +500,11 @@ class MqttAdapter:
 
     # --- the client task --------------------------------------------------------------------------
     async def _run(self) -> None:
+        """Connect, publish, reconnect with backoff; until a stop is requested. Never raises: an
+        unexpected error is logged with its traceback and retried like a lost broker."""
+        import aiomqtt
+
+        expected = (aiomqtt.MqttError, _BrokerGoneError, OSError, TimeoutError)
         delay = RECONNECT_MIN_S
         while not self._stop_requested.is_set():
             was_connected = False
@@ -512,6 +516,8 @@ class MqttAdapter:
                 raise
             except Exception as exc:  # broker away, refused, TLS, timeouts: retried, never fatal
                 was_connected = was_connected or self._connected
+                if not isinstance(exc, expected):
+                    logger.exception("MQTT: unexpected error in the client task (retried)")
                 self._connection_failed(exc)
             finally:
                 self._requeue()
