@@ -122,6 +122,13 @@ ADAPTERS: dict[str, AdapterKind] = {
             default=False,
             summary="ADS over TCP: HLI symbols on AMS port 851, FCT-C3 CNC objects on port 551 (H-04, C3-10)",
         ),
+        AdapterKind(
+            "mqtt",
+            "hli_server.adapters.mqtt:MqttAdapter",
+            "hli_server.adapters.mqtt:MqttOptions",
+            default=False,
+            summary="MQTT events to a broker, JSON per event kind (H-05; docs/mqtt.md)",
+        ),
     )
 }
 """Adapter name -> :class:`AdapterKind`, in the order ``run`` starts the default ones."""
@@ -161,6 +168,14 @@ CLI_ALIASES: tuple[CliAlias, ...] = (
         kind=str,
         metavar="NETID",
         help="start the ADS server with this AMS NetId (the clients' target NetId)",
+    ),
+    CliAlias(
+        "--mqtt",
+        "mqtt",
+        "broker",
+        kind=str,
+        metavar="HOST[:PORT]",
+        help="publish the events to this MQTT broker (H-05; docs/mqtt.md)",
     ),
 )
 """The short flags of ``hli-server run``; each is the same as ``--adapter NAME:OPTION=VALUE``."""

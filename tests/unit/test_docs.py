@@ -35,3 +35,13 @@ def test_the_requirement_list_has_every_id_once_in_order() -> None:
         + [f"H-{i:02d}" for i in range(1, 10)]
     )
     assert ids == expected
+
+
+def test_mqtt_doc_lists_every_topic_and_option() -> None:
+    from hli_server.adapters.mqtt import MqttOptions
+    from hli_server.commands.events import mqtt_markdown
+
+    doc = (ROOT / "docs" / "mqtt.md").read_text(encoding="utf-8")
+    assert mqtt_markdown() in doc, "docs/mqtt.md is stale: paste `hli-server events --mqtt` in its markers"
+    missing = [name for name in MqttOptions.model_fields if f"`{name}`" not in doc]
+    assert not missing, f"docs/mqtt.md does not describe the MQTT options {missing}"
