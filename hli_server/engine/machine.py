@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hli_server.engine.alarms import ALARMS, Alarm, Reaction, Severity
-from hli_server.engine.axis import Axis, AxisFaults
+from hli_server.engine.axis import Axis, AxisFaults, check_fault_value
 from hli_server.engine.channel import Channel, Mode
 from hli_server.engine.hli import AxisHli, ChannelHli, MachineHli
 from schemas.config import MachineConfig
@@ -104,7 +104,8 @@ class Machine:
     def inject_fault(self, axis_name: str, **fields: float | bool) -> None:
         """Fault injection (A3-05): set fields of the axis' :class:`AxisFaults` (friction,
         gain_factor, encoder_drift, encoder_stuck, drive_error); effective from the next cycle.
-        ``inject_fault("X", friction=5.0)``; ``inject_fault("X")`` with no fields clears all faults."""
+        ``inject_fault("X", friction=5.0)``; ``inject_fault("X")`` with no fields clears all faults.
+        Values out of range raise ValueError (``check_fault_value``) and change nothing."""
         axis = self.axes_by_name.get(axis_name)
         if axis is None:
             raise KeyError(f"inject_fault: no axis {axis_name!r} (axes: {', '.join(self.axes_by_name)})")
@@ -117,7 +118,8 @@ class Machine:
             raise ValueError(
                 f"inject_fault({axis_name!r}): unknown fault field(s) {unknown}; known: {', '.join(known)}"
             )
-        for name, value in fields.items():
+        checked = {name: check_fault_value(axis, name, value) for name, value in fields.items()}
+        for name, value in checked.items():
             setattr(axis.faults, name, value)
         self.emit("fault", self.channels[axis.channel], axis=axis_name, **fields)
 
