@@ -66,12 +66,14 @@ def _finite(machine: Machine) -> bool:
 
 
 def _settle(machine: Machine, limit: int = 20_000) -> None:
-    """Reset every channel and step until the axes stand still (they brake after an abort)."""
+    """Reset every channel and step until the axes stand still and no axis brakes on its own any
+    more (a start before that is refused: the last bit of a stop ramp can be below the setpoint's
+    resolution, so a standing setpoint alone does not say the stop is over)."""
     for ch in machine.channels:
         ch.request_reset()
     for _ in range(limit):
         machine.step(1)
-        if all(a.setpoint_step == 0.0 for a in machine.axes):
+        if all(a.setpoint_step == 0.0 and not a.stopping for a in machine.axes):
             return
     raise AssertionError("the axes did not come to rest after a reset")
 
