@@ -65,12 +65,13 @@ def _finite(machine: Machine) -> bool:
     )
 
 
-def _settle(machine: Machine, rounds: int = 5, cycles: int = 5000) -> None:
-    """What an operator does until the machine is clear: reset every channel and wait until the axes
-    stand still, no axis brakes on its own and no alarm is active; again while one is (an axis whose
-    measured position a cleared fault left far off raises 911012 right after the reset, and its stop
-    is released only by the next reset). A standing setpoint alone does not end a stop: its last bit
-    can be below the setpoint's resolution."""
+def _settle(machine: Machine, rounds: int = 20, cycles: int = 5000) -> None:
+    """What an operator does until the machine is clear: reset every channel and wait until every
+    axis stands in its exact-stop window, brakes on its own no more and no alarm is active; reset
+    again while one is. Why each condition: the last bit of a stop ramp can be below the setpoint's
+    resolution (a standing setpoint does not end the stop); a cleared ``encoder_stuck`` lets the
+    measured position jump to where the real axis ran, and while the loop pulls it back 911012 or
+    70082 fire (its stop is released only by the next reset)."""
     for _ in range(rounds):
         for ch in machine.channels:
             ch.request_reset()
@@ -78,7 +79,12 @@ def _settle(machine: Machine, rounds: int = 5, cycles: int = 5000) -> None:
             machine.step(1)
             if machine.active_alarms:
                 break
-            if all(a.setpoint_step == 0.0 and not a.stopping for a in machine.axes):
+            if all(
+                a.setpoint_step == 0.0
+                and not a.stopping
+                and abs(a.following_error) * 10_000 <= a.config.window
+                for a in machine.axes
+            ):
                 return
     active = [a.message for a in machine.active_alarms]
     raise AssertionError(f"the machine is not clear after {rounds} resets: {active}")
