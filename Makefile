@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 RUNTIME_STAMP := $(VENV)/.installed-runtime
 TEST_STAMP    := $(VENV)/.installed-test
 
-.PHONY: run test lint format bench clean venv
+.PHONY: run test lint format bench soak clean venv
 
 $(BIN)/python:
 	@$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -41,6 +41,14 @@ test: $(TEST_STAMP) lint
 
 bench: $(TEST_STAMP)
 	$(BIN)/python -m benchmarks $(ARGS)
+
+# The fuzz tests of the suite (marker `fuzz`), long: SOAK_SCALE times their examples, a new seed each
+# run unless HLI_FUZZ_SEED is given (docs/reliability.md, "NC programs and configuration").
+SOAK_SCALE ?= 100
+soak: $(STAMP)
+	@seed=$${HLI_FUZZ_SEED:-$$(date +%s)}; echo "soak: HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed"; \
+	HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed $(BIN)/python -m pytest -m fuzz -p no:cacheprovider \
+		--timeout=0 --durations=0 -q -rP $(PYTEST_ARGS)
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache build *.egg-info

@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import annotated_types
-from pydantic import BaseModel, TypeAdapter, ValidationError
+from pydantic import BaseModel, ConfigDict, TypeAdapter, ValidationError
 from pydantic.fields import FieldInfo
 
 from schemas.config import (
@@ -327,7 +327,8 @@ def _parse_int(raw: str) -> int | None:
 def _field_adapter(model: type[BaseModel], field_name: str) -> TypeAdapter[Any]:
     info = model.model_fields[field_name]
     annotated: Any = typing.Annotated[info.annotation, info]
-    return TypeAdapter(annotated)
+    # the models refuse inf and NaN (schemas.config); a field checked alone must too
+    return TypeAdapter(annotated, config=ConfigDict(allow_inf_nan=False))
 
 
 def _check_field(model: type[BaseModel], field_name: str, value: Any, written: str) -> str | None:
@@ -357,7 +358,9 @@ def _bound_text(field_name: str, value: Any) -> str:
     names = {DINT_MIN: "MIN(SGN32)", DINT_MAX: "MAX(SGN32)", UDINT_MAX: "MAX(UNS32)"}
     if isinstance(value, int) and not isinstance(value, bool) and value in names:
         return names[value]
-    return f"{value:g}" if isinstance(value, float) else str(value)
+    if isinstance(value, float):
+        return str(int(value)) if value.is_integer() and abs(value) < 1e15 else f"{value:g}"
+    return str(value)
 
 
 def _range_text(model: type[BaseModel], field_name: str) -> str:
@@ -383,6 +386,9 @@ def _field_problem(model: type[BaseModel], field_name: str, err: Any, written: A
     label = pid or field_name
     if err["type"] in _RANGE_ERRORS:
         return f"{written} is out of range: {label} allows {_range_text(model, field_name)}"
+    if err["type"] == "finite_number":  # inf, nan (TOML and the lists can write them)
+        allowed = _range_text(model, field_name) or "a finite number"
+        return f"{written} is not a finite number: {label} allows {allowed}"
     msg = str(err["msg"])
     msg = msg[:1].lower() + msg[1:]
     return f"invalid value {written!r}: {msg}" + (f" ({pid})" if pid else "")

@@ -5,6 +5,11 @@ P-STUP-00070); positions in 0.1 µm (0.0001° rotary), times in µs, acceleratio
 Parameters the documents do not name (velocities, jog, drive model) are the project's own and are
 marked so in ``docs/configuration.md``.
 
+Every number has a range (E-07; issue 12 finding 1): positions and distances a DINT in 0.1 µm,
+times in µs within their type, velocities and accelerations positive and at most
+:data:`~schemas.units.VELOCITY_LIMIT_MM_PER_MIN` / :data:`~schemas.units.ACCELERATION_LIMIT`; no
+model takes inf or NaN (``allow_inf_nan=False``; TOML and the text lists can write ``inf`` and ``nan``).
+
 The table :data:`AXIS_PARAMETERS` maps the ISG text-list paths (``kenngr.swe_neg``) to the fields
 here; the text-list importer and the docs are derived from it.
 """
@@ -17,7 +22,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from schemas.units import DINT_MAX, DINT_MIN, UDINT_MAX
+from schemas.units import ACCELERATION_LIMIT, DINT_MAX, DINT_MIN, UDINT_MAX, VELOCITY_LIMIT_MM_PER_MIN
 
 __all__ = [
     "AXIS_PARAMETERS",
@@ -74,7 +79,7 @@ def _raise_issues(issues: list[ParameterIssue]) -> None:
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False, allow_inf_nan=False)
 
 
 class AxisType(StrEnum):
@@ -125,9 +130,14 @@ class AxisConfig(_Strict):
         description="P-AXIS-00015 operating mode of the axis; bit 0x8000: collision monitoring (FCT-C3)",
     )
     a_emergency: float = Field(
-        default=5000.0, gt=0.0, description="P-AXIS-00003 emergency deceleration [mm/s²]"
+        default=5000.0,
+        gt=0.0,
+        le=ACCELERATION_LIMIT,
+        description="P-AXIS-00003 emergency deceleration [mm/s²]",
     )
-    a_max: float = Field(default=2000.0, gt=0.0, description="P-AXIS-00008 maximum acceleration [mm/s²]")
+    a_max: float = Field(
+        default=2000.0, gt=0.0, le=ACCELERATION_LIMIT, description="P-AXIS-00008 maximum acceleration [mm/s²]"
+    )
     coll_check_ax_nr: int = Field(
         default=0,
         ge=0,
@@ -184,10 +194,24 @@ class AxisConfig(_Strict):
         default=-1, description="P-AXIS-00532 max settling time into the window [µs]; 0 off, <0 P-AXIS-00151"
     )
     # project's own: what motion needs
-    v_max: float = Field(default=30_000.0, gt=0.0, description="maximum path/axis velocity [mm/min]")
-    v_rapid: float = Field(default=30_000.0, gt=0.0, description="G00 velocity [mm/min]")
-    jog_velocity: float = Field(default=3_000.0, gt=0.0, description="jog velocity in manual mode [mm/min]")
-    jog_acceleration: float = Field(default=1000.0, gt=0.0, description="jog acceleration [mm/s²]")
+    v_max: float = Field(
+        default=30_000.0,
+        gt=0.0,
+        le=VELOCITY_LIMIT_MM_PER_MIN,
+        description="maximum path/axis velocity [mm/min]",
+    )
+    v_rapid: float = Field(
+        default=30_000.0, gt=0.0, le=VELOCITY_LIMIT_MM_PER_MIN, description="G00 velocity [mm/min]"
+    )
+    jog_velocity: float = Field(
+        default=3_000.0,
+        gt=0.0,
+        le=VELOCITY_LIMIT_MM_PER_MIN,
+        description="jog velocity in manual mode [mm/min]",
+    )
+    jog_acceleration: float = Field(
+        default=1000.0, gt=0.0, le=ACCELERATION_LIMIT, description="jog acceleration [mm/s²]"
+    )
     referenced: bool = Field(default=True, description="axis is homed at start-up")
     start_position: Dint = Field(default=0, description="position at start-up [0.1 µm]")
     reference_position: Dint | None = Field(
@@ -290,7 +314,10 @@ class ChannelConfig(_Strict):
         description="P-CHAN-00874 input cycles of the dynamic position limits (FCT-C43) [cycles]",
     )
     feedhold_deceleration: float = Field(
-        default=1000.0, gt=0.0, description="path deceleration of feedhold [mm/s²] (project's own)"
+        default=1000.0,
+        gt=0.0,
+        le=ACCELERATION_LIMIT,
+        description="path deceleration of feedhold [mm/s²] (project's own)",
     )
     zero_offsets: list[ZeroOffset] = Field(default_factory=list)
     programs: list[ProgramEntry] = Field(default_factory=list)

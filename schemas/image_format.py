@@ -34,7 +34,14 @@ Header::
      96   8  cycle               cycle of the newest publish (for information;
                                  the consistent one is in the buffer)
     104   4  server_pid
-    108  20  reserved
+    108   8  server_start        start time of the server process (clock ticks since boot, 0 unknown)
+    116   8  server_pid_ns       inode of the server's PID namespace (0 unknown)
+    124   4  reserved
+
+``server_pid`` with ``server_start`` names the very process that wrote the image: a PID the kernel
+has since given to another process has another start time, so a restarted server can tell its
+crashed predecessor's segment from the image of a live server (H-01; issue 12 finding 7). The PID
+namespace says whether the PID means anything here (another container's PIDs do not).
 
 Consistency:
 
@@ -102,7 +109,7 @@ __all__ = [
 MAGIC: Final = b"HLI-IMG\x00"
 FORMAT_VERSION: Final = 1
 HEADER_SIZE: Final = 128
-HEADER: Final = struct.Struct("<8sII32sIIIIIIIIIIQQI20x")
+HEADER: Final = struct.Struct("<8sII32sIIIIIIIIIIQQIQQ4x")
 """The header as one ``struct`` (field order as in the module docstring)."""
 
 OFF_MAGIC: Final = 0
@@ -167,7 +174,9 @@ def header_construct() -> object:
         "publish_count" / cs.Int64ul,
         "cycle" / cs.Int64ul,
         "server_pid" / cs.Int32ul,
-        cs.Padding(20),
+        "server_start" / cs.Int64ul,
+        "server_pid_ns" / cs.Int64ul,
+        cs.Padding(4),
     )
 
 
@@ -214,6 +223,10 @@ class ImageHeader:
     publish_count: int
     cycle: int
     server_pid: int
+    server_start: int = 0
+    """Start time of the server process in clock ticks since boot (``/proc/<pid>/stat``); 0 unknown."""
+    server_pid_ns: int = 0
+    """Inode of the server's PID namespace (``/proc/<pid>/ns/pid``); 0 unknown."""
 
     @property
     def closed(self) -> bool:
@@ -239,13 +252,20 @@ class ImageHeader:
             self.publish_count,
             self.cycle,
             self.server_pid,
+            self.server_start,
+            self.server_pid_ns,
         )
 
 
-def read_header(buf: memoryview | bytes, name: str = "?", *, segment_size: int | None = None) -> ImageHeader:
+def read_header(
+    buf: memoryview | bytes, name: str = "?", *, segment_size: int | None = None, unready_ok: bool = False
+) -> ImageHeader:
     """Decode and check the header: magic, format version and that the offsets fit the segment.
 
-    The layout version and hash are checked by the caller, which knows what it expects.
+    The layout version and hash are checked by the caller, which knows what it expects. With
+    ``unready_ok`` a header whose magic is not written yet (a server that is starting, or that died
+    while starting) is decoded too, when everything else in it is an image's; the server uses that
+    to judge a segment that is in the way of its own (H-01).
     """
     if len(buf) < HEADER_SIZE:
         raise ImageMismatchError(
@@ -253,7 +273,7 @@ def read_header(buf: memoryview | bytes, name: str = "?", *, segment_size: int |
         )
     raw = HEADER.unpack_from(buf, 0)
     magic = raw[0]
-    if magic != MAGIC:
+    if magic != MAGIC and not (unready_ok and magic == b"\x00" * 8):
         if magic == b"\x00" * 8:
             raise ImageNotReadyError(
                 f"shared memory {name!r} has no image header yet: the server is still starting; retry"
@@ -279,6 +299,8 @@ def read_header(buf: memoryview | bytes, name: str = "?", *, segment_size: int |
         publish_count=raw[14],
         cycle=raw[15],
         server_pid=raw[16],
+        server_start=raw[17],
+        server_pid_ns=raw[18],
     )
     size = len(buf) if segment_size is None else segment_size
     ends = (

@@ -14,10 +14,14 @@ factor 10 000 per mm (or per °), so one pair of functions serves translatory an
 from __future__ import annotations
 
 __all__ = [
+    "ACCELERATION_LIMIT",
     "DINT_MAX",
     "DINT_MIN",
+    "DISTANCE_LIMIT_MM",
     "INCREMENTS_PER_MM",
+    "POSITION_LIMIT_MM",
     "UDINT_MAX",
+    "VELOCITY_LIMIT_MM_PER_MIN",
     "increments_from_mm",
     "mm_from_increments",
     "mm_per_min_to_mm_per_s",
@@ -31,6 +35,28 @@ INCREMENTS_PER_MM = 10_000
 DINT_MIN = -(2**31)
 DINT_MAX = 2**31 - 1
 UDINT_MAX = 2**32 - 1
+
+# --- the ranges every number that enters must lie in (E-04, E-07; issue 12 finding 1) --------------
+POSITION_LIMIT_MM = DINT_MAX / INCREMENTS_PER_MM
+"""214748.3647 mm (or °): the largest position the interface can carry, a DINT in 0.1 µm (0.0001°).
+NC positions, MIN_EXCUR/MAX_EXCUR and configured positions lie within +/- this."""
+
+DISTANCE_LIMIT_MM = 2 * POSITION_LIMIT_MM
+"""429496.7294 mm: the largest distance between two positions within :data:`POSITION_LIMIT_MM`;
+the bound of the circle centre words I/J/K (relative to the start point under G162)."""
+
+VELOCITY_LIMIT_MM_PER_MIN = 6_000_000.0
+"""100 m/s: upper bound of every velocity (configured v_max and the like, the NC feed F).
+
+Why: the actual velocity reaches the PLC as ``ipo_state.velocity_r``, a DINT in 0.1 µm/s, which
+holds 214 748 mm/s; the drive model saturates at twice the axis' v_max (``engine/axis.py``), so
+v_max must stay below 107 374 mm/s (6.44e6 mm/min). Rounded down to 100 m/s, some ten times what
+the fastest linear-motor machines reach."""
+
+ACCELERATION_LIMIT = 1_000_000.0
+"""mm/s² (about 100 g): upper bound of every configured acceleration. No interface field limits
+it; it is far above any machine axis and keeps every derived quantity (braking distances, ramp
+times) finite and meaningful."""
 
 
 def increments_from_mm(value_mm: float) -> int:

@@ -84,6 +84,7 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(910108, "Malformed block number", "project"),
     _e(910109, "Unknown # command", "project"),
     _e(910110, "Not supported by the simulator", "project"),
+    _e(910111, "Number out of range in NC block", "project (E-04)"),
     # --- project's own: decoder and motion (911xxx) -----------------------------------------
     _e(911000, "No feed programmed for a feed move", "project"),
     _e(911001, "Circle: centre or radius inconsistent", "project"),

@@ -17,6 +17,13 @@ setpoint to the reference position (``reference_position``, default the start po
 velocity and acceleration, like a search for the reference mark; when it arrives there the axis is
 referenced. The per-cycle code reads plain values copied once from the configuration (the pydantic
 model is not touched per cycle).
+
+The drive saturates: ``v_cmd`` is limited to :data:`DRIVE_SATURATION` times the axis' v_max, as a
+real drive's speed limit does. A loop made unstable by its gain (kv * T_A > 2 without a time
+constant, or a large ``gain_factor``) then oscillates with a bounded amplitude, the position
+monitor reports it, and no value grows without bound (before, such a loop reached inf within a
+few hundred cycles and ended the server, issue 12 finding 2). Injected fault values are checked
+by :func:`check_fault_value` before they reach the loop.
 """
 
 from __future__ import annotations
@@ -27,7 +34,15 @@ from dataclasses import dataclass
 from schemas.config import AxisConfig, AxisType
 from schemas.units import mm_from_increments, mm_per_min_to_mm_per_s, s_from_us
 
-__all__ = ["Axis", "AxisFaults", "DriveParams"]
+__all__ = ["DRIVE_SATURATION", "GAIN_FACTOR_MAX", "Axis", "AxisFaults", "DriveParams", "check_fault_value"]
+
+DRIVE_SATURATION = 2.0
+"""The drive's speed limit as a multiple of the axis' v_max (project's own: motors are sized with
+margin above the axis' rated speed; the PLC sees the velocity as a DINT in 0.1 µm/s, which the
+configuration's bound on v_max keeps representable at twice v_max)."""
+
+GAIN_FACTOR_MAX = 100.0
+"""Largest ``gain_factor``: a hundredfold kv is far beyond any mistuning worth simulating."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -81,14 +96,39 @@ class AxisFaults:
 
 
 def check_fault_value(axis: Axis, name: str, value: float | bool) -> float | bool:
-    """A fault value the drive model can take, or ValueError naming the field and the allowed range."""
+    """A fault value the drive model can take (A3-05), else ValueError naming the field, the value
+    and the allowed range. ``Machine.inject_fault`` checks every field before it changes any.
+
+    The ranges, and why (issue 12 finding 2: ``encoder_drift=1e308`` reached inf in the next cycle):
+
+    * ``friction`` 0 .. v_max [mm/s]: a dead band as wide as the axis' top speed already swallows
+      every command the path gives; a wider one says nothing more.
+    * ``gain_factor`` > 0 .. :data:`GAIN_FACTOR_MAX`: 0 would open the loop (that is
+      ``encoder_stuck`` or ``drive_error``); the drive's saturation bounds an unstable loop.
+    * ``encoder_drift`` -v_max .. v_max [mm/s]: the loop compensates a drift by moving the axis at
+      the drift's speed, which the drive can do up to v_max; a measuring system that runs away
+      faster than the axis can travel is broken, not drifting (``encoder_stuck``).
+    * ``encoder_stuck``, ``drive_error``: true or false.
+    """
     default = getattr(AxisFaults(), name)
+    where = f"fault {name} of axis {axis.name}"
     if isinstance(default, bool):
         if not isinstance(value, bool):
-            raise ValueError(f"fault {name} of axis {axis.name}: true or false, got {value!r}")
+            raise ValueError(f"{where}: true or false, got {value!r}")
         return value
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise ValueError(f"fault {name} of axis {axis.name}: a finite number, got {value!r}")
+        raise ValueError(f"{where}: a finite number, got {value!r}")
+    v_max = axis.v_max
+    unit = "°/s" if axis.rotary else "mm/s"
+    if name == "friction":
+        ok, allowed = 0.0 <= value <= v_max, f"0 .. {v_max:g} {unit} (the axis' v_max)"
+    elif name == "gain_factor":
+        ok, allowed = 0.0 < value <= GAIN_FACTOR_MAX, f"greater than 0, at most {GAIN_FACTOR_MAX:g}"
+    else:  # encoder_drift
+        ok = -v_max <= value <= v_max
+        allowed = f"-{v_max:g} .. {v_max:g} {unit} (the axis' v_max; a faster one is encoder_stuck)"
+    if not ok:
+        raise ValueError(f"{where}: {value!r} is out of range; allowed {allowed}")
     return float(value)
 
 
@@ -242,6 +282,9 @@ class Axis:
             v_ff = (self.setpoint - self.prev_setpoint) / t_a
             kv = cfg.kv * f.gain_factor
             v_cmd = cfg.feed_forward * v_ff + kv * (self.setpoint - self.measured)
+            limit = DRIVE_SATURATION * self.v_max  # the drive's speed limit (see the module docstring)
+            if not -limit <= v_cmd <= limit:
+                v_cmd = limit if v_cmd > 0.0 else -limit
             if f.friction > 0.0 and abs(v_cmd) <= f.friction:
                 v_cmd = 0.0
                 self.drive_velocity = 0.0

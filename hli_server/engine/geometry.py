@@ -67,11 +67,14 @@ class ArcSegment:
 
     @property
     def length(self) -> float:
+        """Path length of the helix: hypot of the arc length and the linear axes' travel. ``hypot``
+        rather than a sum of squares: it stays finite for every finite result (a square of 1e155
+        overflowed, issue 12 finding 1)."""
         i, j = self.plane
-        linear_sq = sum(
-            (b - a) ** 2 for k, (a, b) in enumerate(zip(self.start, self.end, strict=True)) if k not in (i, j)
+        return math.hypot(
+            self.arc_length,
+            *(b - a for k, (a, b) in enumerate(zip(self.start, self.end, strict=True)) if k not in (i, j)),
         )
-        return math.sqrt(self.arc_length**2 + linear_sq)
 
     def point_at(self, s: float) -> Point:
         length = self.length

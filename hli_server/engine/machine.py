@@ -173,7 +173,7 @@ class Machine:
         """Fault injection (A3-05): set fields of the axis' :class:`AxisFaults` (friction,
         gain_factor, encoder_drift, encoder_stuck, drive_error); effective from the next cycle.
         ``inject_fault("X", friction=5.0)``; ``inject_fault("X")`` with no fields clears all faults.
-        Values out of range raise ValueError and change nothing."""
+        Values out of range raise ValueError (``check_fault_value``) and change nothing."""
         axis = self.axes_by_name.get(axis_name)
         if axis is None:
             raise KeyError(f"inject_fault: no axis {axis_name!r} (axes: {', '.join(self.axes_by_name)})")

@@ -12,6 +12,17 @@ The protocol adapters (Modbus, ADS) are PLC doors into the same image: :meth:`Pr
 writes one PLC->CNC field with a single store and refuses CNC->PLC fields (H-02);
 :meth:`ProcessImage.read` and :meth:`ProcessImage.snapshot` read. The segment is unlinked by
 :meth:`ProcessImage.close` (and, if the server dies, by the resource tracker of the server process).
+
+A segment of the wanted name that exists already (H-01; issue 12 finding 7) is replaced only when it
+is provably a stale HLI image: it has an image header, and the process that wrote it is gone. The
+header records that process as PID *and* start time (``/proc/<pid>/stat``, clock ticks since boot):
+a PID the kernel has since handed to another process has another start time, so a crashed server's
+segment is replaced even when its PID is alive again. The start time beats reading
+``/proc/<pid>/cmdline``: it names the very process, not a program, so it holds for a server started
+as ``python -m``, inside pytest, or several servers on one host. A segment without an image header
+belongs to another program and is never touched; neither is one whose writer cannot be judged (a PID
+of another PID namespace, i.e. another container sharing /dev/shm). Without /proc (not Linux) the
+start time is 0 and a live PID counts as a running server, as before.
 """
 
 from __future__ import annotations
@@ -22,6 +33,7 @@ import re
 import secrets
 import struct
 from multiprocessing import shared_memory
+from pathlib import Path
 from types import TracebackType
 from typing import Any, Final
 
@@ -30,7 +42,14 @@ from hli_server.image.projection import Projection, compile_projection, diagnose
 from schemas import image_format as fmt
 from schemas.layout import Direction, Layout, Signal, SignalType, SignalValueError
 
-__all__ = ["IMAGE_NAME_PREFIX", "ProcessImage", "default_image_name", "open_image_names"]
+__all__ = [
+    "IMAGE_NAME_PREFIX",
+    "ProcessImage",
+    "default_image_name",
+    "open_image_names",
+    "pid_namespace",
+    "process_start_ticks",
+]
 
 log = logging.getLogger(__name__)
 
@@ -84,6 +103,45 @@ def _server_alive(pid: int) -> bool:
     return True
 
 
+def process_start_ticks(pid: int) -> int:
+    """Start time of process ``pid`` in clock ticks since boot (``/proc/<pid>/stat`` field 22);
+    0 when it cannot be read (no such process, no /proc)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_bytes()
+    except OSError:
+        return 0
+    # "pid (comm) state ppid ...": comm may hold blanks and parentheses; the fields after the last
+    # ")" start with field 3 (state), so starttime (field 22) is the 20th of them
+    fields = stat.rpartition(b")")[2].split()
+    try:
+        return int(fields[19])
+    except (IndexError, ValueError):  # pragma: no cover - a kernel with another stat format
+        return 0
+
+
+def pid_namespace(pid: int | str = "self") -> int:
+    """Inode of the PID namespace of ``pid`` (default: this process); 0 when unknown."""
+    try:
+        return os.stat(f"/proc/{pid}/ns/pid").st_ino
+    except OSError:
+        return 0
+
+
+def _writer_state(header: fmt.ImageHeader) -> str:
+    """``"gone"``, ``"alive"`` or ``"foreign"`` (cannot be judged): is the process that wrote the
+    header still running? See the module docstring for why the start time decides."""
+    ours = pid_namespace()
+    if header.server_pid_ns and ours and header.server_pid_ns != ours:
+        return "foreign"
+    if not _server_alive(header.server_pid):
+        return "gone"
+    if header.server_start:
+        now = process_start_ticks(header.server_pid)
+        if now and now != header.server_start:
+            return "gone"  # the PID was given to another process since
+    return "alive"
+
+
 class ProcessImage:
     """The server's handle on the shared-memory image. Create with :meth:`create`."""
 
@@ -108,7 +166,9 @@ class ProcessImage:
         """Create the segment ``name`` (default :func:`default_image_name`) for ``layout``.
 
         An existing segment of that name is an error, unless ``replace_stale`` is set and the
-        segment is not the image of a running server (it is then unlinked and made anew).
+        segment is the image of a server that is gone (it is then unlinked and made anew). A segment
+        that is no HLI image, or the image of a running server, is never touched (FileExistsError
+        that names the segment and says what to do; see the module docstring).
         """
         fmt.check_host()
         plain = _check_name(name or default_image_name())
@@ -146,20 +206,44 @@ class ProcessImage:
     def _remove_stale(name: str) -> None:
         # look without registering with the resource tracker: a tracked mapping would be unlinked
         # when this process ends, even when it belongs to a running server and is left alone
-        old = fmt.attach_untracked(name)
         try:
+            old = fmt.attach_untracked(name)
+        except PermissionError:
+            raise FileExistsError(
+                f"shared memory {name!r} exists and this user may not open it: it is not ours. Choose "
+                "another image name (--image-name)"
+            ) from None
+        try:
+            buf = _buffer(old)
             try:
-                header = fmt.read_header(_buffer(old), name)
+                header = fmt.read_header(buf, name, segment_size=len(buf), unready_ok=True)
             except fmt.ImageError:
-                header = None
-            if header is not None and not header.closed and _server_alive(header.server_pid):
+                raise FileExistsError(
+                    f"shared memory {name!r} exists and is not an HLI process image (no image header): "
+                    "it belongs to another program and is left alone. Choose another image name "
+                    f"(--image-name), or remove /dev/shm/{name} yourself if you know it is unused"
+                ) from None
+            writer = "gone" if header.closed else _writer_state(header)
+            if writer == "alive":
                 raise FileExistsError(
                     f"shared memory {name!r} is the image of the running server pid {header.server_pid}: "
                     "stop that server or choose another image name"
                 )
+            if writer == "foreign":
+                raise FileExistsError(
+                    f"shared memory {name!r} is the image of a server in another PID namespace (pid "
+                    f"{header.server_pid} there; a container sharing /dev/shm): whether it runs cannot be "
+                    f"told from here. Choose another image name, or remove /dev/shm/{name} once that "
+                    "server is stopped"
+                )
         finally:
             old.close()
-        log.warning("removing stale shared memory %s", name)
+        log.warning(
+            "replacing the stale process image %s (its server pid %d is gone%s)",
+            name,
+            header.server_pid,
+            "; the image was closed" if header.closed else "",
+        )
         stale = shared_memory.SharedMemory(name=name, create=False)
         stale.close()
         stale.unlink()
@@ -180,6 +264,8 @@ class ProcessImage:
             publish_count=0,
             cycle=0,
             server_pid=os.getpid(),
+            server_start=process_start_ticks(os.getpid()),
+            server_pid_ns=pid_namespace(),
         )
         buf[: fmt.HEADER_SIZE] = header.pack()
         buf[fmt.OFF_MAGIC : fmt.OFF_MAGIC + 8] = fmt.MAGIC  # last: the image is ready

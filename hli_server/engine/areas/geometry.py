@@ -83,10 +83,12 @@ class Polygon:
         self.points = tuple(points)
         n = len(points)
         pairs = [(points[k], points[(k + 1) % n]) for k in range(n)]
-        # (x0, y0, dx, dy, |d|², |d|, y1)
+        # (x0, y0, dx, dy, |d|², |d|, y1); products, not ``** 2``, which raises OverflowError where a
+        # product is inf (the area handler refuses such coordinates before they get here, issue 12)
         self.edges = tuple(
-            (x0, y0, x1 - x0, y1 - y0, (x1 - x0) ** 2 + (y1 - y0) ** 2, math.hypot(x1 - x0, y1 - y0), y1)
+            (x0, y0, dx, dy, dx * dx + dy * dy, math.hypot(dx, dy), y1)
             for (x0, y0), (x1, y1) in pairs
+            for dx, dy in ((x1 - x0, y1 - y0),)
         )
         # each edge's box grown by EPS: only a point inside it can be on the edge
         self.near = tuple(
@@ -540,7 +542,8 @@ def _segments_meet(
     d2 = _orient(r[0], r[1], s[0], s[1], q[0], q[1])
     d3 = _orient(p[0], p[1], q[0], q[1], r[0], r[1])
     d4 = _orient(p[0], p[1], q[0], q[1], s[0], s[1])
-    scale = max(1.0, *(abs(v) for pt in (p, q, r, s) for v in pt)) ** 2
+    largest = max(1.0, *(abs(v) for pt in (p, q, r, s) for v in pt))
+    scale = largest * largest  # not ** 2: that raises OverflowError (issue 12)
     tol = 1e-12 * scale
     if ((d1 > tol and d2 < -tol) or (d1 < -tol and d2 > tol)) and (
         (d3 > tol and d4 < -tol) or (d3 < -tol and d4 > tol)

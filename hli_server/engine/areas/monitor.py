@@ -52,7 +52,7 @@ from hli_server.engine.nc.blocks import (
 )
 from hli_server.engine.planner import Marker, Motion
 from schemas.events import Alarm, AreasChanged, AreaViolation, Measurement
-from schemas.units import increments_from_mm
+from schemas.units import DISTANCE_LIMIT_MM, increments_from_mm
 from schemas.wire import Mode, ProgramState
 
 if TYPE_CHECKING:
@@ -83,6 +83,12 @@ ALARM_MEASURE_LIMIT = 50706
 ALARM_POINT_IN_PROTECTION = 912000
 ALARM_PATH_ENTERS_PROTECTION = 912001
 ALARM_DEFINITION = 912002
+COORDINATE_LIMIT = DISTANCE_LIMIT_MM
+"""mm: corners, circle extents and height limits of an area lie within +/- this (429496.7294 mm, twice
+the range of positions, which the DINT in 0.1 µm bounds). The NC words are range-checked already;
+zero offsets and G92 can still add to them. Beyond it no axis can go, and the exact geometry's
+boundary tolerance (:data:`~hli_server.engine.areas.geometry.EPS`, 1e-9 mm) would drown in the
+floats' resolution; refused as 912002 (issue 12 finding 1)."""
 ALARM_COMMAND = 912003
 ALARM_MANUAL_STOP = 912004
 ALARM_NO_PROBE = 912010
@@ -121,6 +127,22 @@ def _fmt(names: list[str], point: Point, indices: tuple[int, ...] | None = None)
 
 def _fmt2(p: tuple[float, float]) -> str:
     return f"({_num(p[0])}, {_num(p[1])})"
+
+
+def _beyond_limit(points: list[tuple[str, float, float]], lo: float, hi: float) -> str | None:
+    """What of an area lies beyond :data:`COORDINATE_LIMIT` (or is not finite), or None."""
+    limit = COORDINATE_LIMIT
+    why = (
+        f"lies beyond +/-{limit:.4f} mm, twice the range of positions (a DINT in 0.1 µm): no axis gets "
+        "there; check the zero offset and G92 shift in effect"
+    )
+    for what, x, y in points:
+        if not (-limit <= x <= limit and -limit <= y <= limit):
+            return f"{what} {why}"
+    for what, h in (("MIN_EXCUR with the offset", lo), ("MAX_EXCUR with the offset", hi)):
+        if not -limit <= h <= limit:
+            return f"{what} ({_num(h)}) {why}"
+    return None
 
 
 def _ids(ids: list[int]) -> str:
@@ -452,6 +474,24 @@ class ChannelAreas:
                     f"not at its start point {_fmt2(start2)}",
                 )
             centre = (arc.centre[0], arc.centre[1]) if arc.plane == (a, b) else (arc.centre[1], arc.centre[0])
+            far = _beyond_limit(
+                [
+                    (
+                        f"circle extent {_fmt2((centre[0] - arc.radius, centre[1] - arc.radius))}",
+                        centre[0] - arc.radius,
+                        centre[1] - arc.radius,
+                    ),
+                    (
+                        f"circle extent {_fmt2((centre[0] + arc.radius, centre[1] + arc.radius))}",
+                        centre[0] + arc.radius,
+                        centre[1] + arc.radius,
+                    ),
+                ],
+                lo,
+                hi,
+            )
+            if far is not None:
+                return DecodeError(ALARM_DEFINITION, f"{area}: {far}")
             return AreaDefinition(
                 begin.area_id,
                 begin.kind,
@@ -465,6 +505,16 @@ class ChannelAreas:
                 source=source,
             )
         pts = [(cb.segment.end[a], cb.segment.end[b]) for cb in p.contour]
+        far = _beyond_limit(
+            [
+                (f"corner {_fmt2(pt)} ({cb.block.label})", pt[0], pt[1])
+                for pt, cb in zip(pts, p.contour, strict=True)
+            ],
+            lo,
+            hi,
+        )
+        if far is not None:
+            return DecodeError(ALARM_DEFINITION, f"{area}: {far}")
         if math.dist(pts[0], pts[-1]) > CLOSE_TOLERANCE:
             return DecodeError(
                 ALARM_DEFINITION,

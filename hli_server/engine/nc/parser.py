@@ -21,6 +21,14 @@ Syntax (DIN 66025 as used by the ISG documents FCT-C14 sections 2.4 and 3, and t
 
 Error messages show the offending word upper-cased (the parser works on the upper-cased code).
 
+Ranges (issue 12 finding 1): every number is range-checked where it is read, so that nothing
+downstream (geometry, monitors, the DINT fields of the process image) can overflow; a number out of
+range is alarm 910111 naming the word and the range. Positions (axis words, MIN_EXCUR, MAX_EXCUR)
+must fit a DINT in 0.1 µm (0.0001° rotary): +/-214748.3647; circle centre words I/J/K twice that
+(the distance between two such positions); the feed F +/-6e6 mm/min (100 m/s,
+``schemas.units.VELOCITY_LIMIT_MM_PER_MIN``); S/T/D/H a DINT; ID 0..999999999, EXCUR_AXNR
+1..999999999; G, M and N numbers are whole numbers of at most 9 digits (G must be a known code).
+
 Speed: :func:`iter_blocks` is lazy and meant for multi-million-line programs. A plain motion line
 (no comment, ``#``, ``:``, ``/``) costs a ``strip``, an ``upper`` and one ``findall`` over its words,
 the N number being read as the first word; everything unusual leaves this fast path, and errors
@@ -36,7 +44,7 @@ import math
 import re
 import types
 from collections.abc import Callable, Collection, Iterator
-from typing import NoReturn
+from typing import NoReturn, Protocol
 
 from hli_server.engine.nc.blocks import (
     AreaBegin,
@@ -50,6 +58,7 @@ from hli_server.engine.nc.blocks import (
     Block,
     NcError,
 )
+from schemas.units import DINT_MAX, DISTANCE_LIMIT_MM, POSITION_LIMIT_MM, VELOCITY_LIMIT_MM_PER_MIN
 
 __all__ = ["KNOWN_G_CODES", "iter_blocks", "parse_line", "parse_program"]
 
@@ -64,6 +73,29 @@ _G_CONFLICT = 910106
 _UNKNOWN_AXIS = 910107
 _BAD_N = 910108
 _UNKNOWN_HASH = 910109
+_OUT_OF_RANGE = 910111
+
+# --- ranges (E-04; issue 12 finding 1): the largest magnitude of each kind of word, and why -------
+# The hot loop compares each value with two module constants (one chained comparison; it also refuses
+# what float() made inf). Old and new parser interleaved in one process, bench_parser's text: no
+# measurable cost (new/old 0.99..1.02: the old per-line length test for 300-digit literals is gone).
+_POSITION_MAX = POSITION_LIMIT_MM
+_POSITION_MIN = -POSITION_LIMIT_MM
+_POSITION_RANGE = (
+    f"positions must lie within +/-{POSITION_LIMIT_MM:.4f} mm (a DINT in 0.1 µm; rotary axes in 0.0001°)"
+)
+_CENTRE_MAX = DISTANCE_LIMIT_MM
+_CENTRE_RANGE = (
+    f"circle centre words I, J, K must lie within +/-{DISTANCE_LIMIT_MM:.4f} mm "
+    "(the largest distance between two positions)"
+)
+_FEED_MAX = VELOCITY_LIMIT_MM_PER_MIN
+_FEED_MIN = -VELOCITY_LIMIT_MM_PER_MIN
+_FEED_RANGE = f"the feed must lie within +/-{VELOCITY_LIMIT_MM_PER_MIN:.0f} mm/min (100 m/s)"
+_EXTRA_MAX = float(DINT_MAX)
+_EXTRA_RANGE = f"S, T, D and H must lie within +/-{DINT_MAX} (a DINT)"
+_ID_RANGE = (0, 999_999_999)
+_AXNR_RANGE = (1, 999_999_999)
 
 KNOWN_G_CODES: frozenset[int] = frozenset(
     (0, 1, 2, 3, 4, 17, 18, 19, 53, 54, 55, 56, 57, 58, 59, 60, 90, 91, 92, 100, 161, 162, 200, 201, 202)
@@ -138,8 +170,11 @@ _FLAG_OPTIONS = frozenset(("WORK", "PROT", "POLY", "CIRC", "ALL"))
 _OPTION_WORDS = frozenset((*_BEGIN_OPTIONS, *_SELECT_OPTIONS))
 _MONITOR_LEVELS = ("MCS", "IMCS")
 
-_Fail = Callable[[str], NoReturn]
-"""``fail(message)`` of one #CONTROL AREA command: raises its 910105 error."""
+
+class _Fail(Protocol):
+    """``fail(message)`` of one #CONTROL AREA command: raises its 910105 error (or ``alarm``)."""
+
+    def __call__(self, message: str, alarm: int = ...) -> NoReturn: ...
 
 
 # --- errors --------------------------------------------------------------------------------------
@@ -169,11 +204,11 @@ def _twice(what: str, prefix: str, first: float, again: str, line: int, number: 
     )
 
 
-def _finite(text: str, word: str, line: int, number: int | None) -> float:
+def _ranged(prefix: str, text: str, limit: float, why: str, line: int, number: int | None) -> float:
+    """The value of a rare word (I/J/K, S/T/D/H), range-checked; the hot words inline the same."""
     value = float(text)
-    # Only a literal of 309+ digits can overflow a double; skip the check for every ordinary word.
-    if len(text) > 300 and not math.isfinite(value):
-        _out_of_range(word, line, number)
+    if not -limit <= value <= limit:
+        _out_of_range(prefix, text, why, line, number)
     return value
 
 
@@ -184,8 +219,20 @@ def _leading_number(code: str) -> int | None:
     return int(digits) if digits is not None else None
 
 
-def _out_of_range(word: str, line: int, number: int | None) -> NoReturn:
-    _fail(_BAD_NUMBER, line, number, f"value out of range in {_short(word)!r}: write it with fewer digits")
+def _shown_number(prefix: str, text: str) -> str:
+    """A word with a number as a message shows it: as written, or compact (``X1e305``) when long."""
+    if len(text) <= 20:
+        return prefix + text
+    value = float(text)
+    if math.isfinite(value):
+        return prefix + f"{value:.6g}".replace("e+", "e")
+    digits = sum(c.isdigit() for c in text)
+    return f"{prefix}{text[:12]}... ({digits} digits)"
+
+
+def _out_of_range(prefix: str, text: str, why: str, line: int, number: int | None) -> NoReturn:
+    """Alarm 910111: ``X1e305 is out of range: positions must lie within ...`` (E-04)."""
+    _fail(_OUT_OF_RANGE, line, number, f"{_shown_number(prefix, text)} is out of range: {why}")
 
 
 def _unclosed_comment(text: str, code: str, open_at: int, line: int) -> NoReturn:
@@ -384,8 +431,6 @@ class _LineParser:
         centre: dict[str, float] | None = None
         extra: dict[str, float] | None = None
         feed: float | None = None
-        # Only a literal of 309+ digits overflows a double: no isfinite() per word on normal lines.
-        long_line = len(u) > 300
         findall = self._findall if "=" not in u else _WORD.findall
         for letter, idx, num, bad in findall(u, pos, end):
             if bad:
@@ -397,8 +442,8 @@ class _LineParser:
                 if name in axis_words:
                     _twice(f"axis {name}", f"{name}=", axis_words[name], num, line, number)
                 value = float(num)
-                if long_line and not math.isfinite(value):
-                    _out_of_range(f"{name}={num}", line, number)
+                if not _POSITION_MIN <= value <= _POSITION_MAX:
+                    _out_of_range(f"{name}=", num, _POSITION_RANGE, line, number)
                 axis_words[name] = value
             elif letter == "G":
                 g = _G_BY_TEXT.get(num)
@@ -407,15 +452,15 @@ class _LineParser:
                 if letter in axis_words:
                     _twice(f"axis {letter}", letter, axis_words[letter], num, line, number)
                 value = float(num)
-                if long_line and not math.isfinite(value):
-                    _out_of_range(letter + num, line, number)
+                if not _POSITION_MIN <= value <= _POSITION_MAX:
+                    _out_of_range(letter, num, _POSITION_RANGE, line, number)
                 axis_words[letter] = value
             elif letter == "F":
                 if feed is not None:
                     _twice("feed", "F", feed, num, line, number)
                 feed = float(num)
-                if long_line and not math.isfinite(feed):
-                    _out_of_range("F" + num, line, number)
+                if not _FEED_MIN <= feed <= _FEED_MAX:
+                    _out_of_range("F", num, _FEED_RANGE, line, number)
             elif letter == "N":
                 if (
                     not n_first
@@ -442,13 +487,13 @@ class _LineParser:
                     centre = {}
                 elif letter in centre:
                     _twice(f"circle centre {letter}", letter, centre[letter], num, line, number)
-                centre[letter] = _finite(num, letter + num, line, number)
+                centre[letter] = _ranged(letter, num, _CENTRE_MAX, _CENTRE_RANGE, line, number)
             elif letter in _EXTRA_LETTERS:
                 if extra is None:
                     extra = {}
                 elif letter in extra:
                     _twice(letter, letter, extra[letter], num, line, number)
-                extra[letter] = _finite(num, letter + num, line, number)
+                extra[letter] = _ranged(letter, num, _EXTRA_MAX, _EXTRA_RANGE, line, number)
             else:
                 self._unknown_axis(letter, letter + num, line, number, lenient)
         if len(g_codes) > 1:
@@ -550,6 +595,8 @@ class _LineParser:
         letter = u[at]
         if letter == "N":
             _fail(_BAD_N, line, number, f"malformed block number {word!r}: write N<digits>")
+        if re.search(r"(?:^[A-Z]|=)\s*[-+]?(?:INF|INFINITY|NAN)$", word):
+            _fail(_BAD_NUMBER, line, number, f"{word!r}: not a finite number; write digits ({letter}100)")
         if "=" in word:
             _fail(_BAD_NUMBER, line, number, f"{word!r}: value after '=' missing or malformed")
         if at + 1 < end and u[at + 1].isalpha():  # "HELLO", "XABC"
@@ -645,8 +692,8 @@ def _area_command(keyword: str, lexemes: list[tuple[str, str]], line: int, numbe
     """C14-02 (BEGIN/START, END), C14-11 (ON), C14-12 (OFF), C14-13 (CLEAR)."""
     shown = f"#CONTROL AREA {keyword}"
 
-    def fail(message: str) -> NoReturn:
-        _fail(_BAD_AREA, line, number, f"{shown}: {message}")
+    def fail(message: str, alarm: int = _BAD_AREA) -> NoReturn:
+        _fail(alarm, line, number, f"{shown}: {message}")
 
     if keyword == "END":
         if lexemes:
@@ -740,14 +787,19 @@ def _bad_character(text: str, fail: _Fail) -> NoReturn:
 def _option_value(key: str, value: str, kind: str, fail: _Fail) -> str | float | int:
     if key in ("ID", "EXCUR_AXNR"):
         if kind != "#" or not _INT.fullmatch(value):
-            fail(f"{key}={value} is not a whole number (expressions are not supported)")
-        return int(value)
+            fail(f"{key}={_short(value)} is not a whole number (expressions are not supported)")
+        whole = int(value)
+        low, high = _ID_RANGE if key == "ID" else _AXNR_RANGE
+        if not low <= whole <= high:
+            what = "an area ID" if key == "ID" else "a logical axis number"
+            fail(f"{key}={value} is out of range: {what} is a whole number {low}..{high}", _OUT_OF_RANGE)
+        return whole
     if key in ("MIN_EXCUR", "MAX_EXCUR"):
         if kind != "#":
-            fail(f"{key}={value} is not a number (expressions are not supported)")
+            fail(f"{key}={_short(value)} is not a number (expressions are not supported)")
         number = float(value)
-        if not math.isfinite(number):
-            fail(f"{key}={value} out of range")
+        if not -_POSITION_MAX <= number <= _POSITION_MAX:
+            fail(f"{_shown_number(key + '=', value)} is out of range: {_POSITION_RANGE}", _OUT_OF_RANGE)
         return number
     if key == "EXCUR_AX":
         name = value.strip()

@@ -1,0 +1,297 @@
+"""Fuzzing the doors of NC programs, configuration and fault injection (E-04, E-07, A3-05; issue 12).
+
+Bounded and seeded (``tests/fuzz.py``): a few seconds each in the suite; ``make soak`` runs the same
+tests with ``HLI_FUZZ_SCALE`` times the examples (``docs/reliability.md``, "NC programs and
+configuration"). The oracle everywhere: only the door's own refusal comes out (a numbered NcError,
+an alarm of the table, ConfigError, ValueError/KeyError from ``inject_fault``), never another
+exception; every value the engine publishes stays finite; and the machine keeps stepping and runs a
+good program to its end afterwards.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import re
+import shutil
+import traceback
+from importlib import resources
+from pathlib import Path
+
+import pytest
+
+from hli_server.commands.check import check_program
+from hli_server.configuration import ConfigError, load_machine
+from hli_server.engine import Machine
+from hli_server.engine.alarms import ALARMS
+from hli_server.engine.hli import ProgramState
+from hli_server.engine.nc import NcError, iter_blocks, parse_line
+from schemas.config import MachineConfig
+from tests import fuzz
+
+pytestmark = pytest.mark.fuzz
+
+AXES = ("X", "Y", "Z", "X1", "X2", "Z1")
+CHANNEL_AXES = {1: ("X", "Y", "Z"), 2: ("X1", "X2", "Z1")}
+GOOD = "N10 G90 G01 X10 Y-10 Z5 F20000\nN20 G02 X20 Y0 I5 J5\nN30 G00 X0 Y0 Z0\nN40 M30\n"
+RUNNING = (ProgramState.RUNNING, ProgramState.HELD)
+
+
+@pytest.fixture(scope="module")
+def demo() -> MachineConfig:
+    return load_machine(None)
+
+
+def _fail(what: str, seed: int, example: int, text: object) -> str:
+    return (
+        f"{what} (HLI_FUZZ_SEED={fuzz.FUZZ_SEED}, test seed {seed}, example {example}); input:\n"
+        f"{text!r}\n{traceback.format_exc()}"
+    )
+
+
+def _check_nc_error(err: NcError, line: int) -> None:
+    assert err.alarm in ALARMS
+    assert 910100 <= err.alarm <= 910111
+    assert err.line >= line
+    assert re.fullmatch(r"line [0-9]+|N[0-9]+", err.block)
+    assert err.message
+
+
+def _finite(machine: Machine) -> bool:
+    return all(
+        math.isfinite(v)
+        for a in machine.axes
+        for v in (a.setpoint, a.actual, a.measured, a.drive_velocity, a.following_error)
+    )
+
+
+def _settle(machine: Machine, rounds: int = 20, cycles: int = 5000) -> None:
+    """What an operator does until the machine is clear: reset every channel and wait until every
+    axis stands in its exact-stop window, brakes on its own no more and no alarm is active; reset
+    again while one is. Why each condition: the last bit of a stop ramp can be below the setpoint's
+    resolution (a standing setpoint does not end the stop); a cleared ``encoder_stuck`` lets the
+    measured position jump to where the real axis ran, and while the loop pulls it back 911012 or
+    70082 fire (its stop is released only by the next reset)."""
+    for _ in range(rounds):
+        for ch in machine.channels:
+            ch.request_reset()
+        for _ in range(cycles):
+            machine.step(1)
+            if machine.active_alarms:
+                break
+            if all(
+                a.setpoint_step == 0.0
+                and not a.stopping
+                and abs(a.following_error) * 10_000 <= a.config.window
+                for a in machine.axes
+            ):
+                return
+    active = [a.message for a in machine.active_alarms]
+    raise AssertionError(f"the machine is not clear after {rounds} resets: {active}")
+
+
+def _runs_to_the_end(machine: Machine, program: str = GOOD) -> bool:
+    ch = machine.channel(1)
+    ch.load_program(program, "good")
+    ch.request_start()
+    machine.step(1)
+    for _ in range(20_000):
+        if ch.state not in RUNNING:
+            break
+        machine.step(1)
+    return ch.state == ProgramState.FINISHED and not machine.active_alarms
+
+
+# --- the parser ------------------------------------------------------------------------------------
+
+
+@pytest.mark.req("E-04")
+def test_fuzz_parser_lines_raise_only_numbered_nc_errors() -> None:
+    seed = fuzz.seed_for("parser-lines")
+    rng = random.Random(seed)
+    refused = 0
+    for example in range(fuzz.count(40_000)):
+        text = fuzz.nc_line(rng) if example % 2 else fuzz.mutate(rng, rng.choice(fuzz.CORPUS))
+        try:
+            block = parse_line(text, 7, AXES)
+        except NcError as err:
+            _check_nc_error(err, 7)
+            refused += 1
+            continue
+        except Exception:  # the fuzzer's whole point: anything else is a finding
+            pytest.fail(_fail("parse_line raised something else than NcError", seed, example, text))
+        if block is not None:
+            values = [v for _, v in block.axes] + [v for _, v in block.centre] + list(block.extra.values())
+            assert all(math.isfinite(v) for v in values), text
+            assert all(abs(v) <= 214748.3647 for _, v in block.axes), text
+    total = fuzz.count(40_000)
+    print(f"parser: {total} lines, {refused} refused with a numbered NcError, {total - refused} parsed")
+    assert 0 < refused < total  # both outcomes occur: the generator reaches both sides
+
+
+@pytest.mark.req("E-04")
+def test_fuzz_parser_programs_stop_at_a_numbered_error() -> None:
+    seed = fuzz.seed_for("parser-programs")
+    rng = random.Random(seed)
+    refused = blocks = 0
+    for example in range(fuzz.count(5000)):
+        text = fuzz.nc_program(rng, wild=0.3)
+        try:
+            for _ in iter_blocks(text, AXES):
+                blocks += 1
+        except NcError as err:
+            _check_nc_error(err, 1)
+            refused += 1
+        except Exception:
+            pytest.fail(_fail("iter_blocks raised something else than NcError", seed, example, text))
+    print(f"parser: {fuzz.count(5000)} programs, {blocks} blocks, {refused} stopped at a numbered NcError")
+
+
+# --- the decoder: `hli-server check --geometry-only` offline ---------------------------------------
+
+
+@pytest.mark.req("E-04")
+def test_fuzz_check_geometry_only_reports_alarms_and_never_raises(demo: MachineConfig) -> None:
+    seed = fuzz.seed_for("check-geometry")
+    rng = random.Random(seed)
+    alarms_seen: set[int] = set()
+    completed = blocks = 0
+    for example in range(fuzz.count(1500)):
+        channel = rng.choice((1, 1, 2))
+        text = fuzz.nc_program(rng, CHANNEL_AXES[channel])
+        machine = Machine(demo)
+        try:
+            result = check_program(machine, text, channel=channel, geometry_only=True)
+        except Exception:
+            pytest.fail(_fail("check_program raised", seed, example, text))
+        assert all(a.number in ALARMS for a in result.alarms)
+        assert all(math.isfinite(v) for v in result.final_position.values()), text
+        alarms_seen.update(a.number for a in result.alarms)
+        completed += result.completed
+        blocks += result.blocks
+    print(
+        f"check --geometry-only: {fuzz.count(1500)} programs, {blocks} blocks, {completed} ran to the end, "
+        f"{len(alarms_seen)} different alarms: {sorted(alarms_seen)}"
+    )
+    assert {910111, 911011} <= alarms_seen or fuzz.FUZZ_SCALE < 1
+
+
+# --- stepped engine runs, with fault injection ---------------------------------------------------------
+
+
+@pytest.mark.req("E-04", "A3-05")
+def test_fuzz_stepped_runs_keep_the_machine_stepping(demo: MachineConfig) -> None:
+    """Programs run cycle by cycle on one machine (areas, offsets and faults carry over from one to
+    the next, as on a server); faults are injected between them. After each: reset, the axes come to
+    rest; every tenth and at the end a good program must run to its end."""
+    seed = fuzz.seed_for("stepped")
+    rng = random.Random(seed)
+    machine = Machine(demo)
+    refused_faults = injected = 0
+    alarms_seen: set[int] = set()
+    for example in range(fuzz.count(100)):
+        channel = rng.choice((1, 1, 2))
+        text = fuzz.nc_program(rng, CHANNEL_AXES[channel])
+        ch = machine.channel(channel)
+        try:
+            if rng.random() < 0.4:
+                axis = rng.choice(("X", "Y", "Z", "X1", "X2", "Q"))
+                injected += 1
+                try:
+                    machine.inject_fault(axis, **fuzz.fault_values(rng))  # type: ignore[arg-type]
+                except (ValueError, KeyError):
+                    refused_faults += 1
+            ch.load_program(text, f"fuzz{example}")
+            ch.request_start()
+            for _ in range(rng.randint(1, 1500)):
+                machine.step(1)
+                if ch.state not in RUNNING:
+                    break
+            assert _finite(machine), "a value went inf/nan"
+            assert all(a.number in ALARMS for a in machine.alarm_history)
+            alarms_seen.update(a.number for a in machine.alarm_history)
+            for name in ("X", "Y", "Z", "X1", "X2", "Z1"):
+                machine.inject_fault(name)  # clears: the drive must be sound again for the good program
+            _settle(machine)
+            if example % 10 == 9:
+                assert _runs_to_the_end(machine), [a.message for a in machine.alarm_history][-3:]
+                _settle(machine)
+        except Exception:
+            pytest.fail(_fail("a stepped run failed", seed, example, text))
+    print(
+        f"stepped: {fuzz.count(100)} programs, {machine.cycle} cycles, {injected} fault injections "
+        f"({refused_faults} refused), alarms {sorted(alarms_seen)}"
+    )
+    assert refused_faults > 0
+    assert _runs_to_the_end(machine)
+
+
+# --- the configuration loader ----------------------------------------------------------------------------
+
+
+def _demo_files(directory: Path) -> dict[str, str]:
+    files = {}
+    for name in ("demo.toml", "demo_ch1.lis", "demo_x1.lis", "demo_x2.lis"):
+        text = resources.files("hli_server.machines").joinpath(name).read_text(encoding="utf-8")
+        files[name] = text
+        (directory / name).write_text(text, encoding="utf-8")
+    return files
+
+
+_CONFIG_VALUES = (
+    "inf",
+    "nan",
+    "-inf",
+    "1e400",
+    "-1",
+    "0",
+    "0x7FFFFFFF",
+    "2147483648",
+    "1e9",
+    '"x"',
+    "[]",
+    "",
+)
+
+
+@pytest.mark.req("E-07")
+def test_fuzz_configuration_files_raise_only_config_errors(tmp_path: Path) -> None:
+    """Mutated demo machine files and parameter lists (values replaced by extremes, lines edited)."""
+    seed = fuzz.seed_for("config")
+    rng = random.Random(seed)
+    originals = _demo_files(tmp_path)
+    loaded = refused = 0
+    for example in range(fuzz.count(150)):
+        name = rng.choice(list(originals))
+        lines = originals[name].splitlines()
+        for _ in range(rng.randint(1, 3)):
+            k = rng.randrange(len(lines))
+            if rng.random() < 0.6 and ("=" in lines[k] or name.endswith(".lis")):
+                sep = "=" if name.endswith(".toml") else " "
+                key = lines[k].split(sep, 1)[0].rstrip()
+                lines[k] = f"{key}{' = ' if sep == '=' else ' '}{rng.choice(_CONFIG_VALUES)}"
+            else:
+                lines[k] = fuzz.mutate(rng, lines[k])
+        (tmp_path / name).write_text("\n".join(lines) + "\n", encoding="utf-8")
+        try:
+            config = load_machine(tmp_path / "demo.toml")
+        except ConfigError as err:
+            messages = err.messages
+            refused += 1
+            if not messages:
+                pytest.fail(_fail("a ConfigError without a message", seed, example, "\n".join(lines)))
+        except Exception:
+            pytest.fail(_fail(f"load_machine raised ({name})", seed, example, "\n".join(lines)))
+        else:
+            loaded += 1
+            machine = Machine(config)
+            machine.step(20)
+            assert _finite(machine)
+        finally:
+            (tmp_path / name).write_text(originals[name], encoding="utf-8")
+    print(
+        f"configuration: {fuzz.count(150)} mutated files, {refused} refused with ConfigError, {loaded} loaded"
+    )
+    assert loaded > 0
+    assert refused > 0
+    shutil.rmtree(tmp_path, ignore_errors=True)
