@@ -214,13 +214,20 @@ def test_adding_an_axis_or_a_channel_moves_no_address(layout, change):
     if change == "axis":
         bigger = demo_config(extra_axes=1)
     else:
-        bigger = config.model_copy(deep=True)
-        bigger.axes = [*bigger.axes, AxisConfig(number=9, name="W"), AxisConfig(number=10, name="V")]
-        bigger.axes.append(AxisConfig(number=11, name="Q"))
-        bigger.channels = [
-            *bigger.channels,
-            ChannelConfig(number=3, axes=["W", "V", "Q"], main_axes=("W", "V", "Q")),
+        extra = [
+            AxisConfig(number=9, name="W"),
+            AxisConfig(number=10, name="V"),
+            AxisConfig(number=11, name="Q"),
         ]
+        bigger = config.model_copy(
+            update={
+                "axes": [*config.axes, *extra],
+                "channels": [
+                    *config.channels,
+                    ChannelConfig(number=3, axes=["W", "V", "Q"], main_axes=("W", "V", "Q")),
+                ],
+            }
+        )
         bigger = MachineConfig.model_validate(bigger.model_dump())
     big = build_layout(bigger)
     assert len(big) > len(layout)
@@ -269,7 +276,9 @@ def test_configs_the_addressing_cannot_hold_are_refused():
     with pytest.raises(LayoutError, match="Modbus map has blocks for 635"):
         build_layout(config)
     config = demo_config()
-    config.axes[0].number = 70_000
+    config = config.model_copy(
+        update={"axes": [config.axes[0].model_copy(update={"number": 70_000}), *config.axes[1:]]}
+    )
     with pytest.raises(LayoutError, match="does not fit the 16 bits"):
         build_layout(config)
 
@@ -310,12 +319,13 @@ def test_json_export_rebuilds_the_same_layout_and_detects_edits(layout):
 
 @pytest.mark.req("H-01")
 def test_hash_ignores_documentation_but_not_addresses(layout):
-    renamed = demo_config()
-    renamed.name = "other"
-    renamed.channels[0].name = "another name"
+    demo = demo_config()
+    channels = [demo.channels[0].model_copy(update={"name": "another name"}), *demo.channels[1:]]
+    renamed = demo.model_copy(update={"name": "other", "channels": channels})
     assert build_layout(renamed).hash == layout.hash
-    renumbered = demo_config()
-    renumbered.axes[0].number = 42
+    renumbered = demo.model_copy(
+        update={"axes": [demo.axes[0].model_copy(update={"number": 42}), *demo.axes[1:]]}
+    )
     assert build_layout(renumbered).hash != layout.hash  # dyn_coll_mon ADS offsets changed
 
 
