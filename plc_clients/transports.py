@@ -282,6 +282,14 @@ class ShmTransport:
         except FileNotFoundError as exc:
             raise TransportError(str(exc)) from exc
 
+    @classmethod
+    def over(
+        cls, buffer: memoryview | bytearray, *, name: str = "memory", expect: Layout | str | None = None
+    ) -> ShmTransport:
+        """The image of a server in this process that keeps it in a buffer instead of ``/dev/shm``
+        (the pytest harness); the same protocol, see :meth:`ImageClient.over`."""
+        return cls(ImageClient.over(buffer, name=name, expect=expect))
+
     def _check_open(self) -> None:
         if self.client.server_closed:
             raise TransportError(
