@@ -109,14 +109,12 @@ class ObstacleDemo(Demo):
                 io, f"MCV_DynPosLimitHigh error 0x{block.ErrorID:04X}: {block.ErrorText}", failed=True
             )
             return
+        where = f"{self.axis_name} = {_mm(int(io.read(self.position)))}"
         if block.State == DynPosLimitState.ACTIVE_BRAKE and not self.held:
             self.held = True
-            self.say(
-                io,
-                f"{self.axis_name} stopped at the limit: {self.axis_name} = {_mm(int(io.read(self.position)))}",
-            )
+            self.say(io, f"{self.axis_name} stopped at the limit: {where}")
         if state == ProgramState.FINISHED:
-            self.finish(io, f"program finished: {self.axis_name} = {_mm(int(io.read(self.position)))}")
+            self.finish(io, f"program finished: {where}")
         elif state == ProgramState.ABORTED:
             self.finish(io, "the program was aborted (see the CNC's alarms)", failed=True)
 
