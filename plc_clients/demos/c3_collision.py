@@ -15,8 +15,9 @@ program that drives the carriages toward each other. Every cycle the PLC program
    commanded positions;
 2. predicts where the pair would rest if it held the path now: the distance, less the way each
    carriage needs to stop under feedhold (the channel's feedhold deceleration, shared along the
-   path: ``|v_i| * |v| / (2 a_feedhold)``), less what the pair closes during the
-   ``latency_cycles`` until the CNC has latched the feedhold;
+   path: ``|v_i| * |v| / (2 a_feedhold)``), less what the pair closes until the CNC brakes: the
+   CNC cycles between two runs of the PLC task (the task decides once per cycle; measured from
+   ``io.cycle``, the most seen) plus ``latch_cycles`` until the CNC has latched the feedhold;
 3. sets the channel's feedhold control unit (``ControlBoolUnit``) when that rest distance comes
    within ``margin`` of the minimum; reports where the carriages stopped;
 4. after ``hold_cycles`` resets the channel (``mc_command.reset_w``) and releases the feedhold.
@@ -41,8 +42,9 @@ if TYPE_CHECKING:
 __all__ = ["CollisionDemo"]
 
 APPROACH = """\
-N10 G90 G01 X1=300 X2=310 F12000 (the carriages close in on each other: 10 mm apart at the end)
-N20 M30
+N10 G90 G00 X1=0 X2=500 (apart first: from wherever the last run left them)
+N20 G01 X1=300 X2=310 F12000 (the carriages close in on each other: 10 mm apart at the end)
+N30 M30
 """
 
 
@@ -64,7 +66,7 @@ class CollisionDemo(Demo):
         third: str = "Z1",
         feedhold_deceleration: float = 1000.0,
         cycle_time_s: float = 0.001,
-        latency_cycles: int = 3,
+        latch_cycles: int = 2,
         margin: int = 20_000,
         hold_cycles: int = 200,
     ) -> None:
@@ -72,7 +74,10 @@ class CollisionDemo(Demo):
         self.names = (partner, master, third)
         self.a_feedhold = feedhold_deceleration * 10_000.0  # mm/s² -> 0.1 µm/s²
         self.t_a = cycle_time_s
-        self.latency_cycles = latency_cycles
+        self.latch_cycles = latch_cycles
+        self.task_cycles = 1
+        """CNC cycles between two runs of the PLC task (the most seen)."""
+        self.last_cycle: int | None = None
         self.margin = margin
         self.hold_cycles = hold_cycles
         self.ready = False
@@ -101,15 +106,19 @@ class CollisionDemo(Demo):
         self.ready = True
 
     def rest_gap(self, io: IoImage) -> tuple[float, float]:
-        """``(distance now, distance at rest if the PLC held the path now)`` in 0.1 µm."""
+        """``(distance now, distance at rest if the PLC held the path now)`` in 0.1 µm.
+
+        Each carriage goes on at its velocity until the CNC brakes (the latency), then brakes under
+        feedhold along the path: ``|v_i| * |v| / (2 a_feedhold)`` in its direction of motion."""
         x1, x2 = (float(io.read(p)) for p in self.pos)
         v1, v2, vz = (float(io.read(p)) for p in self.vel)
-        gap = abs(x2 - x1)
         speed = math.sqrt(v1 * v1 + v2 * v2 + vz * vz)
-        braking = (abs(v1) + abs(v2)) * speed / (2.0 * self.a_feedhold)
-        toward = v1 - v2 if x2 >= x1 else v2 - v1  # > 0: the carriages close in
-        latency = max(0.0, toward) * self.latency_cycles * self.t_a
-        return gap, gap - braking - latency
+        latency_s = (self.task_cycles + self.latch_cycles) * self.t_a
+        rest = [
+            x + v * latency_s + math.copysign(abs(v) * speed / (2.0 * self.a_feedhold), v)
+            for x, v in ((x1, v1), (x2, v2))
+        ]
+        return abs(x2 - x1), abs(rest[1] - rest[0])
 
     def __call__(self, io: IoImage) -> None:
         if self.done:
@@ -117,6 +126,9 @@ class CollisionDemo(Demo):
         if not self.ready:
             self._paths(io)
         assert self.feedhold is not None
+        if self.last_cycle is not None:
+            self.task_cycles = max(self.task_cycles, io.cycle - self.last_cycle)
+        self.last_cycle = io.cycle
         hold = self.step in ("holding", "held")
         unit = self.feedhold(Enable=hold, Command=hold)
         state = io.read(self.program_state)

@@ -7,10 +7,12 @@ duration; "Wird die Begrenzung durch die SPS aufgehoben, wird das Bearbeitungspr
 
 The PLC program, cycle by cycle:
 
-1. starts the NC program the operator loaded (a rising edge of ``mc_command.start_w``);
+1. starts the NC program the operator loaded (a rising edge of ``mc_command.start_w``): X goes home,
+   then (block N20) toward +100 mm;
 2. reads the obstacle sensor. The sensor is simulated: it reports an obstacle from
-   ``obstacle_from`` to ``obstacle_until`` CNC cycles after the program started (a light curtain
-   that someone walks through). While it does, ``MCV_DynPosLimitHigh`` holds X below ``limit``;
+   ``obstacle_from`` to ``obstacle_until`` CNC cycles after X set off toward it (block N20 began;
+   a light curtain that someone walks through). While it does, ``MCV_DynPosLimitHigh`` holds X
+   below ``limit``;
 3. the CNC brakes X so that it stops at the limit (``state_r`` ACTIVE_BRAKING, then ACTIVE_BRAKE)
    and holds the program there (C43-04, C43-06);
 4. the obstacle leaves: Enable FALSE lifts the limit, the program goes on (C43-07) and finishes.
@@ -35,6 +37,7 @@ __all__ = ["ObstacleDemo"]
 
 CH = "gpCh[0]^"
 PROGRAM_STATE = CH + "bahn_state.program_state_r"
+BLOCK = CH + "bahn_state.block_nr_r"
 START = CH + "mc_command.start_w"
 
 
@@ -45,7 +48,11 @@ class ObstacleDemo(Demo):
     document = "FCT-C43"
     summary = "an obstacle limits X with MCV_DynPosLimitHigh; the program holds, then finishes"
     channel = 1
-    nc_program: ClassVar[str] = "N10 G90 G01 X100 Y0 F6000 (toward the obstacle's side)\nN20 M30\n"
+    nc_program: ClassVar[str] = (
+        "N10 G90 G00 X0 Y0 (home)\nN20 G01 X100 F6000 (toward the obstacle's side)\nN30 M30\n"
+    )
+    approach_block: ClassVar[int] = 20
+    """The obstacle sensor's clock starts when this block (N number) becomes active."""
 
     def __init__(
         self,
@@ -64,13 +71,16 @@ class ObstacleDemo(Demo):
         self.block = MCV_DynPosLimitHigh()
         self.axis: AXIS_REF | None = None
         self.position = ""
-        self.started_at = 0
+        self.started_at: int | None = None
         self.obstacle = False
         self.held = False
-        self.watch = (PROGRAM_STATE,)
+        self.watch = (PROGRAM_STATE, BLOCK)
 
     def obstacle_present(self, cycle: int) -> bool:
-        """The simulated sensor: TRUE from ``obstacle_from`` to ``obstacle_until`` cycles after the start."""
+        """The simulated sensor: TRUE from ``obstacle_from`` to ``obstacle_until`` CNC cycles after X
+        set off toward the obstacle."""
+        if self.started_at is None:
+            return False
         since = cycle - self.started_at
         return self.obstacle_from <= since < self.obstacle_until
 
@@ -89,11 +99,12 @@ class ObstacleDemo(Demo):
             io.write(START, True)
             if state == ProgramState.RUNNING:
                 io.write(START, False)
-                self.started_at = io.cycle
                 self.say(io, "program started; watching the obstacle sensor")
                 self.step = "running"
         if self.step != "running":
             return
+        if self.started_at is None and io.read(BLOCK) == self.approach_block:
+            self.started_at = io.cycle
         present = self.obstacle_present(io.cycle)
         if present != self.obstacle:
             self.obstacle = present
