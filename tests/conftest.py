@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+pytest_plugins = ["pytester"]  # the plugin's own tests run a user's suite (tests/integration/test_plugin.py)
+
 _DEV_SHM = Path("/dev/shm")
 
 
