@@ -76,6 +76,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     ap.add_argument("--cycle-ms", type=float, default=10.0, help="the PLC task's cycle (default 10 ms)")
     ap.add_argument("--timeout", type=float, default=120.0, help="give up after this many seconds")
+    ap.add_argument(
+        "--wait", type=float, default=5.0, help="shm: wait this long for the server's image (default 5 s)"
+    )
     return ap
 
 
@@ -169,7 +172,7 @@ def _open(args: argparse.Namespace) -> Transport:
     if kind == "shm":
         if not args.image:
             raise UsageError("--transport shm needs --image NAME (the name `hli-server run` prints)")
-        return ShmTransport.attach(args.image, timeout=5.0)
+        return ShmTransport.attach(args.image, timeout=args.wait)
     port = args.port or DEFAULT_PORTS[kind]
     layout = load_layout(args.layout or args.http)
     if kind == "modbus":

@@ -19,7 +19,9 @@ name             document   what the PLC does
 ================ ========== ===============================================================
 
 The operator's part (loading the demo's NC program, :attr:`Demo.nc_program`, into
-:attr:`Demo.channel`) is done by whoever runs the demo: ``hli-plc`` over the HTTP API, a test
+:attr:`Demo.channel`) is done by whoever runs the demo (the PLC starts it with a rising edge of
+``start_w`` and writes ``program_select_w`` = 0, so that a selection an earlier PLC left in the image
+does not replace it): ``hli-plc`` over the HTTP API, a test
 through the harness' operator panel. Everything else goes through the PLC's door only, so a demo
 behaves the same over shared memory, Modbus and ADS: its decisions depend on the CNC cycle of its
 input image (``io.cycle``), never on the wall clock.

@@ -117,6 +117,7 @@ class ManualModeDemo(Demo):
             return
         if step == "start":
             io.write(START, False)
+            io.write(CH + "mc_command.program_select_w", 0)  # keep the operator's program (0 = no selection)
             self.step = "starting"
         elif step == "starting":
             io.write(START, True)

@@ -94,6 +94,7 @@ class CollisionDemo(Demo):
         self.error_id = ch + "bahn_state.error_id_r"
         self.start = ch + "mc_command.start_w"
         self.reset = ch + "mc_command.reset_w"
+        self.select = ch + "mc_command.program_select_w"
         self.feedhold = ControlBoolUnit(ch + "bahn_mc_control.feedhold")
         p, m, z = (f"gpAx[{a.index}]^" for a in axes)
         self.pos = (p + "ipo_state.cmd_pos_r", m + "ipo_state.cmd_pos_r")
@@ -140,6 +141,7 @@ class CollisionDemo(Demo):
         self.min_gap = min(self.min_gap, gap)
         if self.step == "start":
             io.write(self.start, False)
+            io.write(self.select, 0)  # keep the operator's program (0 = no selection)
             self.step = "starting"
         elif self.step == "starting":
             io.write(self.start, True)

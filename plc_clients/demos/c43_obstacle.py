@@ -94,6 +94,7 @@ class ObstacleDemo(Demo):
         state = io.read(PROGRAM_STATE)
         if self.step == "start":  # a rising edge of start_w: low in this cycle, high in the next
             io.write(START, False)
+            io.write(CH + "mc_command.program_select_w", 0)  # keep the operator's program (0 = no selection)
             self.step = "starting"
         elif self.step == "starting":
             io.write(START, True)

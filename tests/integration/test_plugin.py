@@ -9,26 +9,20 @@ two workers, and no server of one test shares a port or an image with one runnin
 from __future__ import annotations
 
 import json
-import re
 from pathlib import Path
 
 import pytest
 
 from hli_server.testing import unavailable
+from tests.doc_blocks import DOCS, marked_block
 
 pytestmark = pytest.mark.req("H-07")
 
 ROOT = Path(__file__).resolve().parents[2]
-TESTING_DOC = ROOT / "docs" / "testing.md"
-DOC_MARKER = "<!-- test_my_plc.py:"
 
 
 def doc_test_source() -> str:
-    text = TESTING_DOC.read_text(encoding="utf-8")
-    start = text.index(DOC_MARKER)
-    match = re.compile(r"```python\n(.*?)```", re.DOTALL).search(text, start)
-    assert match is not None, "the complete test's code block follows its marker in docs/testing.md"
-    return match.group(1)
+    return marked_block(DOCS / "testing.md", "test_my_plc.py:")
 
 
 def doors() -> tuple[int, int]:
