@@ -32,6 +32,7 @@ def doors() -> tuple[int, int]:
     return len(names) - missing, missing
 
 
+@pytest.mark.slow
 def test_the_complete_test_of_the_docs_passes_as_written(pytester: pytest.Pytester) -> None:
     source = doc_test_source()
     assert len([line for line in source.splitlines() if line.strip()]) <= 14  # "about ten lines"
@@ -42,6 +43,7 @@ def test_the_complete_test_of_the_docs_passes_as_written(pytester: pytest.Pytest
     result.stdout.fnmatch_lines(["*test_the_limit_holds_x_at_50_mm?shm? PASSED*"])
 
 
+@pytest.mark.slow
 def test_a_failing_user_test_shows_the_report_of_the_last_cycles(pytester: pytest.Pytester) -> None:
     pytester.makepyfile(
         test_stuck="""
@@ -64,6 +66,7 @@ def test_a_failing_user_test_shows_the_report_of_the_last_cycles(pytester: pytes
     assert "harness.py" not in out  # the report, not the harness' own frames
 
 
+@pytest.mark.slow
 def test_the_machine_comes_from_the_ini_option_and_a_bad_marker_is_a_usage_error(
     pytester: pytest.Pytester,
 ) -> None:

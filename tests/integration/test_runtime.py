@@ -447,6 +447,7 @@ def read_banner(proc: subprocess.Popen[str], timeout: float = 20.0) -> dict[str,
     raise AssertionError(f"no banner from hli-server run: {''.join(lines)} {stderr}")
 
 
+@pytest.mark.slow
 @pytest.mark.req("H-01", "E-01")
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_run_process_shuts_down_cleanly_on_signal(sig: signal.Signals) -> None:
@@ -472,6 +473,7 @@ def test_run_process_shuts_down_cleanly_on_signal(sig: signal.Signals) -> None:
         pass
 
 
+@pytest.mark.slow
 @pytest.mark.req("E-01")
 @pytest.mark.parametrize(
     ("clock", "event_loop"), [("free", "select"), ("realtime", "select"), ("realtime", "default")]
@@ -504,6 +506,7 @@ def test_run_with_cycles_stops_by_itself(clock: str, event_loop: str) -> None:
         assert "lateness p50" in result.stdout
 
 
+@pytest.mark.slow
 def test_run_reports_a_port_in_use_with_exit_2() -> None:
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
@@ -533,6 +536,7 @@ def test_run_reports_a_bad_config_with_exit_2(tmp_path: Path) -> None:
     assert "missing.toml" in result.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.req("E-07", "H-03")
 def test_run_starts_the_adapters_the_machine_file_names(tmp_path: Path) -> None:
     """``[[adapters]]`` in the machine file: Modbus with the file's options; an --adapter of the

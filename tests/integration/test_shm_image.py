@@ -105,6 +105,7 @@ def _uniform_setter(layout, machine):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.req("H-01")
 @pytest.mark.parametrize("writer", ["publish_from", "field_by_field", "no_protocol"])
 def test_a_concurrent_reader_never_sees_a_half_written_cycle(layout, image, writer):
