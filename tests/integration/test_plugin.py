@@ -97,19 +97,31 @@ def test_the_machine_comes_from_the_ini_option_and_a_bad_marker_is_a_usage_error
 
 
 USER_SUITE = """
-import json, os, time
+import glob, json, os, time
 
 import pytest
 
 OUT = os.environ["HLI_XDIST_OUT"]
+WORKER = os.environ.get("PYTEST_XDIST_WORKER", "main")
+first_test = [True]
+
+
+def other_worker_running():
+    for path in glob.glob(os.path.join(OUT, "*.json")):
+        with open(path) as f:
+            record = json.load(f)
+        if record["worker"] != WORKER and not os.path.exists(path[: -len(".json")] + ".end"):
+            return True
+    return False
 
 
 def record(hli, name):
-    with open(os.path.join(OUT, f"{name}-{os.getpid()}.json"), "w") as out:
+    path = os.path.join(OUT, f"{name}-{os.getpid()}.json")
+    with open(path + ".tmp", "w") as out:  # then renamed: the other worker never reads half a file
         json.dump(
             {
                 "test": name,
-                "worker": os.environ.get("PYTEST_XDIST_WORKER", "main"),
+                "worker": WORKER,
                 "pid": os.getpid(),
                 "image": hli.image.name,
                 "modbus": hli.port("modbus"),
@@ -118,17 +130,24 @@ def record(hli, name):
             },
             out,
         )
+    os.replace(path + ".tmp", path)
+    if first_test[0]:  # each worker's first server waits for one of the other's: both alive at once
+        first_test[0] = False
+        deadline = time.monotonic() + 60
+        while not other_worker_running():
+            assert time.monotonic() < deadline, "the other worker never started a test"
+            time.sleep(0.01)
 
 
 @pytest.mark.parametrize("k", range(4))
 def test_scenario(hli, plc_transport, k):
-    record(hli, f"scenario{k}-{plc_transport.__class__.__name__}")
+    name = f"scenario{k}-{plc_transport.__class__.__name__}"
+    record(hli, name)
     hli.operator.load_program(1, "N10 G01 X%d F6000\\nN20 M30\\n" % (k + 1))
     hli.operator.start(1)
     hli.run_until(lambda: hli.image["gpCh[0]^bahn_state.program_state_r"] == 4, max_cycles=2000)
     assert plc_transport.snapshot().values["gpAx[0]^ipo_state.cmd_pos_r"] == (k + 1) * 10_000
-    name = f"scenario{k}-{plc_transport.__class__.__name__}-{os.getpid()}.end"
-    with open(os.path.join(OUT, name), "w") as f:
+    with open(os.path.join(OUT, f"{name}-{os.getpid()}.end"), "w") as f:
         f.write(str(time.monotonic()))
 """
 
