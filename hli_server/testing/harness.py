@@ -227,7 +227,8 @@ class Harness:
         ready.wait(self.timeout_s)
         try:
             self._runtime = self._call(self._start_runtime())
-        except BaseException:
+        except BaseException:  # the runtime undid its own start; end the thread too
+            self._stopped = True
             self._shutdown_loop()
             raise
         image = self._runtime.image
@@ -274,7 +275,7 @@ class Harness:
 
     def _shutdown_loop(self) -> None:
         loop, thread = self._loop, self._thread
-        if loop is None or thread is None:
+        if loop is None or thread is None or loop.is_closed():
             return
         loop.call_soon_threadsafe(loop.stop)
         thread.join(self.timeout_s)

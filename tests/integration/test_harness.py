@@ -265,3 +265,18 @@ def test_the_ads_door_is_skipped_with_its_reason_until_it_exists() -> None:
         assert "plc_clients.ads" in reason
     else:  # pragma: no cover - once the ADS transport is merged
         assert reason is None or "adapter 'ads'" in reason
+
+
+def test_a_door_that_cannot_open_fails_the_start_and_leaves_nothing_running() -> None:
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        harness = Harness(adapters=[("modbus", {"port": port})])
+        with pytest.raises(OSError, match=f"cannot listen on 127.0.0.1:{port}"):
+            harness.start()
+    assert harness._thread is not None
+    assert not harness._thread.is_alive()
+    harness.stop()  # nothing left to stop: no error
+    with pytest.raises(HarnessError, match="does not run"):
+        harness.step(1)
