@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 RUNTIME_STAMP := $(VENV)/.installed-runtime
 TEST_STAMP    := $(VENV)/.installed-test
 
-.PHONY: run test lint format bench soak clean venv
+.PHONY: run test test-fast lint format bench soak clean venv
 
 $(BIN)/python:
 	@$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -39,13 +39,17 @@ format: $(TEST_STAMP)
 test: $(TEST_STAMP) lint
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
+# the edit-test loop: no lint, no test marked `slow` (subprocess servers, xdist, long property runs)
+test-fast: $(TEST_STAMP)
+	$(BIN)/python -m pytest -m "not slow" $(PYTEST_ARGS)
+
 bench: $(TEST_STAMP)
 	$(BIN)/python -m benchmarks $(ARGS)
 
 # The fuzz tests of the suite (marker `fuzz`), long: SOAK_SCALE times their examples, a new seed each
 # run unless HLI_FUZZ_SEED is given (docs/reliability.md, "NC programs and configuration").
 SOAK_SCALE ?= 100
-soak: $(STAMP)
+soak: $(TEST_STAMP)
 	@seed=$${HLI_FUZZ_SEED:-$$(date +%s)}; echo "soak: HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed"; \
 	HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed $(BIN)/python -m pytest -m fuzz -p no:cacheprovider \
 		--timeout=0 --durations=0 -q -rP $(PYTEST_ARGS)

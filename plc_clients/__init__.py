@@ -9,7 +9,10 @@ these modules runs against any server that serves the same layout.
 * :mod:`plc_clients.task`: :class:`PlcTask` (read inputs, run the program, write outputs);
 * :mod:`plc_clients.plcopen`: :class:`MCV_DynPosLimitLow`, :class:`MCV_DynPosLimitHigh`,
   :class:`ControlUnitBlock` and its BOOL / SGN32 variants, :class:`AXIS_REF`;
-* :mod:`plc_clients.shm`: the low-level shared-memory handle :class:`ImageClient`.
+* :mod:`plc_clients.shm`: the low-level shared-memory handle :class:`ImageClient` (by name, or over
+  a buffer of a server in the same process);
+* :mod:`plc_clients.demos`: the documents' examples as PLC programs, and :mod:`plc_clients.cli`,
+  ``hli-plc``, which runs them against a running server.
 
 See docs/plc-clients.md.
 """

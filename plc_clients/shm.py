@@ -18,6 +18,10 @@ server runs another one. No configuration file is needed to attach.
 The client never unlinks the segment and does not register it with the ``multiprocessing``
 resource tracker, so neither its exit nor its tracker removes the server's image or warns about it.
 It imports ``schemas`` only, never ``hli_server``.
+
+A server running in this very process (the pytest harness, H-07) may keep its image in a plain
+buffer instead of ``/dev/shm``; ``ImageClient.over(buffer)`` attaches to that buffer with the same
+checks and the same protocol (``ShmTransport`` takes either client).
 """
 
 from __future__ import annotations
@@ -73,15 +77,21 @@ class Snapshot:
 
 
 class ImageClient:
-    """A PLC's handle on the image. Attach with :meth:`attach`; use as a context manager."""
+    """A PLC's handle on the image. Attach with :meth:`attach` (shared memory, by name) or
+    :meth:`over` (a buffer of this process); use as a context manager."""
 
-    def __init__(self, shm: shared_memory.SharedMemory, header: fmt.ImageHeader, layout: Layout) -> None:
-        buf = shm.buf
-        if buf is None:  # pragma: no cover
-            raise ImageError("shared memory closed while attaching")
+    def __init__(
+        self,
+        buffer: memoryview,
+        header: fmt.ImageHeader,
+        layout: Layout,
+        *,
+        name: str,
+        shm: shared_memory.SharedMemory | None = None,
+    ) -> None:
         self._shm = shm
-        self._buf = buf
-        self.name = shm.name.removeprefix("/")
+        self._buf = buffer
+        self.name = name
         self.header = header
         self.plan = header.plan
         self.layout = layout
@@ -112,36 +122,60 @@ class ImageClient:
                 time.sleep(0.01)
 
     @classmethod
+    def over(
+        cls, buffer: memoryview | bytearray, *, name: str = "memory", expect: Layout | str | None = None
+    ) -> ImageClient:
+        """Attach to an image in a buffer of this process (a server in the same process keeps it
+        there: ``ProcessImage.in_memory(...).buffer``). Same checks as :meth:`attach`; ``name`` is
+        used in messages only."""
+        fmt.check_host()
+        expected_hash = expect.hash if isinstance(expect, Layout) else expect
+        view = memoryview(buffer)  # our own view: it stays valid when the server releases its own
+        header, layout = cls._check(view, name, len(view), expected_hash)
+        return cls(view, header, layout, name=name)
+
+    @classmethod
     def _attach_once(cls, name: str, expected_hash: str | None) -> ImageClient:
         shm = attach_untracked(name)
         try:
             buf = shm.buf
             assert buf is not None
-            header = fmt.read_header(buf, name, segment_size=shm.size)
-            fmt.check_layout(header, name, expected_hash)
-            plan = header.plan
-            raw = bytes(buf[plan.layout_json_offset : plan.layout_json_offset + plan.layout_json_size])
-            try:
-                layout = Layout.from_json(raw)
-            except LayoutError as exc:
-                raise ImageMismatchError(f"image {name!r}: the stored layout is damaged: {exc}") from exc
-            if layout.hash != header.layout_hash:
-                raise ImageMismatchError(
-                    f"image {name!r}: header hash {header.layout_hash[:16]}... does not match the stored "
-                    f"layout ({layout.hash[:16]}...): the segment is damaged; restart the server"
-                )
-            if layout.p2c_size != plan.p2c_size or layout.c2p_size != plan.c2p_size:
-                raise ImageMismatchError(f"image {name!r}: half sizes in the header differ from the layout")
-            return cls(shm, header, layout)
+            header, layout = cls._check(buf, name, shm.size, expected_hash)
+            return cls(buf, header, layout, name=shm.name.removeprefix("/"), shm=shm)
         except BaseException:
             shm.close()
             raise
+
+    @staticmethod
+    def _check(
+        buf: memoryview, name: str, size: int, expected_hash: str | None
+    ) -> tuple[fmt.ImageHeader, Layout]:
+        """The header and the layout stored in the segment, checked against each other."""
+        header = fmt.read_header(buf, name, segment_size=size)
+        fmt.check_layout(header, name, expected_hash)
+        plan = header.plan
+        raw = bytes(buf[plan.layout_json_offset : plan.layout_json_offset + plan.layout_json_size])
+        try:
+            layout = Layout.from_json(raw)
+        except LayoutError as exc:
+            raise ImageMismatchError(f"image {name!r}: the stored layout is damaged: {exc}") from exc
+        if layout.hash != header.layout_hash:
+            raise ImageMismatchError(
+                f"image {name!r}: header hash {header.layout_hash[:16]}... does not match the stored "
+                f"layout ({layout.hash[:16]}...): the segment is damaged; restart the server"
+            )
+        if layout.p2c_size != plan.p2c_size or layout.c2p_size != plan.c2p_size:
+            raise ImageMismatchError(f"image {name!r}: half sizes in the header differ from the layout")
+        return header, layout
 
     def close(self) -> None:
         """Unmap (never unlink: the server owns the segment). Idempotent."""
         if not self._closed:
             self._closed = True
-            self._shm.close()
+            if self._shm is not None:
+                self._shm.close()
+            else:
+                self._buf.release()
 
     def __enter__(self) -> ImageClient:
         return self

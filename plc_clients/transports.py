@@ -40,11 +40,16 @@ from the server you talk to.
 **Consistency over Modbus.** Modbus has no atomic read of several tables: each request is
 answered from one publish of the CNC->PLC half (the server serves it without yielding), but two
 requests may fall into two CNC cycles. :meth:`ModbusTransport.snapshot` reads only what is
-watched (fewest requests, :mod:`plc_clients.modbus_codec`), reads ``cycle_r`` in the first request
-and, when it needed more than one request, once more at the end: :attr:`Inputs.consistent` says
-whether all requests came from the same publish. With the default ``watch=None`` it reads the whole
-half (22 requests on the demo machine): pass the inputs the program reads (the PLC task learns
-them, :class:`~plc_clients.task.PlcTask`).
+watched (fewest requests, :mod:`plc_clients.modbus_codec`). When that takes more than one request
+it first writes 1 to the server's snapshot register (holding register
+:data:`~schemas.layout.MODBUS_SNAPSHOT_REGISTER`): the server then answers this connection's reads
+of inputs from one copy of the newest publish, so the whole snapshot is one CNC cycle
+(:attr:`Inputs.consistent` is True) for one request more. A later single read of an input
+(:meth:`read`) writes 0 first (live values again). Against a server without the register (it
+answers 0x02) the transport reads ``cycle_r`` before and after instead, and ``consistent`` says
+whether both came from the same publish. With the default ``watch=None`` it reads the whole half
+(22 requests on the demo machine): pass the inputs the program reads (the PLC task learns them,
+:class:`~plc_clients.task.PlcTask`).
 
 Imports ``schemas`` (and pymodbus' clients, lazily, in the Modbus transports), never ``hli_server``.
 """
@@ -63,7 +68,15 @@ from typing import TYPE_CHECKING, Any, ClassVar, Final, Protocol, Self, runtime_
 
 from plc_clients.modbus_codec import ModbusCodec, ReadRequest
 from plc_clients.shm import ImageClient, ImageError
-from schemas.layout import Direction, Layout, LayoutError, ModbusTable, Signal, SignalType
+from schemas.layout import (
+    MODBUS_SNAPSHOT_REGISTER,
+    Direction,
+    Layout,
+    LayoutError,
+    ModbusTable,
+    Signal,
+    SignalType,
+)
 
 if TYPE_CHECKING:
     from plc_clients.shm import Snapshot
@@ -281,6 +294,14 @@ class ShmTransport:
             return cls(ImageClient.attach(name, expect=expect, timeout=timeout))
         except FileNotFoundError as exc:
             raise TransportError(str(exc)) from exc
+
+    @classmethod
+    def over(
+        cls, buffer: memoryview | bytearray, *, name: str = "memory", expect: Layout | str | None = None
+    ) -> ShmTransport:
+        """The image of a server in this process that keeps it in a buffer instead of ``/dev/shm``
+        (the pytest harness); the same protocol, see :meth:`ImageClient.over`."""
+        return cls(ImageClient.over(buffer, name=name, expect=expect))
 
     def _check_open(self) -> None:
         if self.client.server_closed:
@@ -530,6 +551,10 @@ class _ModbusCommon:
         self._cycle_signal = self.layout.signal(CYCLE_SIGNAL)
         self._counter = _CycleCounter()
         self._plans: dict[frozenset[str] | None, list[ReadRequest]] = {}
+        self._frozen = False
+        """This connection's input reads are frozen on one publish (the snapshot register)."""
+        self._has_snapshot_register: bool | None = None
+        """None until the first freeze tells; False: an older server, before and after cycle reads."""
         self._client = self._make_client(host, port, timeout)
 
     def _make_client(self, host: str, port: int, timeout: float) -> Any:
@@ -557,6 +582,26 @@ class _ModbusCommon:
 
     def _cycle_request(self) -> ReadRequest:
         return self.codec.read_requests([self._cycle_signal])[0]
+
+    def _wants_freeze(self, plan: list[ReadRequest]) -> bool:
+        """A snapshot of several requests freezes (and so does any while frozen: a new copy)."""
+        return (len(plan) > 1 or self._frozen) and self._has_snapshot_register is not False
+
+    def _froze(self, value: int, error: TransportError | None) -> bool:
+        """Book-keeping after a write of the snapshot register; False: the server has none."""
+        if error is not None:
+            if error.modbus_exception != 0x02:
+                raise error
+            self._has_snapshot_register = False
+            self._frozen = False
+            return False
+        self._has_snapshot_register = True
+        self._frozen = value == 1
+        return True
+
+    @staticmethod
+    def _is_input(signal: Signal) -> bool:
+        return signal.modbus_table in (ModbusTable.DISCRETE_INPUT, ModbusTable.INPUT_REGISTER)
 
     def _inputs(self, values: dict[str, Value], first_raw: int, last_raw: int | None) -> Inputs:
         cycle = self._counter.update(int(first_raw))
@@ -648,19 +693,35 @@ class ModbusTransport(_ModbusCommon):
         bits_or_regs = response.bits if request.table in _BITS else response.registers
         return self.codec.decode(request, bits_or_regs)
 
+    def _snapshot_register(self, value: int) -> bool:
+        """Write the server's snapshot register: 1 freezes this connection's inputs, 0 thaws."""
+        try:
+            self._call(
+                f"FC6 write of the snapshot register {MODBUS_SNAPSHOT_REGISTER}",
+                self._client.write_register,
+                MODBUS_SNAPSHOT_REGISTER,
+                value,
+            )
+        except TransportError as exc:
+            return self._froze(value, exc)
+        return self._froze(value, None)
+
     def snapshot(self, watch: Collection[str] | None = None) -> Inputs:
         plan = self._plan(watch)
+        frozen = self._wants_freeze(plan) and self._snapshot_register(1)
         values: dict[str, Value] = {}
         for request in plan:
             values.update(self._read(request))
         first = int(values[CYCLE_SIGNAL])
         last = None
-        if len(plan) > 1:
+        if len(plan) > 1 and not frozen:
             last = int(self._read(self._cycle_request())[CYCLE_SIGNAL])
         return self._inputs(values, first, last)
 
     def read(self, st_path: str) -> Value:
         s = self.layout.signal(st_path)
+        if self._frozen and self._is_input(s):
+            self._snapshot_register(0)
         return self._read(self.codec.read_requests([s])[0])[s.st_path]
 
     def write(self, st_path: str, value: Value) -> None:
@@ -680,6 +741,8 @@ class ModbusTransport(_ModbusCommon):
     @property
     def cycle(self) -> int:
         """The CNC's newest cycle (one request)."""
+        if self._frozen:
+            self._snapshot_register(0)
         return self._counter.update(int(self._read(self._cycle_request())[CYCLE_SIGNAL]))
 
     def close(self) -> None:
@@ -756,19 +819,34 @@ class AsyncModbusTransport(_ModbusCommon):
         bits_or_regs = response.bits if request.table in _BITS else response.registers
         return self.codec.decode(request, bits_or_regs)
 
+    async def _snapshot_register(self, value: int) -> bool:
+        try:
+            await self._call(
+                f"FC6 write of the snapshot register {MODBUS_SNAPSHOT_REGISTER}",
+                self._client.write_register,
+                MODBUS_SNAPSHOT_REGISTER,
+                value,
+            )
+        except TransportError as exc:
+            return self._froze(value, exc)
+        return self._froze(value, None)
+
     async def snapshot(self, watch: Collection[str] | None = None) -> Inputs:
         plan = self._plan(watch)
+        frozen = self._wants_freeze(plan) and await self._snapshot_register(1)
         values: dict[str, Value] = {}
         for request in plan:
             values.update(await self._read(request))
         first = int(values[CYCLE_SIGNAL])
         last = None
-        if len(plan) > 1:
+        if len(plan) > 1 and not frozen:
             last = int((await self._read(self._cycle_request()))[CYCLE_SIGNAL])
         return self._inputs(values, first, last)
 
     async def read(self, st_path: str) -> Value:
         s = self.layout.signal(st_path)
+        if self._frozen and self._is_input(s):
+            await self._snapshot_register(0)
         return (await self._read(self.codec.read_requests([s])[0]))[s.st_path]
 
     async def write(self, st_path: str, value: Value) -> None:

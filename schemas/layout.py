@@ -70,6 +70,7 @@ __all__ = [
     "MODBUS_AXIS_BASE",
     "MODBUS_BLOCK_STRIDE",
     "MODBUS_CHANNEL_BASE",
+    "MODBUS_SNAPSHOT_REGISTER",
     "AxisInfo",
     "ChannelInfo",
     "Direction",
@@ -100,6 +101,14 @@ MODBUS_AXIS_BASE: Final = 2000
 MODBUS_BLOCK_STRIDE: Final = 100
 MAX_AXES: Final = (65536 - MODBUS_AXIS_BASE) // MODBUS_BLOCK_STRIDE
 """635: the axes that fit the 16-bit Modbus address space with the fixed blocks."""
+MODBUS_SNAPSHOT_REGISTER: Final = 1900
+"""Holding register of the Modbus adapter's consistent snapshot (not a signal: between the last
+channel block, which ends at 1199, and the first axis block). Writing 1 freezes the connection's
+reads of discrete inputs and input registers on one publish of the CNC->PLC half; 0 reads live
+again (docs/modbus.md, "Consistent snapshots")."""
+_CHANNEL_BLOCKS_END: Final = MODBUS_CHANNEL_BASE + MAX_CHANNELS * MODBUS_BLOCK_STRIDE
+if not _CHANNEL_BLOCKS_END <= MODBUS_SNAPSHOT_REGISTER < MODBUS_AXIS_BASE:  # pragma: no cover - a typo
+    raise RuntimeError("the snapshot register must lie between the channel and the axis blocks")
 
 ADS_PORT_HLI: Final = 851
 """ADS port of the HLI image (the port where a TwinCAT PLC runtime serves its symbols; project's choice)."""

@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 from pathlib import Path
 
 import pytest
+
+pytest_plugins = ["pytester"]  # the plugin's own tests run a user's suite (tests/integration/test_plugin.py)
 
 _DEV_SHM = Path("/dev/shm")
 
@@ -25,7 +28,8 @@ def _our_segments() -> set[str]:
 
 @pytest.fixture(autouse=True)
 def _no_leaked_shared_memory():
-    """No process image created by a test outlives it (H-01): every one is closed and unlinked.
+    """No process image created by a test outlives it (H-01): every one is closed and unlinked; no
+    harness' server thread outlives it either (H-07).
 
     Images belong to function-scoped fixtures; one kept by a module-scoped fixture is reported here.
     """
@@ -36,8 +40,10 @@ def _no_leaked_shared_memory():
     for name in still_open:  # close them, so that one leak does not fail every later test
         shm_module._open_images[name].close()
     left = sorted(_our_segments() - before)
+    servers = [t.name for t in threading.enumerate() if t.name == "hli-harness-server"]
     assert not still_open, f"process images not closed by the test: {still_open}"
     assert not left, f"shared memory left in /dev/shm by the test: {left}"
+    assert not servers, "a test harness (hli_server.testing.Harness) was not stopped: use it with `with`"
 
 
 # --------------------------------------------------------------------------------------------

@@ -10,8 +10,9 @@ An adapter never sees the runtime or the machine. It is handed an :class:`Adapte
   Requests are latched by the channel at the next cycle, as a PLC's are. The HTTP API and the
   dashboard use it; the PLC doors do not;
 * ``events`` (:class:`EventFeed`): the typed events of ``schemas.events``, live and as a log;
-* ``step(n)`` for the stepped clock, and ``on_cycle`` for work that must follow every published cycle
-  (ADS device notifications).
+* ``step(n)`` for the stepped clock (``step_traced(n, signals)`` also returns chosen signals in every
+  one of those cycles, :class:`Trace`), and ``on_cycle`` for work that must follow every published
+  cycle (ADS device notifications).
 
 The runtime implements these protocols (``hli_server/runtime/host.py``). ``make lint`` forbids
 ``hli_server.adapters`` to import ``hli_server.engine`` or ``hli_server.runtime``: everything an
@@ -20,13 +21,16 @@ adapter may use is named here.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from schemas.events import Event
-from schemas.layout import Direction, Layout, Signal
+from schemas.layout import Direction, Layout, Signal, SignalType
 from schemas.wire import Mode
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
 
 __all__ = [
     "LOOPBACK_NAMES",
@@ -42,6 +46,7 @@ __all__ = [
     "OperatorError",
     "OperatorPort",
     "StepRefusedError",
+    "Trace",
     "Value",
 ]
 
@@ -111,6 +116,58 @@ class LoggedEvent:
 
     def to_json(self) -> dict[str, Any]:
         return {"seq": self.seq, **self.event.to_json()}
+
+
+_DTYPE = {
+    SignalType.BOOL: "bool",
+    SignalType.DINT: "int32",
+    SignalType.UDINT: "uint32",
+    SignalType.LREAL: "float64",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class Trace:
+    """Chosen signals in every cycle of a run (H-07): the per-cycle record of a scenario.
+
+    ``cycles[k]`` is the cycle of the ``k``-th published cycle; ``values[st_path][k]`` the signal's
+    value in it (CNC->PLC as published, PLC->CNC as latched). ``trace[st_path]`` is the column as a
+    numpy array (``bool``, ``int32``, ``uint32`` or ``float64`` after the signal's type), ready for
+    ``argmax``, ``diff`` and friends; :meth:`to_json` is what ``POST /api/step`` returns.
+    """
+
+    signals: tuple[str, ...]
+    cycles: Sequence[int]
+    values: Mapping[str, Sequence[Value]]
+    types: Mapping[str, SignalType]
+
+    def __len__(self) -> int:
+        return len(self.cycles)
+
+    def __getitem__(self, st_path: str) -> npt.NDArray[Any]:
+        import numpy as np
+
+        try:
+            column = self.values[st_path]
+        except KeyError:
+            raise KeyError(f"{st_path!r} was not traced; the trace has {', '.join(self.signals)}") from None
+        return np.asarray(column, dtype=_DTYPE[self.types[st_path]])
+
+    def at(self, cycle: int) -> dict[str, Value]:
+        """Every traced signal in ``cycle`` (KeyError when the trace does not hold that cycle)."""
+        try:
+            k = list(self.cycles).index(cycle)
+        except ValueError:
+            first, last = (self.cycles[0], self.cycles[-1]) if self.cycles else (None, None)
+            raise KeyError(f"cycle {cycle} is not in the trace (cycles {first}..{last})") from None
+        return {path: self.values[path][k] for path in self.signals}
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "signals": list(self.signals),
+            "cycles": list(self.cycles),
+            "values": {path: list(self.values[path]) for path in self.signals},
+        }
 
 
 class ImagePort(Protocol):
@@ -266,6 +323,11 @@ class AdapterHost(Protocol):
     async def step(self, cycles: int = 1) -> int:
         """Run ``cycles`` cycles now (stepped clock only; else :class:`StepRefusedError`); returns
         the machine's cycle counter."""
+        ...
+
+    async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
+        """:meth:`step`, and the value of each of ``signals`` (ST paths) in every one of those
+        cycles. An unknown path raises the layout's ``UnknownSignalError`` before any cycle runs."""
         ...
 
     def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:

@@ -32,6 +32,14 @@ input registers     4 read                DINT/UDINT/LREAL CNC->PLC             
   behind it, so that a client with a wrong unit id fails at once instead of waiting for a time-out
   (``unknown_unit="exception"``, the default); ``unknown_unit="ignore"`` drops them without an
   answer, as a serial slave that is not addressed does.
+* **Consistent snapshots.** One request is answered from one publish; a PLC that reads more than one
+  request's worth of inputs (two tables, distant addresses, more than 125 registers) can have them
+  all from one publish: writing 1 to holding register ``MODBUS_SNAPSHOT_REGISTER`` (1900, FC 6)
+  freezes *this connection's* reads of discrete inputs and input registers on a copy of the newest
+  publish, taken at that write, until the connection writes the register again (1: a new copy,
+  0: live again; other values: 0x03). Other connections are not affected; the copy is the
+  connection's, not the machine's. ``plc_clients``' Modbus transports freeze before every snapshot
+  of more than one request (docs/modbus.md).
 * **Pipelining.** Requests are answered one by one, in the order they arrived, however they are
   split into TCP segments: several in one segment, one across several. The framing is the sans-I/O
   :class:`~hli_server.codecs.modbus_frames.MbapDecoder`; each request is served synchronously from
@@ -85,6 +93,7 @@ from hli_server.codecs.modbus_frames import (
 )
 from hli_server.codecs.modbus_words import WORD_ORDERS, check_word_order, decode_value, swap_words
 from schemas.layout import (
+    MODBUS_SNAPSHOT_REGISTER,
     Direction,
     Layout,
     ModbusTable,
@@ -103,6 +112,7 @@ __all__ = [
     "ModbusOptions",
     "ModbusServer",
     "RegisterMap",
+    "Session",
 ]
 
 logger = logging.getLogger(__name__)
@@ -125,6 +135,8 @@ _TABLE_OF_FC: Final = {
     3: ModbusTable.HOLDING_REGISTER,
     4: ModbusTable.INPUT_REGISTER,
 }
+_FREEZE_PDU_HEAD: Final = bytes((6,)) + MODBUS_SNAPSHOT_REGISTER.to_bytes(2, "big")
+"""FC 6 to the snapshot register: the first three bytes of a freeze request's PDU."""
 _TABLE_TEXT: Final = {
     ModbusTable.COIL: "coil",
     ModbusTable.DISCRETE_INPUT: "discrete input",
@@ -167,13 +179,18 @@ class RegisterMap:
         self._readers: dict[bytes, Reader] = {}
         self._c2p_count = -1
         self._c2p = b""
+        self.frozen: bytes | None = None
+        """The CNC->PLC half the current request is served from when its connection froze one."""
 
     # --- the halves --------------------------------------------------------------------------
     def _p2c_half(self) -> bytes:
         return self.image.read_half(_P2C)
 
     def _c2p_half(self) -> bytes:
-        """The newest consistent CNC->PLC publish; copied again only after a new publish."""
+        """The newest consistent CNC->PLC publish (copied again only after a new publish), or the
+        copy the requesting connection froze (:class:`Session`)."""
+        if self.frozen is not None:
+            return self.frozen
         count = self.image.publish_count
         if count != self._c2p_count:
             self._c2p = self.image.snapshot()[1]
@@ -426,6 +443,15 @@ class ServerStats:
     """connections closed after idle_timeout seconds of silence"""
 
 
+@dataclass(slots=True)
+class Session:
+    """What one connection holds: the copy of the CNC->PLC half it froze (``(cycle, half)``) or None.
+
+    Connection state, not machine state: the adapter still keeps nothing of the machine's own."""
+
+    frozen: tuple[int, bytes] | None = None
+
+
 class ModbusServer:
     """Answers Modbus TCP frames from a :class:`RegisterMap` (no I/O; :meth:`answer` is sync)."""
 
@@ -446,8 +472,9 @@ class ModbusServer:
         self.units = frozenset({unit_id}) | ANY_UNIT_IDS
         self.stats = ServerStats()
 
-    def answer(self, frame: Frame) -> bytes | None:
-        """The response ADU of one frame, or None when the frame gets no answer."""
+    def answer(self, frame: Frame, session: Session | None = None) -> bytes | None:
+        """The response ADU of one frame, or None when the frame gets no answer. ``session``: the
+        connection's state (the consistent snapshot it froze); without one nothing can be frozen."""
         tid, pid, unit, pdu = frame
         self.stats.requests += 1
         if pid != 0:
@@ -460,6 +487,9 @@ class ModbusServer:
                 self.stats.dropped += 1
                 return None
             return self._exception(tid, unit, fc, ExceptionCode.GATEWAY_TARGET_FAILED_TO_RESPOND)
+        if session is not None and pdu[:3] == _FREEZE_PDU_HEAD and len(pdu) == 5:
+            return self._freeze(tid, unit, pdu, session)
+        self.map.frozen = session.frozen[1] if session is not None and session.frozen is not None else None
         try:
             answer = self.map.read(pdu)
             if answer is None:
@@ -472,7 +502,21 @@ class ModbusServer:
         except Exception:
             logger.exception("Modbus request %s (unit %d, transaction %d) failed", pdu.hex(" "), unit, tid)
             return self._exception(tid, unit, fc, ExceptionCode.SERVER_DEVICE_FAILURE)
+        finally:
+            self.map.frozen = None
         return encode_adu(tid, unit, answer)
+
+    def _freeze(self, tid: int, unit: int, pdu: bytes, session: Session) -> bytes:
+        """FC 6 to the snapshot register: 1 freezes a copy of the newest publish, 0 thaws."""
+        value = int.from_bytes(pdu[3:5], "big")
+        if value == 1:
+            session.frozen = self.map.image.snapshot()
+        elif value == 0:
+            session.frozen = None
+        else:
+            logger.debug("snapshot register: %d is neither 1 (freeze) nor 0 (live)", value)
+            return self._exception(tid, unit, 6, ExceptionCode.ILLEGAL_DATA_VALUE)
+        return encode_adu(tid, unit, pdu)
 
     def _count(self, code: int) -> None:
         self.stats.exceptions[code] = self.stats.exceptions.get(code, 0) + 1
@@ -497,6 +541,7 @@ class _Connection(asyncio.Protocol):
         self._adapter = adapter
         self._server = adapter.server
         self._decoder = MbapDecoder()
+        self._session = Session()
         self._transport: asyncio.Transport | None = None
         self._peer: Any = None
         self._queue: deque[Frame] = deque()
@@ -561,10 +606,10 @@ class _Connection(asyncio.Protocol):
         if transport is None or transport.is_closing():
             self._queue.clear()
             return
-        queue, answer = self._queue, self._server.answer
+        queue, answer, session = self._queue, self._server.answer, self._session
         out: list[bytes] = []
         for _ in range(min(BATCH, len(queue))):
-            reply = answer(queue.popleft())
+            reply = answer(queue.popleft(), session)
             if reply is not None:
                 out.append(reply)
         if out:

@@ -1,4 +1,4 @@
-"""The process image in POSIX shared memory, server side (H-01, H-02).
+"""The process image, server side: in POSIX shared memory, or in a plain buffer (H-01, H-02).
 
 The server creates the segment, writes the header and the layout JSON, and then, once per cycle,
 
@@ -23,6 +23,18 @@ as ``python -m``, inside pytest, or several servers on one host. A segment witho
 belongs to another program and is never touched; neither is one whose writer cannot be judged (a PID
 of another PID namespace, i.e. another container sharing /dev/shm). Without /proc (not Linux) the
 start time is 0 and a live PID counts as a running server, as before.
+
+Where the bytes live is the only difference between the two kinds (the format, the seqlock and
+every method are the same code):
+
+* :meth:`ProcessImage.create`: a POSIX shared-memory segment ``/dev/shm/NAME`` that another process
+  maps by name (``hli-server run``, the default);
+* :meth:`ProcessImage.in_memory`: a ``bytearray`` of the same format, for a server that runs inside
+  the process of its PLC (the pytest harness, H-07): it needs no ``/dev/shm``, so it runs where shared
+  memory is restricted (containers, sandboxes), and it cannot leak a segment. A PLC in the same
+  process attaches with ``plc_clients.ImageClient.over(image.buffer)``.
+
+:meth:`ProcessImage.recorder` samples chosen signals of every publish (per-cycle traces, H-07).
 """
 
 from __future__ import annotations
@@ -32,6 +44,7 @@ import os
 import re
 import secrets
 import struct
+from collections.abc import Iterable
 from multiprocessing import shared_memory
 from pathlib import Path
 from types import TracebackType
@@ -45,6 +58,7 @@ from schemas.layout import Direction, Layout, Signal, SignalType, SignalValueErr
 __all__ = [
     "IMAGE_NAME_PREFIX",
     "ProcessImage",
+    "SignalRecorder",
     "default_image_name",
     "open_image_names",
     "pid_namespace",
@@ -143,12 +157,21 @@ def _writer_state(header: fmt.ImageHeader) -> str:
 
 
 class ProcessImage:
-    """The server's handle on the shared-memory image. Create with :meth:`create`."""
+    """The server's handle on the image. Create with :meth:`create` (shared memory) or
+    :meth:`in_memory` (a buffer in this process)."""
 
-    def __init__(self, shm: shared_memory.SharedMemory, layout: Layout, plan: fmt.SegmentPlan) -> None:
+    def __init__(
+        self,
+        buffer: memoryview,
+        layout: Layout,
+        plan: fmt.SegmentPlan,
+        *,
+        name: str,
+        shm: shared_memory.SharedMemory | None = None,
+    ) -> None:
         self._shm = shm
-        self._buf = _buffer(shm)
-        self.name: str = shm.name.removeprefix("/")
+        self._buf = buffer
+        self.name: str = name
         self.layout = layout
         self.plan = plan
         self._projection: Projection = compile_projection(layout)
@@ -185,22 +208,51 @@ class ProcessImage:
                 ) from None
             cls._remove_stale(plain)
             shm = shared_memory.SharedMemory(name=plain, create=True, size=plan.total_size)
-        image = cls(shm, layout, plan)
+        image = cls(_buffer(shm), layout, plan, name=shm.name.removeprefix("/"), shm=shm)
+        return image._ready(layout_json)
+
+    @classmethod
+    def in_memory(cls, layout: Layout, name: str | None = None) -> ProcessImage:
+        """The same image in a ``bytearray`` of this process: no ``/dev/shm``, nothing to unlink.
+
+        ``name`` only names it in logs and reports (default :func:`default_image_name`). A PLC in
+        this process attaches with ``ImageClient.over(image.buffer)`` (the pytest harness does).
+        """
+        fmt.check_host()
+        plain = _check_name(name or default_image_name())
+        layout_json = layout.to_json(indent=None).encode("utf-8")
+        plan = fmt.plan_segment(len(layout_json), layout.p2c_size, layout.c2p_size)
+        image = cls(memoryview(bytearray(plan.total_size)), layout, plan, name=plain)
+        return image._ready(layout_json)
+
+    def _ready(self, layout_json: bytes) -> ProcessImage:
         try:
-            image._write_header(layout_json)
+            self._write_header(layout_json)
         except BaseException:
-            image.close()
+            self.close()
             raise
-        _open_images[image.name] = image
+        _open_images[self.name] = self
         log.info(
-            "process image %s created: %d bytes (PLC->CNC %d, CNC->PLC %d), layout %s",
-            image.name,
-            plan.total_size,
-            layout.p2c_size,
-            layout.c2p_size,
-            layout.hash[:12],
+            "process image %s created in %s: %d bytes (PLC->CNC %d, CNC->PLC %d), layout %s",
+            self.name,
+            self.backing,
+            self.plan.total_size,
+            self.layout.p2c_size,
+            self.layout.c2p_size,
+            self.layout.hash[:12],
         )
-        return image
+        return self
+
+    @property
+    def backing(self) -> str:
+        """``shared memory`` (``/dev/shm/NAME``) or ``memory`` (a buffer of this process)."""
+        return "shared memory" if self._shm is not None else "memory"
+
+    @property
+    def buffer(self) -> memoryview:
+        """The whole segment (header, layout, halves): what a PLC in this process attaches to
+        (``ImageClient.over``). Valid until :meth:`close`."""
+        return self._buf
 
     @staticmethod
     def _remove_stale(name: str) -> None:
@@ -271,7 +323,10 @@ class ProcessImage:
         buf[fmt.OFF_MAGIC : fmt.OFF_MAGIC + 8] = fmt.MAGIC  # last: the image is ready
 
     def close(self) -> None:
-        """Mark the image closed for attached clients, unmap it and unlink it. Idempotent."""
+        """Mark the image closed for attached clients, unmap it and unlink it. Idempotent.
+
+        A buffer-backed image keeps its bytes for the clients still attached (they see the
+        closed flag, as they do on shared memory); the server's own view is released."""
         if self._closed:
             return
         self._closed = True
@@ -281,6 +336,10 @@ class ProcessImage:
             struct.pack_into("<I", self._buf, fmt.OFF_FLAGS, flags | fmt.FLAG_CLOSED)
         except (ValueError, TypeError):  # pragma: no cover - buffer already released
             pass
+        if self._shm is None:
+            self._buf.release()  # later use raises "released memoryview", as with shared memory
+            log.info("process image %s (memory) closed", self.name)
+            return
         self._shm.close()  # releases self._buf: later use raises "released memoryview"
         try:
             self._shm.unlink()
@@ -302,7 +361,7 @@ class ProcessImage:
 
     def __repr__(self) -> str:
         state = "closed" if self._closed else f"cycle {self._cycle}"
-        return f"ProcessImage({self.name!r}, {self.plan.total_size} bytes, {state})"
+        return f"ProcessImage({self.name!r}, {self.backing}, {self.plan.total_size} bytes, {state})"
 
     # --- the cycle ---------------------------------------------------------------------------
     def latch_into(self, machine: MachineHli) -> None:
@@ -416,3 +475,81 @@ class ProcessImage:
     def snapshot(self) -> tuple[int, bytes]:
         """``(cycle, CNC->PLC half)`` of the newest consistent publish."""
         return fmt.read_c2p(self._buf, self.plan, self.name)
+
+    # --- per-cycle traces (H-07) ---------------------------------------------------------
+    def recorder(self, st_paths: Iterable[str]) -> SignalRecorder:
+        """A recorder of ``st_paths`` (either half): :meth:`SignalRecorder.sample` after a publish
+        keeps their values in that publish; unknown paths raise the layout's error at once."""
+        return SignalRecorder(self, st_paths)
+
+    def _newest_half_offset(self) -> int:
+        """Offset of the newest publish's buffer (its cycle word, then the half); writer side only."""
+        return self.plan.c2p_offsets[self._publish_count & 1] + 8
+
+
+def _field_struct(signals: list[Signal], head: str = "") -> struct.Struct:
+    """One ``Struct`` that reads ``signals`` (sorted by offset) from the start of their half in a
+    single ``unpack_from``; ``head`` is read first (the buffer's cycle word)."""
+    parts = ["<", head]
+    cursor = 0
+    for s in signals:
+        if s.offset > cursor:
+            parts.append(f"{s.offset - cursor}x")
+        parts.append(s.type.struct_char)
+        cursor = s.offset + s.size
+    return struct.Struct("".join(parts))
+
+
+class SignalRecorder:
+    """Chosen signals of every publish, kept as rows (H-07: per-cycle traces).
+
+    Cheap per cycle: :meth:`sample` is one ``unpack_from`` for the CNC->PLC signals (with the
+    publish's cycle) and one for the PLC->CNC signals, appended to a list; the columns are built
+    once, by :meth:`columns`. Sample on the writer's side, right after a publish (the runtime does):
+    the newest buffer is then not being written, so no seqlock retry is needed. PLC->CNC values are
+    those of the live half at that moment (what the cycle latched, unless a PLC wrote since).
+    """
+
+    __slots__ = ("_c2p", "_c2p_rows", "_image", "_order", "_p2c", "_p2c_off", "_p2c_rows", "paths", "types")
+
+    def __init__(self, image: ProcessImage, st_paths: Iterable[str]) -> None:
+        layout = image.layout
+        signals = [layout.signal(p) for p in st_paths]
+        paths = [s.st_path for s in signals]
+        if len(set(paths)) != len(paths):
+            raise ValueError(f"each signal once, please: {paths}")
+        self._image = image
+        self.paths: tuple[str, ...] = tuple(paths)
+        self.types: dict[str, SignalType] = {s.st_path: s.type for s in signals}
+        c2p = sorted((s for s in signals if s.direction is _C2P), key=lambda s: s.offset)
+        p2c = sorted((s for s in signals if s.direction is _P2C), key=lambda s: s.offset)
+        self._c2p = _field_struct(c2p, "Q").unpack_from
+        self._p2c = _field_struct(p2c).unpack_from if p2c else None
+        self._p2c_off = image.plan.p2c_offset
+        recorded = [s.st_path for s in c2p] + [s.st_path for s in p2c]
+        self._order = [recorded.index(p) for p in paths]
+        self._c2p_rows: list[tuple[Any, ...]] = []
+        self._p2c_rows: list[tuple[Any, ...]] = []
+
+    def sample(self) -> None:
+        """Keep the signals of the newest publish (call right after it)."""
+        image = self._image
+        buf = image._buf
+        self._c2p_rows.append(self._c2p(buf, image._newest_half_offset()))
+        if self._p2c is not None:
+            self._p2c_rows.append(self._p2c(buf, self._p2c_off))
+
+    def __len__(self) -> int:
+        return len(self._c2p_rows)
+
+    def columns(self) -> tuple[list[int], dict[str, list[Any]]]:
+        """``(cycles, {st_path: values})``: one value per sample, in the order sampled."""
+        rows = self._c2p_rows
+        if not rows:
+            return [], {p: [] for p in self.paths}
+        c2p_cols = list(zip(*rows, strict=True))
+        cycles = list(c2p_cols[0])
+        cols = c2p_cols[1:]
+        if self._p2c is not None:
+            cols += list(zip(*self._p2c_rows, strict=True))
+        return cycles, {p: list(cols[k]) for p, k in zip(self.paths, self._order, strict=True)}

@@ -27,10 +27,10 @@ import gc
 import logging
 import signal
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
-from hli_server.adapters.host import AccessPolicy, LoggedEvent
+from hli_server.adapters.host import AccessPolicy, LoggedEvent, Trace
 from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
 from hli_server.engine.machine import Machine
 from hli_server.runtime.events import EventLog
@@ -50,11 +50,12 @@ from hli_server.runtime.programs import read_program_file
 if TYPE_CHECKING:
     from types import TracebackType
 
+    from hli_server.image import SignalRecorder
     from schemas.config import MachineConfig
     from schemas.events import Event
     from schemas.layout import Layout
 
-__all__ = ["AdapterSpec", "Runtime", "RuntimeStateError"]
+__all__ = ["AdapterSpec", "Recording", "Runtime", "RuntimeStateError"]
 
 logger = logging.getLogger(__name__)
 
@@ -130,6 +131,7 @@ class Runtime:
         self.adapters: list[Adapter] = []
         self._started_adapters: list[Adapter] = []
         self._cycle_listeners: list[Callable[[int], None]] = []
+        self._recorders: list[SignalRecorder] = []
         self._pacer: asyncio.Task[None] | None = None
         self._stop_event: asyncio.Event | None = None
         self._step_lock: asyncio.Lock | None = None
@@ -170,7 +172,8 @@ class Runtime:
 
     def endpoints(self) -> list[str]:
         """Where everything listens, one line each (the ``run`` banner)."""
-        lines = [f"shared memory image: {self.image.name}"]
+        backing = getattr(self.image, "backing", "shared memory")
+        lines = [f"{backing} image: {self.image.name}"]
         for a in self.adapters:
             lines.extend(a.endpoints())
         return lines
@@ -196,6 +199,34 @@ class Runtime:
                 self._cycle_listeners.remove(listener)
 
         return unsubscribe
+
+    # --- per-cycle traces (H-07) -------------------------------------------------------------
+    def record(self, signals: Sequence[str]) -> Recording:
+        """Record ``signals`` (ST paths, either half) in every published cycle from now on, whatever
+        steps the clock, until :meth:`Recording.stop`. One ``unpack_from`` per cycle; unknown paths
+        raise the layout's ``UnknownSignalError`` at once."""
+        self._running_or_raise()
+        recorder = self.image.recorder(signals)
+        self._recorders.append(recorder)
+        return Recording(self, recorder)
+
+    def _stop_recording(self, recorder: SignalRecorder) -> None:
+        with contextlib.suppress(ValueError):
+            self._recorders.remove(recorder)
+
+    async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
+        """:meth:`step`, and ``signals`` in every one of these cycles (exactly these: a step that
+        waits for the step lock does not see another caller's cycles)."""
+        self._check_step(cycles)
+        recorder = self.image.recorder(signals)  # unknown paths fail before any cycle runs
+        assert self._step_lock is not None
+        async with self._step_lock:
+            self._recorders.append(recorder)
+            try:
+                await self._run_cycles(cycles)
+            finally:
+                self._stop_recording(recorder)
+        return _trace(recorder)
 
     # --- life cycle -----------------------------------------------------------------------
     async def __aenter__(self) -> Runtime:
@@ -253,6 +284,19 @@ class Runtime:
             self._pacer.add_done_callback(self._pacer_done)
         self._check_stop_cycle()
 
+    async def start_adapter(self, spec: AdapterSpec) -> Adapter:
+        """Start one more adapter on a running runtime (the test harness opens the doors a test
+        asks for); it is stopped with the others. Raises what the adapter's start raises."""
+        self._running_or_raise()
+        adapter = self._make_adapter(spec)
+        if any(a.name == adapter.name for a in self.adapters):
+            raise AdapterError(f"adapter {adapter.name!r} runs already: {'; '.join(adapter.endpoints())}")
+        await adapter.start(self.host)
+        self.adapters.append(adapter)
+        self._started_adapters.append(adapter)
+        logger.info("adapter %s started: %s", adapter.name, "; ".join(adapter.endpoints()))
+        return adapter
+
     def _make_adapter(self, spec: AdapterSpec) -> Adapter:
         if isinstance(spec, str):
             return create_adapter(spec, bind=self.bind)
@@ -287,6 +331,7 @@ class Runtime:
             if not fut.done():
                 fut.cancel()
         self._cycle_waiters.clear()
+        self._recorders.clear()
         if self._image is not None:
             image, self._image = self._image, None
             image.close()
@@ -367,6 +412,8 @@ class Runtime:
             image.publish_from(machine.hli, machine.cycle)
         except Exception as exc:
             self._cycle_failed(exc)
+        for recorder in self._recorders:
+            recorder.sample()
         for listener in self._cycle_listeners:
             try:
                 listener(machine.cycle)
@@ -422,6 +469,13 @@ class Runtime:
         Long runs yield to the event loop now and then, so the adapters stay responsive; concurrent
         calls run one after the other.
         """
+        self._check_step(cycles)
+        assert self._step_lock is not None
+        async with self._step_lock:
+            await self._run_cycles(cycles)
+        return self.machine.cycle
+
+    def _check_step(self, cycles: int) -> None:
         if self.clock is not Clock.STEPPED:
             raise ClockError(
                 f"step() needs the stepped clock; this runtime runs the {self.clock} clock "
@@ -430,25 +484,25 @@ class Runtime:
         if cycles < 0:
             raise ValueError(f"cycles must be >= 0, got {cycles}")
         self._running_or_raise()
-        assert self._step_lock is not None
-        async with self._step_lock:
-            left = cycles
-            while left > 0:
-                self._running_or_raise()
-                slice_end = time.monotonic() + FREE_SLICE_S
-                batch = min(left, STEP_BATCH)
-                done = 0
-                while done < batch:
-                    self._one_cycle()
-                    done += 1
-                    if time.monotonic() > slice_end:
-                        break
-                left -= done
-                self.stats.wakeup(done)
-                self._after_cycles()
-                if left > 0:
-                    await asyncio.sleep(0)
-        return self.machine.cycle
+
+    async def _run_cycles(self, cycles: int) -> None:
+        """``cycles`` cycles under the step lock, yielding to the loop every FREE_SLICE_S."""
+        left = cycles
+        while left > 0:
+            self._running_or_raise()
+            slice_end = time.monotonic() + FREE_SLICE_S
+            batch = min(left, STEP_BATCH)
+            done = 0
+            while done < batch:
+                self._one_cycle()
+                done += 1
+                if time.monotonic() > slice_end:
+                    break
+            left -= done
+            self.stats.wakeup(done)
+            self._after_cycles()
+            if left > 0:
+                await asyncio.sleep(0)
 
     async def wait_cycle(self, cycle: int, timeout: float | None = None) -> int:
         """Until the machine has run ``cycle`` (any clock; in stepped mode someone must step)."""
@@ -470,3 +524,39 @@ class Runtime:
     def __repr__(self) -> str:
         state = "stopped" if self.stopped else "running" if self.started else "new"
         return f"Runtime({self.config.name!r}, {self.clock} clock, cycle {self.machine.cycle}, {state})"
+
+
+def _trace(recorder: SignalRecorder) -> Trace:
+    cycles, values = recorder.columns()
+    return Trace(signals=recorder.paths, cycles=cycles, values=values, types=recorder.types)
+
+
+class Recording:
+    """Signals recorded in every published cycle (:meth:`Runtime.record`); a context manager.
+
+    :meth:`trace` gives what was recorded so far (it can be called while recording goes on);
+    :meth:`stop` ends the recording (the runtime's :meth:`Runtime.stop` ends it too)."""
+
+    def __init__(self, runtime: Runtime, recorder: SignalRecorder) -> None:
+        self._runtime = runtime
+        self._recorder = recorder
+
+    @property
+    def signals(self) -> tuple[str, ...]:
+        return self._recorder.paths
+
+    def __len__(self) -> int:
+        return len(self._recorder)
+
+    def trace(self) -> Trace:
+        return _trace(self._recorder)
+
+    def stop(self) -> Trace:
+        self._runtime._stop_recording(self._recorder)
+        return self.trace()
+
+    def __enter__(self) -> Recording:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()

@@ -8,7 +8,7 @@ engine rule.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 from hli_server.adapters.host import (
@@ -21,6 +21,7 @@ from hli_server.adapters.host import (
     NotFoundError,
     OperatorPort,
     StepRefusedError,
+    Trace,
 )
 from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis
@@ -234,6 +235,15 @@ class RuntimeHost:
 
         try:
             return await self._rt.step(cycles)
+        except (ClockError, RuntimeStateError) as exc:
+            raise StepRefusedError(str(exc)) from None
+
+    async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
+        from hli_server.runtime.core import RuntimeStateError
+        from hli_server.runtime.pacing import ClockError
+
+        try:
+            return await self._rt.step_traced(cycles, signals)
         except (ClockError, RuntimeStateError) as exc:
             raise StepRefusedError(str(exc)) from None
 

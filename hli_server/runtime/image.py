@@ -1,17 +1,24 @@
-"""Creating the process image the runtime publishes into (H-01)."""
+"""Creating the process image the runtime publishes into (H-01).
+
+Two factories: :func:`shared_memory_image` (``/dev/shm/NAME``, the default of ``hli-server run``: a
+PLC in another process maps it by name) and :func:`memory_image` (the same format in a buffer of
+this process: the pytest harness, H-07, where the PLC runs in the same process and ``/dev/shm`` may
+be restricted).
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Protocol
 
 from hli_server.adapters.host import ImagePort
 
 if TYPE_CHECKING:
     from hli_server.engine.hli import MachineHli
+    from hli_server.image import SignalRecorder
     from schemas.config import MachineConfig
 
-__all__ = ["ImageFactory", "RuntimeImage", "shared_memory_image"]
+__all__ = ["ImageFactory", "RuntimeImage", "memory_image", "shared_memory_image"]
 
 
 class RuntimeImage(ImagePort, Protocol):
@@ -30,6 +37,10 @@ class RuntimeImage(ImagePort, Protocol):
         """Mark closed for attached clients, unmap and unlink the segment. Idempotent."""
         ...
 
+    def recorder(self, st_paths: Iterable[str]) -> SignalRecorder:
+        """Samples ``st_paths`` after each publish (per-cycle traces, H-07)."""
+        ...
+
 
 ImageFactory = Callable[["MachineConfig", "str | None"], RuntimeImage]
 """``(config, name or None) -> image``; the image exists when this returns. ``None``: a unique name."""
@@ -43,4 +54,13 @@ def shared_memory_image(config: MachineConfig, name: str | None) -> RuntimeImage
     # replace_stale: a segment left by a crashed server of the same name is replaced; the image of a
     # running server never is (ProcessImage.create checks its pid)
     image: RuntimeImage = ProcessImage.create(build_layout(config), name=name, replace_stale=True)
+    return image
+
+
+def memory_image(config: MachineConfig, name: str | None) -> RuntimeImage:
+    """The image in a buffer of this process (no ``/dev/shm``): for a PLC in the same process."""
+    from hli_server.image import ProcessImage
+    from schemas.layout import build_layout
+
+    image: RuntimeImage = ProcessImage.in_memory(build_layout(config), name=name)
     return image

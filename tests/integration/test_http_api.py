@@ -1,5 +1,8 @@
 """The HTTP control API over a real socket: uvicorn on port 0 inside the runtime's loop, httpx as
-the client, the stepped clock for exact cycles (E-01, H-01, H-02, H-07)."""
+the client, the stepped clock for exact cycles (E-01, H-01, H-02, H-07).
+
+The server is the harness' (the ``hli`` fixture of the project's pytest plugin) with its HTTP door.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +15,8 @@ import pytest
 
 from hli_server.configuration import load_machine
 from hli_server.runtime import Runtime
-from schemas.config import ProgramEntry
+from hli_server.testing import Harness
+from schemas.config import MachineConfig, ProgramEntry
 from schemas.wire import HoldSource, ProgramState
 
 PROGRAM = "N10 G01 X20 Y10 F6000\nN20 G01 X0 Y0\nN30 M30\n"
@@ -20,14 +24,8 @@ OVERRIDE = "gpCh[0]^bahn_mc_control.override"
 
 
 @pytest.fixture
-async def runtime() -> AsyncIterator[Runtime]:
-    async with Runtime(load_machine(None), clock="stepped", http_port=0) as rt:
-        yield rt
-
-
-@pytest.fixture
-async def client(runtime: Runtime) -> AsyncIterator[httpx.AsyncClient]:
-    async with httpx.AsyncClient(base_url=runtime.http_url, timeout=10) as c:
+async def client(hli: Harness) -> AsyncIterator[httpx.AsyncClient]:
+    async with httpx.AsyncClient(base_url=hli.http_url, timeout=10) as c:
         yield c
 
 
@@ -46,8 +44,8 @@ def url_path(st_path: str) -> str:
 
 
 @pytest.mark.req("E-01")
-async def test_server_listens_on_the_port_it_was_given(runtime: Runtime, client: httpx.AsyncClient) -> None:
-    port = int(runtime.http_url.rsplit(":", 1)[1])
+async def test_server_listens_on_the_port_it_was_given(hli: Harness, client: httpx.AsyncClient) -> None:
+    port = int(hli.http_url.rsplit(":", 1)[1])
     assert port > 0
     r = await client.get("/api/state")
     assert r.status_code == 200
@@ -262,9 +260,9 @@ async def test_image_path_with_a_dot_instead_of_the_caret(client: httpx.AsyncCli
     assert r.json()["value"] is True
 
 
-async def test_layout_is_served(runtime: Runtime, client: httpx.AsyncClient) -> None:
+async def test_layout_is_served(hli: Harness, client: httpx.AsyncClient) -> None:
     layout = (await client.get("/api/layout")).json()
-    assert layout["layout_hash"] == runtime.layout.hash
+    assert layout["layout_hash"] == hli.layout.hash
     assert any(s["st_path"] == OVERRIDE + ".command_w" for s in layout["signals"])
 
 
@@ -274,12 +272,12 @@ async def test_layout_is_served(runtime: Runtime, client: httpx.AsyncClient) -> 
 
 
 @pytest.mark.req("A3-05")
-async def test_fault_injection(runtime: Runtime, client: httpx.AsyncClient) -> None:
+async def test_fault_injection(hli: Harness, client: httpx.AsyncClient) -> None:
     r = await client.post("/api/axes/X/faults", json={"friction": 0.5, "encoder_stuck": True})
     assert r.status_code == 200
     assert r.json()["friction"] == 0.5
     assert r.json()["gain_factor"] == 1.0
-    assert runtime.machine.axis("X").faults.encoder_stuck is True
+    assert hli.runtime.machine.axis("X").faults.encoder_stuck is True
     r = await client.post("/api/axes/X/faults", json={"gain_factor": 0.5})
     assert r.json()["friction"] == 0.5  # omitted fields keep their value
     assert (await client.get("/api/axes/X/faults")).json()["gain_factor"] == 0.5
@@ -299,7 +297,7 @@ async def test_fault_injection(runtime: Runtime, client: httpx.AsyncClient) -> N
     assert "X, Y, Z, X1, X2, Z1" in r.json()["detail"]
 
 
-async def test_faults_take_effect_in_the_position_loop(runtime: Runtime, client: httpx.AsyncClient) -> None:
+async def test_faults_take_effect_in_the_position_loop(client: httpx.AsyncClient) -> None:
     await client.post("/api/axes/Y/faults", json={"encoder_drift": 10.0})
     await step(client, 100)
     y = (await client.get("/api/state")).json()["axes"]["Y"]
@@ -342,22 +340,85 @@ async def test_openapi_is_published(client: httpx.AsyncClient) -> None:
     assert (await client.get("/docs")).status_code == 200
 
 
-async def test_select_a_program_given_by_path_reads_the_file(tmp_path: Path) -> None:
-    """Program table entries with ``path`` are read by the runtime when selected (the engine does no I/O)."""
+@pytest.fixture
+def program_file(tmp_path: Path) -> Path:
     nc = tmp_path / "file.nc"
     nc.write_text(PROGRAM, encoding="utf-8")
+    return nc
+
+
+@pytest.fixture
+def hli_machine(request: pytest.FixtureRequest) -> MachineConfig | None:
+    """The demo machine; with a program table entry read from a file for the test that asks for it."""
+    if "program_file" not in request.fixturenames:
+        return None
     config = load_machine(None).model_copy(deep=True)
-    config.channels[0].programs.append(ProgramEntry(number=7, name="from file", path=str(nc)))
-    async with (
-        Runtime(config, clock="stepped", http_port=0) as rt,
-        httpx.AsyncClient(base_url=rt.http_url) as c,
-    ):
-        r = await c.post("/api/channels/1/select", json={"number": 7})
-        assert r.status_code == 200, r.text
-        assert rt.machine.channel(1).program_text == PROGRAM
-        await c.post("/api/channels/1/start")
-        await step(c, 50)
-        assert rt.machine.axis("X").setpoint > 0.0
+    path = request.getfixturevalue("program_file")
+    config.channels[0].programs.append(ProgramEntry(number=7, name="from file", path=str(path)))
+    return config
+
+
+async def test_select_a_program_given_by_path_reads_the_file(
+    hli: Harness, client: httpx.AsyncClient, program_file: Path
+) -> None:
+    """Program table entries with ``path`` are read by the runtime when selected (the engine does no I/O)."""
+    r = await client.post("/api/channels/1/select", json={"number": 7})
+    assert r.status_code == 200, r.text
+    assert hli.runtime.machine.channel(1).program_text == PROGRAM
+    await client.post("/api/channels/1/start")
+    await step(client, 50)
+    assert hli.runtime.machine.axis("X").setpoint > 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# Per-cycle traces (H-07)
+# --------------------------------------------------------------------------------------------
+
+TRACED = ["gpAx[0].ipo_state.cmd_pos_r", "gpCh[0]^bahn_state.program_state_r", f"{OVERRIDE}.enable_w"]
+
+
+@pytest.mark.req("H-07")
+async def test_step_with_a_trace_returns_the_signals_in_every_cycle(
+    hli: Harness, client: httpx.AsyncClient
+) -> None:
+    await client.post("/api/channels/1/program", json={"text": PROGRAM})
+    await client.post("/api/channels/1/start")
+    await step(client, 3)
+    await client.put(url_path(f"{OVERRIDE}.command_w"), json={"value": 900})
+    await client.put(url_path(f"{OVERRIDE}.enable_w"), json={"value": True})
+    with hli.trace("gpAx[0]^ipo_state.cmd_pos_r", f"{OVERRIDE}.enable_w") as recording:
+        r = await client.post("/api/step", json={"cycles": 40, "trace": TRACED})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert (body["cycles"], body["cycle"]) == (40, 43)
+    trace = body["trace"]
+    x, state, enabled = (trace["values"][p] for p in ("gpAx[0]^ipo_state.cmd_pos_r", *TRACED[1:]))
+    assert trace["signals"] == ["gpAx[0]^ipo_state.cmd_pos_r", *TRACED[1:]]  # the dot spelling normalised
+    assert trace["cycles"] == list(range(4, 44))
+    assert len(x) == len(state) == len(enabled) == 40
+    assert x == sorted(x)
+    assert x[-1] > x[0] > 0
+    assert set(state) == {ProgramState.RUNNING}
+    assert enabled == [True] * 40  # a PLC->CNC field: as each cycle latched it
+    # the same cycles as the harness recorded them
+    recorded = recording.trace()
+    assert recorded.cycles == trace["cycles"]
+    assert recorded["gpAx[0]^ipo_state.cmd_pos_r"].tolist() == x
+
+
+@pytest.mark.req("H-07")
+async def test_a_trace_of_an_unknown_signal_or_too_many_values_runs_no_cycle(
+    client: httpx.AsyncClient,
+) -> None:
+    r = await client.post("/api/step", json={"cycles": 5, "trace": ["gpAx[0]^ipo_state.cmd_posr"]})
+    assert r.status_code == 404
+    assert "did you mean gpAx[0]^ipo_state.cmd_pos_r" in r.json()["detail"]
+    r = await client.post("/api/step", json={"cycles": 1_000_000, "trace": TRACED})
+    assert r.status_code == 422
+    assert "more than the 2,000,000 one answer may carry" in r.text
+    r = await client.post("/api/step", json={"cycles": 1, "trace": ["gpAx[0]^ipo_state.cmd_pos_r"] * 65})
+    assert r.status_code == 422
+    assert (await client.get("/api/state")).json()["cycle"] == 0
 
 
 # --------------------------------------------------------------------------------------------
@@ -411,7 +472,7 @@ async def test_an_error_abort_reads_aborted_until_reset_and_a_new_program_loads(
 
 @pytest.mark.req("E-03", "E-04", "H-01")
 async def test_a_start_while_the_reset_still_brakes_is_refused_and_nothing_restarts_by_itself(
-    runtime: Runtime, client: httpx.AsyncClient
+    client: httpx.AsyncClient,
 ) -> None:
     """Issue 9, defect 2: reset while moving, start one cycle later: the start is refused with warning
     911022 (the axes still brake), the program state stays 0, and X never moves again by itself."""

@@ -30,9 +30,9 @@ from pymodbus.pdu import ModbusPDU
 from hli_server.adapters.modbus import ModbusAdapter
 from hli_server.configuration import load_machine
 from hli_server.image import ProcessImage
-from hli_server.runtime import Runtime
+from hli_server.testing import Harness
 from schemas.config import MachineConfig
-from schemas.layout import Direction, Layout, ModbusTable, build_layout
+from schemas.layout import MODBUS_SNAPSHOT_REGISTER, Direction, Layout, ModbusTable, build_layout
 from schemas.wire import ProgramState
 
 pytestmark = pytest.mark.req("H-03")
@@ -640,53 +640,39 @@ async def test_stop_closes_the_listener_and_the_connections(image: ProcessImage,
 
 
 @pytest.fixture
-async def runtime(demo: MachineConfig) -> AsyncIterator[Runtime]:
-    rt = Runtime(
-        demo,
-        clock="stepped",
-        http_port=None,
-        image_name=image_name("rt"),
-        adapters=[("modbus", {"port": 0})],
-    )
-    async with rt:
-        yield rt
-
-
-@pytest.fixture
-async def rt_client(runtime: Runtime) -> AsyncIterator[AsyncModbusTcpClient]:
-    adapter = runtime.adapter("modbus")
+async def rt_client(hli: Harness) -> AsyncIterator[AsyncModbusTcpClient]:
+    """A client of the harness' Modbus door (the adapter by its registry name, on a free port)."""
+    adapter = hli.serve("modbus")
     assert isinstance(adapter, ModbusAdapter)
-    assert any(f":{adapter.port} " in line for line in runtime.endpoints())
+    assert any(f":{adapter.port} " in line for line in hli.runtime.endpoints())
     c = AsyncModbusTcpClient("127.0.0.1", port=adapter.port or 0, timeout=2, retries=0)
     assert await c.connect()
     yield c
     c.close()
 
 
-async def test_a_write_is_latched_at_the_next_cycle(
-    runtime: Runtime, rt_client: AsyncModbusTcpClient
-) -> None:
-    layout = runtime.layout
-    unit = runtime.machine.hli.axes[0].ipo_mc_control.dyn_pos_limit_low
+async def test_a_write_is_latched_at_the_next_cycle(hli: Harness, rt_client: AsyncModbusTcpClient) -> None:
+    layout = hli.layout
+    unit = hli.runtime.machine.hli.axes[0].ipo_mc_control.dyn_pos_limit_low
     ok(await rt_client.write_registers(addr(layout, HOLDING_DINT), regs32(-123_456)))
     ok(await rt_client.write_coil(addr(layout, COIL), True))
     assert (unit.command_w, unit.enable_w) == (0, False)  # not before the cycle
-    await runtime.step(1)
+    hli.step(1)
     assert (unit.command_w, unit.enable_w) == (-123_456, True)
 
 
-async def test_input_registers_follow_the_engine(runtime: Runtime, rt_client: AsyncModbusTcpClient) -> None:
-    layout = runtime.layout
-    channel = runtime.machine.channel(1)
+async def test_input_registers_follow_the_engine(hli: Harness, rt_client: AsyncModbusTcpClient) -> None:
+    layout = hli.layout
+    channel = hli.runtime.machine.channel(1)
     channel.load_program("N10 G01 X-20 F6000\nN20 M30\n", "p")
     channel.request_start()
     for _ in range(3):
-        await runtime.step(37)
+        hli.step(37)
         cycle = ok(await rt_client.read_input_registers(addr(layout, INPUT_UDINT), count=2)).registers
-        assert rt_client.convert_from_registers(cycle, rt_client.DATATYPE.UINT32) == runtime.machine.cycle
+        assert rt_client.convert_from_registers(cycle, rt_client.DATATYPE.UINT32) == hli.runtime.machine.cycle
         pos = ok(await rt_client.read_input_registers(addr(layout, "gpAx[0]^ipo_state.cmd_pos_r"), count=2))
         value = int32(pos.registers)
-        assert value == runtime.image.read("gpAx[0]^ipo_state.cmd_pos_r")
+        assert value == hli.runtime.image.read("gpAx[0]^ipo_state.cmd_pos_r")
         assert value < 0
         moving = ok(await rt_client.read_discrete_inputs(addr(layout, "gpAx[0]^ipo_state.moving_r"), count=1))
         assert moving.bits[0] is True
@@ -699,26 +685,26 @@ async def test_input_registers_follow_the_engine(runtime: Runtime, rt_client: As
 
 @pytest.mark.req("H-03", "C43-02", "C43-03", "C43-04")
 async def test_dyn_pos_limit_set_over_modbus_stops_the_axis(
-    runtime: Runtime, rt_client: AsyncModbusTcpClient
+    hli: Harness, rt_client: AsyncModbusTcpClient
 ) -> None:
-    layout = runtime.layout
+    layout = hli.layout
     high = "gpAx[0]^ipo_mc_control.dyn_pos_limit_high"
     limit = 300_000  # 30 mm in 0.1 µm
     # the PLC sets the limit over Modbus: command_w first, then enable_w (the image's write order rule)
     ok(await rt_client.write_registers(addr(layout, f"{high}.command_w"), regs32(limit)))
     ok(await rt_client.write_coil(addr(layout, f"{high}.enable_w"), True))
-    await runtime.step(5)
+    hli.step(5)
     state = addr(layout, f"{high}.state_r")
     registers = ok(await rt_client.read_input_registers(state, count=2)).registers
     assert int32(registers) == 2  # ACTIVE
 
-    channel = runtime.machine.channel(1)
+    channel = hli.runtime.machine.channel(1)
     channel.load_program("N10 G01 X100 F6000\nN20 M30\n", "p")
     channel.request_start()
-    await runtime.step(3000)  # 3 s: without the limit X would reach 100 mm long before
+    hli.step(3000)  # 3 s: without the limit X would reach 100 mm long before
     pos = ok(await rt_client.read_input_registers(addr(layout, "gpAx[0]^ipo_state.cmd_pos_r"), count=2))
     x = int32(pos.registers)
-    one_cycle = 6000 / 60 * runtime.t_a * 10_000  # F6000 mm/min for one cycle, in 0.1 µm
+    one_cycle = 6000 / 60 * hli.t_a * 10_000  # F6000 mm/min for one cycle, in 0.1 µm
     assert limit - one_cycle <= x <= limit + one_cycle  # C43-06: passed by at most one cycle
     registers = ok(await rt_client.read_input_registers(state, count=2)).registers
     assert int32(registers) == 4  # ACTIVE_BRAKE
@@ -728,9 +714,71 @@ async def test_dyn_pos_limit_set_over_modbus_stops_the_axis(
 
     # C43-07: the PLC lifts the limit over Modbus and the program continues to its end
     ok(await rt_client.write_coil(addr(layout, f"{high}.enable_w"), False))
-    await runtime.step(3000)
+    hli.step(3000)
     pos = ok(await rt_client.read_input_registers(addr(layout, "gpAx[0]^ipo_state.cmd_pos_r"), count=2))
     assert int32(pos.registers) == 1_000_000
+
+
+# ================================================================================================
+# Consistent snapshots: the snapshot register (H-03, docs/modbus.md)
+# ================================================================================================
+
+
+def uint32(registers: Sequence[int]) -> int:
+    value = AsyncModbusTcpClient.convert_from_registers(list(registers), AsyncModbusTcpClient.DATATYPE.UINT32)
+    assert isinstance(value, int)
+    return value
+
+
+@pytest.mark.req("H-03")
+async def test_the_snapshot_register_freezes_one_connections_inputs_on_one_publish(
+    hli: Harness, rt_client: AsyncModbusTcpClient
+) -> None:
+    layout = hli.layout
+    other = AsyncModbusTcpClient("127.0.0.1", port=hli.port("modbus"), timeout=2, retries=0)
+    assert await other.connect()
+    cycle = addr(layout, INPUT_UDINT)
+    moving = addr(layout, "gpAx[0]^ipo_state.moving_r")
+    try:
+        hli.step(5)
+        ok(await rt_client.write_register(MODBUS_SNAPSHOT_REGISTER, 1))  # freeze: cycle 5
+        hli.operator.load_program(1, "N10 G01 X10 F6000\nN20 M30\n")
+        hli.operator.start(1)
+        hli.step(7)
+        assert uint32(ok(await rt_client.read_input_registers(cycle, count=2)).registers) == 5
+        assert ok(await rt_client.read_discrete_inputs(moving, count=1)).bits[0] is False
+        assert uint32(ok(await other.read_input_registers(cycle, count=2)).registers) == 12  # not frozen
+        assert ok(await other.read_discrete_inputs(moving, count=1)).bits[0] is True
+        # the PLC's own outputs (coils, holding registers) stay live on the frozen connection
+        ok(await other.write_registers(addr(layout, HOLDING_DINT), regs32(-77)))
+        assert (
+            int32(ok(await rt_client.read_holding_registers(addr(layout, HOLDING_DINT), count=2)).registers)
+            == -77
+        )
+        ok(await rt_client.write_register(MODBUS_SNAPSHOT_REGISTER, 1))  # a new copy: cycle 12
+        assert uint32(ok(await rt_client.read_input_registers(cycle, count=2)).registers) == 12
+        ok(await rt_client.write_register(MODBUS_SNAPSHOT_REGISTER, 0))  # live again
+        hli.step(1)
+        assert uint32(ok(await rt_client.read_input_registers(cycle, count=2)).registers) == 13
+        assert exception_code(await rt_client.write_register(MODBUS_SNAPSHOT_REGISTER, 2)) == 0x03
+    finally:
+        other.close()
+
+
+@pytest.mark.req("H-03")
+async def test_a_frozen_connection_that_closes_leaves_nothing_behind(hli: Harness) -> None:
+    adapter = hli.serve("modbus")
+    assert isinstance(adapter, ModbusAdapter)
+    first = await Raw.connect(hli.port("modbus"))
+    assert await first.ask(1, struct.pack(">BHH", 6, MODBUS_SNAPSHOT_REGISTER, 1)) == struct.pack(
+        ">BHH", 6, MODBUS_SNAPSHOT_REGISTER, 1
+    )
+    await first.close()
+    hli.step(3)
+    second = await Raw.connect(hli.port("modbus"))
+    answer = await second.ask(2, read_pdu(4, addr(hli.layout, INPUT_UDINT), 2))
+    assert struct.unpack(">BBI", answer) == (4, 4, 3)  # a new connection reads live
+    await second.close()
 
 
 # ================================================================================================

@@ -413,6 +413,7 @@ async def test_second_process_writes_dyn_pos_limit_and_sees_state_r_within_two_c
 # --------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.req("H-01", "E-01")
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_run_process_shuts_down_cleanly_on_signal(sig: signal.Signals) -> None:
@@ -438,6 +439,7 @@ def test_run_process_shuts_down_cleanly_on_signal(sig: signal.Signals) -> None:
         pass
 
 
+@pytest.mark.slow
 @pytest.mark.req("E-01")
 @pytest.mark.parametrize(
     ("clock", "event_loop"), [("free", "select"), ("realtime", "select"), ("realtime", "default")]
@@ -470,6 +472,7 @@ def test_run_with_cycles_stops_by_itself(clock: str, event_loop: str) -> None:
         assert "lateness p50" in result.stdout
 
 
+@pytest.mark.slow
 def test_run_reports_a_port_in_use_with_exit_2() -> None:
     with socket.socket() as busy:
         busy.bind(("127.0.0.1", 0))
@@ -499,6 +502,7 @@ def test_run_reports_a_bad_config_with_exit_2(tmp_path: Path) -> None:
     assert "missing.toml" in result.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.req("E-07", "H-03")
 def test_run_starts_the_adapters_the_machine_file_names(tmp_path: Path) -> None:
     """``[[adapters]]`` in the machine file: Modbus with the file's options; an --adapter of the

@@ -24,6 +24,7 @@ from plc_clients.shm import ImageClient
 from schemas import image_format as fmt
 from schemas.layout import Direction, ReadOnlySignalError, SignalValueError, build_layout
 from tests.integration import _shm_children as children
+from tests.machines import demo_config, distinct_values
 
 P2C, C2P = Direction.PLC_TO_CNC, Direction.CNC_TO_PLC
 SPAWN = multiprocessing.get_context("spawn")
@@ -32,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.fixture(scope="module")
 def layout():
-    return build_layout(children.demo_config())
+    return build_layout(demo_config())
 
 
 @pytest.fixture
@@ -55,14 +56,14 @@ def _dev_shm(name: str) -> Path:
 @pytest.mark.req("H-01", "H-08")
 def test_every_field_written_through_the_layout_reads_back_byte_for_byte_in_a_second_process(layout, image):
     machine = _machine(layout)
-    c2p_values = children.distinct_values(layout, C2P, salt=1)
+    c2p_values = distinct_values(layout, C2P, salt=1)
     for s in layout.half(C2P):
         set_engine_value(machine, s, c2p_values[s.st_path])
     image.publish_from(machine, cycle=4242)
-    p2c_values = children.distinct_values(layout, P2C, salt=2)
+    p2c_values = distinct_values(layout, P2C, salt=2)
     for st_path, value in p2c_values.items():
         image.write(st_path, value)
-    plc_writes = children.distinct_values(layout, P2C, salt=5)
+    plc_writes = distinct_values(layout, P2C, salt=5)
 
     parent, child = SPAWN.Pipe()
     proc = SPAWN.Process(target=children.read_everything, args=(image.name, child, plc_writes))
@@ -104,6 +105,7 @@ def _uniform_setter(layout, machine):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.req("H-01")
 @pytest.mark.parametrize("writer", ["publish_from", "field_by_field", "no_protocol"])
 def test_a_concurrent_reader_never_sees_a_half_written_cycle(layout, image, writer):
@@ -249,7 +251,7 @@ def test_raw_writes_into_the_plc_half_check_every_value_first(layout, image):
 
 @pytest.mark.req("H-01")
 def test_attach_checks_magic_version_and_hash_with_clear_errors(layout, image):
-    other = build_layout(children.demo_config(extra_axes=1))
+    other = build_layout(demo_config(extra_axes=1))
     with pytest.raises(fmt.ImageMismatchError, match="another machine configuration"):
         ImageClient.attach(image.name, expect=other)
     with ImageClient.attach(image.name, expect=layout.hash) as client:
@@ -346,7 +348,7 @@ def test_a_refused_second_server_leaves_the_running_servers_image_alone(layout, 
         import sys
         from hli_server.image import ProcessImage
         from schemas.layout import build_layout
-        from tests.integration._shm_children import demo_config
+        from tests.machines import demo_config
         try:
             ProcessImage.create(build_layout(demo_config()), {image.name!r}, replace_stale=True)
         except FileExistsError as exc:

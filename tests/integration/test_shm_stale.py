@@ -24,14 +24,14 @@ from hli_server.image.shm import pid_namespace, process_start_ticks
 from plc_clients.shm import ImageClient
 from schemas import image_format as fmt
 from schemas.layout import Layout, build_layout
-from tests.integration import _shm_children as children
+from tests.machines import demo_config
 
 FOREIGN_BYTES = b"another program's data, not an image " * 100
 
 
 @pytest.fixture(scope="module")
 def layout() -> Layout:
-    return build_layout(children.demo_config())
+    return build_layout(demo_config())
 
 
 @pytest.fixture
@@ -195,7 +195,7 @@ def test_a_stale_image_whose_pid_now_belongs_to_another_process_is_replaced(
 
 @pytest.mark.req("H-01")
 def test_run_replaces_a_stale_image_whose_pid_was_reused(segment_name: str, other_process: int) -> None:
-    layout = build_layout(children.demo_config())
+    layout = build_layout(demo_config())
     make_segment(
         segment_name,
         image_bytes(layout, pid=other_process, start=process_start_ticks(other_process) - 1, pid_ns=0),

@@ -110,6 +110,7 @@ def obj(m: Machine, a_id: int, element: int) -> bool | int | float:
 ACTIVE, VELOCITY, BRAKE_DIST, OFFSET, DECEL = 0x0234, 0x0244, 0x0245, 0x0246, 0x0247
 
 
+@pytest.mark.slow
 @pytest.mark.req("C3-01", "C3-08", "C3-10")
 def test_pair_stops_when_distance_less_braking_distance_falls_below_the_minimum():
     m = one_channel()
@@ -374,6 +375,7 @@ def test_drive_error_of_one_axis_stops_both_channels_with_p_axis_00044(decelerat
     assert m.channel(1).state == ProgramState.ABORTED
 
 
+@pytest.mark.slow
 @pytest.mark.req("C3-01", "C3-02")
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(

@@ -375,6 +375,7 @@ def test_limit_changes_are_adopted_every_p_chan_00874_cycles():
     assert waited == 3
 
 
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     targets=st.lists(

@@ -36,7 +36,7 @@ from schemas.layout import (
     UnknownSignalError,
     build_layout,
 )
-from tests.integration._shm_children import demo_config, distinct_values
+from tests.machines import demo_config, distinct_values
 
 PYTHON_TYPE = {SignalType.BOOL: bool, SignalType.DINT: int, SignalType.UDINT: int, SignalType.LREAL: float}
 UNIT_ORDER = ["request_r", "enable_w", "command_w", "state_r"]

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, model_validator
 
 __all__ = [
     "MAX_STEP",
+    "MAX_TRACE_SIGNALS",
+    "MAX_TRACE_VALUES",
     "AcceptedBody",
     "FaultsBody",
     "FeedholdBody",
@@ -23,6 +25,10 @@ __all__ = [
 
 MAX_STEP = 10_000_000
 """Most cycles one ``POST /api/step`` may ask for (10 000 s of simulated time at 1 ms)."""
+MAX_TRACE_SIGNALS = 64
+"""Most signals one ``POST /api/step`` may trace."""
+MAX_TRACE_VALUES = 2_000_000
+"""Most traced values (cycles x signals) in one answer (tens of MB of JSON)."""
 
 
 class _Body(BaseModel):
@@ -61,6 +67,23 @@ class JogBody(_Body):
 
 class StepBody(_Body):
     cycles: int = Field(default=1, ge=1, le=MAX_STEP, description="cycles of T_A to run")
+    trace: list[str] = Field(
+        default_factory=list,
+        max_length=MAX_TRACE_SIGNALS,
+        description="ST paths (either half) whose value in every stepped cycle the answer carries "
+        "(`trace`: cycles and one list of values per signal); at most "
+        f"{MAX_TRACE_SIGNALS} signals and {MAX_TRACE_VALUES:,} values (cycles x signals) per request",
+    )
+
+    @model_validator(mode="after")
+    def _bounded(self) -> StepBody:
+        if self.trace and self.cycles * len(self.trace) > MAX_TRACE_VALUES:
+            raise ValueError(
+                f"{self.cycles} cycles x {len(self.trace)} traced signals = "
+                f"{self.cycles * len(self.trace):,} values, more than the {MAX_TRACE_VALUES:,} one answer "
+                "may carry: step in smaller parts"
+            )
+        return self
 
 
 class FaultsBody(_Body):

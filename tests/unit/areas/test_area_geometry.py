@@ -107,6 +107,7 @@ def test_point_classification_matches_shapely(pts: list[tuple[float, float]], x:
 
 
 # --- lines ------------------------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.req("C14-14", "C14-15")
 @settings(max_examples=300, deadline=None)
 @given(
@@ -248,6 +249,7 @@ def paths(draw: st.DrawFn) -> LineSegment | ArcSegment:
     return ArcSegment(start, end, (0, 1), (cx, cy), r, a0, sweep)
 
 
+@pytest.mark.slow
 @pytest.mark.req("C14-14", "C14-15")
 @settings(max_examples=200, deadline=None)
 @given(st.lists(regions, min_size=0, max_size=2), st.lists(regions, min_size=0, max_size=2), paths())
@@ -294,6 +296,7 @@ def test_line_and_arc_entry_points_match_the_sampling_oracle(
 
 
 # --- 3D: the height band ---------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.req("C14-06", "C14-15")
 @settings(max_examples=300, deadline=None)
 @given(

@@ -1,0 +1,550 @@
+"""The integration harness: an in-process hli-server with the stepped clock, for tests (H-07).
+
+:class:`Harness` starts the real server (the :class:`~hli_server.runtime.Runtime` with the engine,
+the process image and any adapter) in this process, on free ports, with the stepped clock, and
+gives a test what it needs to drive it cycle by cycle::
+
+    with Harness() as hli:                              # the demo machine; Harness("my.toml") for yours
+        hli.operator.load_program(1, "N10 G01 X50 F6000\\nN20 M30\\n")
+        hli.operator.start(1)
+        hli.run_until(lambda: hli.image["gpCh[0]^bahn_state.program_state_r"] == 4, max_cycles=2000)
+        assert hli.image["gpAx[0]^ipo_state.cmd_pos_r"] == 500_000
+
+The pytest plugin (:mod:`hli_server.testing.plugin`) hands out a started harness as the ``hli``
+fixture and a PLC transport to it as ``plc_transport``.
+
+**Threads.** The server runs its event loop in a thread of its own, as if it were another device:
+every door (shared memory, Modbus, ADS, HTTP) answers while the test's thread waits in a blocking
+client, and a test may be a plain function or a coroutine. The engine is stepped only from the
+server's loop (design.md, point 1): :meth:`Harness.step` hands the request to that loop and waits
+for it. Between steps the server does nothing but answer its doors, so the test may read the
+machine (``hli.runtime.machine``) directly; requests to the operator panel (``hli.operator``) are
+handed to the server's loop like the steps.
+
+**Speed.** :meth:`Harness.run_until` runs whole stretches inside the server's loop: with a PLC task
+on a non-blocking transport (shared memory) each cycle is the PLC task's cycle and one engine cycle,
+without a thread hand-over. A PLC on a blocking transport (Modbus, ADS: a client waiting for a
+socket) runs in the test's thread, one hand-over per cycle.
+
+**Image.** ``image="memory"`` (the default) keeps the process image in a buffer of this process:
+no ``/dev/shm`` (the harness runs where shared memory is restricted) and nothing to leak. The PLC's
+shared-memory transport reads the same bytes with the same protocol. ``image="shm"`` puts it into
+POSIX shared memory, for a PLC in another process.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import inspect
+import logging
+import os
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Coroutine, Iterable, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal, TypeVar, cast
+
+from schemas.layout import Direction, Layout
+
+if TYPE_CHECKING:
+    from hli_server.adapters.host import OperatorPort, Value
+    from hli_server.adapters.registry import Adapter
+    from hli_server.runtime import AdapterSpec, Recording, Runtime, RuntimeImage
+    from plc_clients.task import PlcTask
+    from plc_clients.transports import Transport
+    from schemas.config import MachineConfig
+
+__all__ = ["ConditionNotMetError", "Harness", "HarnessError", "ImageView", "load_machine_spec"]
+
+logger = logging.getLogger(__name__)
+
+T = TypeVar("T")
+
+REPORT_CYCLES = 8
+"""Cycles shown in the report of a condition that never came."""
+YIELD_EVERY_S = 0.005
+"""A long :meth:`Harness.run_until` lets the server's doors answer at least this often [s]."""
+
+_P2C, _C2P = Direction.PLC_TO_CNC, Direction.CNC_TO_PLC
+
+
+class HarnessError(RuntimeError):
+    """The harness cannot do what was asked (not started, stopped, used from the wrong thread)."""
+
+
+class ConditionNotMetError(AssertionError):
+    """:meth:`Harness.run_until` ran ``max_cycles`` cycles without the condition becoming true.
+
+    An ``AssertionError``: pytest reports it as a failed test, with the report of the last cycles
+    (the signals that changed in them, the channels' state, the alarms) as its message."""
+
+
+@functools.lru_cache(maxsize=1)
+def _demo_machine() -> MachineConfig:
+    from hli_server.configuration import load_machine
+
+    return load_machine(None)
+
+
+def load_machine_spec(machine: Any, base: Path | None = None) -> MachineConfig:
+    """A :class:`MachineConfig` from a configuration, a machine file (relative paths against
+    ``base``, else the working directory) or None (the built-in demo machine, loaded once)."""
+    from hli_server.configuration import load_machine
+    from schemas.config import MachineConfig
+
+    if machine is None:
+        return _demo_machine()
+    if isinstance(machine, MachineConfig):
+        return machine
+    path = Path(os.fspath(machine))
+    if not path.is_absolute() and base is not None and (base / path).exists():
+        path = base / path
+    return load_machine(path)
+
+
+class ImageView:
+    """The process image by ST path, as the test sees it: ``hli.image[path]``, ``hli.image[path] = v``.
+
+    Reads give CNC->PLC fields from the newest publish and PLC->CNC fields as they are now; a write
+    (PLC->CNC fields only, H-02) is latched at the start of the next cycle, as a PLC's is."""
+
+    def __init__(self, image: RuntimeImage) -> None:
+        self._image = image
+
+    @property
+    def layout(self) -> Layout:
+        return self._image.layout
+
+    @property
+    def name(self) -> str:
+        return self._image.name
+
+    def __getitem__(self, st_path: str) -> Value:
+        return self._image.read(st_path)
+
+    def __setitem__(self, st_path: str, value: Value) -> None:
+        self._image.write(st_path, value)
+
+    def read(self, st_path: str) -> Value:
+        return self._image.read(st_path)
+
+    def write(self, st_path: str, value: Value) -> None:
+        self._image.write(st_path, value)
+
+    def snapshot(self) -> dict[str, Value]:
+        """Every CNC->PLC field of the newest publish (and ``"cycle"``: its cycle)."""
+        cycle, data = self._image.snapshot()
+        values: dict[str, Value] = self._image.layout.unpack(_C2P, data)
+        values["cycle"] = cycle
+        return values
+
+    def outputs(self) -> dict[str, Value]:
+        """Every PLC->CNC field as it is now."""
+        values: dict[str, Value] = self._image.layout.unpack(_P2C, self._image.read_half(_P2C))
+        return values
+
+    def __repr__(self) -> str:
+        return f"ImageView({self._image.name!r})"
+
+
+class _OperatorInLoop:
+    """The operator panel with every call handed to the server's loop (a thin proxy)."""
+
+    def __init__(self, harness: Harness, operator: OperatorPort) -> None:
+        self._harness = harness
+        self._operator = operator
+
+    def __getattr__(self, name: str) -> Any:
+        attr = getattr(self._operator, name)
+        if not callable(attr):
+            return attr
+
+        @functools.wraps(attr)
+        def call(*args: Any, **kwargs: Any) -> Any:
+            return self._harness._call_soon(functools.partial(attr, *args, **kwargs))
+
+        return call
+
+    def __repr__(self) -> str:
+        return f"<operator panel of {self._harness!r}>"
+
+
+class Harness:
+    """An in-process hli-server with the stepped clock (H-07); see the module docstring.
+
+    ``machine``: a :class:`MachineConfig`, a machine file or None (the demo machine). ``image``:
+    ``"memory"`` (default) or ``"shm"``. ``adapters``: doors to open at start (``"http"``,
+    ``("modbus", {"word_order": "CDAB"})``; ports default to free ones); :meth:`serve` opens more
+    later. ``timeout_s`` bounds every hand-over to the server (a hung server fails the test instead
+    of hanging it).
+    """
+
+    def __init__(
+        self,
+        machine: Any = None,
+        *,
+        image: Literal["memory", "shm"] = "memory",
+        image_name: str | None = None,
+        adapters: Iterable[AdapterSpec] = (),
+        bind: str = "127.0.0.1",
+        base: Path | None = None,
+        timeout_s: float = 120.0,
+    ) -> None:
+        if image not in ("memory", "shm"):
+            raise ValueError(f"image={image!r}: use 'memory' (a buffer of this process) or 'shm' (/dev/shm)")
+        self.config = load_machine_spec(machine, base)
+        self.image_kind = image
+        self.image_name = image_name
+        self.bind = bind
+        self.timeout_s = timeout_s
+        self._adapter_specs = [_with_free_port(spec) for spec in adapters]
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._runtime: Runtime | None = None
+        self._image: ImageView | None = None
+        self._operator: _OperatorInLoop | None = None
+        self._transports: list[Transport] = []
+        self._stopped = False
+
+    # --- life cycle ---------------------------------------------------------------------------
+    def start(self) -> Harness:
+        """Start the server thread, the runtime and the adapters; returns ``self``."""
+        if self._loop is not None:
+            raise HarnessError("the harness was started already; make a new Harness to run again")
+        loop = asyncio.new_event_loop()
+        self._loop = loop
+        ready = threading.Event()
+
+        def serve() -> None:
+            asyncio.set_event_loop(loop)
+            loop.call_soon(ready.set)
+            loop.run_forever()
+
+        self._thread = threading.Thread(target=serve, name="hli-harness-server", daemon=True)
+        self._thread.start()
+        ready.wait(self.timeout_s)
+        try:
+            self._runtime = self._call(self._start_runtime())
+        except BaseException:  # the runtime undid its own start; end the thread too
+            self._stopped = True
+            self._shutdown_loop()
+            raise
+        image = self._runtime.image
+        self._image = ImageView(image)
+        self._operator = _OperatorInLoop(self, self._runtime.operator)
+        logger.info("harness started: %s", "; ".join(self._runtime.endpoints()))
+        return self
+
+    async def _start_runtime(self) -> Runtime:
+        from hli_server.runtime import Runtime, memory_image, shared_memory_image
+
+        runtime = Runtime(
+            self.config,
+            clock="stepped",
+            bind=self.bind,
+            http_port=None,
+            image_name=self.image_name,
+            adapters=self._adapter_specs,
+            image_factory=memory_image if self.image_kind == "memory" else shared_memory_image,
+        )
+        await runtime.start()
+        return runtime
+
+    def stop(self) -> None:
+        """Close the transports it opened, stop the runtime (adapters, image), end the thread."""
+        if self._stopped:
+            return
+        self._stopped = True
+        errors: list[BaseException] = []
+        for transport in reversed(self._transports):
+            try:
+                transport.close()
+            except Exception as exc:  # every door is closed, whatever one of them does
+                errors.append(exc)
+        self._transports.clear()
+        if self._runtime is not None and self._loop is not None:
+            try:
+                self._call(self._runtime.stop())
+            except BaseException as exc:
+                errors.append(exc)
+        self._shutdown_loop()
+        if errors:
+            raise errors[0]
+
+    def _shutdown_loop(self) -> None:
+        loop, thread = self._loop, self._thread
+        if loop is None or thread is None or loop.is_closed():
+            return
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(self.timeout_s)
+        if thread.is_alive():  # pragma: no cover - a hung server
+            raise HarnessError(f"the server thread did not end within {self.timeout_s} s")
+        loop.run_until_complete(loop.shutdown_asyncgens())
+        loop.close()
+
+    def __enter__(self) -> Harness:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def __repr__(self) -> str:
+        state = "stopped" if self._stopped else f"cycle {self.cycle}" if self._runtime else "new"
+        return f"Harness({self.config.name!r}, {self.image_kind} image, {state})"
+
+    # --- hand-over to the server's loop ------------------------------------------------------------
+    def _in_server_thread(self) -> bool:
+        return threading.current_thread() is self._thread
+
+    def _loop_or_raise(self) -> asyncio.AbstractEventLoop:
+        if self._loop is None or self._stopped:
+            raise HarnessError("the harness does not run (start() it, or it was stopped)")
+        return self._loop
+
+    def _call(self, coro: Coroutine[Any, Any, T]) -> T:
+        """Run ``coro`` in the server's loop and wait for its result (bounded by ``timeout_s``)."""
+        loop = self._loop
+        if loop is None:
+            coro.close()
+            raise HarnessError("the harness does not run (start() it, or it was stopped)")
+        if self._in_server_thread():
+            coro.close()
+            raise HarnessError(
+                "step() and run_until() cannot be called from inside a condition or a PLC program "
+                "that the harness is running (they run in the server's thread)"
+            )
+        future = asyncio.run_coroutine_threadsafe(coro, loop)
+        try:
+            return future.result(self.timeout_s)
+        except TimeoutError:
+            future.cancel()
+            raise HarnessError(
+                f"the server did not answer within {self.timeout_s} s (a hung cycle or adapter?)"
+            ) from None
+
+    def _call_soon(self, fn: Callable[[], T]) -> T:
+        """Call ``fn`` in the server's loop (directly when already there) and return its result."""
+        if self._in_server_thread():
+            return fn()
+
+        async def run() -> T:
+            return fn()
+
+        return self._call(run())
+
+    # --- what the test sees ------------------------------------------------------------------------
+    @property
+    def runtime(self) -> Runtime:
+        """The server itself: read it between steps; change the machine through :attr:`operator`."""
+        if self._runtime is None:
+            raise HarnessError("the harness is not started (use it as a context manager, or start())")
+        return self._runtime
+
+    @property
+    def layout(self) -> Layout:
+        return self.runtime.image.layout
+
+    @property
+    def cycle(self) -> int:
+        """The machine's cycle counter (cycles run so far)."""
+        return self.runtime.machine.cycle
+
+    @property
+    def t_a(self) -> float:
+        """The interpolation cycle time [s]."""
+        return self.runtime.t_a
+
+    @property
+    def image(self) -> ImageView:
+        """The process image by ST path (``hli.image["gpAx[0]^ipo_state.cmd_pos_r"]``)."""
+        if self._image is None:
+            raise HarnessError("the harness is not started")
+        return self._image
+
+    @property
+    def operator(self) -> OperatorPort:
+        """The operator panel (load/select/start/reset/feedhold/mode/jog/override/reference/faults/
+        snapshot/alarms): what the HTTP API offers, without HTTP. Requests are latched by the
+        channel at the next cycle."""
+        if self._operator is None:
+            raise HarnessError("the harness is not started")
+        return cast("OperatorPort", self._operator)
+
+    def step(self, cycles: int = 1) -> int:
+        """Run ``cycles`` cycles now; returns the machine's cycle counter."""
+        self._loop_or_raise()
+        return self._call(self.runtime.step(cycles))
+
+    def trace(self, *signals: str) -> Recording:
+        """Record ``signals`` (ST paths) in every cycle from now on, until the recording's
+        ``stop()`` or the end of a ``with`` block; ``recording.trace()[path]`` is a numpy array."""
+        self._loop_or_raise()
+        return self._call_soon(lambda: self.runtime.record(signals))
+
+    # --- doors ------------------------------------------------------------------------------------
+    def serve(self, adapter: str, **options: Any) -> Adapter:
+        """Open a door (``"modbus"``, ``"http"``, ``"ads"``) if it is not open yet, on a free port
+        unless ``port`` is given; returns the adapter (``adapter.port``, ``adapter.endpoints()``)."""
+        self._loop_or_raise()
+        for running in self.runtime.adapters:
+            if running.name == adapter:
+                return running
+        spec: AdapterSpec = _with_free_port((adapter, options))
+        return self._call(self.runtime.start_adapter(spec))
+
+    @property
+    def http_url(self) -> str:
+        """The HTTP control API's base URL (opens the door on first use)."""
+        url: str = getattr(self.serve("http"), "url")  # noqa: B009 - the HTTP adapter's own attribute
+        return url
+
+    def port(self, adapter: str) -> int:
+        """The TCP port a door listens on (opens it on first use)."""
+        port = getattr(self.serve(adapter), "port", None)
+        if not isinstance(port, int):
+            raise HarnessError(f"adapter {adapter!r} does not listen on a TCP port")
+        return port
+
+    def transport(self, kind: str = "shm") -> Transport:
+        """A PLC-side transport to this server (``plc_clients``): ``"shm"``, ``"modbus"``, ``"ads"``
+        or any registered one (:mod:`hli_server.testing.transports`). Closed when the harness stops."""
+        from hli_server.testing.transports import open_transport
+
+        self._loop_or_raise()
+        transport = open_transport(self, kind)
+        self._transports.append(transport)
+        return transport
+
+    # --- running until something happens -------------------------------------------------------------
+    def run_until(
+        self,
+        condition: Callable[[], object],
+        max_cycles: int,
+        *,
+        plc: PlcTask | None = None,
+        show: Sequence[str] = (),
+        what: str | None = None,
+    ) -> int:
+        """Run cycles until ``condition()`` is true; returns the cycles run (0 if it is true already).
+
+        With ``plc``, every cycle is one cycle of the PLC task (inputs, program, outputs) followed by
+        one CNC cycle, so that PLC and CNC run in lock-step. ``condition`` is checked after each
+        cycle. When it is still false after ``max_cycles`` cycles, :class:`ConditionNotMetError`
+        reports the last cycles: the signals that changed in them (and those in ``show``), the
+        channels' program state, the active alarms and the PLC task's faults. ``what`` names the
+        condition in that report (default: the source line of the call).
+        """
+        __tracebackhide__ = True  # pytest shows the test's line and the report, not this method
+        self._loop_or_raise()
+        if max_cycles < 0:
+            raise ValueError(f"max_cycles must be >= 0, got {max_cycles}")
+        if plc is not None and plc.is_async:
+            raise TypeError(
+                "run_until drives the PLC task synchronously: give it a synchronous transport "
+                "(hli.transport(...) or the plc_transport fixture), not an asyncio one"
+            )
+        history: deque[tuple[int, bytes, bytes]] = deque(maxlen=REPORT_CYCLES)
+        start = self.cycle
+        if plc is not None and getattr(plc.transport, "blocking", False):
+            ran = self._run_until_here(condition, max_cycles, plc, history)
+        else:
+            ran = self._call(self._run_until_in_loop(condition, max_cycles, plc, history))
+        if ran is None:
+            shown = [self.layout.signal(path) for path in show]
+            raise ConditionNotMetError(self._report(condition, what, max_cycles, start, history, plc, shown))
+        return ran
+
+    def _keep(self, history: deque[tuple[int, bytes, bytes]]) -> None:
+        image = self.runtime.image
+        cycle, c2p = image.snapshot()
+        history.append((cycle, c2p, image.read_half(_P2C)))
+
+    async def _run_until_in_loop(
+        self,
+        condition: Callable[[], object],
+        max_cycles: int,
+        plc: PlcTask | None,
+        history: deque[tuple[int, bytes, bytes]],
+    ) -> int | None:
+        if condition():
+            return 0
+        step = self.runtime.step
+        clock = time.monotonic
+        next_yield = clock() + YIELD_EVERY_S
+        for ran in range(1, max_cycles + 1):
+            if plc is not None:
+                plc.run_cycle()
+            await step(1)
+            self._keep(history)
+            if condition():
+                return ran
+            if clock() >= next_yield:
+                await asyncio.sleep(0)  # the doors answer (an HTTP client watching, a second PLC)
+                next_yield = clock() + YIELD_EVERY_S
+        return None
+
+    def _run_until_here(
+        self,
+        condition: Callable[[], object],
+        max_cycles: int,
+        plc: PlcTask,
+        history: deque[tuple[int, bytes, bytes]],
+    ) -> int | None:
+        if condition():
+            return 0
+        for ran in range(1, max_cycles + 1):
+            plc.run_cycle()
+            self.step(1)
+            self._keep(history)
+            if condition():
+                return ran
+        return None
+
+    def _report(
+        self,
+        condition: Callable[[], object],
+        what: str | None,
+        max_cycles: int,
+        start: int,
+        history: deque[tuple[int, bytes, bytes]],
+        plc: PlcTask | None,
+        show: Sequence[Any],
+    ) -> str:
+        from hli_server.testing.report import cycle_report
+
+        return cycle_report(
+            what=what or describe(condition),
+            max_cycles=max_cycles,
+            first_cycle=start + 1,
+            layout=self.layout,
+            history=list(history),
+            show=show,
+            alarms=self._call_soon(lambda: self.runtime.operator.alarms(history=0))["active"],
+            plc=plc,
+        )
+
+
+def describe(condition: Callable[[], object]) -> str:
+    """The condition as the test wrote it: the source of a lambda's call line, else its name."""
+    name = getattr(condition, "__name__", None)
+    if name and name != "<lambda>":
+        return f"{name}()"
+    try:
+        lines, _ = inspect.getsourcelines(condition)
+    except (OSError, TypeError):
+        return repr(condition)
+    text = " ".join(line.strip() for line in lines)
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+def _with_free_port(spec: Any) -> Any:
+    """Network adapters listen on a free port unless the test names one (design: tests bind 0)."""
+    if isinstance(spec, str):
+        return (spec, {"port": 0}) if spec in ("http", "modbus", "ads") else spec
+    if isinstance(spec, tuple):
+        name, options = spec
+        if name in ("http", "modbus", "ads") and "port" not in options:
+            return (name, {**options, "port": 0})
+    return spec

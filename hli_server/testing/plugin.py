@@ -1,0 +1,144 @@
+"""The pytest plugin of hli-server (H-07): an in-process server per test, stepped, on free ports.
+
+Registered by the ``pytest11`` entry point of the package, so a user who installed ``hli-server``
+writes a test file and nothing else (docs/testing.md)::
+
+    def test_the_limit_holds_x(hli, plc_transport):
+        ...
+
+Fixtures:
+
+* ``hli``: a started :class:`~hli_server.testing.Harness` (the server with the stepped clock; stopped
+  after the test). Which machine: the ``hli`` marker's ``machine=``, else the ``hli_machine``
+  fixture (override or parametrize it), else the ``hli_machine`` ini option, else the demo machine.
+  ``@pytest.mark.hli(image="shm")`` puts the image into ``/dev/shm`` (default: a buffer of this
+  process); ``adapters=["http"]`` opens doors at start (``hli.serve(...)`` opens them later).
+* ``plc_transport``: a synchronous ``plc_clients`` transport to ``hli``'s server, the test runs once
+  per door: ``shm``, ``modbus``, ``ads`` (:mod:`hli_server.testing.transports`; a door whose parts
+  are not installed is skipped with the reason). Narrow it with
+  ``@pytest.mark.parametrize("plc_transport", ["shm"], indirect=True)``.
+* ``hli_machine``: the machine of ``hli`` (see above).
+
+Nothing is shared between tests or between pytest-xdist workers: every ``hli`` has its own image
+(named after the worker's pid) and its own free ports, so a suite runs under ``-n auto`` unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import pytest
+
+if TYPE_CHECKING:
+    from hli_server.testing.harness import Harness
+    from plc_clients.transports import Transport
+
+__all__ = ["hli", "hli_machine", "plc_transport"]
+
+_MARKER = (
+    "hli(machine=None, image='memory', adapters=()): options of the `hli` fixture (hli-server's "
+    "pytest plugin, H-07): the machine file or configuration, 'memory' or 'shm' for the process image, "
+    "doors to open at start"
+)
+_IMAGE_KINDS = ("memory", "shm")
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addini(
+        "hli_machine",
+        "machine file of the `hli` fixture (hli-server), relative to the rootdir; default: the demo machine",
+        default="",
+    )
+    parser.addini(
+        "hli_image",
+        "process image of the `hli` fixture: memory (default) or shm (/dev/shm)",
+        default="memory",
+    )
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line("markers", _MARKER)
+
+
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    """Run a test that takes ``plc_transport`` once per registered door, unless it chose its own."""
+    if "plc_transport" not in metafunc.fixturenames:
+        return
+    for marker in metafunc.definition.iter_markers("parametrize"):
+        names = marker.args[0] if marker.args else marker.kwargs.get("argnames", "")
+        if isinstance(names, str):
+            names = [n.strip() for n in names.split(",")]
+        if "plc_transport" in names:
+            return
+    from hli_server.testing.transports import transport_names
+
+    metafunc.parametrize("plc_transport", transport_names(), indirect=True)
+
+
+def _hli_marker(request: pytest.FixtureRequest) -> dict[str, Any]:
+    marker = request.node.get_closest_marker("hli")
+    if marker is None:
+        return {}
+    if marker.args:
+        raise pytest.UsageError(
+            f"{request.node.nodeid}: write @pytest.mark.hli(machine=..., image=..., adapters=...) with names"
+        )
+    known = {"machine", "image", "adapters"}
+    unknown = set(marker.kwargs) - known
+    if unknown:
+        raise pytest.UsageError(
+            f"{request.node.nodeid}: @pytest.mark.hli takes {', '.join(sorted(known))}, "
+            f"not {', '.join(sorted(unknown))}"
+        )
+    return dict(marker.kwargs)
+
+
+@pytest.fixture
+def hli_machine(request: pytest.FixtureRequest) -> Any:
+    """The machine of the ``hli`` fixture: a machine file (relative to the test file), a
+    ``MachineConfig``, or None for the demo machine. Override or parametrize it to choose per test."""
+    options = _hli_marker(request)
+    if options.get("machine") is not None:
+        return options["machine"]
+    configured = str(request.config.getini("hli_machine") or "")
+    if configured:
+        return request.config.rootpath / configured
+    return None
+
+
+@pytest.fixture
+def hli(request: pytest.FixtureRequest, hli_machine: Any) -> Iterator[Harness]:
+    """An in-process hli-server with the stepped clock, started for this test and stopped after it."""
+    from hli_server.testing.harness import Harness
+
+    options = _hli_marker(request)
+    image = str(options.get("image") or request.config.getini("hli_image") or "memory")
+    if image not in _IMAGE_KINDS:
+        raise pytest.UsageError(f"hli image {image!r}: use one of {', '.join(_IMAGE_KINDS)}")
+    base = Path(request.path).parent if request.path is not None else None
+    harness = Harness(
+        hli_machine,
+        image=image,  # type: ignore[arg-type]
+        adapters=options.get("adapters", ()),
+        base=base,
+    )
+    with harness:
+        yield harness
+
+
+@pytest.fixture
+def plc_transport(request: pytest.FixtureRequest, hli: Harness) -> Iterator[Transport]:
+    """A synchronous PLC transport to ``hli``'s server, once per door (shm, modbus, ads)."""
+    from hli_server.testing.transports import open_transport, unavailable
+
+    name = getattr(request, "param", "shm")
+    reason = unavailable(name)
+    if reason is not None:
+        pytest.skip(reason)
+    transport = open_transport(hli, name)
+    try:
+        yield transport
+    finally:
+        transport.close()
