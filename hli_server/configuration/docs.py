@@ -1,0 +1,145 @@
+"""The one-line machine summary and the parameter table of docs/configuration.md."""
+
+from __future__ import annotations
+
+import re
+from enum import Enum
+
+from pydantic import BaseModel
+from pydantic.fields import FieldInfo
+
+from hli_server.configuration.fields import _range_text
+from hli_server.configuration.tables import _PARAMETERS_OF_MODEL
+from schemas.config import (
+    AdapterEntry,
+    AxisConfig,
+    ChannelConfig,
+    DriveModel,
+    MachineConfig,
+    ManualConfig,
+    ProgramEntry,
+    ZeroOffset,
+)
+from schemas.units import mm_from_increments
+
+
+def machine_summary(config: MachineConfig) -> str:
+    """One line about the machine, for ``hli-server config validate``."""
+    channels = "; ".join(f"channel {ch.number} {ch.name!r}: {' '.join(ch.axes)}" for ch in config.channels)
+    pairs = config.collision_pairs()
+    pair_text = ", ".join(
+        f"{m.name}-{p.name} {mm_from_increments(max(m.coll_offset, p.coll_offset)):g} mm" for m, p in pairs
+    )
+    return (
+        f"machine {config.name!r}, cycle {config.cycle_time_us} µs, "
+        f"{_count(len(config.axes), 'axis', 'axes')}, "
+        f"{_count(len(config.channels), 'channel', 'channels')} ({channels}), "
+        f"{_count(len(pairs), 'collision pair', 'collision pairs')}" + (f" ({pair_text})" if pairs else "")
+    )
+
+
+def _count(n: int, one: str, many: str) -> str:
+    return f"{n} {one if n == 1 else many}"
+
+
+_SECTIONS: tuple[tuple[str, type[BaseModel], frozenset[str]], ...] = (
+    ("Machine (top level)", MachineConfig, frozenset({"axes", "channels", "manual", "adapters"})),
+    ("Axis `[[axes]]`", AxisConfig, frozenset({"drive"})),
+    ("Drive model `[axes.drive]` (project's own, E-02)", DriveModel, frozenset()),
+    ("Channel `[[channels]]`", ChannelConfig, frozenset({"zero_offsets", "programs"})),
+    ("Zero offsets `[[channels.zero_offsets]]`", ZeroOffset, frozenset()),
+    ("Programs `[[channels.programs]]` (project's own program table)", ProgramEntry, frozenset()),
+    ("Manual mode `[manual]`", ManualConfig, frozenset()),
+    ("Adapters `[[adapters]]` (project's own; `hli-server run`)", AdapterEntry, frozenset()),
+)
+
+_RANGE_NOTES: dict[tuple[type[BaseModel], str], str] = {
+    (AxisConfig, "name"): "`[A-Z][A-Z0-9]{0,7}`, unique",
+    (AxisConfig, "number"): "1 ≤ value ≤ MAX(UNS32), unique",
+    (AxisConfig, "axis_type"): "T or R",
+    (AxisConfig, "swe_neg"): "MIN(SGN32) < value < swe_pos",
+    (AxisConfig, "swe_pos"): "swe_neg < value < MAX(SGN32)",
+    (AxisConfig, "coll_check_ax_nr"): "0 (none) or 1 ≤ value < MAX(UNS32): a logical axis number; "
+    "both axes need bit 0x8000 in achs_mode",
+    (AxisConfig, "coll_offset"): "0 (none) or 1 < value < MAX(UNS32)",
+    (AxisConfig, "achs_mode"): "0x00000001 ≤ value ≤ 0x10000000; bit 0x8000: collision monitoring",
+    (ChannelConfig, "axes"): "names of `[[axes]]`; each axis in one channel",
+    (ChannelConfig, "main_axes"): "three different axes of the channel",
+    (ChannelConfig, "interpolator_function"): "keywords FCT_IPO_DEFAULT, FCT_LOOK_AHEAD_STANDARD, "
+    "FCT_DYN_POS_LIMIT; a list or `A | B`",
+    (ZeroOffset, "code"): "G54 … G59, each once per channel",
+    (ZeroOffset, "offsets"): "axis name -> offset [0.1 µm], axes of the channel",
+    (ProgramEntry, "number"): "1 ≤ value ≤ 65535, unique in the channel",
+    (ProgramEntry, "text"): "exactly one of text / path",
+    (ProgramEntry, "path"): "exactly one of text / path (relative to the machine file)",
+}
+
+
+def _unit_of(model: type[BaseModel], field_name: str, info: FieldInfo) -> str:
+    for pinfo in _PARAMETERS_OF_MODEL.get(model, ()):
+        if pinfo.field == field_name:
+            return pinfo.unit
+    if info.annotation is bool:
+        return "0/1"
+    match = re.search(r"\[([^\]]+)\]", info.description or "")
+    return match[1] if match else "-"
+
+
+def _default_text(model: type[BaseModel], field_name: str, info: FieldInfo) -> str:
+    if info.is_required():
+        return "required"
+    value = info.get_default(call_default_factory=True)
+    if field_name == "achs_mode" and isinstance(value, int):
+        return f"0x{value:08X}"
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, Enum):
+        return str(value.value)
+    if isinstance(value, list | tuple):
+        return " | ".join(str(v.value if isinstance(v, Enum) else v) for v in value) or "(none)"
+    if isinstance(value, BaseModel):
+        return "(table)"
+    if value is None:
+        return "(none)"
+    return str(value)
+
+
+def _meaning(info: FieldInfo) -> str:
+    text = info.description or ""
+    text = re.sub(r"^P-[A-Z]{4}-\d{5}\s*", "", text)
+    text = re.sub(r"\s*\[[^\]]+\]", "", text)
+    return text.strip() or "-"
+
+
+def parameter_table_markdown() -> str:
+    """Every configuration parameter: key, P-ID, ISG path, unit, default, range (docs/configuration.md)."""
+    out: list[str] = []
+    for title, model, skip in _SECTIONS:
+        paths = {info.field: info for info in _PARAMETERS_OF_MODEL.get(model, ())}
+        out += [
+            f"### {title}",
+            "",
+            "| TOML key | P-ID | ISG text-list path | unit | default | range | meaning |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for name, info in model.model_fields.items():
+            if name in skip:
+                continue
+            pinfo = paths.get(name)
+            pid = (pinfo.pid or "-") if pinfo else "project's own"
+            path = f"`{pinfo.path.replace('[0]', '[i]')}`" if pinfo else "-"
+            range_text = _RANGE_NOTES.get((model, name)) or _range_text(model, name) or "-"
+            if info.annotation is bool:
+                range_text = "0/1"
+            cells = (
+                f"`{name}`",
+                pid,
+                path,
+                _unit_of(model, name, info),
+                _default_text(model, name, info),
+                range_text,
+                _meaning(info),
+            )
+            out.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
+        out.append("")
+    return "\n".join(out)
