@@ -53,8 +53,9 @@ TRAIL_TOLERANCE = 0.05
 drawn chords stay within a quarter of it (0.0125 mm, far below a screen pixel)."""
 TRAIL_POINTS = 500
 """Points of the trail kept per channel (the newest); bounds the cost of a scene."""
-AHEAD_POINTS = 500
-"""Points of the path ahead at most (arcs are sampled within :data:`TRAIL_TOLERANCE`)."""
+AHEAD_POINTS = 300
+"""Points of the path ahead at most (arcs are sampled within :data:`TRAIL_TOLERANCE`); bounds the cost of
+a scene like :data:`TRAIL_POINTS`."""
 _ARC_SAMPLES_MAX = 90
 
 
@@ -193,6 +194,7 @@ def live_scene(machine: Machine, recorder: TrailRecorder, number: int) -> dict[s
         channel=number,
         position=ch.setpoints(),
         ahead=path_ahead(ch),
+        tolerance=0.0,  # the trail is simplified as it is recorded, the path ahead sampled within it
     )
 
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import logging
 from collections import deque
 from dataclasses import dataclass, field
@@ -54,8 +55,10 @@ logger = logging.getLogger(__name__)
 
 DEFAULT_MAX_STREAMS = 16
 DEFAULT_RATE_HZ = 20.0
-SCENE_PERIOD_S = 0.5
-"""How often a channel's scene is looked at without an event of its channel (its trail grows)."""
+SCENE_PERIOD_S = 1.0
+"""How often a channel's scene is looked at without an event of its channel (its trail grows, its path
+ahead moves on). A scene of a moving channel costs a few milliseconds (``docs/performance.md``); between
+two scenes the page moves the TCP and draws its newest trail from the states."""
 QUEUE_SIZE = 1000
 """Events one stream may have waiting; beyond, new events are dropped for it and counted."""
 
@@ -111,6 +114,16 @@ class Stream:
 
 def _sse(name: bytes, data: bytes) -> bytes:
     return b"event: " + name + b"\ndata: " + data + b"\n\n"
+
+
+def _scene_bytes(scene: dict[str, Any]) -> bytes:
+    """A scene as an SSE message. Its numbers are finite and rounded (``hli_server.scene``), so the plain
+    encoder does, without the walk that names non-finite numbers (a scene has thousands of them)."""
+    try:
+        data = json.dumps(scene, ensure_ascii=True, allow_nan=False, separators=(",", ":")).encode("ascii")
+    except ValueError:
+        data = json_bytes(scene)
+    return _sse(b"scene", data)
 
 
 class _AxisSignals:
@@ -181,7 +194,7 @@ class LiveFeed:
                 "dashboard tab, or start the server with --adapter http:max_streams=N"
             )
         stream = Stream()
-        stream.scenes = {n: _sse(b"scene", json_bytes(s)) for n, s in self._current_scenes().items()}
+        stream.scenes = {n: _scene_bytes(s) for n, s in self._current_scenes().items()}
         stream.state = _sse(b"state", json_bytes(self.state()))
         self.streams.append(stream)
         if self._unsubscribe is None:
@@ -273,7 +286,7 @@ class LiveFeed:
             if look_at is None:
                 self._scene_checked = now
             for number, scene in self._changed_scenes(look_at).items():
-                scenes[number] = _sse(b"scene", json_bytes(scene))
+                scenes[number] = _scene_bytes(scene)
         state = _sse(b"state", json_bytes(self.state()))
         for stream in self.streams:
             stream.scenes.update(scenes)

@@ -427,15 +427,15 @@ function drawLive(c) {
   const scenePath = c.scene.path.length ? c.scene.path[c.scene.path.length - 1] : [];
   const from = scenePath.length ? [scenePath[scenePath.length - 1]] : [];
   c.tailLine.setAttribute("points", [...from, ...c.tail].map((p) => `${m.x(p[0]).toFixed(2)},${m.y(p[1]).toFixed(2)}`).join(" "));
-  const ahead = c.scene.ahead || [];
-  const aheadPts = ahead.length ? [c.tcp, ...ahead.slice(1)] : [];
+  // the path ahead from the TCP on; points the TCP has passed since the scene are dropped (same s scale)
+  const sNow = (c.scene.position ? c.scene.position[3] : 0) + c.tailS;
+  const ahead = (c.scene.ahead || []).filter((p, k) => k > 0 && p[3] > sNow);
+  const aheadPts = ahead.length ? [c.tcp, ...ahead] : [];
   c.aheadLine.setAttribute("points", aheadPts.map((p) => `${m.x(p[0]).toFixed(2)},${m.y(p[1]).toFixed(2)}`).join(" "));
   if (c.sm && c.tcp[2] !== null) {
-    const s = (c.scene.position ? c.scene.position[3] : 0) + c.tailS;
-    c.sideTcp.setAttribute("cx", c.sm.x(s));
+    c.sideTcp.setAttribute("cx", c.sm.x(sNow));
     c.sideTcp.setAttribute("cy", c.sm.y(c.tcp[2]));
-    const shift = s - (ahead.length ? ahead[0][3] : 0);
-    c.sideAhead.setAttribute("points", (ahead.length ? [[0, 0, c.tcp[2], s], ...ahead.slice(1).map((p) => [0, 0, p[2], p[3] + shift])] : [])
+    c.sideAhead.setAttribute("points", (ahead.length ? [[0, 0, c.tcp[2], sNow], ...ahead] : [])
       .map((p) => `${c.sm.x(p[3]).toFixed(2)},${c.sm.y(p[2]).toFixed(2)}`).join(" "));
   }
 }
