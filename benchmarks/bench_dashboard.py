@@ -71,10 +71,25 @@ def _cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def _chromium_cpu_s() -> float:
+    """CPU time of every Chromium process on the machine (the browser and its renderers)."""
+    total = 0.0
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            if b"chromium" not in (proc / "cmdline").read_bytes().split(b"\0")[0]:
+                continue
+            total += _cpu_s(int(proc.name))
+        except OSError:
+            continue
+    return total
+
+
 def _phase(url: str, pid: int, seconds: float, before: dict[str, Any]) -> dict[str, Any]:
-    cpu0, t0 = _cpu_s(pid), time.monotonic()
+    cpu0, browser0, t0 = _cpu_s(pid), _chromium_cpu_s(), time.monotonic()
     time.sleep(seconds)
-    cpu1, t1 = _cpu_s(pid), time.monotonic()
+    cpu1, browser1, t1 = _cpu_s(pid), _chromium_cpu_s(), time.monotonic()
     timing = _get(f"{url}/api/timing")
     lat = timing["lateness_us"]
     return {
@@ -86,6 +101,7 @@ def _phase(url: str, pid: int, seconds: float, before: dict[str, Any]) -> dict[s
         "dropped": timing["slipped_cycles"] - before.get("slipped_cycles", 0),
         "cycles": timing["cycles"] - before.get("cycles", 0),
         "cpu": (cpu1 - cpu0) / (t1 - t0),
+        "browser_cpu": (browser1 - browser0) / (t1 - t0),
     }
 
 
@@ -176,7 +192,10 @@ def main() -> None:
     print(f"server: {url}, {args.seconds:g} s per phase, program running, T_A 1 ms")
     print(_line("page closed", closed))
     print(_line(f"{args.pages} stream(s)", streams) + f"; states received {min(counts) / args.seconds:.1f}/s")
-    print(_line(f"{args.pages} page(s)", opened) + f"; events lost by the page: {lost}")
+    print(
+        _line(f"{args.pages} page(s)", opened)
+        + f"; Chromium CPU {opened['browser_cpu'] * 100:.1f} %; events lost by the page: {lost}"
+    )
     ratio = opened["p99_us"] / closed["p99_us"] if closed["p99_us"] else float("nan")
     print(
         f"figure: p99 lateness with the page open {opened['p99_us']:.0f} µs; reference (page closed, "

@@ -51,9 +51,9 @@ TRAIL_EVERY = 4
 TRAIL_TOLERANCE = 0.05
 """mm: how far a sample may be from the line the trail follows before a point is kept; on an arc the
 drawn chords stay within a quarter of it (0.0125 mm, far below a screen pixel)."""
-TRAIL_POINTS = 500
+TRAIL_POINTS = 300
 """Points of the trail kept per channel (the newest); bounds the cost of a scene."""
-AHEAD_POINTS = 300
+AHEAD_POINTS = 200
 """Points of the path ahead at most (arcs are sampled within :data:`TRAIL_TOLERANCE`); bounds the cost of
 a scene like :data:`TRAIL_POINTS`."""
 _ARC_SAMPLES_MAX = 90

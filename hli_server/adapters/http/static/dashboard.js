@@ -81,6 +81,18 @@ function viridis(f) {
   return `rgb(${mix(1)},${mix(3)},${mix(5)})`;
 }
 
+// is b on the straight line from a on to c (within 0.01 mm, in the base plane and the height)?
+function onLine(a, b, c) {
+  const d = [c[0] - a[0], c[1] - a[1], (c[2] || 0) - (a[2] || 0)];
+  const e = [b[0] - a[0], b[1] - a[1], (b[2] || 0) - (a[2] || 0)];
+  const dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+  if (dd === 0) return false;
+  const t = (d[0] * e[0] + d[1] * e[1] + d[2] * e[2]) / dd;
+  if (t < 0 || t > 1) return false;
+  const off = [e[0] - t * d[0], e[1] - t * d[1], e[2] - t * d[2]];
+  return off[0] * off[0] + off[1] * off[1] + off[2] * off[2] < 1e-4;
+}
+
 function niceStep(span, count) {
   const raw = span / Math.max(count, 1);
   const p = Math.pow(10, Math.floor(Math.log10(raw)));
@@ -167,6 +179,10 @@ function channelCard(ch) {
     }
   }
 
+  // each view is two SVGs on top of each other: the scene (redrawn when a scene comes) and the live layer
+  // (TCP, newest trail, path ahead: 20 times a second), so that the browser repaints only the small one
+  const topLive = svg("svg", { id: id("top-live"), class: "live", viewBox: `0 0 ${TOP.width} ${TOP.height}`, "aria-hidden": "true" });
+  const sideLive = svg("svg", { id: id("side-live"), class: "live", viewBox: `0 0 ${SIDE.width} ${SIDE.height}`, "aria-hidden": "true" });
   const top = svg("svg", { id: id("top"), class: "top", viewBox: `0 0 ${TOP.width} ${TOP.height}`, role: "img",
     "aria-label": `channel ${n}: base plane with areas, path and TCP` });
   const side = svg("svg", { id: id("side"), class: "side", viewBox: `0 0 ${SIDE.width} ${SIDE.height}`, role: "img",
@@ -204,9 +220,10 @@ function channelCard(ch) {
       el("summary", { text: "load an NC program" }), text,
       el("button", { type: "button", id: id("load"), text: "Load",
         onclick: () => api("POST", `/api/channels/${n}/program`, { text: text.value, name: "dashboard" }, `channel ${n}: load program`) })),
-    el("figure", {}, top, side, el("figcaption", {}, legend)),
+    el("figure", {}, el("div", { class: "view" }, top, topLive), el("div", { class: "view", id: id("side-view") }, side, sideLive),
+      el("figcaption", {}, legend)),
   );
-  return { number: n, card, top, side, legend, scene: null, tail: [], tailS: 0, feedhold: false, view: null, tcp: null };
+  return { number: n, card, top, side, topLive, sideLive, legend, scene: null, tail: [], tailS: 0, feedhold: false, tcp: null };
 }
 
 // --- drawing a scene ---------------------------------------------------------------------------
@@ -357,9 +374,12 @@ function drawScene(c) {
     const s = scene.stop;
     svg("text", { x: m.x(s[0]), y: m.y(s[1]) + 5, class: "stop-mark", "text-anchor": "middle", fill: COLOURS.stop }, paths).textContent = "✕";
   }
-  // the live layer: path ahead, newest trail, TCP
-  c.live = svg("g", { class: "live" }, c.top);
-  c.aheadLine = polyline(c.live, [], { stroke: COLOURS.ahead, "stroke-width": 1.5, "stroke-dasharray": "5 4", id: `ch${c.number}-ahead` });
+  // the path ahead, from where the TCP was: the live layer's trail covers what the TCP has passed since
+  polyline(paths, (scene.ahead || []).map((p) => [m.x(p[0]), m.y(p[1])]), { stroke: COLOURS.ahead, "stroke-width": 1.5,
+    "stroke-dasharray": "5 4", id: `ch${c.number}-ahead` });
+  // the live layer: the newest trail and the TCP
+  c.topLive.replaceChildren();
+  c.live = svg("g", { class: "live" }, c.topLive);
   c.tailLine = polyline(c.live, [], { stroke: COLOURS.path, "stroke-width": 2, id: `ch${c.number}-tail` });
   c.tcpMark = svg("g", { id: `tcp-${c.number}`, class: "tcp" }, c.live);
   svg("circle", { r: 6, fill: "none", stroke: COLOURS.tcp, "stroke-width": 2 }, c.tcpMark);
@@ -373,13 +393,15 @@ function drawScene(c) {
 function drawSide(c) {
   const scene = c.scene;
   c.side.replaceChildren();
+  c.sideLive.replaceChildren();
   const view = scene.view;
+  const holder = document.getElementById(`ch${c.number}-side-view`);
   if (view.height === null) {
-    c.side.setAttribute("hidden", "");
+    holder.hidden = true;
     c.sm = null;
     return;
   }
-  c.side.removeAttribute("hidden");
+  holder.hidden = false;
   defs(c.side);
   const pts = [...scene.path.flat(), ...(scene.ahead || []), ...(scene.refused ? scene.refused.points : [])];
   if (scene.position) pts.push(scene.position);
@@ -408,13 +430,14 @@ function drawSide(c) {
     const v = scene.violation.point;
     star(g, sm.x(v[3]), sm.y(v[2]), 8, { fill: COLOURS.refused, stroke: "#000" });
   }
-  c.sideLive = svg("g", {}, c.side);
-  c.sideAhead = polyline(c.sideLive, [], { stroke: COLOURS.ahead, "stroke-width": 1.5, "stroke-dasharray": "5 4" });
-  c.sideTcp = svg("circle", { r: 5, fill: "none", stroke: COLOURS.tcp, "stroke-width": 2, id: `tcp-side-${c.number}` }, c.sideLive);
+  polyline(g, (scene.ahead || []).map((p) => [sm.x(p[3]), sm.y(p[2])]), { stroke: COLOURS.ahead, "stroke-width": 1.5,
+    "stroke-dasharray": "5 4" });
+  c.sideLiveG = svg("g", {}, c.sideLive);
+  c.sideTcp = svg("circle", { r: 5, fill: "none", stroke: COLOURS.tcp, "stroke-width": 2, id: `tcp-side-${c.number}` }, c.sideLiveG);
   c.sm = sm;
 }
 
-// the TCP, the trail since the scene and the path ahead from the TCP, at the state's rate
+// the TCP and the trail since the scene, at the state's rate
 function drawLive(c) {
   if (!c.m || !c.tcp) return;
   const m = c.m;
@@ -427,16 +450,11 @@ function drawLive(c) {
   const scenePath = c.scene.path.length ? c.scene.path[c.scene.path.length - 1] : [];
   const from = scenePath.length ? [scenePath[scenePath.length - 1]] : [];
   c.tailLine.setAttribute("points", [...from, ...c.tail].map((p) => `${m.x(p[0]).toFixed(2)},${m.y(p[1]).toFixed(2)}`).join(" "));
-  // the path ahead from the TCP on; points the TCP has passed since the scene are dropped (same s scale)
-  const sNow = (c.scene.position ? c.scene.position[3] : 0) + c.tailS;
-  const ahead = (c.scene.ahead || []).filter((p, k) => k > 0 && p[3] > sNow);
-  const aheadPts = ahead.length ? [c.tcp, ...ahead] : [];
-  c.aheadLine.setAttribute("points", aheadPts.map((p) => `${m.x(p[0]).toFixed(2)},${m.y(p[1]).toFixed(2)}`).join(" "));
   if (c.sm && c.tcp[2] !== null) {
-    c.sideTcp.setAttribute("cx", c.sm.x(sNow));
-    c.sideTcp.setAttribute("cy", c.sm.y(c.tcp[2]));
-    c.sideAhead.setAttribute("points", (ahead.length ? [[0, 0, c.tcp[2], sNow], ...ahead] : [])
-      .map((p) => `${c.sm.x(p[3]).toFixed(2)},${c.sm.y(p[2]).toFixed(2)}`).join(" "));
+    // s goes on from the scene's position by the distance travelled in the base plane since
+    const sNow = (c.scene.position ? c.scene.position[3] : 0) + c.tailS;
+    c.sideTcp.setAttribute("cx", c.sm.x(sNow).toFixed(2));
+    c.sideTcp.setAttribute("cy", c.sm.y(c.tcp[2]).toFixed(2));
   }
 }
 
@@ -468,11 +486,46 @@ function onScene(scene) {
   drawScene(c);
 }
 
+// the picture follows every state (20 Hz); the numbers and lists, which nobody reads faster, 5 times a
+// second (each text change costs the browser a layout and a paint)
+const NUMBERS_EVERY_MS = 200;
+let latestState = null;
+setInterval(() => {
+  if (latestState) showNumbers(latestState);
+  latestState = null;
+}, NUMBERS_EVERY_MS);
+
 function onState(s) {
+  latestState = s;
+  const axes = new Map(s.axes.map((a) => [a.name, a]));
+  for (const ch of s.channels) {
+    const c = state.channels.get(ch.number);
+    if (!c || !c.scene) continue;
+    const v = c.scene.view;
+    const get = (name) => (name === null ? null : axes.get(name) ? axes.get(name).command_mm : null);
+    const tcp = [get(v.a), get(v.b), get(v.height)];
+    if (tcp[0] === null || tcp[1] === null) continue;
+    if (c.tcp) {
+      const moved = Math.hypot(tcp[0] - c.tcp[0], tcp[1] - c.tcp[1]);
+      if (moved > 0 || (tcp[2] !== null && tcp[2] !== c.tcp[2])) {
+        c.tailS += moved;
+        const n = c.tail.length;
+        if (n >= 2 && onLine(c.tail[n - 2], c.tail[n - 1], tcp)) c.tail[n - 1] = tcp; // a straight move: 2 points
+        else c.tail.push(tcp);
+        if (c.tail.length > TAIL_POINTS) c.tail.shift();
+      } else {
+        continue; // nothing moved: nothing to draw
+      }
+    }
+    c.tcp = tcp;
+    drawLive(c);
+  }
+}
+
+function showNumbers(s) {
   setText(document.getElementById("cycle"), String(s.cycle));
   setText(document.getElementById("time"), `${num(s.time_s, 3)} s`);
   setText(document.getElementById("dropped"), String(s.dropped));
-  const axes = new Map(s.axes.map((a) => [a.name, a]));
   for (const ch of s.channels) {
     const c = state.channels.get(ch.number);
     if (!c) continue;
@@ -480,7 +533,7 @@ function onState(s) {
     setText(id("mode"), ch.mode);
     const badge = id("state");
     setText(badge, ch.program_state_name);
-    badge.className = `badge ${ch.program_state_name}`;
+    if (badge.className !== `badge ${ch.program_state_name}`) badge.className = `badge ${ch.program_state_name}`;
     setText(id("progname"), ch.program || "-");
     setText(id("block"), ch.block ? `${ch.block} (line ${ch.line})` : "-");
     setText(id("holds"), ch.holds.length ? ch.holds.join(", ") : "none");
@@ -489,23 +542,6 @@ function onState(s) {
     id("feedhold").classList.toggle("on", c.feedhold);
     id("auto").classList.toggle("on", ch.mode === "automatic");
     id("manual").classList.toggle("on", ch.mode === "manual");
-    if (c.scene) {
-      const v = c.scene.view;
-      const get = (name) => (name === null ? null : axes.get(name) ? axes.get(name).command_mm : null);
-      const tcp = [get(v.a), get(v.b), get(v.height)];
-      if (tcp[0] !== null && tcp[1] !== null) {
-        if (c.tcp) {
-          const moved = Math.hypot(tcp[0] - c.tcp[0], tcp[1] - c.tcp[1]);
-          if (moved > 0 || (tcp[2] !== null && tcp[2] !== c.tcp[2])) {
-            c.tailS += moved;
-            c.tail.push(tcp);
-            if (c.tail.length > TAIL_POINTS) c.tail.shift();
-          }
-        }
-        c.tcp = tcp;
-        drawLive(c);
-      }
-    }
   }
   axisTable(s.axes);
   pairTable(s.pairs);
@@ -534,7 +570,7 @@ function axisTable(axes) {
     for (const side of ["low", "high"]) {
       const d = a.dyn_pos_limit[side];
       setText(row.cells[side], d.enabled || d.state ? `${num(d.limit_mm)} · ${d.state_name}` : d.state_name);
-      row.cells[side].className = `dpl s${d.state}`;
+      if (row.cells[side].className !== `dpl s${d.state}`) row.cells[side].className = `dpl s${d.state}`;
     }
     setText(row.cells.brake, a.collision.active ? num(a.collision.brake_dist_mm) : "-");
   }
