@@ -250,3 +250,23 @@ async def test_the_state_carries_axes_limits_pairs_and_alarms(runtime: Runtime) 
         20.0,
     )
     assert state["alarms"] == []
+
+
+async def test_a_scene_that_cannot_be_computed_leaves_the_rest_of_the_page(
+    runtime: Runtime, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    def broken(number: int) -> dict:
+        raise ValueError(f"channel {number}: a bug")
+
+    monkeypatch.setattr(runtime.operator, "scene", broken)
+    feed = LiveFeed(runtime.host)
+    stream = feed.open()
+    chunk = stream._take()
+    assert b"event: state" in chunk
+    assert b"event: scene" not in chunk
+    feed._tick(1e9)
+    feed._tick(2e9)
+    assert b"event: state" in stream._take()
+    failures = [r for r in caplog.records if "cannot be computed" in r.getMessage()]
+    assert len(failures) == 2  # once per channel, not once per tick
+    await feed.close()

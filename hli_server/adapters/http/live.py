@@ -41,6 +41,7 @@ from hli_server.adapters.http.deps import json_bytes
 from schemas.events import Event
 from schemas.image_format import read_field
 from schemas.layout import Direction, Signal
+from schemas.wire import DynPosLimitState
 
 __all__ = [
     "DEFAULT_MAX_STREAMS",
@@ -62,8 +63,6 @@ two scenes the page moves the TCP and draws its newest trail from the states."""
 QUEUE_SIZE = 1000
 """Events one stream may have waiting; beyond, new events are dropped for it and counted."""
 
-_DPL_STATES = ("INACTIVE", "ACTIVATION", "ACTIVE", "ACTIVE_BRAKING", "ACTIVE_BRAKE")
-"""HLI_DYNPL_STATE_* by number (FCT-C43 3.1.1)."""
 _MM = 1e-4
 """0.1 µm -> mm."""
 
@@ -110,6 +109,14 @@ class Stream:
             parts.append(self.state)
             self.state = None
         return b"".join(parts)
+
+
+def _dpl_name(state: int) -> str:
+    """HLI_DYNPL_STATE_* by number (FCT-C43 3.1.1), the number itself if it is none of them."""
+    try:
+        return DynPosLimitState(state).name
+    except ValueError:
+        return str(state)
 
 
 def _sse(name: bytes, data: bytes) -> bytes:
@@ -178,6 +185,7 @@ class LiveFeed:
         self._closed = False
         self._dirty: set[int] = set()
         self._scenes: dict[int, dict[str, Any]] = {}
+        self._scene_failed: set[int] = set()
         self._scene_checked = 0.0
         self._axes: list[_AxisSignals] | None = None
         self._channel_signals: list[tuple[int, Signal, Signal]] | None = None
@@ -293,10 +301,24 @@ class LiveFeed:
             stream.state = state
             stream.wake.set()
 
+    def _scene(self, number: int) -> dict[str, Any] | None:
+        """The channel's scene, or None (logged once per channel) if computing it fails: a page without
+        one channel's picture is better than no page."""
+        try:
+            return self.host.operator.scene(number)
+        except Exception:
+            if number not in self._scene_failed:
+                self._scene_failed.add(number)
+                logger.exception(
+                    "the scene of channel %d cannot be computed; the dashboard goes without it", number
+                )
+            return None
+
     def _current_scenes(self) -> dict[int, dict[str, Any]]:
-        op = self.host.operator
-        for number in op.channel_numbers():
-            self._scenes[number] = op.scene(number)
+        for number in self.host.operator.channel_numbers():
+            scene = self._scene(number)
+            if scene is not None:
+                self._scenes[number] = scene
         return dict(self._scenes)
 
     def _changed_scenes(self, channels: set[int] | None) -> dict[int, dict[str, Any]]:
@@ -307,8 +329,8 @@ class LiveFeed:
         for number in op.channel_numbers():
             if channels is not None and number not in channels:
                 continue
-            scene = op.scene(number)
-            if scene is not self._scenes.get(number):
+            scene = self._scene(number)
+            if scene is not None and scene is not self._scenes.get(number):
                 self._scenes[number] = scene
                 changed[number] = scene
         return changed
@@ -354,7 +376,7 @@ class LiveFeed:
                 state = int(read_field(c2p, 0, state_sig))
                 dpl[side] = {
                     "state": state,
-                    "state_name": _DPL_STATES[state] if 0 <= state < len(_DPL_STATES) else str(state),
+                    "state_name": _dpl_name(state),
                     "enabled": bool(read_field(p2c, 0, enable_sig)),
                     "limit_mm": int(read_field(p2c, 0, command_sig)) * _MM,
                 }
