@@ -199,11 +199,14 @@ def live_scene(machine: Machine, recorder: TrailRecorder, number: int) -> dict[s
 
 
 def scene_key(machine: Machine, recorder: TrailRecorder, number: int) -> tuple[object, ...]:
-    """Changes whenever the channel's scene would: trail, areas, alarms, program state, look-ahead."""
+    """Changes whenever the channel's scene would: trail, position, areas, alarms, program state,
+    look-ahead."""
     planner = machine.channel(number).planner
     head = planner.queue[0] if planner.queue else None
+    trail = recorder.trails[number]
     return (
-        recorder.trails[number].revision,
+        trail.revision,
+        trail.last,
         recorder.revisions[number],
         planner.generation,
         planner.s_queued_end,
