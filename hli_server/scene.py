@@ -50,7 +50,9 @@ point (a side view plots ``h`` over ``s``: the path's footprint unrolled, plunge
                          "points": [[a, b, h, s], ...]},  # the refused block (arcs sampled)
       "violation": null | {"alarm": 912001, "area": 4, "kind": "PROT", "point": [a, b, h, s],
                            "position": {"X": -75.0, "Y": 75.0, "Z": 0.0}},
-      "stop": null | [a, b, h, s]              # where the axes came to rest after an error
+      "stop": null | [a, b, h, s],             # where the axes came to rest after an error
+      "position": null | [a, b, h, s],         # live: where the axes are now (the TCP)
+      "ahead": [[a, b, h, s], ...]             # live: the programmed path ahead, from ``position``
     }
 
 ``relation`` is over the whole programmed path the check reached: the travelled path and the refused
@@ -62,6 +64,11 @@ the relation on each (``refused``: the stretch belongs to the refused block); a 
 ``from == to``. The relation is computed on the recorded points joined by straight lines (``check``
 records every 10th cycle, and arcs every few degrees), so it is a picture's precision, not the
 monitor's: the monitor's exact verdict is the alarm.
+
+``position`` and ``ahead`` are the live dashboard's (``check`` leaves them ``null`` and empty): the TCP
+and the path the channel has decoded ahead of it (its look-ahead), ``s`` going on from the travelled path's
+end. The path ahead is drawn, not related to the areas: the channel checked each of its blocks against the
+active areas when it decoded it (C14-15), and a refused block is the ``refused`` entry.
 
 The view is the plane most areas share (the channel's main axes in ``plane`` when there are none);
 areas on other axes (X2/Y2, FCT-C14 section 4) have ``in_view`` false and still a relation. The path's
@@ -91,7 +98,7 @@ __all__ = [
 SCENE_VERSION = 1
 RESOLUTION_MM = 1.0 / INCREMENTS_PER_MM
 """0.1 µm: the resolution of positions at the interface; numbers shown to people are rounded to it."""
-_DIGITS = round(math.log10(INCREMENTS_PER_MM))
+_SCALE = float(INCREMENTS_PER_MM)
 
 RELATIONS = ("crosses", "above", "below", "above_and_below", "apart")
 """How the path meets an area's prism, from the most to the least concerning."""
@@ -108,8 +115,13 @@ _SIMPLIFY = 1e-4
 
 def round_mm(value: float) -> float:
     """``value`` (mm) rounded to the resolution, 0.1 µm: ``100.00000000000001`` -> ``100.0``,
-    ``7.105427357601002e-15`` -> ``0.0`` (and never ``-0.0``)."""
-    return round(value, _DIGITS) + 0.0
+    ``7.105427357601002e-15`` -> ``0.0`` (and never ``-0.0``).
+
+    ``round(value * 10**4) / 10**4`` is the double nearest to the rounded decimal, as ``round(value, 4)``
+    is, at a fifth of its cost (a live scene rounds thousands of numbers between two cycles)."""
+    if not math.isfinite(value):
+        return value
+    return round(value * _SCALE) / _SCALE + 0.0
 
 
 def round_numbers(value: Any) -> Any:
@@ -117,11 +129,11 @@ def round_numbers(value: Any) -> Any:
     strings and the rest unchanged. For alarm params: their floats are lengths in mm (the ints are
     0.1 µm increments or counts), so the resolution is the right precision for all of them."""
     if isinstance(value, float):
-        return round_mm(value) if math.isfinite(value) else value
-    if isinstance(value, Mapping):
-        return {k: round_numbers(v) for k, v in value.items()}
+        return round_mm(value)
     if isinstance(value, list | tuple):
         return [round_numbers(v) for v in value]
+    if isinstance(value, dict | Mapping):
+        return {k: round_numbers(v) for k, v in value.items()}
     return value
 
 
@@ -139,6 +151,21 @@ class _Region:
             self.points = [(float(x), float(y)) for x, y in area["points"]]
             if len(self.points) < 3:
                 raise ValueError(f"area {area.get('id')}: a POLY area needs 3 corners, got {self.points}")
+        if self.circle is not None:
+            cx, cy, r = self.circle
+            box = (cx - r, cy - r, cx + r, cy + r)
+        else:
+            xs = [x for x, _ in self.points]
+            ys = [y for _, y in self.points]
+            box = (min(xs), min(ys), max(xs), max(ys))
+        self.box = (box[0] - _TOL, box[1] - _TOL, box[2] + _TOL, box[3] + _TOL)
+        """The region's bounding box, widened by the tolerance: a segment outside it is never over it."""
+
+    def far_from(self, p: tuple[float, float], q: tuple[float, float]) -> bool:
+        """Is the segment P->Q certainly not over the region (its bounding box misses the region's)?
+        The cheap test that keeps a long path's scene fast (most segments are far from most areas)."""
+        x0, y0, x1, y1 = self.box
+        return max(p[0], q[0]) < x0 or min(p[0], q[0]) > x1 or max(p[1], q[1]) < y0 or min(p[1], q[1]) > y1
 
     def contains(self, x: float, y: float) -> bool:
         """Inside or on the boundary (within :data:`_TOL`)."""
@@ -284,6 +311,8 @@ def _spans(
             pts, ss = [pts[0], pts[0]], [ss[0], ss[0]]
         for k in range(len(pts) - 1):
             p, q = pts[k], pts[k + 1]
+            if region.far_from((p[ia], p[ib]), (q[ia], q[ib])):
+                continue
             for t0, t1 in _footprint_intervals(region, (p[ia], p[ib]), (q[ia], q[ib])):
                 if ic is None:
                     relation = "crosses"  # no height axis recorded: over the region is in it
@@ -436,6 +465,8 @@ def build_scene(
     stop: Sequence[float] | None = None,
     channel: int | None = None,
     tolerance: float | None = None,
+    position: Sequence[float] | None = None,
+    ahead: Sequence[Sequence[float]] = (),
 ) -> dict[str, Any]:
     """The scene (module docstring) of a channel's areas and the path it travelled.
 
@@ -444,7 +475,9 @@ def build_scene(
     when no area does. ``alarms``: as ``check --format json`` lists them; the first whose params carry
     an ``intersection`` (or a ``position`` and an ``area``) gives the refused block and the violation
     point. ``stop``: where the axes came to rest (all axes). ``tolerance``: mm the drawn path may deviate
-    from the recorded one (default 1e-4 of the scene's diagonal; 0 keeps every point)."""
+    from the recorded one (default 1e-4 of the scene's diagonal; 0 keeps every point). ``position`` (all
+    axes) and ``ahead`` (points, all axes) are the live dashboard's: the TCP now and the path decoded
+    ahead of it (drawn from ``position``; not related to the areas, see the module docstring)."""
     names = list(axis_names)
     width = len(names)
     table = _area_list(areas)
@@ -453,6 +486,13 @@ def build_scene(
             raise ValueError(f"path point {k} has {len(p)} coordinates, the channel has {width} axes {names}")
     if stop is not None and len(stop) != width:
         raise ValueError(f"stop point has {len(stop)} coordinates, the channel has {width} axes {names}")
+    if position is not None and len(position) != width:
+        raise ValueError(f"position has {len(position)} coordinates, the channel has {width} axes {names}")
+    for k, p in enumerate(ahead):
+        if len(p) != width:
+            raise ValueError(
+                f"point {k} ahead has {len(p)} coordinates, the channel has {width} axes {names}"
+            )
     va, vb, vh = _choose_view(table, names, main_axes, plane)
     ia, ib = names.index(va), names.index(vb)
     ih = names.index(vh) if vh is not None else None
@@ -521,9 +561,32 @@ def build_scene(
         entry["relation"] = _combine(sp["relation"] for sp in spans) if spans is not None else "apart"
         out_areas.append(entry)
 
+    position_view: list[float | None] | None = None
+    ahead_view: list[list[float | None]] = []
+    if position is not None or ahead:
+        here = tuple(float(v) for v in (position if position is not None else ahead[0]))
+        s_here = s_end + (
+            math.hypot(here[ia] - travelled[-1][ia], here[ib] - travelled[-1][ib]) if travelled else 0.0
+        )
+        if position is not None:
+            position_view = view(here, s_here)
+        if ahead:
+            piece = _Piece(
+                [here, *(tuple(float(v) for v in p) for p in ahead)], s_here, ia, ib, refused=False
+            )
+            ahead_view = [view(p, s) for p, s in zip(piece.points, piece.s, strict=True)]
+
     path_view = [view(p, s) for p, s in zip(travelled, pieces[0].s, strict=True)] if travelled else []
+    s_end_total = pieces[-1].s_end if pieces else 0.0
+    if ahead_view:
+        s_end_total = max(s_end_total, float(ahead_view[-1][3] or 0.0))
     bounds = _bounds(
-        out_areas, path_view, refused, violation, stop_view, s_end_total=pieces[-1].s_end if pieces else 0.0
+        out_areas,
+        path_view + ahead_view + ([position_view] if position_view is not None else []),
+        refused,
+        violation,
+        stop_view,
+        s_end_total=s_end_total,
     )
     if tolerance is None:
         (a0, a1), (b0, b1) = bounds["a"], bounds["b"]
@@ -541,6 +604,8 @@ def build_scene(
         "refused": refused,
         "violation": violation,
         "stop": stop_view,
+        "position": position_view,
+        "ahead": _simplify(ahead_view, tolerance),
     }
     result: dict[str, Any] = round_numbers(scene)
     return result

@@ -278,6 +278,23 @@ class OperatorPort(Protocol):
         """Pacing statistics of the clock (``GET /api/timing``)."""
         ...
 
+    # --- what the dashboard draws (issue 15); lengths in mm ----------------------------------
+    def scene(self, channel: int) -> dict[str, Any]:
+        """The channel's live scene, as :func:`hli_server.scene.build_scene` computes it for ``check
+        --plot``: the area table, the recent trail of the setpoints (since the last program start, the
+        newest points), the active alarms' refused block and violation point, the position now and the
+        path the channel has decoded ahead. Unchanged inputs give the same (cached) object."""
+        ...
+
+    def programs(self, channel: int) -> list[dict[str, Any]]:
+        """The channel's program table: ``[{"number", "name"}]`` (for ``select_program``)."""
+        ...
+
+    def collision_pairs(self) -> list[dict[str, Any]]:
+        """The collision pairs (FCT-C3) now: ``{"master", "partner", "distance", "min_distance",
+        "brake_master", "brake_partner", "monitoring", "stopped", "latched"}``."""
+        ...
+
 
 class EventFeed(Protocol):
     """The typed events (``schemas.events``): live, and the runtime's log."""

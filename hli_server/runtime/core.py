@@ -118,6 +118,8 @@ class Runtime:
         self.stats = PacingStats(self.t_a)
         self.event_log = EventLog()
         self.machine.event_listeners.append(self.event_log)
+        self._cycle_listeners: list[Callable[[int], None]] = []
+        self._recorders: list[SignalRecorder] = []
         self.operator = OperatorPanel(self.machine, self.timing)
         self.host = RuntimeHost(self, self.operator)
         self._image_factory = image_factory or shared_memory_image
@@ -130,8 +132,6 @@ class Runtime:
         self._adapter_specs = specs
         self.adapters: list[Adapter] = []
         self._started_adapters: list[Adapter] = []
-        self._cycle_listeners: list[Callable[[int], None]] = []
-        self._recorders: list[SignalRecorder] = []
         self._pacer: asyncio.Task[None] | None = None
         self._stop_event: asyncio.Event | None = None
         self._step_lock: asyncio.Lock | None = None

@@ -27,6 +27,7 @@ from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel import Channel
 from hli_server.engine.machine import Machine
+from hli_server.runtime.live import TrailRecorder, collision_pairs, live_scene, program_table, scene_key
 from schemas.wire import Mode
 
 if TYPE_CHECKING:
@@ -41,6 +42,9 @@ class OperatorPanel(OperatorPort):
     def __init__(self, machine: Machine, timing: Callable[[], dict[str, Any]]) -> None:
         self._m = machine
         self._timing = timing
+        self.recorder = TrailRecorder(machine)
+        """The trails and scene revisions; fed by the runtime host (a cycle listener, an event listener)."""
+        self._scenes: dict[int, tuple[tuple[object, ...], dict[str, Any]]] = {}
 
     # --- what and where -------------------------------------------------------------------
     @property
@@ -197,6 +201,23 @@ class OperatorPanel(OperatorPort):
     def timing(self) -> dict[str, Any]:
         return self._timing()
 
+    # --- the dashboard (issue 15): hli_server/runtime/live.py ------------------------------
+    def scene(self, channel: int) -> dict[str, Any]:
+        ch = self._channel(channel)
+        key = scene_key(self._m, self.recorder, ch.number)
+        cached = self._scenes.get(ch.number)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        scene = live_scene(self._m, self.recorder, ch.number)
+        self._scenes[ch.number] = (key, scene)
+        return scene
+
+    def programs(self, channel: int) -> list[dict[str, Any]]:
+        return program_table(self._channel(channel))
+
+    def collision_pairs(self) -> list[dict[str, Any]]:
+        return collision_pairs(self._m)
+
 
 class RuntimeHost:
     """The :class:`~hli_server.adapters.host.AdapterHost` of a running :class:`Runtime`."""
@@ -204,6 +225,9 @@ class RuntimeHost:
     def __init__(self, runtime: Runtime, operator: OperatorPanel) -> None:
         self._rt = runtime
         self._operator = operator
+        # the operator panel's trails follow the cycles, its scenes the events (the dashboard)
+        runtime.on_cycle(operator.recorder.after_cycle)
+        runtime.event_log.subscribe(operator.recorder.on_event)
 
     @property
     def image(self) -> ImagePort:

@@ -2,7 +2,8 @@
 
 The operator panel of the simulated machine and the remote control of the integration tests (H-07):
 machine state, programs, start/feedhold/reset, mode, jog, override, referencing, stepping the stepped
-clock, fault injection (A3-05), alarms and events, and every image field by its ST path (H-01, H-02).
+clock, fault injection (A3-05), alarms and events, and every image field by its ST path (H-01, H-02);
+the live dashboard at ``/`` (issue 15, ``routers/page.py``, ``live.py``).
 Each concern is a router of its own (``routers/``); each takes the host as a dependency and knows
 nothing of the runtime or the engine.
 
@@ -19,15 +20,23 @@ from fastapi import FastAPI
 from hli_server.adapters.host import AdapterHost
 from hli_server.adapters.http.deps import SafeJSONResponse, install_error_handlers
 from hli_server.adapters.http.guard import Guard
+from hli_server.adapters.http.live import DEFAULT_MAX_STREAMS, DEFAULT_RATE_HZ, LiveFeed
 from hli_server.adapters.http.options import DEFAULT_MAX_BODY_BYTES
 from hli_server.adapters.http.routers import ROUTERS
 
 __all__ = ["create_app"]
 
 
-def create_app(host: AdapterHost, *, max_body_bytes: int = DEFAULT_MAX_BODY_BYTES) -> FastAPI:
+def create_app(
+    host: AdapterHost,
+    *,
+    max_body_bytes: int = DEFAULT_MAX_BODY_BYTES,
+    max_streams: int = DEFAULT_MAX_STREAMS,
+    live_rate_hz: float = DEFAULT_RATE_HZ,
+) -> FastAPI:
     """The FastAPI application for ``host`` (usable without a socket, e.g. with an ASGI client), behind
-    the guard (Host, Origin, token, read-only, body size: ``guard.py``)."""
+    the guard (Host, Origin, token, read-only, body size: ``guard.py``). ``app.state.live`` is the
+    dashboard's :class:`~hli_server.adapters.http.live.LiveFeed` (close it before stopping the server)."""
     app = FastAPI(
         default_response_class=SafeJSONResponse,
         title="hli-server control API",
@@ -35,11 +44,13 @@ def create_app(host: AdapterHost, *, max_body_bytes: int = DEFAULT_MAX_BODY_BYTE
         description=(
             "Operator panel and remote control of the simulated CNC kernel: state, programs, "
             "start/feedhold/reset, mode, jog, override, referencing, stepping (stepped clock), fault "
-            "injection, alarms, events and the process image by ST path. Requests to a channel are "
-            "latched at the next cycle (202). See docs/api.md."
+            "injection, alarms, events and the process image by ST path; the dashboard at / with its "
+            "event stream /api/live. Requests to a channel are latched at the next cycle (202). See "
+            "docs/api.md and docs/dashboard.md."
         ),
     )
     app.state.host = host
+    app.state.live = LiveFeed(host, max_streams=max_streams, rate_hz=live_rate_hz)
     install_error_handlers(app)
     for router in ROUTERS:
         app.include_router(router)

@@ -22,7 +22,7 @@ from hli_server.adapters.host import (
 )
 from hli_server.adapters.http.models import AcceptedBody
 
-__all__ = ["HostDep", "SafeJSONResponse", "accepted", "get_host", "install_error_handlers"]
+__all__ = ["HostDep", "SafeJSONResponse", "accepted", "get_host", "install_error_handlers", "json_bytes"]
 
 
 def _json_safe(value: Any) -> Any:
@@ -37,14 +37,19 @@ def _json_safe(value: Any) -> Any:
     return value
 
 
+def json_bytes(content: Any) -> bytes:
+    """Compact JSON that always renders (see :class:`SafeJSONResponse`); also the event stream's."""
+    return json.dumps(_json_safe(content), ensure_ascii=True, allow_nan=False, separators=(",", ":")).encode(
+        "ascii"
+    )
+
+
 class SafeJSONResponse(JSONResponse):
     """JSON that always renders: non-finite numbers named (see :func:`_json_safe`), text escaped to ASCII
     (a lone surrogate in a client's string cannot break the answer). Issue 12, finding 6: these made 500s."""
 
     def render(self, content: Any) -> bytes:
-        return json.dumps(
-            _json_safe(content), ensure_ascii=True, allow_nan=False, separators=(",", ":")
-        ).encode("ascii")
+        return json_bytes(content)
 
 
 def get_host(request: Request) -> AdapterHost:

@@ -34,3 +34,12 @@ class HttpOptions(BaseModel):
     max_body_bytes: int = Field(
         default=DEFAULT_MAX_BODY_BYTES, ge=1024, le=1 << 30, description="largest request body (else 413)"
     )
+    max_streams: int = Field(
+        default=16,
+        ge=1,
+        le=256,
+        description="dashboard event streams (GET /api/live) open at once (else 503)",
+    )
+    live_rate_hz: float = Field(
+        default=20.0, ge=1.0, le=100.0, description="state updates per second on each dashboard event stream"
+    )

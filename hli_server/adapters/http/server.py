@@ -17,6 +17,7 @@ import uvicorn
 
 from hli_server.adapters.host import AdapterHost
 from hli_server.adapters.http.app import create_app
+from hli_server.adapters.http.live import LiveFeed
 from hli_server.adapters.http.options import HttpOptions
 from hli_server.adapters.http.protocol import bounded_protocol
 
@@ -48,6 +49,7 @@ class HttpApiAdapter:
         self._server: _Server | None = None
         self._task: asyncio.Task[None] | None = None
         self._socket: socket.socket | None = None
+        self._live: LiveFeed | None = None
 
     @property
     def url(self) -> str:
@@ -65,8 +67,15 @@ class HttpApiAdapter:
         self._socket = sock = _listen(self.bind, self.requested_port)
         self.port = sock.getsockname()[1]
         options = self.options
+        app = create_app(
+            host,
+            max_body_bytes=options.max_body_bytes,
+            max_streams=options.max_streams,
+            live_rate_hz=options.live_rate_hz,
+        )
+        self._live = app.state.live
         config = uvicorn.Config(
-            create_app(host, max_body_bytes=options.max_body_bytes),
+            app,
             log_config=None,
             access_log=False,
             lifespan="off",
@@ -87,6 +96,10 @@ class HttpApiAdapter:
     async def stop(self) -> None:
         server, task = self._server, self._task
         self._server = self._task = None
+        if self._live is not None:
+            # end the dashboards' event streams first: an open stream would hold the graceful shutdown
+            await self._live.close()
+            self._live = None
         if server is not None and task is not None:
             server.should_exit = True
             try:

@@ -1,7 +1,16 @@
 """The control API's routers, one per concern; ``app.py`` includes them all."""
 
-from hli_server.adapters.http.routers import axes, channels, clock, events, image, state
+from hli_server.adapters.http.routers import axes, channels, clock, events, image, live, page, state
 
-ROUTERS = (state.router, channels.router, axes.router, clock.router, events.router, image.router)
+ROUTERS = (
+    page.router,
+    state.router,
+    channels.router,
+    axes.router,
+    clock.router,
+    events.router,
+    image.router,
+    live.router,
+)
 
 __all__ = ["ROUTERS"]

@@ -1,0 +1,76 @@
+"""``/api/live`` (the dashboard's event stream), the scene, the program table and the collision pairs."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from typing import Any
+
+from fastapi import APIRouter, HTTPException, Request
+from fastapi.responses import StreamingResponse
+
+from hli_server.adapters.http.deps import HostDep
+from hli_server.adapters.http.live import LiveFeed, TooManyStreamsError
+
+__all__ = ["router"]
+
+router = APIRouter(tags=["dashboard"])
+
+
+def _feed(request: Request) -> LiveFeed:
+    feed: LiveFeed = request.app.state.live
+    return feed
+
+
+@router.get(
+    "/api/live",
+    summary="Server-sent events: hello, state (20 Hz), event, scene, dropped (the dashboard's feed)",
+    response_class=StreamingResponse,
+    responses={
+        200: {"content": {"text/event-stream": {}}, "description": "an endless event stream"},
+        503: {"description": "all stream slots are taken (max_streams)"},
+    },
+)
+async def get_live(request: Request) -> StreamingResponse:
+    feed = _feed(request)
+    try:
+        stream = feed.open()
+    except TooManyStreamsError as exc:
+        raise HTTPException(503, str(exc)) from None
+    except RuntimeError as exc:
+        raise HTTPException(503, str(exc)) from None
+    hello = feed.hello()
+
+    async def chunks() -> AsyncIterator[bytes]:
+        try:
+            yield hello
+            while True:
+                chunk = await stream.next_chunk()
+                if chunk is None:
+                    return
+                yield chunk
+        finally:
+            feed.release(stream)
+
+    return StreamingResponse(
+        chunks(),
+        media_type="text/event-stream",
+        headers={"cache-control": "no-cache", "x-accel-buffering": "no"},
+    )
+
+
+@router.get(
+    "/api/channels/{number}/scene",
+    summary="The channel's live scene: areas, trail, path ahead, TCP, refused block (as check --plot draws)",
+)
+async def get_scene(host: HostDep, number: int) -> dict[str, Any]:
+    return host.operator.scene(number)
+
+
+@router.get("/api/channels/{number}/programs", summary="The channel's program table (for select)")
+async def get_programs(host: HostDep, number: int) -> list[dict[str, Any]]:
+    return host.operator.programs(number)
+
+
+@router.get("/api/collision-pairs", summary="Collision pairs (FCT-C3): distance, minimum, braking distances")
+async def get_collision_pairs(host: HostDep) -> list[dict[str, Any]]:
+    return host.operator.collision_pairs()

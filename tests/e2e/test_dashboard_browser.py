@@ -1,0 +1,241 @@
+"""The dashboard as a person uses it (issue 15): headless Chromium, driven by Playwright, against
+``hli-server run`` in its own process (realtime clock, the demo machine).
+
+Debian's ``chromium`` (``/usr/bin/chromium``, or ``HLI_CHROMIUM``) with Playwright's Python package; no
+browser is downloaded (``playwright install`` cannot work here). ``.ci/run`` installs ``chromium``;
+without it these tests are skipped and say why. Screenshots are kept in ``test-artifacts/`` (or
+``HLI_TEST_ARTIFACTS``): ``dashboard-area-violation.png`` after the violation, ``dashboard-reset.png``
+after the reset (docs/dashboard.md).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from tests.integration.servers import hli_server_cmd, read_banner, stop_server
+from tests.spec_examples import CIRC_PROT_OLD
+
+playwright_api = pytest.importorskip(
+    "playwright.sync_api", reason="Playwright's Python package is missing: pip install -e '.[test]'"
+)
+expect = playwright_api.expect
+
+CHROMIUM = os.environ.get("HLI_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",  # without these Chromium calls home, and this network refuses it
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
+ARTIFACTS = Path(
+    os.environ.get("HLI_TEST_ARTIFACTS") or Path(__file__).resolve().parents[2] / "test-artifacts"
+)
+WAIT_MS = 20_000  # a loaded machine (2 shared cores) may be slow; every wait ends as soon as it holds
+
+pytestmark = [
+    pytest.mark.slow,
+    pytest.mark.timeout(180),
+    pytest.mark.skipif(
+        not Path(CHROMIUM).exists(),
+        reason=f"Debian's chromium is not installed ({CHROMIUM}): apt-get install chromium (.ci/run does)",
+    ),
+]
+
+# the protection cylinder of FCT-C14's older excerpt: centre (150, 0), radius 50, Z -70..70; the block
+# N70 goes through it and is refused before it starts (912001), its entry point is X100 Y0
+THROUGH = CIRC_PROT_OLD + "N50 G01 X0 Y0 F30000\nN60 #CONTROL AREA ON [ID4]\nN70 G01 X300 F6000\nN80 M30\n"
+
+
+def _start(*args: str, log: Path) -> tuple[subprocess.Popen[str], str]:
+    with log.open("w") as err:
+        proc = subprocess.Popen(
+            [*hli_server_cmd(), "run", "--http-port", "0", "--no-modbus", *args],
+            stdout=subprocess.PIPE,
+            stderr=err,  # the server's log (lateness warnings on a loaded machine) must not fill a pipe
+            text=True,
+        )
+    return proc, read_banner(proc)["url"]
+
+
+@pytest.fixture(scope="module")
+def server() -> Iterator[str]:
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    proc, url = _start(log=ARTIFACTS / "dashboard-server.log")
+    yield url
+    stop_server(proc)
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Any]:
+    with playwright_api.sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def page(browser: Any) -> Iterator[Any]:
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    page = context.new_page()
+    page.set_default_timeout(WAIT_MS)
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    yield page
+    context.close()
+    assert not errors, f"the page's script failed: {errors}"
+
+
+def _open(page: Any, url: str) -> None:
+    page.goto(url)
+    expect(page.locator("#conn")).to_have_text("live", timeout=WAIT_MS)
+
+
+def _at_rest(page: Any, axes: str = "XYZ") -> None:
+    for axis in axes:
+        expect(page.locator(f"#axis-{axis} td.status")).to_contain_text("in position", timeout=WAIT_MS)
+
+
+@pytest.mark.req("C14-14", "C14-15", "E-03")
+def test_an_operator_starts_the_demo_program_sees_a_violation_and_resets(server: str, page: Any) -> None:
+    p = page
+    _open(p, server)
+    tcp = p.locator("#tcp-1")
+    expect(tcp).to_have_attribute("data-a", re.compile(r"."))
+    before = [float(tcp.get_attribute("data-a")), float(tcp.get_attribute("data-b"))]
+
+    # the demo program: the square of the program table, selected and started from the page
+    p.select_option("#ch1-program", "1")
+    p.click("#ch1-select")
+    expect(p.locator("#message")).to_contain_text("select program 1: done")
+    p.click("#ch1-start")
+    expect(p.locator("#ch1-state")).to_have_text("running")
+    expect(p.locator("#ch1-progname")).to_have_text("square")
+    # the TCP moves on the picture (more than 5 mm), and the trail follows it
+    p.wait_for_function(
+        "([a, b]) => { const t = document.querySelector('#tcp-1');"
+        " return Math.hypot(t.dataset.a - a, t.dataset.b - b) > 5; }",
+        arg=before,
+    )
+    expect(p.locator("#ch1-tail")).to_have_attribute("points", re.compile(r"\d+.*,.* \d"))
+    expect(p.locator("#ch1-block")).to_contain_text("N2")
+    p.click("#ch1-reset")
+    expect(p.locator("#ch1-state")).not_to_have_text("running")
+    _at_rest(p)
+
+    # a program whose block N70 goes through an active protection area
+    p.click("#ch1-card details.load summary")
+    p.fill("#ch1-text", THROUGH)
+    p.click("#ch1-load")
+    expect(p.locator("#message")).to_contain_text("load program: done")
+    p.click("#ch1-start")
+    alarm = p.locator("#alarms li[data-alarm='912001']")
+    expect(alarm).to_contain_text("touches protection area 4")
+    expect(alarm).to_contain_text("N70")
+    expect(p.locator("#ch1-state")).to_have_text("aborted")
+    area = p.locator("#ch1-top .area[data-area='4']")
+    expect(area).to_have_attribute("data-state", "active")
+    expect(area).to_have_attribute("data-relation", "crosses")
+    expect(p.locator("#ch1-violation")).to_have_count(1)
+    expect(p.locator("#ch1-refused")).to_have_count(1)
+    legend = p.locator("#ch1-legend")
+    expect(legend).to_contain_text("refused block N70")
+    expect(legend).to_contain_text("violation at X100.0000 Y0.0000 Z0.0000, area 4 (alarm 912001)")
+    expect(legend).to_contain_text("ID4 PROT active, Z -70..70: path goes through it")
+    expect(p.locator("#events")).to_contain_text("area_violation")
+    p.screenshot(path=str(ARTIFACTS / "dashboard-area-violation.png"), full_page=True)
+
+    # reset: the alarm goes, the refused block and the violation point with it; the area stays (E-03)
+    p.click("#ch1-reset")
+    expect(p.locator("#alarms li[data-alarm]")).to_have_count(0)
+    expect(p.locator("#alarms")).to_contain_text("no active alarm")
+    expect(p.locator("#ch1-violation")).to_have_count(0)
+    expect(p.locator("#ch1-refused")).to_have_count(0)
+    expect(area).to_have_attribute("data-state", "inactive")  # deactivated, not deleted
+    expect(p.locator("#alarm-history li[data-alarm='912001']")).to_have_count(1)
+    p.screenshot(path=str(ARTIFACTS / "dashboard-reset.png"), full_page=True)
+
+
+@pytest.mark.req("E-05")
+def test_mode_jog_override_feedhold_and_faults_from_the_page(server: str, page: Any) -> None:
+    p = page
+    _open(p, server)
+    p.click("#ch1-reset")
+    _at_rest(p)
+    # manual mode, jog Y+ while the key is held
+    p.click("#ch1-manual")
+    expect(p.locator("#ch1-mode")).to_have_text("manual")
+    y0 = float(p.locator("#axis-Y td.command").text_content())
+    key = p.locator("#ch1-jog-Yplus")
+    key.hover()
+    p.mouse.down()
+    p.wait_for_function(
+        "y0 => Number(document.querySelector('#axis-Y td.command').textContent) > y0 + 2", arg=y0
+    )
+    p.mouse.up()
+    expect(p.locator("#message")).to_contain_text("jog Y released")
+    _at_rest(p, "Y")
+    p.click("#ch1-auto")
+    expect(p.locator("#ch1-mode")).to_have_text("automatic")
+
+    # override 50 %, then the circle with a feedhold and its release
+    p.locator("#ch1-override").fill("50")
+    expect(p.locator("#ch1-override-state")).to_have_text("50 %")
+    p.select_option("#ch1-program", "2")
+    p.click("#ch1-select")
+    expect(p.locator("#message")).to_contain_text("select program 2: done")
+    p.click("#ch1-start")
+    expect(p.locator("#ch1-state")).to_have_text("running")
+    p.click("#ch1-feedhold")
+    expect(p.locator("#ch1-state")).to_have_text("held")
+    expect(p.locator("#ch1-holds")).to_have_text("feedhold")
+    p.click("#ch1-feedhold")
+    expect(p.locator("#ch1-state")).to_have_text("running")
+
+    # a drive error on X (A3-05): the axis shows it, an alarm comes, reset and clear end it
+    p.click("#axis-X button:has-text('drive error')")
+    expect(p.locator("#axis-X td.status")).to_contain_text("ERROR")
+    expect(p.locator("#alarms li.error")).not_to_have_count(0)
+    p.click("#axis-X button:has-text('clear')")
+    p.click("#ch1-reset")
+    expect(p.locator("#axis-X td.status")).not_to_contain_text("ERROR")
+    expect(p.locator("#alarms")).to_contain_text("no active alarm")
+    p.locator("#ch1-override").fill("100")
+    expect(p.locator("#ch1-override-state")).to_have_text("100 %")
+
+
+def test_with_an_api_token_the_page_asks_for_it_once(browser: Any, tmp_path: Path) -> None:
+    proc, url = _start("--api-token", "s3cret-token", log=tmp_path / "server.log")
+    try:
+        context = browser.new_context()
+        p = context.new_page()
+        p.set_default_timeout(WAIT_MS)
+        _open(p, url)
+        form = p.locator("#token-form")
+        expect(form).to_be_visible()  # hello said the server needs one
+        p.fill("#token", "wrong")
+        p.click("#token-save")
+        expect(form).to_be_hidden()
+        p.click("#ch1-select")
+        expect(form).to_be_visible()  # 401: asked again, the action kept
+        expect(p.locator("#message")).to_contain_text("the token was refused")
+        p.fill("#token", "s3cret-token")
+        p.click("#token-save")
+        expect(p.locator("#message")).to_contain_text("select program 1: done")  # the kept action, retried
+        p.click("#ch1-start")
+        expect(p.locator("#ch1-state")).to_have_text("running")
+        p.click("#ch1-reset")
+        expect(p.locator("#ch1-state")).not_to_have_text("running")
+        context.close()
+    finally:
+        stop_server(proc)
