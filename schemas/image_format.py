@@ -73,7 +73,7 @@ from dataclasses import dataclass
 from multiprocessing import resource_tracker, shared_memory
 from typing import Final
 
-from schemas.layout import LAYOUT_VERSION, Signal, SignalType
+from schemas.layout import LAYOUT_VERSION, Direction, Layout, Signal, SignalType, SignalValueError
 
 __all__ = [
     "C2P_BUFFER_HEADER",
@@ -103,6 +103,7 @@ __all__ = [
     "read_header",
     "read_u64",
     "write_field",
+    "write_p2c_bytes",
     "write_u64",
 ]
 
@@ -347,6 +348,25 @@ def write_u64(buf: memoryview, offset: int, value: int) -> None:
 def write_field(buf: memoryview, half_offset: int, signal: Signal, value: bool | int | float) -> None:
     """One store of the field's size (PLC->CNC single-field write). ``value`` must be coerced."""
     _NATIVE[signal.type].pack_into(buf, half_offset + signal.offset, value)
+
+
+def write_p2c_bytes(buf: memoryview, plan: SegmentPlan, layout: Layout, offset: int, data: bytes) -> None:
+    """A raw write into the PLC->CNC half (ADS's index group of the half): whole fields only, every value
+    checked before any is written (a refused write changes nothing); padding bytes in the range are
+    ignored. Raises the layout's errors (SignalValueError, a range that cuts a field)."""
+    signals = layout.signals_in_range(Direction.PLC_TO_CNC, offset, len(data))
+    values: list[tuple[Signal, bool | int | float]] = []
+    for s in signals:
+        raw = data[s.offset - offset : s.offset - offset + s.size]
+        if s.type is SignalType.BOOL:
+            if raw[0] > 1:
+                raise SignalValueError(f"{s.st_path}: BOOL byte must be 0 or 1, got {raw[0]}")
+            value: bool | int | float = bool(raw[0])
+        else:
+            value = struct.unpack("<" + s.type.struct_char, raw)[0]
+        values.append((s, s.coerce(value)))
+    for s, v in values:
+        write_field(buf, plan.p2c_offset, s, v)
 
 
 def read_field(buf: memoryview, half_offset: int, signal: Signal) -> bool | int | float:

@@ -80,6 +80,9 @@ class AdapterKind:
     default: bool
     """Started by ``hli-server run`` unless switched off (``--no-http``)."""
     summary: str
+    image_only: bool = False
+    """Serves the process image and nothing else (no operator, no events): it can run in the doors
+    process (``hli-server run --doors-process``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -114,6 +117,7 @@ ADAPTERS: dict[str, AdapterKind] = {
             "hli_server.adapters.modbus:ModbusOptions",
             default=True,
             summary="Modbus TCP view of the process image (H-03)",
+            image_only=True,
         ),
         AdapterKind(
             "ads",
@@ -121,6 +125,7 @@ ADAPTERS: dict[str, AdapterKind] = {
             "hli_server.adapters.ads.options:AdsOptions",
             default=False,
             summary="ADS over TCP: HLI symbols on AMS port 851, FCT-C3 CNC objects on port 551 (H-04, C3-10)",
+            image_only=True,
         ),
         AdapterKind(
             "mqtt",

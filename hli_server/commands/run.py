@@ -138,6 +138,13 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     "required with a --bind beyond loopback",
 )
 @click.option("--insecure", is_flag=True, help="allow a --bind beyond loopback without --api-token")
+@click.option(
+    "--doors-process/--no-doors-process",
+    default=True,
+    show_default=True,
+    help="serve Modbus and ADS from a second process attached to the shared memory, so that network "
+    "load does not compete with the cycle (docs/reliability.md)",
+)
 @click.option("--read-only", is_flag=True, help="the network doors accept no writes (HTTP, Modbus, ADS)")
 @click.option(
     "--allow-host",
@@ -190,6 +197,7 @@ def run(
     bind: str,
     api_token: str | None,
     insecure: bool,
+    doors_process: bool,
     read_only: bool,
     allow_hosts: tuple[str, ...],
     allow_origins: tuple[str, ...],
@@ -242,6 +250,7 @@ def run(
             max_catch_up=max_catch_up,
             stop_after_cycles=cycles,
             policy=policy,
+            doors_process=doors_process,
         )
     except (AdapterError, ValueError) as exc:
         click.echo(f"error: {exc}", err=True)

@@ -444,19 +444,7 @@ class ProcessImage:
     def write_bytes(self, offset: int, data: bytes) -> None:
         """Raw write into the PLC->CNC half (ADS index group of the half): whole fields only,
         every value checked before any is written; padding bytes in the range are ignored."""
-        signals = self.layout.signals_in_range(_P2C, offset, len(data))
-        values: list[tuple[Signal, bool | int | float]] = []
-        for s in signals:
-            raw = data[s.offset - offset : s.offset - offset + s.size]
-            if s.type is SignalType.BOOL:
-                if raw[0] > 1:
-                    raise SignalValueError(f"{s.st_path}: BOOL byte must be 0 or 1, got {raw[0]}")
-                value: bool | int | float = bool(raw[0])
-            else:
-                value = struct.unpack("<" + s.type.struct_char, raw)[0]
-            values.append((s, s.coerce(value)))
-        for s, v in values:
-            fmt.write_field(self._buf, self.plan.p2c_offset, s, v)
+        fmt.write_p2c_bytes(self._buf, self.plan, self.layout, offset, data)
 
     def read(self, st_path: str) -> Any:
         """One field: PLC->CNC from the live half, CNC->PLC from the newest consistent publish."""

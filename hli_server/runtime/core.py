@@ -95,6 +95,7 @@ class Runtime:
         stop_after_cycles: int | None = None,
         read_program: Callable[[str], str] | None = read_program_file,
         policy: AccessPolicy | None = None,
+        doors_process: bool = False,
     ) -> None:
         try:
             self.clock = Clock(clock)
@@ -109,6 +110,8 @@ class Runtime:
         self.config = config
         self.bind = bind
         self.policy = policy or AccessPolicy()
+        self.doors_process = doors_process
+        """Run the image-only doors (Modbus, ADS) in a process of their own (``runtime/doors.py``)."""
         self.http_port = http_port
         self.image_name = image_name
         self.max_catch_up = max_catch_up
@@ -253,7 +256,7 @@ class Runtime:
         try:
             self._image = self._image_factory(self.config, self.image_name)
             self._image.init_from(self.machine.hli, self.machine.cycle)
-            for spec in self._adapter_specs:
+            for spec in self._in_process_specs():
                 adapter = self._make_adapter(spec)
                 self.adapters.append(adapter)
                 await adapter.start(self.host)
@@ -296,6 +299,41 @@ class Runtime:
         self._started_adapters.append(adapter)
         logger.info("adapter %s started: %s", adapter.name, "; ".join(adapter.endpoints()))
         return adapter
+
+    def _in_process_specs(self) -> list[AdapterSpec]:
+        """The adapters to start here; with ``doors_process`` the image-only ones go to one
+        :class:`~hli_server.runtime.doors.DoorsProcess`, started in their place."""
+        if not self.doors_process:
+            return list(self._adapter_specs)
+        from hli_server.adapters.registry import ADAPTERS
+        from hli_server.runtime.doors import DoorsProcess
+
+        here: list[AdapterSpec] = []
+        moved: list[tuple[str, dict[str, Any]]] = []
+        for spec in self._adapter_specs:
+            name, options = (
+                (spec, {}) if isinstance(spec, str) else spec if isinstance(spec, tuple) else ("", {})
+            )
+            kind = ADAPTERS.get(name)
+            if kind is not None and kind.image_only:
+                moved.append((name, dict(options)))
+            else:
+                here.append(spec)
+        if moved:
+            if self._image_factory is not shared_memory_image:
+                raise RuntimeStateError(
+                    "the doors process needs the image in shared memory (the default image)"
+                )
+            here.append(
+                DoorsProcess(
+                    moved,
+                    bind=self.bind,
+                    policy=self.policy,
+                    t_a_us=self.config.cycle_time_us,
+                    machine_name=self.config.name,
+                )
+            )
+        return here
 
     def _make_adapter(self, spec: AdapterSpec) -> Adapter:
         if isinstance(spec, str):

@@ -1,0 +1,112 @@
+"""The doors process (``hli-server run``'s default, issue 12): Modbus and ADS served by a second process
+attached to the shared memory, so that network load does not compete with the cycle."""
+
+from __future__ import annotations
+
+import os
+import signal
+import struct
+import time
+
+import httpx
+import pytest
+
+from plc_clients.ads import AdsTransport
+from schemas.layout import Layout
+from tests.integration.servers import start_server, stop_server
+
+pytestmark = [pytest.mark.slow]
+
+
+def _banner(proc) -> dict[str, str]:  # type: ignore[no-untyped-def]
+    found: dict[str, str] = {}
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        assert line, proc.stderr.read()
+        for door in ("HTTP control API", "Modbus TCP", "ADS (AMS/TCP)"):
+            if line.strip().startswith(door + ":"):
+                found[door] = line.strip()
+        if "stop with" in line:
+            return found
+    raise AssertionError("no banner")
+
+
+def _pid_of(line: str) -> int:
+    return int(line.rsplit("pid ", 1)[1].rstrip("]"))
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
+
+
+def _modbus_write_register(port: int, address: int, value: int) -> bytes:
+    import socket
+
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
+        pdu = struct.pack(">BHHB", 16, address, 2, 4) + struct.pack(">i", value)
+        s.sendall(struct.pack(">HHHB", 1, 0, len(pdu) + 1, 1) + pdu)
+        head = s.recv(7)
+        return s.recv(struct.unpack(">H", head[4:6])[0] - 1)
+
+
+@pytest.mark.req("H-03", "H-04", "E-01")
+def test_run_serves_modbus_and_ads_from_the_doors_process_and_stops_it_cleanly() -> None:
+    proc = start_server("--http-port", "0", "--modbus-port", "0", "--ads-port", "0")
+    try:
+        banner = _banner(proc)
+        url = banner["HTTP control API"].split(": ", 1)[1].split()[0]
+        modbus_port = int(banner["Modbus TCP"].split(": ", 1)[1].split()[0].rsplit(":", 1)[1])
+        ads_port = int(banner["ADS (AMS/TCP)"].split(": ", 1)[1].split()[0].rsplit(":", 1)[1])
+        doors = _pid_of(banner["Modbus TCP"])
+        assert doors == _pid_of(banner["ADS (AMS/TCP)"]) != proc.pid
+        layout = Layout.from_dict(httpx.get(url + "/api/layout", timeout=5).json())
+        command = layout.signal("gpCh[0]^bahn_mc_control.override.command_w")
+        answer = _modbus_write_register(modbus_port, command.modbus_address, 430)
+        assert answer[0] == 16  # written (no exception)
+        r = httpx.get(url + "/api/image/gpCh[0].bahn_mc_control.override.command_w", timeout=5)
+        assert r.json()["value"] == 430  # the engine's process sees the doors process' write
+        ads = AdsTransport.connect("127.0.0.1", ads_port, layout=layout)
+        try:
+            first = ads.read("gpCh[0]^bahn_state.cycle_r")
+            time.sleep(0.05)
+            assert ads.read("gpCh[0]^bahn_state.cycle_r") > first  # live: the engine's publishes
+            assert ads.read("gpCh[0]^bahn_mc_control.override.command_w") == 430
+        finally:
+            ads.close()
+    finally:
+        stop_server(proc)
+    assert proc.returncode == 0
+    deadline = time.monotonic() + 10
+    while _alive(doors) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _alive(doors)
+
+
+@pytest.mark.req("H-03")
+def test_the_doors_process_ends_when_the_server_is_killed() -> None:
+    proc = start_server("--http-port", "0", "--modbus-port", "0")
+    try:
+        doors = _pid_of(_banner(proc)["Modbus TCP"])
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(10)
+        deadline = time.monotonic() + 10
+        while _alive(doors) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not _alive(doors)  # no orphan serving a dead image
+    finally:
+        stop_server(proc)
+
+
+@pytest.mark.req("H-03")
+def test_no_doors_process_serves_modbus_in_the_engines_process() -> None:
+    proc = start_server("--http-port", "0", "--modbus-port", "0", "--no-doors-process")
+    try:
+        line = _banner(proc)["Modbus TCP"]
+        assert "doors process" not in line
+    finally:
+        stop_server(proc)
