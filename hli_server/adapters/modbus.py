@@ -60,7 +60,6 @@ integration tests, the oracle of the codec's unit tests and the reference server
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
 import struct
 import time
@@ -72,6 +71,7 @@ from typing import TYPE_CHECKING, Any, Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from hli_server.adapters.tcp import Admission, ConnectionSlots, close, listen
 from hli_server.codecs.modbus_frames import (
     ExceptionCode,
     Frame,
@@ -554,12 +554,7 @@ class _Connection(asyncio.Protocol):
         assert isinstance(transport, asyncio.Transport)
         self._transport = transport
         self._peer = transport.get_extra_info("peername")
-        if not self._adapter._accept(self):
-            logger.warning(
-                "Modbus: refused connection from %s: %d connections open and none idle (max_connections)",
-                self._peer,
-                self._adapter.max_connections,
-            )
+        if not self._adapter._accept(self, self._peer):
             transport.abort()
             self._transport = None
             return
@@ -649,9 +644,9 @@ class _Connection(asyncio.Protocol):
                 handle.cancel()
         self._turn = self._idle = None
 
-    @property
-    def idle(self) -> bool:
-        return not self._queue and self._turn is None
+    def idle_since(self, now: float) -> float:
+        """When the client was last active; ``now`` while requests of it wait for their turn."""
+        return self.last_active if not self._queue and self._turn is None else now
 
     def abort(self) -> None:
         if self._transport is not None:
@@ -725,7 +720,9 @@ class ModbusAdapter:
         self.port: int | None = None
         self.server: ModbusServer
         self._listener: asyncio.Server | None = None
-        self._connections: set[_Connection] = set()
+        self._slots: ConnectionSlots[_Connection] = ConnectionSlots(
+            "Modbus", self.options.max_connections, self.options.evict_after
+        )
 
     @property
     def host(self) -> str:
@@ -753,48 +750,31 @@ class ModbusAdapter:
     async def start_for(self, image: ImagePort, *, read_only: bool = False) -> None:
         """Listen for an image without a runtime (tests, tools)."""
         self.serve_image(image, read_only=read_only)
-        loop = asyncio.get_running_loop()
-        try:
-            self._listener = await loop.create_server(
-                lambda: _Connection(self), host=self.bind, port=self.requested_port, reuse_address=True
-            )
-        except OSError as exc:
-            raise OSError(
-                exc.errno,
-                f"Modbus TCP: cannot listen on {self.bind}:{self.requested_port}: {exc.strerror}; "
-                "choose another --modbus-port (0 = any free port) or --bind address",
-            ) from None
+        self._listener = await listen(
+            lambda: _Connection(self),
+            self.bind,
+            self.requested_port,
+            "Modbus TCP",
+            "choose another --modbus-port (0 = any free port) or --bind address",
+        )
         self.port = self._listener.sockets[0].getsockname()[1]
         logger.info("Modbus TCP listening on %s:%d", self.bind, self.port)
 
     async def stop(self) -> None:
         listener, self._listener = self._listener, None
-        if listener is not None:
-            listener.close()
-        for connection in list(self._connections):
-            connection.abort()
-        self._connections.clear()
-        if listener is not None:
-            with contextlib.suppress(Exception):
-                await listener.wait_closed()
+        await close(listener, self._slots)
         self.port = None
 
-    def _accept(self, connection: _Connection) -> bool:
-        """Admit ``connection``; at the limit, close the connection silent the longest (at least
-        ``evict_after`` seconds) to make room, else refuse (issue 12, finding 4)."""
-        if len(self._connections) >= self.max_connections:
-            now = time.monotonic()
-            idle = [c for c in self._connections if c.idle and now - c.last_active >= self.evict_after]
-            if not idle:
-                self.server.stats.refused += 1
-                return False
-            victim = min(idle, key=lambda c: c.last_active)
-            logger.info("Modbus: closing the connection idle longest to make room for a new client")
+    def _accept(self, connection: _Connection, peer: object) -> bool:
+        """Admit ``connection``; at the limit, the connection silent the longest (at least
+        ``evict_after`` seconds) makes room, else it is refused (issue 12, finding 4; ``adapters/tcp.py``)."""
+        admission = self._slots.admit(connection, peer)
+        if admission is Admission.REFUSED:
+            self.server.stats.refused += 1
+            return False
+        if admission is Admission.EVICTED:
             self.server.stats.evicted += 1
-            victim.abort()
-            self._connections.discard(victim)
-        self._connections.add(connection)
         return True
 
     def _forget(self, connection: _Connection) -> None:
-        self._connections.discard(connection)
+        self._slots.forget(connection)

@@ -727,7 +727,7 @@ async def test_a_flooding_client_that_never_reads_is_bounded_and_others_are_serv
         # what the server holds for the flooder is bounded: queued answers by the high-water mark
         # plus one turn, buffered requests by one read of the socket plus one frame
         reply = 38 + 8 + layout.c2p_size
-        for connection in ads(rt)._connections:
+        for connection in ads(rt)._slots:
             transport = connection._transport
             assert transport is not None
             assert transport.get_write_buffer_size() <= 16 * 1024 + 32 * reply

@@ -47,6 +47,7 @@ from pydantic import ValidationError
 
 from hli_server.adapters.ads.device import AdsDevice, DeviceLimits, Session
 from hli_server.adapters.ads.options import AdsOptions
+from hli_server.adapters.tcp import Admission, ConnectionSlots, close, listen
 from hli_server.codecs.ads import (
     NEED_DATA,
     AdsCodecError,
@@ -342,7 +343,9 @@ class AdsAdapter:
         self.stats = ServerStats()
         self.device: AdsDevice
         self._listener: asyncio.Server | None = None
-        self._connections: set[_Connection] = set()
+        self._slots: ConnectionSlots[_Connection] = ConnectionSlots(
+            "ADS", self.options.max_connections, self.options.evict_idle_after_s
+        )
         self._flush_pending: set[Session] = set()
         self._flush_scheduled = False
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -356,7 +359,7 @@ class AdsAdapter:
 
     @property
     def connection_count(self) -> int:
-        return len(self._connections)
+        return len(self._slots)
 
     def endpoints(self) -> list[str]:
         if self.port is None:
@@ -404,23 +407,16 @@ class AdsAdapter:
         await self._listen()
 
     async def _listen(self) -> None:
-        self._loop = loop = asyncio.get_running_loop()
-        try:
-            self._listener = await loop.create_server(
-                lambda: _Connection(self),
-                host=self.bind,
-                port=self.requested_port,
-                reuse_address=True,
-                backlog=256,
-            )
-        except OSError as exc:
-            raise OSError(
-                exc.errno,
-                f"ADS: cannot listen on {self.bind}:{self.requested_port}: {exc.strerror}; choose another "
-                "--ads-port (0 = any free port) or --bind address (is a TwinCAT router on 48898?)",
-            ) from None
+        self._loop = asyncio.get_running_loop()
+        self._listener = await listen(
+            lambda: _Connection(self),
+            self.bind,
+            self.requested_port,
+            "ADS",
+            "choose another --ads-port (0 = any free port) or --bind address (is a TwinCAT router on 48898?)",
+        )
         self.port = self._listener.sockets[0].getsockname()[1]
-        self._idle_task = loop.create_task(self._watch_idle(), name="hli-ads-idle")
+        self._idle_task = self._loop.create_task(self._watch_idle(), name="hli-ads-idle")
         logger.info("ADS listening on %s:%d (AMS NetId %s)", self.bind, self.port, self.net_id)
 
     async def stop(self) -> None:
@@ -433,47 +429,23 @@ class AdsAdapter:
                 await self._idle_task
             self._idle_task = None
         listener, self._listener = self._listener, None
-        if listener is not None:
-            listener.close()
-        for connection in list(self._connections):
-            connection.abort()
-        self._connections.clear()
-        if listener is not None:
-            with contextlib.suppress(Exception):
-                await listener.wait_closed()
+        await close(listener, self._slots)
         self.port = None
 
     # --- connections --------------------------------------------------------------------------
     def _accept(self, connection: _Connection) -> bool:
-        if len(self._connections) >= self.options.max_connections:
-            now = time.monotonic()
-            oldest = min(self._connections, key=lambda c: c.idle_since(now))
-            idle = now - oldest.idle_since(now)
-            if idle < self.options.evict_idle_after_s:
-                self.stats.refused_full += 1
-                logger.warning(
-                    "ADS: refused a connection from %s: %d connections open and none idle for %.0f s "
-                    "(max_connections, evict_idle_after_s)",
-                    connection.session.name,
-                    len(self._connections),
-                    self.options.evict_idle_after_s,
-                )
-                return False
+        """Admit ``connection``; at the limit the one idle longest (``evict_idle_after_s``) makes room
+        (``adapters/tcp.py``)."""
+        admission = self._slots.admit(connection, connection.session.name)
+        if admission is Admission.REFUSED:
+            self.stats.refused_full += 1
+            return False
+        if admission is Admission.EVICTED:
             self.stats.evicted += 1
-            logger.info(
-                "ADS: %d connections open: closing %s (idle %.1f s) for a new client from %s",
-                len(self._connections),
-                oldest.session.name,
-                idle,
-                connection.session.name,
-            )
-            self._connections.discard(oldest)
-            oldest.abort()
-        self._connections.add(connection)
         return True
 
     def _forget(self, connection: _Connection) -> None:
-        self._connections.discard(connection)
+        self._slots.forget(connection)
         self._flush_pending.discard(connection.session)
 
     def next_client_port(self) -> int:
@@ -487,12 +459,12 @@ class AdsAdapter:
         while True:
             await asyncio.sleep(period)
             now = time.monotonic()
-            for connection in [c for c in self._connections if now - c.idle_since(now) > timeout]:
+            for connection in [c for c in self._slots if now - c.idle_since(now) > timeout]:
                 self.stats.idle_closed += 1
                 logger.info(
                     "ADS: closing %s: idle for %.0f s (idle_timeout_s)", connection.session.name, timeout
                 )
-                self._connections.discard(connection)
+                self._slots.forget(connection)
                 connection.abort()
 
     # --- notifications: sampled in the cycle, written in the next turn -------------------------
