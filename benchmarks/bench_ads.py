@@ -32,22 +32,21 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import multiprocessing as mp
 import os
 import signal
 import socket
 import time
 from array import array
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Any
+
+from benchmarks._servers import CTX, Server
 
 GOAL = 3.0
 SYMBOL = "gpAx[0]^ipo_state.cmd_pos_r"
 """A DINT of the CNC->PLC half; the reference holds a variable of the same name and address."""
 SERVER_NET_ID = "127.0.0.1.1.1"
-_CTX = mp.get_context("fork")
 
 
 def _address() -> tuple[int, int]:
@@ -163,32 +162,6 @@ def _serve_floor(conn: Connection) -> None:
     conn.send(None)
 
 
-@dataclass
-class Server:
-    name: str
-    process: Any
-    conn: Connection
-    port: int
-
-    @classmethod
-    def start(cls, name: str, target: Callable[[Connection], None]) -> Server:
-        parent, child = _CTX.Pipe()
-        process = _CTX.Process(target=target, args=(child,), daemon=True)
-        process.start()
-        if not parent.poll(30):
-            process.kill()
-            raise RuntimeError(f"{name}: the server did not start within 30 s")
-        return cls(name, process, parent, parent.recv())
-
-    def stop(self) -> Any:
-        self.process.terminate()
-        report = self.conn.recv() if self.conn.poll(15) else None
-        self.process.join(15)
-        if self.process.is_alive():
-            self.process.kill()
-        return report
-
-
 # --------------------------------------------------------------------------------------------
 # The client (a fresh process per run: AdsLib keeps one route per NetId per process)
 # --------------------------------------------------------------------------------------------
@@ -235,8 +208,8 @@ def _client_process(conn: Connection, port: int, mode: str, seconds: float) -> N
 
 def _run_client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
     """One run in a fresh process (AdsLib's router is per process)."""
-    parent, child = _CTX.Pipe()
-    process = _CTX.Process(target=_client_process, args=(child, port, mode, seconds), daemon=True)
+    parent, child = CTX.Pipe()
+    process = CTX.Process(target=_client_process, args=(child, port, mode, seconds), daemon=True)
     process.start()
     try:
         if not parent.poll(seconds + 60):

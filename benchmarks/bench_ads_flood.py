@@ -30,7 +30,8 @@ from array import array
 from multiprocessing.connection import Connection
 from typing import Any
 
-from benchmarks.bench_ads import _CTX, SYMBOL, Server, _address, _serve_hli
+from benchmarks._servers import CTX, Server
+from benchmarks.bench_ads import SYMBOL, _address, _serve_hli
 
 HALF_GROUP = 0xF020
 
@@ -113,8 +114,8 @@ def _honest(conn: Connection, port: int, seconds: float) -> None:
 
 
 def _start(target: Any, *args: Any) -> tuple[Any, Connection]:
-    parent, child = _CTX.Pipe()
-    process = _CTX.Process(target=target, args=(child, *args), daemon=True)
+    parent, child = CTX.Pipe()
+    process = CTX.Process(target=target, args=(child, *args), daemon=True)
     process.start()
     return process, parent
 

@@ -22,24 +22,22 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
-import multiprocessing as mp
 import os
 import signal
 import socket
 import struct
 import time
 from array import array
-from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any
 
+from benchmarks._servers import CTX, Server
+
 HOLDING_ADDRESS = 0
 """Channel 1's holding registers: override.command_w, mode_w, program_select_w (6 registers)."""
 GOAL = 1.5
-
-_CTX = mp.get_context("fork")
 
 
 # --------------------------------------------------------------------------------------------
@@ -104,33 +102,6 @@ def _serve_plain(conn: Connection) -> None:
 
     asyncio.run(main())
     conn.send(None)
-
-
-@dataclass
-class Server:
-    name: str
-    process: Any
-    conn: Connection
-    port: int
-
-    @classmethod
-    def start(cls, name: str, target: Callable[[Connection], None]) -> Server:
-        parent, child = _CTX.Pipe()
-        process = _CTX.Process(target=target, args=(child,), daemon=True)
-        process.start()
-        if not parent.poll(30):
-            process.kill()
-            raise RuntimeError(f"{name}: the server did not start within 30 s")
-        return cls(name, process, parent, parent.recv())
-
-    def stop(self) -> Any:
-        """SIGTERM, then what the server reports on its way out (the runtime's timing)."""
-        self.process.terminate()
-        report = self.conn.recv() if self.conn.poll(15) else None
-        self.process.join(15)
-        if self.process.is_alive():
-            self.process.kill()
-        return report
 
 
 # --------------------------------------------------------------------------------------------
@@ -221,7 +192,7 @@ def measure(server: Server, clients: int, seconds: float, count: int) -> Result:
     answer_size = 9 + 2 * count
     pid = server.process.pid
     idle_from, idle_cpu = time.perf_counter(), _cpu_seconds(pid)
-    with ProcessPoolExecutor(max_workers=clients, mp_context=_CTX) as pool:
+    with ProcessPoolExecutor(max_workers=clients, mp_context=CTX) as pool:
         start_at = time.perf_counter() + 0.5 + 0.05 * clients  # every client connected and waiting
         futures = [
             pool.submit(_client, server.port, frame, answer_size, start_at, seconds) for _ in range(clients)

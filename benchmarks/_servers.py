@@ -1,0 +1,43 @@
+"""A server under test in a process of its own, for the benchmarks that measure a door from outside."""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+from collections.abc import Callable
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from typing import Any
+
+__all__ = ["CTX", "Server"]
+
+CTX = mp.get_context("fork")
+"""Fork: the server process starts in milliseconds with what the benchmark imported already."""
+
+
+@dataclass
+class Server:
+    """``target(conn)`` runs the server, sends its port on ``conn``, and on SIGTERM what it reports."""
+
+    name: str
+    process: Any
+    conn: Connection
+    port: int
+
+    @classmethod
+    def start(cls, name: str, target: Callable[[Connection], None]) -> Server:
+        parent, child = CTX.Pipe()
+        process = CTX.Process(target=target, args=(child,), daemon=True)
+        process.start()
+        if not parent.poll(30):
+            process.kill()
+            raise RuntimeError(f"{name}: the server did not start within 30 s")
+        return cls(name, process, parent, parent.recv())
+
+    def stop(self) -> Any:
+        """SIGTERM, then what the server reports on its way out (the runtime's timing)."""
+        self.process.terminate()
+        report = self.conn.recv() if self.conn.poll(15) else None
+        self.process.join(15)
+        if self.process.is_alive():
+            self.process.kill()
+        return report
