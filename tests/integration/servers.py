@@ -7,7 +7,10 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["hli_server_cmd", "read_banner", "start_server", "stop_server"]
+__all__ = ["DOORS", "door_port", "hli_server_cmd", "read_banner", "start_server", "stop_server"]
+
+DOORS = ("HTTP control API", "Modbus TCP", "ADS (AMS/TCP)", "MQTT")
+"""The doors' names as the banner starts their lines."""
 
 
 def hli_server_cmd() -> list[str]:
@@ -25,7 +28,8 @@ def start_server(*args: str) -> subprocess.Popen[str]:
 
 
 def read_banner(proc: subprocess.Popen[str], timeout: float = 20.0) -> dict[str, str]:
-    """The banner lines up to 'stop with ...': returns the HTTP URL and the image name."""
+    """The banner lines up to 'stop with ...': the HTTP URL (``url``), the image name (``image``) and
+    each door's whole line under its name (``"Modbus TCP"``: ``door_port`` reads its port)."""
     assert proc.stdout is not None
     found: dict[str, str] = {}
     deadline = time.monotonic() + timeout
@@ -39,6 +43,9 @@ def read_banner(proc: subprocess.Popen[str], timeout: float = 20.0) -> dict[str,
             found["url"] = line.split("HTTP control API:")[1].split()[0]
         if "shared memory image:" in line:
             found["image"] = line.split("shared memory image:")[1].split()[0]
+        for door in DOORS:
+            if line.strip().startswith(door + ":"):
+                found[door] = line.strip()
         if "stop with" in line:
             return found
     stderr = proc.stderr.read() if proc.stderr and proc.poll() is not None else ""
@@ -54,3 +61,8 @@ def stop_server(proc: subprocess.Popen[str], timeout: float = 10.0) -> None:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait(timeout)
+
+
+def door_port(line: str) -> int:
+    """The port of a door's banner line: ``Modbus TCP: 127.0.0.1:5020  (...)`` -> 5020."""
+    return int(line.split(": ", 1)[1].split(maxsplit=1)[0].rsplit(":", 1)[1])

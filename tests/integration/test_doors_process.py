@@ -13,23 +13,9 @@ import pytest
 
 from plc_clients.ads import AdsTransport
 from schemas.layout import Layout
-from tests.integration.servers import start_server, stop_server
+from tests.integration.servers import door_port, read_banner, start_server, stop_server
 
 pytestmark = [pytest.mark.slow]
-
-
-def _banner(proc) -> dict[str, str]:  # type: ignore[no-untyped-def]
-    found: dict[str, str] = {}
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        assert line, proc.stderr.read()
-        for door in ("HTTP control API", "Modbus TCP", "ADS (AMS/TCP)"):
-            if line.strip().startswith(door + ":"):
-                found[door] = line.strip()
-        if "stop with" in line:
-            return found
-    raise AssertionError("no banner")
 
 
 def _pid_of(line: str) -> int:
@@ -58,10 +44,10 @@ def _modbus_write_register(port: int, address: int, value: int) -> bytes:
 def test_run_serves_modbus_and_ads_from_the_doors_process_and_stops_it_cleanly() -> None:
     proc = start_server("--http-port", "0", "--modbus-port", "0", "--ads-port", "0")
     try:
-        banner = _banner(proc)
-        url = banner["HTTP control API"].split(": ", 1)[1].split()[0]
-        modbus_port = int(banner["Modbus TCP"].split(": ", 1)[1].split()[0].rsplit(":", 1)[1])
-        ads_port = int(banner["ADS (AMS/TCP)"].split(": ", 1)[1].split()[0].rsplit(":", 1)[1])
+        banner = read_banner(proc)
+        url = banner["url"]
+        modbus_port = door_port(banner["Modbus TCP"])
+        ads_port = door_port(banner["ADS (AMS/TCP)"])
         doors = _pid_of(banner["Modbus TCP"])
         assert doors == _pid_of(banner["ADS (AMS/TCP)"]) != proc.pid
         layout = Layout.from_dict(httpx.get(url + "/api/layout", timeout=5).json())
@@ -91,7 +77,7 @@ def test_run_serves_modbus_and_ads_from_the_doors_process_and_stops_it_cleanly()
 def test_the_doors_process_ends_when_the_server_is_killed() -> None:
     proc = start_server("--http-port", "0", "--modbus-port", "0")
     try:
-        doors = _pid_of(_banner(proc)["Modbus TCP"])
+        doors = _pid_of(read_banner(proc)["Modbus TCP"])
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
         deadline = time.monotonic() + 10
@@ -106,7 +92,7 @@ def test_the_doors_process_ends_when_the_server_is_killed() -> None:
 def test_no_doors_process_serves_modbus_in_the_engines_process() -> None:
     proc = start_server("--http-port", "0", "--modbus-port", "0", "--no-doors-process")
     try:
-        line = _banner(proc)["Modbus TCP"]
+        line = read_banner(proc)["Modbus TCP"]
         assert "doors process" not in line
     finally:
         stop_server(proc)

@@ -17,10 +17,8 @@ import contextlib
 import os
 import random
 import struct
-import sys
 import time
 from collections.abc import AsyncIterator, Iterator, Sequence
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -34,6 +32,7 @@ from hli_server.testing import Harness
 from schemas.config import MachineConfig
 from schemas.layout import MODBUS_SNAPSHOT_REGISTER, Direction, Layout, ModbusTable, build_layout
 from schemas.wire import ProgramState
+from tests.integration.servers import door_port, read_banner, start_server, stop_server
 
 pytestmark = pytest.mark.req("H-03")
 
@@ -787,10 +786,7 @@ async def test_a_frozen_connection_that_closes_leaves_nothing_behind(hli: Harnes
 
 
 async def test_run_serves_modbus_on_a_free_port_with_the_given_options() -> None:
-    cli = str(Path(sys.executable).parent / "hli-server")
-    proc = await asyncio.create_subprocess_exec(
-        cli,
-        "run",
+    proc = start_server(
         "--no-http",
         "--modbus-port",
         "0",
@@ -800,22 +796,12 @@ async def test_run_serves_modbus_on_a_free_port_with_the_given_options() -> None
         "9",
         "--image-name",
         image_name("run"),
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.PIPE,
     )
     try:
-        assert proc.stdout is not None
-        port = 0
-        while True:
-            line = (await asyncio.wait_for(proc.stdout.readline(), 20)).decode()
-            assert line, "hli-server run ended before its banner"
-            if "Modbus TCP:" in line:
-                port = int(line.split("Modbus TCP:")[1].split()[0].rsplit(":", 1)[1])
-                assert "unit id 9" in line
-                assert "word order CDAB" in line
-            if "stop with" in line:
-                break
-        assert port > 0
+        line = read_banner(proc)["Modbus TCP"]
+        assert "unit id 9" in line
+        assert "word order CDAB" in line
+        port = door_port(line)
         client = AsyncModbusTcpClient("127.0.0.1", port=port, timeout=2, retries=0)
         assert await client.connect()
         layout = build_layout(load_machine(None))
@@ -829,6 +815,5 @@ async def test_run_serves_modbus_on_a_free_port_with_the_given_options() -> None
         assert exception_code(await client.read_input_registers(cycle_address, count=2, device_id=1)) == 0x0B
         client.close()
     finally:
-        proc.terminate()
-        await asyncio.wait_for(proc.wait(), 15)
+        stop_server(proc)
     assert proc.returncode == 0
