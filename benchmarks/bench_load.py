@@ -39,7 +39,7 @@ PROGRAM = "".join(
 
 def _server(seconds: float, doors_process: bool) -> tuple[subprocess.Popen[str], str, int]:
     cli = str(Path(sys.executable).parent / "hli-server")
-    extra = ["--doors-process"] if doors_process else []
+    extra = ["--doors-process"] if doors_process else ["--no-doors-process"]
     proc = subprocess.Popen(
         [
             cli,
