@@ -3,9 +3,10 @@
 Two servers, each in its own process, measured in the same run, interleaved (hli-server, reference,
 hli-server, reference, ...) so that a change of load on the shared machine hits both alike:
 
-* **hli-server**: the runtime with the demo machine, the engine running in real time (T_A = 1 ms,
-  every monitor installed), the ``ads`` adapter, the event loop ``hli-server run`` uses; reads come
-  from the live process image.
+* **hli-server**: ``hli-server run`` with the demo machine, the engine running in real time (T_A = 1 ms,
+  every monitor installed), ADS served by the doors process as ``run`` does by default; reads come
+  from the live process image. ``--in-process`` serves ADS from the engine's process instead (the
+  runtime's event loop, ``--no-doors-process``).
 * **pyads.testserver**: ``AdsTestServer`` with an ``AdvancedHandler`` holding one DINT variable at
   the same index group/offset and name: the reference (no engine).
 
@@ -85,6 +86,46 @@ def _serve_hli(conn: Connection) -> None:
     report = runtime.timing()
     adapter: Any = runtime.adapters[0]
     report["ads"] = {"requests": adapter.device.stats.requests, **adapter.stats.as_dict()}
+    conn.send(report)
+
+
+def _serve_hli_run(conn: Connection) -> None:
+    """``hli-server run`` as a user starts it: the engine in real time, ADS served by the doors process."""
+    import json
+    import subprocess
+    import sys
+    import urllib.request
+    from pathlib import Path
+
+    cli = str(Path(sys.executable).parent / "hli-server")
+    args = ["run", "--http-port", "0", "--no-modbus", "--ads-port", "0", "--doors-process"]
+    args += ["--clock", CLOCK[0], "--image-name", f"hli_bench_ads_{os.getpid()}"]
+    proc = subprocess.Popen([cli, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout is not None
+    url, port = "", 0
+    for line in proc.stdout:
+        if "HTTP control API:" in line:
+            url = line.split("HTTP control API:")[1].split()[0]
+        if line.strip().startswith("ADS (AMS/TCP):"):
+            port = int(line.split(": ", 1)[1].split(maxsplit=1)[0].rsplit(":", 1)[1])
+        if "stop with" in line:
+            break
+    if not port:
+        proc.kill()
+        raise RuntimeError(f"hli-server run printed no ADS port: {proc.stderr.read() if proc.stderr else ''}")
+    stop = [False]
+    signal.signal(signal.SIGTERM, lambda *_: stop.__setitem__(0, True))
+    conn.send(port)
+    while not stop[0]:
+        time.sleep(0.05)
+    report = None
+    with (
+        contextlib.suppress(OSError, ValueError),
+        urllib.request.urlopen(url + "/api/timing", timeout=10) as r,
+    ):
+        report = json.loads(r.read())
+    proc.terminate()
+    proc.wait(15)
     conn.send(report)
 
 
@@ -250,6 +291,11 @@ def main() -> None:
         default="realtime",
         help="clock of the hli-server: realtime (the engine runs; the goal) or stepped (the door alone)",
     )
+    parser.add_argument(
+        "--in-process",
+        action="store_true",
+        help="serve ADS from the engine's process (--no-doors-process), not from run's doors process",
+    )
     args = parser.parse_args()
     CLOCK[0] = args.clock
     group, offset = _address()
@@ -258,7 +304,7 @@ def main() -> None:
         f"0x{group:X}/{offset} and read_by_name({SYMBOL!r}); {args.rounds} x {args.seconds:g} s per server "
         f"and mode, interleaved; {os.cpu_count()} CPUs shared"
     )
-    servers = {"hli-server": Server.start("hli-server", _serve_hli)}
+    servers = {"hli-server": Server.start("hli-server", _serve_hli if args.in_process else _serve_hli_run)}
     servers["pyads.testserver"] = Server.start("pyads.testserver", _serve_testserver)
     servers["floor"] = Server.start("floor", _serve_floor)
     results = {(s, m): Result() for s in servers for m in ("raw", "by_name")}
@@ -278,7 +324,8 @@ def main() -> None:
         servers["floor"].stop()
 
     labels = {
-        "hli-server": f"hli-server ads adapter (engine {'realtime' if args.clock == 'realtime' else 'idle'})",
+        "hli-server": f"hli-server {'in-process' if args.in_process else 'doors proc.'}, engine "
+        f"{'realtime' if args.clock == 'realtime' else 'idle'}",
         "pyads.testserver": "pyads.testserver + AdvancedHandler",
         "floor": "floor: canned replies, no decoding",
     }
