@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 RUNTIME_STAMP := $(VENV)/.installed-runtime
 TEST_STAMP    := $(VENV)/.installed-test
 
-.PHONY: run test test-fast lint format bench soak clean venv
+.PHONY: run test test-fast lint format bench soak clean venv compile
 
 $(BIN)/python:
 	@$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -22,6 +22,13 @@ $(TEST_STAMP): pyproject.toml | $(BIN)/python
 	@touch $(TEST_STAMP) $(RUNTIME_STAMP)
 
 venv: $(TEST_STAMP)
+
+# rebuild the compiled engine after editing it (an edited engine runs as pure Python until then:
+# hli_server/_compiled.py says so once); HLI_PURE_PYTHON=1 make compile removes the compiled modules
+compile: $(TEST_STAMP)
+	find hli_server/engine -name '*.so' -delete
+	rm -f *__mypyc*.so
+	$(BIN)/python -m pip install --quiet --no-deps -e .
 
 run: $(RUNTIME_STAMP)
 	$(BIN)/hli-server run $(ARGS)
@@ -55,4 +62,5 @@ soak: $(TEST_STAMP)
 		--timeout=0 --durations=0 -q -rP $(PYTEST_ARGS)
 
 clean:
-	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache build *.egg-info
+	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache build *.egg-info *__mypyc*.so
+	find hli_server/engine -name '*.so' -delete

@@ -40,7 +40,10 @@ FULL_MACHINE = Path(__file__).with_name("machines") / "full.toml"
 
 WORK_RADIUS = 280.0
 WORK_POLYGON = [
-    (WORK_RADIUS * math.cos(math.pi / 8 + k * math.pi / 4), WORK_RADIUS * math.sin(math.pi / 8 + k * math.pi / 4))
+    (
+        WORK_RADIUS * math.cos(math.pi / 8 + k * math.pi / 4),
+        WORK_RADIUS * math.sin(math.pi / 8 + k * math.pi / 4),
+    )
     for k in range(8)
 ]
 """The work area's corners (an octagon), counter-clockwise."""
@@ -267,8 +270,10 @@ def main() -> None:
     n = write_lines(args.out / "near_areas.nc", near_area_lines(args.blocks))
     m = write_lines(args.out / "near_areas_plain.nc", near_area_lines(args.blocks, with_areas=False))
     r = write_lines(args.out / "near_areas_rs274.ngc", near_area_lines_rs274(args.blocks))
-    print(f"wrote {args.out}: pocket.nc, shuttle.nc, near_areas.nc ({n} lines), near_areas_plain.nc ({m}), "
-          f"near_areas_rs274.ngc ({r})")
+    print(
+        f"wrote {args.out}: pocket.nc, shuttle.nc, near_areas.nc ({n} lines), near_areas_plain.nc ({m}), "
+        f"near_areas_rs274.ngc ({r})"
+    )
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Callable
 from dataclasses import fields, is_dataclass
+from enum import Enum
 from typing import Any
 
 from benchmarks.programs import FULL_MACHINE, pocket_program, shuttle_program
@@ -73,6 +74,10 @@ def demo_machine(program: str) -> Machine:
 
 
 def _fold(value: Any) -> Any:
+    """Plain values of the outputs: an enum counts as its value (the compiled engine stores the int a
+    field is declared as, the interpreter the IntEnum that was assigned; the wire carries the same)."""
+    if isinstance(value, Enum):
+        return value.value
     if is_dataclass(value) and not isinstance(value, type):
         return tuple((f.name, _fold(getattr(value, f.name))) for f in fields(value))
     if isinstance(value, list | tuple):
@@ -105,7 +110,7 @@ def trace_digest(
                 machine.cycle,
                 _fold(machine.hli),
                 tuple((a.setpoint, a.actual, a.measured, a.drive_velocity) for a in machine.axes),
-                tuple(repr(e) for e in events),
+                tuple((type(e).__name__, _fold(e)) for e in events),
             )
             events.clear()
             h.update(repr(state).encode())

@@ -16,6 +16,8 @@ import math
 from collections.abc import Iterator, Sequence
 from typing import Protocol
 
+from mypy_extensions import mypyc_attr
+
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
 from hli_server.engine.decoder import DecodeError, Decoder
@@ -49,7 +51,11 @@ class JogGuard(Protocol):
     def must_brake(self, channel: Channel, current: Point, stop_point: Point) -> bool: ...
 
 
+@mypyc_attr(native_class=False)
 class Channel:
+    """One channel. A plain Python class also where the engine is compiled (issue 16): the runtime's
+    tests replace a bound method of a channel to make a cycle fail, which a native class refuses."""
+
     def __init__(
         self,
         machine: MachinePort,

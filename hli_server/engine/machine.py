@@ -117,7 +117,9 @@ class Machine:
         self._after_loop: list[Callable[[], None]] = []
         self._on_alarm: list[Callable[[Alarm], None]] = []
         self._install(DEFAULT_MONITORS if monitors is None else tuple(monitors))
-        self._publish_rows = [(axis, hli.ipo_state) for axis, hli in zip(self.axes, self.hli.axes, strict=True)]
+        self._publish_rows = [
+            (axis, hli.ipo_state) for axis, hli in zip(self.axes, self.hli.axes, strict=True)
+        ]
         self.publish()
 
     def _install(self, factories: tuple[MonitorFactory, ...]) -> None:
@@ -170,7 +172,7 @@ class Machine:
     def channel_of(self, axis: Axis) -> Channel:
         return self.channels[axis.channel]
 
-    def inject_fault(self, axis_name: str, **fields: float | bool) -> None:
+    def inject_fault(self, axis_name: str, **fields: object) -> None:
         """Fault injection (A3-05): set fields of the axis' :class:`AxisFaults` (friction,
         gain_factor, encoder_drift, encoder_stuck, drive_error); effective from the next cycle.
         ``inject_fault("X", friction=5.0)``; ``inject_fault("X")`` with no fields clears all faults.

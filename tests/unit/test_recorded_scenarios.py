@@ -20,11 +20,11 @@ from pathlib import Path
 import pytest
 
 from benchmarks.bench_engine import long_program
+from benchmarks.programs import FULL_MACHINE, near_area_lines
 from benchmarks.scenarios import demo_machine, full_machine, trace_digest
 from hli_server.commands.check import check_program
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine
-from benchmarks.programs import FULL_MACHINE, near_area_lines
 
 RECORDED = Path(__file__).parents[1] / "data" / "recorded_scenarios.json"
 
@@ -151,7 +151,11 @@ def test_outputs_are_the_recorded_ones_cycle_for_cycle(name: str) -> None:
         first = next(
             (k for k, (a, b) in enumerate(zip(marks, recorded["marks"], strict=False)) if a != b), None
         )
-        where = f"first difference within cycles {first * 1000}..{(first + 1) * 1000}" if first is not None else ""
+        where = (
+            f"first difference within cycles {first * 1000}..{(first + 1) * 1000}"
+            if first is not None
+            else ""
+        )
         pytest.fail(f"scenario {name}: outputs differ from the recording {where}")
 
 
