@@ -13,10 +13,8 @@ accepted, the path reached M30, an error reaction, ...) and tells the table.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Protocol
-
-from mypy_extensions import mypyc_attr
 
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
@@ -51,11 +49,7 @@ class JogGuard(Protocol):
     def must_brake(self, channel: Channel, current: Point, stop_point: Point) -> bool: ...
 
 
-@mypyc_attr(native_class=False)
 class Channel:
-    """One channel. A plain Python class also where the engine is compiled (issue 16): the runtime's
-    tests replace a bound method of a channel to make a cycle fail, which a native class refuses."""
-
     def __init__(
         self,
         machine: MachinePort,
@@ -114,6 +108,10 @@ class Channel:
         self._prev_reference_w = [False] * len(axes)
         self.feedhold_active = False
         self.override_permille = 1000
+        self.interpolate: Callable[[], None] = self._interpolate
+        """One cycle of path, jog or referencing (the machine calls it). An attribute, not a method, so
+        that a test can put a failing function in its place where the engine is compiled (mypyc's
+        classes refuse to have a method replaced; issue 16)."""
 
     # --- state ---------------------------------------------------------------------------
     @property
@@ -371,7 +369,7 @@ class Channel:
         """A monitor holds the path this cycle (call before interpolation, every cycle it holds)."""
         self.monitor_holds |= source
 
-    def interpolate(self) -> None:
+    def _interpolate(self) -> None:
         holds = self.monitor_holds | (HoldSource.FEEDHOLD if self.feedhold_active else HoldSource.NONE)
         self._set_holds(holds)
         if any(a.referencing for a in self.axes):
