@@ -27,7 +27,7 @@ venv: $(TEST_STAMP)
 # hli_server/_compiled.py says so once); HLI_PURE_PYTHON=1 make compile removes the compiled modules
 compile: $(TEST_STAMP)
 	find hli_server/engine -name '*.so' -delete
-	rm -f *__mypyc*.so
+	rm -rf build *__mypyc*.so
 	$(BIN)/python -m pip install --quiet --no-deps -e .
 
 run: $(RUNTIME_STAMP)

@@ -1,7 +1,7 @@
 """Build: the engine compiled with mypyc where it can be, plain Python everywhere else (issue 16).
 
 Everything about the package is in ``pyproject.toml``; this file only adds the extension modules. The
-modules of ``hli_server/engine`` (not the packages' ``__init__``) are compiled with mypyc, the way
+modules of ``hli_server/engine`` (all but ``_compiled.NOT_COMPILED``) are compiled with mypyc, the way
 black and mypy ship themselves, when
 
 * the interpreter is CPython,
@@ -50,6 +50,22 @@ def _why_not_compiled() -> str | None:
     return None
 
 
+def _not_compiled() -> tuple[str, ...]:
+    """The engine files that stay Python, as ``hli_server/_compiled.py`` lists them (read from the
+    file: the package is not importable while it is being built)."""
+    import ast
+
+    tree = ast.parse((HERE / "hli_server" / "_compiled.py").read_text(encoding="utf-8"))
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == "NOT_COMPILED" for t in node.targets
+        ):
+            value = ast.literal_eval(node.value)
+            assert isinstance(value, tuple)
+            return value
+    raise RuntimeError("hli_server/_compiled.py: NOT_COMPILED not found")
+
+
 def _ext_modules() -> list[object]:
     why = _why_not_compiled()
     if why is not None:
@@ -57,7 +73,7 @@ def _ext_modules() -> list[object]:
         return []
     from mypyc.build import mypycify
 
-    sources = sorted(str(p.relative_to(HERE)) for p in ENGINE.rglob("*.py") if p.name != "__init__.py")
+    sources = sorted(str(p.relative_to(HERE)) for p in ENGINE.rglob("*.py") if p.name not in _not_compiled())
     # IEEE results identical to the interpreter's: no fused multiply-add contracted by the compiler
     os.environ["CFLAGS"] = (os.environ.get("CFLAGS", "") + " -ffp-contract=off").strip()
     print(f"hli-server: compiling {len(sources)} engine modules with mypyc", file=sys.stderr)

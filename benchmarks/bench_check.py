@@ -104,11 +104,13 @@ def _shapely_batched(blocks: int) -> tuple[float, int] | None:
 def _peak_rss_mb(path: Path) -> float:
     """Peak resident memory of an ``hli-server check --geometry-only`` process on ``path`` [MB]."""
     code = (
-        "import resource, sys\n"
+        "import sys\n"
         "from hli_server.cli import main\n"
         "sys.argv = ['hli-server', 'check', '--geometry-only', '--config', sys.argv[1], sys.argv[2]]\n"
         "try:\n    main()\nexcept SystemExit:\n    pass\n"
-        "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\n"
+        # VmHWM, not ru_maxrss: Linux keeps ru_maxrss across exec (it would be this benchmark's own)
+        "hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM')][0].split()[1]\n"
+        "print(hwm, file=sys.stderr)\n"
     )
     done = subprocess.run(
         [sys.executable, "-c", code, str(FULL_MACHINE), str(path)],

@@ -29,10 +29,16 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
 
-__all__ = ["ENGINE_COMPILED", "PURE_ENV", "select", "stale_modules"]
+__all__ = ["ENGINE_COMPILED", "NOT_COMPILED", "PURE_ENV", "select", "stale_modules"]
 
 PURE_ENV = "HLI_PURE_PYTHON"
 """Set to 1 to run the engine as pure Python although it is compiled."""
+
+NOT_COMPILED = ("__init__.py", "blocks.py")
+"""Engine files that stay Python where the engine is compiled (``setup.py`` reads this): the packages'
+``__init__``, and ``nc/blocks.py``, whose frozen ``Block`` a compiled module builds through the
+dataclass' interpreted ``__init__`` (15% of a geometry check); as a plain slots class the parser builds
+it through its slot descriptors, twice as fast (``nc/parser.py``, ``_block_maker``)."""
 
 _ENGINE = "hli_server.engine"
 _ENGINE_DIR = Path(__file__).with_name("engine")
@@ -59,8 +65,8 @@ def stale_modules() -> tuple[list[Path], list[Path]]:
     checkout = (_ENGINE_DIR.parent.parent / ".git").exists()
     stale: list[Path] = []
     for source in sorted(_ENGINE_DIR.rglob("*.py")):
-        if source.name == "__init__.py":
-            continue  # the packages' __init__ modules are never compiled
+        if source.name in NOT_COMPILED:
+            continue
         built = _compiled_file(source)
         if built is None:
             stale.append(source)
