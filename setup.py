@@ -78,7 +78,16 @@ def _ext_modules() -> list[object]:
     os.environ["CFLAGS"] = (os.environ.get("CFLAGS", "") + " -ffp-contract=off").strip()
     print(f"hli-server: compiling {len(sources)} engine modules with mypyc", file=sys.stderr)
     # mypy's options come from pyproject.toml; its override for construct is unused here
-    return list(mypycify(["--no-warn-unused-configs", *sources], opt_level="3", debug_level="1"))
+    # the group's shared library inside the package (hli_server/engine/native__mypyc...so), not at the
+    # top level, where an editable install's finder would not see it from another directory
+    return list(
+        mypycify(
+            ["--no-warn-unused-configs", *sources],
+            opt_level="3",
+            debug_level="1",
+            group_name="hli_server.engine.native",
+        )
+    )
 
 
 setup(ext_modules=_ext_modules())
