@@ -80,14 +80,18 @@ def _ext_modules() -> list[object]:
     # mypy's options come from pyproject.toml; its override for construct is unused here
     # the group's shared library inside the package (hli_server/engine/native__mypyc...so), not at the
     # top level, where an editable install's finder would not see it from another directory
-    return list(
-        mypycify(
-            ["--no-warn-unused-configs", *sources],
-            opt_level="3",
-            debug_level="1",
-            group_name="hli_server.engine.native",
+    try:
+        return list(
+            mypycify(
+                ["--no-warn-unused-configs", *sources],
+                opt_level="3",
+                debug_level="1",
+                group_name="hli_server.engine.native",
+            )
         )
-    )
+    except (SystemExit, Exception) as exc:  # mypyc exits on a type error: install pure, say so
+        print(f"hli-server: engine not compiled (mypyc failed: {exc!r}): pure Python", file=sys.stderr)
+        return []
 
 
 setup(ext_modules=_ext_modules())
