@@ -10,6 +10,7 @@ import os
 import sys
 import threading
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -59,6 +60,21 @@ def pytest_collection_finish(session: pytest.Session) -> None:
         for mark in item.iter_markers("req"):
             for req_id in mark.args:
                 _REQ_IDS[req_id] = _REQ_IDS.get(req_id, 0) + 1
+
+
+def pytest_sessionfinish(session: pytest.Session) -> None:
+    """Under pytest-xdist (``make test``) each worker collects the whole suite: it hands its counts to
+    the controller, which prints the summary."""
+    workeroutput = getattr(session.config, "workeroutput", None)
+    if workeroutput is not None:
+        workeroutput["req_ids"] = dict(_REQ_IDS)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node: Any, error: object) -> None:
+    ids = getattr(node, "workeroutput", {}).get("req_ids")
+    if ids and not _REQ_IDS:  # every worker collected the same items: one worker's counts
+        _REQ_IDS.update(ids)
 
 
 def _known_requirements() -> list[str]:

@@ -27,7 +27,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import click
 
@@ -140,7 +140,7 @@ class _Progress:
 
 def check_program(
     machine: Machine,
-    text: str,
+    text: str | TextIO,
     *,
     channel: int = 1,
     geometry_only: bool = False,
@@ -151,18 +151,21 @@ def check_program(
     """Run (or decode) ``text`` on ``machine`` and collect the result.
 
     ``record_path``: keep the path for the picture (``--plot``): every 10th cycle's setpoints in a full
-    check, every block's end (arcs every few degrees) with ``geometry_only``."""
+    check, every block's end (arcs every few degrees) with ``geometry_only``.
+
+    ``text`` may be an open text file (``newline=""``): a geometry check then streams it line by line,
+    with flat memory however long the program (issue 16); a full check reads it whole."""
     began = time.perf_counter()
     result = CheckResult(machine, channel, "geometry" if geometry_only else "full")
     ch = machine.channel(channel)
-    meter = _Progress(text.count("\n") + 1, progress)
+    meter = _Progress(_count_lines(text) if progress else 0, progress)
     history_start = len(machine.alarm_history)
     if record_path:
         result.path.append(tuple(ch.setpoints()))
     if geometry_only:
         _decode_only(machine, text, channel, result, meter, record_path)
     else:
-        ch.load_program(text, "check")
+        ch.load_program(text if isinstance(text, str) else text.read(), "check")
         ch.request_start()
         step = machine.step
         running = (ProgramState.RUNNING, ProgramState.HELD)
@@ -200,6 +203,23 @@ def check_program(
     return result
 
 
+def _count_lines(text: str | TextIO) -> int:
+    """Lines of the program for the progress bar (only drawn on a terminal): a file is counted in a
+    binary pass and rewound, so that streaming it keeps memory flat."""
+    if isinstance(text, str):
+        return text.count("\n") + 1
+    if not sys.stderr.isatty() or not text.seekable():
+        return 0
+    raw = getattr(text, "buffer", None)
+    if raw is None:
+        return 0
+    lines = 1
+    while chunk := raw.read(1 << 20):
+        lines += chunk.count(b"\n")
+    text.seek(0)
+    return lines
+
+
 def _record(path: list[tuple[float, ...]], point: tuple[float, ...]) -> None:
     """Append ``point`` unless the axes stand where the last one was (dwell, waiting at a marker)."""
     if not path or path[-1] != point:
@@ -224,7 +244,12 @@ def _segment_points(segment: Segment) -> list[tuple[float, ...]]:
 
 
 def _decode_only(
-    machine: Machine, text: str, channel: int, result: CheckResult, meter: _Progress, record_path: bool
+    machine: Machine,
+    text: str | TextIO,
+    channel: int,
+    result: CheckResult,
+    meter: _Progress,
+    record_path: bool,
 ) -> None:
     ch = machine.channel(channel)
     decoder = ch.decoder
@@ -338,33 +363,47 @@ def check(
     if plot_path is not None:
         _check_plot_target(plot_path)
     try:
-        text = program.read_text(encoding="utf-8", errors="strict")
+        # a geometry check streams the file (flat memory for programs of millions of blocks); the
+        # full check reads it whole
+        text: str | TextIO = (
+            program.open(encoding="utf-8", errors="strict", newline="")
+            if geometry_only
+            else program.read_text(encoding="utf-8", errors="strict")
+        )
     except (OSError, UnicodeDecodeError) as exc:
         click.echo(f"error: cannot read {program}: {exc}", err=True)
         sys.exit(2)
     try:
-        config = load_machine(config_path)
-    except ConfigError as exc:
-        click.echo(f"error: configuration: {exc}", err=True)
-        sys.exit(2)
-    except OSError as exc:
-        click.echo(f"error: cannot read configuration: {exc}", err=True)
-        sys.exit(2)
-    machine = Machine(config)
-    try:
-        machine.channel(channel)
-    except KeyError:
-        click.echo(f"error: no channel {channel} in the configuration", err=True)
-        sys.exit(2)
-    result = check_program(
-        machine,
-        text,
-        channel=channel,
-        geometry_only=geometry_only,
-        max_cycles=max_cycles,
-        record_path=plot_path is not None,
-        progress=True,
-    )
+        try:
+            config = load_machine(config_path)
+        except ConfigError as exc:
+            click.echo(f"error: configuration: {exc}", err=True)
+            sys.exit(2)
+        except OSError as exc:
+            click.echo(f"error: cannot read configuration: {exc}", err=True)
+            sys.exit(2)
+        machine = Machine(config)
+        try:
+            machine.channel(channel)
+        except KeyError:
+            click.echo(f"error: no channel {channel} in the configuration", err=True)
+            sys.exit(2)
+        try:
+            result = check_program(
+                machine,
+                text,
+                channel=channel,
+                geometry_only=geometry_only,
+                max_cycles=max_cycles,
+                record_path=plot_path is not None,
+                progress=True,
+            )
+        except (OSError, UnicodeDecodeError) as exc:
+            click.echo(f"error: cannot read {program}: {exc}", err=True)
+            sys.exit(2)
+    finally:
+        if not isinstance(text, str):
+            text.close()
     # the report first: whatever the drawing does, the user has the verdict
     if fmt == "json":
         click.echo(json.dumps(result.to_json(), indent=2))

@@ -95,7 +95,7 @@ class AxisFaults:
         )
 
 
-def check_fault_value(axis: Axis, name: str, value: float | bool) -> float | bool:
+def check_fault_value(axis: Axis, name: str, value: object) -> float | bool:
     """A fault value the drive model can take (A3-05), else ValueError naming the field, the value
     and the allowed range. ``Machine.inject_fault`` checks every field before it changes any.
 

@@ -13,7 +13,7 @@ accepted, the path reached M30, an error reaction, ...) and tells the table.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Protocol
 
 from hli_server.engine.axis import Axis
@@ -108,6 +108,10 @@ class Channel:
         self._prev_reference_w = [False] * len(axes)
         self.feedhold_active = False
         self.override_permille = 1000
+        self.interpolate: Callable[[], None] = self._interpolate
+        """One cycle of path, jog or referencing (the machine calls it). An attribute, not a method, so
+        that a test can put a failing function in its place where the engine is compiled (mypyc's
+        classes refuse to have a method replaced; issue 16)."""
 
     # --- state ---------------------------------------------------------------------------
     @property
@@ -365,7 +369,7 @@ class Channel:
         """A monitor holds the path this cycle (call before interpolation, every cycle it holds)."""
         self.monitor_holds |= source
 
-    def interpolate(self) -> None:
+    def _interpolate(self) -> None:
         holds = self.monitor_holds | (HoldSource.FEEDHOLD if self.feedhold_active else HoldSource.NONE)
         self._set_holds(holds)
         if any(a.referencing for a in self.axes):

@@ -34,6 +34,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from enum import StrEnum
 
+from mypy_extensions import mypyc_attr
+
 from schemas.wire import Mode, ProgramState
 
 __all__ = [
@@ -58,6 +60,7 @@ class Cause(StrEnum):
     RESET = "reset"
 
 
+@mypyc_attr(native_class=False)  # mypyc compiles no subclass of RuntimeError (issue 16)
 class StateTransitionError(RuntimeError):
     """A transition the table does not list: a bug in the engine."""
 

@@ -8,7 +8,7 @@ and the others linearly (helix).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 __all__ = ["ArcSegment", "LineSegment", "Point", "Segment", "arc_from_centre"]
 
@@ -21,10 +21,11 @@ _TAU = 2.0 * math.pi
 class LineSegment:
     start: Point
     end: Point
+    length: float = field(init=False, repr=False, compare=False)
+    """Path length [mm], computed once: the interpolator asks for it every cycle (issue 16)."""
 
-    @property
-    def length(self) -> float:
-        return math.dist(self.start, self.end)
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "length", math.dist(self.start, self.end))
 
     def point_at(self, s: float) -> Point:
         """Point at path distance ``s`` from the start (clamped to the segment)."""
@@ -32,7 +33,7 @@ class LineSegment:
         if length <= 0.0:
             return self.end
         f = min(max(s / length, 0.0), 1.0)
-        return tuple(a + (b - a) * f for a, b in zip(self.start, self.end, strict=True))
+        return tuple([a + (b - a) * f for a, b in zip(self.start, self.end, strict=True)])
 
     def direction_at(self, s: float) -> Point:
         length = self.length
@@ -60,21 +61,22 @@ class ArcSegment:
     radius: float
     start_angle: float
     sweep: float
+    length: float = field(init=False, repr=False, compare=False)
+    """Path length of the helix: hypot of the arc length and the linear axes' travel, computed once.
+    ``hypot`` rather than a sum of squares: it stays finite for every finite result (a square of
+    1e155 overflowed, issue 12 finding 1)."""
+
+    def __post_init__(self) -> None:
+        i, j = self.plane
+        length = math.hypot(
+            self.arc_length,
+            *(b - a for k, (a, b) in enumerate(zip(self.start, self.end, strict=True)) if k not in (i, j)),
+        )
+        object.__setattr__(self, "length", length)
 
     @property
     def arc_length(self) -> float:
         return abs(self.sweep) * self.radius
-
-    @property
-    def length(self) -> float:
-        """Path length of the helix: hypot of the arc length and the linear axes' travel. ``hypot``
-        rather than a sum of squares: it stays finite for every finite result (a square of 1e155
-        overflowed, issue 12 finding 1)."""
-        i, j = self.plane
-        return math.hypot(
-            self.arc_length,
-            *(b - a for k, (a, b) in enumerate(zip(self.start, self.end, strict=True)) if k not in (i, j)),
-        )
 
     def point_at(self, s: float) -> Point:
         length = self.length

@@ -46,7 +46,7 @@ from schemas.events import (
     FaultInjected,
     ReferenceChanged,
 )
-from schemas.units import increments_from_mm, s_from_us
+from schemas.units import DINT_MAX, DINT_MIN, INCREMENTS_PER_MM, s_from_us
 from schemas.wire import Mode
 
 __all__ = ["ALARM_HISTORY", "DEFAULT_MONITORS", "EventListener", "Machine"]
@@ -117,6 +117,9 @@ class Machine:
         self._after_loop: list[Callable[[], None]] = []
         self._on_alarm: list[Callable[[Alarm], None]] = []
         self._install(DEFAULT_MONITORS if monitors is None else tuple(monitors))
+        self._publish_rows = [
+            (axis, hli.ipo_state) for axis, hli in zip(self.axes, self.hli.axes, strict=True)
+        ]
         self.publish()
 
     def _install(self, factories: tuple[MonitorFactory, ...]) -> None:
@@ -169,7 +172,7 @@ class Machine:
     def channel_of(self, axis: Axis) -> Channel:
         return self.channels[axis.channel]
 
-    def inject_fault(self, axis_name: str, **fields: float | bool) -> None:
+    def inject_fault(self, axis_name: str, **fields: object) -> None:
         """Fault injection (A3-05): set fields of the axis' :class:`AxisFaults` (friction,
         gain_factor, encoder_drift, encoder_stuck, drive_error); effective from the next cycle.
         ``inject_fault("X", friction=5.0)``; ``inject_fault("X")`` with no fields clears all faults.
@@ -348,16 +351,28 @@ class Machine:
 
     # --- outputs -------------------------------------------------------------------------
     def publish(self) -> None:
-        for axis, hli in zip(self.axes, self.hli.axes, strict=True):
-            st = hli.ipo_state
-            st.cmd_pos_r = increments_from_mm(axis.setpoint)
-            st.act_pos_r = increments_from_mm(axis.measured)
-            st.velocity_r = increments_from_mm(axis.drive_velocity)
-            st.following_error_r = increments_from_mm(axis.following_error)
+        """The HLI ``_r`` fields of every axis and channel. Positions in 0.1 µm as
+        :func:`~schemas.units.increments_from_mm` converts them (rounded to the nearest, clamped to a
+        DINT), written out here: 32 conversions a cycle on an 8-axis machine (issue 16)."""
+        scale = INCREMENTS_PER_MM
+        lo, hi = DINT_MIN, DINT_MAX
+        for axis, st in self._publish_rows:
+            setpoint = axis.setpoint
+            measured = axis.measured
+            cmd = round(setpoint * scale)
+            act = round(measured * scale)
+            vel = round(axis.drive_velocity * scale)
+            err = round((setpoint - measured) * scale)
+            st.cmd_pos_r = hi if cmd > hi else lo if cmd < lo else cmd
+            st.act_pos_r = hi if act > hi else lo if act < lo else act
+            st.velocity_r = hi if vel > hi else lo if vel < lo else vel
+            err = hi if err > hi else lo if err < lo else err
+            st.following_error_r = err
             st.referenced_r = axis.referenced
             st.referencing_r = axis.referencing
-            st.moving_r = axis.setpoint_step != 0.0
-            st.in_position_r = abs(st.following_error_r) <= axis.window_inc and not st.moving_r
+            moving = setpoint - axis.prev_setpoint != 0.0
+            st.moving_r = moving
+            st.in_position_r = abs(err) <= axis.window_inc and not moving
             st.error_r = axis.faults.drive_error
         for ch in self.channels:
             ch.publish(self.cycle)

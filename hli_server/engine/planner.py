@@ -104,6 +104,8 @@ class Planner:
     """Asked at standstill after a G60 block: may the next item start? (FCT-A3: axes in the window)"""
     _exact_stop_pending: Motion | None = None
     _dirty: bool = True
+    _motions: int = 0
+    """Motion items in the queue, counted as they come and go (the channel asks every cycle)."""
 
     # --- filling -------------------------------------------------------------------------
     def clear(self) -> None:
@@ -116,6 +118,7 @@ class Planner:
         self._exact_stop_pending = None
         self.generation += 1
         self._dirty = True
+        self._motions = 0
 
     def push(self, item: Item) -> None:
         if isinstance(item, Motion):
@@ -125,6 +128,7 @@ class Planner:
             prev = self._last_motion_before_end()
             if prev is not None:
                 prev.v_junction = _junction_velocity(prev, item)
+            self._motions += 1
         else:
             item.s_start = self.s_queued_end
         self.queue.append(item)
@@ -138,7 +142,8 @@ class Planner:
 
     @property
     def motion_items(self) -> int:
-        return sum(1 for it in self.queue if isinstance(it, Motion))
+        """Motion items queued (the look-ahead's fill level)."""
+        return self._motions
 
     @property
     def queued_length(self) -> float:
@@ -280,6 +285,7 @@ class Planner:
             self.s_abs = item.s_start + item.length
             ds -= max(s_rem, 0.0)
             self.queue.popleft()
+            self._motions -= 1
             self.position_in_item = 0.0
             nxt = self.queue[0] if self.queue else None
             if not isinstance(nxt, Motion) or item.v_exit_max <= 1e-9:

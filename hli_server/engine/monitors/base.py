@@ -20,6 +20,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, TypeVar
 
+from mypy_extensions import mypyc_attr
+
 from hli_server.engine.channel import Channel, JogGuard
 from hli_server.engine.decoder import AreaHandler, MeasureHandler, PathCheck
 from hli_server.engine.planner import ExactStopGate
@@ -74,6 +76,7 @@ class MachineView(MachinePort, Protocol):
         ...
 
 
+@mypyc_attr(allow_interpreted_subclasses=True)
 class Monitor:
     """A monitoring function. Subclasses override what they need; the defaults do nothing."""
 

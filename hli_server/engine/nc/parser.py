@@ -43,7 +43,7 @@ import io
 import math
 import re
 import types
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Callable, Collection, Iterable, Iterator
 from typing import NoReturn, Protocol
 
 from hli_server.engine.nc.blocks import (
@@ -174,7 +174,7 @@ _MONITOR_LEVELS = ("MCS", "IMCS")
 class _Fail(Protocol):
     """``fail(message)`` of one #CONTROL AREA command: raises its 910105 error (or ``alarm``)."""
 
-    def __call__(self, message: str, alarm: int = ...) -> NoReturn: ...
+    def __call__(self, message: str, alarm: int = _BAD_AREA) -> NoReturn: ...
 
 
 # --- errors --------------------------------------------------------------------------------------
@@ -863,8 +863,9 @@ def _parser_for(axis_names: frozenset[str]) -> _LineParser:
     return _LineParser(axis_names)
 
 
-def iter_blocks(text: str, axis_names: Collection[str]) -> Iterator[Block]:
-    """Blocks of a program, lazily, line by line (E-04).
+def iter_blocks(text: str | Iterable[str], axis_names: Collection[str]) -> Iterator[Block]:
+    """Blocks of a program, lazily, line by line (E-04). ``text`` is the program's text, or its lines
+    (an open text file: ``check`` streams a program of any length with flat memory, issue 16).
 
     Raises :class:`NcError` when it reaches a malformed line, so the blocks before it can already
     run. A ``#CONTROL AREA`` command whose ``[`` is not closed on its line continues on the next
@@ -875,7 +876,8 @@ def iter_blocks(text: str, axis_names: Collection[str]) -> Iterator[Block]:
     parser = _LineParser(axis_names)
     parse = parser.parse
     words = parser._words
-    lines = io.StringIO(text, newline="")  # lazy; "\n", "\r\n" and "\r" all end a line
+    # lazy; "\n", "\r\n" and "\r" all end a line (a file is opened with newline="" by its reader)
+    lines: Iterator[str] = iter(io.StringIO(text, newline="")) if isinstance(text, str) else iter(text)
     line = 0
     for raw in lines:
         line += 1
@@ -893,7 +895,7 @@ def iter_blocks(text: str, axis_names: Collection[str]) -> Iterator[Block]:
                 texts = [stripped]
                 codes = [code]
                 while "]" not in codes[-1]:
-                    nxt = lines.readline()
+                    nxt = next(lines, "")
                     if not nxt:
                         _continuation_failed(code, first_line, "the end of the program")
                     line += 1

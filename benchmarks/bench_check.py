@@ -1,0 +1,185 @@
+"""Issue 16, P2: ``check --geometry-only`` on a program that runs close to 20 areas, against its references.
+
+The program (``benchmarks/programs.py``, ``near_area_lines``): lines and G02/G03 arcs round every one of
+the 19 protection areas 0.5..2 mm off them and along the work polygon's edges 0.5..2 mm inside it, on
+the full machine (``machines/full.toml``) after its 20 areas are defined and activated; it touches
+nothing, so every block is checked exactly to the end. Goal: 200,000 blocks/s or more, memory flat
+however long the program, and at least 1.0x LinuxCNC's ``rs274`` on the same moves.
+
+References, measured in the same run, interleaved round by round (best of ``--rounds``):
+
+* the same check of the same moves without the areas (what the 20 areas cost);
+* ``rs274 -g`` (LinuxCNC's C++ interpreter, Debian's ``linuxcnc-uspace``) on the same moves in its
+  dialect, without areas (it has none), timed as a process; skipped with a note where it is absent;
+* shapely's batched ``intersects`` of all the program's lines against the 20 areas in one call (the
+  honest reference for the area check: it answers only "touches or not", for lines only);
+* peak memory (``ru_maxrss``) of ``hli-server check`` processes on the program and on one twice as long:
+  a streaming check stays flat.
+
+    .venv/bin/python -m benchmarks.bench_check [--blocks N] [--rounds R]
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchmarks.programs import (
+    FULL_MACHINE,
+    PROTECTIONS,
+    WORK_POLYGON,
+    _near_moves,
+    near_area_lines,
+    near_area_lines_rs274,
+    write_lines,
+)
+from hli_server._compiled import ENGINE_COMPILED
+from hli_server.commands.check import check_program
+from hli_server.configuration import load_machine
+from hli_server.engine import Machine
+
+
+def _ours(path: Path) -> tuple[float, int]:
+    machine = Machine(load_machine(FULL_MACHINE))
+    with path.open(encoding="utf-8", newline="") as f:
+        began = time.perf_counter()
+        result = check_program(machine, f, geometry_only=True)
+        elapsed = time.perf_counter() - began
+    assert result.completed, result.to_json()["alarms"][:2]
+    assert not result.alarms, result.to_json()["alarms"][:2]
+    return elapsed, result.blocks
+
+
+def _rs274(path: Path, tool_table: Path, out: Path) -> float | None:
+    exe = shutil.which("rs274")
+    if exe is None:
+        return None
+    began = time.perf_counter()
+    subprocess.run(
+        [exe, "-t", str(tool_table), "-g", str(path), str(out)],
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        check=True,
+        timeout=600,
+    )
+    return time.perf_counter() - began
+
+
+def _shapely_batched(blocks: int) -> tuple[float, int] | None:
+    try:
+        import numpy as np
+        import shapely
+    except ImportError:
+        return None
+    coords = []
+    x, y = 0.0, 0.0
+    for kind, v in _near_moves(blocks):
+        if kind == "L":
+            coords.append(((x, y), (v[0], v[1])))
+        x, y = v[0], v[1]
+    shapes = [shapely.Polygon(WORK_POLYGON).exterior]  # leaving the work area = touching its boundary
+    for shape, cx, cy, size in PROTECTIONS:
+        if shape == "CIRC":
+            shapes.append(shapely.Point(cx, cy).buffer(size, quad_segs=16))
+        else:
+            shapes.append(shapely.box(cx - size, cy - size, cx + size, cy + size))
+    geoms = np.array(shapes, dtype=object)
+    arr = np.array(coords)
+    began = time.perf_counter()
+    lines = shapely.linestrings(arr)
+    hits = int(shapely.intersects(lines[:, None], geoms[None, :]).any(axis=1).sum())
+    elapsed = time.perf_counter() - began
+    assert hits == 0, (
+        f"shapely finds {hits} lines touching an area: the program is not 'near without touching'"
+    )
+    return elapsed, len(coords)
+
+
+def _peak_rss_mb(path: Path) -> float:
+    """Peak resident memory of an ``hli-server check --geometry-only`` process on ``path`` [MB]."""
+    code = (
+        "import sys\n"
+        "from hli_server.cli import main\n"
+        "sys.argv = ['hli-server', 'check', '--geometry-only', '--config', sys.argv[1], sys.argv[2]]\n"
+        "try:\n    main()\nexcept SystemExit:\n    pass\n"
+        # VmHWM, not ru_maxrss: Linux keeps ru_maxrss across exec (it would be this benchmark's own)
+        "hwm = [l for l in open('/proc/self/status') if l.startswith('VmHWM')][0].split()[1]\n"
+        "print(hwm, file=sys.stderr)\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code, str(FULL_MACHINE), str(path)],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=1200,
+    )
+    return int(done.stderr.strip().splitlines()[-1]) / 1024.0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--blocks", type=int, default=1_000_000, help="motion blocks of the program")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--no-memory", action="store_true", help="skip the peak-memory comparison")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        with_areas, plain, ngc = d / "near.nc", d / "near_plain.nc", d / "near.ngc"
+        write_lines(with_areas, near_area_lines(args.blocks))
+        write_lines(plain, near_area_lines(args.blocks, with_areas=False))
+        write_lines(ngc, near_area_lines_rs274(args.blocks))
+        tool_table = d / "tool.tbl"
+        tool_table.write_text("T1 P1 D0 Z0 ;\n", encoding="utf-8")
+        best = {"areas": 0.0, "plain": 0.0, "rs274": 0.0}
+        blocks = 0
+        for _ in range(args.rounds):
+            t, blocks = _ours(with_areas)
+            best["areas"] = max(best["areas"], blocks / t)
+            t, n = _ours(plain)
+            best["plain"] = max(best["plain"], n / t)
+            t_rs = _rs274(ngc, tool_table, d / "rs274.out")
+            if t_rs is not None:
+                best["rs274"] = max(best["rs274"], (args.blocks + 2) / t_rs)
+        engine = "compiled" if ENGINE_COMPILED else "pure Python"
+        print(
+            f"check --geometry-only, 20 active areas ({engine} engine): {best['areas']:,.0f} blocks/s "
+            f"({blocks:,} blocks, best of {args.rounds})"
+        )
+        print(
+            f"reference: the same moves without areas: {best['plain']:,.0f} blocks/s; "
+            f"ratio with / without areas: {best['areas'] / best['plain']:.2f}"
+        )
+        if best["rs274"]:
+            print(
+                f"reference: LinuxCNC rs274 -g, same moves, no areas: {best['rs274']:,.0f} blocks/s; "
+                f"ratio ours (20 areas) / rs274: {best['areas'] / best['rs274']:.2f}, "
+                f"ours without areas / rs274: {best['plain'] / best['rs274']:.2f}"
+            )
+        else:
+            print("reference rs274: skipped (not installed; Debian: apt-get install linuxcnc-uspace)")
+        shp = _shapely_batched(args.blocks)
+        if shp is not None:
+            t, n = shp
+            print(
+                f"reference: shapely batched intersects, the program's {n:,} lines x 20 areas, one call: "
+                f"{n / t:,.0f} lines/s (yes/no only); ratio ours / shapely: {best['areas'] / (n / t):.2f}"
+            )
+        if not args.no_memory:
+            double = d / "near2.nc"
+            write_lines(double, near_area_lines(2 * args.blocks))
+            m1, m2 = _peak_rss_mb(with_areas), _peak_rss_mb(double)
+            print(
+                f"peak memory of hli-server check: {m1:,.0f} MB ({args.blocks:,} blocks), "
+                f"{m2:,.0f} MB ({2 * args.blocks:,} blocks); file sizes "
+                f"{with_areas.stat().st_size / 1e6:,.0f} and {double.stat().st_size / 1e6:,.0f} MB"
+            )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,122 @@
+"""Compiled or pure engine: which one this process runs (issue 16, docs/performance.md "Compiled engine").
+
+``pip install`` compiles the modules of ``hli_server/engine`` with mypyc where a C compiler and the
+Python headers are present (``setup.py``); the same source runs as plain Python everywhere else. The
+compiled modules (``*.so`` beside the ``.py`` files) take precedence on import, so this module decides,
+once, before the first engine module is imported (``hli_server/__init__.py`` calls :func:`select`):
+
+* ``HLI_PURE_PYTHON=1`` (any value but empty or ``0``): pure Python, for debugging (breakpoints,
+  tracebacks with lines, profilers that see every function);
+* a compiled module older than its source (an editable install whose ``.py`` was edited after the build:
+  the ``.so`` would run the old code), or a source without its compiled module: pure Python for the
+  whole engine, with one warning that says which file and how to rebuild. All or nothing: a pure class
+  cannot inherit from a compiled one, and a half-compiled engine would be neither tested nor measured.
+
+Pure Python is chosen by a finder ahead of the standard ones that loads ``hli_server.engine.*`` from the
+``.py`` files. :data:`ENGINE_COMPILED` tells which engine runs (``hli-server version``, the benchmarks,
+the differential test in ``tests/unit/test_compiled_engine.py``).
+"""
+
+from __future__ import annotations
+
+import importlib.abc
+import importlib.machinery
+import importlib.util
+import os
+import sys
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from types import ModuleType
+
+__all__ = ["ENGINE_COMPILED", "NOT_COMPILED", "PURE_ENV", "select", "stale_modules"]
+
+PURE_ENV = "HLI_PURE_PYTHON"
+"""Set to 1 to run the engine as pure Python although it is compiled."""
+
+NOT_COMPILED = ("__init__.py", "blocks.py")
+"""Engine files that stay Python where the engine is compiled (``setup.py`` reads this): the packages'
+``__init__``, and ``nc/blocks.py``, whose frozen ``Block`` a compiled module builds through the
+dataclass' interpreted ``__init__`` (15% of a geometry check); as a plain slots class the parser builds
+it through its slot descriptors, twice as fast (``nc/parser.py``, ``_block_maker``)."""
+
+_ENGINE = "hli_server.engine"
+_ENGINE_DIR = Path(__file__).with_name("engine")
+
+ENGINE_COMPILED = False
+"""True when this process runs the mypyc-compiled engine (set by :func:`select`)."""
+
+
+def _compiled_file(source: Path) -> Path | None:
+    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+        candidate = source.with_name(source.stem + suffix)
+        if candidate.exists():
+            return candidate
+    return None
+
+
+def stale_modules() -> tuple[list[Path], list[Path]]:
+    """(compiled modules, sources whose compiled module is missing or older than the source).
+
+    The age is compared only in a source checkout (an editable install: ``.git`` beside the package),
+    where sources are edited after the build; an installed wheel is left as installed (pip does not keep
+    the build's file times, so a ``.py`` may be unpacked after its ``.so``)."""
+    compiled: list[Path] = []
+    checkout = (_ENGINE_DIR.parent.parent / ".git").exists()
+    stale: list[Path] = []
+    for source in sorted(_ENGINE_DIR.rglob("*.py")):
+        if source.name in NOT_COMPILED:
+            continue
+        built = _compiled_file(source)
+        if built is None:
+            stale.append(source)
+            continue
+        compiled.append(built)
+        if checkout and built.stat().st_mtime < source.stat().st_mtime:
+            stale.append(source)
+    return compiled, stale
+
+
+class _PureEngineFinder(importlib.abc.MetaPathFinder):
+    """Finds ``hli_server.engine`` and its modules as ``.py`` files (never the compiled ones)."""
+
+    def find_spec(
+        self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
+    ) -> importlib.machinery.ModuleSpec | None:
+        if fullname != _ENGINE and not fullname.startswith(_ENGINE + "."):
+            return None
+        leaf = fullname.rpartition(".")[2]
+        for entry in path or ():
+            base = Path(entry) / leaf
+            init = base / "__init__.py"
+            if init.is_file():
+                return importlib.util.spec_from_file_location(
+                    fullname, init, submodule_search_locations=[str(base)]
+                )
+            module = base.with_suffix(".py")
+            if module.is_file():
+                return importlib.util.spec_from_file_location(fullname, module)
+        return None
+
+
+def select() -> bool:
+    """Decide compiled or pure for this process (before any engine module is imported)."""
+    global ENGINE_COMPILED  # noqa: PLW0603 - decided once per process, read by everyone after
+    if any(isinstance(f, _PureEngineFinder) for f in sys.meta_path):
+        return ENGINE_COMPILED
+    compiled, stale = stale_modules()
+    forced = os.environ.get(PURE_ENV, "") not in ("", "0")
+    if compiled and stale and not forced:
+        shown = ", ".join(str(p.relative_to(_ENGINE_DIR.parent.parent)) for p in stale[:3])
+        more = f" and {len(stale) - 3} more" if len(stale) > 3 else ""
+        warnings.warn(
+            f"hli_server: the compiled engine is older than its source ({shown}{more}): running the engine "
+            "as pure Python. Rebuild it with `pip install -e .` (or `make compile`), or set "
+            f"{PURE_ENV}=1 to silence this",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    ENGINE_COMPILED = bool(compiled) and not stale and not forced
+    if compiled and not ENGINE_COMPILED:
+        sys.meta_path.insert(0, _PureEngineFinder())
+    return ENGINE_COMPILED

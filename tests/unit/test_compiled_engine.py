@@ -1,0 +1,83 @@
+"""The compiled and the pure engine give the same outputs, cycle for cycle (issue 16).
+
+``pip install`` compiles the engine with mypyc where it can (``setup.py``); ``HLI_PURE_PYTHON=1`` runs the
+same source as plain Python (``hli_server/_compiled.py``). The suite itself runs with whichever engine
+the installation has; this test runs the recorded scenarios (``test_recorded_scenarios.py``) in a second
+process with the *other* engine, so that both are held to the same recording: every published field,
+every event, every cycle. Where the engine is not compiled (no C compiler) it says so and runs the
+pure one only, which the suite does anyway.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import hli_server._compiled as compiled
+
+ROOT = Path(__file__).parents[2]
+
+
+def _run_scenarios(pure: bool) -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ)
+    env.pop(compiled.PURE_ENV, None)
+    if pure:
+        env[compiled.PURE_ENV] = "1"
+    code = (
+        "import json, sys\n"
+        "import hli_server._compiled as c\n"
+        "import tests.unit.test_recorded_scenarios as t\n"
+        "rec = t._recorded()\n"
+        "bad = [n for n, (run, size) in t.SCENARIOS.items() if run(size)[0] != rec[n]['digest']]\n"
+        "print(json.dumps({'compiled': c.ENGINE_COMPILED, 'differ': bad}))\n"
+    )
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.req("E-01")
+def test_the_other_engine_gives_the_recorded_outputs_cycle_for_cycle() -> None:
+    import json
+
+    other_is_pure = compiled.ENGINE_COMPILED
+    done = _run_scenarios(pure=other_is_pure)
+    assert done.returncode == 0, done.stderr[-2000:]
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    if not other_is_pure and not result["compiled"]:
+        pytest.skip("the engine is not compiled here (no C compiler or mypyc at install): pure Python only")
+    assert result["compiled"] is (not other_is_pure)
+    assert result["differ"] == [], (
+        f"{'pure' if other_is_pure else 'compiled'} engine differs in {result['differ']}"
+    )
+
+
+def test_pure_python_can_be_forced_for_debugging() -> None:
+    """HLI_PURE_PYTHON=1 loads every engine module from its .py file (breakpoints, profilers)."""
+    env = dict(os.environ, **{compiled.PURE_ENV: "1"})
+    code = (
+        "import hli_server._compiled as c, hli_server.engine.machine as m, hli_server.engine.nc.parser as p\n"
+        "print(c.ENGINE_COMPILED, m.__file__.endswith('.py'), p.__file__.endswith('.py'))\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["False", "True", "True"]
