@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any
 
-__all__ = ["CTX", "Server"]
+__all__ = ["CTX", "Server", "print_lateness"]
 
 CTX = mp.get_context("fork")
 """Fork: the server process starts in milliseconds with what the benchmark imported already."""
@@ -41,3 +41,15 @@ class Server:
         if self.process.is_alive():
             self.process.kill()
         return report
+
+
+def print_lateness(timing: dict[str, Any] | None) -> None:
+    """One line on how the realtime clock fared under the load (the runtime's ``/api/timing``)."""
+    if not timing or not timing.get("lateness_us"):
+        return
+    lateness = timing["lateness_us"]
+    print(
+        f"engine under the load: {timing['cycles']} cycles in {timing['wall_s']:.1f} s, lateness "
+        f"p50 {lateness['p50']:.0f} us, p99 {lateness['p99']:.0f} us, max {lateness['max']:.0f} us, "
+        f"{timing['slipped_cycles']} cycles dropped"
+    )

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Any
 
-from benchmarks._servers import CTX, Server
+from benchmarks._servers import CTX, Server, print_lateness
 
 GOAL = 3.0
 SYMBOL = "gpAx[0]^ipo_state.cmd_pos_r"
@@ -343,13 +343,7 @@ def main() -> None:
             f"ratio hli-server / pyads.testserver, {mode}: {ratio:.2f}x ({verdict} the goal >= {GOAL:g}x); "
             f"the client's floor allows at most {floor / ref.rate:.2f}x"
         )
-    if timing and timing.get("lateness_us"):
-        lateness = timing["lateness_us"]
-        print(
-            f"engine under the load: {timing['cycles']} cycles in {timing['wall_s']:.1f} s, lateness "
-            f"p50 {lateness['p50']:.0f} us, p99 {lateness['p99']:.0f} us, max {lateness['max']:.0f} us, "
-            f"{timing['slipped_cycles']} cycles dropped"
-        )
+    print_lateness(timing)
 
 
 if __name__ == "__main__":

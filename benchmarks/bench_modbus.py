@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import Any
 
-from benchmarks._servers import CTX, Server
+from benchmarks._servers import CTX, Server, print_lateness
 
 HOLDING_ADDRESS = 0
 """Channel 1's holding registers: override.command_w, mode_w, program_select_w (6 registers)."""
@@ -269,13 +269,7 @@ def main() -> None:
         ratio = ours.rate / plain.rate if plain.rate else float("inf")
         verdict = "meets" if ratio >= GOAL else "MISSES"
         print(f"ratio hli-server / plain, {clients} client(s): {ratio:.2f}x ({verdict} the goal >= {GOAL}x)")
-    if timing:
-        lateness = timing["lateness_us"]
-        print(
-            f"engine under the load: {timing['cycles']} cycles in {timing['wall_s']:.1f} s, lateness "
-            f"p50 {lateness['p50']:.0f} us, p99 {lateness['p99']:.0f} us, max {lateness['max']:.0f} us, "
-            f"{timing['slipped_cycles']} cycles dropped"
-        )
+    print_lateness(timing)
 
 
 if __name__ == "__main__":
