@@ -118,7 +118,9 @@ STILL_AWAY_LOG_S: Final = 60.0
 """While the broker stays away, a warning repeats at most this often (each failure is logged at debug)."""
 PASSWORD_ENV: Final = "HLI_MQTT_PASSWORD"
 OPERATION_TIMEOUT_S: Final = 5.0
-"""Longest wait for the broker's CONNACK or a PUBACK before the connection is given up and retried."""
+"""Default of ``timeout_s``: the longest wait for the broker's CONNACK or a PUBACK before the connection
+is given up and retried. It is also how long a broker that closes the connection before its CONNACK
+costs: aiomqtt 2.x notices such a close only by this time-out."""
 
 
 def topic_safe(name: str) -> str:
@@ -189,6 +191,12 @@ class MqttOptions(BaseModel):
     keepalive: int = Field(default=30, ge=5, le=3600, description="MQTT keepalive [s]")
     reconnect_max_s: float = Field(
         default=10.0, ge=RECONNECT_MIN_S, le=3600.0, description="longest wait between reconnects [s]"
+    )
+    timeout_s: float = Field(
+        default=OPERATION_TIMEOUT_S,
+        ge=0.1,
+        le=600.0,
+        description="longest wait for the broker's CONNACK or a PUBACK before the connection is retried [s]",
     )
     snapshot: bool = Field(default=True, description="publish the retained snapshot of the channel states")
 
@@ -583,7 +591,7 @@ class MqttAdapter:
             identifier=self.client_id,
             will=aiomqtt.Will(self.prefix + STATUS_TOPIC, b"offline", qos=self.qos, retain=True),
             keepalive=o.keepalive,
-            timeout=OPERATION_TIMEOUT_S,
+            timeout=o.timeout_s,
             tls_context=self._tls,
             max_inflight_messages=WINDOW,
             max_queued_incoming_messages=16,  # nothing is subscribed: a broker that sends anyway is bounded

@@ -17,6 +17,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import logging
 import os
 import signal
 import socket
@@ -692,3 +693,87 @@ def test_run_without_a_broker_says_so_retries_and_runs_to_the_end(tmp_path: Path
     assert result.stderr.count("not reachable") == 1  # once, not at every retry
     assert "stopped at cycle 1500" in result.stdout
     assert "Traceback" not in result.stderr
+
+
+# --------------------------------------------------------------------------------------------
+# A broker that answers garbage (issue 12's bar: the MQTT door's only input is the broker's bytes)
+# --------------------------------------------------------------------------------------------
+
+
+def _garbage_answers(seed: int, count: int) -> list[bytes]:
+    """What a broken broker may answer to CONNECT: a refusing CONNACK, a CONNACK cut short, a packet
+    that claims 256 MB, a PUBLISH before any CONNACK, a malformed length, then seeded random bytes."""
+    import random
+
+    rng = random.Random(seed)
+    fixed = [
+        b"\x20\x02\x00\x05",  # CONNACK: not authorised
+        b"\x20\x02\x00",  # CONNACK cut short, then the connection closes
+        b"\x30\xff\xff\xff\x7f",  # PUBLISH claiming 268 MB
+        b"\x30\x07\x00\x03a/b" + b"xy",  # PUBLISH before any CONNACK
+        b"\x20\xff\xff\xff\xff\x01",  # a remaining length of five bytes (malformed)
+        b"\xe0\x00",  # DISCONNECT from the broker
+    ]
+    return fixed + [rng.randbytes(rng.randint(1, 300)) for _ in range(count - len(fixed))]
+
+
+@pytest.fixture
+def garbage_broker() -> Iterator[tuple[int, list[int]]]:
+    """A port whose every connection gets the next answer of :func:`_garbage_answers` and is closed;
+    ``served`` counts the connections."""
+    import threading
+
+    answers = _garbage_answers(seed=12, count=40)
+    served: list[int] = []
+    stop = threading.Event()
+    listener = socket.create_server(("127.0.0.1", 0))
+    listener.settimeout(0.1)
+
+    def serve() -> None:
+        while not stop.is_set():
+            try:
+                conn, _ = listener.accept()
+            except TimeoutError:
+                continue
+            with conn:
+                conn.settimeout(1.0)
+                with contextlib.suppress(OSError):
+                    conn.recv(4096)  # the client's CONNECT
+                    conn.sendall(answers[len(served) % len(answers)])
+                served.append(1)
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        yield listener.getsockname()[1], served
+    finally:
+        stop.set()
+        thread.join(5)
+        listener.close()
+
+
+async def test_a_broker_answering_garbage_is_retried_and_harms_nothing(
+    demo: MachineConfig, garbage_broker: tuple[int, list[int]], caplog: pytest.LogCaptureFixture
+) -> None:
+    port, served = garbage_broker
+    adapter = MqttAdapter(broker=f"127.0.0.1:{port}", queue_size=50, reconnect_max_s=0.1, timeout_s=0.3)
+    async with running(demo, adapter) as rt:
+        deadline = time.monotonic() + 20
+        cycles = 0
+        while len(served) < 16 and time.monotonic() < deadline:
+            rt.operator.inject_faults("Y", friction=0.001 * (cycles % 100 + 1))
+            await rt.step(10)
+            cycles += 10
+            await asyncio.sleep(0.01)
+        stats = adapter.stats()
+        assert len(served) >= 16, f"the adapter stopped retrying after {len(served)} connections: {stats}"
+        assert rt.machine.cycle == cycles  # every step was taken
+        assert rt.timing()["failed_cycles"] == 0
+        assert not stats["connected"]
+        assert stats["connects"] == 0  # no answer was taken for a CONNACK
+        assert stats["connect_failures"] >= 10
+        assert stats["queued"] <= 50
+        assert stats["dropped"] == cycles // 10 - stats["queued"]
+        assert stats["last_error"]  # says why
+    unexpected = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
+    assert unexpected == []  # every answer was an expected failure, none an "unexpected error"
