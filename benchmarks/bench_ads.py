@@ -243,8 +243,69 @@ def _client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
     return len(latencies), latencies.tobytes()
 
 
+def _socket_client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
+    """The same calls from a plain blocking socket (one send, one reply read per request): the
+    server's round trip without AdsLib's threads, to tell the server's share from the client's."""
+    import struct
+
+    from hli_server.codecs.ads import (
+        AmsAddress,
+        CommandId,
+        NetId,
+        ReadRequest,
+        ReadWriteRequest,
+        WriteRequest,
+        encode_request,
+    )
+
+    group, offset = _address()
+    target, source = (
+        AmsAddress(NetId.parse(SERVER_NET_ID), 851),
+        AmsAddress(NetId.parse("10.1.2.3.1.1"), 30001),
+    )
+    sock = socket.create_connection(("127.0.0.1", port))
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+    def exchange(command: int, payload: bytes) -> bytes:
+        sock.sendall(encode_request(target, source, command, 1, payload))
+        head = b""
+        while len(head) < 6:
+            head += sock.recv(6 - len(head))
+        size = struct.unpack_from("<I", head, 2)[0]
+        body = b""
+        while len(body) < size:
+            body += sock.recv(size - len(body))
+        return body
+
+    raw_read = ReadRequest(group, offset, 4).encode()
+    get_handle = ReadWriteRequest(0xF003, 0, 4, SYMBOL.encode() + b"\0").encode()
+
+    def call() -> None:
+        if mode == "raw":
+            exchange(CommandId.READ, raw_read)
+            return
+        handle = struct.unpack_from("<I", exchange(CommandId.READ_WRITE, get_handle), 40)[0]
+        exchange(CommandId.READ, ReadRequest(0xF005, handle, 4).encode())
+        exchange(CommandId.WRITE, WriteRequest(0xF006, 0, struct.pack("<I", handle)).encode())
+
+    for _ in range(200):  # warm up
+        call()
+    latencies = array("Q")
+    ns = time.perf_counter_ns
+    stop_at = time.perf_counter() + seconds
+    while time.perf_counter() < stop_at:
+        t0 = ns()
+        call()
+        latencies.append(ns() - t0)
+    sock.close()
+    return len(latencies), latencies.tobytes()
+
+
+CLIENT = ["pyads"]
+
+
 def _client_process(conn: Connection, port: int, mode: str, seconds: float) -> None:
-    conn.send(_client(port, mode, seconds))
+    conn.send((_client if CLIENT[0] == "pyads" else _socket_client)(port, mode, seconds))
 
 
 def _run_client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
@@ -296,11 +357,19 @@ def main() -> None:
         action="store_true",
         help="serve ADS from the engine's process (--no-doors-process), not from run's doors process",
     )
+    parser.add_argument(
+        "--client",
+        choices=["pyads", "socket"],
+        default="pyads",
+        help="pyads (the goal's client) or a plain blocking socket (the servers' share of a round trip)",
+    )
     args = parser.parse_args()
     CLOCK[0] = args.clock
+    CLIENT[0] = args.client
     group, offset = _address()
     print(
-        f"one pyads {__import__('pyads').__version__} client, one call in flight; raw read of a DINT at "
+        f"{'one pyads ' + __import__('pyads').__version__ if args.client == 'pyads' else 'one plain socket'} "
+        f"client, one call in flight; raw read of a DINT at "
         f"0x{group:X}/{offset} and read_by_name({SYMBOL!r}); {args.rounds} x {args.seconds:g} s per server "
         f"and mode, interleaved; {os.cpu_count()} CPUs shared"
     )
