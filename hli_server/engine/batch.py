@@ -45,7 +45,7 @@ from hli_server.engine.areas.geometry import Group
 from hli_server.engine.areas.path_check import AreaPathCheck
 from hli_server.engine.areas.prefilter import MARGIN, PathBatch, clear_of_areas
 from hli_server.engine.channel import Channel
-from hli_server.engine.decoder import Decoder
+from hli_server.engine.decoder import Decoder, PathCheck
 from hli_server.engine.monitors.collision import MoveApartCheck
 from hli_server.engine.monitors.soft_limits import SoftLimitPathCheck
 from hli_server.engine.nc.blocks import Block, NcError
@@ -76,9 +76,15 @@ Item = Motion | Marker
 def unsupported(channel: Channel) -> str | None:
     """Why the batch cannot check this channel's programs (a path check it does not know), or None."""
     for check in channel.decoder.path_checks:
-        if not isinstance(check, SoftLimitPathCheck | AreaPathCheck | MoveApartCheck):
-            return f"path check {type(check).__name__} is not known to the batch check"
+        if not isinstance(check, SoftLimitPathCheck | MoveApartCheck) and _area_check(check) is None:
+            return f"path check {getattr(check, '__qualname__', type(check).__name__)} is not known to the batch check"
     return None
+
+
+def _area_check(check: PathCheck) -> AreaPathCheck | None:
+    """The area check whose bound method ``check`` is (the hook the area monitor installs), or None."""
+    owner = getattr(check, "__self__", None)
+    return owner if isinstance(owner, AreaPathCheck) else None
 
 
 class _Chunk:
@@ -141,9 +147,7 @@ class BatchGeometryCheck:
         decoder.start(iter(()), self.channel.setpoints())
         self._chunks = self._read(io.StringIO(text, newline="") if isinstance(text, str) else text)
         self._chunk = None
-        while self._next_chunk():
-            chunk = self._chunk
-            assert chunk is not None
+        while (chunk := self._next_chunk()) is not None:
             i = chunk.cursor
             at = bisect.bisect_left(chunk.others, i)
             o = chunk.others[at] if at < len(chunk.others) else chunk.lines
@@ -162,14 +166,15 @@ class BatchGeometryCheck:
         if not decoder.finished:
             yield decoder.end_of_program()
 
-    def _next_chunk(self) -> bool:
-        """Make sure the current chunk has a line left; False at the end of the text."""
-        while self._chunk is None or self._chunk.cursor >= self._chunk.lines:
-            nxt = next(self._chunks, None)
-            if nxt is None:
-                return False
-            self._chunk = nxt
-        return True
+    def _next_chunk(self) -> _Chunk | None:
+        """The current chunk, or the next one if it has no line left; None at the end of the text."""
+        chunk = self._chunk
+        while chunk is None or chunk.cursor >= chunk.lines:
+            chunk = next(self._chunks, None)
+            if chunk is None:
+                return None
+            self._chunk = chunk
+        return chunk
 
     def _read(self, source: TextIO) -> Iterator[_Chunk]:
         """Chunks of whole lines; ``\\r\\n`` and a lone ``\\r`` end a line as ``\\n`` does (as the parser's
@@ -205,9 +210,7 @@ class BatchGeometryCheck:
 
     def _more_lines(self) -> Iterator[str]:
         """The lines after the current one (a wrapped ``#CONTROL AREA`` continues on them)."""
-        while self._next_chunk():
-            chunk = self._chunk
-            assert chunk is not None
+        while (chunk := self._next_chunk()) is not None:
             k = chunk.cursor
             chunk.cursor += 1
             yield chunk.raw(k)
@@ -439,8 +442,9 @@ class BatchGeometryCheck:
         groups: list[Group] = []
         all_exact = False
         for check in self.decoder.path_checks:
-            if isinstance(check, AreaPathCheck):
-                groups.extend(check.planned.groups())
+            areas = _area_check(check)
+            if areas is not None:
+                groups.extend(areas.planned.groups())
             elif isinstance(check, MoveApartCheck):
                 all_exact = all_exact or bool(check.monitor.latched_pairs(check.channel))
         return groups, all_exact

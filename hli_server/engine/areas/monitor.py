@@ -166,7 +166,7 @@ class AreaMonitor(Monitor):
     def channel_hooks(self, channel: Channel) -> ChannelHooks:
         handler = self.channels[channel.number]
         return ChannelHooks(
-            path_check=handler.path_check,
+            path_check=handler.path_check.path_check,
             jog_guard=handler.manual,
             area_handler=handler.definitions,
             measure_handler=handler.measuring,

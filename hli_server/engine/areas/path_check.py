@@ -35,13 +35,9 @@ class AreaPathCheck(AreaRole):
     start and end point and the exact intersection point."""
 
     # --- path check (C14-15) ---------------------------------------------------------------
-    def __call__(self, segment: Segment, block: Block) -> DecodeError | None:
-        """The decoder's path check (:class:`~hli_server.engine.decoder.PathCheck`): the channel's
-        decoder holds this object itself, so that the batch geometry check can recognise it and read
-        the groups it checks (``hli_server/engine/batch.py``)."""
-        return self.path_check(segment, block)
-
     def path_check(self, segment: Segment, block: Block) -> DecodeError | None:
+        """The decoder's path check (a bound method: the batch geometry check recognises it by its
+        ``__self__``, ``hli_server/engine/batch.py``)."""
         groups = self.planned.groups()
         if not groups:
             return None

@@ -177,19 +177,22 @@ def _line_test(
 ) -> Bools:
     if isinstance(region, Circle):
         if protection:
-            return _point_segment(region.cx, region.cy, sx, sy, ex, ey) > region.r + MARGIN
+            apart: Bools = _point_segment(region.cx, region.cy, sx, sy, ex, ey) > region.r + MARGIN
+            return apart
         limit = region.r - MARGIN
-        return (np.hypot(sx - region.cx, sy - region.cy) < limit) & (
+        within: Bools = (np.hypot(sx - region.cx, sy - region.cy) < limit) & (
             np.hypot(ex - region.cx, ey - region.cy) < limit
         )
+        return within
     if not protection:
         halves = _half_planes(region)
         if halves is not None:
             # convex: the segment lies inside with the margin when both ends do
             nx, ny, off = halves
-            return ((sx[:, None] * nx + sy[:, None] * ny < off).all(axis=1)) & (
-                (ex[:, None] * nx + ey[:, None] * ny < off).all(axis=1)
-            )
+            start_in = np.all(sx[:, None] * nx + sy[:, None] * ny < off, axis=1)
+            end_in = np.all(ex[:, None] * nx + ey[:, None] * ny < off, axis=1)
+            both: Bools = np.logical_and(start_in, end_in)
+            return both
     qx0, qy0, qx1, qy1 = _edges(region)
     s = (sx[:, None], sy[:, None], ex[:, None], ey[:, None])
     apart = _segment_segment(*s, qx0, qy0, qx1, qy1).min(axis=1) > MARGIN
@@ -218,9 +221,11 @@ def _arc_test(
         to_end = np.hypot(px - ex, py - ey)
         if protection:
             # every point of the circle through the start is |d - r| or more from the centre
-            return (np.abs(d - r) > region.r + MARGIN) & (to_end > region.r + MARGIN)
+            off_circle: Bools = (np.abs(d - r) > region.r + MARGIN) & (to_end > region.r + MARGIN)
+            return off_circle
         limit = region.r - MARGIN
-        return (d + r < limit) & (to_end < limit)
+        in_circle: Bools = (d + r < limit) & (to_end < limit)
+        return in_circle
     if not protection:
         halves = _half_planes(region)
         if halves is not None:
@@ -229,7 +234,10 @@ def _arc_test(
             if swap:
                 nx, ny = ny, nx
             reach = cx[:, None] * nx + cy[:, None] * ny + r[:, None]
-            return (reach < off).all(axis=1) & (ex[:, None] * nx + ey[:, None] * ny < off).all(axis=1)
+            circle_in = np.all(reach < off, axis=1)
+            end_in = np.all(ex[:, None] * nx + ey[:, None] * ny < off, axis=1)
+            all_in: Bools = np.logical_and(circle_in, end_in)
+            return all_in
     qx0, qy0, qx1, qy1 = _edges(region)
     if swap:
         qx0, qy0, qx1, qy1 = qy0, qx0, qy1, qx1
@@ -239,9 +247,8 @@ def _arc_test(
     )
     inside_start = _inside(region, sy, sx) if swap else _inside(region, sx, sy)
     inside_end = _inside(region, ey, ex) if swap else _inside(region, ex, ey)
-    if protection:
-        return apart & ~inside_start & ~inside_end
-    return apart & inside_start & inside_end
+    result: Bools = apart & (~inside_start & ~inside_end if protection else inside_start & inside_end)
+    return result
 
 
 def _on_sweep(angle: Floats, a0: Floats, sweep: Floats) -> Bools:
