@@ -6,9 +6,15 @@ the full machine (``machines/full.toml``) after its 20 areas are defined and act
 nothing, so every block is checked exactly to the end. Goal: 200,000 blocks/s or more, memory flat
 however long the program, and at least 1.0x LinuxCNC's ``rs274`` on the same moves.
 
+``check --geometry-only`` runs as a batch (``hli_server/engine/batch.py``): plain motion lines tokenized
+and checked with numpy a megabyte at a time, only the blocks a conservative prefilter cannot clear (and
+every other line) through the exact decoder (docs/performance.md, docs/check.md).
+
 References, measured in the same run, interleaved round by round (best of ``--rounds``):
 
 * the same check of the same moves without the areas (what the 20 areas cost);
+* the exact path, block by block (``HLI_BATCH_CHECK=0``: what ``check`` did before the batch, and does
+  with ``--plot``), on the same program (skip with ``--no-exact``);
 * ``rs274 -g`` (LinuxCNC's C++ interpreter, Debian's ``linuxcnc-uspace``) on the same moves in its
   dialect, without areas (it has none), timed as a process; skipped with a note where it is absent;
 * shapely's batched ``intersects`` of all the program's lines against the 20 areas in one call (the
@@ -22,6 +28,7 @@ References, measured in the same run, interleaved round by round (best of ``--ro
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import subprocess
 import sys
@@ -39,17 +46,25 @@ from benchmarks.programs import (
     write_lines,
 )
 from hli_server._compiled import ENGINE_COMPILED
-from hli_server.commands.check import check_program
+from hli_server.commands.check import BATCH_ENV, check_program
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine
 
 
-def _ours(path: Path) -> tuple[float, int]:
+def _ours(path: Path, exact: bool = False) -> tuple[float, int]:
     machine = Machine(load_machine(FULL_MACHINE))
-    with path.open(encoding="utf-8", newline="") as f:
-        began = time.perf_counter()
-        result = check_program(machine, f, geometry_only=True)
-        elapsed = time.perf_counter() - began
+    saved = os.environ.get(BATCH_ENV)
+    os.environ[BATCH_ENV] = "0" if exact else "1"
+    try:
+        with path.open(encoding="utf-8", newline="") as f:
+            began = time.perf_counter()
+            result = check_program(machine, f, geometry_only=True)
+            elapsed = time.perf_counter() - began
+    finally:
+        if saved is None:
+            os.environ.pop(BATCH_ENV, None)
+        else:
+            os.environ[BATCH_ENV] = saved
     assert result.completed, result.to_json()["alarms"][:2]
     assert not result.alarms, result.to_json()["alarms"][:2]
     return elapsed, result.blocks
@@ -127,6 +142,7 @@ def main() -> None:
     ap.add_argument("--blocks", type=int, default=1_000_000, help="motion blocks of the program")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--no-memory", action="store_true", help="skip the peak-memory comparison")
+    ap.add_argument("--no-exact", action="store_true", help="skip the exact (block by block) reference")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
@@ -136,13 +152,16 @@ def main() -> None:
         write_lines(ngc, near_area_lines_rs274(args.blocks))
         tool_table = d / "tool.tbl"
         tool_table.write_text("T1 P1 D0 Z0 ;\n", encoding="utf-8")
-        best = {"areas": 0.0, "plain": 0.0, "rs274": 0.0}
+        best = {"areas": 0.0, "plain": 0.0, "rs274": 0.0, "exact": 0.0}
         blocks = 0
         for _ in range(args.rounds):
             t, blocks = _ours(with_areas)
             best["areas"] = max(best["areas"], blocks / t)
             t, n = _ours(plain)
             best["plain"] = max(best["plain"], n / t)
+            if not args.no_exact:
+                t, n = _ours(with_areas, exact=True)
+                best["exact"] = max(best["exact"], n / t)
             t_rs = _rs274(ngc, tool_table, d / "rs274.out")
             if t_rs is not None:
                 best["rs274"] = max(best["rs274"], (args.blocks + 2) / t_rs)
@@ -155,6 +174,11 @@ def main() -> None:
             f"reference: the same moves without areas: {best['plain']:,.0f} blocks/s; "
             f"ratio with / without areas: {best['areas'] / best['plain']:.2f}"
         )
+        if best["exact"]:
+            print(
+                f"reference: the exact path, block by block ({BATCH_ENV}=0), same program: "
+                f"{best['exact']:,.0f} blocks/s; batch / exact: {best['areas'] / best['exact']:.1f}"
+            )
         if best["rs274"]:
             print(
                 f"reference: LinuxCNC rs274 -g, same moves, no areas: {best['rs274']:,.0f} blocks/s; "

@@ -77,7 +77,8 @@ def unsupported(channel: Channel) -> str | None:
     """Why the batch cannot check this channel's programs (a path check it does not know), or None."""
     for check in channel.decoder.path_checks:
         if not isinstance(check, SoftLimitPathCheck | MoveApartCheck) and _area_check(check) is None:
-            return f"path check {getattr(check, '__qualname__', type(check).__name__)} is not known to the batch check"
+            name = getattr(check, "__qualname__", type(check).__name__)
+            return f"path check {name} is not known to the batch check"
     return None
 
 
@@ -313,7 +314,8 @@ class BatchGeometryCheck:
             ):
                 raise RuntimeError(
                     f"batch geometry check out of step with the decoder at line {self.line}: "
-                    f"{decoder.position} != {end[:, k].tolist()} (a bug; HLI_BATCH_CHECK=0 checks block by block)"
+                    f"{decoder.position} != {end[:, k].tolist()} (a bug; HLI_BATCH_CHECK=0 checks block by "
+                    "block)"
                 )
             yield items
             if decoder.finished:

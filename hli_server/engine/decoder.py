@@ -175,7 +175,9 @@ class Decoder:
         self.current_block = block
         self.blocks_decoded += 1
         items = self._decode(block)
-        if items and any(isinstance(i, Marker) and i.kind in (MarkerKind.ERROR, MarkerKind.END) for i in items):
+        if items and any(
+            isinstance(i, Marker) and i.kind in (MarkerKind.ERROR, MarkerKind.END) for i in items
+        ):
             self.finished = True
         return items
 

@@ -1,4 +1,4 @@
-"""Which paths of a batch surely keep clear of the active areas (issue 16: ``check --geometry-only`` as a batch).
+"""Which paths of a batch surely keep clear of the active areas (issue 16: ``check --geometry-only``).
 
 The exact path check (:mod:`hli_server.engine.areas.geometry`, C14-15) is the authority. This module only
 answers, for many blocks at once with numpy, "this path cannot violate any active area" - conservatively:
@@ -298,7 +298,9 @@ def _arc_segment(
     crossing = (df < r) & (l2 > 0.0)
     for tt in (t - h, t + h):
         xx, yy = qx0 + tt * ux, qy0 + tt * uy
-        hit = crossing & (tt >= -1e-9) & (tt <= 1.0 + 1e-9) & _on_sweep(np.arctan2(yy - cy, xx - cx), a0, sweep)
+        hit = (
+            crossing & (tt >= -1e-9) & (tt <= 1.0 + 1e-9) & _on_sweep(np.arctan2(yy - cy, xx - cx), a0, sweep)
+        )
         best = np.where(hit, 0.0, best)
     result: Floats = best
     return result
