@@ -543,14 +543,16 @@ def test_plot_and_env_switch_use_the_exact_path(config: MachineConfig) -> None:
 
 
 # --- the tokenizer of plain lines against the parser ------------------------------------------------
-_DECIMAL = st.tuples(st.floats(-300000, 300000, allow_nan=False), st.integers(0, 5))
+_DECIMAL = st.tuples(st.floats(-300000, 300000, allow_nan=False), st.integers(0, 9))
 _NUM = st.one_of(
     _DECIMAL.map(lambda t: f"{t[0]:.{t[1]}f}"),
     st.integers(-1000, 1000).map(str),
     st.sampled_from(
         ["0", "-0", "+5", ".5", "-.25", "5.", "007", "0000000000000001", "214748.3647", "214748.3648",
          "-214748.3647", "429496.7294", "429496.7295", "1.2.3", "--1", "+-1", "-", ".", "", "1e5",
-         "123456789012345", "1234567890123456", "12345678.9012345", "6000000", "6000000.1", "9" * 17]
+         "123456789012345", "1234567890123456", "12345678.9012345", "6000000", "6000000.1", "9" * 17,
+         "123456789", "123456789.5", "0.12345678", "0.123456789", "99999999", "100000000", "1.", "+.5",
+         "0.00000001", "12345678901.2345", "-999999999"]
     ),
 )  # fmt: skip
 _WORD = st.tuples(st.sampled_from("NGFIJKXYZWMXYZXYZ"), st.sampled_from(["", "", "", " ", "="]), _NUM).map(

@@ -63,6 +63,12 @@ _MAX_CHARS = 16
 _MAX_DIGITS = 15
 _MAX_N_DIGITS = 9
 _POW10 = 10.0 ** np.arange(23)
+_POW10_INT = np.array([10**k for k in range(17)], dtype=np.uint64)
+_ZEROS = np.uint64(0x3030303030303030)
+_DOTS = np.uint64(0x2E2E2E2E2E2E2E2E)
+_ONES = np.uint64(0x0101010101010101)
+_HIGHS = np.uint64(0x8080808080808080)
+_NIBBLES = np.uint64(0xF0F0F0F0F0F0F0F0)
 
 Floats = npt.NDArray[np.float64]
 Ints = npt.NDArray[np.int64]
@@ -149,85 +155,101 @@ class PlainTokenizer:
         after = np.empty_like(term)
         after[:-1] = term[1:]
         after[-1] = n
-        ct = c[term]
-        is_newline = ct == _NEWLINE
-        # line of the number that follows each terminator (a line end's follower is on the next line)
-        follow_line = np.cumsum(is_newline)
-        is_letter = ct == _LETTER
+        is_letter = c[term] == _LETTER
         has_number = after > term + 1
-        orphan = ~is_letter & has_number & (follow_line < lines)
-        other[follow_line[orphan]] = True
+        orphan = np.flatnonzero(~is_letter & has_number)
+        if orphan.shape[0]:
+            other[np.searchsorted(ends, term[orphan] + 1)] = True  # a number after a blank or line end
         if c[0] >= _DIGIT and c[0] <= _SIGN:
             other[0] = True  # a number at the chunk's start, before any terminator
         at = np.flatnonzero(is_letter)
-        line = follow_line[at]
         pos = term[at]
         end = after[at]
-        other[line[~has_number[at]]] = True
-        keep = ~other[line]
-        line, pos, end = line[keep], pos[keep], end[keep]
-        # the number: optional sign, then its body of digits and at most one dot
+        line = np.searchsorted(ends, pos)
+        # the number: optional sign, then its body of digits and at most one dot, read eight bytes at a
+        # time as little-endian integers (SWAR); words of lines already refused are read too, harmlessly
         start = pos + 1
         signed = c[start] == _SIGN
         negative = a[start] == ord("-")
         body = start + signed
         length = end - body
-        too_long = (length <= 0) | (end - start > _MAX_CHARS)
-        if too_long.any():
-            other[line[too_long]] = True
-            keep = ~too_long
-            line, pos, end, body, length = line[keep], pos[keep], end[keep], body[keep], length[keep]
-            signed, negative = signed[keep], negative[keep]
-        words = int(line.shape[0])
-        first = np.cumsum(length) - length
-        total = int(length.sum())
-        word_of = np.repeat(np.arange(words), length)
-        where = np.repeat(body - first, length) + np.arange(total)
-        cw = c[where]
-        dots = np.flatnonzero(cw == _DOT)
-        dot_word = word_of[dots]
-        n_dots = np.bincount(dot_word, minlength=words)
-        n_signs = np.bincount(word_of[cw == _SIGN], minlength=words)
-        dot_at = np.full(words, n + 1, np.int64)
-        dot_at[dot_word] = where[dots]
-        has_dot = n_dots > 0
-        digits = length - n_dots
-        # weight of each digit: 10 ** (its place counted from the number's last digit)
-        last = np.where(has_dot, end, end + 1)
-        place = last[word_of] - 1 - where - (where < dot_at[word_of])
-        digit = (a[where].astype(np.float64) - 48.0) * (cw == _DIGIT)
-        weight = digit * _POW10[np.clip(place, 0, 22)]
-        mantissa = np.add.reduceat(weight, first) if words else np.zeros(0)
-        decimals = np.where(has_dot, end - 1 - dot_at, 0)
-        value = mantissa / _POW10[np.clip(decimals, 0, 22)]
+        padded = data + bytes(16)
+        eight = np.ndarray((n + 8,), dtype="<u8", buffer=padded, strides=(1,))
+        dot = _first_byte(eight[body], _DOTS)
+        far = np.flatnonzero((dot == 8) & (length > 8))
+        if far.shape[0]:
+            dot[far] = 8 + _first_byte(eight[body[far] + 8], _DOTS)
+        has_dot = dot < length
+        whole = np.where(has_dot, dot, length)
+        decimals = np.clip(np.where(has_dot, length - dot - 1, 0), 0, 16)
+        digits = whole + decimals
+        low_count = np.minimum(whole, 8)
+        number, ok = _digits(eight[body + whole - low_count] - _ZEROS, low_count)
+        big = np.flatnonzero(whole > 8)
+        if big.shape[0]:
+            high, high_ok = _digits(eight[body[big]] - _ZEROS, whole[big] - 8)
+            number[big] += high * _POW10_INT[8]
+            ok[big] &= high_ok
+        frac, frac_ok = _digits(eight[body + whole + 1] - _ZEROS, np.minimum(decimals, 8))
+        mantissa = number * _POW10_INT[decimals] + frac
+        value = mantissa.astype(np.float64) / _POW10[decimals]
         value = np.where(negative, -value, value)
         column = self._column[a[pos]]
         plain_integer = ~signed & ~has_dot
         wrong = (
-            (n_dots > 1)
-            | (n_signs > 0)
+            ~(ok & frac_ok & has_number[at])
+            | (end - start > _MAX_CHARS)
+            | (whole > 2 * 8)
+            | (decimals > 8)
             | (digits < 1)
             | (digits > _MAX_DIGITS)
             | (value < self._low[column])
             | (value > self._high[column])
             | ((column == COL_F) & (value <= 0.0))
         )
+        words = int(line.shape[0])
+        first_of_line = np.ones(words, np.bool_)
+        first_of_line[1:] = line[1:] != line[:-1]
+        # N: the first word of its line, a whole number of at most 9 digits; G: 0..3
         is_n = column == COL_N
-        if is_n.any():
-            # N: the first word of its line, a whole number of at most 9 digits
-            first_of_line = np.ones(words, np.bool_)
-            first_of_line[1:] = line[1:] != line[:-1]
-            wrong |= is_n & (~first_of_line | ~plain_integer | (digits > _MAX_N_DIGITS))
-        is_g = column == COL_G
-        wrong |= is_g & (~plain_integer | (value > 3.0))
-        # each letter once per line
-        key = line * len(letters) + column
-        twice = np.bincount(key, minlength=lines * len(letters))[key] > 1
-        wrong |= twice
+        wrong |= is_n & (~first_of_line | ~plain_integer | (digits > _MAX_N_DIGITS))
+        wrong |= (column == COL_G) & (~plain_integer | (value > 3.0))
         other[line[wrong]] = True
+        # each letter once per line: the sum of the letters' bits is their union
+        if words:
+            firsts = np.flatnonzero(first_of_line)
+            bits = np.left_shift(np.int64(1), column)
+            twice = np.add.reduceat(bits, firsts) != np.bitwise_or.reduceat(bits, firsts)
+            other[line[firsts[twice]]] = True
         good = ~other[line]
         values[column[good], line[good]] = value[good]
         has_words = np.zeros(lines, np.bool_)
         has_words[line] = True
         kind[:] = np.where(other, OTHER, np.where(has_words, PLAIN, EMPTY))
         return PlainChunk(kind, starts, ends, values, letters)
+
+
+def _first_byte(x: npt.NDArray[np.uint64], byte: np.uint64) -> Ints:
+    """Index (0..7) of the first byte of each ``x`` (little-endian) equal to ``byte``'s, 8 if none: the
+    zero-byte test ``(y - 0x01..) & ~y & 0x80..`` is exact at the lowest zero byte of ``y = x ^ byte``."""
+    y = x ^ byte
+    found = (y - _ONES) & ~y & _HIGHS
+    lowest = found & (~found + np.uint64(1))
+    _, exponent = np.frexp(lowest.astype(np.float64))
+    index: Ints = np.where(found == 0, 8, (exponent.astype(np.int64) - 1) // 8)
+    return index
+
+
+def _digits(x: npt.NDArray[np.uint64], count: Ints) -> tuple[npt.NDArray[np.uint64], Bools]:
+    """The first ``count`` (0..8) bytes of ``x`` (characters less ``'0'``, little-endian) as a decimal
+    number, and whether they are all digits (SWAR, as simdjson's ``parse_eight_digits``): shifted to
+    the top, the bytes beyond ``count`` drop out and leading zero bytes come in."""
+    shift = (8 - np.minimum(count, 8)).astype(np.uint64) * np.uint64(8)
+    kept = np.where(count > 0, x << np.minimum(shift, np.uint64(56)), np.uint64(0))
+    ok: Bools = (kept & _NIBBLES) == 0
+    v = ((kept & np.uint64(0x0F0F0F0F0F0F0F0F)) * np.uint64(2561)) >> np.uint64(8)
+    v = ((v & np.uint64(0x00FF00FF00FF00FF)) * np.uint64(6553601)) >> np.uint64(16)
+    v = (((v & np.uint64(0x0000FFFF0000FFFF)) * np.uint64(42949672960001)) >> np.uint64(32)) & np.uint64(
+        0xFFFFFFFF
+    )
+    return v, ok
