@@ -19,6 +19,9 @@ References, measured in the same run, interleaved round by round (best of ``--ro
   dialect, without areas (it has none), timed as a process; skipped with a note where it is absent;
 * shapely's batched ``intersects`` of all the program's lines against the 20 areas in one call (the
   honest reference for the area check: it answers only "touches or not", for lines only);
+* the same moves (a fifth as many) with other lines among them, batch against the exact path: a comment
+  every 5 motion lines (comment lines do not end a stretch), an ``M08`` line every 200 and every 1,000
+  (they do: short stretches among many areas go block by block, ``SMALL_RUN_PER_AREA``);
 * peak memory (``ru_maxrss``) of ``hli-server check`` processes on the program and on one twice as long:
   a streaming check stays flat.
 
@@ -41,6 +44,7 @@ from benchmarks.programs import (
     PROTECTIONS,
     WORK_POLYGON,
     _near_moves,
+    interleaved,
     near_area_lines,
     near_area_lines_rs274,
     write_lines,
@@ -49,6 +53,8 @@ from hli_server._compiled import ENGINE_COMPILED
 from hli_server.commands.check import BATCH_ENV, check_program
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine
+from hli_server.engine.batch import BatchGeometryCheck
+from hli_server.engine.planner import Marker, MarkerKind
 
 
 def _ours(path: Path, exact: bool = False) -> tuple[float, int]:
@@ -68,6 +74,18 @@ def _ours(path: Path, exact: bool = False) -> tuple[float, int]:
     assert result.completed, result.to_json()["alarms"][:2]
     assert not result.alarms, result.to_json()["alarms"][:2]
     return elapsed, result.blocks
+
+
+def _exact_share(path: Path) -> tuple[int, int]:
+    """How many of the program's blocks the batch handed to the exact decoder, of how many (untimed)."""
+    machine = Machine(load_machine(FULL_MACHINE))
+    batch = BatchGeometryCheck(machine.channel(1))
+    with path.open(encoding="utf-8", newline="") as f:
+        for items in batch.items(f):
+            for item in items:  # the area definitions and activation run, as in check_program
+                if isinstance(item, Marker) and item.kind == MarkerKind.ACTION:
+                    item.payload()
+    return batch.exact_blocks, batch.exact_blocks + batch.batched_blocks
 
 
 def _rs274(path: Path, tool_table: Path, out: Path) -> float | None:
@@ -152,6 +170,11 @@ def main() -> None:
         write_lines(ngc, near_area_lines_rs274(args.blocks))
         tool_table = d / "tool.tbl"
         tool_table.write_text("T1 P1 D0 Z0 ;\n", encoding="utf-8")
+        mixes = [(5, "(a comment)"), (200, "M08"), (1000, "M08")]
+        mixed = [d / f"mixed{k}.nc" for k in range(len(mixes))]
+        for (every, extra), path in zip(mixes, mixed, strict=True):
+            write_lines(path, interleaved(near_area_lines(args.blocks // 5), every, extra))
+        best_mixed = [[0.0, 0.0] for _ in mixes]
         best = {"areas": 0.0, "plain": 0.0, "rs274": 0.0, "exact": 0.0}
         blocks = 0
         for _ in range(args.rounds):
@@ -162,6 +185,10 @@ def main() -> None:
             if not args.no_exact:
                 t, n = _ours(with_areas, exact=True)
                 best["exact"] = max(best["exact"], n / t)
+            for path, figures in zip(mixed, best_mixed, strict=True):
+                for k, exact in enumerate((False, True)):
+                    t, n = _ours(path, exact=exact)
+                    figures[k] = max(figures[k], n / t)
             t_rs = _rs274(ngc, tool_table, d / "rs274.out")
             if t_rs is not None:
                 best["rs274"] = max(best["rs274"], (args.blocks + 2) / t_rs)
@@ -173,6 +200,11 @@ def main() -> None:
         print(
             f"reference: the same moves without areas: {best['plain']:,.0f} blocks/s; "
             f"ratio with / without areas: {best['areas'] / best['plain']:.2f}"
+        )
+        exact, total = _exact_share(with_areas)
+        print(
+            f"blocks the prefilter could not clear, decoded exactly: {exact:,} of {total:,} "
+            f"({100.0 * exact / max(total, 1):.2f} %)"
         )
         if best["exact"]:
             print(
@@ -187,6 +219,12 @@ def main() -> None:
             )
         else:
             print("reference rs274: skipped (not installed; Debian: apt-get install linuxcnc-uspace)")
+        for (every, extra), (batch, exact) in zip(mixes, best_mixed, strict=True):
+            print(
+                f"the same moves ({args.blocks // 5:,}) with {extra!r} after every {every} motion lines: "
+                f"{batch:,.0f} blocks/s; the exact path: {exact:,.0f} blocks/s; "
+                f"batch / exact: {batch / exact:.2f}"
+            )
         shp = _shapely_batched(args.blocks)
         if shp is not None:
             t, n = shp

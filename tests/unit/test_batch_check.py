@@ -49,12 +49,18 @@ def config() -> MachineConfig:
 
 @contextmanager
 def _batch_settings(exact: bool, chunk: int | None = None, small: int | None = None) -> Iterator[None]:
-    saved = (os.environ.get(BATCH_ENV), batch_module.CHUNK_CHARS, batch_module.SMALL_RUN)
+    saved = (
+        os.environ.get(BATCH_ENV),
+        batch_module.CHUNK_CHARS,
+        batch_module.SMALL_RUN,
+        batch_module.SMALL_RUN_PER_AREA,
+    )
     os.environ[BATCH_ENV] = "0" if exact else "1"
     if chunk is not None:
         batch_module.CHUNK_CHARS = chunk
     if small is not None:
         batch_module.SMALL_RUN = small
+        batch_module.SMALL_RUN_PER_AREA = 0
     try:
         yield
     finally:
@@ -62,7 +68,7 @@ def _batch_settings(exact: bool, chunk: int | None = None, small: int | None = N
             os.environ.pop(BATCH_ENV, None)
         else:
             os.environ[BATCH_ENV] = saved[0]
-        batch_module.CHUNK_CHARS, batch_module.SMALL_RUN = saved[1], saved[2]
+        batch_module.CHUNK_CHARS, batch_module.SMALL_RUN, batch_module.SMALL_RUN_PER_AREA = saved[1:]
 
 
 def run(
@@ -96,8 +102,10 @@ def assert_same(
 
 
 def _count_batched(
-    config: MachineConfig, text: str, chunk: int = 1 << 20, small: int = 16
+    config: MachineConfig, text: str, chunk: int = 1 << 20, small: int | None = 16
 ) -> tuple[int, int]:
+    """Blocks the batch decoded itself and blocks it gave the exact decoder (``small=None``: the
+    module's thresholds, with their share per active area)."""
     machine = Machine(config)
     with _batch_settings(False, chunk, small):
         checker = BatchGeometryCheck(machine.channel(1))
@@ -290,7 +298,11 @@ class _Writer:
                 )
             )
         elif choice == 7:
-            self.lines.append(rng.choice(("(a comment)", "; a note", "", "   ", "N5", "G01 X1 (inline)")))
+            self.lines.append(
+                rng.choice(
+                    ("(a comment)", "; a note", "", "   ", "N5", "G01 X1 (inline)", " (c) (d) ; e", "(open")
+                )
+            )
             if self.lines[-1].startswith("G01"):
                 self.p[0] = 1.0 if self.absolute else self.p[0] + 1.0
         else:
@@ -442,6 +454,37 @@ def test_incremental_moves_sum_as_the_decoder_sums_them(config: MachineConfig) -
     exact = run(config, text, exact=True)
     result = assert_same(config, text)
     assert result.final_position == exact.final_position  # the same floats, rounding included
+
+
+def test_comment_lines_do_not_cut_a_stretch(config: MachineConfig) -> None:
+    body: list[str] = []
+    for k, line in enumerate(_zigzag(600)):
+        body.append(line)
+        if k % 3 == 0:
+            body.append(("(comment)", "; a note", "  (two) (comments) ; and a note")[k % 9 // 3])
+    text = AREAS + "\n".join([*body, "G01 X0 Y-300", "M30"]) + "\n"
+    result = assert_same(config, text)
+    assert [a.number for a in result.alarms] == [120486]  # the last move leaves the work area
+    batched, exact = _count_batched(config, text, small=None)
+    assert batched >= 590, (batched, exact)
+
+
+def test_short_stretches_among_areas_are_decoded_block_by_block(config: MachineConfig) -> None:
+    """The prefilter's set-up costs per stretch and active area: with 3 areas active, a stretch shorter
+    than SMALL_RUN + 3 * SMALL_RUN_PER_AREA plain lines between two other lines is not batched."""
+    n = batch_module.SMALL_RUN + 3 * batch_module.SMALL_RUN_PER_AREA
+
+    def program(stretch: int) -> str:
+        body: list[str] = []
+        for _ in range(10):
+            body += [*_zigzag(stretch), "M08"]
+        return AREAS + "\n".join([*body, "M30"]) + "\n"
+
+    short, long = program(n - 1), program(n)
+    assert_same(config, short)
+    assert_same(config, long)
+    assert _count_batched(config, short, small=None)[0] == 0
+    assert _count_batched(config, long, small=None)[0] >= 10 * (n - 2)
 
 
 @pytest.mark.req("E-04")
