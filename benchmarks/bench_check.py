@@ -6,13 +6,22 @@ the full machine (``machines/full.toml``) after its 20 areas are defined and act
 nothing, so every block is checked exactly to the end. Goal: 200,000 blocks/s or more, memory flat
 however long the program, and at least 1.0x LinuxCNC's ``rs274`` on the same moves.
 
+``check --geometry-only`` runs as a batch (``hli_server/engine/batch.py``): plain motion lines tokenized
+and checked with numpy a megabyte at a time, only the blocks a conservative prefilter cannot clear (and
+every other line) through the exact decoder (docs/performance.md, docs/check.md).
+
 References, measured in the same run, interleaved round by round (best of ``--rounds``):
 
 * the same check of the same moves without the areas (what the 20 areas cost);
+* the exact path, block by block (``HLI_BATCH_CHECK=0``: what ``check`` did before the batch, and does
+  with ``--plot``), on the same program (skip with ``--no-exact``);
 * ``rs274 -g`` (LinuxCNC's C++ interpreter, Debian's ``linuxcnc-uspace``) on the same moves in its
   dialect, without areas (it has none), timed as a process; skipped with a note where it is absent;
 * shapely's batched ``intersects`` of all the program's lines against the 20 areas in one call (the
   honest reference for the area check: it answers only "touches or not", for lines only);
+* the same moves (a fifth as many) with other lines among them, batch against the exact path: a comment
+  every 5 motion lines (comment lines do not end a stretch), an ``M08`` line every 200 and every 1,000
+  (they do: short stretches among many areas go block by block, ``SMALL_RUN_PER_AREA``);
 * peak memory (``ru_maxrss``) of ``hli-server check`` processes on the program and on one twice as long:
   a streaming check stays flat.
 
@@ -22,6 +31,7 @@ References, measured in the same run, interleaved round by round (best of ``--ro
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import subprocess
 import sys
@@ -34,25 +44,48 @@ from benchmarks.programs import (
     PROTECTIONS,
     WORK_POLYGON,
     _near_moves,
+    interleaved,
     near_area_lines,
     near_area_lines_rs274,
     write_lines,
 )
 from hli_server._compiled import ENGINE_COMPILED
-from hli_server.commands.check import check_program
+from hli_server.commands.check import BATCH_ENV, check_program
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine
+from hli_server.engine.batch import BatchGeometryCheck
+from hli_server.engine.planner import Marker, MarkerKind
 
 
-def _ours(path: Path) -> tuple[float, int]:
+def _ours(path: Path, exact: bool = False) -> tuple[float, int]:
     machine = Machine(load_machine(FULL_MACHINE))
-    with path.open(encoding="utf-8", newline="") as f:
-        began = time.perf_counter()
-        result = check_program(machine, f, geometry_only=True)
-        elapsed = time.perf_counter() - began
+    saved = os.environ.get(BATCH_ENV)
+    os.environ[BATCH_ENV] = "0" if exact else "1"
+    try:
+        with path.open(encoding="utf-8", newline="") as f:
+            began = time.perf_counter()
+            result = check_program(machine, f, geometry_only=True)
+            elapsed = time.perf_counter() - began
+    finally:
+        if saved is None:
+            os.environ.pop(BATCH_ENV, None)
+        else:
+            os.environ[BATCH_ENV] = saved
     assert result.completed, result.to_json()["alarms"][:2]
     assert not result.alarms, result.to_json()["alarms"][:2]
     return elapsed, result.blocks
+
+
+def _exact_share(path: Path) -> tuple[int, int]:
+    """How many of the program's blocks the batch handed to the exact decoder, of how many (untimed)."""
+    machine = Machine(load_machine(FULL_MACHINE))
+    batch = BatchGeometryCheck(machine.channel(1))
+    with path.open(encoding="utf-8", newline="") as f:
+        for items in batch.items(f):
+            for item in items:  # the area definitions and activation run, as in check_program
+                if isinstance(item, Marker) and item.kind == MarkerKind.ACTION:
+                    item.payload()
+    return batch.exact_blocks, batch.exact_blocks + batch.batched_blocks
 
 
 def _rs274(path: Path, tool_table: Path, out: Path) -> float | None:
@@ -127,6 +160,7 @@ def main() -> None:
     ap.add_argument("--blocks", type=int, default=1_000_000, help="motion blocks of the program")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--no-memory", action="store_true", help="skip the peak-memory comparison")
+    ap.add_argument("--no-exact", action="store_true", help="skip the exact (block by block) reference")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
@@ -136,13 +170,25 @@ def main() -> None:
         write_lines(ngc, near_area_lines_rs274(args.blocks))
         tool_table = d / "tool.tbl"
         tool_table.write_text("T1 P1 D0 Z0 ;\n", encoding="utf-8")
-        best = {"areas": 0.0, "plain": 0.0, "rs274": 0.0}
+        mixes = [(5, "(a comment)"), (200, "M08"), (1000, "M08")]
+        mixed = [d / f"mixed{k}.nc" for k in range(len(mixes))]
+        for (every, extra), path in zip(mixes, mixed, strict=True):
+            write_lines(path, interleaved(near_area_lines(args.blocks // 5), every, extra))
+        best_mixed = [[0.0, 0.0] for _ in mixes]
+        best = {"areas": 0.0, "plain": 0.0, "rs274": 0.0, "exact": 0.0}
         blocks = 0
         for _ in range(args.rounds):
             t, blocks = _ours(with_areas)
             best["areas"] = max(best["areas"], blocks / t)
             t, n = _ours(plain)
             best["plain"] = max(best["plain"], n / t)
+            if not args.no_exact:
+                t, n = _ours(with_areas, exact=True)
+                best["exact"] = max(best["exact"], n / t)
+            for path, figures in zip(mixed, best_mixed, strict=True):
+                for k, exact in enumerate((False, True)):
+                    t, n = _ours(path, exact=exact)
+                    figures[k] = max(figures[k], n / t)
             t_rs = _rs274(ngc, tool_table, d / "rs274.out")
             if t_rs is not None:
                 best["rs274"] = max(best["rs274"], (args.blocks + 2) / t_rs)
@@ -155,6 +201,16 @@ def main() -> None:
             f"reference: the same moves without areas: {best['plain']:,.0f} blocks/s; "
             f"ratio with / without areas: {best['areas'] / best['plain']:.2f}"
         )
+        exact, total = _exact_share(with_areas)
+        print(
+            f"blocks the prefilter could not clear, decoded exactly: {exact:,} of {total:,} "
+            f"({100.0 * exact / max(total, 1):.2f} %)"
+        )
+        if best["exact"]:
+            print(
+                f"reference: the exact path, block by block ({BATCH_ENV}=0), same program: "
+                f"{best['exact']:,.0f} blocks/s; batch / exact: {best['areas'] / best['exact']:.1f}"
+            )
         if best["rs274"]:
             print(
                 f"reference: LinuxCNC rs274 -g, same moves, no areas: {best['rs274']:,.0f} blocks/s; "
@@ -163,6 +219,12 @@ def main() -> None:
             )
         else:
             print("reference rs274: skipped (not installed; Debian: apt-get install linuxcnc-uspace)")
+        for (every, extra), (batch, exact) in zip(mixes, best_mixed, strict=True):
+            print(
+                f"the same moves ({args.blocks // 5:,}) with {extra!r} after every {every} motion lines: "
+                f"{batch:,.0f} blocks/s; the exact path: {exact:,.0f} blocks/s; "
+                f"batch / exact: {batch / exact:.2f}"
+            )
         shp = _shapely_batched(args.blocks)
         if shp is not None:
             t, n = shp

@@ -236,6 +236,18 @@ def near_area_lines(blocks: int, with_areas: bool = True) -> Iterator[str]:
     yield "M30"
 
 
+def interleaved(lines: Iterator[str], every: int, extra: str) -> Iterator[str]:
+    """``lines`` with ``extra`` after every ``every``-th motion line (a comment, an M code): what a CAM
+    program's other lines do to the batch geometry check's stretches of plain lines."""
+    motions = 0
+    for line in lines:
+        yield line
+        if line.startswith(("G01 X", "G02 X", "G03 X")):
+            motions += 1
+            if motions % every == 0:
+                yield extra
+
+
 def near_area_lines_rs274(blocks: int) -> Iterator[str]:
     """The same moves in LinuxCNC's dialect (no areas: rs274 has none), for ``rs274 -g``."""
     yield "G21 G90 G17 G94 G40 G49 G80"

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -34,6 +35,8 @@ import click
 from hli_server.engine import Machine
 from hli_server.engine.alarms import Alarm, Severity
 from hli_server.engine.areas.monitor import AreaMonitor
+from hli_server.engine.batch import BatchGeometryCheck, unsupported
+from hli_server.engine.channel import Channel
 from hli_server.engine.geometry import ArcSegment, Segment
 from hli_server.engine.nc.parser import iter_blocks
 from hli_server.engine.planner import Marker, MarkerKind, Motion
@@ -243,6 +246,19 @@ def _segment_points(segment: Segment) -> list[tuple[float, ...]]:
     return [segment.point_at(length * k / n) for k in range(1, n + 1)]
 
 
+BATCH_ENV = "HLI_BATCH_CHECK"
+"""Set to 0 to decode a geometry check block by block (the exact path) although the batch could run."""
+
+
+def batch_in_use(machine: Machine, channel: int, record_path: bool) -> bool:
+    """Does a geometry check of this channel run as a batch (``hli_server/engine/batch.py``)? Not with
+    ``record_path`` (``--plot`` draws every block's path), not with a path check the batch does not know
+    (a user's monitor), not with ``HLI_BATCH_CHECK=0``."""
+    if record_path or os.environ.get(BATCH_ENV, "") == "0":
+        return False
+    return unsupported(machine.channel(channel)) is None
+
+
 def _decode_only(
     machine: Machine,
     text: str | TextIO,
@@ -253,32 +269,44 @@ def _decode_only(
 ) -> None:
     ch = machine.channel(channel)
     decoder = ch.decoder
-    decoder.start(iter_blocks(text, ch.axis_names), ch.setpoints())
-    motions = 0
-    next_update = 4096
-    line = 0
-    while not decoder.finished:
-        for item in decoder.next_items():
-            if isinstance(item, Motion):
-                motions += 1
-                line = item.block.line
-                if record_path:
-                    result.path.extend(_segment_points(item.segment))
-            elif isinstance(item, Marker):
-                if item.block is not None:
+    if batch_in_use(machine, channel, record_path):
+        batch = BatchGeometryCheck(ch)
+        for items in batch.items(text):
+            for item in items:
+                if isinstance(item, Marker):
+                    _handle_marker(ch, item, result)
+            meter.update(batch.line, decoder.blocks_decoded)
+    else:
+        decoder.start(iter_blocks(text, ch.axis_names), ch.setpoints())
+        motions = 0
+        next_update = 4096
+        line = 0
+        while not decoder.finished:
+            for item in decoder.next_items():
+                if isinstance(item, Motion):
+                    motions += 1
                     line = item.block.line
-                if item.kind == MarkerKind.ACTION:
-                    item.payload()
-                elif item.kind == MarkerKind.END:
-                    ch.warn_missing_program_end(item)
-                    result.completed = True
-                elif item.kind == MarkerKind.ERROR:
-                    ch.raise_decode_error(item)
-        if motions >= next_update:  # the decoder hands out items in batches: a threshold, not a modulo
-            next_update = motions + 4096
-            meter.update(line, decoder.blocks_decoded)
+                    if record_path:
+                        result.path.extend(_segment_points(item.segment))
+                elif isinstance(item, Marker):
+                    if item.block is not None:
+                        line = item.block.line
+                    _handle_marker(ch, item, result)
+            if motions >= next_update:  # the decoder hands out items in batches: a threshold, not a modulo
+                next_update = motions + 4096
+                meter.update(line, decoder.blocks_decoded)
     result.blocks = decoder.blocks_decoded
     result.final_position = dict(zip(ch.axis_names, decoder.position, strict=True))
+
+
+def _handle_marker(ch: Channel, item: Marker, result: CheckResult) -> None:
+    if item.kind == MarkerKind.ACTION:
+        item.payload()
+    elif item.kind == MarkerKind.END:
+        ch.warn_missing_program_end(item)
+        result.completed = True
+    elif item.kind == MarkerKind.ERROR:
+        ch.raise_decode_error(item)
 
 
 def _text_report(result: CheckResult, program: str) -> str:

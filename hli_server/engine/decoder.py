@@ -161,24 +161,41 @@ class Decoder:
             try:
                 block = next(self.blocks)
             except StopIteration:
-                self.finished = True
-                return [Marker(MarkerKind.END, self.current_block, payload="eof")]
+                return self.end_of_program()
             except NcError as exc:
-                self.finished = True
-                return [
-                    Marker(
-                        MarkerKind.ERROR,
-                        None,
-                        payload=DecodeError(exc.alarm, exc.message, {"line": exc.line, "block": exc.block}),
-                    )
-                ]
-            self.current_block = block
-            self.blocks_decoded += 1
-            items = self._decode(block)
+                return self.syntax_error(exc)
+            items = self.decode_block(block)
             if items:
-                if any(isinstance(i, Marker) and i.kind in (MarkerKind.ERROR, MarkerKind.END) for i in items):
-                    self.finished = True
                 return items
+
+    # --- the steps of next_items, also driven one by one by the batch geometry check -------------
+    def decode_block(self, block: Block) -> list[Motion | Marker]:
+        """Decode one parsed block (the per-block step of :meth:`next_items`); an error or the program's
+        end (M30/M02) finishes decoding."""
+        self.current_block = block
+        self.blocks_decoded += 1
+        items = self._decode(block)
+        if items and any(
+            isinstance(i, Marker) and i.kind in (MarkerKind.ERROR, MarkerKind.END) for i in items
+        ):
+            self.finished = True
+        return items
+
+    def end_of_program(self) -> list[Motion | Marker]:
+        """The text ended (without M30/M02 when decoding gets here): the end marker of the last block."""
+        self.finished = True
+        return [Marker(MarkerKind.END, self.current_block, payload="eof")]
+
+    def syntax_error(self, exc: NcError) -> list[Motion | Marker]:
+        """A line the parser could not read: the error marker with the place the parser named."""
+        self.finished = True
+        return [
+            Marker(
+                MarkerKind.ERROR,
+                None,
+                payload=DecodeError(exc.alarm, exc.message, {"line": exc.line, "block": exc.block}),
+            )
+        ]
 
     # --- one block -------------------------------------------------------------------------
     def _error(self, block: Block, alarm: int, message: str, **params: Any) -> list[Motion | Marker]:

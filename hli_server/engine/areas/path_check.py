@@ -36,6 +36,8 @@ class AreaPathCheck(AreaRole):
 
     # --- path check (C14-15) ---------------------------------------------------------------
     def path_check(self, segment: Segment, block: Block) -> DecodeError | None:
+        """The decoder's path check (a bound method: the batch geometry check recognises it by its
+        ``__self__``, ``hli_server/engine/batch.py``)."""
         groups = self.planned.groups()
         if not groups:
             return None

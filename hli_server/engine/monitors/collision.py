@@ -65,7 +65,7 @@ from schemas.units import INCREMENTS_PER_MM, increments_from_mm, mm_from_increme
 if TYPE_CHECKING:
     from hli_server.engine.axis import Axis
 
-__all__ = ["CollisionMonitor", "CollisionPair"]
+__all__ = ["CollisionMonitor", "CollisionPair", "MoveApartCheck"]
 
 _EPS = 1e-9
 _ARC_SAMPLES = 64
@@ -169,7 +169,7 @@ class CollisionMonitor(Monitor):
 
     def channel_hooks(self, channel: Channel) -> ChannelHooks:
         if any(channel.index in (p.master.channel, p.partner.channel) for p in self.pairs):
-            return ChannelHooks(path_check=_MoveApartCheck(self, channel), jog_guard=_MoveApartGuard(self))
+            return ChannelHooks(path_check=MoveApartCheck(self, channel), jog_guard=_MoveApartGuard(self))
         return ChannelHooks()
 
     def a_coll(self, axis: Axis) -> float:
@@ -327,7 +327,7 @@ def _coordinate(channel: Channel, axis: Axis, point: Point) -> float:
     return axis.setpoint
 
 
-class _MoveApartCheck:
+class MoveApartCheck:
     """C3-02 path check: while a pair is latched, a block may not bring it closer than it stopped."""
 
     def __init__(self, monitor: CollisionMonitor, channel: Channel) -> None:

@@ -18,7 +18,7 @@ from hli_server.engine.monitors.base import ChannelHooks, MachineView, Monitor
 from hli_server.engine.nc.blocks import Block
 from schemas.units import increments_from_mm
 
-__all__ = ["SoftLimits"]
+__all__ = ["SoftLimitPathCheck", "SoftLimits"]
 
 _EPS = 1e-9
 
@@ -31,7 +31,7 @@ class SoftLimits(Monitor):
         self._warn = machine.config.manual.move_limit_warning
 
     def channel_hooks(self, channel: Channel) -> ChannelHooks:
-        return ChannelHooks(path_check=_PathCheck(channel), jog_guard=self)
+        return ChannelHooks(path_check=SoftLimitPathCheck(channel), jog_guard=self)
 
     # --- jog guard -----------------------------------------------------------------------
     def must_brake(self, channel: Channel, current: Point, stop_point: Point) -> bool:
@@ -79,8 +79,9 @@ class SoftLimits(Monitor):
             channel.abort()
 
 
-class _PathCheck:
-    """The per-block check of programmed positions for one channel."""
+class SoftLimitPathCheck:
+    """The per-block check of programmed positions for one channel (the batch geometry check reads its
+    channel's limits: ``hli_server/engine/batch.py``)."""
 
     def __init__(self, channel: Channel) -> None:
         self.channel = channel

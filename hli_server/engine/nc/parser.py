@@ -60,7 +60,7 @@ from hli_server.engine.nc.blocks import (
 )
 from schemas.units import DINT_MAX, DISTANCE_LIMIT_MM, POSITION_LIMIT_MM, VELOCITY_LIMIT_MM_PER_MIN
 
-__all__ = ["KNOWN_G_CODES", "iter_blocks", "parse_line", "parse_program"]
+__all__ = ["KNOWN_G_CODES", "BlockReader", "iter_blocks", "parse_line", "parse_program"]
 
 # --- alarm numbers (hli_server/engine/alarms.py, group 910xxx) ----------------------------------
 _UNKNOWN_WORD = 910100
@@ -874,7 +874,6 @@ def iter_blocks(text: str | Iterable[str], axis_names: Collection[str]) -> Itera
     that starts a new block (``N<digits>``, ``#``, ``/``, ``:``) or opens another ``[``.
     """
     parser = _LineParser(axis_names)
-    parse = parser.parse
     words = parser._words
     # lazy; "\n", "\r\n" and "\r" all end a line (a file is opened with newline="" by its reader)
     lines: Iterator[str] = iter(io.StringIO(text, newline="")) if isinstance(text, str) else iter(text)
@@ -888,34 +887,59 @@ def iter_blocks(text: str | Iterable[str], axis_names: Collection[str]) -> Itera
         if not ("(" in stripped or ";" in stripped or "#" in stripped or ":" in stripped or "/" in stripped):
             yield words(stripped, stripped.upper(), 0, _TO_END, line, None, True)
             continue
-        if "#" in stripped and "[" in stripped:
-            code, open_at = _strip_comments(stripped)
-            if open_at < 0 and code.count("[") > code.count("]") and "#CONTROL" in code.upper():
-                first_line = line
-                texts = [stripped]
-                codes = [code]
-                while "]" not in codes[-1]:
-                    nxt = next(lines, "")
-                    if not nxt:
-                        _continuation_failed(code, first_line, "the end of the program")
-                    line += 1
-                    piece = nxt.strip()
-                    piece_code, piece_open = _strip_comments(piece)
-                    if piece_open >= 0:
-                        _unclosed_comment(piece, piece_code, piece_open, line)
-                    if not piece_code.strip():
-                        continue
-                    if _NEW_BLOCK.match(piece_code) or "[" in piece_code:
-                        _continuation_failed(code, first_line, f"line {line} ({_short(piece)!r})")
-                    texts.append(piece)
-                    codes.append(piece_code)
-                block = parser.parse_code(" ".join(texts), " ".join(codes), first_line)
-                if block is not None:
-                    yield block
-                continue
-        block = parse(stripped, line)
+        block, line = _read_stripped(parser, stripped, line, lines)
         if block is not None:
             yield block
+
+
+class BlockReader:
+    """The parser of :func:`iter_blocks` for a caller that hands it the lines one by one: the batch
+    geometry check (``hli_server/engine/batch.py``, issue 16) reads plain motion lines itself and gives
+    every other line to :meth:`read`, which parses it exactly as :func:`iter_blocks` does."""
+
+    __slots__ = ("_parser",)
+
+    def __init__(self, axis_names: Collection[str]) -> None:
+        self._parser = _LineParser(axis_names)
+
+    def read(self, raw: str, line: int, more: Iterator[str]) -> tuple[Block | None, int]:
+        """The block of ``raw``, line number ``line`` (None for a blank or comment-only line), and the
+        number of the last line used: a wrapped ``#CONTROL AREA ... [`` continues on lines taken from
+        ``more``. Raises :class:`NcError` as :func:`iter_blocks` does."""
+        stripped = raw.strip()
+        if not stripped:
+            return None, line
+        return _read_stripped(self._parser, stripped, line, more)
+
+
+def _read_stripped(
+    parser: _LineParser, stripped: str, line: int, lines: Iterator[str]
+) -> tuple[Block | None, int]:
+    """One non-blank line that left the fast path of :func:`iter_blocks` (comments, ``#``, ``:``, ``/``):
+    its block, or None, and the number of the last line used (a wrapped ``#CONTROL AREA`` takes more)."""
+    if "#" in stripped and "[" in stripped:
+        code, open_at = _strip_comments(stripped)
+        if open_at < 0 and code.count("[") > code.count("]") and "#CONTROL" in code.upper():
+            first_line = line
+            texts = [stripped]
+            codes = [code]
+            while "]" not in codes[-1]:
+                nxt = next(lines, "")
+                if not nxt:
+                    _continuation_failed(code, first_line, "the end of the program")
+                line += 1
+                piece = nxt.strip()
+                piece_code, piece_open = _strip_comments(piece)
+                if piece_open >= 0:
+                    _unclosed_comment(piece, piece_code, piece_open, line)
+                if not piece_code.strip():
+                    continue
+                if _NEW_BLOCK.match(piece_code) or "[" in piece_code:
+                    _continuation_failed(code, first_line, f"line {line} ({_short(piece)!r})")
+                texts.append(piece)
+                codes.append(piece_code)
+            return parser.parse_code(" ".join(texts), " ".join(codes), first_line), line
+    return parser.parse(stripped, line), line
 
 
 def _continuation_failed(code: str, line: int, where: str) -> NoReturn:

@@ -1,0 +1,490 @@
+"""``check --geometry-only`` as a batch: plain motion lines decoded and checked many at a time (issue 16).
+
+The exact geometry check decodes a program block by block (:meth:`Decoder.next_items`): parse the line,
+update the modal state, build the segment, run every path check (soft limits, work and protection areas).
+It stays the authority. This module gets the same result faster for the lines that make up nearly all
+of a CAM program:
+
+1. The text is read a megabyte at a time; :class:`~hli_server.engine.nc.plain.PlainTokenizer` classifies
+   every line with numpy - *plain* (words N, G0..G3, F, I/J/K and one-letter axes), *empty*, or *other* -
+   and reads the plain lines' numbers, bit for bit as the parser does.
+2. Every *other* line (comments, ``#CONTROL AREA``, M codes, G90/G91, G17.., G54.., G92, ``X2=..``,
+   anything unusual or wrong) goes to the parser (:class:`~hli_server.engine.nc.parser.BlockReader`) and
+   the decoder, one by one, in program order, exactly as before; so do plain lines while an area is being
+   defined and short stretches of plain lines (fewer than :data:`SMALL_RUN` plus
+   :data:`SMALL_RUN_PER_AREA` for each active area). A line with only a comment does not end a stretch.
+3. A stretch of plain lines between them is decoded at once: the modal motion and feed, the targets
+   (G90 with the zero offset, G91 summed in program order: the same floats), the segments' boxes; then
+   the blocks that might fail a check are picked, conservatively: a line shorter than 1 µm (the decoder may
+   drop it), a move without feed, an arc without centre, with radius below 1 µm or ends off the circle by
+   nearly the tolerance, a path within :data:`~hli_server.engine.areas.prefilter.MARGIN` of a soft limit,
+   a path the area prefilter (:mod:`hli_server.engine.areas.prefilter`) cannot clear. Those blocks - and
+   only those - are parsed and decoded exactly, in order, with the decoder's state set to what it is
+   before them; every other block only moves the position, which is committed at the stretch's end.
+
+An error stops at the same block with the same alarm, because the block that raises it is decoded
+exactly; a block the batch clears cannot fail a check. ``tests/unit/test_batch_check.py`` holds the
+batch to the exact path on random programs (same alarms, points, line and block numbers, final position).
+
+The batch runs only where it knows every path check of the channel (soft limits, areas, the collision
+check while no pair is latched); with any other check installed (a user's monitor), ``check`` decodes
+block by block (:func:`unsupported`).
+"""
+
+from __future__ import annotations
+
+import bisect
+import io
+import math
+from collections.abc import Iterator
+from typing import TextIO
+
+import numpy as np
+import numpy.typing as npt
+
+from hli_server.engine.areas.geometry import Group
+from hli_server.engine.areas.path_check import AreaPathCheck
+from hli_server.engine.areas.prefilter import MARGIN, PathBatch, clear_of_areas
+from hli_server.engine.channel import Channel
+from hli_server.engine.decoder import Decoder, PathCheck
+from hli_server.engine.monitors.collision import MoveApartCheck
+from hli_server.engine.monitors.soft_limits import SoftLimitPathCheck
+from hli_server.engine.nc.blocks import Block, NcError
+from hli_server.engine.nc.parser import BlockReader
+from hli_server.engine.nc.plain import COL_F, COL_G, COL_I, EMPTY, OTHER, PLAIN, PlainChunk, PlainTokenizer
+from hli_server.engine.planner import Marker, Motion
+
+__all__ = ["CHUNK_CHARS", "SMALL_RUN", "SMALL_RUN_PER_AREA", "BatchGeometryCheck", "unsupported"]
+
+CHUNK_CHARS = 1 << 20
+"""Characters read at a time (about 40,000 lines of a CAM program): memory stays flat."""
+SMALL_RUN = 16
+"""Fewer plain lines than this between two other lines are decoded one by one (numpy's set-up would
+cost more than it saves)."""
+SMALL_RUN_PER_AREA = 12
+"""... and this many more for each active area: the prefilter's numpy set-up per stretch and area costs
+about what the exact decoder spends on as many blocks (measured with 20 areas, compiled: a stretch of
+200 lines between two M-code lines checks 0.86x as fast as a batch as block by block, of 400 1.7x), so
+a program whose plain stretches are short is checked block by block, never slower than before."""
+
+_TAU = 2.0 * math.pi
+_PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}
+"""As the decoder's: indices into the main axes of the plane's first and second axis."""
+_ADDRESS_LETTERS = frozenset("GMFNIJKSTDH")
+_NO_LINES: Iterator[str] = iter(())
+
+Floats = npt.NDArray[np.float64]
+Ints = npt.NDArray[np.int64]
+Bools = npt.NDArray[np.bool_]
+Item = Motion | Marker
+
+
+def unsupported(channel: Channel) -> str | None:
+    """Why the batch cannot check this channel's programs (a path check it does not know), or None."""
+    for check in channel.decoder.path_checks:
+        if not isinstance(check, SoftLimitPathCheck | MoveApartCheck) and _area_check(check) is None:
+            name = getattr(check, "__qualname__", type(check).__name__)
+            return f"path check {name} is not known to the batch check"
+    return None
+
+
+def _area_check(check: PathCheck) -> AreaPathCheck | None:
+    """The area check whose bound method ``check`` is (the hook the area monitor installs), or None."""
+    owner = getattr(check, "__self__", None)
+    return owner if isinstance(owner, AreaPathCheck) else None
+
+
+class _Chunk:
+    """One chunk of whole lines: its bytes, its lines' kinds and words, and the next line to handle."""
+
+    __slots__ = ("cursor", "data", "first_line", "others", "plain")
+
+    def __init__(self, data: bytes, plain: PlainChunk, first_line: int) -> None:
+        self.data = data
+        self.plain = plain
+        self.first_line = first_line
+        """Line number of the chunk's first line."""
+        self.others: list[int] = np.flatnonzero(plain.kind == OTHER).tolist()
+        self.cursor = 0
+
+    @property
+    def lines(self) -> int:
+        return self.plain.lines
+
+    def raw(self, k: int) -> str:
+        """Line ``k`` as the parser is given it (with its line end)."""
+        start = int(self.plain.starts[k])
+        end = int(self.plain.ends[k])
+        return self.data[start : end + 1].decode("utf-8")
+
+
+class BatchGeometryCheck:
+    """Decodes a program for ``check --geometry-only`` on ``channel`` (see the module's description).
+
+    :meth:`items` yields what the exact decoder would have yielded for the blocks it decodes exactly
+    (motions, markers, errors), in program order, and an empty list after each chunk (progress); the
+    caller handles them as it handles :meth:`Decoder.next_items`. :attr:`line` is the last line handled."""
+
+    def __init__(self, channel: Channel) -> None:
+        why = unsupported(channel)
+        if why is not None:
+            raise ValueError(f"batch geometry check: {why}")
+        self.channel = channel
+        self.decoder: Decoder = channel.decoder
+        decoder = self.decoder
+        self._reader = BlockReader(channel.axis_names)
+        letters = [
+            name.upper()
+            for name in decoder.axes
+            if len(name) == 1 and name.upper() not in _ADDRESS_LETTERS and "A" <= name.upper() <= "Z"
+        ]
+        self._tokenizer = PlainTokenizer(letters)
+        column = {letter: 6 + k for k, letter in enumerate(letters)}
+        self._axis_column: list[int] = [column.get(name.upper(), -1) for name in decoder.axes]
+        self._chunks: Iterator[_Chunk] = iter(())
+        self._chunk: _Chunk | None = None
+        self.line = 0
+        self.batched_blocks = 0
+        """Blocks the batch decoded without the exact decoder (for the tests and the benchmark)."""
+        self.exact_blocks = 0
+
+    # --- the program -----------------------------------------------------------------------------
+    def items(self, text: str | TextIO) -> Iterator[list[Item]]:
+        decoder = self.decoder
+        decoder.start(iter(()), self.channel.setpoints())
+        self._chunks = self._read(io.StringIO(text, newline="") if isinstance(text, str) else text)
+        self._chunk = None
+        while (chunk := self._next_chunk()) is not None:
+            i = chunk.cursor
+            at = bisect.bisect_left(chunk.others, i)
+            o = chunk.others[at] if at < len(chunk.others) else chunk.lines
+            if o > i:
+                yield from self._plain_lines(chunk, i, o)
+                if decoder.finished:
+                    return
+                chunk.cursor = o
+            if o < chunk.lines:
+                chunk.cursor = o + 1
+                yield from self._other_line(chunk, o)
+                if decoder.finished:
+                    return
+            if chunk.cursor >= chunk.lines:
+                yield []
+        if not decoder.finished:
+            yield decoder.end_of_program()
+
+    def _next_chunk(self) -> _Chunk | None:
+        """The current chunk, or the next one if it has no line left; None at the end of the text."""
+        chunk = self._chunk
+        while chunk is None or chunk.cursor >= chunk.lines:
+            chunk = next(self._chunks, None)
+            if chunk is None:
+                return None
+            self._chunk = chunk
+        return chunk
+
+    def _read(self, source: TextIO) -> Iterator[_Chunk]:
+        """Chunks of whole lines; ``\\r\\n`` and a lone ``\\r`` end a line as ``\\n`` does (as the parser's
+        file iteration with ``newline=""`` splits them)."""
+        pending = ""
+        first_line = 1
+        while True:
+            data = source.read(CHUNK_CHARS)
+            eof = not data
+            text = pending + data
+            if not eof and text.endswith("\r"):
+                text, pending = text[:-1], "\r"  # its "\n" may come with the next read
+            else:
+                pending = ""
+            if "\r" in text:
+                text = text.replace("\r\n", "\n").replace("\r", "\n")
+            if eof:
+                if not text:
+                    return
+                if not text.endswith("\n"):
+                    text += "\n"
+                cut = len(text)
+            else:
+                cut = text.rfind("\n") + 1
+            pending = text[cut:] + pending
+            if cut:
+                data_bytes = text[:cut].encode("utf-8")
+                plain = self._tokenizer.tokenize(data_bytes)
+                chunk = _Chunk(data_bytes, plain, first_line)
+                self._comments_as_blank(chunk)
+                yield chunk
+                first_line += plain.lines
+            if eof:
+                return
+
+    def _comments_as_blank(self, chunk: _Chunk) -> None:
+        """A line with only a comment gives the parser no block: it does not end a stretch of plain
+        lines (a CAM program's comments would otherwise cut it into stretches too short to batch)."""
+        kept: list[int] = []
+        for k in chunk.others:
+            raw = chunk.raw(k)
+            if raw.lstrip()[:1] in ("(", ";"):
+                try:
+                    block, _ = self._reader.read(raw, chunk.first_line + k, _NO_LINES)
+                except NcError:
+                    kept.append(k)  # an unclosed comment: the parser raises it in its turn
+                    continue
+                if block is None:
+                    chunk.plain.kind[k] = EMPTY
+                    continue
+            kept.append(k)
+        chunk.others = kept
+
+    def _more_lines(self) -> Iterator[str]:
+        """The lines after the current one (a wrapped ``#CONTROL AREA`` continues on them)."""
+        while (chunk := self._next_chunk()) is not None:
+            k = chunk.cursor
+            chunk.cursor += 1
+            yield chunk.raw(k)
+
+    # --- other lines: the parser and the decoder ---------------------------------------------------
+    def _other_line(self, chunk: _Chunk, k: int) -> Iterator[list[Item]]:
+        decoder = self.decoder
+        line = chunk.first_line + k
+        self.line = line
+        try:
+            block, last = self._reader.read(chunk.raw(k), line, self._more_lines())
+        except NcError as exc:
+            yield decoder.syntax_error(exc)
+            return
+        self.line = last
+        if block is not None:
+            self.exact_blocks += 1
+            yield decoder.decode_block(block)
+
+    def _exact(self, chunk: _Chunk, k: int) -> Block:
+        block, _ = self._reader.read(chunk.raw(k), chunk.first_line + k, _NO_LINES)
+        assert block is not None  # a plain line always has a word
+        return block
+
+    # --- plain lines -------------------------------------------------------------------------------
+    def _plain_lines(self, chunk: _Chunk, i: int, o: int) -> Iterator[list[Item]]:
+        """Lines ``i`` to ``o`` (exclusive) of the chunk: plain or empty."""
+        idx = i + np.flatnonzero(chunk.plain.kind[i:o] == PLAIN)
+        count = int(idx.shape[0])
+        if count == 0:
+            return
+        decoder = self.decoder
+        if decoder.modal.in_area_definition or count < SMALL_RUN + SMALL_RUN_PER_AREA * self._active_areas():
+            for k in idx.tolist():
+                self.line = chunk.first_line + k
+                self.exact_blocks += 1
+                yield decoder.decode_block(self._exact(chunk, k))
+                if decoder.finished:
+                    return
+            return
+        yield from self._batch(chunk, idx)
+
+    def _batch(self, chunk: _Chunk, idx: Ints) -> Iterator[list[Item]]:
+        decoder = self.decoder
+        modal = decoder.modal
+        count = int(idx.shape[0])
+        values = chunk.plain.values[:, idx]
+        with np.errstate(all="ignore"):
+            motion = _fill(values[COL_G], float(modal.motion))
+            feed = _fill(values[COL_F], modal.feed if modal.feed is not None else math.nan)
+            start, end, present = self._targets(values, count)
+            arc = motion >= 2.0
+            centre_given = ~np.isnan(values[COL_I : COL_I + 3]).all(axis=0)
+            moving = present | (arc & centre_given)
+            arc &= moving
+            # blocks the exact decoder must see: no feed, too short to be sure it is a move
+            exact = moving & (motion != 0.0) & np.isnan(feed)
+            d = end - start
+            exact |= moving & ~arc & ((d * d).sum(axis=0) < 1e-12)
+            lo = np.minimum(start, end)
+            hi = np.maximum(start, end)
+            arcs = self._arcs(values, motion, start, end, arc, exact, lo, hi)
+            exact |= self._outside_limits(lo, hi) & moving
+            groups, all_exact = self._checks()
+            if all_exact:
+                exact |= moving
+            sel = np.flatnonzero(moving & ~exact)
+            if groups and sel.shape[0]:
+                centre, radius, a0, sweep = arcs
+                paths = PathBatch(
+                    start[:, sel],
+                    end[:, sel],
+                    lo[:, sel],
+                    hi[:, sel],
+                    arc[sel],
+                    self._plane(),
+                    centre[:, sel],
+                    radius[sel],
+                    a0[sel],
+                    sweep[sel],
+                )
+                exact[sel[~clear_of_areas(groups, paths)]] = True
+        flagged: list[int] = np.flatnonzero(exact).tolist()
+        last = -1
+        first_line = chunk.first_line
+        for k in flagged:
+            decoder.blocks_decoded += k - last - 1
+            self.batched_blocks += k - last - 1
+            decoder.position = start[:, k].tolist()
+            if k > 0:
+                modal.motion = int(motion[k - 1])
+                before = float(feed[k - 1])
+                modal.feed = None if math.isnan(before) else before
+            line = int(idx[k])
+            self.line = first_line + line
+            self.exact_blocks += 1
+            items = decoder.decode_block(self._exact(chunk, line))
+            if not decoder.finished and (
+                decoder.position != end[:, k].tolist() or modal.motion != int(motion[k])
+            ):
+                raise RuntimeError(
+                    f"batch geometry check out of step with the decoder at line {self.line}: "
+                    f"{decoder.position} != {end[:, k].tolist()} (a bug; HLI_BATCH_CHECK=0 checks block by "
+                    "block)"
+                )
+            yield items
+            if decoder.finished:
+                return
+            last = k
+        decoder.blocks_decoded += count - 1 - last
+        self.batched_blocks += count - 1 - last
+        decoder.position = end[:, count - 1].tolist()
+        modal.motion = int(motion[count - 1])
+        final_feed = float(feed[count - 1])
+        modal.feed = None if math.isnan(final_feed) else final_feed
+        line = int(idx[count - 1])
+        self.line = first_line + line
+        if last != count - 1:
+            decoder.current_block = self._exact(chunk, line)
+
+    def _targets(self, values: Floats, count: int) -> tuple[Floats, Floats, Bools]:
+        """Start and end points (one row per channel axis) and whether any axis word is given."""
+        decoder = self.decoder
+        modal = decoder.modal
+        n_axes = len(decoder.axes)
+        start = np.empty((n_axes, count))
+        end = np.empty((n_axes, count))
+        present = np.zeros(count, np.bool_)
+        for k, name in enumerate(decoder.axes):
+            p0 = decoder.position[k]
+            col = self._axis_column[k]
+            if col < 0:
+                end[k] = p0
+            else:
+                v = values[col]
+                given = ~np.isnan(v)
+                present |= given
+                if modal.absolute:
+                    end[k] = _fill(v + modal.offset(name), p0)
+                else:
+                    # the decoder adds word by word: a running sum in program order; -0.0 adds nothing
+                    steps = np.empty(count + 1)
+                    steps[0] = p0
+                    steps[1:] = np.where(given, v, -0.0)
+                    end[k] = np.cumsum(steps)[1:]
+            start[k, 0] = p0
+            start[k, 1:] = end[k, :-1]
+        return start, end, present
+
+    def _plane(self) -> tuple[int, int] | None:
+        """Channel indices of the arcs' plane axes (None if the channel lacks one of them)."""
+        decoder = self.decoder
+        first, second = _PLANE_AXES[decoder.modal.plane]
+        i = decoder.index.get(decoder.main[first])
+        j = decoder.index.get(decoder.main[second])
+        return (i, j) if i is not None and j is not None else None
+
+    def _arcs(
+        self,
+        values: Floats,
+        motion: Floats,
+        start: Floats,
+        end: Floats,
+        arc: Bools,
+        exact: Bools,
+        lo: Floats,
+        hi: Floats,
+    ) -> tuple[Floats, Floats, Floats, Floats]:
+        """Centre, radius, start angle and sweep of the arcs (the prefilter's); marks the arcs the exact
+        decoder must see in ``exact`` and widens ``lo``/``hi`` to each arc's whole circle."""
+        count = motion.shape[0]
+        centre = np.zeros((2, count))
+        radius = np.zeros(count)
+        a0 = np.zeros(count)
+        sweep = np.full(count, _TAU)
+        if not arc.any():
+            return centre, radius, a0, sweep
+        plane = self._plane()
+        if plane is None:
+            exact |= arc
+            return centre, radius, a0, sweep
+        decoder = self.decoder
+        modal = decoder.modal
+        first, second = _PLANE_AXES[modal.plane]
+        i, j = plane
+        wi, wj = values[COL_I + first], values[COL_I + second]
+        given = ~np.isnan(wi) | ~np.isnan(wj)
+        exact |= arc & ~given
+        ci = np.where(np.isnan(wi), 0.0, wi)
+        cj = np.where(np.isnan(wj), 0.0, wj)
+        if modal.centre_absolute:
+            cx = ci + modal.offset(decoder.main[first])
+            cy = cj + modal.offset(decoder.main[second])
+        else:
+            cx = start[i] + ci
+            cy = start[j] + cj
+        r0 = np.hypot(start[i] - cx, start[j] - cy)
+        r1 = np.hypot(end[i] - cx, end[j] - cy)
+        # the decoder refuses radius 0 and ends off the circle by more than 0.01 mm: let it decide
+        exact |= arc & ((r0 < 1e-6) | (np.abs(r1 - r0) > 0.01 - 1e-6))
+        reach = np.maximum(r0, r1)
+        lo[i] = np.where(arc, np.minimum(lo[i], cx - reach), lo[i])
+        hi[i] = np.where(arc, np.maximum(hi[i], cx + reach), hi[i])
+        lo[j] = np.where(arc, np.minimum(lo[j], cy - reach), lo[j])
+        hi[j] = np.where(arc, np.maximum(hi[j], cy + reach), hi[j])
+        b0 = np.arctan2(start[j] - cy, start[i] - cx)
+        b1 = np.arctan2(end[j] - cy, end[i] - cx)
+        cw = motion == 2.0
+        turn = np.where(cw, -((b0 - b1) % _TAU), (b1 - b0) % _TAU)
+        span = np.abs(end[i] - start[i]) + np.abs(end[j] - start[j])
+        scale = 1.0 + np.abs(start[i]) + np.abs(start[j])
+        unsure = (np.abs(turn) < 1e-6) | (np.abs(turn) > _TAU - 1e-6) | (span <= 1e-6 * scale)
+        turn = np.where(unsure, np.where(cw, -_TAU, _TAU), turn)
+        centre[0] = cx
+        centre[1] = cy
+        return centre, r0, b0, turn
+
+    def _outside_limits(self, lo: Floats, hi: Floats) -> Bools:
+        """Paths whose box comes within MARGIN of a software limit (the exact check decides)."""
+        near = np.zeros(lo.shape[1], np.bool_)
+        for check in self.decoder.path_checks:
+            if isinstance(check, SoftLimitPathCheck):
+                for k, axis in enumerate(check.channel.axes):
+                    near |= (lo[k] < axis.swe_neg + MARGIN) | (hi[k] > axis.swe_pos - MARGIN)
+        return near
+
+    def _active_areas(self) -> int:
+        return sum(len(g.works) + len(g.prots) for g in self._checks()[0])
+
+    def _checks(self) -> tuple[list[Group], bool]:
+        """The active area groups of the channel's area checks (planned table), and whether every
+        block must be checked exactly (a collision pair latched: its check is not batched)."""
+        groups: list[Group] = []
+        all_exact = False
+        for check in self.decoder.path_checks:
+            areas = _area_check(check)
+            if areas is not None:
+                groups.extend(areas.planned.groups())
+            elif isinstance(check, MoveApartCheck):
+                all_exact = all_exact or bool(check.monitor.latched_pairs(check.channel))
+        return groups, all_exact
+
+
+def _fill(values: Floats, initial: float) -> Floats:
+    """Each value, or the last one given before it (NaN: not given), or ``initial`` (a modal word)."""
+    given = ~np.isnan(values)
+    at = np.where(given, np.arange(values.shape[0]), -1)
+    np.maximum.accumulate(at, out=at)
+    result: Floats = np.where(at >= 0, values[at], initial)
+    return result

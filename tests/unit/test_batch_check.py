@@ -1,0 +1,666 @@
+"""The batch geometry check against the exact one (issue 16, P2; ``hli_server/engine/batch.py``).
+
+``check --geometry-only`` decodes plain motion lines many at a time and sends only the blocks it cannot
+clear to the exact decoder. These tests hold it to the exact path (``HLI_BATCH_CHECK=0``, block by
+block): on random programs (hypothesis, derandomized: seeded and bounded) mixing plain moves, arcs in
+three planes, G90/G91, G92, G54, G161, feeds, block numbers, comments, area definitions, activation and
+deactivation mid-program, moves aimed at area boundaries (grazing), soft limits and syntax errors, the
+two give the same report: the same alarms in the same order with the same numbers, messages, line and
+block numbers and parameters (points bit for bit), the same completed flag, block count, final
+position and area table. Then the edges one by one, and the tokenizer of plain lines against the parser.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import random
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
+
+from hli_server.commands.check import BATCH_ENV, CheckResult, batch_in_use, check_program
+from hli_server.configuration import load_machine
+from hli_server.engine import Machine
+from hli_server.engine import batch as batch_module
+from hli_server.engine.alarms import Severity
+from hli_server.engine.batch import BatchGeometryCheck
+from hli_server.engine.monitors.base import ChannelHooks, Monitor
+from hli_server.engine.nc import NcError, parse_line
+from hli_server.engine.nc.plain import EMPTY, PLAIN, PlainTokenizer
+from schemas.config import MachineConfig, ZeroOffset
+
+AXES = ("X", "Y", "Z")
+
+
+@pytest.fixture(scope="module")
+def config() -> MachineConfig:
+    """The demo machine (soft limits X/Y +/-600, Z +/-200 mm) with a zero offset G54 in channel 1."""
+    demo = load_machine(None)
+    g54 = ZeroOffset(code="G54", offsets={"X": 123_456, "Y": -98_765, "Z": 5_000})
+    ch1 = demo.channels[0].model_copy(update={"zero_offsets": [g54]})
+    return demo.model_copy(update={"channels": [ch1, *demo.channels[1:]]})
+
+
+@contextmanager
+def _batch_settings(exact: bool, chunk: int | None = None, small: int | None = None) -> Iterator[None]:
+    saved = (
+        os.environ.get(BATCH_ENV),
+        batch_module.CHUNK_CHARS,
+        batch_module.SMALL_RUN,
+        batch_module.SMALL_RUN_PER_AREA,
+    )
+    os.environ[BATCH_ENV] = "0" if exact else "1"
+    if chunk is not None:
+        batch_module.CHUNK_CHARS = chunk
+    if small is not None:
+        batch_module.SMALL_RUN = small
+        batch_module.SMALL_RUN_PER_AREA = 0
+    try:
+        yield
+    finally:
+        if saved[0] is None:
+            os.environ.pop(BATCH_ENV, None)
+        else:
+            os.environ[BATCH_ENV] = saved[0]
+        batch_module.CHUNK_CHARS, batch_module.SMALL_RUN, batch_module.SMALL_RUN_PER_AREA = saved[1:]
+
+
+def run(
+    config: MachineConfig, text: str, exact: bool, chunk: int | None = None, small: int | None = None
+) -> CheckResult:
+    with _batch_settings(exact, chunk, small):
+        return check_program(Machine(config), text, geometry_only=True)
+
+
+def report(result: CheckResult) -> dict[str, Any]:
+    """Everything a check reports, unrounded (points as the engine computed them)."""
+    return {
+        "completed": result.completed,
+        "blocks": result.blocks,
+        "alarms": [
+            (a.number, str(a.severity), a.line, a.block, a.message, repr(a.params), a.axis)
+            for a in result.alarms
+        ],
+        "final": [(k, repr(v)) for k, v in result.final_position.items()],
+        "areas": repr(result.to_json().get("areas")),
+    }
+
+
+def assert_same(
+    config: MachineConfig, text: str, chunk: int | None = None, small: int | None = None
+) -> CheckResult:
+    exact = run(config, text, exact=True)
+    batched = run(config, text, exact=False, chunk=chunk, small=small)
+    assert report(batched) == report(exact), text
+    return batched
+
+
+def _count_batched(
+    config: MachineConfig, text: str, chunk: int = 1 << 20, small: int | None = 16
+) -> tuple[int, int]:
+    """Blocks the batch decoded itself and blocks it gave the exact decoder (``small=None``: the
+    module's thresholds, with their share per active area)."""
+    machine = Machine(config)
+    with _batch_settings(False, chunk, small):
+        checker = BatchGeometryCheck(machine.channel(1))
+        for items in checker.items(text):
+            for item in items:
+                if getattr(item, "kind", None) is not None and item.kind.name == "ACTION":
+                    item.payload()
+    return checker.batched_blocks, checker.exact_blocks
+
+
+# --- random programs --------------------------------------------------------------------------------
+def _f(v: float) -> str:
+    text = f"{v:.4f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+_PLANES = {17: ((0, 1), "IJ"), 18: ((2, 0), "KI"), 19: ((1, 2), "JK")}
+
+
+class _Writer:
+    """Writes a random program and tracks what it needs for the next line (program coordinates)."""
+
+    def __init__(self, rng: random.Random) -> None:
+        self.rng = rng
+        self.lines: list[str] = []
+        self.p = [0.0, 0.0, 0.0]
+        self.absolute = True
+        self.plane = 17
+        self.centre_absolute = False
+        self.next_id = 1
+        self.areas: list[tuple[int, str, str, tuple[float, ...]]] = []
+        self.n = 0
+        self.motion = 1
+
+    def word_line(self, words: list[str]) -> None:
+        rng = self.rng
+        if rng.random() < 0.2:
+            self.n += rng.randint(1, 20)
+            words = [f"N{self.n}", *words]
+        sep = rng.choice((" ", " ", " ", "  ", "\t"))
+        text = sep.join(words)
+        if rng.random() < 0.05:
+            text = text.lower()
+        if rng.random() < 0.05:
+            text = " " + text + " "
+        self.lines.append(text)
+
+    def axis_words(self, target: list[float], which: tuple[int, ...]) -> list[str]:
+        out = []
+        for k in which:
+            value = target[k] if self.absolute else target[k] - self.p[k]
+            out.append(f"{AXES[k]}{_f(value)}")
+        return out
+
+    def point(self) -> list[float]:
+        rng = self.rng
+        r = rng.random()
+        if r < 0.02 and self.areas:
+            # on an area's boundary: a corner, or a point of its circle (a graze, a touch)
+            _, _, shape, geo = rng.choice(self.areas)
+            if shape == "CIRC":
+                cx, cy, rad = geo
+                t = rng.choice((0.0, 0.5, 1.0, 1.5)) * math.pi
+                return [cx + rad * math.cos(t), cy + rad * math.sin(t), self.p[2]]
+            xs, ys = geo[0::2], geo[1::2]
+            k = rng.randrange(len(xs))
+            return [xs[k], ys[k], self.p[2]]
+        if r > 0.997:  # now and then beyond a software limit
+            return [rng.uniform(-700, 700), rng.uniform(-700, 700), self.p[2]]
+        # a random walk: long runs of moves that pass near the areas now and then
+        step = rng.choice((2.0, 15.0, 40.0))
+        z = self.p[2] if rng.random() < 0.8 else rng.uniform(-40.0, 40.0)
+        x = min(130.0, max(-130.0, self.p[0] + rng.uniform(-step, step)))
+        y = min(130.0, max(-130.0, self.p[1] + rng.uniform(-step, step)))
+        return [x, y, z]
+
+    def move(self) -> None:
+        rng = self.rng
+        if rng.random() < 0.7:
+            target = self.point()
+            target = [float(_f(v)) for v in target]
+            which = tuple(k for k in range(3) if target[k] != self.p[k] or rng.random() < 0.3) or (0,)
+            g = rng.choice(("G01", "G01", "G00", "G1", "", "", ""))
+            if not g and self.motion > 1:
+                g = "G01"
+            self.motion = {"G00": 0, "": self.motion}.get(g, 1)
+            words = ([g] if g else []) + self.axis_words(target, which)
+            if rng.random() < 0.15:
+                words.append(f"F{rng.choice((500, 2000, 6000))}")
+            for k in which:
+                self.p[k] = target[k]
+            self.word_line(words)
+            return
+        (a, b), centre_words = _PLANES[self.plane]
+        radius = rng.uniform(0.5, 30.0) if rng.random() < 0.95 else rng.uniform(30.0, 200.0)
+        phi = rng.uniform(0.0, 2.0 * math.pi)
+        cx = self.p[a] - radius * math.cos(phi)
+        cy = self.p[b] - radius * math.sin(phi)
+        turn = rng.uniform(0.05, 2.0 * math.pi) * rng.choice((1, -1))
+        end = list(self.p)
+        end[a] = float(_f(cx + radius * math.cos(phi + turn)))
+        end[b] = float(_f(cy + radius * math.sin(phi + turn)))
+        if rng.random() < 0.005:
+            end[a] += 0.05  # off the circle: the decoder's error
+        if rng.random() < 0.1:
+            end = list(self.p)  # a whole circle
+        self.motion = 2 if turn < 0 else 3
+        words = ["G02" if turn < 0 else "G03", *self.axis_words(end, (a, b))]
+        if self.centre_absolute:
+            words += [f"{centre_words[0]}{_f(cx)}", f"{centre_words[1]}{_f(cy)}"]
+        else:
+            words += [f"{centre_words[0]}{_f(cx - self.p[a])}", f"{centre_words[1]}{_f(cy - self.p[b])}"]
+        self.p = end
+        self.word_line(words)
+
+    def run(self) -> None:
+        for _ in range(self.rng.randint(4, 60)):
+            self.move()
+
+    def areas_piece(self) -> None:
+        rng = self.rng
+        self.lines.append("G90")
+        self.absolute = True
+        for _ in range(rng.randint(1, 3)):
+            area_id = self.next_id
+            self.next_id += 1
+            kind = "WORK" if rng.random() < 0.25 else "PROT"
+            shape = rng.choice(("POLY", "POLY", "CIRC"))
+            lo, hi = (
+                (-100, 100) if kind == "WORK" else rng.choice(((-100, 100), (-100, 100), (-10, 10), (0, 50)))
+            )
+            self.lines.append(
+                f"#CONTROL AREA BEGIN [ID={area_id} {kind} {shape} MIN_EXCUR={lo} MAX_EXCUR={hi}]"
+            )
+            size = 140.0 if kind == "WORK" else rng.uniform(3.0, 30.0)
+            cx, cy = (0.0, 0.0) if kind == "WORK" else (rng.uniform(-100, 100), rng.uniform(-100, 100))
+            cx, cy, size = float(_f(cx)), float(_f(cy)), float(_f(size))
+            self.motion = 2 if shape == "CIRC" else 1  # the contour's last block sets the modal motion
+            if shape == "CIRC":
+                self.lines += [f"G01 X{_f(cx + size)} Y{_f(cy)}", f"G02 I{_f(-size)} J0"]
+                geo: tuple[float, ...] = (cx, cy, size)
+            else:
+                if rng.random() < 0.3:  # an L: not convex
+                    pts = [(-1, -1), (1, -1), (1, 0), (0, 0), (0, 1), (-1, 1)]
+                elif rng.random() < 0.3:
+                    pts = [(-1, -1), (1, -1), (0, 1)]
+                else:
+                    pts = [(-1, -1), (1, -1), (1, 1), (-1, 1)]
+                corners = [(float(_f(cx + sx * size)), float(_f(cy + sy * size))) for sx, sy in pts]
+                self.lines += [f"G01 X{_f(x)} Y{_f(y)}" for x, y in [*corners, corners[0]]]
+                geo = tuple(v for c in corners for v in c)
+            self.lines.append("#CONTROL AREA END")
+            self.areas.append((area_id, kind, shape, geo))
+        self.lines.append(rng.choice(("#CONTROL AREA ON ALL", f"#CONTROL AREA ON [ID={self.next_id - 1}]")))
+
+    def modal(self) -> None:
+        rng = self.rng
+        choice = rng.randrange(9)
+        if choice == 0:
+            self.absolute = not self.absolute
+            self.lines.append("G90" if self.absolute else "G91")
+        elif choice == 1:
+            self.plane = rng.choice((17, 17, 18, 19))
+            self.lines.append(f"G{self.plane}")
+        elif choice == 2:
+            value = float(_f(rng.uniform(-30, 30)))
+            self.lines.append(f"G92 X{_f(value)}")
+            self.p[0] = value
+        elif choice == 3:
+            self.lines.append(rng.choice(("G54", "G53")))
+            self.p = [float("nan")] * 3  # program coordinates unknown: absolute moves settle them
+            self.lines.append("G90 G01 X0 Y0 Z0")
+            self.p = [0.0, 0.0, 0.0]
+            self.absolute = True
+        elif choice == 4:
+            self.centre_absolute = not self.centre_absolute
+            self.lines.append("G161" if self.centre_absolute else "G162")
+        elif choice == 5:
+            self.lines.append(f"F{rng.choice((100, 3000, 20000))}")
+        elif choice == 6 and self.areas:
+            area_id = rng.choice(self.areas)[0]
+            self.lines.append(
+                rng.choice(
+                    (
+                        f"#CONTROL AREA OFF [ID={area_id}]",
+                        f"#CONTROL AREA ON [ID={area_id}]",
+                        "#CONTROL AREA OFF",
+                        "#CONTROL AREA ON ALL",
+                    )
+                )
+            )
+        elif choice == 7:
+            self.lines.append(
+                rng.choice(
+                    ("(a comment)", "; a note", "", "   ", "N5", "G01 X1 (inline)", " (c) (d) ; e", "(open")
+                )
+            )
+            if self.lines[-1].startswith("G01"):
+                self.p[0] = 1.0 if self.absolute else self.p[0] + 1.0
+        else:
+            self.lines.append(rng.choice(("G01 X1.2.3", "G01 X", "G1 Q5", "N10 N20", "G01 X99999999")))
+
+
+@st.composite
+def programs(draw: st.DrawFn) -> str:
+    seed = draw(st.integers(0, 2**32 - 1))
+    pieces = draw(st.lists(st.sampled_from("aarrrrrrmmm"), min_size=1, max_size=10))
+    w = _Writer(random.Random(seed))
+    w.lines.append(w.rng.choice(("G90 G17 G01 X0 Y0 Z0 F6000", "N1 G90 F3000", "G01 X0 Y0 F6000")))
+    for piece in pieces:
+        if piece == "a":
+            w.areas_piece()
+        elif piece == "r":
+            w.run()
+        elif piece == "m" and w.rng.random() < 0.85:
+            w.modal()
+        elif piece == "m":
+            w.lines.append(w.rng.choice(("G01 X1.2.3", "M30", "G01 X700 Y0")))
+    if w.rng.random() < 0.7:
+        w.lines.append("M30")
+    return "\n".join(w.lines) + w.rng.choice(("\n", "", "\r\n"))
+
+
+@pytest.mark.req("C14-15", "E-06")
+@pytest.mark.fuzz
+@settings(max_examples=120, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(text=programs(), chunk=st.sampled_from((1 << 20, 300, 97)), small=st.sampled_from((1, 4, 16)))
+def test_batch_and_exact_report_the_same_on_random_programs(
+    config: MachineConfig, text: str, chunk: int, small: int
+) -> None:
+    result = assert_same(config, text, chunk=chunk, small=small)
+    event(f"first alarm: {[a.number for a in result.alarms][:1]}")
+    event(f"blocks: {'<50' if result.blocks < 50 else '<200' if result.blocks < 200 else '>=200'}")
+
+
+def test_random_programs_are_mostly_batched(config: MachineConfig) -> None:
+    """The differential test above would prove little if the batch handed everything to the exact path."""
+    batched = exact = 0
+    rng = random.Random(16)
+    for _ in range(30):
+        w = _Writer(rng)
+        w.lines.append("G90 G17 G01 X0 Y0 Z0 F6000")
+        w.areas_piece()
+        for _ in range(4):
+            w.run()
+        b, e = _count_batched(config, "\n".join(w.lines), small=4)
+        batched += b
+        exact += e
+    assert batched > exact, (batched, exact)
+
+
+# --- the edges, one by one --------------------------------------------------------------------------
+AREAS = """G90 G17 G01 X0 Y0 Z0 F6000
+#CONTROL AREA BEGIN [ID=1 WORK POLY MIN_EXCUR=-100 MAX_EXCUR=100]
+G01 X-200 Y-200
+X200 Y-200
+X200 Y200
+X-200 Y200
+X-200 Y-200
+#CONTROL AREA END
+#CONTROL AREA BEGIN [ID=2 PROT CIRC MIN_EXCUR=-100 MAX_EXCUR=100]
+G01 X60 Y0
+G02 I-10 J0
+#CONTROL AREA END
+#CONTROL AREA BEGIN [ID=3 PROT POLY MIN_EXCUR=-100 MAX_EXCUR=100]
+G01 X-80 Y-20
+X-60 Y-20
+X-60 Y20
+X-80 Y20
+X-80 Y-20
+#CONTROL AREA END
+#CONTROL AREA ON ALL
+"""
+
+
+def _zigzag(n: int, x0: float = -30.0, x1: float = 30.0) -> list[str]:
+    """Moves clear of every area of AREAS (between the square and the circle)."""
+    return [f"G01 X{_f(x0 if k % 2 else x1)} Y{_f(-40.0 + (k % 80))}" for k in range(n)]
+
+
+@pytest.mark.req("C14-15")
+@pytest.mark.parametrize(
+    ("before", "move", "alarm"),
+    [
+        ("G01 X50 Y30", "G01 X50 Y10", 912001),  # onto the top of the protection circle: a touch
+        ("G01 X60 Y30", "G01 X60 Y-30", 912001),  # tangent to it
+        ("G01 X60.00001 Y30", "G01 X60.00001 Y-30", None),  # 10 nm beside it
+        ("G01 X-60 Y60", "G01 X-60 Y20", 912001),  # onto the square's corner
+        ("G01 X-59.99999 Y60", "G01 X-59.99999 Y-60", None),  # 10 nm beside its edge, all along
+        ("G01 X0 Y0", "G01 X200 Y0", 912001),  # through the circle
+        ("G01 X0 Y0", "G00 X-70 Y0", 912001),  # into the square
+        ("G01 X0 Y150", "G01 X200 Y150", None),  # to the work area's edge: a work area may be touched
+        ("G01 X0 Y150", "G01 X200.0001 Y150", 120486),  # just beyond it
+    ],
+)
+def test_a_block_that_grazes_an_area_mid_chunk(
+    config: MachineConfig, before: str, move: str, alarm: int | None
+) -> None:
+    text = AREAS + "\n".join([*_zigzag(500), before, move, *_zigzag(500), "M30"]) + "\n"
+    result = assert_same(config, text)
+    assert [a.number for a in result.alarms if a.severity == Severity.ERROR] == ([alarm] if alarm else [])
+    batched, _ = _count_batched(config, text)
+    assert batched >= 500
+
+
+@pytest.mark.req("C14-15")
+@pytest.mark.parametrize(
+    ("arc", "alarm"),
+    [
+        # from (62, 5) to (62, -5): the chord misses the circle (centre (50, 0), radius 10) ...
+        ("G03 X62 Y-5 I4 J-5", 912001),  # ... the arc about (66, 0) bulges into it
+        ("G02 X62 Y-5 I4 J-5", None),  # the other way round it stays right of the chord
+        ("G03 X62 Y-5 I5.25 J-5", 912001),  # about (67.25, 0): touches it at (60, 0)
+        ("G03 X62 Y-5 I5.26 J-5", None),  # 2.8 µm off
+    ],
+)
+def test_arcs_whose_chord_misses_an_area_but_not_the_arc(
+    config: MachineConfig, arc: str, alarm: int | None
+) -> None:
+    approach = ["G01 X30 Y30", "G01 X62 Y30", "G01 X62 Y5"]  # round the circle, not through it
+    text = (
+        AREAS
+        + "\n".join([*_zigzag(200), *approach, arc, "G01 X62 Y30", "G01 X30 Y30", *_zigzag(200), "M30"])
+        + "\n"
+    )
+    result = assert_same(config, text)
+    assert [a.number for a in result.alarms if a.severity == Severity.ERROR] == ([alarm] if alarm else [])
+
+
+@pytest.mark.req("C14-15", "C14-11")
+def test_a_violation_deep_in_a_long_program_and_an_area_activated_mid_chunk(config: MachineConfig) -> None:
+    body = _zigzag(30_000)
+    body[20_000:20_000] = ["#CONTROL AREA OFF [ID=2]", "G01 X55 Y0", "G01 X0 Y0", "#CONTROL AREA ON [ID=2]"]
+    body[25_000:25_000] = ["N777 G01 X45 Y0"]
+    text = AREAS + "\n".join([*body, "M30"]) + "\n"
+    result = assert_same(config, text)
+    (alarm,) = [a for a in result.alarms if a.severity == Severity.ERROR]
+    assert (alarm.number, alarm.line, alarm.block) == (912001, AREAS.count("\n") + 25_001, "N777")
+    assert result.final_position["X"] == -30.0  # the refused block's start
+
+
+@pytest.mark.req("E-04", "C14-15")
+def test_incremental_moves_sum_as_the_decoder_sums_them(config: MachineConfig) -> None:
+    steps = [f"G01 X{_f(0.1 * ((k % 7) - 3))} Y{_f(0.3 if k % 2 else -0.3)}" for k in range(3000)]
+    text = "G90 G01 X0 Y0 Z0 F6000\nG91\n" + "\n".join(steps) + "\nG90\nM30\n"
+    exact = run(config, text, exact=True)
+    result = assert_same(config, text)
+    assert result.final_position == exact.final_position  # the same floats, rounding included
+
+
+def test_comment_lines_do_not_cut_a_stretch(config: MachineConfig) -> None:
+    body: list[str] = []
+    for k, line in enumerate(_zigzag(600)):
+        body.append(line)
+        if k % 3 == 0:
+            body.append(("(comment)", "; a note", "  (two) (comments) ; and a note")[k % 9 // 3])
+    text = AREAS + "\n".join([*body, "G01 X0 Y-300", "M30"]) + "\n"
+    result = assert_same(config, text)
+    assert [a.number for a in result.alarms] == [120486]  # the last move leaves the work area
+    batched, exact = _count_batched(config, text, small=None)
+    assert batched >= 590, (batched, exact)
+
+
+def test_short_stretches_among_areas_are_decoded_block_by_block(config: MachineConfig) -> None:
+    """The prefilter's set-up costs per stretch and active area: with 3 areas active, a stretch shorter
+    than SMALL_RUN + 3 * SMALL_RUN_PER_AREA plain lines between two other lines is not batched."""
+    n = batch_module.SMALL_RUN + 3 * batch_module.SMALL_RUN_PER_AREA
+
+    def program(stretch: int) -> str:
+        body: list[str] = []
+        for _ in range(10):
+            body += [*_zigzag(stretch), "M08"]
+        return AREAS + "\n".join([*body, "M30"]) + "\n"
+
+    short, long = program(n - 1), program(n)
+    assert_same(config, short)
+    assert_same(config, long)
+    assert _count_batched(config, short, small=None)[0] == 0
+    assert _count_batched(config, long, small=None)[0] >= 10 * (n - 2)
+
+
+@pytest.mark.req("E-04")
+@pytest.mark.parametrize(
+    "bad", ["G01 X1.2.3", "G01 X", "N12 G01 Q5", "N12 N13 X1", "G01 X214748.3648", "G01 X1 X2"]
+)
+def test_a_syntax_error_mid_chunk_is_the_parsers_error_with_line_and_block(
+    config: MachineConfig, bad: str
+) -> None:
+    text = "G90 G01 X0 Y0 F6000\n" + "\n".join([*_zigzag(700), bad, *_zigzag(700), "M30"]) + "\n"
+    result = assert_same(config, text)
+    (alarm,) = result.alarms
+    assert alarm.line == 702
+    assert alarm.block == ("N12" if bad.startswith("N12") else "line 702")
+    assert 910100 <= alarm.number <= 910111
+    assert result.blocks == 701
+
+
+@pytest.mark.req("E-04", "C14-02")
+@pytest.mark.parametrize("ending", ["\n", "\r\n", "\r"])
+@pytest.mark.parametrize("chunk", [1 << 20, 64, 7])
+def test_line_ends_chunk_borders_and_a_wrapped_area_command(
+    config: MachineConfig, ending: str, chunk: int
+) -> None:
+    """The lines a chunk is cut into are the parser's, whatever ends them; a ``#CONTROL AREA BEGIN [``
+    wrapped over lines continues across a chunk's border."""
+    lines = [
+        "G90 G01 X0 Y0 Z0 F6000",
+        *_zigzag(40),
+        "#CONTROL AREA BEGIN [ID=5 PROT POLY MIN_EXCUR",
+        "= -100 MAX_EXCUR=100]",
+        "G01 X-20 Y100",
+        "X20 Y100",
+        "X20 Y120",
+        "X-20 Y120",
+        "X-20 Y100",
+        "#CONTROL AREA END",
+        "#CONTROL AREA ON ALL",
+        "",
+        "(comment)",
+        *_zigzag(40),
+        "G01 X0 Y110",
+        "M30",
+    ]
+    text = ending.join(lines) + ending
+    result = assert_same(config, text, chunk=chunk, small=4)
+    assert [a.number for a in result.alarms] == [912001]
+
+
+@pytest.mark.req("E-04")
+def test_a_program_without_m30_ends_with_the_last_blocks_warning(config: MachineConfig) -> None:
+    text = "G90 G01 X0 Y0 F6000\n" + "\n".join(_zigzag(100)) + "\nN99 G01 X1 Y1\n\n(trailing comment)\n"
+    result = assert_same(config, text)
+    (warning,) = result.alarms
+    assert (warning.number, warning.line, warning.block) == (911005, 102, "N99")
+
+
+@pytest.mark.req("E-06")
+def test_soft_limits_mid_chunk(config: MachineConfig) -> None:
+    for move, alarm in (
+        ("G01 X600 Y0", None),
+        ("G01 X600.0001 Y0", 911011),
+        ("G02 X0 Y0 I0 J-300", None),  # a whole circle down to the limit
+        ("G02 X0 Y0 I0 J-300.0001", 911010),
+        ("G03 X0 Y0 I300.0001 J0", 911011),
+    ):
+        text = "G90 G01 X0 Y0 F6000\n" + "\n".join([*_zigzag(100), "G01 X0 Y0", move, *_zigzag(100), "M30"])
+        result = assert_same(config, text)
+        assert [a.number for a in result.alarms] == ([alarm] if alarm else []), move
+
+
+def test_a_path_check_the_batch_does_not_know_means_block_by_block(config: MachineConfig) -> None:
+    class Watcher(Monitor):
+        def __init__(self, machine: Any) -> None:
+            self.seen = 0
+
+        def channel_hooks(self, channel: Any) -> ChannelHooks:
+            def check(segment: Any, block: Any) -> None:
+                self.seen += 1
+
+            return ChannelHooks(path_check=check)
+
+    from hli_server.engine.machine import DEFAULT_MONITORS
+
+    machine = Machine(config, monitors=(*DEFAULT_MONITORS, Watcher))
+    assert not batch_in_use(machine, 1, record_path=False)
+    text = "G90 G01 X0 Y0 F6000\n" + "\n".join(_zigzag(50)) + "\nM30\n"
+    result = check_program(machine, text, geometry_only=True)
+    assert result.completed
+    assert machine.monitor(Watcher).seen == 50  # every move (the first block does not move)
+
+
+def test_plot_and_env_switch_use_the_exact_path(config: MachineConfig) -> None:
+    machine = Machine(config)
+    assert batch_in_use(machine, 1, record_path=False)
+    assert not batch_in_use(machine, 1, record_path=True)
+    with _batch_settings(exact=True):
+        assert not batch_in_use(machine, 1, record_path=False)
+
+
+# --- the tokenizer of plain lines against the parser ------------------------------------------------
+_DECIMAL = st.tuples(st.floats(-300000, 300000, allow_nan=False), st.integers(0, 9))
+_NUM = st.one_of(
+    _DECIMAL.map(lambda t: f"{t[0]:.{t[1]}f}"),
+    st.integers(-1000, 1000).map(str),
+    st.sampled_from(
+        ["0", "-0", "+5", ".5", "-.25", "5.", "007", "0000000000000001", "214748.3647", "214748.3648",
+         "-214748.3647", "429496.7294", "429496.7295", "1.2.3", "--1", "+-1", "-", ".", "", "1e5",
+         "123456789012345", "1234567890123456", "12345678.9012345", "6000000", "6000000.1", "9" * 17,
+         "123456789", "123456789.5", "0.12345678", "0.123456789", "99999999", "100000000", "1.", "+.5",
+         "0.00000001", "12345678901.2345", "-999999999"]
+    ),
+)  # fmt: skip
+_WORD = st.tuples(st.sampled_from("NGFIJKXYZWMXYZXYZ"), st.sampled_from(["", "", "", " ", "="]), _NUM).map(
+    lambda t: t[0] + t[1] + t[2]
+)
+_LINE = st.tuples(
+    st.lists(_WORD, max_size=6),
+    st.sampled_from([" ", " ", "  ", "\t", ""]),
+    st.sampled_from(["", "", "", " ", "\t", "(c)", ";x", "#", "/", ":", "\xa0", "\x0b"]),
+    st.booleans(),
+).map(lambda t: (t[1].join(t[0]) + t[2]).lower() if t[3] else t[1].join(t[0]) + t[2])
+
+
+@pytest.mark.req("E-04")
+@settings(max_examples=400, deadline=None, derandomize=True)
+@given(lines=st.lists(_LINE, min_size=1, max_size=8))
+def test_a_plain_line_reads_as_the_parser_reads_it(lines: list[str]) -> None:
+    tokenizer = PlainTokenizer(["X", "Y", "Z", "W"])
+    chunk = tokenizer.tokenize(("\n".join(lines) + "\n").encode())
+    assert chunk.lines == len(lines)
+    for k, line in enumerate(lines):
+        kind = int(chunk.kind[k])
+        try:
+            block = parse_line(line, 1, ["X", "Y", "Z", "W"])
+        except NcError:
+            assert kind != PLAIN, line
+            continue
+        if kind == EMPTY:
+            assert block is None, line
+        if kind != PLAIN:
+            continue
+        assert block is not None
+        words = {
+            tokenizer.letters[c]: float(chunk.values[c, k])
+            for c in range(len(tokenizer.letters))
+            if not np.isnan(chunk.values[c, k])
+        }
+        expected: dict[str, float] = dict(block.axes)
+        expected.update(dict(block.centre))
+        if block.feed is not None:
+            expected["F"] = block.feed
+        if block.number is not None:
+            expected["N"] = float(block.number)
+        if block.g_codes:
+            (g,) = block.g_codes
+            expected["G"] = float(g)
+        assert block.m_codes == ()
+        assert not block.extra
+        assert block.area is None
+        assert {k: (v, math.copysign(1.0, v)) for k, v in words.items()} == {
+            k: (v, math.copysign(1.0, v)) for k, v in expected.items()
+        }, line
+
+
+@pytest.mark.req("E-04")
+def test_the_lines_of_a_cam_program_are_plain() -> None:
+    tokenizer = PlainTokenizer(["X", "Y", "Z"])
+    lines = [
+        "G01 X-227.6015 Y-136.6805",
+        "G02 X1 Y2 I-12 J0",
+        "N10 G0 Z5",
+        "x1y2z3",
+        "F6000",
+        "G03X1.5Y.5I1J0F200",
+        "   ",
+    ]
+    chunk = tokenizer.tokenize(("\n".join(lines) + "\n").encode())
+    assert chunk.kind.tolist() == [PLAIN] * 6 + [EMPTY]
