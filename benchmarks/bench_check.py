@@ -20,8 +20,9 @@ References, measured in the same run, interleaved round by round (best of ``--ro
 * shapely's batched ``intersects`` of all the program's lines against the 20 areas in one call (the
   honest reference for the area check: it answers only "touches or not", for lines only);
 * the same moves (a fifth as many) with other lines among them, batch against the exact path: a comment
-  every 5 motion lines (comment lines do not end a stretch), an ``M08`` line every 200 and every 1,000
-  (they do: short stretches among many areas go block by block, ``SMALL_RUN_PER_AREA``);
+  every 5 motion lines (comment lines do not end a stretch), an ``M08`` line every 50, 200 and 1,000
+  (they do: stretches shorter than ``SMALL_RUN`` + ``SMALL_RUN_PER_AREA`` per active area go block by
+  block);
 * peak memory (``ru_maxrss``) of ``hli-server check`` processes on the program and on one twice as long:
   a streaming check stays flat.
 
@@ -170,7 +171,7 @@ def main() -> None:
         write_lines(ngc, near_area_lines_rs274(args.blocks))
         tool_table = d / "tool.tbl"
         tool_table.write_text("T1 P1 D0 Z0 ;\n", encoding="utf-8")
-        mixes = [(5, "(a comment)"), (200, "M08"), (1000, "M08")]
+        mixes = [(5, "(a comment)"), (50, "M08"), (200, "M08"), (1000, "M08")]
         mixed = [d / f"mixed{k}.nc" for k in range(len(mixes))]
         for (every, extra), path in zip(mixes, mixed, strict=True):
             write_lines(path, interleaved(near_area_lines(args.blocks // 5), every, extra))

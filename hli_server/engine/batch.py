@@ -58,14 +58,16 @@ __all__ = ["CHUNK_CHARS", "SMALL_RUN", "SMALL_RUN_PER_AREA", "BatchGeometryCheck
 
 CHUNK_CHARS = 1 << 20
 """Characters read at a time (about 40,000 lines of a CAM program): memory stays flat."""
-SMALL_RUN = 16
-"""Fewer plain lines than this between two other lines are decoded one by one (numpy's set-up would
-cost more than it saves)."""
-SMALL_RUN_PER_AREA = 12
-"""... and this many more for each active area: the prefilter's numpy set-up per stretch and area costs
-about what the exact decoder spends on as many blocks (measured with 20 areas, compiled: a stretch of
-200 lines between two M-code lines checks 0.86x as fast as a batch as block by block, of 400 1.7x), so
-a program whose plain stretches are short is checked block by block, never slower than before."""
+SMALL_RUN = 26
+"""Fewer plain lines than this between two other lines are decoded one by one: numpy's set-up per
+stretch would cost more than it saves (measured without areas, compiled: a stretch of 20 lines between
+two M-code lines checks 0.83x as fast as a batch as block by block, of 25 0.98x, of 30 1.13x)."""
+SMALL_RUN_PER_AREA = 1
+"""... and this many more for each active area: the area prefilter tests all areas of a group in a few
+numpy passes, so its set-up per stretch hardly grows with their number (measured, compiled, a stretch
+between two M-code lines as a batch against block by block: with 3 active areas 0.96x at 30 lines,
+1.36x at 50; with 20 areas 0.87x at 40, 1.06x at 50, 3.1x at 200). Before the prefilter was
+vectorized this was 12 (20 areas: 0.88x at 200 lines)."""
 
 _TAU = 2.0 * math.pi
 _PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}

@@ -29,7 +29,10 @@ from hli_server.configuration import load_machine
 from hli_server.engine import Machine
 from hli_server.engine import batch as batch_module
 from hli_server.engine.alarms import Severity
+from hli_server.engine.areas.geometry import Circle, Group, Polygon, Prism, first_violation
+from hli_server.engine.areas.prefilter import PathBatch, clear_of_areas
 from hli_server.engine.batch import BatchGeometryCheck
+from hli_server.engine.geometry import ArcSegment, LineSegment, Segment
 from hli_server.engine.monitors.base import ChannelHooks, Monitor
 from hli_server.engine.nc import NcError, parse_line
 from hli_server.engine.nc.plain import EMPTY, PLAIN, PlainTokenizer
@@ -470,8 +473,9 @@ def test_comment_lines_do_not_cut_a_stretch(config: MachineConfig) -> None:
 
 
 def test_short_stretches_among_areas_are_decoded_block_by_block(config: MachineConfig) -> None:
-    """The prefilter's set-up costs per stretch and active area: with 3 areas active, a stretch shorter
-    than SMALL_RUN + 3 * SMALL_RUN_PER_AREA plain lines between two other lines is not batched."""
+    """The batch's set-up costs per stretch (a little more with each active area): with 3 areas active,
+    a stretch shorter than SMALL_RUN + 3 * SMALL_RUN_PER_AREA plain lines between two other lines is
+    not batched."""
     n = batch_module.SMALL_RUN + 3 * batch_module.SMALL_RUN_PER_AREA
 
     def program(stretch: int) -> str:
@@ -583,6 +587,212 @@ def test_plot_and_env_switch_use_the_exact_path(config: MachineConfig) -> None:
     assert not batch_in_use(machine, 1, record_path=True)
     with _batch_settings(exact=True):
         assert not batch_in_use(machine, 1, record_path=False)
+
+
+TWO_WORKS = """G90 G17 G01 X0 Y0 Z0 F6000
+#CONTROL AREA BEGIN [ID=1 WORK POLY MIN_EXCUR=-100 MAX_EXCUR=100]
+G01 X-200 Y-200
+X30 Y-200
+X30 Y200
+X-200 Y200
+X-200 Y-200
+#CONTROL AREA END
+#CONTROL AREA BEGIN [ID=2 WORK CIRC MIN_EXCUR=-100 MAX_EXCUR=100]
+G01 X210 Y0
+G02 I-100 J0
+#CONTROL AREA END
+#CONTROL AREA BEGIN [ID=3 WORK POLY MIN_EXCUR=-100 MAX_EXCUR=100]
+G01 X-300 Y300
+X300 Y300
+X300 Y350
+X-300 Y350
+X-300 Y300
+#CONTROL AREA END
+#CONTROL AREA BEGIN [ID=4 PROT POLY MIN_EXCUR=-100 MAX_EXCUR=100]
+G01 X150 Y50
+X170 Y50
+X170 Y55
+X160 Y55
+X160 Y60
+X150 Y60
+X150 Y50
+#CONTROL AREA END
+#CONTROL AREA BEGIN [ID=5 PROT CIRC MIN_EXCUR=-100 MAX_EXCUR=100]
+G01 X-90 Y100
+G02 I-10 J0
+#CONTROL AREA END
+#CONTROL AREA ON ALL
+"""
+
+
+@pytest.mark.req("C14-15")
+@pytest.mark.parametrize(
+    ("moves", "alarm"),
+    [
+        (["G01 X120 Y20"], None),  # in the circle only (the second work area)
+        (["G01 X0 Y20", "G01 X-100 Y20"], None),  # through both into the square only (the first)
+        (["G01 X-100 Y20", "G02 X-100 Y-20 I0 J-20"], None),  # an arc in the square
+        (["G01 X120 Y20", "G03 X120 Y20 I0 J10"], None),  # a whole circle in the circle
+        (["G01 X140 Y20", "G03 X140 Y20 I0 J20"], 912001),  # ... through the L
+        (["G01 X0 Y250"], 120486),  # out of all three
+        (["G01 X155 Y40", "G01 X155 Y49.99999"], None),  # 10 nm below the L
+        (["G01 X155 Y40", "G01 X155 Y50"], 912001),  # onto its edge
+        (["G01 X145 Y40", "G02 X165 Y40 I10 J0"], 912001),  # an arc up to its edge (tangent)
+        (["G01 X145 Y39.99", "G02 X165 Y39.99 I10 J0"], None),  # 10 µm below it
+        (["G01 X-100 Y20", "G01 X-100 Y89"], None),  # 1 mm below the protection circle
+        (["G01 X-100 Y20", "G01 X-115 Y85", "G03 X-85 Y85 I15 J0"], None),  # an arc below it
+        (["G01 X-100 Y20", "G01 X-115 Y85", "G02 X-85 Y85 I15 J0"], 912001),  # over the top: into it
+    ],
+)
+def test_several_work_areas_and_mixed_protections(
+    config: MachineConfig, moves: list[str], alarm: int | None
+) -> None:
+    """The prefilter tests all areas of a group at once: a path is held by any one of the work areas
+    (a square, a circle, a band), protections of both shapes (an L, a circle) are all tested."""
+    zigzag = [f"G01 X{_f(60.0 if k % 2 else 140.0)} Y{_f(-40.0 + (k % 80))}" for k in range(300)]
+    text = TWO_WORKS + "\n".join([*zigzag, "G01 X100 Y20", *moves, *zigzag, "M30"]) + "\n"
+    result = assert_same(config, text)
+    assert [a.number for a in result.alarms if a.severity == Severity.ERROR] == ([alarm] if alarm else [])
+    batched, _ = _count_batched(config, text)
+    assert batched >= 290  # the zigzag is in the circle only: cleared by the second work area
+
+
+def _prism(rng: random.Random, axes: tuple[int, int, int], protection: bool) -> Prism:
+    a, b, c = axes
+    if protection:
+        cx, cy, size = rng.uniform(-60, 60), rng.uniform(-60, 60), rng.uniform(2, 25)
+        lo, hi = rng.choice(((-100.0, 100.0), (-10.0, 10.0), (0.0, 50.0)))
+    else:
+        cx, cy, size = rng.uniform(-10, 10), rng.uniform(-10, 10), rng.uniform(50, 120)
+        lo, hi = -100.0, 100.0
+    if rng.random() < 0.35:
+        region: Circle | Polygon = Circle(cx, cy, size)
+    else:
+        shape = rng.choice(
+            (
+                [(-1, -1), (1, -1), (1, 1), (-1, 1)],
+                [(-1, 1), (1, 1), (1, -1), (-1, -1)],  # clockwise
+                [(-1, -1), (1, -1), (1, 0), (0, 0), (0, 1), (-1, 1)],  # an L
+                [(-1, -1), (1, -1), (0, 1)],
+                [(math.cos(k * math.pi / 6), math.sin(k * math.pi / 6)) for k in range(12)],
+            )
+        )
+        region = Polygon([(cx + size * x, cy + size * y) for x, y in shape])
+    return Prism(region, a, b, c, lo, hi, protection=protection)
+
+
+def _random_groups(rng: random.Random) -> list[Group]:
+    """A group on X, Y, Z (its prisms mostly on one base plane, some turned or with swapped axes) and
+    now and then one on Z, U, V (five axes: X Y Z U V)."""
+    groups = []
+    for orders in ([(0, 1, 2), (1, 0, 2), (2, 0, 1), (1, 2, 0)], [(3, 4, 2)]):
+        if orders[0][0] == 3 and rng.random() < 0.5:
+            continue
+        usual = rng.choice(orders)
+
+        def axes(
+            orders: list[tuple[int, int, int]] = orders, usual: tuple[int, int, int] = usual
+        ) -> tuple[int, int, int]:
+            return usual if rng.random() < 0.85 else rng.choice(orders)
+
+        works = [_prism(rng, axes(), False) for _ in range(rng.choice((0, 1, 2, 3)))]
+        prots = [_prism(rng, axes(), True) for _ in range(rng.randint(0, 10))]
+        groups.append(Group(frozenset(orders[0]), works, prots))
+    return groups
+
+
+def _random_paths(
+    rng: random.Random, groups: list[Group], plane: tuple[int, int] | None, n: int
+) -> list[Segment]:
+    """A random walk of lines and arcs in ``plane`` (G17 or G18 and the like), now and then to an
+    area's corner or a point of its circle, or just beside it (grazing)."""
+    corners = [
+        (q.a, q.b, x, y)
+        for g in groups
+        for q in g.works + g.prots
+        for x, y in (
+            q.region.points if isinstance(q.region, Polygon) else [(q.region.cx + q.region.r, q.region.cy)]
+        )
+    ]
+    out: list[Segment] = []
+    p = [rng.uniform(-50, 50) for _ in range(5)]
+    for _ in range(n):
+        start = tuple(p)
+        end = [v + rng.uniform(-1, 1) * rng.choice((0.5, 5.0, 30.0)) for v in p]
+        if rng.random() < 0.8:
+            end[2] = p[2]
+        if rng.random() < 0.1 and corners:
+            a, b, x, y = rng.choice(corners)
+            end[a], end[b] = x + rng.choice((0.0, 2e-5, -2e-5, 1e-3)), y + rng.choice((0.0, 2e-5, -1e-3))
+        if plane is not None and rng.random() < 0.4:
+            i, j = plane
+            r = rng.uniform(0.5, 30.0)
+            phi = rng.uniform(0.0, 2.0 * math.pi)
+            cx, cy = start[i] - r * math.cos(phi), start[j] - r * math.sin(phi)
+            sweep = rng.uniform(0.05, 2.0 * math.pi) * rng.choice((1, -1))
+            end[i], end[j] = cx + r * math.cos(phi + sweep), cy + r * math.sin(phi + sweep)
+            radius = math.hypot(start[i] - cx, start[j] - cy)
+            a0 = math.atan2(start[j] - cy, start[i] - cx)
+            out.append(ArcSegment(start, tuple(end), plane, (cx, cy), radius, a0, sweep))
+        else:
+            out.append(LineSegment(start, tuple(end)))
+        p = end
+    return out
+
+
+def _path_batch(paths: list[Segment], plane: tuple[int, int] | None) -> PathBatch:
+    """The paths as the batch hands them to the prefilter (an arc's box: its whole circle)."""
+    start = np.array([s.start for s in paths]).T
+    end = np.array([s.end for s in paths]).T
+    lo, hi = np.minimum(start, end), np.maximum(start, end)
+    n = len(paths)
+    arc = np.array([isinstance(s, ArcSegment) for s in paths])
+    centre, radius, a0, sweep = np.zeros((2, n)), np.zeros(n), np.zeros(n), np.full(n, 2.0 * math.pi)
+    for k, s in enumerate(paths):
+        if isinstance(s, ArcSegment):
+            centre[:, k] = s.centre
+            radius[k], a0[k], sweep[k] = s.radius, s.start_angle, s.sweep
+            for axis, c in zip(s.plane, s.centre, strict=True):
+                lo[axis, k], hi[axis, k] = min(lo[axis, k], c - s.radius), max(hi[axis, k], c + s.radius)
+    return PathBatch(start, end, lo, hi, arc, plane, centre, radius, a0, sweep)
+
+
+_ARC_PLANES = [None, (0, 1), (2, 0), (1, 2), (1, 0), (3, 4)]
+
+
+@pytest.mark.req("C14-15")
+@settings(max_examples=120, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), plane=st.sampled_from(_ARC_PLANES))
+def test_the_prefilter_clears_only_paths_the_exact_check_passes(
+    seed: int, plane: tuple[int, int] | None
+) -> None:
+    """All the areas of a group at once, in two groups: every path the prefilter clears has no
+    violation in the exact check (lines, arcs in and across the prisms' base planes, grazing)."""
+    rng = random.Random(seed)
+    groups = _random_groups(rng)
+    paths = _random_paths(rng, groups, plane, 200)
+    clear = clear_of_areas(groups, _path_batch(paths, plane))
+    for k in np.flatnonzero(clear).tolist():
+        assert first_violation(groups, paths[k]) is None, (k, paths[k])
+    event(f"cleared: {int(clear.sum()) // 50 * 25}%+")
+
+
+def test_the_prefilter_clears_most_allowed_paths_of_random_groups() -> None:
+    """... and the test above is not empty: most paths the exact check allows are cleared, arcs too."""
+    allowed = cleared = arcs_cleared = 0
+    for seed in range(40):
+        rng = random.Random(seed)
+        groups = _random_groups(rng)
+        plane = _ARC_PLANES[seed % len(_ARC_PLANES)]
+        paths = _random_paths(rng, groups, plane, 200)
+        clear = clear_of_areas(groups, _path_batch(paths, plane))
+        for k, path in enumerate(paths):
+            if first_violation(groups, path) is None:
+                allowed += 1
+                cleared += bool(clear[k])
+                arcs_cleared += bool(clear[k]) and isinstance(path, ArcSegment)
+    assert cleared > 0.8 * allowed, (cleared, allowed)
+    assert arcs_cleared > 200, arcs_cleared
 
 
 # --- the tokenizer of plain lines against the parser ------------------------------------------------

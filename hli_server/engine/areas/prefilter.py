@@ -26,6 +26,13 @@ cut into chords by the exact check: such an arc is cleared only by boxes apart (
 the arc's box) and never inside a work area. The path of an arc is the exact check's: the circle
 through its start (its radius) from the start angle over the sweep, and its programmed end point, which
 may lie off that circle by the decoder's tolerance (0.01 mm).
+
+All the prisms of a group are tested at once, so the cost per batch hardly grows with the number of
+areas: a (prisms x paths) box test, then the region tests on the (prism, path) pairs whose boxes meet,
+each kind (lines or arcs against circles or polygons) in one numpy pass over its pairs; a polygon's
+edges are a row of a table of polygons of about as many edges (padded with copies of an edge, which
+change no distance). A group's arrays are built once per group (:func:`_stacks`): the area table
+rebuilds its groups only when areas change.
 """
 
 from __future__ import annotations
@@ -80,7 +87,7 @@ def clear_of_areas(groups: list[Group], paths: PathBatch) -> Bools:
     """True for each path that surely passes the exact path check of every group."""
     clear = np.ones(paths.arc.shape[0], np.bool_)
     for group in groups:
-        clear &= _group_clear(group, paths)
+        clear = _group_clear(group, paths, clear)
     return clear
 
 
@@ -96,158 +103,417 @@ def _relation(q: Prism, plane: tuple[int, int] | None) -> int:
     return _MIXED
 
 
-def _group_clear(group: Group, p: PathBatch) -> Bools:
-    n = p.arc.shape[0]
-    ok = np.ones(n, np.bool_)
-    # an arc seen at an angle by any prism of the group is cut into chords for all of them (geometry._pieces)
-    chords = any(_relation(q, p.plane) == _MIXED for q in group.works + group.prots)
-    for q in group.prots:
-        x0, y0, x1, y1 = q.region.bbox
-        a, b, c = q.a, q.b, q.c
-        near = (
-            (p.lo[a] <= x1 + MARGIN)
-            & (p.hi[a] >= x0 - MARGIN)
-            & (p.lo[b] <= y1 + MARGIN)
-            & (p.hi[b] >= y0 - MARGIN)
-            & (p.lo[c] <= q.hi + MARGIN)
-            & (p.hi[c] >= q.lo - MARGIN)
-        )
-        cand = np.flatnonzero(near & ok)
-        if cand.shape[0]:
-            ok[cand[~_region_test(q, p, cand, chords, protection=True)]] = False
-    if group.works:
-        inside = np.zeros(n, np.bool_)
-        for w in group.works:
-            x0, y0, x1, y1 = w.region.bbox
-            a, b, c = w.a, w.b, w.c
-            within = (
-                (p.lo[c] >= w.lo + MARGIN)
-                & (p.hi[c] <= w.hi - MARGIN)
-                & (p.lo[a] >= x0 + MARGIN)
-                & (p.hi[a] <= x1 - MARGIN)
-                & (p.lo[b] >= y0 + MARGIN)
-                & (p.hi[b] <= y1 - MARGIN)
+# --- a group's prisms as arrays ----------------------------------------------------------------------
+class _Table:
+    """Polygons with about as many edges (``width``: a power of two) and the same ``convex``, one row
+    each: their edges (x0, y0, x1, y1) and half-planes (``nx``, ``ny``, ``off``; work prisms that are
+    convex), a short polygon's row filled up with copies of its first edge (``real``: not a copy); a
+    copy changes no least distance and no half-plane test, and the even-odd count skips it."""
+
+    __slots__ = ("convex", "nx", "ny", "off", "real", "rows", "width", "x0", "x1", "y0", "y1")
+
+    def __init__(self, convex: bool, width: int, polygons: list[Polygon]) -> None:
+        self.convex = convex
+        self.width = width
+        self.rows = len(polygons)
+        shape = (self.rows, width)
+        self.x0: Floats = np.zeros(shape)
+        self.y0: Floats = np.zeros(shape)
+        self.x1: Floats = np.zeros(shape)
+        self.y1: Floats = np.zeros(shape)
+        self.nx: Floats = np.full(shape, np.nan)
+        self.ny: Floats = np.full(shape, np.nan)
+        self.off: Floats = np.full(shape, np.nan)
+        self.real: Bools = np.zeros(shape, np.bool_)
+        for row, poly in enumerate(polygons):
+            x0, y0, x1, y1 = _edges(poly)
+            n = int(x0.shape[1])
+            fill = np.concatenate([np.arange(n), np.zeros(width - n, np.int64)])
+            self.x0[row] = x0[0, fill]
+            self.y0[row] = y0[0, fill]
+            self.x1[row] = x1[0, fill]
+            self.y1[row] = y1[0, fill]
+            self.real[row, :n] = True
+            halves = _half_planes(poly) if convex else None
+            if halves is not None:
+                nx, ny, off = halves
+                self.nx[row] = nx[0, fill]
+                self.ny[row] = ny[0, fill]
+                self.off[row] = off[0, fill]
+
+
+class _Stack:
+    """The work or the protection prisms of a group as arrays, one entry per prism: its axes (rows a,
+    b, c), its box bounds with :data:`MARGIN` (protection: grown, apart beyond them; work: shrunk,
+    around within them), its circle, or its polygon's table and row in it."""
+
+    __slots__ = (
+        "axes",
+        "circle",
+        "cx",
+        "cy",
+        "lower",
+        "prisms",
+        "r",
+        "row",
+        "size",
+        "table",
+        "tables",
+        "upper",
+    )
+
+    def __init__(self, prisms: list[Prism], protection: bool) -> None:
+        m = len(prisms)
+        self.prisms = prisms
+        self.size = m
+        self.axes: Ints = np.array(
+            [[q.a for q in prisms], [q.b for q in prisms], [q.c for q in prisms]], np.int64
+        ).reshape(3, m)
+        lower = np.zeros((3, m, 1))
+        upper = np.zeros((3, m, 1))
+        self.circle: Bools = np.zeros(m, np.bool_)
+        self.cx: Floats = np.zeros(m)
+        self.cy: Floats = np.zeros(m)
+        self.r: Floats = np.zeros(m)
+        self.table: Ints = np.full(m, -1, np.int64)
+        self.row: Ints = np.zeros(m, np.int64)
+        keys: list[tuple[bool, int]] = []
+        members: list[list[Polygon]] = []
+        for k, q in enumerate(prisms):
+            x0, y0, x1, y1 = q.region.bbox
+            if protection:
+                lower[:, k, 0] = (x0 - MARGIN, y0 - MARGIN, q.lo - MARGIN)
+                upper[:, k, 0] = (x1 + MARGIN, y1 + MARGIN, q.hi + MARGIN)
+            else:
+                lower[:, k, 0] = (x0 + MARGIN, y0 + MARGIN, q.lo + MARGIN)
+                upper[:, k, 0] = (x1 - MARGIN, y1 - MARGIN, q.hi - MARGIN)
+            region = q.region
+            if isinstance(region, Circle):
+                self.circle[k] = True
+                self.cx[k] = region.cx
+                self.cy[k] = region.cy
+                self.r[k] = region.r
+                continue
+            # half-planes only for work prisms (a protection polygon is tested by its edges)
+            key = (
+                not protection and _half_planes(region) is not None,
+                1 << (len(region.points) - 1).bit_length(),
             )
-            cand = np.flatnonzero(within & ok & ~inside)
-            if cand.shape[0]:
-                inside[cand[_region_test(w, p, cand, chords, protection=False)]] = True
+            if key not in keys:
+                keys.append(key)
+                members.append([])
+            t = keys.index(key)
+            self.table[k] = t
+            self.row[k] = len(members[t])
+            members[t].append(region)
+        self.lower: Floats = lower
+        self.upper: Floats = upper
+        self.tables = [_Table(key[0], key[1], polygons) for key, polygons in zip(keys, members, strict=True)]
+
+
+class _Stacks:
+    """A group's prisms as arrays (built once per group: a group is rebuilt when its areas change),
+    and per plane of the arcs how its prisms see them."""
+
+    __slots__ = ("planes", "prots", "works")
+
+    def __init__(self, group: Group) -> None:
+        self.prots = _Stack(group.prots, protection=True)
+        self.works = _Stack(group.works, protection=False)
+        self.planes: dict[tuple[int, int] | None, _Plane] = {}
+
+    def plane(self, plane: tuple[int, int] | None) -> _Plane:
+        seen = self.planes.get(plane)
+        if seen is None:
+            seen = _Plane(self, plane)
+            self.planes[plane] = seen
+        return seen
+
+
+class _Plane:
+    """How the prisms of a group see the arcs of one plane, per prism (protection, work): as lines
+    from start to end (``linear``: the plane has none of the prism's axes), as arcs (``circle``: the
+    plane is the prism's base plane; ``swap`` where the prism's axes are (j, i)); ``chords``: some
+    prism of the group sees them at an angle, and the exact check cuts them into chords for every
+    prism of the group (``geometry._pieces``)."""
+
+    __slots__ = (
+        "chords",
+        "prot_circle",
+        "prot_linear",
+        "prot_swap",
+        "work_circle",
+        "work_linear",
+        "work_swap",
+    )
+
+    def __init__(self, stacks: _Stacks, plane: tuple[int, int] | None) -> None:
+        relations = [_relation(q, plane) for q in stacks.prots.prisms + stacks.works.prisms]
+        self.chords = _MIXED in relations
+        self.prot_linear, self.prot_circle, self.prot_swap = _relations(stacks.prots, plane)
+        self.work_linear, self.work_circle, self.work_swap = _relations(stacks.works, plane)
+
+
+def _relations(stack: _Stack, plane: tuple[int, int] | None) -> tuple[Bools, Bools, Bools]:
+    rel = [_relation(q, plane) for q in stack.prisms]
+    i = plane[0] if plane is not None else -1
+    linear: Bools = np.array([x == _LINEAR for x in rel], np.bool_).reshape(stack.size)
+    circle: Bools = np.array([x == _CIRCLE for x in rel], np.bool_).reshape(stack.size)
+    swap: Bools = np.array(
+        [x == _CIRCLE and q.a != i for x, q in zip(rel, stack.prisms, strict=True)], np.bool_
+    ).reshape(stack.size)
+    return linear, circle, swap
+
+
+_STACKS: dict[int, tuple[Group, _Stacks]] = {}
+
+
+def _stacks(group: Group) -> _Stacks:
+    """The group's arrays, cached per group (the entry holds the group: its id is not reused)."""
+    cached = _STACKS.get(id(group))
+    if cached is not None and cached[0] is group:
+        return cached[1]
+    stacks = _Stacks(group)
+    if len(_STACKS) > 64:
+        _STACKS.clear()
+    _STACKS[id(group)] = (group, stacks)
+    return stacks
+
+
+# --- the test ----------------------------------------------------------------------------------------
+def _group_clear(group: Group, p: PathBatch, clear: Bools) -> Bools:
+    """``clear`` less the paths that might fail the group's check. All prisms of the group at once: a
+    (prisms x paths) box test, then the region tests on the (prism, path) pairs whose boxes meet."""
+    stacks = _stacks(group)
+    plane = stacks.plane(p.plane)
+    n = clear.shape[0]
+    ok = clear.copy()
+    prots = stacks.prots
+    if prots.size:
+        near = np.repeat(ok[None, :], prots.size, axis=0)
+        for row in range(3):
+            axis = prots.axes[row]
+            near &= p.lo[axis] <= prots.upper[row]
+            near &= p.hi[axis] >= prots.lower[row]
+        flat = np.flatnonzero(near)
+        if flat.shape[0]:
+            prism = flat // n
+            path = flat - prism * n
+            apart = _pairs(
+                prots,
+                p,
+                prism,
+                path,
+                plane.prot_linear,
+                plane.prot_circle,
+                plane.prot_swap,
+                plane.chords,
+                True,
+            )
+            ok[path[~apart]] = False
+    works = stacks.works
+    if works.size:
+        within = np.repeat(ok[None, :], works.size, axis=0)
+        for row in range(3):
+            axis = works.axes[row]
+            within &= p.lo[axis] >= works.lower[row]
+            within &= p.hi[axis] <= works.upper[row]
+        inside = np.zeros(n, np.bool_)
+        flat = np.flatnonzero(within)
+        if flat.shape[0]:
+            prism = flat // n
+            path = flat - prism * n
+            held = _pairs(
+                works,
+                p,
+                prism,
+                path,
+                plane.work_linear,
+                plane.work_circle,
+                plane.work_swap,
+                plane.chords,
+                False,
+            )
+            inside[path[held]] = True
         ok &= inside
     return ok
 
 
-def _region_test(q: Prism, p: PathBatch, cand: Ints, chords: bool, protection: bool) -> Bools:
-    """For the paths ``cand`` whose box meets the prism's: protection - the path keeps off the region;
-    work - the path lies inside it; in the base plane, with :data:`MARGIN`. False where not sure."""
-    result = np.zeros(cand.shape[0], np.bool_)
-    rel = _relation(q, p.plane)
-    arcs = p.arc[cand]
-    as_line = ~arcs if rel != _LINEAR else np.ones(cand.shape[0], np.bool_)
-    if as_line.any():
-        k = cand[as_line]
-        sx, sy, ex, ey = p.start[q.a, k], p.start[q.b, k], p.end[q.a, k], p.end[q.b, k]
-        result[as_line] = _line_test(q.region, sx, sy, ex, ey, protection)
-    if rel == _CIRCLE and not chords:
-        as_arc = arcs
-        if as_arc.any():
-            assert p.plane is not None
-            k = cand[as_arc]
-            i, j = p.plane
-            # the region in the arcs' plane coordinates (swapped where the prism's axes are (j, i))
-            swap = (q.a, q.b) != (i, j)
-            result[as_arc] = _arc_test(
-                q.region,
-                swap,
-                p.centre[0, k],
-                p.centre[1, k],
-                p.radius[k],
-                p.start_angle[k],
-                p.sweep[k],
-                p.start[i, k],
-                p.start[j, k],
-                p.end[i, k],
-                p.end[j, k],
-                protection,
-            )
+def _pairs(
+    st: _Stack,
+    p: PathBatch,
+    prism: Ints,
+    path: Ints,
+    linear: Bools,
+    circle: Bools,
+    swap: Bools,
+    chords: bool,
+    protection: bool,
+) -> Bools:
+    """For (prism, path) pairs whose boxes meet: protection - the path keeps off the prism's region;
+    work - the path lies inside it; in the prism's base plane, with :data:`MARGIN`. False where not
+    sure (an arc that some prism of the group sees at an angle: never tested)."""
+    result = np.zeros(prism.shape[0], np.bool_)
+    arcs = p.arc[path]
+    round_ = st.circle[prism]
+    # lines; an arc whose plane has none of the prism's axes is a line from start to end for it
+    as_line = ~arcs | linear[prism]
+    k = np.flatnonzero(as_line & round_)
+    if k.shape[0]:
+        result[k] = _line_circle(st, p, prism[k], path[k], protection)
+    k = np.flatnonzero(as_line & ~round_)
+    if k.shape[0]:
+        result[k] = _line_polygon(st, p, prism[k], path[k], protection)
+    plane = p.plane
+    if plane is not None and not chords:
+        as_arc = arcs & circle[prism]
+        k = np.flatnonzero(as_arc & round_)
+        if k.shape[0]:
+            result[k] = _arc_circle(st, p, plane, prism[k], path[k], swap[prism[k]], protection)
+        k = np.flatnonzero(as_arc & ~round_)
+        if k.shape[0]:
+            result[k] = _arc_polygon(st, p, plane, prism[k], path[k], swap[prism[k]], protection)
     return result
 
 
+def _by_table(st: _Stack, prism: Ints) -> list[tuple[Ints, _Table, Ints]]:
+    """The pairs of polygon prisms split by table: (the pairs, the table, each pair's row in it)."""
+    if len(st.tables) == 1:
+        return [(np.arange(prism.shape[0]), st.tables[0], st.row[prism])]
+    which = st.table[prism]
+    parts: list[tuple[Ints, _Table, Ints]] = []
+    for t, table in enumerate(st.tables):
+        k = np.flatnonzero(which == t)
+        if k.shape[0]:
+            parts.append((k, table, st.row[prism[k]]))
+    return parts
+
+
+def _take(values: Floats, rows: Ints, table: _Table) -> Floats:
+    """The rows of the pairs (a table of one polygon: its row, broadcast)."""
+    if table.rows == 1:
+        return values
+    taken: Floats = values[rows]
+    return taken
+
+
+def _edge_rows(table: _Table, rows: Ints) -> tuple[Floats, Floats, Floats, Floats]:
+    return (
+        _take(table.x0, rows, table),
+        _take(table.y0, rows, table),
+        _take(table.x1, rows, table),
+        _take(table.y1, rows, table),
+    )
+
+
 # --- lines -------------------------------------------------------------------------------------------
-def _line_test(
-    region: Polygon | Circle, sx: Floats, sy: Floats, ex: Floats, ey: Floats, protection: bool
-) -> Bools:
-    if isinstance(region, Circle):
-        if protection:
-            apart: Bools = _point_segment(region.cx, region.cy, sx, sy, ex, ey) > region.r + MARGIN
-            return apart
-        limit = region.r - MARGIN
-        within: Bools = (np.hypot(sx - region.cx, sy - region.cy) < limit) & (
-            np.hypot(ex - region.cx, ey - region.cy) < limit
-        )
-        return within
-    if not protection:
-        halves = _half_planes(region)
-        if halves is not None:
-            # convex: the segment lies inside with the margin when both ends do
-            nx, ny, off = halves
-            start_in = np.all(sx[:, None] * nx + sy[:, None] * ny < off, axis=1)
-            end_in = np.all(ex[:, None] * nx + ey[:, None] * ny < off, axis=1)
-            both: Bools = np.logical_and(start_in, end_in)
-            return both
-    qx0, qy0, qx1, qy1 = _edges(region)
-    s = (sx[:, None], sy[:, None], ex[:, None], ey[:, None])
-    apart = _segment_segment(*s, qx0, qy0, qx1, qy1).min(axis=1) > MARGIN
-    inside = _inside(region, sx, sy)
-    return apart & (~inside if protection else inside)
+def _line_circle(st: _Stack, p: PathBatch, prism: Ints, path: Ints, protection: bool) -> Bools:
+    a, b = st.axes[0, prism], st.axes[1, prism]
+    sx, sy, ex, ey = p.start[a, path], p.start[b, path], p.end[a, path], p.end[b, path]
+    cx, cy, r = st.cx[prism], st.cy[prism], st.r[prism]
+    if protection:
+        apart: Bools = _point_segment(cx, cy, sx, sy, ex, ey) > r + MARGIN
+        return apart
+    limit = r - MARGIN
+    within: Bools = (np.hypot(sx - cx, sy - cy) < limit) & (np.hypot(ex - cx, ey - cy) < limit)
+    return within
+
+
+def _line_polygon(st: _Stack, p: PathBatch, prism: Ints, path: Ints, protection: bool) -> Bools:
+    a, b = st.axes[0, prism], st.axes[1, prism]
+    result = np.zeros(prism.shape[0], np.bool_)
+    for k, table, rows in _by_table(st, prism):
+        pk = path[k]
+        ak, bk = a[k], b[k]
+        sx, sy = p.start[ak, pk][:, None], p.start[bk, pk][:, None]
+        ex, ey = p.end[ak, pk][:, None], p.end[bk, pk][:, None]
+        if table.convex:
+            # convex work polygon: the segment lies inside with the margin when both ends do
+            nx, ny, off = (
+                _take(table.nx, rows, table),
+                _take(table.ny, rows, table),
+                _take(table.off, rows, table),
+            )
+            start_in = np.all(sx * nx + sy * ny < off, axis=1)
+            end_in = np.all(ex * nx + ey * ny < off, axis=1)
+            result[k] = start_in & end_in
+            continue
+        x0, y0, x1, y1 = _edge_rows(table, rows)
+        apart = _segment_segment(sx, sy, ex, ey, x0, y0, x1, y1).min(axis=1) > MARGIN
+        inside = _inside(x0, y0, x1, y1, _take_real(table, rows), sx, sy)
+        result[k] = apart & (~inside if protection else inside)
+    return result
+
+
+def _take_real(table: _Table, rows: Ints) -> Bools:
+    if table.rows == 1:
+        return table.real
+    taken: Bools = table.real[rows]
+    return taken
 
 
 # --- arcs --------------------------------------------------------------------------------------------
-def _arc_test(
-    region: Polygon | Circle,
-    swap: bool,
-    cx: Floats,
-    cy: Floats,
-    r: Floats,
-    a0: Floats,
-    sweep: Floats,
-    sx: Floats,
-    sy: Floats,
-    ex: Floats,
-    ey: Floats,
-    protection: bool,
+def _arc_circle(
+    st: _Stack, p: PathBatch, plane: tuple[int, int], prism: Ints, path: Ints, swap: Bools, protection: bool
 ) -> Bools:
-    if isinstance(region, Circle):
-        px, py = (region.cy, region.cx) if swap else (region.cx, region.cy)
-        d = np.hypot(px - cx, py - cy)
-        to_end = np.hypot(px - ex, py - ey)
-        if protection:
-            # every point of the circle through the start is |d - r| or more from the centre
-            off_circle: Bools = (np.abs(d - r) > region.r + MARGIN) & (to_end > region.r + MARGIN)
-            return off_circle
-        limit = region.r - MARGIN
-        in_circle: Bools = (d + r < limit) & (to_end < limit)
-        return in_circle
-    if not protection:
-        halves = _half_planes(region)
-        if halves is not None:
-            # convex: the arc's whole circle and its end inside with the margin
-            nx, ny, off = halves
-            if swap:
-                nx, ny = ny, nx
-            reach = cx[:, None] * nx + cy[:, None] * ny + r[:, None]
-            circle_in = np.all(reach < off, axis=1)
-            end_in = np.all(ex[:, None] * nx + ey[:, None] * ny < off, axis=1)
-            all_in: Bools = np.logical_and(circle_in, end_in)
-            return all_in
-    qx0, qy0, qx1, qy1 = _edges(region)
-    if swap:
-        qx0, qy0, qx1, qy1 = qy0, qx0, qy1, qx1
-    col = (cx[:, None], cy[:, None], r[:, None], a0[:, None], sweep[:, None])
-    apart = (_arc_segment(*col, qx0, qy0, qx1, qy1).min(axis=1) > MARGIN) & (
-        _point_segment(ex[:, None], ey[:, None], qx0, qy0, qx1, qy1).min(axis=1) > MARGIN
-    )
-    inside_start = _inside(region, sy, sx) if swap else _inside(region, sx, sy)
-    inside_end = _inside(region, ey, ex) if swap else _inside(region, ex, ey)
-    result: Bools = apart & (~inside_start & ~inside_end if protection else inside_start & inside_end)
+    """Arcs in the base plane of circle prisms (the circle in the arcs' plane coordinates)."""
+    i, j = plane
+    px = np.where(swap, st.cy[prism], st.cx[prism])
+    py = np.where(swap, st.cx[prism], st.cy[prism])
+    cx, cy, r = p.centre[0, path], p.centre[1, path], p.radius[path]
+    d = np.hypot(px - cx, py - cy)
+    to_end = np.hypot(px - p.end[i, path], py - p.end[j, path])
+    radius = st.r[prism]
+    if protection:
+        # every point of the circle through the start is |d - r| or more from the centre
+        off_circle: Bools = (np.abs(d - r) > radius + MARGIN) & (to_end > radius + MARGIN)
+        return off_circle
+    limit = radius - MARGIN
+    in_circle: Bools = (d + r < limit) & (to_end < limit)
+    return in_circle
+
+
+def _arc_polygon(
+    st: _Stack, p: PathBatch, plane: tuple[int, int], prism: Ints, path: Ints, swap: Bools, protection: bool
+) -> Bools:
+    """Arcs in the base plane of polygon prisms (the edges in the arcs' plane coordinates)."""
+    i, j = plane
+    a, b = st.axes[0, prism], st.axes[1, prism]
+    result = np.zeros(prism.shape[0], np.bool_)
+    for k, table, rows in _by_table(st, prism):
+        pk = path[k]
+        cx, cy, r = p.centre[0, pk][:, None], p.centre[1, pk][:, None], p.radius[pk][:, None]
+        ex, ey = p.end[i, pk][:, None], p.end[j, pk][:, None]
+        flip = swap[k][:, None]
+        swapped = bool(flip.any())
+        if table.convex:
+            # convex work polygon: the arc's whole circle and its end inside with the margin
+            nx, ny, off = (
+                _take(table.nx, rows, table),
+                _take(table.ny, rows, table),
+                _take(table.off, rows, table),
+            )
+            if swapped:
+                nx, ny = np.where(flip, ny, nx), np.where(flip, nx, ny)
+            circle_in = np.all(cx * nx + cy * ny + r < off, axis=1)
+            end_in = np.all(ex * nx + ey * ny < off, axis=1)
+            result[k] = circle_in & end_in
+            continue
+        x0, y0, x1, y1 = _edge_rows(table, rows)
+        qx0, qy0, qx1, qy1 = x0, y0, x1, y1
+        if swapped:
+            qx0, qy0 = np.where(flip, y0, x0), np.where(flip, x0, y0)
+            qx1, qy1 = np.where(flip, y1, x1), np.where(flip, x1, y1)
+        to_arc = _arc_segment(cx, cy, r, p.start_angle[pk][:, None], p.sweep[pk][:, None], qx0, qy0, qx1, qy1)
+        to_end = _point_segment(ex, ey, qx0, qy0, qx1, qy1)
+        apart = (to_arc.min(axis=1) > MARGIN) & (to_end.min(axis=1) > MARGIN)
+        # start and end inside: in the prism's own coordinates, with its own edges
+        ak, bk = a[k], b[k]
+        real = _take_real(table, rows)
+        inside_start = _inside(x0, y0, x1, y1, real, p.start[ak, pk][:, None], p.start[bk, pk][:, None])
+        inside_end = _inside(x0, y0, x1, y1, real, p.end[ak, pk][:, None], p.end[bk, pk][:, None])
+        held = ~inside_start & ~inside_end if protection else inside_start & inside_end
+        result[k] = apart & held
     return result
 
 
@@ -278,31 +544,27 @@ def _arc_segment(
     where the segment's line crosses the circle - with angles near the arc counted as on it."""
     a1 = a0 + sweep
     inf = np.inf
-    best = np.minimum(
-        _point_segment(cx + r * np.cos(a0), cy + r * np.sin(a0), qx0, qy0, qx1, qy1),
-        _point_segment(cx + r * np.cos(a1), cy + r * np.sin(a1), qx0, qy0, qx1, qy1),
-    )
-    for qx, qy in ((qx0, qy0), (qx1, qy1)):
-        dq = np.hypot(qx - cx, qy - cy)
-        on = _on_sweep(np.arctan2(qy - cy, qx - cx), a0, sweep) | (dq <= 1e-12)
-        best = np.minimum(best, np.where(on, np.abs(dq - r), inf))
+    ends = np.stack((a0, a1))
+    best = _point_segment(cx + r * np.cos(ends), cy + r * np.sin(ends), qx0, qy0, qx1, qy1).min(axis=0)
     ux, uy = qx1 - qx0, qy1 - qy0
     l2 = ux * ux + uy * uy
     safe = np.where(l2 > 0.0, l2, 1.0)
     t = np.where(l2 > 0.0, ((cx - qx0) * ux + (cy - qy0) * uy) / safe, 0.0)
     fx, fy = qx0 + t * ux, qy0 + t * uy
     df = np.hypot(fx - cx, fy - cy)
-    foot_on = (t >= 0.0) & (t <= 1.0) & (_on_sweep(np.arctan2(fy - cy, fx - cx), a0, sweep) | (df <= 1e-12))
-    best = np.minimum(best, np.where(foot_on, np.abs(df - r), inf))
     h = np.sqrt(np.maximum(r * r - df * df, 0.0) / safe)
+    tt = np.stack((t - h, t + h))
+    # the angles of the segment's ends, its foot point and where its line crosses the circle, at once
+    dx = np.concatenate((np.stack((qx0, qx1)) - cx, (fx - cx)[None], qx0 + tt * ux - cx))
+    dy = np.concatenate((np.stack((qy0, qy1)) - cy, (fy - cy)[None], qy0 + tt * uy - cy))
+    on = _on_sweep(np.arctan2(dy, dx), a0, sweep)
+    dq = np.hypot(dx[:2], dy[:2])
+    best = np.minimum(best, np.where(on[:2] | (dq <= 1e-12), np.abs(dq - r), inf).min(axis=0))
+    foot_on = (t >= 0.0) & (t <= 1.0) & (on[2] | (df <= 1e-12))
+    best = np.minimum(best, np.where(foot_on, np.abs(df - r), inf))
     crossing = (df < r) & (l2 > 0.0)
-    for tt in (t - h, t + h):
-        xx, yy = qx0 + tt * ux, qy0 + tt * uy
-        hit = (
-            crossing & (tt >= -1e-9) & (tt <= 1.0 + 1e-9) & _on_sweep(np.arctan2(yy - cy, xx - cx), a0, sweep)
-        )
-        best = np.where(hit, 0.0, best)
-    result: Floats = best
+    hit = crossing & ((tt >= -1e-9) & (tt <= 1.0 + 1e-9) & on[3:]).any(axis=0)
+    result: Floats = np.where(hit, 0.0, best)
     return result
 
 
@@ -383,12 +645,11 @@ def _segment_segment(
     return result
 
 
-def _inside(poly: Polygon, x: Floats, y: Floats) -> Bools:
-    """Even-odd rule (as ``Polygon.classify``); only asked for points farther than MARGIN from every edge."""
-    x0, y0, x1, y1 = _edges(poly)
-    px, py = x[:, None], y[:, None]
+def _inside(x0: Floats, y0: Floats, x1: Floats, y1: Floats, real: Bools, px: Floats, py: Floats) -> Bools:
+    """Even-odd rule (as ``Polygon.classify``), one row per point, its polygon's edges across (those
+    not ``real`` skipped); only asked for points farther than MARGIN from every edge."""
     straddles = (y0 > py) != (y1 > py)
     dy = np.where(straddles, y1 - y0, 1.0)
-    crossings = straddles & (px < x0 + (py - y0) * (x1 - x0) / dy)
+    crossings = straddles & (px < x0 + (py - y0) * (x1 - x0) / dy) & real
     result: Bools = (crossings.sum(axis=1) % 2) == 1
     return result
