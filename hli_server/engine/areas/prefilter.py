@@ -290,15 +290,8 @@ def _group_clear(group: Group, p: PathBatch, clear: Bools) -> Bools:
     ok = clear.copy()
     prots = stacks.prots
     if prots.size:
-        near = np.repeat(ok[None, :], prots.size, axis=0)
-        for row in range(3):
-            axis = prots.axes[row]
-            near &= p.lo[axis] <= prots.upper[row]
-            near &= p.hi[axis] >= prots.lower[row]
-        flat = np.flatnonzero(near)
-        if flat.shape[0]:
-            prism = flat // n
-            path = flat - prism * n
+        prism, path = _box_pairs(prots, p, ok, protection=True)
+        if path.shape[0]:
             apart = _pairs(
                 prots,
                 p,
@@ -313,16 +306,9 @@ def _group_clear(group: Group, p: PathBatch, clear: Bools) -> Bools:
             ok[path[~apart]] = False
     works = stacks.works
     if works.size:
-        within = np.repeat(ok[None, :], works.size, axis=0)
-        for row in range(3):
-            axis = works.axes[row]
-            within &= p.lo[axis] >= works.lower[row]
-            within &= p.hi[axis] <= works.upper[row]
         inside = np.zeros(n, np.bool_)
-        flat = np.flatnonzero(within)
-        if flat.shape[0]:
-            prism = flat // n
-            path = flat - prism * n
+        prism, path = _box_pairs(works, p, ok, protection=False)
+        if path.shape[0]:
             held = _pairs(
                 works,
                 p,
@@ -337,6 +323,25 @@ def _group_clear(group: Group, p: PathBatch, clear: Bools) -> Bools:
             inside[path[held]] = True
         ok &= inside
     return ok
+
+
+def _box_pairs(st: _Stack, p: PathBatch, ok: Bools, protection: bool) -> tuple[Ints, Ints]:
+    """The (prism, path) pairs, among the paths still ``ok``, that the box test leaves to the region
+    tests: protection - the boxes meet (the prism's grown by MARGIN); work - the path's box lies within
+    the prism's (shrunk by MARGIN)."""
+    n = ok.shape[0]
+    hit = np.repeat(ok[None, :], st.size, axis=0)
+    for row in range(3):
+        axis = st.axes[row]
+        if protection:
+            hit &= p.lo[axis] <= st.upper[row]
+            hit &= p.hi[axis] >= st.lower[row]
+        else:
+            hit &= p.lo[axis] >= st.lower[row]
+            hit &= p.hi[axis] <= st.upper[row]
+    flat: Ints = np.flatnonzero(hit)
+    prism: Ints = flat // n
+    return prism, flat - prism * n
 
 
 def _pairs(
