@@ -19,12 +19,11 @@ docs/performance.md, "Compiled engine", has the figures.
 
 from __future__ import annotations
 
+import importlib.util
 import os
-import platform
-import shutil
 import sys
-import sysconfig
 from pathlib import Path
+from types import ModuleType
 
 from setuptools import setup
 
@@ -32,48 +31,29 @@ HERE = Path(__file__).parent
 ENGINE = HERE / "hli_server" / "engine"
 
 
-def _why_not_compiled() -> str | None:
-    if os.environ.get("HLI_PURE_PYTHON", "") not in ("", "0"):
-        return "HLI_PURE_PYTHON is set"
-    if platform.python_implementation() != "CPython":
-        return f"{platform.python_implementation()} is not CPython"
-    compiler = (sysconfig.get_config_var("CC") or "cc").split()[0]
-    if shutil.which(compiler) is None:
-        return f"no C compiler ({compiler})"
-    include = sysconfig.get_paths().get("include") or ""
-    if not (Path(include) / "Python.h").exists():
-        return f"no Python headers (Python.h in {include})"
-    try:
-        import mypyc.build  # noqa: F401
-    except ImportError:
-        return "mypyc is not installed"
-    return None
-
-
-def _not_compiled() -> tuple[str, ...]:
-    """The engine files that stay Python, as ``hli_server/_compiled.py`` lists them (read from the
-    file: the package is not importable while it is being built)."""
-    import ast
-
-    tree = ast.parse((HERE / "hli_server" / "_compiled.py").read_text(encoding="utf-8"))
-    for node in tree.body:
-        if isinstance(node, ast.Assign) and any(
-            isinstance(t, ast.Name) and t.id == "NOT_COMPILED" for t in node.targets
-        ):
-            value = ast.literal_eval(node.value)
-            assert isinstance(value, tuple)
-            return value
-    raise RuntimeError("hli_server/_compiled.py: NOT_COMPILED not found")
+def _compiled_module() -> ModuleType:
+    """``hli_server/_compiled.py``, loaded by its path (stdlib only; the package is not importable while
+    it is being built): it says what stays Python (``NOT_COMPILED``) and whether this machine can
+    compile the rest (``why_not_compilable``), for this build and for the test that checks the install."""
+    spec = importlib.util.spec_from_file_location("_hli_compiled", HERE / "hli_server" / "_compiled.py")
+    assert spec is not None
+    assert spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def _ext_modules() -> list[object]:
-    why = _why_not_compiled()
+    compiled = _compiled_module()
+    why = compiled.why_not_compilable()
     if why is not None:
         print(f"hli-server: engine not compiled ({why}): pure Python", file=sys.stderr)
         return []
     from mypyc.build import mypycify
 
-    sources = sorted(str(p.relative_to(HERE)) for p in ENGINE.rglob("*.py") if p.name not in _not_compiled())
+    sources = sorted(
+        str(p.relative_to(HERE)) for p in ENGINE.rglob("*.py") if p.name not in compiled.NOT_COMPILED
+    )
     # IEEE results identical to the interpreter's: no fused multiply-add contracted by the compiler
     os.environ["CFLAGS"] = (os.environ.get("CFLAGS", "") + " -ffp-contract=off").strip()
     print(f"hli-server: compiling {len(sources)} engine modules with mypyc", file=sys.stderr)

@@ -23,13 +23,16 @@ import importlib.abc
 import importlib.machinery
 import importlib.util
 import os
+import platform
+import shutil
 import sys
+import sysconfig
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
 
-__all__ = ["ENGINE_COMPILED", "NOT_COMPILED", "PURE_ENV", "select", "stale_modules"]
+__all__ = ["ENGINE_COMPILED", "NOT_COMPILED", "PURE_ENV", "select", "stale_modules", "why_not_compilable"]
 
 PURE_ENV = "HLI_PURE_PYTHON"
 """Set to 1 to run the engine as pure Python although it is compiled."""
@@ -45,6 +48,27 @@ _ENGINE_DIR = Path(__file__).with_name("engine")
 
 ENGINE_COMPILED = False
 """True when this process runs the mypyc-compiled engine (set by :func:`select`)."""
+
+
+def why_not_compilable() -> str | None:
+    """Why ``pip install`` here builds the engine as pure Python (``setup.py`` asks this, loading this
+    file by its path: stdlib only), or None where it compiles it: CPython, a C compiler, the Python
+    headers, ``HLI_PURE_PYTHON`` not set, and mypyc importable."""
+    if os.environ.get(PURE_ENV, "") not in ("", "0"):
+        return f"{PURE_ENV} is set"
+    if platform.python_implementation() != "CPython":
+        return f"{platform.python_implementation()} is not CPython"
+    compiler = (sysconfig.get_config_var("CC") or "cc").split()[0]
+    if shutil.which(compiler) is None:
+        return f"no C compiler ({compiler})"
+    include = sysconfig.get_paths().get("include") or ""
+    if not (Path(include) / "Python.h").exists():
+        return f"no Python headers (Python.h in {include})"
+    try:
+        import mypyc.build  # noqa: F401 - only where a build is asked about
+    except ImportError:
+        return "mypyc is not installed"
+    return None
 
 
 def _compiled_file(source: Path) -> Path | None:

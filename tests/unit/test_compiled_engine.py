@@ -85,21 +85,12 @@ def test_pure_python_can_be_forced_for_debugging() -> None:
 
 def test_an_install_with_a_c_compiler_compiled_the_engine() -> None:
     """A build that falls back to pure Python says so only in pip's verbose output; the suite says it
-    loudly where the machine could have compiled (a C compiler and the Python headers: what setup.py
-    asks for). It once fell back on a fresh machine because numpy, new in the engine, was missing from
-    the build requirements (pyproject.toml [build-system]): mypyc type-checks what the engine imports."""
-    import platform
-    import shutil
-    import sysconfig
-
-    if os.environ.get(compiled.PURE_ENV, "") not in ("", "0"):
-        pytest.skip(f"{compiled.PURE_ENV} is set: pure Python on purpose")
-    if platform.python_implementation() != "CPython":
-        pytest.skip("not CPython: the engine is pure Python")
-    compiler = (sysconfig.get_config_var("CC") or "cc").split()[0]
-    headers = Path(sysconfig.get_paths().get("include") or "") / "Python.h"
-    if shutil.which(compiler) is None or not headers.exists():
-        pytest.skip("no C compiler or no Python headers here: the engine is pure Python")
+    loudly where the machine could have compiled (``why_not_compilable``, which setup.py asks too). It
+    once fell back on a fresh machine because numpy, new in the engine, was missing from the build
+    requirements (pyproject.toml [build-system]): mypyc type-checks what the engine imports."""
+    why = compiled.why_not_compilable()  # what setup.py asks
+    if why is not None:
+        pytest.skip(f"the engine is pure Python here: {why}")
     built, missing = compiled.stale_modules()
     assert built, (
         "the engine was installed as pure Python although this machine can compile it: run "
