@@ -6,8 +6,11 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
-__all__ = ["DOORS", "door_port", "hli_server_cmd", "read_banner", "start_server", "stop_server"]
+import httpx
+
+__all__ = ["DOORS", "door_port", "hli_server_cmd", "http_step", "read_banner", "start_server", "stop_server"]
 
 DOORS = ("HTTP control API", "Modbus TCP", "ADS (AMS/TCP)", "MQTT")
 """The doors' names as the banner starts their lines."""
@@ -66,3 +69,11 @@ def stop_server(proc: subprocess.Popen[str], timeout: float = 10.0) -> None:
 def door_port(line: str) -> int:
     """The port of a door's banner line: ``Modbus TCP: 127.0.0.1:5020  (...)`` -> 5020."""
     return int(line.split(": ", 1)[1].split(maxsplit=1)[0].rsplit(":", 1)[1])
+
+
+async def http_step(client: httpx.AsyncClient, cycles: int) -> dict[str, Any]:
+    """``POST /api/step`` on a stepped clock: ``cycles`` cycles; the reply's body."""
+    r = await client.post("/api/step", json={"cycles": cycles})
+    assert r.status_code == 200, r.text
+    body: dict[str, Any] = r.json()
+    return body

@@ -18,6 +18,7 @@ from hli_server.runtime import Runtime
 from hli_server.testing import Harness
 from schemas.config import MachineConfig, ProgramEntry
 from schemas.wire import HoldSource, ProgramState
+from tests.integration.servers import http_step as step
 
 PROGRAM = "N10 G01 X20 Y10 F6000\nN20 G01 X0 Y0\nN30 M30\n"
 OVERRIDE = "gpCh[0]^bahn_mc_control.override"
@@ -27,13 +28,6 @@ OVERRIDE = "gpCh[0]^bahn_mc_control.override"
 async def client(hli: Harness) -> AsyncIterator[httpx.AsyncClient]:
     async with httpx.AsyncClient(base_url=hli.http_url, timeout=10) as c:
         yield c
-
-
-async def step(client: httpx.AsyncClient, cycles: int) -> dict[str, Any]:
-    r = await client.post("/api/step", json={"cycles": cycles})
-    assert r.status_code == 200, r.text
-    body: dict[str, Any] = r.json()
-    return body
 
 
 def url_path(st_path: str) -> str:

@@ -19,6 +19,7 @@ import pytest
 from hli_server.configuration import load_machine
 from hli_server.engine.hli import ProgramState
 from hli_server.runtime import Runtime
+from tests.integration.servers import http_step as step
 
 X_1E305 = "N10 G01 X1" + "0" * 305 + " F1000\nN20 M30\n"
 GOOD = "N10 G01 X20 F6000\nN20 M30\n"
@@ -34,13 +35,6 @@ async def runtime() -> AsyncIterator[Runtime]:
 async def client(runtime: Runtime) -> AsyncIterator[httpx.AsyncClient]:
     async with httpx.AsyncClient(base_url=runtime.http_url, timeout=10) as c:
         yield c
-
-
-async def step(client: httpx.AsyncClient, cycles: int) -> dict[str, Any]:
-    r = await client.post("/api/step", json={"cycles": cycles})
-    assert r.status_code == 200, r.text
-    body: dict[str, Any] = r.json()
-    return body
 
 
 async def load_and_start(client: httpx.AsyncClient, text: str) -> None:

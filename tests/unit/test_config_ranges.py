@@ -8,7 +8,6 @@ reports each with file, line and key in the usual form.
 from __future__ import annotations
 
 import math
-import textwrap
 from pathlib import Path
 
 import annotated_types
@@ -16,21 +15,9 @@ import pytest
 from pydantic import BaseModel, ValidationError
 
 import schemas.config as config_models
-from hli_server.configuration import ConfigError, load_machine
 from schemas.config import AxisConfig, ChannelConfig, DriveModel
 from schemas.units import ACCELERATION_LIMIT, VELOCITY_LIMIT_MM_PER_MIN
-
-
-def write(directory: Path, name: str, text: str) -> Path:
-    path = directory / name
-    path.write_text(textwrap.dedent(text).lstrip("\n"), encoding="utf-8")
-    return path
-
-
-def errors_of(path: Path) -> list[str]:
-    with pytest.raises(ConfigError) as info:
-        load_machine(path)
-    return info.value.messages
+from tests.unit.config_helpers import errors_of, write
 
 
 def _models() -> list[type[BaseModel]]:

@@ -34,6 +34,7 @@ from schemas.config import (
     MachineConfig,
 )
 from schemas.units import increments_from_mm, mm_per_min_to_mm_per_s, s_from_us
+from tests.unit.config_helpers import errors_of, write
 
 DOCS = Path(__file__).resolve().parents[2] / "docs" / "configuration.md"
 
@@ -41,18 +42,6 @@ LATER_CHECKS_NOTE = (
     "note: the checks across the machine (collision pairs, which axes belong to which channel) "
     "run once the findings above are fixed: validate again then"
 )
-
-
-def write(directory: Path, name: str, text: str) -> Path:
-    path = directory / name
-    path.write_text(textwrap.dedent(text).lstrip("\n"), encoding="utf-8")
-    return path
-
-
-def errors_of(path: Path) -> list[str]:
-    with pytest.raises(ConfigError) as info:
-        load_machine(path)
-    return info.value.messages
 
 
 def machine_with_lists(tmp_path: Path, axes: dict[str, str], channels: list[list[str]]) -> Path:
