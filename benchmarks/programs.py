@@ -223,16 +223,21 @@ def _near_moves(blocks: int) -> Iterator[tuple[str, tuple[float, ...]]]:
         tour += 1
 
 
-def near_area_lines(blocks: int, with_areas: bool = True) -> Iterator[str]:
-    """The near-area program, line by line (``blocks`` motion blocks after the header)."""
-    if with_areas:
-        yield from area_header().splitlines()
-    yield "G90 G17 G01 X0 Y0 Z-5 F6000"
+def _near_move_lines(blocks: int) -> Iterator[str]:
+    """The near-area program's moves, written alike in both dialects (G01, G02/G03 with I/J)."""
     for kind, v in _near_moves(blocks):
         if kind == "L":
             yield f"G01 X{_f(v[0])} Y{_f(v[1])}"
         else:
             yield f"G0{2 if v[4] else 3} X{_f(v[0])} Y{_f(v[1])} I{_f(v[2])} J{_f(v[3])}"
+
+
+def near_area_lines(blocks: int, with_areas: bool = True) -> Iterator[str]:
+    """The near-area program, line by line (``blocks`` motion blocks after the header)."""
+    if with_areas:
+        yield from area_header().splitlines()
+    yield "G90 G17 G01 X0 Y0 Z-5 F6000"
+    yield from _near_move_lines(blocks)
     yield "M30"
 
 
@@ -252,11 +257,7 @@ def near_area_lines_rs274(blocks: int) -> Iterator[str]:
     """The same moves in LinuxCNC's dialect (no areas: rs274 has none), for ``rs274 -g``."""
     yield "G21 G90 G17 G94 G40 G49 G80"
     yield "G01 X0 Y0 Z-5 F6000"
-    for kind, v in _near_moves(blocks):
-        if kind == "L":
-            yield f"G01 X{_f(v[0])} Y{_f(v[1])}"
-        else:
-            yield f"G0{2 if v[4] else 3} X{_f(v[0])} Y{_f(v[1])} I{_f(v[2])} J{_f(v[3])}"
+    yield from _near_move_lines(blocks)
     yield "M2"
 
 
