@@ -35,13 +35,18 @@ def _run_scenarios(pure: bool) -> subprocess.CompletedProcess[str]:
         "bad = [n for n, (run, size) in t.SCENARIOS.items() if run(size)[0] != rec[n]['digest']]\n"
         "print(json.dumps({'compiled': c.ENGINE_COMPILED, 'differ': bad}))\n"
     )
+    return _python(code, env, timeout=600)
+
+
+def _python(code: str, env: dict[str, str], timeout: float) -> subprocess.CompletedProcess[str]:
+    """``code`` run by this interpreter in a second process, from the checkout, with ``env``."""
     return subprocess.run(
         [sys.executable, "-c", code],
         cwd=ROOT,
         env=env,
         capture_output=True,
         text=True,
-        timeout=600,
+        timeout=timeout,
         check=False,
     )
 
@@ -70,15 +75,7 @@ def test_pure_python_can_be_forced_for_debugging() -> None:
         "import hli_server._compiled as c, hli_server.engine.machine as m, hli_server.engine.nc.parser as p\n"
         "print(c.ENGINE_COMPILED, m.__file__.endswith('.py'), p.__file__.endswith('.py'))\n"
     )
-    done = subprocess.run(
-        [sys.executable, "-c", code],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
+    done = _python(code, env, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["False", "True", "True"]
 
