@@ -33,10 +33,10 @@ import os
 import struct
 import threading
 from collections.abc import Collection, Iterable
-from types import TracebackType
-from typing import Any, ClassVar, Final, Self
+from typing import Any, ClassVar, Final
 
 from hli_server.codecs.ads import AdsCodecError, decode_symbol_upload
+from plc_clients._closing import ClosesOnExit
 from plc_clients.transports import (
     CYCLE_SIGNAL,
     Inputs,
@@ -140,7 +140,7 @@ def _pyads() -> Any:
     return pyads
 
 
-class AdsTransport:
+class AdsTransport(ClosesOnExit):
     """ADS/TCP with pyads' ``Connection`` (blocking). Construct with :meth:`connect`."""
 
     is_async: ClassVar[bool] = False
@@ -330,14 +330,6 @@ class AdsTransport:
     def cycle(self) -> int:
         """The CNC's newest cycle (one request)."""
         return self._counter.update(int(self.read(CYCLE_SIGNAL)))
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
     def __repr__(self) -> str:
         return f"AdsTransport({self.host!r}, {self.port}, {self.ams_net_id}:{self.ams_port})"

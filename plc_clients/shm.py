@@ -31,9 +31,9 @@ import time
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from multiprocessing import shared_memory
-from types import TracebackType
 from typing import Any
 
+from plc_clients._closing import ClosesOnExit
 from schemas import image_format as fmt
 from schemas.image_format import (
     ImageBusyError,
@@ -76,7 +76,7 @@ class Snapshot:
         return self.layout.unpack(Direction.CNC_TO_PLC, self.data)
 
 
-class ImageClient:
+class ImageClient(ClosesOnExit):
     """A PLC's handle on the image. Attach with :meth:`attach` (shared memory, by name) or
     :meth:`over` (a buffer of this process); use as a context manager."""
 
@@ -176,14 +176,6 @@ class ImageClient:
                 self._shm.close()
             else:
                 self._buf.release()
-
-    def __enter__(self) -> ImageClient:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
     def __repr__(self) -> str:
         state = "closed" if self._closed else "open"

@@ -63,9 +63,9 @@ import urllib.request
 from collections.abc import Callable, Collection, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import TracebackType
-from typing import TYPE_CHECKING, Any, ClassVar, Final, Protocol, Self, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, Final, Protocol, runtime_checkable
 
+from plc_clients._closing import ClosesOnExit
 from plc_clients.modbus_codec import ModbusCodec, ReadRequest
 from plc_clients.shm import ImageClient, ImageError
 from schemas.layout import (
@@ -271,7 +271,7 @@ class _SnapshotValues(Mapping[str, Value]):
         return len(self._paths)
 
 
-class ShmTransport:
+class ShmTransport(ClosesOnExit):
     """The shared-memory image (H-01) through :class:`~plc_clients.shm.ImageClient`.
 
     Never blocks (no system call per access), so it can be used from an event loop as well as
@@ -341,14 +341,6 @@ class ShmTransport:
 
     def close(self) -> None:
         self.client.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
     def __repr__(self) -> str:
         return f"ShmTransport({self.client.name!r})"
@@ -637,7 +629,7 @@ _EXCEPTION_HINT: Final = {
 }
 
 
-class ModbusTransport(_ModbusCommon):
+class ModbusTransport(_ModbusCommon, ClosesOnExit):
     """Modbus TCP with pymodbus' synchronous ``ModbusTcpClient`` (H-03): for scripts and threads.
 
     Every call waits for the server (``blocking``): do not use it inside an event loop that also
@@ -747,14 +739,6 @@ class ModbusTransport(_ModbusCommon):
 
     def close(self) -> None:
         self._client.close()
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
     def __repr__(self) -> str:
         return f"ModbusTransport({self.host!r}, {self.port}, word order {self.codec.word_order})"
