@@ -272,7 +272,9 @@ class BatchGeometryCheck:
         if count == 0:
             return
         decoder = self.decoder
-        if decoder.modal.in_area_definition or count < SMALL_RUN + SMALL_RUN_PER_AREA * self._active_areas():
+        groups, all_exact = self._checks()
+        areas = sum(len(g.works) + len(g.prots) for g in groups)
+        if decoder.modal.in_area_definition or count < SMALL_RUN + SMALL_RUN_PER_AREA * areas:
             for k in idx.tolist():
                 self.line = chunk.first_line + k
                 self.exact_blocks += 1
@@ -280,9 +282,9 @@ class BatchGeometryCheck:
                 if decoder.finished:
                     return
             return
-        yield from self._batch(chunk, idx)
+        yield from self._batch(chunk, idx, groups, all_exact)
 
-    def _batch(self, chunk: _Chunk, idx: Ints) -> Iterator[list[Item]]:
+    def _batch(self, chunk: _Chunk, idx: Ints, groups: list[Group], all_exact: bool) -> Iterator[list[Item]]:
         decoder = self.decoder
         modal = decoder.modal
         count = int(idx.shape[0])
@@ -303,7 +305,6 @@ class BatchGeometryCheck:
             hi = np.maximum(start, end)
             arcs = self._arcs(values, motion, start, end, arc, exact, lo, hi)
             exact |= self._outside_limits(lo, hi) & moving
-            groups, all_exact = self._checks()
             if all_exact:
                 exact |= moving
             sel = np.flatnonzero(moving & ~exact)
@@ -465,9 +466,6 @@ class BatchGeometryCheck:
                 for k, axis in enumerate(check.channel.axes):
                     near |= (lo[k] < axis.swe_neg + MARGIN) | (hi[k] > axis.swe_pos - MARGIN)
         return near
-
-    def _active_areas(self) -> int:
-        return sum(len(g.works) + len(g.prots) for g in self._checks()[0])
 
     def _checks(self) -> tuple[list[Group], bool]:
         """The active area groups of the channel's area checks (planned table), and whether every
