@@ -47,6 +47,7 @@ __all__ = [
     "OperatorPort",
     "StepRefusedError",
     "Trace",
+    "UnavailableError",
     "Value",
 ]
 
@@ -95,6 +96,10 @@ class InvalidRequestError(OperatorError, ValueError):
 
 class StepRefusedError(OperatorError):
     """``step()`` outside the stepped clock, or while the runtime does not run."""
+
+
+class UnavailableError(OperatorError):
+    """The engine cannot answer now (the doors process lost it, or it did not answer in time): 503."""
 
 
 @dataclass(frozen=True, slots=True)

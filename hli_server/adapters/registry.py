@@ -81,8 +81,10 @@ class AdapterKind:
     """Started by ``hli-server run`` unless switched off (``--no-http``)."""
     summary: str
     image_only: bool = False
-    """Serves the process image and nothing else (no operator, no events): it can run in the doors
-    process (``hli-server run --doors-process``)."""
+    """Serves the process image and nothing else (no operator, no events)."""
+    doors: bool = False
+    """Can be served from the doors process (``hli-server run --doors-process``, the default): its host's
+    operator, events and step reach the engine's process over a socket (``runtime/remote.py``)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,6 +112,7 @@ ADAPTERS: dict[str, AdapterKind] = {
             "hli_server.adapters.http.options:HttpOptions",
             default=True,
             summary="the HTTP control API (operator panel, remote control of tests)",
+            doors=True,
         ),
         AdapterKind(
             "modbus",
@@ -118,6 +121,7 @@ ADAPTERS: dict[str, AdapterKind] = {
             default=True,
             summary="Modbus TCP view of the process image (H-03)",
             image_only=True,
+            doors=True,
         ),
         AdapterKind(
             "ads",
@@ -126,6 +130,7 @@ ADAPTERS: dict[str, AdapterKind] = {
             default=False,
             summary="ADS over TCP: HLI symbols on AMS port 851, FCT-C3 CNC objects on port 551 (H-04, C3-10)",
             image_only=True,
+            doors=True,
         ),
         AdapterKind(
             "mqtt",
@@ -133,6 +138,7 @@ ADAPTERS: dict[str, AdapterKind] = {
             "hli_server.adapters.mqtt:MqttOptions",
             default=False,
             summary="MQTT events to a broker, JSON per event kind (H-05; docs/mqtt.md)",
+            doors=True,
         ),
     )
 }

@@ -31,6 +31,7 @@ from hli_server.adapters.host import AccessPolicy
 from hli_server.adapters.registry import CLI_ALIASES, AdapterError, options_model, plan_adapters
 from hli_server.configuration import ConfigError, ConfigFileError, load_machine, machine_summary
 from hli_server.runtime import Clock, Runtime, precise_event_loop
+from hli_server.runtime.pacing import probed_default_loop
 
 __all__ = ["run"]
 
@@ -257,7 +258,7 @@ def run(
         ctx.exit(_EXIT_START)
 
     try:
-        loop_factory = precise_event_loop if event_loop == "select" else None
+        loop_factory = precise_event_loop if event_loop == "select" else probed_default_loop
         with asyncio.Runner(loop_factory=loop_factory) as runner:
             runner.run(runtime.serve(ready=lambda rt: _banner(rt, event_loop)))
     except KeyboardInterrupt:  # Ctrl+C before the signal handlers were installed

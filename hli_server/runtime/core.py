@@ -28,7 +28,7 @@ import logging
 import signal
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from hli_server.adapters.host import AccessPolicy, LoggedEvent, Trace
 from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
@@ -44,6 +44,7 @@ from hli_server.runtime.pacing import (
     PacingStats,
     run_free,
     run_realtime,
+    summarize,
 )
 from hli_server.runtime.programs import read_program_file
 
@@ -55,12 +56,22 @@ if TYPE_CHECKING:
     from schemas.events import Event
     from schemas.layout import Layout
 
-__all__ = ["AdapterSpec", "Recording", "Runtime", "RuntimeStateError"]
+__all__ = ["AdapterSpec", "Recording", "RequestService", "Runtime", "RuntimeStateError", "summarize_timing"]
 
 logger = logging.getLogger(__name__)
 
 FAILURE_LOG_INTERVAL_S = 5.0
 """A cycle that keeps failing is logged with its traceback at most this often."""
+
+
+class RequestService(Protocol):
+    """Work the clock's loop does between cycles (``runtime/remote.py``'s ``OperatorService``)."""
+
+    def flush(self) -> None: ...
+
+    def serve(self, deadline: float) -> None: ...
+
+    def serve_all(self) -> None: ...
 
 
 class RuntimeStateError(RuntimeError):
@@ -122,6 +133,7 @@ class Runtime:
         self.event_log = EventLog()
         self.machine.event_listeners.append(self.event_log)
         self._cycle_listeners: list[Callable[[int], None]] = []
+        self._services: list[RequestService] = []
         self._recorders: list[SignalRecorder] = []
         self.operator = OperatorPanel(self.machine, self.timing)
         self.host = RuntimeHost(self, self.operator)
@@ -169,9 +181,16 @@ class Runtime:
 
     @property
     def http_url(self) -> str:
-        """Base URL of the HTTP control API (after start)."""
-        url: str = getattr(self.adapter("http"), "url")  # noqa: B009 - the HTTP adapter's own attribute
-        return url
+        """Base URL of the HTTP control API (after start; in this process or the doors process)."""
+        for a in self.adapters:
+            if a.name == "http":
+                url: str = getattr(a, "url")  # noqa: B009 - the HTTP adapter's own attribute
+                return url
+            door_url = getattr(a, "door_url", None)
+            if door_url is not None and door_url("http") is not None:
+                found: str = door_url("http")
+                return found
+        raise KeyError(f"no HTTP adapter is running (running: {[a.name for a in self.adapters]})")
 
     def endpoints(self) -> list[str]:
         """Where everything listens, one line each (the ``run`` banner)."""
@@ -202,6 +221,32 @@ class Runtime:
                 self._cycle_listeners.remove(listener)
 
         return unsubscribe
+
+    # --- requests served between cycles (the doors process: runtime/remote.py) ------------------
+    def add_service(self, service: RequestService) -> Callable[[], None]:
+        """Serve ``service`` between cycles: ``flush()`` after every batch of cycles, ``serve(deadline)``
+        in the slack before the next realtime cycle is due (see :attr:`defers_requests`). Returns the
+        call that removes it."""
+        self._services.append(service)
+
+        def remove() -> None:
+            with contextlib.suppress(ValueError):
+                self._services.remove(service)
+
+        return remove
+
+    @property
+    def defers_requests(self) -> bool:
+        """True while the realtime clock runs: a service queues what arrives and the clock serves it
+        between cycles; otherwise a service answers at once."""
+        return self.clock is Clock.REALTIME and self._pacer is not None and not self._pacer.done()
+
+    def _serve_between_cycles(self, deadline: float) -> None:
+        for service in self._services:
+            try:
+                service.serve(deadline)
+            except Exception:  # a service's bug must not stop the clock
+                logger.exception("service %r failed between cycles", service)
 
     # --- per-cycle traces (H-07) -------------------------------------------------------------
     def record(self, signals: Sequence[str]) -> Recording:
@@ -268,6 +313,7 @@ class Runtime:
         self.stats.started_at = time.monotonic()
         self.stats.cycles_at_start = self.machine.cycle
         if self.clock is Clock.REALTIME:
+            self.stats.gc.install()
             self._pacer = asyncio.create_task(
                 run_realtime(
                     self._one_cycle,
@@ -275,6 +321,7 @@ class Runtime:
                     self._cycles_left,
                     self.stats,
                     max_catch_up=self.max_catch_up,
+                    serve=self._serve_between_cycles,
                 ),
                 name="hli-runtime-realtime",
             )
@@ -301,8 +348,10 @@ class Runtime:
         return adapter
 
     def _in_process_specs(self) -> list[AdapterSpec]:
-        """The adapters to start here; with ``doors_process`` the image-only ones go to one
-        :class:`~hli_server.runtime.doors.DoorsProcess`, started in their place."""
+        """The adapters to start here; with ``doors_process`` the network doors (every registered kind
+        that can: ``image_only`` or ``doors``) go to one :class:`~hli_server.runtime.doors.DoorsProcess`,
+        started in their place, and the clock's loop keeps only the cycle and the requests it serves
+        between cycles."""
         if not self.doors_process:
             return list(self._adapter_specs)
         from hli_server.adapters.registry import ADAPTERS
@@ -315,7 +364,7 @@ class Runtime:
                 (spec, {}) if isinstance(spec, str) else spec if isinstance(spec, tuple) else ("", {})
             )
             kind = ADAPTERS.get(name)
-            if kind is not None and kind.image_only:
+            if kind is not None and (kind.image_only or kind.doors):
                 moved.append((name, dict(options)))
             else:
                 here.append(spec)
@@ -324,15 +373,7 @@ class Runtime:
                 raise RuntimeStateError(
                     "the doors process needs the image in shared memory (the default image)"
                 )
-            here.append(
-                DoorsProcess(
-                    moved,
-                    bind=self.bind,
-                    policy=self.policy,
-                    t_a_us=self.config.cycle_time_us,
-                    machine_name=self.config.name,
-                )
-            )
+            here.append(DoorsProcess(moved, runtime=self))
         return here
 
     def _make_adapter(self, spec: AdapterSpec) -> Adapter:
@@ -357,6 +398,7 @@ class Runtime:
             # a failure of the clock was recorded by _pacer_done and is raised by wait_stopped/serve;
             # here it must not keep the adapters and the image from being closed
             await asyncio.wait([self._pacer])
+        self.stats.gc.uninstall()
         errors: list[BaseException] = []
         for adapter in reversed(self._started_adapters):
             try:
@@ -427,6 +469,8 @@ class Runtime:
         self.request_stop()
 
     def _pacer_done(self, task: asyncio.Task[None]) -> None:
+        for service in self._services:  # what waited for the clock's slack is served now
+            asyncio.get_running_loop().call_soon(service.serve_all)
         if task.cancelled():
             return
         exc = task.exception()
@@ -475,6 +519,8 @@ class Runtime:
 
     def _after_cycles(self) -> None:
         cycle = self.machine.cycle
+        for service in self._services:
+            service.flush()
         if self._cycle_waiters:
             keep: list[tuple[int, asyncio.Future[None]]] = []
             for target, fut in self._cycle_waiters:
@@ -555,13 +601,24 @@ class Runtime:
     # --- reporting ------------------------------------------------------------------------
     def timing(self) -> dict[str, Any]:
         """Pacing statistics (``GET /api/timing``)."""
-        out = self.stats.summary(self.clock, self.machine.cycle)
-        out["failed_cycles"] = self.failed_cycles
-        return out
+        return summarize_timing(self.timing_raw())
+
+    def timing_raw(self) -> dict[str, Any]:
+        """:meth:`timing` before its percentiles are sorted out (cheap: the doors process sorts)."""
+        raw = self.stats.raw(self.clock, self.machine.cycle)
+        raw["failed_cycles"] = self.failed_cycles
+        return raw
 
     def __repr__(self) -> str:
         state = "stopped" if self.stopped else "running" if self.started else "new"
         return f"Runtime({self.config.name!r}, {self.clock} clock, cycle {self.machine.cycle}, {state})"
+
+
+def summarize_timing(raw: dict[str, Any]) -> dict[str, Any]:
+    """``GET /api/timing`` from :meth:`Runtime.timing_raw`."""
+    out = summarize(raw)
+    out["failed_cycles"] = raw.get("failed_cycles", 0)
+    return out
 
 
 def _trace(recorder: SignalRecorder) -> Trace:

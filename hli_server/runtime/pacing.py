@@ -22,25 +22,38 @@ call ``run_cycle()`` for one cycle and ``after_cycles()`` after each batch.
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import gc
 import logging
 import math
 import select
 import selectors
 import time
+from array import array
+from collections import deque
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any
 
 __all__ = [
+    "CAUSES",
     "FREE_SLICE_S",
     "STEP_BATCH",
     "Clock",
     "ClockError",
+    "GcProbe",
     "PacingStats",
     "PreciseEpollSelector",
+    "ProbedEpollSelector",
+    "SlowCycle",
+    "WaitProbe",
+    "loop_probe",
     "precise_event_loop",
+    "probed_default_loop",
     "run_free",
     "run_realtime",
+    "summarize",
 ]
 
 logger = logging.getLogger(__name__)
@@ -64,7 +77,45 @@ class ClockError(RuntimeError):
     """An operation that the current clock does not allow (e.g. ``step`` outside stepped mode)."""
 
 
-class PreciseEpollSelector(selectors.EpollSelector):
+class WaitProbe:
+    """When the event loop last *waited* (a select with a timeout other than zero): the clock's tracer
+    tells from it whether a late wake-up was the loop's fault (it was busy past the due time before it
+    got to wait), the operating system's (the wait returned later than asked: the process was not
+    scheduled) or other callbacks' (ready at the same time and run first). A selector that has these
+    attributes is a probe; :func:`loop_probe` finds it."""
+
+    wait_began = 0.0
+    """``time.monotonic()`` when the newest blocking wait began."""
+    wait_until = 0.0
+    """When it was asked to end (``wait_began`` + timeout; ``inf`` without a timeout)."""
+    wait_ended = 0.0
+    """When it returned."""
+
+    def _note(self, began: float, timeout: float | None) -> None:
+        self.wait_began = began
+        self.wait_until = began + timeout if timeout is not None else math.inf
+        self.wait_ended = time.monotonic()
+
+
+class ProbedEpollSelector(WaitProbe, selectors.EpollSelector):
+    """asyncio's own selector on Linux (``--event-loop default``), its waits noted (:class:`WaitProbe`)."""
+
+    def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
+        if timeout is not None and timeout <= 0:
+            return super().select(timeout)
+        began = time.monotonic()
+        ready = super().select(timeout)
+        self._note(began, timeout)
+        return ready
+
+
+def loop_probe(loop: asyncio.AbstractEventLoop) -> WaitProbe | None:
+    """The :class:`WaitProbe` of ``loop``'s selector, if it has one (the loops of this module do)."""
+    selector = getattr(loop, "_selector", None)
+    return selector if isinstance(selector, WaitProbe) else None
+
+
+class PreciseEpollSelector(WaitProbe, selectors.EpollSelector):
     """epoll for readiness, ``select(2)`` on the epoll descriptor for a timeout to the microsecond.
 
     asyncio's default loop on Linux waits in ``epoll_wait``, whose timeout is whole milliseconds
@@ -77,11 +128,17 @@ class PreciseEpollSelector(selectors.EpollSelector):
     """
 
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
-        if timeout is not None and timeout > 0:
+        if timeout is not None and timeout <= 0:
+            return super().select(timeout)
+        began = time.monotonic()
+        if timeout is not None:
             epoll_fd = self._selector.fileno()  # type: ignore[attr-defined]
             select.select([epoll_fd], [], [], timeout)
-            timeout = 0
-        return super().select(timeout)
+            ready = super().select(0)
+        else:
+            ready = super().select(None)
+        self._note(began, timeout)
+        return ready
 
 
 def precise_event_loop() -> asyncio.AbstractEventLoop:
@@ -94,9 +151,102 @@ def precise_event_loop() -> asyncio.AbstractEventLoop:
     return asyncio.SelectorEventLoop(selectors.SelectSelector())  # pragma: no cover - not Linux
 
 
+def probed_default_loop() -> asyncio.AbstractEventLoop:
+    """asyncio's default loop on Linux (``epoll``, whole-millisecond timeouts) with its waits noted, so
+    that the clock's tracer can name the cause of a late cycle there too (``--event-loop default``)."""
+    if hasattr(selectors, "EpollSelector"):
+        return asyncio.SelectorEventLoop(ProbedEpollSelector())
+    return asyncio.new_event_loop()  # pragma: no cover - not Linux
+
+
 # --------------------------------------------------------------------------------------------
 # Pacing statistics
 # --------------------------------------------------------------------------------------------
+
+
+class GcProbe:
+    """When the cyclic garbage collector ran (``gc.callbacks``): the newest ``size`` collections as
+    ``(began, ended, generation)`` in ``time.monotonic()`` seconds. One per runtime; :meth:`install` /
+    :meth:`uninstall` around the clock."""
+
+    def __init__(self, size: int = 256) -> None:
+        self.spans: deque[tuple[float, float, int]] = deque(maxlen=size)
+        self.collections = [0, 0, 0]
+        """collections per generation since install."""
+        self._began = 0.0
+
+    def __call__(self, phase: str, info: dict[str, Any]) -> None:
+        if phase == "start":
+            self._began = time.monotonic()
+            return
+        generation = int(info.get("generation", 0))
+        self.spans.append((self._began, time.monotonic(), generation))
+        if 0 <= generation < 3:
+            self.collections[generation] += 1
+
+    def install(self) -> None:
+        if self not in gc.callbacks:
+            gc.callbacks.append(self)
+
+    def uninstall(self) -> None:
+        with contextlib.suppress(ValueError):
+            gc.callbacks.remove(self)
+
+    def overlap(self, a: float, b: float) -> tuple[float, int]:
+        """Seconds of collection within ``[a, b]`` and the highest generation collected there (-1: none)."""
+        total, gen = 0.0, -1
+        for began, ended, generation in reversed(self.spans):
+            if ended <= a:
+                break
+            part = min(ended, b) - max(began, a)
+            if part > 0:
+                total += part
+                gen = max(gen, generation)
+        return total, gen
+
+
+CAUSES = {
+    "gc": "garbage collection",
+    "os": "the operating system woke the clock late (the process was not scheduled: other load)",
+    "loop": "other work on the clock's event loop ran past the due time",
+    "service": "requests of the doors process, served between cycles, ran past the due time",
+    "catch_up": "the cycles before it in the same wake-up (a backlog being caught up)",
+    "cycle": "the cycle's own work (the engine's step)",
+    "preempted": "the cycle lost the CPU while it ran (other load on the machine)",
+}
+"""The causes the tracer tells apart (``GET /api/timing``: ``worst[].cause``, ``late_causes``)."""
+
+
+@dataclass(slots=True)
+class SlowCycle:
+    """One late cycle and why (:meth:`PacingStats.explain`); times in seconds."""
+
+    cycle: int
+    lateness: float
+    cause: str
+    parts: dict[str, float]
+    at: float
+    """seconds since the clock started"""
+    gc_generation: int = -1
+    wake: int = 0
+    """the clock's wake-up it ran in (the five worst are of five different wake-ups)"""
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "cycle": self.cycle,
+            "lateness_us": _us(self.lateness),
+            "cause": self.cause,
+            "detail": self.detail(),
+            "parts_us": {k: _us(v) for k, v in self.parts.items() if v > 0},
+            "at_s": round(self.at, 3),
+        }
+
+    def detail(self) -> str:
+        part = self.parts.get(self.cause, 0.0) * 1e3
+        if self.cause == "gc":
+            return f"garbage collection of generation {self.gc_generation}: {part:.2f} ms"
+        text = CAUSES.get(self.cause, self.cause)
+        return f"{text}: {part:.2f} ms"
 
 
 class PacingStats:
@@ -106,11 +256,20 @@ class PacingStats:
     it was due (``epoch + k * T_A``); it is never negative. The newest ``window`` samples are kept for
     the percentiles; ``max`` and the counters cover the whole run. Stepped and free clocks count
     cycles and wake-ups only (they have no due times).
+
+    The slowest cycles are explained (:meth:`explain`): the five worst of the run are kept with the
+    cause that took most of their lateness, and every cycle later than T_A is counted by its cause
+    (``late_causes``). The lateness of a cycle splits into: the time past its due time before the clock
+    woke (the loop busy with other work, requests of the doors process, the operating system's late
+    wake-up, other callbacks first), the cycles before it in the same wake-up, and its own work (CPU,
+    or time it lost the CPU); garbage collection is taken out of whichever of these it fell into.
     """
+
+    WORST = 5
 
     def __init__(self, t_a: float, window: int = 60_000) -> None:
         self.t_a = t_a
-        self._samples = [0.0] * window
+        self._samples = array("d", bytes(8 * window))
         self._window = window
         self._next = 0
         self.cycles = 0
@@ -129,6 +288,15 @@ class PacingStats:
         """cycles dropped because the backlog exceeded the catch-up cap (simulated time slipped)."""
         self.started_at: float | None = None
         self.cycles_at_start = 0
+        self.worst: list[SlowCycle] = []
+        """The :attr:`WORST` latest cycles of the run, worst first, each with its cause."""
+        self.late_causes: dict[str, int] = {}
+        """Cycles later than T_A, by cause."""
+        self.explain_above = 0.0
+        """Cycles later than this are explained (the fifth worst so far, at most T_A)."""
+        self.gc = GcProbe()
+        self.service: tuple[float, float] = (0.0, 0.0)
+        """When the clock last served requests between cycles (``run_realtime``'s ``serve``)."""
 
     def record(self, lateness: float) -> None:
         self._samples[self._next] = lateness
@@ -137,6 +305,77 @@ class PacingStats:
         self.max_lateness = max(self.max_lateness, lateness)
         if lateness > self.t_a:
             self.late_cycles += 1
+
+    def explain(
+        self,
+        cycle: int,
+        lateness: float,
+        *,
+        due: float,
+        began: float,
+        ended: float,
+        cpu: float,
+        woke: float,
+        slept: float,
+        probe: WaitProbe | None,
+    ) -> SlowCycle:
+        """Why ``cycle`` was ``lateness`` late (see the class docstring). ``due``: when it was due;
+        ``began``/``ended``: its own work (``cpu``: CPU seconds of it); ``woke``: when the clock woke
+        for it; ``slept``: when the clock went to sleep before that; ``probe``: the loop's last wait."""
+        own = max(0.0, ended - began)
+        parts = {
+            "cycle": min(own, cpu),
+            "preempted": max(0.0, own - cpu),
+            "catch_up": max(0.0, began - max(woke, due)),
+            "loop": 0.0,
+            "service": 0.0,
+            "os": 0.0,
+        }
+        wake = max(0.0, woke - due)
+        if wake > 0.0:
+            if probe is not None and probe.wait_ended > slept:
+                # the loop waited while the clock slept: what happened between the due time and the wake
+                busy = max(0.0, min(probe.wait_began, woke) - due)
+                late = max(0.0, min(probe.wait_ended, woke) - max(probe.wait_until, due, probe.wait_began))
+                after = max(0.0, woke - max(probe.wait_ended, due))
+                parts["os"] = late
+                parts["loop"] = busy + after
+            else:  # the loop never got to wait (busy throughout), or it cannot tell
+                parts["loop"] = wake
+            served = min(self.service[1], woke) - max(self.service[0], due)
+            if served > 0.0:
+                moved = min(served, parts["loop"])
+                parts["loop"] -= moved
+                parts["service"] = moved
+        collected, generation = self.gc.overlap(due, ended)
+        if collected > 0.0:
+            inside = self.gc.overlap(began, ended)[0]
+            take = min(inside, parts["cycle"])
+            parts["cycle"] -= take
+            rest = collected - take
+            for key in ("loop", "catch_up", "service", "preempted"):
+                moved = min(rest, parts[key])
+                parts[key] -= moved
+                rest -= moved
+            parts["gc"] = collected
+        cause = max(parts, key=lambda k: parts[k])
+        at = ended - self.started_at if self.started_at is not None else 0.0
+        slow = SlowCycle(cycle, lateness, cause, parts, at, generation if cause == "gc" else -1, self.wakeups)
+        if lateness > self.t_a:
+            self.late_causes[cause] = self.late_causes.get(cause, 0) + 1
+        worst = self.worst
+        same = next((s for s in worst if s.wake == slow.wake), None)
+        if same is not None:  # one stall is one entry: its worst cycle
+            if lateness > same.lateness:
+                worst[worst.index(same)] = slow
+                worst.sort(key=lambda s: s.lateness, reverse=True)
+        elif len(worst) < self.WORST or lateness > worst[-1].lateness:
+            worst.append(slow)
+            worst.sort(key=lambda s: s.lateness, reverse=True)
+            del worst[self.WORST :]
+            if len(worst) == self.WORST:
+                self.explain_above = min(self.t_a, worst[-1].lateness)
+        return slow
 
     def wakeup(self, cycles_run: int) -> None:
         self.cycles += cycles_run
@@ -147,37 +386,76 @@ class PacingStats:
 
     def samples(self) -> list[float]:
         """The newest lateness samples [s], oldest first."""
-        if self.measured <= self._window:
-            return self._samples[: self.measured]
-        return self._samples[self._next :] + self._samples[: self._next]
+        return _ordered(self._samples, self._next, self.measured)
 
-    def summary(self, clock: Clock, machine_cycle: int) -> dict[str, Any]:
-        """Times in µs; percentiles over the newest ``window`` cycles; ``rate`` = simulated / wall time."""
-        data = sorted(self.samples())
+    def raw(self, clock: Clock, machine_cycle: int) -> dict[str, Any]:
+        """What :func:`summarize` needs, taken without sorting anything (a copy of the samples' bytes):
+        the clock's process hands this to the doors process, which does the sorting for ``GET
+        /api/timing`` (``runtime/remote.py``)."""
         wall = (time.monotonic() - self.started_at) if self.started_at is not None else 0.0
-        simulated = (machine_cycle - self.cycles_at_start) * self.t_a
-        lateness: dict[str, float] | None = None
-        if data:
-            lateness = {
-                "p50": _us(_percentile(data, 50)),
-                "p99": _us(_percentile(data, 99)),
-                "max": _us(self.max_lateness),
-            }
         return {
             "clock": str(clock),
-            "t_a_us": round(self.t_a * 1e6),
+            "t_a": self.t_a,
+            "samples": bytes(self._samples),
+            "next": self._next,
+            "measured": self.measured,
+            "max": self.max_lateness,
             "cycles": self.cycles,
-            "lateness_us": lateness,
-            "lateness_window": len(data),
+            "simulated_s": (machine_cycle - self.cycles_at_start) * self.t_a,
+            "wall_s": wall,
             "late_cycles": self.late_cycles,
+            "late_causes": dict(self.late_causes),
+            "worst": [s.to_json() for s in self.worst],
+            "gc_collections": list(self.gc.collections),
             "wakeups": self.wakeups,
             "catch_up_wakeups": self.catch_up_wakeups,
             "max_catch_up": self.max_catch_up,
             "slipped_cycles": self.slipped_cycles,
-            "wall_s": round(wall, 6),
-            "simulated_s": round(simulated, 6),
-            "rate": round(simulated / wall, 6) if wall > 0 else None,
         }
+
+    def summary(self, clock: Clock, machine_cycle: int) -> dict[str, Any]:
+        """Times in µs; percentiles over the newest ``window`` cycles; ``rate`` = simulated / wall time."""
+        return summarize(self.raw(clock, machine_cycle))
+
+
+def _ordered(samples: array[float], next_index: int, measured: int) -> list[float]:
+    if measured <= len(samples):
+        return samples[:measured].tolist()
+    return samples[next_index:].tolist() + samples[:next_index].tolist()
+
+
+def summarize(raw: dict[str, Any]) -> dict[str, Any]:
+    """``GET /api/timing`` from :meth:`PacingStats.raw` (see docs/runtime.md for the fields)."""
+    samples = array("d")
+    samples.frombytes(raw["samples"])
+    data = sorted(_ordered(samples, raw["next"], raw["measured"]))
+    lateness: dict[str, float] | None = None
+    if data:
+        lateness = {
+            "p50": _us(_percentile(data, 50)),
+            "p99": _us(_percentile(data, 99)),
+            "p999": _us(_percentile(data, 99.9)),
+            "max": _us(raw["max"]),
+        }
+    wall, simulated = raw["wall_s"], raw["simulated_s"]
+    return {
+        "clock": raw["clock"],
+        "t_a_us": round(raw["t_a"] * 1e6),
+        "cycles": raw["cycles"],
+        "lateness_us": lateness,
+        "lateness_window": len(data),
+        "late_cycles": raw["late_cycles"],
+        "late_causes": dict(sorted(raw["late_causes"].items(), key=lambda kv: -kv[1])),
+        "worst": raw["worst"],
+        "gc_collections": raw["gc_collections"],
+        "wakeups": raw["wakeups"],
+        "catch_up_wakeups": raw["catch_up_wakeups"],
+        "max_catch_up": raw["max_catch_up"],
+        "slipped_cycles": raw["slipped_cycles"],
+        "wall_s": round(wall, 6),
+        "simulated_s": round(simulated, 6),
+        "rate": round(simulated / wall, 6) if wall > 0 else None,
+    }
 
 
 def _percentile(sorted_data: Sequence[float], q: float) -> float:
@@ -195,6 +473,9 @@ def _us(seconds: float) -> float:
 # The loops
 # --------------------------------------------------------------------------------------------
 
+SERVE_MARGIN_S = 0.0002
+"""``run_realtime`` stops serving requests between cycles this long before the next cycle is due."""
+
 
 async def run_realtime(
     run_cycle: Callable[[], int],
@@ -203,25 +484,50 @@ async def run_realtime(
     stats: PacingStats,
     *,
     max_catch_up: int,
+    serve: Callable[[float], object] | None = None,
 ) -> None:
-    """Realtime pacing (E-01): see the module docstring. ``run_cycle`` returns the machine's cycle."""
+    """Realtime pacing (E-01): see the module docstring. ``run_cycle`` returns the machine's cycle.
+
+    ``serve(deadline)``, if given, is called after every wake-up's cycles, with the time (``monotonic``)
+    by which it should be done: the work the clock's loop does besides the cycles goes there, where it
+    delays no cycle (the requests of the doors process, ``runtime/remote.py``)."""
     t_a = stats.t_a
     cap = max_catch_up
     clock = time.monotonic
+    cpu_clock = time.thread_time
+    probe = loop_probe(asyncio.get_running_loop())
     epoch = clock()
     done = 0  # cycles run since epoch
     stats.started_at = epoch
     cycle = 0
     last_slip_log = -math.inf
+    slept = epoch
     while cycles_left() > 0:
-        now = clock()
+        woke = now = clock()
         backlog = int((now - epoch) / t_a) - done
         if backlog > 0:
             run = min(backlog, cap, cycles_left())
             for _ in range(run):
+                began = clock()
+                cpu = cpu_clock()
                 cycle = run_cycle()
                 done += 1
-                stats.record(clock() - (epoch + done * t_a))
+                ended = clock()
+                due = epoch + done * t_a
+                lateness = ended - due
+                stats.record(lateness)
+                if lateness > stats.explain_above:
+                    stats.explain(
+                        cycle,
+                        lateness,
+                        due=due,
+                        began=began,
+                        ended=ended,
+                        cpu=cpu_clock() - cpu,
+                        woke=woke,
+                        slept=slept,
+                        probe=probe,
+                    )
             stats.wakeup(run)
             if backlog > cap:
                 dropped = backlog - cap
@@ -240,7 +546,12 @@ async def run_realtime(
                         stats.slipped_cycles,
                     )
             after_cycles()
-        delay = epoch + (done + 1) * t_a - clock()
+        if serve is not None:
+            began = clock()
+            serve(epoch + (done + 1) * t_a - SERVE_MARGIN_S)
+            stats.service = (began, clock())
+        slept = clock()
+        delay = epoch + (done + 1) * t_a - slept
         await asyncio.sleep(delay if delay > 0 else 0)
 
 

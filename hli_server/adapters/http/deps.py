@@ -19,6 +19,7 @@ from hli_server.adapters.host import (
     NotFoundError,
     OperatorError,
     StepRefusedError,
+    UnavailableError,
 )
 from hli_server.adapters.http.models import AcceptedBody
 
@@ -74,6 +75,7 @@ _STATUS: tuple[tuple[type[OperatorError], int], ...] = (
     (ConflictError, 409),
     (StepRefusedError, 409),
     (InvalidRequestError, 422),
+    (UnavailableError, 503),
 )
 
 
