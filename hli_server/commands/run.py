@@ -31,7 +31,7 @@ from hli_server.adapters.host import AccessPolicy
 from hli_server.adapters.registry import CLI_ALIASES, AdapterError, options_model, plan_adapters
 from hli_server.configuration import ConfigError, ConfigFileError, load_machine, machine_summary
 from hli_server.runtime import Clock, Runtime, precise_event_loop
-from hli_server.runtime.pacing import probed_default_loop
+from hli_server.runtime.pacing import PRIORITIES, probed_default_loop
 
 __all__ = ["run"]
 
@@ -44,7 +44,10 @@ _EXIT_START = 2
 def _banner(runtime: Runtime, event_loop: str) -> None:
     config = runtime.config
     click.echo(f"hli-server: {machine_summary(config)}")
-    click.echo(f"  clock: {runtime.clock} (T_A = {config.cycle_time_us} µs, event loop: {event_loop})")
+    clock = f"  clock: {runtime.clock} (T_A = {config.cycle_time_us} µs, event loop: {event_loop}"
+    if runtime.clock == "realtime":
+        clock += f", priority: {runtime.priority_granted}"
+    click.echo(clock + ")")
     image = runtime.image
     layout = runtime.layout
     click.echo(
@@ -188,6 +191,14 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     show_default=True,
     help="select: microsecond timers (realtime lateness ~0.1 ms); default: asyncio's (epoll, whole ms)",
 )
+@click.option(
+    "--priority",
+    type=click.Choice(list(PRIORITIES)),
+    default="normal",
+    show_default=True,
+    help="realtime clock: normal; high (nice -10) or realtime (SCHED_FIFO) where permitted (root or "
+    "CAP_SYS_NICE), so that other load on the machine delays the cycle less (docs/runtime.md)",
+)
 @click.option("--cycles", type=click.IntRange(min=0), default=None, help="stop after N cycles (for scripts)")
 @click.pass_context
 def run(
@@ -206,6 +217,7 @@ def run(
     adapter_specs: tuple[str, ...],
     max_catch_up: int,
     event_loop: str,
+    priority: str,
     cycles: int | None,
     **alias_values: Any,
 ) -> None:
@@ -252,6 +264,7 @@ def run(
             stop_after_cycles=cycles,
             policy=policy,
             doors_process=doors_process,
+            priority=priority,
         )
     except (AdapterError, ValueError) as exc:
         click.echo(f"error: {exc}", err=True)

@@ -38,10 +38,13 @@ from hli_server.runtime.host import OperatorPanel, RuntimeHost
 from hli_server.runtime.image import ImageFactory, RuntimeImage, shared_memory_image
 from hli_server.runtime.pacing import (
     FREE_SLICE_S,
+    PRIORITIES,
     STEP_BATCH,
     Clock,
     ClockError,
     PacingStats,
+    ask_for_low_latency,
+    raise_priority,
     run_free,
     run_realtime,
     summarize,
@@ -69,7 +72,9 @@ class RequestService(Protocol):
 
     def flush(self) -> None: ...
 
-    def serve(self, deadline: float) -> None: ...
+    def serve(self, deadline: float) -> bool:
+        """Serve what waits until ``deadline``; whether there was anything."""
+        ...
 
     def serve_all(self) -> None: ...
 
@@ -107,6 +112,7 @@ class Runtime:
         read_program: Callable[[str], str] | None = read_program_file,
         policy: AccessPolicy | None = None,
         doors_process: bool = False,
+        priority: str = "normal",
     ) -> None:
         try:
             self.clock = Clock(clock)
@@ -122,7 +128,13 @@ class Runtime:
         self.bind = bind
         self.policy = policy or AccessPolicy()
         self.doors_process = doors_process
-        """Run the image-only doors (Modbus, ADS) in a process of their own (``runtime/doors.py``)."""
+        """Run the network doors in a process of their own (``runtime/doors.py``)."""
+        if priority not in PRIORITIES:
+            raise ValueError(f"unknown priority {priority!r}; use one of {', '.join(PRIORITIES)}")
+        self.priority = priority
+        """What the realtime clock's thread asks of the operating system (``pacing.raise_priority``)."""
+        self.priority_granted = "normal"
+        """What it got, in words (the banner)."""
         self.http_port = http_port
         self.image_name = image_name
         self.max_catch_up = max_catch_up
@@ -241,12 +253,14 @@ class Runtime:
         between cycles; otherwise a service answers at once."""
         return self.clock is Clock.REALTIME and self._pacer is not None and not self._pacer.done()
 
-    def _serve_between_cycles(self, deadline: float) -> None:
+    def _serve_between_cycles(self, deadline: float) -> bool:
+        served = False
         for service in self._services:
             try:
-                service.serve(deadline)
+                served = service.serve(deadline) or served
             except Exception:  # a service's bug must not stop the clock
                 logger.exception("service %r failed between cycles", service)
+        return served
 
     # --- per-cycle traces (H-07) -------------------------------------------------------------
     def record(self, signals: Sequence[str]) -> Recording:
@@ -313,6 +327,9 @@ class Runtime:
         self.stats.started_at = time.monotonic()
         self.stats.cycles_at_start = self.machine.cycle
         if self.clock is Clock.REALTIME:
+            # after the doors process started: it must not inherit the clock's priority
+            low_latency = ask_for_low_latency()
+            self.priority_granted = ", ".join([raise_priority(self.priority), *low_latency])
             self.stats.gc.install()
             self._pacer = asyncio.create_task(
                 run_realtime(

@@ -26,8 +26,11 @@ import contextlib
 import gc
 import logging
 import math
+import os
 import select
 import selectors
+import struct
+import sys
 import time
 from array import array
 from collections import deque
@@ -39,6 +42,8 @@ from typing import Any
 __all__ = [
     "CAUSES",
     "FREE_SLICE_S",
+    "LOW_LATENCY_SLICE_NS",
+    "PRIORITIES",
     "STEP_BATCH",
     "Clock",
     "ClockError",
@@ -48,9 +53,11 @@ __all__ = [
     "ProbedEpollSelector",
     "SlowCycle",
     "WaitProbe",
+    "ask_for_low_latency",
     "loop_probe",
     "precise_event_loop",
     "probed_default_loop",
+    "raise_priority",
     "run_free",
     "run_realtime",
     "summarize",
@@ -90,11 +97,17 @@ class WaitProbe:
     """When it was asked to end (``wait_began`` + timeout; ``inf`` without a timeout)."""
     wait_ended = 0.0
     """When it returned."""
+    cpu_began = 0.0
+    cpu_ended = 0.0
+    """``time.thread_time()`` (the loop thread's CPU seconds) when it began and when it returned: what the
+    loop did around the wait is told apart from time the process did not have the CPU."""
 
-    def _note(self, began: float, timeout: float | None) -> None:
+    def _note(self, began: float, cpu_began: float, timeout: float | None) -> None:
         self.wait_began = began
+        self.cpu_began = cpu_began
         self.wait_until = began + timeout if timeout is not None else math.inf
         self.wait_ended = time.monotonic()
+        self.cpu_ended = time.thread_time()
 
 
 class ProbedEpollSelector(WaitProbe, selectors.EpollSelector):
@@ -103,9 +116,9 @@ class ProbedEpollSelector(WaitProbe, selectors.EpollSelector):
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         if timeout is not None and timeout <= 0:
             return super().select(timeout)
-        began = time.monotonic()
+        began, cpu = time.monotonic(), time.thread_time()
         ready = super().select(timeout)
-        self._note(began, timeout)
+        self._note(began, cpu, timeout)
         return ready
 
 
@@ -130,14 +143,14 @@ class PreciseEpollSelector(WaitProbe, selectors.EpollSelector):
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         if timeout is not None and timeout <= 0:
             return super().select(timeout)
-        began = time.monotonic()
+        began, cpu = time.monotonic(), time.thread_time()
         if timeout is not None:
             epoll_fd = self._selector.fileno()  # type: ignore[attr-defined]
             select.select([epoll_fd], [], [], timeout)
             ready = super().select(0)
         else:
             ready = super().select(None)
-        self._note(began, timeout)
+        self._note(began, cpu, timeout)
         return ready
 
 
@@ -157,6 +170,67 @@ def probed_default_loop() -> asyncio.AbstractEventLoop:
     if hasattr(selectors, "EpollSelector"):
         return asyncio.SelectorEventLoop(ProbedEpollSelector())
     return asyncio.new_event_loop()  # pragma: no cover - not Linux
+
+
+PRIORITIES = ("normal", "high", "realtime")
+"""``hli-server run --priority``: how the clock's thread asks the operating system for the CPU."""
+
+
+LOW_LATENCY_SLICE_NS = 100_000
+"""The time slice the clock's thread asks the scheduler for (Linux 6.12+, EEVDF: a task with a short slice
+gets an early deadline, so that it preempts the running task as soon as its timer wakes it; it still gets
+its fair share of the CPU, no more)."""
+
+
+def ask_for_low_latency() -> list[str]:
+    """Ask Linux to run the calling thread (the clock's) soon after its timers fire, without privileges:
+    a timer slack of 1 ns instead of 50 µs (``PR_SET_TIMERSLACK``) and a scheduler time slice of
+    :data:`LOW_LATENCY_SLICE_NS` (``sched_setattr``; the thread's nice value is kept). Returns what was
+    granted, in words (nothing where the system does not have it)."""
+    if not sys.platform.startswith("linux") or os.environ.get("HLI_NO_LOW_LATENCY"):
+        return []
+    granted = []
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        if int(libc.prctl(29, 1, 0, 0, 0)) == 0:  # PR_SET_TIMERSLACK
+            granted.append("timer slack 1 ns")
+        nice = os.getpriority(os.PRIO_PROCESS, 0)
+        # struct sched_attr (SCHED_ATTR_SIZE_VER1): size, policy SCHED_OTHER, flags, nice, priority,
+        # runtime (the slice), deadline, period, util_min, util_max
+        slice_ns = int(os.environ.get("HLI_SLICE_NS", LOW_LATENCY_SLICE_NS))
+        attr = struct.pack("<IIQiIQQQII", 56, 0, 0, nice, 0, slice_ns, 0, 0, 0, 0)
+        syscall = {"x86_64": 314, "aarch64": 274}.get(os.uname().machine)
+        if (
+            syscall is not None
+            and int(libc.syscall(syscall, 0, ctypes.create_string_buffer(attr, 56), 0)) == 0
+        ):
+            granted.append(f"time slice {LOW_LATENCY_SLICE_NS / 1000:g} µs")
+    except (OSError, AttributeError):  # pragma: no cover - no libc
+        pass
+    return granted
+
+
+def raise_priority(priority: str) -> str:
+    """Give the calling thread (the clock's) the operating system's ``priority``: ``normal`` changes
+    nothing; ``high`` is nice -10; ``realtime`` is ``SCHED_FIFO`` priority 10 (the thread runs before every
+    normal process whenever its timer is due; Linux keeps 5 % of each second for the others). Both need the
+    privilege (root, or ``CAP_SYS_NICE``: ``docker run --cap-add SYS_NICE``). Returns what was done, in
+    words (the ``run`` banner prints it); a refusal is said, not raised."""
+    if priority == "normal":
+        return "normal"
+    try:
+        if priority == "high":
+            os.setpriority(os.PRIO_PROCESS, 0, -10)
+            return "high (nice -10)"
+        if priority == "realtime":
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+            return "realtime (SCHED_FIFO 10)"
+    except (PermissionError, OSError, AttributeError) as exc:
+        why = getattr(exc, "strerror", None) or exc
+        return f"normal ({priority} refused by the operating system: {why}; needs root or CAP_SYS_NICE)"
+    raise ValueError(f"unknown priority {priority!r}; use one of {', '.join(PRIORITIES)}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -317,11 +391,15 @@ class PacingStats:
         cpu: float,
         woke: float,
         slept: float,
-        probe: WaitProbe | None,
+        woke_cpu: float = 0.0,
+        slept_cpu: float = 0.0,
+        probe: WaitProbe | None = None,
     ) -> SlowCycle:
         """Why ``cycle`` was ``lateness`` late (see the class docstring). ``due``: when it was due;
         ``began``/``ended``: its own work (``cpu``: CPU seconds of it); ``woke``: when the clock woke
-        for it; ``slept``: when the clock went to sleep before that; ``probe``: the loop's last wait."""
+        for it; ``slept``: when the clock went to sleep before that (``woke_cpu``, ``slept_cpu``: the
+        thread's CPU time then); ``probe``: the loop's last wait. Wall time around the wait in which the
+        thread used no CPU is the operating system's (the process did not run), not the loop's."""
         own = max(0.0, ended - began)
         parts = {
             "cycle": min(own, cpu),
@@ -336,10 +414,12 @@ class PacingStats:
             if probe is not None and probe.wait_ended > slept:
                 # the loop waited while the clock slept: what happened between the due time and the wake
                 busy = max(0.0, min(probe.wait_began, woke) - due)
+                busy_cpu = min(busy, max(0.0, probe.cpu_began - slept_cpu))
                 late = max(0.0, min(probe.wait_ended, woke) - max(probe.wait_until, due, probe.wait_began))
                 after = max(0.0, woke - max(probe.wait_ended, due))
-                parts["os"] = late
-                parts["loop"] = busy + after
+                after_cpu = min(after, max(0.0, woke_cpu - probe.cpu_ended))
+                parts["os"] = late + (busy - busy_cpu) + (after - after_cpu)
+                parts["loop"] = busy_cpu + after_cpu
             else:  # the loop never got to wait (busy throughout), or it cannot tell
                 parts["loop"] = wake
             served = min(self.service[1], woke) - max(self.service[0], due)
@@ -484,13 +564,14 @@ async def run_realtime(
     stats: PacingStats,
     *,
     max_catch_up: int,
-    serve: Callable[[float], object] | None = None,
+    serve: Callable[[float], bool] | None = None,
 ) -> None:
     """Realtime pacing (E-01): see the module docstring. ``run_cycle`` returns the machine's cycle.
 
     ``serve(deadline)``, if given, is called after every wake-up's cycles, with the time (``monotonic``)
     by which it should be done: the work the clock's loop does besides the cycles goes there, where it
-    delays no cycle (the requests of the doors process, ``runtime/remote.py``)."""
+    delays no cycle (the requests of the doors process, ``runtime/remote.py``); it returns whether it did
+    any (the tracer then knows when, ``service``)."""
     t_a = stats.t_a
     cap = max_catch_up
     clock = time.monotonic
@@ -502,8 +583,10 @@ async def run_realtime(
     cycle = 0
     last_slip_log = -math.inf
     slept = epoch
+    slept_cpu = cpu_clock()
     while cycles_left() > 0:
         woke = now = clock()
+        woke_cpu = cpu_clock()
         backlog = int((now - epoch) / t_a) - done
         if backlog > 0:
             run = min(backlog, cap, cycles_left())
@@ -526,6 +609,8 @@ async def run_realtime(
                         cpu=cpu_clock() - cpu,
                         woke=woke,
                         slept=slept,
+                        woke_cpu=woke_cpu,
+                        slept_cpu=slept_cpu,
                         probe=probe,
                     )
             stats.wakeup(run)
@@ -548,9 +633,10 @@ async def run_realtime(
             after_cycles()
         if serve is not None:
             began = clock()
-            serve(epoch + (done + 1) * t_a - SERVE_MARGIN_S)
-            stats.service = (began, clock())
+            if serve(epoch + (done + 1) * t_a - SERVE_MARGIN_S):
+                stats.service = (began, clock())
         slept = clock()
+        slept_cpu = cpu_clock()
         delay = epoch + (done + 1) * t_a - slept
         await asyncio.sleep(delay if delay > 0 else 0)
 

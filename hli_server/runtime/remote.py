@@ -210,15 +210,19 @@ class OperatorService(asyncio.Protocol):
             self._transport.write(frame(("events", self._outbox)))
             self._outbox = []
 
-    def serve(self, deadline: float) -> None:
-        """Serve queued requests until ``deadline`` (``time.monotonic``), at least one if any wait."""
+    def serve(self, deadline: float) -> bool:
+        """Serve queued requests until ``deadline`` (``time.monotonic``), at least one if any wait;
+        whether there was any."""
         self.flush()
         pending = self._pending
+        if not pending:
+            return False
         clock = time.monotonic
         while pending:
             self._handle(pending.popleft())
             if clock() >= deadline:
                 break
+        return True
 
     def serve_all(self) -> None:
         """Serve everything queued (the realtime clock stopped)."""
