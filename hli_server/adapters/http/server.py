@@ -80,7 +80,9 @@ class HttpApiAdapter:
             access_log=False,
             lifespan="off",
             ws="none",
-            http=bounded_protocol(options.max_connections, options.idle_timeout),
+            http=bounded_protocol(
+                options.max_connections, options.idle_timeout, options.request_timeout, options.write_timeout
+            ),
             timeout_keep_alive=options.keep_alive,
             timeout_graceful_shutdown=self.graceful_timeout,
         )
