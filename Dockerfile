@@ -25,5 +25,6 @@ HEALTHCHECK --interval=10s --timeout=5s --start-period=20s --retries=3 \
     CMD ["python", "-c", "import urllib.request; urllib.request.urlopen('http://127.0.0.1:8080/api/timing', timeout=3)"]
 
 # inside a container the doors listen on every interface; publish them on the host's loopback only
-# (docker run -p 127.0.0.1:8080:8080 ...), as docker-compose.yml does
-CMD ["hli-server", "run", "--bind", "0.0.0.0", "--http-port", "8080", "--modbus-port", "5020"]
+# (docker run -p 127.0.0.1:8080:8080 ...), as docker-compose.yml does; --insecure says so (it warns that
+# HTTP and Modbus take writes from anyone who reaches them: docs/docker.md, "Under any orchestrator")
+CMD ["hli-server", "run", "--bind", "0.0.0.0", "--insecure", "--http-port", "8080", "--modbus-port", "5020"]

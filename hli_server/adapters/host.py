@@ -40,6 +40,7 @@ __all__ = [
     "AccessPolicy",
     "AdapterHost",
     "ConflictError",
+    "DoorView",
     "EventFeed",
     "ImagePort",
     "InvalidRequestError",
@@ -51,6 +52,7 @@ __all__ = [
     "Trace",
     "UnavailableError",
     "Value",
+    "door_host",
 ]
 
 Value = bool | int | float
@@ -72,12 +74,32 @@ class AccessPolicy:
       literals (DNS rebinding: a page of another site that resolves to this server is refused).
     * ``allowed_origins``: origins (``http://host:port``) whose pages may send state-changing requests
       besides the server's own (a page of another site in the user's browser is refused).
+
+    * ``read_only_doors``: the doors (``http``, ``modbus``, ``ads``) that accept no write, the others do
+      (``--read-only-door NAME``); :meth:`for_door` is the policy one door sees.
+
+    The token guards the HTTP door only; Modbus and ADS are guarded by their allowlists of peer addresses
+    (their ``allow`` option) or by being read-only (issue 27, finding 8; ``hli-server run`` refuses to
+    open an unguarded write door beyond loopback without ``--insecure``).
     """
 
     api_token: str | None = None
     read_only: bool = False
     allowed_hosts: tuple[str, ...] = ()
     allowed_origins: tuple[str, ...] = ()
+    read_only_doors: tuple[str, ...] = ()
+
+    def for_door(self, door: str) -> AccessPolicy:
+        """The policy door ``door`` applies: read-only if the server is, or if that door is."""
+        if self.read_only or door not in self.read_only_doors:
+            return self
+        return AccessPolicy(
+            api_token=self.api_token,
+            read_only=True,
+            allowed_hosts=self.allowed_hosts,
+            allowed_origins=self.allowed_origins,
+            read_only_doors=self.read_only_doors,
+        )
 
 
 class OperatorError(Exception):
@@ -367,6 +389,55 @@ class EventFeed(Protocol):
         """Logged events with ``seq`` greater than ``seq`` (oldest first, at most ``limit``) and the
         newest sequence number."""
         ...
+
+
+class DoorView:
+    """``host`` as door ``door`` sees it: the same image, operator, events and clock, the door's own policy
+    (:meth:`AccessPolicy.for_door`). The runtime starts each adapter with one."""
+
+    def __init__(self, host: AdapterHost, door: str) -> None:
+        self._host = host
+        self._policy = host.policy.for_door(door)
+
+    @property
+    def image(self) -> ImagePort:
+        return self._host.image
+
+    @property
+    def operator(self) -> OperatorPort:
+        return self._host.operator
+
+    @property
+    def events(self) -> EventFeed:
+        return self._host.events
+
+    @property
+    def clock(self) -> str:
+        return self._host.clock
+
+    @property
+    def bind(self) -> str:
+        return self._host.bind
+
+    @property
+    def policy(self) -> AccessPolicy:
+        return self._policy
+
+    async def step(self, cycles: int = 1) -> int:
+        return await self._host.step(cycles)
+
+    async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
+        return await self._host.step_traced(cycles, signals)
+
+    def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
+        return self._host.on_cycle(listener)
+
+
+def door_host(host: AdapterHost, door: str) -> AdapterHost:
+    """The host door ``door`` is started with (its own policy where it differs)."""
+    if host.policy.for_door(door) is host.policy:
+        return host
+    return DoorView(host, door)
 
 
 class AdapterHost(Protocol):

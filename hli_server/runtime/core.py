@@ -30,7 +30,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
-from hli_server.adapters.host import AccessPolicy, LoggedEvent, Trace
+from hli_server.adapters.host import AccessPolicy, LoggedEvent, Trace, door_host
 from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
 from hli_server.engine.machine import Machine
 from hli_server.runtime.events import EventLog
@@ -318,7 +318,7 @@ class Runtime:
             for spec in self._in_process_specs():
                 adapter = self._make_adapter(spec)
                 self.adapters.append(adapter)
-                await adapter.start(self.host)
+                await adapter.start(door_host(self.host, adapter.name))
                 self._started_adapters.append(adapter)
                 logger.info("adapter %s started: %s", adapter.name, "; ".join(adapter.endpoints()))
         except BaseException:
@@ -358,7 +358,7 @@ class Runtime:
         adapter = self._make_adapter(spec)
         if any(a.name == adapter.name for a in self.adapters):
             raise AdapterError(f"adapter {adapter.name!r} runs already: {'; '.join(adapter.endpoints())}")
-        await adapter.start(self.host)
+        await adapter.start(door_host(self.host, adapter.name))
         self.adapters.append(adapter)
         self._started_adapters.append(adapter)
         logger.info("adapter %s started: %s", adapter.name, "; ".join(adapter.endpoints()))

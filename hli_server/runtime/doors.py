@@ -28,7 +28,7 @@ import os
 import socket
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any
 
@@ -40,6 +40,7 @@ from hli_server.adapters.host import (
     OperatorPort,
     Trace,
     Value,
+    door_host,
 )
 from hli_server.adapters.registry import Adapter, create_adapter
 from hli_server.runtime.remote import EventMirror, OperatorService, RemoteLink, RemoteOperator
@@ -212,7 +213,7 @@ class DoorsPlan:
     image_name: str
     specs: list[tuple[str, dict[str, Any]]]
     bind: str
-    policy: dict[str, Any]
+    policy: AccessPolicy
     t_a_us: int
     clock: str
 
@@ -241,13 +242,13 @@ async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -
     events.start(loop)
     link = RemoteLink(sock, events.take)
     link.start(loop)
-    policy = AccessPolicy(**plan.policy)
+    policy = plan.policy
     host = DoorsHost(image, link, events, t_a_us=plan.t_a_us, clock=plan.clock, bind=plan.bind, policy=policy)
     started: list[Adapter] = []
     try:
         for name, options in plan.specs:
             adapter = create_adapter(name, bind=plan.bind, options=options)
-            await adapter.start(host)
+            await adapter.start(door_host(host, name))
             started.append(adapter)
         conn.send(("ready", [(a.name, getattr(a, "port", None), a.endpoints(), _url(a)) for a in started]))
         # what was built to serve lives as long as the process: out of the collector's full passes
@@ -327,7 +328,7 @@ class DoorsProcess:
             image_name=host.image.name,
             specs=self.specs,
             bind=rt.bind,
-            policy=asdict(rt.policy),
+            policy=rt.policy,
             t_a_us=rt.config.cycle_time_us,
             clock=str(rt.clock),
         )
