@@ -273,7 +273,8 @@ def run(
 
 def print_row(r: dict[str, Any]) -> None:
     poll = f"{r['poll_p50_ms']:.2f} / {r['poll_p99_ms']:.2f} ms" if r["poll_p50_ms"] is not None else "-"
-    late = f"{r['p50_us']:>7.0f} {r['p99_us']:>8.0f} {r['p999_us']:>8.0f} {r['max_us']:>8.0f} µs {r['dropped']:>6}"
+    figures = (r["p50_us"], r["p99_us"], r["p999_us"], r["max_us"])
+    late = " ".join(f"{v:>8.0f}" for v in figures) + f" µs {r['dropped']:>6}"
     print(f"{r['phase']:40} {late}  {poll:>18}", flush=True)
 
 
@@ -291,9 +292,8 @@ def print_causes(r: dict[str, Any]) -> None:
         + (f"; {'; '.join(extra)}" if extra else "")
     )
     for w in r["worst"]:
-        print(
-            f"      cycle {w['cycle']:>6} at {w['at_s']:6.2f} s: {w['lateness_us'] / 1e3:7.2f} ms late: {w['detail']}"
-        )
+        late = w["lateness_us"] / 1e3
+        print(f"      cycle {w['cycle']:>6} at {w['at_s']:6.2f} s: {late:7.2f} ms late: {w['detail']}")
 
 
 def main() -> None:
@@ -342,7 +342,8 @@ def main() -> None:
         flush=True,
     )
     print(
-        f"{'phase':40} {'lateness p50':>7} {'p99':>8} {'p99.9':>8} {'max':>8}    {'dropped':>6}  {'poll p50 / p99':>18}"
+        f"{'phase':40} {'late p50':>8} {'p99':>8} {'p99.9':>8} {'max':>8}    {'dropped':>6}  "
+        f"{'poll p50 / p99':>18}"
     )
     rows = []
     for name, load, doors in plan:
@@ -353,7 +354,8 @@ def main() -> None:
     idle = [r for r in rows if r["phase"].startswith("idle")]
     idle_p99 = sum(r["p99_us"] for r in idle) / len(idle)
     print(
-        f"idle p99 (first / last): {idle[0]['p99_us']:.0f} / {idle[-1]['p99_us']:.0f} µs, mean {idle_p99:.0f} µs"
+        f"idle p99 (first / last): {idle[0]['p99_us']:.0f} / {idle[-1]['p99_us']:.0f} µs, "
+        f"mean {idle_p99:.0f} µs"
     )
     for r in rows:
         if r["phase"].startswith("idle"):
