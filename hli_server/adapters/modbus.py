@@ -559,8 +559,9 @@ class _Connection(asyncio.Protocol):
         self._turn: asyncio.Handle | None = None
         self._write_paused = False
         self.last_active = time.monotonic()
-        self.last_answered = self.last_active
-        """When a request of this client was last answered (its connect time until one is)."""
+        self.connected_at = self.last_active
+        self.last_answered: float | None = None
+        """When a request of this client was last answered (None until one is)."""
         self.partial_since: float | None = None
         """When the bytes of the incomplete frame held back began to arrive (None: no partial frame)."""
         self._idle: asyncio.TimerHandle | None = None
@@ -700,10 +701,14 @@ class _Connection(asyncio.Protocol):
         """When the client was last active; ``now`` while requests of it wait for their turn."""
         return self.last_active if not self._queue and self._turn is None else now
 
-    def last_served(self, now: float) -> float:
-        """When a request of the client was last answered (``adapters/tcp.py``, ``least_useful``);
-        ``now`` while requests of it wait for their turn."""
-        return self.last_answered if not self._queue and self._turn is None else now
+    def usefulness(self, now: float) -> tuple[int, float]:
+        """``adapters/tcp.py``, ``least_useful``: never answered (by connect time) before answered (by
+        the last answer); ``now`` while requests of it wait for their turn."""
+        if self._queue or self._turn is not None:
+            return (1, now)
+        if self.last_answered is None:
+            return (0, self.connected_at)
+        return (1, self.last_answered)
 
     def abort(self) -> None:
         if self._transport is not None:

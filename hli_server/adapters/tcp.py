@@ -5,10 +5,11 @@ A door holds at most ``max_connections``. At the limit a newcomer is never locke
 do nothing for anyone (a PLC that reconnects after a restart must never find the door locked by the dead
 connections of its former self). Two policies:
 
-* ``least_useful`` (Modbus): the connection whose last request was answered longest ago makes room
-  (:meth:`Connection.last_served`; one that never completed a request counts from its connect time, one
-  whose requests are being answered counts as now). A connection that trickles a byte now and then without
-  ever completing a frame is the least useful of all; honest clients that poll keep their slots. The
+* ``least_useful`` (Modbus): the least useful connection makes room (:meth:`ServedConnection.usefulness`):
+  one that has never had a request answered (the one connected longest ago first: a connection that
+  trickles a byte now and then without ever completing a frame, or never sends anything), then the one
+  whose last request was answered longest ago; one whose requests are being answered counts as served
+  now. Honest clients that poll keep their slots, even while a burst of new connections comes in. The
   newcomer is never refused.
 * otherwise (ADS, for now): a connection silent for ``evict_after`` seconds makes room (the one silent the
   longest); when every connection has been active more recently, the newcomer is refused.
@@ -48,9 +49,9 @@ class Connection(Protocol):
 
 
 class ServedConnection(Connection, Protocol):
-    def last_served(self, now: float) -> float:
-        """When a request of the client was last answered whole (its connect time if none was; ``now``
-        while requests of it wait for their answers)."""
+    def usefulness(self, now: float) -> tuple[int, float]:
+        """``(0, connect time)`` while no request of the client was answered, else ``(1, when the last
+        one was)`` (``now`` while requests of it wait for their answers): the lowest makes room first."""
         ...
 
 
@@ -87,12 +88,14 @@ class ConnectionSlots(Generic[C]):
         admission = Admission.ADMITTED
         if len(self._connections) >= self.max_connections and self.least_useful:
             now = time.monotonic()
-            victim = min(self._connections, key=lambda c: c.last_served(now))  # type: ignore[attr-defined]
+            victim = min(self._connections, key=lambda c: c.usefulness(now))  # type: ignore[attr-defined]
+            served, since = victim.usefulness(now)  # type: ignore[attr-defined]
             logger.info(
-                "%s: %d connections open: closing the one served longest ago (%.1f s) to make room for %s",
+                "%s: %d connections open: closing one %s %.1f s ago to make room for %s",
                 self.door,
                 len(self._connections),
-                now - victim.last_served(now),  # type: ignore[attr-defined]
+                "last answered" if served else "never answered, connected",
+                now - since,
                 peer,
             )
             self._connections.discard(victim)

@@ -86,10 +86,9 @@ class ClockError(RuntimeError):
 
 class WaitProbe:
     """When the event loop last *waited* (a select with a timeout other than zero): the clock's tracer
-    tells from it whether a late wake-up was the loop's fault (it was busy past the due time before it
-    got to wait), the operating system's (the wait returned later than asked: the process was not
-    scheduled) or other callbacks' (ready at the same time and run first). A selector that has these
-    attributes is a probe; :func:`loop_probe` finds it."""
+    tells from it whether the time between a cycle's due time and the clock's wake-up went to the loop's
+    other work (before or after the wait) or to a wait that returned later than asked. A selector that has
+    these attributes is a probe; :func:`loop_probe` finds it."""
 
     wait_began = 0.0
     """``time.monotonic()`` when the newest blocking wait began."""
@@ -97,17 +96,37 @@ class WaitProbe:
     """When it was asked to end (``wait_began`` + timeout; ``inf`` without a timeout)."""
     wait_ended = 0.0
     """When it returned."""
-    cpu_began = 0.0
-    cpu_ended = 0.0
-    """``time.thread_time()`` (the loop thread's CPU seconds) when it began and when it returned: what the
-    loop did around the wait is told apart from time the process did not have the CPU."""
 
-    def _note(self, began: float, cpu_began: float, timeout: float | None) -> None:
+    def _note(self, began: float, timeout: float | None) -> None:
         self.wait_began = began
-        self.cpu_began = cpu_began
         self.wait_until = began + timeout if timeout is not None else math.inf
         self.wait_ended = time.monotonic()
-        self.cpu_ended = time.thread_time()
+
+
+class ThreadClock:
+    """The calling thread's CPU time and the time it waited, runnable, for a CPU (seconds, both growing):
+    ``/proc/thread-self/schedstat`` on Linux (one read of an open file, a few microseconds). Elsewhere the
+    CPU time only (``time.thread_time``), and the tracer takes wall time without CPU as the operating
+    system's. Open it in the thread it is to measure."""
+
+    def __init__(self) -> None:
+        self._fd: int | None = None
+        with contextlib.suppress(OSError):
+            self._fd = os.open("/proc/thread-self/schedstat", os.O_RDONLY)
+        self.precise = self._fd is not None
+        """Whether the run-queue wait is measured (else it is reported as 0)."""
+
+    def read(self) -> tuple[float, float]:
+        """``(CPU seconds, run-queue seconds)`` of the thread so far."""
+        if self._fd is not None:
+            fields = os.pread(self._fd, 96, 0).split()
+            return int(fields[0]) * 1e-9, int(fields[1]) * 1e-9
+        return time.thread_time(), 0.0
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
 
 
 class ProbedEpollSelector(WaitProbe, selectors.EpollSelector):
@@ -116,9 +135,9 @@ class ProbedEpollSelector(WaitProbe, selectors.EpollSelector):
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         if timeout is not None and timeout <= 0:
             return super().select(timeout)
-        began, cpu = time.monotonic(), time.thread_time()
+        began = time.monotonic()
         ready = super().select(timeout)
-        self._note(began, cpu, timeout)
+        self._note(began, timeout)
         return ready
 
 
@@ -143,14 +162,14 @@ class PreciseEpollSelector(WaitProbe, selectors.EpollSelector):
     def select(self, timeout: float | None = None) -> list[tuple[selectors.SelectorKey, int]]:
         if timeout is not None and timeout <= 0:
             return super().select(timeout)
-        began, cpu = time.monotonic(), time.thread_time()
+        began = time.monotonic()
         if timeout is not None:
             epoll_fd = self._selector.fileno()  # type: ignore[attr-defined]
             select.select([epoll_fd], [], [], timeout)
             ready = super().select(0)
         else:
             ready = super().select(None)
-        self._note(began, cpu, timeout)
+        self._note(began, timeout)
         return ready
 
 
@@ -284,8 +303,7 @@ CAUSES = {
     "os": "the operating system woke the clock late (the process was not scheduled: other load)",
     "loop": "other work on the clock's event loop ran past the due time",
     "service": "requests of the doors process, served between cycles, ran past the due time",
-    "catch_up": "the cycles before it in the same wake-up (a backlog being caught up)",
-    "cycle": "the cycle's own work (the engine's step)",
+    "cycle": "the cycles' own work (the engine's step; with a backlog, the cycles caught up before it)",
     "preempted": "the cycle lost the CPU while it ran (other load on the machine)",
 }
 """The causes the tracer tells apart (``GET /api/timing``: ``worst[].cause``, ``late_causes``)."""
@@ -331,12 +349,14 @@ class PacingStats:
     the percentiles; ``max`` and the counters cover the whole run. Stepped and free clocks count
     cycles and wake-ups only (they have no due times).
 
-    The slowest cycles are explained (:meth:`explain`): the five worst of the run are kept with the
-    cause that took most of their lateness, and every cycle later than T_A is counted by its cause
-    (``late_causes``). The lateness of a cycle splits into: the time past its due time before the clock
-    woke (the loop busy with other work, requests of the doors process, the operating system's late
-    wake-up, other callbacks first), the cycles before it in the same wake-up, and its own work (CPU,
-    or time it lost the CPU); garbage collection is taken out of whichever of these it fell into.
+    The slowest cycles are explained (:meth:`explain`): the five worst of the run (five different
+    wake-ups) are kept with the cause that took most of their lateness, and every cycle later than T_A is
+    counted by its cause (``late_causes``). The lateness of a cycle is cut where the clock's thread was
+    seen (the previous wake-up's end, the loop's wait, the wake-up, the cycle's start) and each piece
+    split by the CPU the thread used in it: CPU of cycles (``cycle``), of requests served between cycles
+    (``service``), of the loop's other callbacks (``loop``), of garbage collection (``gc``, taken out of
+    the others); wall time without CPU is the operating system's (``os`` before the wake-up,
+    ``preempted`` while cycles ran).
     """
 
     WORST = 5
@@ -369,8 +389,9 @@ class PacingStats:
         self.explain_above = 0.0
         """Cycles later than this are explained (the fifth worst so far, at most T_A)."""
         self.gc = GcProbe()
-        self.service: tuple[float, float] = (0.0, 0.0)
-        """When the clock last served requests between cycles (``run_realtime``'s ``serve``)."""
+        self.service: tuple[float, float, float] = (0.0, 0.0, 1.0)
+        """When the clock last served requests between cycles (``run_realtime``'s ``serve``): began, ended,
+        and the share of that time the thread ran (the rest it waited for a CPU)."""
 
     def record(self, lateness: float) -> None:
         self._samples[self._next] = lateness
@@ -388,56 +409,71 @@ class PacingStats:
         due: float,
         began: float,
         ended: float,
-        cpu: float,
         woke: float,
         slept: float,
-        woke_cpu: float = 0.0,
-        slept_cpu: float = 0.0,
+        at_ended: tuple[float, float],
+        at_woke: tuple[float, float],
+        at_slept: tuple[float, float],
+        previous: tuple[float, float] = (1.0, 0.0),
+        precise: bool = True,
         probe: WaitProbe | None = None,
     ) -> SlowCycle:
-        """Why ``cycle`` was ``lateness`` late (see the class docstring). ``due``: when it was due;
-        ``began``/``ended``: its own work (``cpu``: CPU seconds of it); ``woke``: when the clock woke
-        for it; ``slept``: when the clock went to sleep before that (``woke_cpu``, ``slept_cpu``: the
-        thread's CPU time then); ``probe``: the loop's last wait. Wall time around the wait in which the
-        thread used no CPU is the operating system's (the process did not run), not the loop's."""
-        own = max(0.0, ended - began)
-        parts = {
-            "cycle": min(own, cpu),
-            "preempted": max(0.0, own - cpu),
-            "catch_up": max(0.0, began - max(woke, due)),
-            "loop": 0.0,
-            "service": 0.0,
-            "os": 0.0,
-        }
-        wake = max(0.0, woke - due)
-        if wake > 0.0:
-            if probe is not None and probe.wait_ended > slept:
-                # the loop waited while the clock slept: what happened between the due time and the wake
-                busy = max(0.0, min(probe.wait_began, woke) - due)
-                busy_cpu = min(busy, max(0.0, probe.cpu_began - slept_cpu))
-                late = max(0.0, min(probe.wait_ended, woke) - max(probe.wait_until, due, probe.wait_began))
-                after = max(0.0, woke - max(probe.wait_ended, due))
-                after_cpu = min(after, max(0.0, woke_cpu - probe.cpu_ended))
-                parts["os"] = late + (busy - busy_cpu) + (after - after_cpu)
-                parts["loop"] = busy_cpu + after_cpu
-            else:  # the loop never got to wait (busy throughout), or it cannot tell
-                parts["loop"] = wake
-            served = min(self.service[1], woke) - max(self.service[0], due)
-            if served > 0.0:
-                moved = min(served, parts["loop"])
-                parts["loop"] -= moved
-                parts["service"] = moved
+        """Why ``cycle`` was ``lateness`` late (see the class docstring). Times are ``time.monotonic()``:
+        ``due`` when it was due; ``began``/``ended`` its own work; ``woke`` when the clock woke for it;
+        ``slept`` when the clock went to sleep before that. ``at_*``: the clock's thread's ``(CPU, run-queue
+        wait)`` (:class:`ThreadClock`) at ``ended``, ``woke`` and ``slept``; ``previous``: the shares of CPU
+        and of run-queue wait in the previous wake-up's work (before ``slept``); ``precise``: whether the
+        run-queue wait is measured (else wall time without CPU counts as the operating system's);
+        ``probe``: the loop's last wait.
+
+        The time from the due time to the publish is cut where the clock's thread was seen: the end of the
+        previous wake-up's work, the loop's wait, the wake-up. In each piece the thread ran (CPU: the
+        cycles', the requests', the loop's other callbacks'), waited for a CPU it was ready to use (the
+        operating system's: ``os``, ``preempted``), or was blocked (in the loop's wait: only the part
+        past its asked end is late, the operating system's; elsewhere: a callback blocked the loop)."""
+        parts = dict.fromkeys(("cycle", "preempted", "loop", "service", "os"), 0.0)
+        # 1. the previous wake-up's work (its cycles, then its requests) ran past this cycle's due time
+        if due < slept:
+            s_began, s_ended, s_share = self.service
+            served = max(0.0, min(s_ended, slept) - max(s_began, due))
+            if served > 0.0:  # the requests, with what the thread got of the CPU while it served them
+                parts["service"] += served * s_share
+                parts["os"] += served * (1.0 - s_share)
+            rest = slept - due - served
+            cpu_share, wait_share = previous
+            waited = rest * (wait_share if precise else 1.0 - cpu_share)
+            parts["os"] += waited
+            parts["cycle"] += rest - waited
+        # 2. from the clock's sleep to its wake-up: the loop
+        start = max(due, slept)
+        if woke > start:
+            span = woke - start
+            cpu = max(0.0, at_woke[0] - at_slept[0])
+            waited = max(0.0, at_woke[1] - at_slept[1]) if precise else max(0.0, span - cpu)
+            overdue = 0.0  # the loop's wait returned later than it asked (a late timer)
+            if probe is not None and slept < probe.wait_ended <= woke:
+                overdue = max(0.0, probe.wait_ended - max(start, probe.wait_until, probe.wait_began))
+            late = min(span, max(waited, overdue))
+            parts["os"] += late
+            parts["loop"] += span - late
+        # 3. the cycles of this wake-up up to and with this one
+        start = max(due, woke)
+        if ended > start:
+            span = ended - start
+            waited = max(0.0, at_ended[1] - at_woke[1])
+            if not precise:
+                waited = max(0.0, (ended - woke) - (at_ended[0] - at_woke[0]))
+            lost = min(span, waited)
+            parts["preempted"] += lost
+            parts["cycle"] += span - lost
         collected, generation = self.gc.overlap(due, ended)
-        if collected > 0.0:
-            inside = self.gc.overlap(began, ended)[0]
-            take = min(inside, parts["cycle"])
-            parts["cycle"] -= take
-            rest = collected - take
-            for key in ("loop", "catch_up", "service", "preempted"):
+        if collected > 0.0:  # collections are CPU time of whatever they interrupted
+            rest = collected
+            for key in ("cycle", "loop", "service"):
                 moved = min(rest, parts[key])
                 parts[key] -= moved
                 rest -= moved
-            parts["gc"] = collected
+            parts["gc"] = collected - rest
         cause = max(parts, key=lambda k: parts[k])
         at = ended - self.started_at if self.started_at is not None else 0.0
         slow = SlowCycle(cycle, lateness, cause, parts, at, generation if cause == "gc" else -1, self.wakeups)
@@ -575,7 +611,8 @@ async def run_realtime(
     t_a = stats.t_a
     cap = max_catch_up
     clock = time.monotonic
-    cpu_clock = time.thread_time
+    thread = ThreadClock()
+    read = thread.read
     probe = loop_probe(asyncio.get_running_loop())
     epoch = clock()
     done = 0  # cycles run since epoch
@@ -583,62 +620,78 @@ async def run_realtime(
     cycle = 0
     last_slip_log = -math.inf
     slept = epoch
-    slept_cpu = cpu_clock()
-    while cycles_left() > 0:
-        woke = now = clock()
-        woke_cpu = cpu_clock()
-        backlog = int((now - epoch) / t_a) - done
-        if backlog > 0:
-            run = min(backlog, cap, cycles_left())
-            for _ in range(run):
-                began = clock()
-                cpu = cpu_clock()
-                cycle = run_cycle()
-                done += 1
-                ended = clock()
-                due = epoch + done * t_a
-                lateness = ended - due
-                stats.record(lateness)
-                if lateness > stats.explain_above:
-                    stats.explain(
-                        cycle,
-                        lateness,
-                        due=due,
-                        began=began,
-                        ended=ended,
-                        cpu=cpu_clock() - cpu,
-                        woke=woke,
-                        slept=slept,
-                        woke_cpu=woke_cpu,
-                        slept_cpu=slept_cpu,
-                        probe=probe,
-                    )
-            stats.wakeup(run)
-            if backlog > cap:
-                dropped = backlog - cap
-                epoch += dropped * t_a
-                stats.slipped_cycles += dropped
-                if now - last_slip_log > 1.0:
-                    last_slip_log = now
-                    logger.warning(
-                        "realtime clock ran %.1f ms late at cycle %d: caught up %d cycles, dropped %d "
-                        "(simulated time now %.3f s behind the wall clock; %d dropped in all)",
-                        backlog * t_a * 1e3,
-                        cycle,
-                        cap,
-                        dropped,
-                        stats.slipped_cycles * t_a,
-                        stats.slipped_cycles,
-                    )
-            after_cycles()
-        if serve is not None:
-            began = clock()
-            if serve(epoch + (done + 1) * t_a - SERVE_MARGIN_S):
-                stats.service = (began, clock())
-        slept = clock()
-        slept_cpu = cpu_clock()
-        delay = epoch + (done + 1) * t_a - slept
-        await asyncio.sleep(delay if delay > 0 else 0)
+    at_slept = read()
+    previous = (1.0, 0.0)  # shares of CPU and of run-queue wait in the previous wake-up's work
+    try:
+        while cycles_left() > 0:
+            woke = now = clock()
+            at_woke = read()
+            backlog = int((now - epoch) / t_a) - done
+            if backlog > 0:
+                run = min(backlog, cap, cycles_left())
+                for _ in range(run):
+                    began = clock()
+                    cycle = run_cycle()
+                    done += 1
+                    ended = clock()
+                    due = epoch + done * t_a
+                    lateness = ended - due
+                    stats.record(lateness)
+                    if lateness > stats.explain_above:
+                        stats.explain(
+                            cycle,
+                            lateness,
+                            due=due,
+                            began=began,
+                            ended=ended,
+                            woke=woke,
+                            slept=slept,
+                            at_ended=read(),
+                            at_woke=at_woke,
+                            at_slept=at_slept,
+                            previous=previous,
+                            precise=thread.precise,
+                            probe=probe,
+                        )
+                stats.wakeup(run)
+                if backlog > cap:
+                    dropped = backlog - cap
+                    epoch += dropped * t_a
+                    stats.slipped_cycles += dropped
+                    if now - last_slip_log > 1.0:
+                        last_slip_log = now
+                        logger.warning(
+                            "realtime clock ran %.1f ms late at cycle %d: caught up %d cycles, dropped %d "
+                            "(simulated time now %.3f s behind the wall clock; %d dropped in all)",
+                            backlog * t_a * 1e3,
+                            cycle,
+                            cap,
+                            dropped,
+                            stats.slipped_cycles * t_a,
+                            stats.slipped_cycles,
+                        )
+                after_cycles()
+            if serve is not None:
+                began, at_began = clock(), read()
+                if serve(epoch + (done + 1) * t_a - SERVE_MARGIN_S):
+                    ended, at_served = clock(), read()
+                    wall = ended - began
+                    if wall <= 0:
+                        share = 1.0
+                    elif thread.precise:  # ran or was blocked (serving), as against waiting for a CPU
+                        share = 1.0 - min(1.0, (at_served[1] - at_began[1]) / wall)
+                    else:
+                        share = min(1.0, (at_served[0] - at_began[0]) / wall)
+                    stats.service = (began, ended, share)
+            slept = clock()
+            at_slept = read()
+            span = slept - woke
+            if span > 0:
+                previous = ((at_slept[0] - at_woke[0]) / span, (at_slept[1] - at_woke[1]) / span)
+            delay = epoch + (done + 1) * t_a - slept
+            await asyncio.sleep(delay if delay > 0 else 0)
+    finally:
+        thread.close()
 
 
 async def run_free(

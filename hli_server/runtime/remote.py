@@ -237,7 +237,9 @@ class OperatorService(asyncio.Protocol):
         try:
             if kind == "call":
                 _, _, name, args, kwargs = message
-                self._answer(ident, self._call(name, args, kwargs))
+                result = self._call(name, args, kwargs)
+                self.flush()  # the events of the request (a program load) before its answer
+                self._answer(ident, result)
             elif kind == "timing":
                 self._answer(ident, self._rt.timing_raw())
             elif kind == "step":

@@ -19,7 +19,10 @@ subclass of uvicorn's ``H11Protocol`` that
   connection is closed; the application sees the client go away;
 * gives a client ``write_timeout`` seconds to take an answer the server is waiting to send (the
   transport's buffer is full because the client does not read): then the connection is dropped, and
-  what was buffered for it with it (a dashboard's stream that never reads, a large answer nobody takes);
+  what was buffered for it with it (a dashboard's stream that never reads, a large answer nobody takes).
+  The kernel's send buffer of a connection is held to :data:`SEND_BUFFER` bytes (Linux doubles it, and
+  grows it to 4 MB otherwise, which a stream of 60 kB/s takes a minute to fill before anyone can tell
+  that its page does not read); that is still as much as a local network needs in flight;
 * closes a connection that sends nothing for ``idle_timeout`` seconds while no request of it is in
   progress (uvicorn's own keep-alive timeout closes idle connections between requests sooner).
 """
@@ -27,14 +30,17 @@ subclass of uvicorn's ``H11Protocol`` that
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import socket
 import time
+from collections.abc import Iterable
 from typing import Any, ClassVar
 
 import h11
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
-__all__ = ["bounded_protocol"]
+__all__ = ["SEND_BUFFER", "abort_stalled", "bounded_protocol"]
 
 logger = logging.getLogger(__name__)
 
@@ -52,6 +58,8 @@ def _raw_answer(status: int, reason: str, detail: str) -> bytes:
 _REFUSAL = _raw_answer(
     503, "Service Unavailable", "too many connections to the control API, all of them busy; try again later"
 )
+SEND_BUFFER = 64 * 1024
+"""``SO_SNDBUF`` of every connection of the door (see the module docstring)."""
 _TIMEOUT_DETAIL = "the request did not arrive within the request_timeout of this door; send it whole, at once"
 _TIMEOUT = _raw_answer(408, "Request Timeout", _TIMEOUT_DETAIL)
 
@@ -77,6 +85,10 @@ class _BoundedH11Protocol(H11Protocol):
             transport.close()
             return
         self._admitted = True
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER)
         super().connection_made(transport)
         self._last_active = time.monotonic()
         self._arm_check()
@@ -218,6 +230,17 @@ class _BoundedH11Protocol(H11Protocol):
             self._check_handle = None
         if self._admitted:
             super().connection_lost(exc)
+
+
+def abort_stalled(connections: Iterable[object]) -> int:
+    """Drop the connections whose clients do not read what they were sent (at shutdown: their answers
+    would hold the graceful stop for its whole timeout); how many."""
+    dropped = 0
+    for c in list(connections):
+        if isinstance(c, _BoundedH11Protocol) and c._write_paused_at is not None:
+            c.transport.abort()
+            dropped += 1
+    return dropped
 
 
 def bounded_protocol(
