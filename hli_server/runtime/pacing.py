@@ -52,6 +52,7 @@ __all__ = [
     "PreciseEpollSelector",
     "ProbedEpollSelector",
     "SlowCycle",
+    "ThreadClock",
     "WaitProbe",
     "ask_for_low_latency",
     "loop_probe",
