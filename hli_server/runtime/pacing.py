@@ -302,6 +302,7 @@ class GcProbe:
 CAUSES = {
     "gc": "garbage collection",
     "os": "the operating system woke the clock late (the process was not scheduled: other load)",
+    "timer": "the loop's timer fired late (its resolution: whole milliseconds in asyncio's own loop)",
     "loop": "other work on the clock's event loop ran past the due time",
     "service": "requests of the doors process, served between cycles, ran past the due time",
     "cycle": "the cycles' own work (the engine's step; with a backlog, the cycles caught up before it)",
@@ -432,7 +433,7 @@ class PacingStats:
         cycles', the requests', the loop's other callbacks'), waited for a CPU it was ready to use (the
         operating system's: ``os``, ``preempted``), or was blocked (in the loop's wait: only the part
         past its asked end is late, the operating system's; elsewhere: a callback blocked the loop)."""
-        parts = dict.fromkeys(("cycle", "preempted", "loop", "service", "os"), 0.0)
+        parts = dict.fromkeys(("cycle", "preempted", "loop", "service", "os", "timer"), 0.0)
         # 1. the previous wake-up's work (its cycles, then its requests) ran past this cycle's due time
         if due < slept:
             s_began, s_ended, s_share = self.service
@@ -451,12 +452,14 @@ class PacingStats:
             span = woke - start
             cpu = max(0.0, at_woke[0] - at_slept[0])
             waited = max(0.0, at_woke[1] - at_slept[1]) if precise else max(0.0, span - cpu)
-            overdue = 0.0  # the loop's wait returned later than it asked (a late timer)
+            overdue = 0.0  # the loop's wait returned later than it asked
             if probe is not None and slept < probe.wait_ended <= woke:
                 overdue = max(0.0, probe.wait_ended - max(start, probe.wait_until, probe.wait_began))
-            late = min(span, max(waited, overdue))
-            parts["os"] += late
-            parts["loop"] += span - late
+            waited = min(span, waited)
+            timer = min(span - waited, max(0.0, overdue - waited))  # late, though not for want of a CPU
+            parts["os"] += waited
+            parts["timer"] += timer
+            parts["loop"] += span - waited - timer
         # 3. the cycles of this wake-up up to and with this one
         start = max(due, woke)
         if ended > start:

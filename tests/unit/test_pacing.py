@@ -119,3 +119,18 @@ def test_the_worst_five_are_five_stalls_and_the_summary_reports_them() -> None:
     assert len(out["worst"]) == 5
     assert all(w["cause"] in CAUSES for w in out["worst"])
     assert out["late_causes"] == {"os": 6, "preempted": 1}  # later than T_A: the machine's, each
+
+
+@pytest.mark.req("E-01")
+def test_a_wait_that_returns_late_without_wanting_a_cpu_is_the_timers() -> None:
+    """asyncio's own loop waits in whole milliseconds: asked to wake at 10.0 ms, it returned at 11.0 ms,
+    the thread never waiting for a CPU (the timer's resolution, issue 26's list of suspects)."""
+    s = stats()
+    slow = s.explain(
+        10, 0.0012, due=0.010, began=0.01105, ended=0.0112, woke=0.01104, slept=0.0091,
+        at_ended=(1.00015, 0.5), at_woke=(1.0, 0.5), at_slept=(1.0, 0.5),
+        probe=probe(0.0091, 0.0100, 0.0110),
+    )  # fmt: skip
+    assert slow.cause == "timer"
+    assert slow.parts["timer"] == pytest.approx(0.001, abs=1e-5)
+    assert "resolution" in slow.detail()
