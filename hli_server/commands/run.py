@@ -95,6 +95,14 @@ def _farewell(runtime: Runtime) -> None:
             f"max {lateness['max']:.0f} µs, {timing['slipped_cycles']} cycles dropped"
         )
     click.echo(text)
+    causes = timing.get("late_causes") or {}
+    late = sum(causes.values())
+    machine = causes.get("os", 0) + causes.get("preempted", 0)
+    if late >= 10 and machine > late / 2 and runtime.priority == "normal":
+        click.echo(
+            f"hli-server: {machine} of the {late} cycles later than T_A waited for a CPU (other load on the "
+            "machine): --priority realtime (root or CAP_SYS_NICE) lets the clock go first (docs/runtime.md)"
+        )
 
 
 def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
