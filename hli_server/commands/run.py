@@ -98,10 +98,11 @@ def _farewell(runtime: Runtime) -> None:
     causes = timing.get("late_causes") or {}
     late = sum(causes.values())
     machine = causes.get("os", 0) + causes.get("preempted", 0)
-    if late >= 10 and machine > late / 2 and runtime.priority == "normal":
+    if late >= 10 and machine > late / 2 and not runtime.priority_granted.startswith("realtime"):
         click.echo(
             f"hli-server: {machine} of the {late} cycles later than T_A waited for a CPU (other load on the "
-            "machine): --priority realtime (root or CAP_SYS_NICE) lets the clock go first (docs/runtime.md)"
+            "machine): the realtime priority (root or CAP_SYS_NICE, e.g. docker run --cap-add SYS_NICE) lets "
+            "the clock go first (docs/runtime.md)"
         )
 
 
@@ -220,10 +221,11 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
 @click.option(
     "--priority",
     type=click.Choice(list(PRIORITIES)),
-    default="normal",
+    default="auto",
     show_default=True,
-    help="realtime clock: normal; high (nice -10) or realtime (SCHED_FIFO) where permitted (root or "
-    "CAP_SYS_NICE), so that other load on the machine delays the cycle less (docs/runtime.md)",
+    help="the realtime clock's thread: realtime (SCHED_FIFO) or high (nice -10) where permitted (root or "
+    "CAP_SYS_NICE), so that other load on the machine delays the cycle less; auto: realtime if permitted, "
+    "else normal (docs/runtime.md)",
 )
 @click.option("--cycles", type=click.IntRange(min=0), default=None, help="stop after N cycles (for scripts)")
 @click.pass_context

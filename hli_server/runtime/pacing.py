@@ -192,8 +192,9 @@ def probed_default_loop() -> asyncio.AbstractEventLoop:
     return asyncio.new_event_loop()  # pragma: no cover - not Linux
 
 
-PRIORITIES = ("normal", "high", "realtime")
-"""``hli-server run --priority``: how the clock's thread asks the operating system for the CPU."""
+PRIORITIES = ("auto", "normal", "high", "realtime")
+"""``hli-server run --priority``: how the clock's thread asks the operating system for the CPU (``auto``, the
+default of ``run``: ``realtime`` where the process may, else ``normal``)."""
 
 
 LOW_LATENCY_SLICE_NS = 100_000
@@ -235,11 +236,23 @@ def ask_for_low_latency() -> list[str]:
 def raise_priority(priority: str) -> str:
     """Give the calling thread (the clock's) the operating system's ``priority``: ``normal`` changes
     nothing; ``high`` is nice -10; ``realtime`` is ``SCHED_FIFO`` priority 10 (the thread runs before every
-    normal process whenever its timer is due; Linux keeps 5 % of each second for the others). Both need the
-    privilege (root, or ``CAP_SYS_NICE``: ``docker run --cap-add SYS_NICE``). Returns what was done, in
-    words (the ``run`` banner prints it); a refusal is said, not raised."""
+    normal process whenever its timer is due; Linux keeps 5 % of each second for the others); ``auto`` is
+    ``realtime`` where the process may, else ``normal``. ``high`` and ``realtime`` need the privilege (root,
+    or ``CAP_SYS_NICE``: ``docker run --cap-add SYS_NICE``). Returns what was done, in words (the ``run``
+    banner prints it); a refusal is said, not raised.
+
+    Why ``run`` asks for ``realtime`` by default (issue 26): on a machine with other work the clock's
+    lateness is the time its thread waits for a CPU (the tracer's ``os``), and no amount of work saved in
+    the server changes that; with ``SCHED_FIFO`` the same load costs the cycle nothing (docs/performance.md,
+    "The clock under load"). The thread sleeps between cycles (a fraction of one CPU); the doors process
+    and the test harness keep the normal priority."""
     if priority == "normal":
         return "normal"
+    if priority == "auto":
+        granted = raise_priority("realtime")
+        if granted.startswith("realtime"):
+            return granted
+        return "normal (realtime not permitted: root or CAP_SYS_NICE, e.g. docker run --cap-add SYS_NICE)"
     try:
         if priority == "high":
             os.setpriority(os.PRIO_PROCESS, 0, -10)
