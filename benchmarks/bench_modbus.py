@@ -61,6 +61,7 @@ def _serve_hli(conn: Connection) -> None:
         image_name=f"hli_bench_modbus_{os.getpid()}",
         adapters=[("modbus", {"port": 0})],
         doors_process=not IN_PROCESS[0],
+        priority="auto",  # as hli-server run
     )
 
     def ready(rt: Runtime) -> None:
