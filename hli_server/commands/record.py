@@ -63,7 +63,7 @@ def show(file: Path, fmt: str, limit: int) -> None:
     "-s",
     multiple=True,
     metavar="PATTERN",
-    help="ST paths or fnmatch patterns (gpAx[[]0]^*); repeatable; default: every signal (CSV, VCD)",
+    help="ST paths, * and ? as wildcards (gpAx[0]^*); repeatable; default: every signal (CSV, VCD)",
 )
 @click.option(
     "--every-cycle", is_flag=True, help="CSV: a row for every cycle (default: cycles with a change)"
@@ -125,7 +125,7 @@ def _until(value: str | None, t_a_us: int) -> int | None:
 )
 @click.option("--until", metavar="CYCLE|SECONDSs", help="stop after this cycle (or machine time: 12.5s)")
 @click.option(
-    "--signals", "-s", multiple=True, metavar="PATTERN", help="compare only these outputs (fnmatch)"
+    "--signals", "-s", multiple=True, metavar="PATTERN", help="compare only these outputs (ST paths, * and ? as wildcards)"
 )
 @click.option("--all", "all_differences", is_flag=True, help="go on after the first difference; report all")
 @click.option("--max-differences", type=click.IntRange(1, 1_000_000), default=1000, show_default=True)

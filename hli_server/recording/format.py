@@ -37,8 +37,9 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import zlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, Final
@@ -56,6 +57,7 @@ __all__ = [
     "gzip_member",
     "read_header",
     "read_records",
+    "signal_pattern",
 ]
 
 FORMAT: Final = "hli-recording"
@@ -95,6 +97,16 @@ def decode_value(value: Any) -> Any:
         except KeyError:
             raise RecordingError(f"a signal value {value!r} is neither a number nor a boolean") from None
     return value
+
+
+def signal_pattern(patterns: Sequence[str]) -> Callable[[str], bool]:
+    """A matcher of ST paths: ``*`` any text, ``?`` one character, everything else literal (the
+    brackets of ``gpAx[0]`` too); no patterns match everything."""
+    if not patterns:
+        return lambda _path: True
+    parts = [re.escape(p).replace(r"\*", ".*").replace(r"\?", ".") for p in patterns]
+    regex = re.compile("^(?:" + "|".join(parts) + ")$")
+    return lambda path: regex.match(path) is not None
 
 
 def dumps(record: dict[str, Any]) -> str:

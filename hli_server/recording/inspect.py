@@ -8,7 +8,6 @@ exports keep only the chosen signals' changes.
 from __future__ import annotations
 
 import csv
-import fnmatch
 import math
 import re
 from collections.abc import Iterator, Sequence
@@ -16,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, Final
 
-from hli_server.recording.format import RecordingError, Records, decode_value, read_records
+from hli_server.recording.format import RecordingError, Records, decode_value, read_records, signal_pattern
 
 __all__ = ["Change", "Summary", "signal_changes", "summarize", "write_csv", "write_plot", "write_vcd"]
 
@@ -236,11 +235,12 @@ class Change:
 
 
 def select_signals(header: dict[str, Any], patterns: Sequence[str]) -> list[tuple[str, str, str]]:
-    """``(half, path, type)`` of the signals matching ``patterns`` (fnmatch; none: every signal)."""
+    """``(half, path, type)`` of the signals matching ``patterns`` (``*``, ``?``; none: every signal)."""
     out = []
+    matches = signal_pattern(patterns)
     for half, key in (("in", "inputs"), ("out", "outputs")):
         for path, kind in header.get(key, []):
-            if not patterns or any(fnmatch.fnmatchcase(path, p) for p in patterns):
+            if matches(path):
                 out.append((half, path, kind))
     if patterns and not out:
         raise RecordingError(f"no recorded signal matches {', '.join(patterns)}")

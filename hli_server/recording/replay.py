@@ -20,24 +20,24 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import fnmatch
 import json
 import math
 import time
 from collections import deque
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from hli_server.adapters.host import OperatorError
-from hli_server.recording.format import RecordingError, Records, decode_value, read_records
+from hli_server.recording.format import RecordingError, Records, decode_value, read_records, signal_pattern
 from hli_server.recording.tap import CYCLE_MODULUS, OPERATOR_REQUESTS, _finite, server_info
 from schemas.layout import Direction, Signal, SignalType
 from schemas.wire import Mode
 
 if TYPE_CHECKING:
+    from hli_server.engine.machine import Machine
     from hli_server.runtime import Runtime
     from schemas.config import MachineConfig
     from schemas.events import Event
@@ -266,6 +266,7 @@ class Feeder:
         self.info = info
         self.report = report
         self.signal_patterns = tuple(signals or ())
+        self._matches = signal_pattern(self.signal_patterns)
         self.compare_events = events
         self.all_differences = all_differences
         self.max_differences = max_differences
@@ -352,7 +353,7 @@ class Feeder:
         return out
 
     def _selected(self, path: str) -> bool:
-        return not self.signal_patterns or any(fnmatch.fnmatchcase(path, p) for p in self.signal_patterns)
+        return self._matches(path)
 
     # --- reading ahead -----------------------------------------------------------------------------
     def _fill(self, upto: int) -> None:
@@ -585,8 +586,12 @@ async def replay(
     all_differences: bool = False,
     max_differences: int = 1000,
     same_version: bool = False,
+    prepare: Callable[[Machine], None] | None = None,
 ) -> ReplayReport:
-    """Replay ``path`` (module docstring); never raises for what a recording holds: the report says."""
+    """Replay ``path`` (module docstring); never raises for what a recording holds: the report says.
+
+    ``prepare(machine)`` is called once the machine is built, before its first cycle: a test can change
+    the engine there (a drive parameter, a monitor) and see whether the recording notices."""
     from hli_server.runtime import Runtime, memory_image
 
     path = Path(path)
@@ -632,6 +637,8 @@ async def replay(
             read_program=feeder.read_file,
         )
         runtime.session = feeder  # type: ignore[assignment]  # the replay's tap: feeds and compares
+        if prepare is not None:
+            prepare(runtime.machine)
         async with runtime:
             feeder.bind(runtime)
             with contextlib.suppress(_StopReplayError):
