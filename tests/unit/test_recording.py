@@ -337,7 +337,7 @@ async def test_exports_csv_vcd_and_a_plot(runtime: Runtime, tmp_path: Path) -> N
     assert {"cmd_pos_r", "command_w"} <= names
     kinds = (TokenKind.CHANGE_SCALAR, TokenKind.CHANGE_VECTOR, TokenKind.CHANGE_REAL)
     variables = sum(1 for t in tokens if t.kind is TokenKind.VAR)
-    assert sum(1 for t in tokens if t.kind in kinds) == changes + variables  # + the initial $dumpvars
+    assert changes <= sum(1 for t in tokens if t.kind in kinds) <= changes + variables  # + $dumpvars
     timescale = next(t for t in tokens if t.kind is TokenKind.TIMESCALE).timescale
     assert (timescale.magnitude.value, timescale.unit.value) == (1, "ms")
 
