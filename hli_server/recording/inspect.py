@@ -341,8 +341,8 @@ def _vcd_scope_and_name(st_path: str) -> tuple[str, str]:
 
 
 def write_vcd(path: Path | str, out: IO[str], patterns: Sequence[str] = ()) -> int:
-    """The chosen signals as a VCD (IEEE 1364) that GTKWave opens, one timestep per cycle of T_A
-    (pyvcd writes it); returns the value changes written."""
+    """The chosen signals as a VCD (IEEE 1364) that GTKWave opens, time in µs (cycle x T_A; pyvcd
+    writes it); returns the value changes written."""
     from vcd import VCDWriter
 
     header, chosen, changes = signal_changes(path, patterns)
@@ -372,7 +372,7 @@ def write_vcd(path: Path | str, out: IO[str], patterns: Sequence[str] = ()) -> i
                     value = int(value)
                 elif isinstance(value, int) and value < 0:
                     value &= 0xFFFF_FFFF  # two's complement, as a 32-bit vector
-                vcd.change(var, change.cycle, value)
+                vcd.change(var, change.cycle * t_a_us, value)
                 written += 1
     return written
 

@@ -339,7 +339,9 @@ async def test_exports_csv_vcd_and_a_plot(runtime: Runtime, tmp_path: Path) -> N
     variables = sum(1 for t in tokens if t.kind is TokenKind.VAR)
     assert changes <= sum(1 for t in tokens if t.kind in kinds) <= changes + variables  # + $dumpvars
     timescale = next(t for t in tokens if t.kind is TokenKind.TIMESCALE).timescale
-    assert (timescale.magnitude.value, timescale.unit.value) == (1, "ms")
+    assert (int(timescale.magnitude), str(timescale.unit.value)) == (1, "us")
+    stamps = [t.time_change for t in tokens if t.kind is TokenKind.CHANGE_TIME]
+    assert all(s % 1000 == 0 for s in stamps) and stamps[-1] <= 2100 * 1000
 
     png = tmp_path / "s.png"
     assert write_plot(path, png, [CMD_X, OVERRIDE]) == 2
