@@ -348,9 +348,10 @@ def write_vcd(path: Path | str, out: IO[str], patterns: Sequence[str] = ()) -> i
     header, chosen, changes = signal_changes(path, patterns)
     t_a_us = int(header.get("t_a_us", 1000))
     written = 0
+    # VCD allows 1, 10 or 100 as the timescale's number (GTKWave refuses "1000 us"): time in µs
     with VCDWriter(
         out,
-        timescale=f"{t_a_us} us",
+        timescale="1 us",
         date=str(header.get("created", "")),
         comment=f"hli-server recording {path}",
     ) as vcd:
