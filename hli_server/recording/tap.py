@@ -54,6 +54,7 @@ from hli_server.recording.format import (
     RecordingFullError,
     RecordingWriter,
     dumps,
+    encode_json,
     encode_value,
     gzip_member,
 )
@@ -182,17 +183,14 @@ class HalfCodec:
         counts = changed.sum(axis=1).tolist()
         fields = np.nonzero(changed)[1].tolist()
         at = 0
-        floats = self.floats
         unpack = self.unpack
+        # non-finite LREALs stay floats here: the line's encoder names them (_dumps_values)
         for n, (row, count) in enumerate(zip(rows, counts, strict=True)):
             values = None
             flat: list[Any] = []
             if count:
                 values = unpack(row)
-                for k in fields[at : at + count]:
-                    v = values[k]
-                    flat.append(k)
-                    flat.append(encode_value(v) if k in floats else v)
+                flat = [x for k in fields[at : at + count] for x in (k, values[k])]
                 at += count
             if follow and not (n == 0 and previous is None):
                 own = cycles[n] % CYCLE_MODULUS
@@ -522,9 +520,15 @@ class SessionTap:
         )
 
     def flush(self) -> None:
-        """Everything so far encoded and, when recording, written out now."""
+        """Everything so far encoded and, when recording, written out now (waits for the writer)."""
         self._encode(len(self._pending))
         self._flush_file()
+        writer = self._writer
+        if writer is not None:
+            try:
+                writer.wait()
+            except OSError as exc:
+                self._fail(str(exc), reason="full" if isinstance(exc, RecordingFullError) else "write error")
 
     # --- the encoder (off the cycle) -----------------------------------------------------------
     async def _encoder(self) -> None:
@@ -586,19 +590,22 @@ class SessionTap:
             if kind == _IN:
                 flat = next(in_changes)
                 if flat:
-                    line = dumps({"c": cycle, "i": flat})
+                    line = _dumps_values({"c": cycle, "i": flat})
                     journal.append(line)
             elif kind == _OUT:
                 half, events = raw
-                record: dict[str, Any] = {"c": cycle}
-                if half is not None:
-                    flat = next(out_changes)
+                flat = next(out_changes) if half is not None else []
+                if events:
+                    record: dict[str, Any] = {"c": cycle}
                     if flat:
                         record["o"] = flat
-                if events:
                     record["e"] = [_event_json(e) for e in events]
-                if len(record) > 1:
                     file.append(_dumps_values(record))
+                elif flat:
+                    try:
+                        file.append(f'{{"c":{cycle},"o":{encode_json(flat)}}}\n')
+                    except ValueError:
+                        file.append(_dumps_values({"c": cycle, "o": flat}))
                 continue
             else:
                 line = _dumps_values({"c": cycle, **raw})
