@@ -207,6 +207,16 @@ def summarize(path: Path | str) -> Summary:
             summary.programs.append(
                 {"cycle": cycle, "what": "read file", "name": record["file"], "lines": text.count("\n")}
             )
+        if "program_file" in record and len(summary.programs) < MAX_LISTED:
+            found = record.get("found")
+            summary.programs.append(
+                {
+                    "cycle": cycle,
+                    "what": "subprogram" if found is not None else "subprogram NOT FOUND",
+                    "name": f"{record['program_file']} ({record.get('origin', ', '.join(record.get('searched') or []))})",
+                    "lines": str(record.get("text", "")).count("\n"),
+                }
+            )
         if "fault" in record:
             what = (
                 f"set {record.get('id')}: {record.get('spec')}"

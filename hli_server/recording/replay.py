@@ -38,6 +38,7 @@ from schemas.wire import Mode
 
 if TYPE_CHECKING:
     from hli_server.engine.machine import Machine
+    from hli_server.engine.programs import ProgramFile
     from hli_server.runtime import Runtime
     from schemas.config import MachineConfig
     from schemas.events import Event
@@ -278,6 +279,8 @@ class Feeder:
         self.end_cycle: int | None = None
         self.last_record_cycle = 0
         self.files: dict[str, deque[str]] = {}
+        self.library_finds: dict[str, deque[dict[str, Any]]] = {}
+        self._searched: tuple[str, ...] = ()
         self._last_file: dict[str, str] = {}
         self.runtime: Runtime | None = None
         self._fault_ids: dict[int, int] = {}
@@ -404,6 +407,8 @@ class Feeder:
                 changed = True
             elif "op" in record:
                 self._apply_op(cycle, record)
+            elif "program_file" in record:
+                self.library_finds.setdefault(str(record["program_file"]), deque()).append(record)
             elif "file" in record:
                 text = record.get("text")
                 if isinstance(text, str):
@@ -480,6 +485,22 @@ class Feeder:
         if path in self._last_file:
             return self._last_file[path]
         raise OSError(f"{path} is not in the recording (the recorded session did not read it)")
+
+    def find(self, name: str) -> ProgramFile | None:
+        """The machine's program library: what the recorded session's library found, find by find."""
+        from hli_server.engine.programs import ProgramFile
+
+        queue = self.library_finds.get(name)
+        if not queue:
+            return None
+        record = queue.popleft()
+        if record.get("found") is None:
+            self._searched = tuple(str(s) for s in record.get("searched") or ())
+            return None
+        return ProgramFile(str(record["found"]), str(record.get("text", "")), str(record.get("origin", "")))
+
+    def searched(self) -> tuple[str, ...]:
+        return self._searched
 
     def after_cycle(self, cycle: int, latched: bytes, packed: bytearray | None) -> None:
         events, self._events[:] = list(self._events), []
@@ -637,6 +658,7 @@ async def replay(
             read_program=feeder.read_file,
         )
         runtime.session = feeder  # type: ignore[assignment]  # the replay's tap: feeds and compares
+        runtime.machine.programs = feeder  # the subprograms the recorded session found
         if prepare is not None:
             prepare(runtime.machine)
         async with runtime:

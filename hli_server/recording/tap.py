@@ -63,6 +63,7 @@ from schemas.wire import Mode
 
 if TYPE_CHECKING:
     from hli_server.engine.machine import Machine
+    from hli_server.engine.programs import ProgramFile, ProgramLibrary
     from hli_server.image.shm import ProcessImage
     from schemas.config import MachineConfig
     from schemas.events import Event
@@ -369,6 +370,11 @@ class SessionTap:
         """A communication fault set or ended (``CommFaults.subscribe``)."""
         self.note(dict(change))
 
+    def wrap_library(self, library: ProgramLibrary) -> ProgramLibrary:
+        """The machine's program library (global subprograms, N-02), with every lookup noted: the
+        program's name, text and origin, or that it was not found and where it was looked for."""
+        return _NotedLibrary(library, self)
+
     def wrap_reader(self, read: Callable[[str], str] | None) -> Callable[[str], str] | None:
         """``read_program`` of the engine, with every file it reads noted (path and text)."""
         if read is None:
@@ -643,6 +649,30 @@ class SessionTap:
                 self.journal_limit // 1024**2,
                 self.journal_lost_at,
             )
+
+
+class _NotedLibrary:
+    """A :class:`ProgramLibrary` whose finds are inputs of the recording (``SessionTap.wrap_library``)."""
+
+    def __init__(self, inner: ProgramLibrary, tap: SessionTap) -> None:
+        self.inner = inner
+        self._tap = tap
+
+    def find(self, name: str) -> ProgramFile | None:
+        found = self.inner.find(name)
+        if found is None:
+            self._tap.note({"program_file": name, "found": None, "searched": list(self.inner.searched())})
+        else:
+            self._tap.note(
+                {"program_file": name, "found": found.name, "text": found.text, "origin": found.origin}
+            )
+        return found
+
+    def searched(self) -> tuple[str, ...]:
+        return self.inner.searched()
+
+    def __getattr__(self, name: str) -> Any:  # what else the runtime's library offers (uploads)
+        return getattr(self.inner, name)
 
 
 def _event_json(event: Event) -> dict[str, Any]:

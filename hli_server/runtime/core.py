@@ -123,6 +123,7 @@ class Runtime:
         """Records the session (issue 25): the input journal always, a recording file on demand."""
         self.machine = Machine(config, read_program=self.session.wrap_reader(read_program))
         self.session.bind(self.machine)
+        self.machine.programs = self.session.wrap_library(self.machine.programs)
         self.comm_faults = CommFaults(lambda: self.machine.cycle)
         """Faults in the PLC's communication on demand (issue 25, ``adapters/faults.py``)."""
         self.comm_faults.subscribe(self.session.note_fault)

@@ -393,3 +393,33 @@ def test_the_in_cycle_work_is_a_comparison_and_an_append() -> None:
     assert tap._pending == []
     tap.after_cycle(6, b"\x00\x00\x00\x01", bytearray(struct.pack("<Q", 6) + b"\x01" * 4))
     assert [(kind, cycle) for kind, cycle, _ in tap._pending] == [(0, 6)]
+
+
+async def test_subprograms_the_library_found_are_recorded_and_found_again_by_the_replay(tmp_path: Path) -> None:
+    from hli_server.engine.programs import MemoryLibrary
+    from hli_server.recording.replay import Feeder, ReplayReport
+
+    path = tmp_path / "sub.jsonl.gz"
+    async with Runtime(demo(), clock="stepped", http_port=None, adapters=[], image_factory=memory_image) as rt:
+        rt.machine.programs.inner = MemoryLibrary({"UP1.NC": "%UP1\nN10 G01 X5 F600\nM17\n"})  # type: ignore[attr-defined]
+        rt.session.start(path)
+        await rt.step(3)
+        # what the interpreter does for `L UP1.NC` and `L MISSING.NC`
+        assert rt.machine.programs.find("up1.nc") is not None
+        assert rt.machine.programs.find("MISSING.NC") is None
+        await rt.step(3)
+        rt.session.stop()
+    finds = [r for r in read_records(path) if "program_file" in r]
+    assert [(r["program_file"], r["found"]) for r in finds] == [("up1.nc", "UP1.NC"), ("MISSING.NC", None)]
+    assert finds[0]["text"].startswith("%UP1") and finds[1]["searched"] == ["uploaded files"]
+    records = read_records(path)
+    header = next(records)
+    feeder = Feeder(header, records, Records(), ReplayReport(path=str(path)), signals=None, events=True,
+                    all_differences=False, max_differences=10, until=None)  # fmt: skip
+    for record in read_records(path):
+        if "program_file" in record:
+            feeder.library_finds.setdefault(record["program_file"], __import__("collections").deque()).append(record)
+    found = feeder.find("up1.nc")
+    assert found is not None and found.text.startswith("%UP1") and found.origin == "upload:UP1.NC"
+    assert feeder.find("MISSING.NC") is None and feeder.searched() == ("uploaded files",)
+    assert (await replay(path)).verdict is Verdict.PASS
