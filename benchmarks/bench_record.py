@@ -1,4 +1,4 @@
-"""Issue 25: recording the full machine for 10 minutes of machine time; file size, record overhead, replay speed.
+"""Issue 25: the full machine recorded for 10 minutes of machine time: file size, overhead, replay speed.
 
 The full machine of issue 16 (``machines/full.toml``: 2 channels, 8 axes, 20 areas, 16 dynamic limits
 written by the PLC through the image, 3 collision pairs; a channel's program is started again whenever it
@@ -44,7 +44,8 @@ PROGRAMS = {1: ("pocket", pocket_program(12)), 2: ("shuttle", shuttle_program(40
 async def main():
     config = load_machine(FULL_MACHINE)
     options = RecordingOptions(file=Path(record)) if record else None
-    rt = Runtime(config, clock="stepped", http_port=None, adapters=[], image_factory=memory_image, recording=options)
+    rt = Runtime(config, clock="stepped", http_port=None, adapters=[], image_factory=memory_image,
+                 recording=options)
     await rt.start()
     for name, (low, high) in DYN_LIMITS.items():  # the PLC sets the 16 dynamic limits through the image
         index = rt.machine.axis(name).index
@@ -65,7 +66,8 @@ async def main():
         if cmd[0] == "stop":
             t0, m0 = time.process_time(), time.thread_time()
             await rt.stop()
-            print(json.dumps({"cpu": time.process_time() - t0, "main": time.thread_time() - m0, "restarts": restarts,
+            print(json.dumps({"cpu": time.process_time() - t0, "main": time.thread_time() - m0,
+                              "restarts": restarts,
                               "alarms": len(rt.machine.active_alarms)}), flush=True)
             return
         cycles = int(cmd[1])
@@ -117,7 +119,8 @@ class Worker:
         self.compiled = bool(json.loads(self.proc.stdout.readline())["compiled"])
 
     def ask(self, line: str) -> dict[str, float]:
-        assert self.proc.stdin is not None and self.proc.stdout is not None
+        assert self.proc.stdin is not None
+        assert self.proc.stdout is not None
         self.proc.stdin.write(line + "\n")
         self.proc.stdin.flush()
         reply: dict[str, float] = json.loads(self.proc.stdout.readline())
@@ -175,11 +178,17 @@ def main() -> None:
     overhead = per_record - per_plain
     overhead_main = per_record_main - per_plain
     hours = cycles * t_a_us / 1e6 / 3600
-    print(f"engine: {engine}; {cycles:,} cycles = {cycles / 60_000:.1f} min of machine time; wall {wall:.0f} s")
-    print(f"program restarts: {end_record['restarts']:.0f}; active alarms at the end: {end_record['alarms']:.0f}")
+    print(
+        f"engine: {engine}; {cycles:,} cycles = {cycles / 60_000:.1f} min of machine time; wall {wall:.0f} s"
+    )
+    print(
+        f"program restarts: {end_record['restarts']:.0f}; "
+        f"active alarms at the end: {end_record['alarms']:.0f}"
+    )
     print(f"recording: {size / 1e6:.2f} MB = {size / 1e6 / hours:.1f} MB per hour of machine time")
     print(
-        f"runtime without recording: {per_plain:.1f} µs/cycle CPU; with recording: {per_record:.1f} µs/cycle; "
+        f"runtime without recording: {per_plain:.1f} µs/cycle CPU; "
+        f"with recording: {per_record:.1f} µs/cycle; "
         f"overhead {overhead:.2f} µs/cycle = {overhead / t_a_us * 100:.2f} % of T_A (goal < 5 %), "
         f"{overhead / per_plain * 100:.1f} % of the runtime's own time per cycle (CPU of all threads)"
     )

@@ -52,5 +52,6 @@ def test_a_change_in_the_engine_shows_up_as_the_first_difference(hli: Harness, r
     with pytest.raises(ReplayFailedError) as failed:
         hli.replay(recording, prepare=softer_position_loop)
     first = failed.value.report.first
-    assert first is not None and first.signal.startswith("gpAx[0]^ipo_state.")  # X's actual position ...
+    assert first is not None
+    assert first.signal.startswith("gpAx[0]^ipo_state.")
     assert "first difference: cycle" in str(failed.value)  # ... with its cycle, expected and actual value

@@ -125,7 +125,11 @@ def _until(value: str | None, t_a_us: int) -> int | None:
 )
 @click.option("--until", metavar="CYCLE|SECONDSs", help="stop after this cycle (or machine time: 12.5s)")
 @click.option(
-    "--signals", "-s", multiple=True, metavar="PATTERN", help="compare only these outputs (ST paths, * and ? as wildcards)"
+    "--signals",
+    "-s",
+    multiple=True,
+    metavar="PATTERN",
+    help="compare only these outputs (ST paths, * and ? as wildcards)",
 )
 @click.option("--all", "all_differences", is_flag=True, help="go on after the first difference; report all")
 @click.option("--max-differences", type=click.IntRange(1, 1_000_000), default=1000, show_default=True)

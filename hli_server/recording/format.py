@@ -135,7 +135,9 @@ class RecordingWriter:
     a full disk) is raised by the next :meth:`flush`. ``max_bytes`` bounds the file: the member that would
     pass it is not written; :meth:`close` then ends the file with an ``"end": "full"`` line."""
 
-    def __init__(self, path: Path, *, max_bytes: int, overwrite: bool = False, level: int = COMPRESS_LEVEL) -> None:
+    def __init__(
+        self, path: Path, *, max_bytes: int, overwrite: bool = False, level: int = COMPRESS_LEVEL
+    ) -> None:
         self.path = path
         self.max_bytes = max_bytes
         self.level = level
@@ -215,7 +217,9 @@ class RecordingWriter:
             self._executor.shutdown(wait=True)
             if isinstance(self._error, RecordingFullError):
                 end = {**(end or {}), "end": "full"}
-            if end is not None and not (self._error is not None and not isinstance(self._error, RecordingFullError)):
+            if end is not None and not (
+                self._error is not None and not isinstance(self._error, RecordingFullError)
+            ):
                 member = gzip_member(dumps(end))
                 file.write(member)
                 self.bytes_written += len(member)

@@ -213,7 +213,7 @@ def summarize(path: Path | str) -> Summary:
                 {
                     "cycle": cycle,
                     "what": "subprogram" if found is not None else "subprogram NOT FOUND",
-                    "name": f"{record['program_file']} ({record.get('origin', ', '.join(record.get('searched') or []))})",
+                    "name": f"{record['program_file']} ({record.get('origin', ', '.join(record.get('searched') or []))})",  # noqa: E501
                     "lines": str(record.get("text", "")).count("\n"),
                 }
             )

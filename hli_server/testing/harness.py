@@ -179,7 +179,7 @@ class SessionRecording:
     def stop(self) -> Path:
         runtime = self._harness.runtime
         if runtime.session.recording:
-            self._harness._call_soon(lambda: runtime.session.stop())
+            self._harness._call_soon(runtime.session.stop)
         return self.path
 
     def __enter__(self) -> SessionRecording:

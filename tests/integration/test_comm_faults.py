@@ -66,7 +66,9 @@ def modbus(hli: Harness) -> Iterator[RawModbus]:
     client.close()
 
 
-def test_a_modbus_exception_for_an_address_range_then_the_answers_again(hli: Harness, modbus: RawModbus) -> None:
+def test_a_modbus_exception_for_an_address_range_then_the_answers_again(
+    hli: Harness, modbus: RawModbus
+) -> None:
     fault = hli.comm_faults.add(kind="error", door="modbus", code=4, first=HOLDING, last=HOLDING + 1, count=2)
     assert fault["left"] == 2
     assert modbus.read_holding(HOLDING) == bytes([0x83, 0x04])  # server device failure, as asked
@@ -201,12 +203,14 @@ def test_the_http_api_sets_faults_for_the_doors_process_and_the_recording_keeps_
             history = httpx.get(f"{url}/api/comm/faults").json()["history"]
             assert {"fault": "end", "id": fault_id, "reason": "count"}.items() <= history[-1].items()
             bad = httpx.post(f"{url}/api/comm/faults", json={"kind": "stall"})
-            assert bad.status_code == 422 and "cycles" in bad.text
+            assert bad.status_code == 422
+            assert "cycles" in bad.text
             assert httpx.delete(f"{url}/api/comm/faults/999").status_code == 404
         finally:
             client.close()
         status = httpx.get(f"{url}/api/recording").json()
-        assert status["recording"] is True and status["file"] == str(record)
+        assert status["recording"] is True
+        assert status["file"] == str(record)
     finally:
         stop_server(proc)
     faults = [r for r in read_records(record) if "fault" in r]
@@ -244,7 +248,11 @@ async def test_the_mqtt_adapter_disconnected_on_demand_the_broker_sends_the_will
 
         watcher = asyncio.create_task(watch())
         async with Runtime(
-            load_machine(None), clock="stepped", http_port=None, adapters=[adapter], image_factory=memory_image
+            load_machine(None),
+            clock="stepped",
+            http_port=None,
+            adapters=[adapter],
+            image_factory=memory_image,
         ) as rt:
             await _until(lambda: statuses[-1:] == ["online"])
             rt.comm_faults.add({"kind": "disconnect", "duration_ms": 1500})
@@ -301,9 +309,9 @@ def _random_fault(rng: Any) -> dict[str, Any]:
 
 @pytest.mark.fuzz
 def test_fuzzed_faults_through_the_http_api_never_break_the_server(hli: Harness) -> None:
-    from tests.fuzz import count, seed_for
-
     import random
+
+    from tests.fuzz import count, seed_for
 
     rng = random.Random(seed_for("comm_faults_http"))
     url = hli.http_url
@@ -328,4 +336,5 @@ def test_fuzzed_faults_through_the_http_api_never_break_the_server(hli: Harness)
         assert modbus.read_holding(HOLDING)[0] == 3  # the doors serve as before
     finally:
         modbus.close()
-    assert statuses.get(201, 0) > 0 and statuses.get(422, 0) > 0
+    assert statuses.get(201, 0) > 0
+    assert statuses.get(422, 0) > 0

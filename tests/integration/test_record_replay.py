@@ -27,11 +27,15 @@ PROGRAM = "N10 G01 X40 Y30 F12000\nN20 G01 X0 Y0\nN30 M30\n"
 
 
 def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([*hli_server_cmd(), *args], capture_output=True, text=True, timeout=120, cwd=cwd)
+    return subprocess.run(
+        [*hli_server_cmd(), *args], capture_output=True, text=True, timeout=120, cwd=cwd, check=False
+    )
 
 
 @pytest.mark.hli(adapters=["http"])
-def test_start_and_stop_a_recording_over_http_then_download_and_replay_it(hli: Harness, tmp_path: Path) -> None:
+def test_start_and_stop_a_recording_over_http_then_download_and_replay_it(
+    hli: Harness, tmp_path: Path
+) -> None:
     hli.runtime.session.directory = tmp_path  # what --record-dir sets
     url = hli.http_url
     with httpx.Client(base_url=url, timeout=10) as client:
@@ -45,9 +49,12 @@ def test_start_and_stop_a_recording_over_http_then_download_and_replay_it(hli: H
         assert client.post("/api/channels/1/start").status_code == 202
         hli.step(1500)
         status = client.get("/api/recording").json()
-        assert status["recording"] is True and status["cycles"] == 1500 and status["name"] == "tuesday.jsonl.gz"
+        assert status["recording"] is True
+        assert status["cycles"] == 1500
+        assert status["name"] == "tuesday.jsonl.gz"
         stopped = client.post("/api/recording/stop")
-        assert stopped.status_code == 200 and stopped.json()["recording"] is False
+        assert stopped.status_code == 200
+        assert stopped.json()["recording"] is False
         assert client.post("/api/recording/stop").status_code == 409
         listed = client.get("/api/recordings").json()
         assert [r["name"] for r in listed] == ["tuesday.jsonl.gz"]
@@ -62,7 +69,8 @@ def test_start_and_stop_a_recording_over_http_then_download_and_replay_it(hli: H
     ops = [r["op"] for r in read_records(saved) if "op" in r]
     assert ops == ["load_program", "start"]
     report = hli.replay(saved)  # the pytest plugin's one line
-    assert report.window_start == 21 and report.last_cycle == 1520
+    assert report.window_start == 21
+    assert report.last_cycle == 1520
 
 
 def test_hli_replay_fails_readably_on_a_difference(hli: Harness, tmp_path: Path) -> None:
@@ -76,7 +84,9 @@ def test_hli_replay_fails_readably_on_a_difference(hli: Harness, tmp_path: Path)
     outputs = [e[0] for e in records[0]["outputs"]]
     for r in records:
         if "o" in r and r["c"] > 300:
-            r["o"][1] = r["o"][1] + 1 if isinstance(r["o"][1], int) and not isinstance(r["o"][1], bool) else r["o"][1]
+            r["o"][1] = (
+                r["o"][1] + 1 if isinstance(r["o"][1], int) and not isinstance(r["o"][1], bool) else r["o"][1]
+            )
             forged_cycle, forged_signal = r["c"], outputs[r["o"][0]]
             break
     with gzip.open(path, "wt") as f:
@@ -86,15 +96,18 @@ def test_hli_replay_fails_readably_on_a_difference(hli: Harness, tmp_path: Path)
     with pytest.raises(ReplayFailedError) as info:
         hli.replay(path)
     text = str(info.value)
-    assert f"first difference: cycle {forged_cycle}" in text and forged_signal in text
-    assert "expected" in text and "got" in text
+    assert f"first difference: cycle {forged_cycle}" in text
+    assert forged_signal in text
+    assert "expected" in text
+    assert "got" in text
 
 
 @pytest.mark.slow
 def test_a_killed_server_leaves_a_recording_that_replays_up_to_its_last_flush(tmp_path: Path) -> None:
     record = tmp_path / "killed.jsonl.gz"
     proc = start_server(
-        "--http-port", "0", "--no-modbus", "--clock", "realtime", "--record", str(record), "--record-flush", "0.1",
+        "--http-port", "0", "--no-modbus", "--clock", "realtime", "--record", str(record),
+        "--record-flush", "0.1",
     )  # fmt: skip
     try:
         banner = read_banner(proc)
@@ -109,7 +122,9 @@ def test_a_killed_server_leaves_a_recording_that_replays_up_to_its_last_flush(tm
         if proc.poll() is None:
             proc.kill()
         out = (proc.stdout.read() if proc.stdout else "") + (proc.stderr.read() if proc.stderr else "")
-        for name in (line.split("shared memory image:")[1].split()[0] for line in out.splitlines() if "image:" in line):
+        for name in (
+            line.split("shared memory image:")[1].split()[0] for line in out.splitlines() if "image:" in line
+        ):
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(f"/dev/shm/{name}")
         if "image" in locals().get("banner", {}):
@@ -122,7 +137,8 @@ def test_a_killed_server_leaves_a_recording_that_replays_up_to_its_last_flush(tm
     assert last > 500
     shown = cli("record", "show", str(record))
     assert shown.returncode == 0, shown.stderr
-    assert "NO END LINE" in shown.stdout and "load_program" in shown.stdout
+    assert "NO END LINE" in shown.stdout
+    assert "load_program" in shown.stdout
     replayed = cli("replay", str(record))
     assert replayed.returncode == 0, replayed.stdout + replayed.stderr
     assert "PASS" in replayed.stdout
@@ -133,13 +149,16 @@ def test_the_commands_replay_record_show_and_export(tmp_path: Path) -> None:
     record = tmp_path / "free.jsonl.gz"
     program = tmp_path / "part.nc"
     program.write_text(PROGRAM, encoding="utf-8")
-    done = cli("run", "--no-http", "--no-modbus", "--clock", "free", "--cycles", "3000", "--record", str(record))
+    done = cli(
+        "run", "--no-http", "--no-modbus", "--clock", "free", "--cycles", "3000", "--record", str(record)
+    )
     assert done.returncode == 0, done.stderr
     assert f"recording to {record} from cycle 1" in done.stdout
     shown = cli("record", "show", str(record), "--format", "json")
     assert shown.returncode == 0
     summary = json.loads(shown.stdout)
-    assert summary["end"] == "server stopped" and summary["last_cycle"] == 3000
+    assert summary["end"] == "server stopped"
+    assert summary["last_cycle"] == 3000
     ok = cli("replay", str(record), "--until", "2.5s", "--report", str(tmp_path / "r.json"))
     assert ok.returncode == 0, ok.stdout + ok.stderr
     assert json.loads((tmp_path / "r.json").read_text())["last_cycle"] == 2500
@@ -153,15 +172,20 @@ def test_the_commands_replay_record_show_and_export(tmp_path: Path) -> None:
     )
     mismatch = cli("replay", str(record), "--config", str(other))
     assert mismatch.returncode == 3, mismatch.stdout + mismatch.stderr
-    assert "configuration mismatch" in mismatch.stderr and "name" in mismatch.stderr
+    assert "configuration mismatch" in mismatch.stderr
+    assert "name" in mismatch.stderr
     nothing = tmp_path / "nothing.jsonl.gz"
     nothing.write_bytes(gzip.compress(b'{"a": 1}\n'))
     assert cli("replay", str(nothing)).returncode == 3
     csv_out = cli("record", "export", str(record), "--csv", "-", "-s", "gpCh[0]^bahn_state.*")
-    assert csv_out.returncode == 0 and csv_out.stdout.startswith("cycle,time_s,gpCh[0]^bahn_state.")
+    assert csv_out.returncode == 0
+    assert csv_out.stdout.startswith("cycle,time_s,gpCh[0]^bahn_state.")
     vcd = tmp_path / "out.vcd"
     png = tmp_path / "out.pdf"
-    exported = cli("record", "export", str(record), "--vcd", str(vcd), "--plot", str(png), "-s", "gpCh[0]^bahn_state.*_r")
+    exported = cli(
+        "record", "export", str(record), "--vcd", str(vcd), "--plot", str(png), "-s", "gpCh[0]^bahn_state.*_r"
+    )
     assert exported.returncode == 0, exported.stderr
-    assert "$enddefinitions" in vcd.read_text() and png.read_bytes()[:4] == b"%PDF"
+    assert "$enddefinitions" in vcd.read_text()
+    assert png.read_bytes()[:4] == b"%PDF"
     assert cli("record", "export", str(record)).returncode == 2

@@ -84,7 +84,8 @@ def test_a_fault_that_makes_no_sense_is_refused_with_a_reason(spec: dict[str, An
 
 def test_a_modbus_error_matches_its_address_range_and_table_and_ends_after_its_count() -> None:
     faults = CommFaults()
-    faults.add({"kind": "error", "door": "modbus", "code": 4, "first": 10, "last": 11, "table": "holding_registers",
+    faults.add({"kind": "error", "door": "modbus", "code": 4, "first": 10, "last": 11,
+                "table": "holding_registers",
                 "count": 2})  # fmt: skip
     gate = faults.gate(Door.MODBUS, FakeTransport())
     assert gate.modbus(read_holding(12)) is None
@@ -93,7 +94,8 @@ def test_a_modbus_error_matches_its_address_range_and_table_and_ends_after_its_c
     assert gate.modbus(read_holding(9, 2)) == struct.pack(">HHHBBB", 7, 0, 3, 1, 0x83, 4)  # 9..10 overlaps
     assert faults.table()[0]["left"] == 1
     assert gate.modbus(Frame(8, 0, 1, struct.pack(">BHH", 6, 11, 5))) is not None  # FC 6 to 11
-    assert faults.table() == [] and faults.history[-1]["reason"] == "count"
+    assert faults.table() == []
+    assert faults.history[-1]["reason"] == "count"
     assert gate.modbus(read_holding(10)) is None
 
 
@@ -105,7 +107,8 @@ def test_an_ads_error_matches_its_index_group_and_offsets() -> None:
     assert gate.ads(ads_read(0xF030, 0)) is None
     assert gate.ads(ads_read(0xF020, 8)) is None
     reply = gate.ads(ads_read(0xF020, 4))
-    assert reply is not None and struct.pack("<I", 0x745) in reply
+    assert reply is not None
+    assert struct.pack("<I", 0x745) in reply
     assert faults.gate(Door.MODBUS, FakeTransport()).modbus(read_holding(0)) is None  # another door
 
 
@@ -114,12 +117,15 @@ def test_a_connection_is_dropped_after_n_requests_and_only_as_many_as_asked() ->
     faults.add({"kind": "drop", "door": "modbus", "after": 2, "count": 2})
     a, b = FakeTransport(), FakeTransport()
     gate_a, gate_b = faults.gate(Door.MODBUS, a), faults.gate(Door.MODBUS, b)
-    assert gate_a.modbus(read_holding(0)) is None and gate_a.modbus(read_holding(0)) is None
+    assert gate_a.modbus(read_holding(0)) is None
+    assert gate_a.modbus(read_holding(0)) is None
     assert gate_b.modbus(read_holding(0)) is None
-    assert gate_a.modbus(read_holding(0)) == b"" and a.aborted  # the third request of a
+    assert gate_a.modbus(read_holding(0)) == b""
+    assert a.aborted
     gate_a.transport.write(b"late")
     assert a.written == []  # nothing goes out on a dropped connection
-    assert gate_b.modbus(read_holding(0)) is None and gate_b.modbus(read_holding(0)) == b""
+    assert gate_b.modbus(read_holding(0)) is None
+    assert gate_b.modbus(read_holding(0)) == b""
     assert faults.table() == []
 
 
@@ -133,7 +139,8 @@ async def test_delayed_answers_keep_their_order_and_come_after_the_delay() -> No
     gate.transport.write(b"first")
     assert gate.ads(ads_read(0xF020, 0)) is None  # the count was 1: not delayed itself ...
     gate.transport.write(b"second")  # ... but it cannot overtake the first
-    assert raw.written == [] and gate.transport.get_write_buffer_size() == len(b"firstsecond")
+    assert raw.written == []
+    assert gate.transport.get_write_buffer_size() == len(b"firstsecond")
     await asyncio.sleep(0.2)
     assert b"".join(d for _, d in raw.written) == b"firstsecond"
     assert raw.written[0][0] - began >= 0.08
@@ -183,6 +190,7 @@ def test_at_most_max_active_faults_and_a_reset_ends_them_all() -> None:
         faults.add({"kind": "delay", "door": "modbus", "delay_ms": 1, "count": 5})
     with pytest.raises(FaultError, match="in effect already"):
         faults.add({"kind": "delay", "door": "modbus", "delay_ms": 1, "count": 5})
-    assert faults.reset() == MAX_ACTIVE and not faults.active
+    assert faults.reset() == MAX_ACTIVE
+    assert not faults.active
     with pytest.raises(FaultError, match="no communication fault 99"):
         faults.end(99)

@@ -35,7 +35,9 @@ def demo() -> MachineConfig:
 
 @pytest.fixture
 async def runtime() -> AsyncIterator[Runtime]:
-    async with Runtime(demo(), clock="stepped", http_port=None, adapters=[], image_factory=memory_image) as rt:
+    async with Runtime(
+        demo(), clock="stepped", http_port=None, adapters=[], image_factory=memory_image
+    ) as rt:
         yield rt
 
 
@@ -74,7 +76,8 @@ async def test_a_recorded_session_replays_cycle_for_cycle(runtime: Runtime, tmp_
     changed = [r for r in records if "i" in r]
     assert len(changed) == 2  # the first cycle (every signal) and the override's change
     assert changed[1]["c"] == 401
-    assert inputs[changed[1]["i"][0]] == OVERRIDE and changed[1]["i"][1] == 1000
+    assert inputs[changed[1]["i"][0]] == OVERRIDE
+    assert changed[1]["i"][1] == 1000
 
     report = await replay(path)
     assert report.verdict is Verdict.PASS, report.text()
@@ -116,11 +119,13 @@ async def test_a_different_output_is_reported_with_cycle_signal_expected_and_act
     assert first is not None
     assert (first.cycle, first.signal, first.expected, first.actual) == (cycle, CMD_X, value + 7, value)
     assert report.exit_status == 1
-    assert f"cycle {cycle}" in report.text() and CMD_X in report.text()
+    assert f"cycle {cycle}" in report.text()
+    assert CMD_X in report.text()
 
     # all differences: the forged value is expected until the next recorded change of the signal
     every = await replay(forged, all_differences=True)
-    assert every.counts[CMD_X][0] >= 1 and every.counts[CMD_X][1] == cycle
+    assert every.counts[CMD_X][0] >= 1
+    assert every.counts[CMD_X][1] == cycle
     # --signals: the other outputs only, no difference; --until before the forgery: none either
     assert (await replay(forged, signals=["gpAx[1]^*"])).verdict is Verdict.PASS
     assert (await replay(forged, until=cycle - 1)).verdict is Verdict.PASS
@@ -136,7 +141,8 @@ async def test_a_change_in_the_engine_shows_up(runtime: Runtime, tmp_path: Path)
 
     report = await replay(path, prepare=softer_drive)
     assert report.verdict is Verdict.DIFFER
-    assert report.first is not None and report.first.signal.startswith("gpAx[0]^")
+    assert report.first is not None
+    assert report.first.signal.startswith("gpAx[0]^")
 
 
 async def test_a_recording_started_in_a_running_server_replays_from_its_input_journal(
@@ -170,7 +176,8 @@ async def test_a_dropped_journal_makes_a_late_recording_unreplayable(tmp_path: P
         rt.session.stop()
     report = await replay(path)
     assert report.verdict is Verdict.CANNOT
-    assert report.reason is not None and "journal" in report.reason
+    assert report.reason is not None
+    assert "journal" in report.reason
     assert report.exit_status == 3
 
 
@@ -211,7 +218,8 @@ async def test_a_given_configuration_must_equal_the_recorded_one(runtime: Runtim
     other = demo().model_copy(update={"cycle_time_us": 2000})
     report = await replay(path, config=other)
     assert report.verdict is Verdict.CANNOT
-    assert report.reason is not None and "configuration mismatch" in report.reason
+    assert report.reason is not None
+    assert "configuration mismatch" in report.reason
     assert "cycle_time_us" in report.reason
 
 
@@ -232,7 +240,9 @@ async def test_version_mismatch_replays_with_a_note_or_refuses_with_same_version
     assert "versions differ" in report.text()
     strict = await replay(forged, same_version=True)
     assert strict.verdict is Verdict.CANNOT
-    assert strict.reason is not None and "version mismatch" in strict.reason and "0.0.1" in strict.reason
+    assert strict.reason is not None
+    assert "version mismatch" in strict.reason
+    assert "0.0.1" in strict.reason
 
 
 async def test_what_is_no_recording_cannot_be_replayed(tmp_path: Path) -> None:
@@ -240,18 +250,22 @@ async def test_what_is_no_recording_cannot_be_replayed(tmp_path: Path) -> None:
     with gzip.open(plain, "wt") as f:
         f.write('{"hello": 1}\n')
     report = await replay(plain)
-    assert report.verdict is Verdict.CANNOT and "not an hli-server recording" in (report.reason or "")
+    assert report.verdict is Verdict.CANNOT
+    assert "not an hli-server recording" in (report.reason or "")
     newer = tmp_path / "n.jsonl.gz"
     with gzip.open(newer, "wt") as f:
         f.write(json.dumps({"record": "header", "format": "hli-recording", "format_version": 99}) + "\n")
     report = await replay(newer)
-    assert report.verdict is Verdict.CANNOT and "newer" in (report.reason or "")
+    assert report.verdict is Verdict.CANNOT
+    assert "newer" in (report.reason or "")
     junk = tmp_path / "j.jsonl.gz"
     junk.write_bytes(b"not gzip at all")
     assert (await replay(junk)).verdict is Verdict.CANNOT
 
 
-async def test_a_crash_leaves_everything_up_to_the_last_flush_readable(runtime: Runtime, tmp_path: Path) -> None:
+async def test_a_crash_leaves_everything_up_to_the_last_flush_readable(
+    runtime: Runtime, tmp_path: Path
+) -> None:
     path = tmp_path / "crash.jsonl.gz"
     runtime.session.start(path)
     runtime.operator.load_program(1, PROGRAM, "part")
@@ -266,7 +280,8 @@ async def test_a_crash_leaves_everything_up_to_the_last_flush_readable(runtime: 
     path.write_bytes(data + data[flushed : flushed + (len(data) - flushed) // 2][:200])
     info = Records()
     records = list(read_records(path, info))
-    assert info.truncated is not None and "incomplete" in info.truncated
+    assert info.truncated is not None
+    assert "incomplete" in info.truncated
     assert "end" not in records[-1]
     assert records[-1]["c"] == 1200
     report = await replay(path)
@@ -301,17 +316,20 @@ async def test_record_show_counts_what_is_in_a_recording(runtime: Runtime, tmp_p
     path = tmp_path / "s.jsonl.gz"
     await scenario(runtime, path)
     summary = summarize(path)
-    assert summary.end == "stopped" and summary.truncated is None
+    assert summary.end == "stopped"
+    assert summary.truncated is None
     assert summary.last_cycle == 2100
     assert summary.duration_s() == pytest.approx(2.1)
-    assert OVERRIDE in summary.inputs and summary.inputs[OVERRIDE][1] == 401
+    assert OVERRIDE in summary.inputs
+    assert summary.inputs[OVERRIDE][1] == 401
     assert CMD_X in summary.outputs
     assert "gpCh[0]^bahn_state.cycle_r" not in summary.outputs  # counts the cycles: not stored
     assert summary.programs[0]["name"] == "part"
     assert [o["op"] for o in summary.operator] == ["load_program", "start", "override"]
     assert summary.events["program_state"] >= 2
     text = summary.text()
-    assert "part" in text and OVERRIDE in text
+    assert "part" in text
+    assert OVERRIDE in text
 
 
 async def test_exports_csv_vcd_and_a_plot(runtime: Runtime, tmp_path: Path) -> None:
@@ -324,7 +342,8 @@ async def test_exports_csv_vcd_and_a_plot(runtime: Runtime, tmp_path: Path) -> N
     assert lines[0] == f"cycle,time_s,{OVERRIDE},{CMD_X}"
     assert len(lines) == rows + 1
     last = lines[-1].split(",")
-    assert int(last[2]) == 1000 and int(last[3]) == runtime.image.read(CMD_X)
+    assert int(last[2]) == 1000
+    assert int(last[3]) == runtime.image.read(CMD_X)
 
     from vcd.reader import TokenKind, tokenize
 
@@ -341,7 +360,8 @@ async def test_exports_csv_vcd_and_a_plot(runtime: Runtime, tmp_path: Path) -> N
     timescale = next(t for t in tokens if t.kind is TokenKind.TIMESCALE).timescale
     assert (int(timescale.magnitude), str(timescale.unit.value)) == (1, "us")
     stamps = [t.time_change for t in tokens if t.kind is TokenKind.CHANGE_TIME]
-    assert all(s % 1000 == 0 for s in stamps) and stamps[-1] <= 2100 * 1000
+    assert all(s % 1000 == 0 for s in stamps)
+    assert stamps[-1] <= 2100 * 1000
 
     png = tmp_path / "s.png"
     assert write_plot(path, png, [CMD_X, OVERRIDE]) == 2
@@ -350,7 +370,9 @@ async def test_exports_csv_vcd_and_a_plot(runtime: Runtime, tmp_path: Path) -> N
         write_plot(path, tmp_path / "x.png", ["nothing*"])
 
 
-async def test_recording_refuses_a_second_start_and_an_existing_file(runtime: Runtime, tmp_path: Path) -> None:
+async def test_recording_refuses_a_second_start_and_an_existing_file(
+    runtime: Runtime, tmp_path: Path
+) -> None:
     path = tmp_path / "s.jsonl.gz"
     runtime.session.start(path)
     with pytest.raises(RecordingError, match="runs already"):
@@ -374,7 +396,8 @@ async def test_a_full_recording_is_closed_and_the_server_goes_on(tmp_path: Path)
             await rt.step(100)
             rt.session.flush()
         assert not rt.session.recording
-        assert rt.session.error is not None and "limit" in rt.session.error
+        assert rt.session.error is not None
+        assert "limit" in rt.session.error
         assert rt.machine.cycle == 4000
     records = list(read_records(path))
     assert records[-1]["end"] == "full"
@@ -395,12 +418,16 @@ def test_the_in_cycle_work_is_a_comparison_and_an_append() -> None:
     assert [(kind, cycle) for kind, cycle, _ in tap._pending] == [(0, 6)]
 
 
-async def test_subprograms_the_library_found_are_recorded_and_found_again_by_the_replay(tmp_path: Path) -> None:
+async def test_subprograms_the_library_found_are_recorded_and_found_again_by_the_replay(
+    tmp_path: Path,
+) -> None:
     from hli_server.engine.programs import MemoryLibrary
     from hli_server.recording.replay import Feeder, ReplayReport
 
     path = tmp_path / "sub.jsonl.gz"
-    async with Runtime(demo(), clock="stepped", http_port=None, adapters=[], image_factory=memory_image) as rt:
+    async with Runtime(
+        demo(), clock="stepped", http_port=None, adapters=[], image_factory=memory_image
+    ) as rt:
         rt.machine.programs.inner = MemoryLibrary({"UP1.NC": "%UP1\nN10 G01 X5 F600\nM17\n"})  # type: ignore[attr-defined]
         rt.session.start(path)
         await rt.step(3)
@@ -411,15 +438,21 @@ async def test_subprograms_the_library_found_are_recorded_and_found_again_by_the
         rt.session.stop()
     finds = [r for r in read_records(path) if "program_file" in r]
     assert [(r["program_file"], r["found"]) for r in finds] == [("up1.nc", "UP1.NC"), ("MISSING.NC", None)]
-    assert finds[0]["text"].startswith("%UP1") and finds[1]["searched"] == ["uploaded files"]
+    assert finds[0]["text"].startswith("%UP1")
+    assert finds[1]["searched"] == ["uploaded files"]
     records = read_records(path)
     header = next(records)
     feeder = Feeder(header, records, Records(), ReplayReport(path=str(path)), signals=None, events=True,
                     all_differences=False, max_differences=10, until=None)  # fmt: skip
     for record in read_records(path):
         if "program_file" in record:
-            feeder.library_finds.setdefault(record["program_file"], __import__("collections").deque()).append(record)
+            feeder.library_finds.setdefault(record["program_file"], __import__("collections").deque()).append(
+                record
+            )
     found = feeder.find("up1.nc")
-    assert found is not None and found.text.startswith("%UP1") and found.origin == "upload:UP1.NC"
-    assert feeder.find("MISSING.NC") is None and feeder.searched() == ("uploaded files",)
+    assert found is not None
+    assert found.text.startswith("%UP1")
+    assert found.origin == "upload:UP1.NC"
+    assert feeder.find("MISSING.NC") is None
+    assert feeder.searched() == ("uploaded files",)
     assert (await replay(path)).verdict is Verdict.PASS
