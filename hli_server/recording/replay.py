@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
+import struct
 import json
 import math
 import time
@@ -292,7 +294,9 @@ class Feeder:
         """Map the recorded signals onto this version's image (CannotReplayError for what is gone)."""
         self.runtime = runtime
         layout = runtime.image.layout
-        self.image = runtime.image
+        self.image: Any = (
+            runtime.image
+        )  # the replay's own ProcessImage in memory (image_factory=memory_image)
         self.inputs = self._map(layout, self.header.get("inputs"), _P2C, "input")
         self.p2c_size = layout.size(_P2C)
         self.expected_in = bytearray(runtime.image.read_half(_P2C))
@@ -415,8 +419,9 @@ class Feeder:
                     self.files.setdefault(str(record["file"]), deque()).append(text)
             elif "fault" in record:
                 self._apply_fault(record)
-        if changed:
-            self.image.write_bytes(0, bytes(self.expected_in))
+        if changed:  # the half as the recorded cycle latched it, byte for byte (no door checks it again)
+            offset = self.image.plan.p2c_offset
+            self.image.buffer[offset : offset + self.p2c_size] = self.expected_in
 
     def _apply_inputs(self, flat: list[Any]) -> None:
         inputs = self.inputs
@@ -426,7 +431,15 @@ class Feeder:
             if signal is None:
                 continue
             value = decode_value(flat[k + 1])
-            struct_for(signal).pack_into(buf, signal.offset, signal.coerce(value))
+            kind = signal.type
+            plain = (
+                bool(value)
+                if kind is SignalType.BOOL
+                else float(value)
+                if kind is SignalType.LREAL
+                else int(value)
+            )
+            struct_for(signal).pack_into(buf, signal.offset, plain)
 
     def _apply_op(self, cycle: int, record: dict[str, Any]) -> None:
         name = record.get("op")
@@ -574,10 +587,13 @@ class Feeder:
             raise _StopReplayError
 
 
-def struct_for(signal: Signal) -> Any:
-    import struct
+def struct_for(signal: Signal) -> struct.Struct:
+    return _struct("<" + signal.type.struct_char)
 
-    return struct.Struct("<" + signal.type.struct_char)
+
+@functools.lru_cache(maxsize=16)
+def _struct(fmt: str) -> struct.Struct:
+    return struct.Struct(fmt)
 
 
 def _event_summary(events: list[Any]) -> list[str]:
