@@ -21,9 +21,9 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
-import struct
 import json
 import math
+import struct
 import time
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
