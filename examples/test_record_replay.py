@@ -19,8 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from hli_server.testing import Harness
-from hli_server.testing.harness import ReplayFailedError
+from hli_server.testing import Harness, ReplayFailedError
 from plc_clients import PlcTask
 from plc_clients.demos.c43_obstacle import ObstacleDemo
 
