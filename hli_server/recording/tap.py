@@ -96,7 +96,7 @@ TICK_S: Final = 0.05
 """How often the encoder task looks for work."""
 ENCODE_SLICE: Final = 2000
 """Cycles encoded before the encoder yields to the event loop (the clock's timer)."""
-MAX_PENDING: Final = 50_000
+MAX_PENDING: Final = 20_000
 """Cycles of raw changes held in memory; beyond, the cycle itself encodes (the loop was starved)."""
 JOURNAL_MEMBER_BYTES: Final = 256 * 1024
 """Journal text compressed into a member once it is this long."""
