@@ -178,7 +178,8 @@ class Axis:
         self.channel = 0
         self.rotary = config.axis_type == AxisType.ROTARY
         self.a_max = config.a_max
-        self.a_emergency = config.a_emergency
+        self.a_emergency = config.emergency_deceleration
+        """P-AXIS-00003 in effect [mm/s²]: a_emergency, or a_max where it is 0"""
         self.v_max = mm_per_min_to_mm_per_s(config.v_max)
         self.v_rapid = min(mm_per_min_to_mm_per_s(config.v_rapid), self.v_max)
         self.jog_velocity = min(mm_per_min_to_mm_per_s(config.jog_velocity), self.v_max)

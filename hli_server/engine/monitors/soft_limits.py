@@ -1,12 +1,24 @@
 """Software limit switches (E-06, FCT-C14 6.2: P-AXIS-00177 / P-AXIS-00178 / P-AXIS-00179).
 
+The kernel's numbers (its software limit switch description,
+https://infosys.beckhoff.com/content/1033/swlimit/15311258251.html):
+
 * Programmed setpoints: every block's whole path (for arcs the extremes on the arc) is checked
   against ``kenngr.swe_neg`` / ``kenngr.swe_pos`` before the block is queued; a violating block is
-  not started (911010 / 911011, program abort at its start point).
+  not started ("that NC block is not executed", program abort at its start point): 120002 beyond
+  the positive, 120003 beyond the negative limit. With P-CHAN-00120 ``soft_limit_tolerance`` = 1 an
+  axis the block does not move is checked against the limits widened by ``swe_toleranz`` (the
+  parameter page: "the tolerance is only considered if the axis is not programmed or moved").
 * Actual positions: every cycle against ``swe_neg - swe_toleranz`` / ``swe_pos + swe_toleranz``;
-  beyond them the channel's axes stop at once (911012).
-* Jog: the axes brake early enough to stop at the limit (no error; warning 911013 when
+  beyond them the channel's axes stop at once: 70021 positive, 70022 negative.
+* Manual mode: the axes brake early enough to stop at the limit (no error; warning 911013 when
   P-MANU-00014 is set).
+
+The limits in effect (``Axis.swe_neg`` / ``swe_pos``) are taken from the axis record (the
+configuration, :meth:`~hli_server.engine.axis.Axis.reload_soft_limits`) at start-up, reset, mode
+change and axis exchange (P-AXIS-00177/00178 "Anmerkungen"); what an NC program or the operator set
+in between (:meth:`~hli_server.engine.axis.Axis.set_soft_limits`, the kernel's G98/G99) holds until
+then.
 """
 
 from __future__ import annotations
@@ -18,7 +30,21 @@ from hli_server.engine.monitors.base import ChannelHooks, MachineView, Monitor
 from hli_server.engine.nc.blocks import Block
 from schemas.units import increments_from_mm
 
-__all__ = ["SoftLimitPathCheck", "SoftLimits"]
+__all__ = [
+    "ALARM_ACTUAL_NEGATIVE",
+    "ALARM_ACTUAL_POSITIVE",
+    "ALARM_MANUAL_LIMIT",
+    "ALARM_PROGRAMMED_NEGATIVE",
+    "ALARM_PROGRAMMED_POSITIVE",
+    "SoftLimitPathCheck",
+    "SoftLimits",
+]
+
+ALARM_PROGRAMMED_POSITIVE = 120002
+ALARM_PROGRAMMED_NEGATIVE = 120003
+ALARM_ACTUAL_POSITIVE = 70021
+ALARM_ACTUAL_NEGATIVE = 70022
+ALARM_MANUAL_LIMIT = 911013
 
 _EPS = 1e-9
 
@@ -42,7 +68,7 @@ class SoftLimits(Monitor):
                 if self._warn and axis.name not in self._warned:
                     self._warned.add(axis.name)
                     self.machine.raise_alarm(
-                        911013,
+                        ALARM_MANUAL_LIMIT,
                         channel,
                         f"axis {axis.name}: jog stopped at the software limit",
                         axis=axis.name,
@@ -66,13 +92,21 @@ class SoftLimits(Monitor):
                 continue
             self._tripped.add(axis.name)
             channel = machine.channels[axis.channel]
+            positive = pos > hi
+            limit = axis.swe_pos if positive else axis.swe_neg
             machine.raise_alarm(
-                911012,
+                ALARM_ACTUAL_POSITIVE if positive else ALARM_ACTUAL_NEGATIVE,
                 channel,
-                f"axis {axis.name}: actual position {pos:.4f} mm beyond the software limit "
-                f"[{lo:.4f}, {hi:.4f}] mm (swe_toleranz included)",
+                f"axis {axis.name}: actual position {pos:.4f} mm beyond the "
+                f"{'positive' if positive else 'negative'} software limit {limit:.4f} mm "
+                f"{'+' if positive else '-'} swe_toleranz {axis.swe_tol:.4f} mm (P-AXIS-00179)",
                 axis=axis.name,
-                params={"axis": axis.name, "position": increments_from_mm(pos)},
+                params={
+                    "axis": axis.name,
+                    "axis_number": axis.number,
+                    "position": increments_from_mm(pos),
+                    "limit": increments_from_mm(limit),
+                },
             )
             for ax in channel.axes:
                 ax.start_independent_stop(ax.a_emergency, machine.t_a)
@@ -87,22 +121,40 @@ class SoftLimitPathCheck:
         self.channel = channel
 
     def __call__(self, segment: Segment, block: Block) -> DecodeError | None:
+        with_tolerance = self.channel.config.soft_limit_tolerance
         for k, axis in enumerate(self.channel.axes):
             lo, hi = segment.axis_extent(k)
-            if lo < axis.swe_neg - _EPS:
+            tol = 0.0
+            if with_tolerance and lo == hi and segment.start[k] == segment.end[k]:
+                tol = axis.swe_tol  # P-CHAN-00120: an axis the block does not move
+            if lo < axis.swe_neg - tol - _EPS:
                 return DecodeError(
-                    911010,
+                    ALARM_PROGRAMMED_NEGATIVE,
                     f"axis {axis.name}: programmed path reaches {lo:.4f} mm, beyond the negative software "
-                    f"limit {axis.swe_neg:.4f} mm (P-AXIS-00177)",
-                    {"axis": axis.name, "position": increments_from_mm(lo), "limit": axis.config.swe_neg},
+                    f"limit {axis.swe_neg:.4f} mm (P-AXIS-00177)" + _tolerance_note(tol),
+                    {
+                        "axis": axis.name,
+                        "axis_number": axis.number,
+                        "position": increments_from_mm(lo),
+                        "limit": increments_from_mm(axis.swe_neg),
+                    },
                     axis=axis.name,
                 )
-            if hi > axis.swe_pos + _EPS:
+            if hi > axis.swe_pos + tol + _EPS:
                 return DecodeError(
-                    911011,
+                    ALARM_PROGRAMMED_POSITIVE,
                     f"axis {axis.name}: programmed path reaches {hi:.4f} mm, beyond the positive software "
-                    f"limit {axis.swe_pos:.4f} mm (P-AXIS-00178)",
-                    {"axis": axis.name, "position": increments_from_mm(hi), "limit": axis.config.swe_pos},
+                    f"limit {axis.swe_pos:.4f} mm (P-AXIS-00178)" + _tolerance_note(tol),
+                    {
+                        "axis": axis.name,
+                        "axis_number": axis.number,
+                        "position": increments_from_mm(hi),
+                        "limit": increments_from_mm(axis.swe_pos),
+                    },
                     axis=axis.name,
                 )
         return None
+
+
+def _tolerance_note(tol: float) -> str:
+    return f" + swe_toleranz {tol:.4f} mm (P-CHAN-00120, the axis does not move)" if tol else ""
