@@ -331,7 +331,7 @@ class Decoder:
         if not block.axes:
             return self._error(block, 912011, "G100 measuring move without a target position")
         if self.modal.in_area_definition:
-            return self._error(block, 912011, "G100 is not allowed inside an area definition")
+            return self._error(block, 21793, "G100 is not allowed inside a control area definition")
         if self.modal.feed is None:
             return self._error(block, 911000, "no feed (F word) programmed for the G100 measuring move")
         segment = LineSegment(tuple(self.position), tuple(self._target(block)))
@@ -390,9 +390,8 @@ class Decoder:
             m.in_area_definition = True
             # the contour blocks do not move the axes: END puts the position back
             self._position_before_area = list(self.position)
-        elif isinstance(cmd, AreaEnd):
-            if not m.in_area_definition:
-                return self._error(block, 912002, "#CONTROL AREA END without BEGIN")
+        elif isinstance(cmd, AreaEnd) and m.in_area_definition:
+            # (an END without BEGIN goes to the area handler: the kernel's warning 21288, no effect)
             m.in_area_definition = False
             if self._position_before_area is not None:
                 self.position = self._position_before_area

@@ -444,7 +444,7 @@ async def test_an_error_abort_reads_aborted_until_reset_and_a_new_program_loads(
     await client.post("/api/channels/1/start")
     await step(client, 3000)
     assert await image_value(client, PROGRAM_STATE) == ProgramState.ABORTED
-    assert await image_value(client, "gpCh[0]^bahn_state.error_id_r") == 911011
+    assert await image_value(client, "gpCh[0]^bahn_state.error_id_r") == 120002
     state = await channel_state(client)
     assert (state["program_state"], state["program_state_name"]) == (3, "aborted")
     r = await client.post("/api/channels/1/program", content="N10 G01 X5 F6000\nN20 M30\n")

@@ -803,10 +803,14 @@ def test_docs_parameter_table_is_current_and_complete() -> None:
         "between the GENERATED markers"
     )
     for info in (*AXIS_PARAMETERS, *CHANNEL_PARAMETERS, *MANUAL_PARAMETERS):
-        assert f"`{info.path.replace('[0]', '[i]')}`" in doc
+        if info.path is not None:
+            assert f"`{info.path.replace('[0]', '[i]')}`" in doc
         assert f"`{info.field}`" in doc
         if info.pid:
             assert info.pid in doc
+            # issue 21: every kernel parameter names the page (or document section) it comes from
+            assert info.page, f"{info.pid} has no kernel page"
+            assert (f"[page]({info.page})" if info.page.startswith("https://") else info.page) in doc
     runner = CliRunner()
     printed = runner.invoke(config_command, ["parameters"])
     assert printed.exit_code == 0
