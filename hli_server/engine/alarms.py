@@ -223,6 +223,12 @@ _TABLE: tuple[AlarmDef, ...] = (
         page=_DIAG + "257574027.html",
         replaces=(912011,),
     ),
+    _e(
+        50052,
+        "Probe already actuated when the measuring move starts",
+        "kernel",
+        page=_DIAG + "257543563.html",
+    ),
     # --- project's own: NC program syntax (910xxx) ------------------------------------------
     _e(910100, "Unknown word in NC block", "project"),
     _e(910101, "Malformed number in NC block", "project"),
