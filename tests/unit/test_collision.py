@@ -210,6 +210,30 @@ def test_cnc_objects_by_index_group_and_offset():
         assert address not in layout.ads_index()
 
 
+@pytest.mark.req("C3-10", "B-04")
+def test_the_coll_offset_object_is_the_minimum_distance_in_effect_not_the_current_distance():
+    """FCT-C3 4.3 names object 0x..0246 "dyn_coll_mon coll_offset - Distanz zwischen Kollisionsachsen",
+    UNS32, 0.1 µm (the kernel's page: https://infosys.beckhoff.com/content/1033/tf5200_axis_collision_mon/
+    1223993099.html). Decided (issue 21, docs/monitors.md): it is the minimum distance in effect, the
+    parameter P-AXIS-00045 coll_offset ("Minimale Distanz zwischen zwei Kollisionsachsen"), not the
+    distance the axes have now: it has the parameter's name, type and unit; a distance of setpoints is
+    signed (the axes can pass each other with P-AXIS-00262/00263) and would be a REAL64 like velocity
+    and brake_dist; and #COLL MON ON, the NC command of the same dynamic collision monitoring, sets it
+    as DIST "analog zu P-AXIS-00045"."""
+    m = one_channel(x1=0.0, x2=100.0)
+    m.step(1)
+    assert (obj(m, 1, 0x0246), obj(m, 2, 0x0246)) == (200_000, 200_000)  # both axes of the pair
+    start(m, "N10 G01 X1=50 F6000\nN20 M30\n")
+    run_until_stopped(m)
+    assert distance(m) == pytest.approx(50.0)
+    assert (obj(m, 1, 0x0246), obj(m, 2, 0x0246)) == (200_000, 200_000)  # not 500000: not the distance
+    # the older two-sided form with two values: the larger applies (70162) and is the object's value
+    two_sided = one_channel(offset=200_000, partner={"coll_check_ax_nr": 2, "coll_offset": 250_000})
+    two_sided.step(1)
+    assert (obj(two_sided, 1, 0x0246), obj(two_sided, 2, 0x0246)) == (250_000, 250_000)
+    assert obj(two_sided, 3, 0x0246) == 0  # Z1: no pair
+
+
 @pytest.mark.req("C3-06")
 def test_monitoring_starts_only_when_both_axes_are_referenced():
     m = one_channel(x1=0.0, x2=100.0, partner={"referenced": False})
