@@ -93,6 +93,8 @@ class _Measuring:
     """Type 3 with G106: the move goes on to its target after the probe signal."""
     run_on: float = 0.0
     """mm the move runs past the programmed target (the measuring offsets)."""
+    end: tuple[float, ...] = ()
+    """Where the move ends without a probe signal (``check --geometry-only`` goes on from there)."""
     triggered: bool = False
     armed: bool = False
 
@@ -149,6 +151,7 @@ class MeasuringMoves(AreaRole):
             measuring_type=mtype,
             to_target=mtype == 3 and 106 in block.g_codes,
             run_on=run_on,
+            end=segment.end,
         )
 
         def done() -> None:
@@ -282,7 +285,8 @@ class MeasuringMoves(AreaRole):
         error = tag.measuring_type == 2 or (tag.measuring_type == 1 and ch.config.meas_error_no_signal)
         if not error:
             # types 1 (P-CHAN-00176 = 0), 3 and 4: the measurement did not take place, the program goes on
-            ch.decoder.resume(ch.setpoints())
+            # from the end of the move (where the axes stand; a geometry check did not move them)
+            ch.decoder.resume(list(tag.end))
             return
         why = "measuring type 2" if tag.measuring_type == 2 else "measuring type 1 with P-CHAN-00176 = 1"
         run_on = f" and its run-on of {fnum(tag.run_on)} mm (measuring offset)" if tag.run_on else ""
