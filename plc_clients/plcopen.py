@@ -427,7 +427,7 @@ class _EnableBlock(FunctionBlock):
 
     def _before_write(self, io: IoImage) -> None:
         """This cycle's command is about to be written: what the CNC latched of the last one is known now."""
-        return None
+        return
 
     # --- per block -------------------------------------------------------------------------------
     def _bind(self, layout: Layout) -> tuple[ErrorID, str] | None:
@@ -535,12 +535,11 @@ class _DynPosLimit(_EnableBlock):
     def cycle(self, io: IoImage) -> None:
         super().cycle(io)
         latched = self._latched_command
-        in_effect = (
-            latched is not None
-            and self._armed
-            and (self.phase is Phase.VALID or int(self.MonitoringState) >= DynPosLimitState.ACTIVE)
-        )
-        self.State = latched if in_effect else 0
+        monitoring = int(self.MonitoringState) >= DynPosLimitState.ACTIVE
+        if latched is not None and self._armed and (self.phase is Phase.VALID or monitoring):
+            self.State = latched
+        else:
+            self.State = 0
 
     def _reset_extra_outputs(self) -> None:
         self.MonitoringState = 0

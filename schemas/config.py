@@ -278,8 +278,8 @@ class AxisConfig(_Strict):
         if self.a_emergency > 2.0 * self.a_max:
             issues.append(
                 ParameterIssue(
-                    f"axis {self.name}: P-AXIS-00003 a_emergency ({self.a_emergency:g}) must be at most twice "
-                    f"P-AXIS-00008 a_max ({self.a_max:g}): 1 ≤ a_emergency ≤ 2*a_max, or 0 for a_max",
+                    f"axis {self.name}: P-AXIS-00003 a_emergency ({self.a_emergency:g}) must be at most "
+                    f"twice P-AXIS-00008 a_max ({self.a_max:g}): 1 ≤ a_emergency ≤ 2*a_max, or 0 for a_max",
                     field="a_emergency",
                 )
             )
@@ -298,8 +298,8 @@ class AxisConfig(_Strict):
             if self.acs_limit_neg >= self.acs_limit_pos:
                 issues.append(
                     ParameterIssue(
-                        f"axis {self.name}: P-AXIS-00492 acs_limit_neg ({self.acs_limit_neg}) must be less than "
-                        f"P-AXIS-00493 acs_limit_pos ({self.acs_limit_pos}) (both 0: off)",
+                        f"axis {self.name}: P-AXIS-00492 acs_limit_neg ({self.acs_limit_neg}) must be less "
+                        f"than P-AXIS-00493 acs_limit_pos ({self.acs_limit_pos}) (both 0: off)",
                         field="acs_limit_neg",
                     )
                 )
@@ -307,8 +307,8 @@ class AxisConfig(_Strict):
         if self.vb_messen > vb_max_um_s:
             issues.append(
                 ParameterIssue(
-                    f"axis {self.name}: P-AXIS-00215 vb_messen ({self.vb_messen} µm/s) must be at most the axis' "
-                    f"maximum velocity (v_max {self.v_max:g} mm/min = {vb_max_um_s:.0f} µm/s)",
+                    f"axis {self.name}: P-AXIS-00215 vb_messen ({self.vb_messen} µm/s) must be at most the "
+                    f"axis' maximum velocity (v_max {self.v_max:g} mm/min = {vb_max_um_s:.0f} µm/s)",
                     field="vb_messen",
                 )
             )
@@ -339,7 +339,7 @@ class AxisConfig(_Strict):
 
     @property
     def emergency_deceleration(self) -> float:
-        """P-AXIS-00003 in effect [mm/s²]: ``a_emergency``, or ``a_max`` where it is 0 (the parameter page)."""
+        """P-AXIS-00003 in effect [mm/s²]: ``a_emergency``, or ``a_max`` where it is 0 (its page)."""
         return self.a_emergency or self.a_max
 
 
@@ -380,11 +380,11 @@ class ChannelConfig(_Strict):
         default=1,
         ge=1,
         le=7,
-        description="P-CHAN-00057 default measuring type of G100 (1..4 simulated; 5, 6, 7 are not G100 types here)",
+        description="P-CHAN-00057 default measuring type of G100 (1..4; 5, 6 are G310's, 7 is not simulated)",
     )
     rel_offset_limits_std_manual_mode: bool = Field(
         default=False,
-        description="P-CHAN-00114 the relative offset limits P-AXIS-00137/00138 apply in manual mode G200 too",
+        description="P-CHAN-00114 the relative offset limits P-AXIS-00137/00138 apply in manual mode G200",
     )
     soft_limit_tolerance: bool = Field(
         default=False,
@@ -744,7 +744,14 @@ AXIS_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
             "https://infosys.beckhoff.com/content/1033/tf5200_axis_position_monitoring/92801291.html",
             "",
         ),
-        ("kenngr.coll_moving_dir_inverted", "coll_moving_dir_inverted", "P-AXIS-00262", "0/1", "FCT-C3 4.2", ""),
+        (
+            "kenngr.coll_moving_dir_inverted",
+            "coll_moving_dir_inverted",
+            "P-AXIS-00262",
+            "0/1",
+            "FCT-C3 4.2",
+            "",
+        ),
         (
             "kenngr.coll_zero_position_offset",
             "coll_zero_position_offset",
@@ -764,7 +771,14 @@ AXIS_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
             "and in FCT-C14's P-CHAN-00268) but show neither its text-list path nor its default: TOML key "
             "only, default 0 as P-AXIS-00114's",
         ),
-        ("handbetrieb.acs_limit_neg", "acs_limit_neg", "P-AXIS-00492", "0.1 µm", _OFFSET_LIMITS + "77659787.html", ""),
+        (
+            "handbetrieb.acs_limit_neg",
+            "acs_limit_neg",
+            "P-AXIS-00492",
+            "0.1 µm",
+            _OFFSET_LIMITS + "77659787.html",
+            "",
+        ),
         ("handbetrieb.acs_limit_pos", "acs_limit_pos", "P-AXIS-00493", "0.1 µm", _AX + "118116619.html", ""),
         (
             "getriebe[0].position_settling_time",
@@ -790,7 +804,7 @@ CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
             "P-CHAN-00057",
             "-",
             "https://infosys.beckhoff.com/content/1033/tf5200_measurement/342039563.html",
-            "the kernel's page gives no default (\"-\"); we take 1, the type G100 had here before",
+            'the kernel\'s page gives no default ("-"); we take 1, the type G100 had here before',
         ),
         (
             "rel_offset_limits_std_manual_mode",
@@ -818,7 +832,14 @@ CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
             "FCT-C14 6.2",
             "",
         ),
-        ("dpl_tol_limit_change", "dpl_tol_limit_change", "P-CHAN-00751", "0.1 µm", _CH + "915821323.html", ""),
+        (
+            "dpl_tol_limit_change",
+            "dpl_tol_limit_change",
+            "P-CHAN-00751",
+            "0.1 µm",
+            _CH + "915821323.html",
+            "",
+        ),
         ("dpl_input_cycles", "dpl_input_cycles", "P-CHAN-00874", "cycles", _CH + "1201698699.html", ""),
         # a start-up parameter (P-STUP) that belongs to one channel; [0] stands for the channel's index
         (

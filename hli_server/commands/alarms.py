@@ -29,7 +29,8 @@ def alarms_markdown() -> str:
         a = ALARMS[number]
         replaces = ", ".join(str(n) for n in a.replaces) or "-"
         lines.append(
-            f"| {a.number} | {_origin(a)} | {a.severity} | {a.reaction} | {a.text} | {a.source} | {replaces} |"
+            f"| {a.number} | {_origin(a)} | {a.severity} | {a.reaction} | {a.text} | {a.source} "
+            f"| {replaces} |"
         )
     return "\n".join(lines) + "\n"
 

@@ -149,7 +149,13 @@ _TABLE: tuple[AlarmDef, ...] = (
         replaces=(911012,),
     ),
     # --- the kernel's diagnosis pages: #CONTROL AREA (FCT-C14) --------------------------------
-    _e(21286, "Control area ID is out of data format", "kernel", page=_DIAG + "254057611.html", replaces=(912002,)),
+    _e(
+        21286,
+        "Control area ID is out of data format",
+        "kernel",
+        page=_DIAG + "254057611.html",
+        replaces=(912002,),
+    ),
     _w(
         21288,
         "#CONTROL AREA END without a definition: the command has no effect",
@@ -248,7 +254,11 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(911002, "Circle: no centre programmed", "project"),
     _e(911003, "Axis not in the active plane or not a main axis", "project"),
     _w(911005, "Program ended without M30 / M02", "project"),
-    _w(911013, "Manual motion stopped at a software limit or a manual mode limit", "project (E-06, P-MANU-00014)"),
+    _w(
+        911013,
+        "Manual motion stopped at a software limit or a manual mode limit",
+        "project (E-06, P-MANU-00014)",
+    ),
     _w(911020, "Program start refused: axes not referenced (reference them first)", "project"),
     _w(911021, "Command not allowed in this mode or state", "project"),
     _w(911022, "Program start refused: the axes still brake (after a reset or a stop)", "project"),

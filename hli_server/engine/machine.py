@@ -26,6 +26,8 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
+from pydantic import ValidationError
+
 from hli_server.engine.alarms import ALARMS, Reaction, Severity
 from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis, AxisFaults, check_fault_value
@@ -37,8 +39,6 @@ from hli_server.engine.monitors.dyn_pos_limit import DynPosLimits
 from hli_server.engine.monitors.position import PositionMonitor
 from hli_server.engine.monitors.soft_limits import SoftLimits
 from hli_server.engine.ports import ChannelRef
-from pydantic import ValidationError
-
 from schemas.config import AxisConfig, MachineConfig
 from schemas.events import (
     Alarm,

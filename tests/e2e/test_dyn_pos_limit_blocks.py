@@ -99,7 +99,13 @@ def test_dyn_pos_limit_high_stops_x_at_the_limit_and_lifting_it_lets_the_program
     hli.run_until(
         lambda: seen.program_state == ProgramState.FINISHED and seen.x == TARGET, max_cycles=3000, plc=task
     )
-    assert (limit.Valid, limit.State, limit.MonitoringState, limit.Error, limit.ErrorID) == (False, 0, 0, False, 0)
+    assert (limit.Valid, limit.State, limit.MonitoringState, limit.Error, limit.ErrorID) == (
+        False,
+        0,
+        0,
+        False,
+        0,
+    )
     assert unit.enable_w is False
     assert unit.state_r == 0
     assert task.stats.input_faults == task.stats.output_faults == 0

@@ -163,7 +163,8 @@ def test_pair_stops_when_distance_less_braking_distance_falls_below_the_minimum(
 @pytest.mark.req("C3-01", "C3-07", "C3-10")
 def test_each_axis_brakes_with_its_own_deceleration_and_leaves_the_contour():
     m = one_channel(
-        master={"coll_use_a_emergency": True, "a_max": 4000.0, "a_emergency": 8000.0}, partner={"a_max": 1000.0}
+        master={"coll_use_a_emergency": True, "a_max": 4000.0, "a_emergency": 8000.0},
+        partner={"a_max": 1000.0},
     )
     assert obj(m, 2, DECEL) == 8000.0  # P-AXIS-00267 on the master: both axes use a_emergency
     # the partner's a_emergency is the kernel's default 0: P-AXIS-00003 is then a_max (its page)

@@ -937,7 +937,7 @@ def test_p_axis_00151_has_the_kernels_path_and_the_old_one_still_reads() -> None
     assert old.values == {"settling_time_legacy_us": 250_000}
     assert old.errors == []
     assert any(
-        "getriebe[2].settling_time is this project's old name; the kernel's path is getriebe[2].pos_einschw_zeit"
-        in w
+        "getriebe[2].settling_time is this project's old name; "
+        "the kernel's path is getriebe[2].pos_einschw_zeit" in w
         for w in old.warnings
     )

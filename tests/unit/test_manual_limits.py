@@ -29,9 +29,7 @@ def machine(*, warn: bool = True, offsets_in_g200: bool = False, start_x: int = 
         AxisConfig(number=3, name="Z", swe_neg=-5_000_000, swe_pos=5_000_000),
     ]
     channel = ChannelConfig(axes=["X", "Y", "Z"], rel_offset_limits_std_manual_mode=offsets_in_g200)
-    return Machine(
-        MachineConfig(axes=axes, channels=[channel], manual=ManualConfig(move_limit_warning=warn))
-    )
+    return Machine(MachineConfig(axes=axes, channels=[channel], manual=ManualConfig(move_limit_warning=warn)))
 
 
 def jog_until_rest(m: Machine, direction: int, cycles: int = 200_000) -> float:

@@ -160,7 +160,13 @@ def test_monitoring_state_follows_the_cnc_and_valid_holds_while_braking(layout: 
         r.image.step()
         r.cycle(cnc=False)
         seen.append((r.block.MonitoringState, r.block.State, r.block.Valid))
-    assert seen == [(3, 500_000, True), (3, 500_000, True), (4, 500_000, True), (4, 500_000, True), (2, 500_000, True)]
+    assert seen == [
+        (3, 500_000, True),
+        (3, 500_000, True),
+        (4, 500_000, True),
+        (4, 500_000, True),
+        (2, 500_000, True),
+    ]
 
 
 @pytest.mark.req("C43-10")
@@ -387,7 +393,11 @@ def test_no_activation_within_the_timeout_is_an_error_naming_fct_dyn_pos_limit(l
     r.cycle(10)
     assert not r.block.Error  # inputs of CNC cycles 0..9: the deadline is cycle 0 + 10
     r.cycle()
-    assert (r.block.Error, r.block.ErrorID, r.block.MonitoringState) == (True, ErrorID.ACTIVATION_TIMEOUT, INACTIVE)
+    assert (r.block.Error, r.block.ErrorID, r.block.MonitoringState) == (
+        True,
+        ErrorID.ACTIVATION_TIMEOUT,
+        INACTIVE,
+    )
     assert r.block.State == 0  # no limit in effect
     assert "FCT_DYN_POS_LIMIT" in r.block.ErrorText
     assert "P-STUP-00070" in r.block.ErrorText
@@ -412,7 +422,11 @@ def test_the_cnc_dropping_the_limit_while_enabled_is_an_error_after_the_timeout(
     other_door = MemoryTransport(r.image)
     other_door.write(f"{HIGH}.enable_w", False)  # someone else clears enable_w
     r.cycle(2)
-    assert (r.block.Valid, r.block.Error, r.block.MonitoringState) == (False, False, INACTIVE)  # waiting, grace
+    assert (r.block.Valid, r.block.Error, r.block.MonitoringState) == (
+        False,
+        False,
+        INACTIVE,
+    )  # waiting, grace
     assert r.block.State == 0
     r.cycle(5)
     assert (r.block.Error, r.block.ErrorID) == (True, ErrorID.LIMIT_LOST)

@@ -21,14 +21,14 @@ from hli_server.engine.areas.common import (
     ALARM_G_IN_DEFINITION,
     ALARM_ID_RANGE,
     ALARM_ID_ZERO,
+    ALARM_NOT_SUPPORTED,
+    ALARM_POINT_IN_PROTECTION,
+    ALARM_POINT_OUTSIDE_WORK,
     ALARM_POLY_INTERSECTS,
     ALARM_POLY_NOT_LINEAR,
     ALARM_POLY_TOO_MANY,
     ALARM_TOO_MANY_AXES,
     AREA_ID_MAX,
-    ALARM_NOT_SUPPORTED,
-    ALARM_POINT_IN_PROTECTION,
-    ALARM_POINT_OUTSIDE_WORK,
     CLOSE_TOLERANCE,
     MAX_CONTOUR_BLOCKS,
     PLANE_AXES,
@@ -225,15 +225,14 @@ class AreaDefinitions(AreaRole):
         self.pending = None
         if p is None:
             # ID 21288: "no definition of a control area belongs to it, the command has no effect"
-            where = {"line": block.line, "block": block.label}
-
             def ignored() -> None:
                 self.machine.raise_alarm(
                     ALARM_END_WITHOUT_BEGIN,
                     self.channel,
                     f"#CONTROL AREA END ({block.label}) without #CONTROL AREA BEGIN: the command has no "
                     "effect; a definition begins with #CONTROL AREA BEGIN [...] and ends with END",
-                    **where,
+                    line=block.line,
+                    block=block.label,
                 )
 
             return ignored

@@ -257,7 +257,9 @@ def test_contour_naming_the_third_axis() -> None:
     # three axes: ID 21797 "Too many axes in control area definition. Maximum two allowed." (its page's
     # own example, https://infosys.beckhoff.com/content/1031/tf5200_diagnosis/256063883.html)
     message, _ = refused(U_AREA.replace("N30 X-50 Y150", "N30 X-50 Y150 Z3"), 21797)
-    assert message.startswith("area 3: the contour names 3 axes (X, Y, Z); a control area is defined with at most two")
+    assert message.startswith(
+        "area 3: the contour names 3 axes (X, Y, Z); a control area is defined with at most two"
+    )
     # two axes, one not of the base plane: the project's 912002
     xz = (
         "#CONTROL AREA BEGIN [ID=3 WORK POLY MIN_EXCUR=0 MAX_EXCUR=1]\n"
@@ -353,7 +355,10 @@ def test_area_id_zero_is_invalid(written: str) -> None:
     program = U_AREA.replace("[ID3 ", f"[{written} ")
     message, block = refused(program, 21292)
     assert block == "N10"
-    assert message == "#CONTROL AREA BEGIN [ID=0]: invalid control area ID 0; an area ID is a whole number 1..999999999"
+    assert (
+        message
+        == "#CONTROL AREA BEGIN [ID=0]: invalid control area ID 0; an area ID is a whole number 1..999999999"
+    )
 
 
 @pytest.mark.req("C14-02")

@@ -250,7 +250,8 @@ def test_measuring_offset_lets_the_move_run_past_its_target() -> None:
     m = make_machine(axis={"meas_offset": 50_000})
     run_with_probe_at(m, "N10 G100 X50 F6000\nN20 G01 Y5\nM30\n", 52.0)
     result = areas(m).measurement
-    assert result is not None and 52.0 <= result["setpoint"]["X"] < 52.2
+    assert result is not None
+    assert 52.0 <= result["setpoint"]["X"] < 52.2
     # type 3: no offset
     m = make_machine(messtyp=3, axis={"meas_offset": 50_000})
     run_with_probe_at(m, "N10 G100 X50 F6000\nM30\n", None)

@@ -38,7 +38,9 @@ async def post_reference(host: HostDep, name: str) -> AcceptedBody:
     return accepted(host.operator.reference(name))
 
 
-@router.get("/api/axes/{name}/soft-limits", summary="Software limits in effect and in the axis record [0.1 µm]")
+@router.get(
+    "/api/axes/{name}/soft-limits", summary="Software limits in effect and in the axis record [0.1 µm]"
+)
 async def get_soft_limits(host: HostDep, name: str) -> dict[str, Any]:
     return host.operator.soft_limits(name)
 
