@@ -201,9 +201,11 @@ class SoftLimitPathCheck:
 
     def __init__(self, channel: Channel) -> None:
         self.channel = channel
+        self._with_tolerance = channel.config.soft_limit_tolerance
+        """P-CHAN-00120, read once (a block's check reads no pydantic model)."""
 
     def __call__(self, segment: Segment, block: Block) -> DecodeError | None:
-        with_tolerance = self.channel.config.soft_limit_tolerance
+        with_tolerance = self._with_tolerance
         for k, axis in enumerate(self.channel.axes):
             lo, hi = segment.axis_extent(k)
             tol = 0.0
