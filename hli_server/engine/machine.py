@@ -72,6 +72,9 @@ first (a block beyond them is refused before the areas look at it), then the are
 limits (they steer the path before interpolation), collision and position monitoring."""
 M = TypeVar("M", bound=Monitor)
 
+SOFT_LIMIT_RECORD_FIELDS: tuple[str, ...] = ("swe_neg", "swe_pos", "swe_toleranz")
+"""The axis record's fields :meth:`Machine.update_axis_record` changes (P-AXIS-00177/00178/00179)."""
+
 
 def _overrides(monitor: Monitor, hook: str) -> bool:
     return getattr(type(monitor), hook) is not getattr(Monitor, hook)
@@ -174,9 +177,6 @@ class Machine:
     def channel_of(self, axis: Axis) -> Channel:
         return self.channels[axis.channel]
 
-    SOFT_LIMIT_RECORD_FIELDS = ("swe_neg", "swe_pos", "swe_toleranz")
-    """The axis record's fields :meth:`update_axis_record` changes (P-AXIS-00177/00178/00179)."""
-
     def update_axis_record(self, axis_name: str, **values: int) -> AxisConfig:
         """Change the software limits in the axis record (a parameter download, 0.1 µm): they take
         effect where the kernel takes them from the record, at the next reset, mode change or axis
@@ -185,11 +185,11 @@ class Machine:
         axis = self.axes_by_name.get(axis_name)
         if axis is None:
             raise KeyError(f"no axis {axis_name!r} (axes: {', '.join(self.axes_by_name)})")
-        unknown = sorted(set(values) - set(self.SOFT_LIMIT_RECORD_FIELDS))
+        unknown = sorted(set(values) - set(SOFT_LIMIT_RECORD_FIELDS))
         if unknown:
             raise ValueError(
                 f"axis {axis_name}: {', '.join(unknown)} cannot be changed at run time; the software limit "
-                f"parameters can: {', '.join(self.SOFT_LIMIT_RECORD_FIELDS)}"
+                f"parameters can: {', '.join(SOFT_LIMIT_RECORD_FIELDS)}"
             )
         try:
             record = AxisConfig.model_validate({**axis.config.model_dump(), **values})
