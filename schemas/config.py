@@ -514,6 +514,31 @@ class AdapterEntry(_Strict):
     )
 
 
+ExternalTypeName = Literal[
+    "BOOLEAN", "SGN08", "UNS08", "SGN16", "UNS16", "SGN32", "UNS32", "REAL32", "REAL64"
+]
+
+
+class ExternalVariableConfig(_Strict):
+    """A ``V.E.`` variable shared by NC programs and the PLC (N-05): the kernel's configuration list of
+    external variables, reduced to what the simulator needs (project's own shape; docs/nc-language.md)."""
+
+    name: str = Field(
+        pattern=r"^[A-Za-z_][A-Za-z0-9_]{0,19}$",
+        description="name without the prefix V.E. (at most 20 characters, as the kernel allows)",
+    )
+    type: ExternalTypeName = Field(default="REAL64", description="data type (the kernel's names)")
+    dims: list[Annotated[int, Field(ge=1, le=65535)]] = Field(
+        default_factory=list, max_length=4, description="array dimensions; empty for a scalar"
+    )
+    channel: int | None = Field(
+        default=None, ge=1, le=12, description="the channel whose own area holds it; none: the global area"
+    )
+    synchronous: bool = Field(
+        default=False, description="read by the interpolator (reading it empties the channel first)"
+    )
+
+
 class MachineConfig(_Strict):
     name: str = Field(default="machine", description="machine name (reports, MQTT topics)")
     cycle_time_us: int = Field(default=1000, ge=100, le=100_000, description="interpolation cycle T_A [µs]")
@@ -523,6 +548,9 @@ class MachineConfig(_Strict):
     adapters: list[AdapterEntry] = Field(
         default_factory=list,
         description="adapters `hli-server run` starts (its --adapter options add to or replace them by name)",
+    )
+    external_variables: list[ExternalVariableConfig] = Field(
+        default_factory=list, max_length=1024, description="V.E. variables shared by NC programs and the PLC"
     )
 
     @model_validator(mode="after")
@@ -578,6 +606,25 @@ class MachineConfig(_Strict):
                     channel=next(n for n in ch_numbers if ch_numbers.count(n) > 1),
                 )
             )
+        seen_vars: set[tuple[int | None, str]] = set()
+        for var in self.external_variables:
+            key = (var.channel, var.name.upper())
+            area = "the global area" if var.channel is None else f"channel {var.channel}'s area"
+            if var.channel is not None and var.channel not in ch_numbers:
+                issues.append(
+                    ParameterIssue(
+                        f"V.E.{var.name}: channel {var.channel} does not exist (channels: {ch_numbers})",
+                        field="external_variables",
+                    )
+                )
+            if key in seen_vars:
+                issues.append(
+                    ParameterIssue(
+                        f"V.E.{var.name} is declared twice in {area} (names are case-insensitive)",
+                        field="external_variables",
+                    )
+                )
+            seen_vars.add(key)
         by_number = {a.number: a for a in self.axes}
         for ax in self.axes:
             if not ax.coll_check_ax_nr:

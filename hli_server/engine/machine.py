@@ -32,6 +32,7 @@ from hli_server.engine.alarms import ALARMS, Reaction, Severity
 from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis, AxisFaults, check_fault_value
 from hli_server.engine.channel import Channel
+from hli_server.engine.external import ExternalType, ExternalVariables, ExternalVarSpec
 from hli_server.engine.hli import AxisHli, ChannelHli, MachineHli
 from hli_server.engine.monitors.base import Monitor, MonitorFactory
 from hli_server.engine.monitors.collision import CollisionMonitor
@@ -39,6 +40,7 @@ from hli_server.engine.monitors.dyn_pos_limit import DynPosLimits
 from hli_server.engine.monitors.position import PositionMonitor
 from hli_server.engine.monitors.soft_limits import SoftLimits
 from hli_server.engine.ports import ChannelRef
+from hli_server.engine.programs import MemoryLibrary, ProgramLibrary
 from schemas.config import AxisConfig, MachineConfig
 from schemas.events import (
     Alarm,
@@ -84,18 +86,27 @@ class Machine:
     """The simulated CNC. ``Machine(config).step(n)`` runs n interpolation cycles.
 
     ``monitors`` builds the monitoring functions (default: all of them, ``DEFAULT_MONITORS``);
-    ``read_program`` loads a program-table entry given by path (the engine does no I/O itself; the
-    runtime passes a file reader)."""
+    ``read_program`` loads a program-table entry given by path and ``programs`` finds the global
+    subprograms a program calls (the engine does no I/O itself; the runtime passes a file reader and
+    a library over the program directories)."""
 
     def __init__(
         self,
         config: MachineConfig,
         read_program: Callable[[str], str] | None = None,
         *,
+        programs: ProgramLibrary | None = None,
         monitors: Iterable[MonitorFactory] | None = None,
     ) -> None:
         self.config = config
         self.read_program = read_program
+        self.programs: ProgramLibrary = MemoryLibrary() if programs is None else programs
+        self.external = ExternalVariables(
+            [
+                ExternalVarSpec(v.name, ExternalType(v.type), tuple(v.dims), v.channel, v.synchronous)
+                for v in config.external_variables
+            ]
+        )
         self.t_a = s_from_us(config.cycle_time_us)
         self.cycle = 0
         self.axes = [Axis(cfg, i) for i, cfg in enumerate(config.axes)]
