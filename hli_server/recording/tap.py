@@ -788,6 +788,20 @@ class JournaledOperator(OperatorPort):
         )
         return result
 
+    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+        result: dict[str, Any] = self._do(
+            "set_soft_limits", {"axis": axis, **values}, lambda: self.panel.set_soft_limits(axis, **values)
+        )
+        return result
+
+    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+        result: dict[str, Any] = self._do(
+            "update_axis_record",
+            {"axis": axis, **values},
+            lambda: self.panel.update_axis_record(axis, **values),
+        )
+        return result
+
     # --- what only reads -------------------------------------------------------------------------
     @property
     def cycle(self) -> int:
@@ -813,6 +827,9 @@ class JournaledOperator(OperatorPort):
 
     def faults(self, axis: str) -> dict[str, Any]:
         return self.panel.faults(axis)
+
+    def soft_limits(self, axis: str) -> dict[str, Any]:
+        return self.panel.soft_limits(axis)
 
     def snapshot(self) -> dict[str, Any]:
         return self.panel.snapshot()
@@ -849,6 +866,8 @@ OPERATOR_REQUESTS: Final = (
     "reference",
     "inject_faults",
     "clear_faults",
+    "set_soft_limits",
+    "update_axis_record",
 )
 """The operator requests a recording holds (and a replay repeats), by :class:`OperatorPort` name."""
 

@@ -456,3 +456,29 @@ async def test_subprograms_the_library_found_are_recorded_and_found_again_by_the
     assert feeder.find("MISSING.NC") is None
     assert feeder.searched() == ("uploaded files",)
     assert (await replay(path)).verdict is Verdict.PASS
+
+
+async def test_software_limits_set_by_the_operator_are_inputs_of_the_recording(
+    runtime: Runtime, tmp_path: Path
+) -> None:
+    path = tmp_path / "limits.jsonl.gz"
+    runtime.session.start(path)
+    runtime.operator.set_soft_limits("X", swe_pos=300_000)  # 30 mm in effect: the program is refused
+    runtime.operator.update_axis_record("Y", swe_neg=-10_000_000)
+    runtime.operator.load_program(1, PROGRAM, "part")
+    runtime.operator.start(1)
+    await runtime.step(800)
+    runtime.session.stop()
+    ops = [(r["op"], r["args"]) for r in read_records(path) if "op" in r]
+    assert ops[0] == ("set_soft_limits", {"axis": "X", "swe_pos": 300_000})
+    assert ops[1] == ("update_axis_record", {"axis": "Y", "swe_neg": -10_000_000})
+    assert summarize(path).alarm_count >= 1
+    assert (await replay(path)).verdict is Verdict.PASS
+
+    def no_limit(record: dict[str, Any]) -> dict[str, Any]:  # a harmless request in its place
+        if record.get("op") == "set_soft_limits":
+            return {**record, "op": "reset", "args": {"channel": 2}}
+        return record
+
+    report = await replay(_rewrite(path, no_limit))
+    assert report.verdict is Verdict.DIFFER  # without the limit the program runs: the outputs differ
