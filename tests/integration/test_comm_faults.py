@@ -79,18 +79,14 @@ def test_a_modbus_exception_for_an_address_range_then_the_answers_again(
 
 
 def test_modbus_answers_delayed_by_n_ms(hli: Harness, modbus: RawModbus) -> None:
-    began = time.perf_counter()
-    modbus.read_holding(HOLDING)
-    plain = time.perf_counter() - began
-    with hli.comm_faults.fault(kind="delay", door="modbus", delay_ms=150, duration_ms=5000):
+    with hli.comm_faults.fault(kind="delay", door="modbus", delay_ms=150, duration_ms=10_000):
         began = time.perf_counter()
         answer = modbus.read_holding(HOLDING)
         delayed = time.perf_counter() - began
-    assert answer[0] == 3
-    assert 0.15 <= delayed < 0.15 + 1.0, (plain, delayed)
-    began = time.perf_counter()
-    modbus.read_holding(HOLDING)
-    assert time.perf_counter() - began < 0.15  # ended by the block
+    assert answer[0] == 3  # the answer itself, only later
+    assert delayed >= 0.15
+    assert hli.comm_faults.table() == []  # ended by the block
+    assert modbus.read_holding(HOLDING)[0] == 3
 
 
 def test_a_modbus_connection_dropped_after_n_requests(hli: Harness, modbus: RawModbus) -> None:
