@@ -19,6 +19,7 @@ happened::
     {"c": 1204, "o": [0, 1204, 12, 503311], "e": [...]}  CNC->PLC published in cycle 1204, its events
     {"c": 1205, "op": "start", "args": {"channel": 1}, "error": null}   operator request before 1205
     {"c": 1205, "file": "/abs/part.nc", "text": "%part\\n..."}          a program file the engine read
+    {"c": 1205, "program_file": "UP1.NC", "found": "UP1.NC", "text": "...", "origin": "..."}  a subprogram
     {"c": 1300, "fault": "set", "id": 2, "spec": {...}}                 a communication fault began
     {"c": 1350, "fault": "end", "id": 2, "reason": "count"}             ... and ended
     {"c": 2000, "end": "stopped"}                                       the last line of a clean stop
@@ -29,7 +30,8 @@ it. The first ``i`` and the first ``o`` line hold every signal; later ones what 
 recorded from the header's ``window_start`` on; inputs always from cycle 1 (a recording started in a
 running server carries the server's input journal from its start, so that a replay can reach the same
 state). BOOL values are ``true``/``false``, DINT/UDINT integers, LREAL numbers (``"NaN"``,
-``"Infinity"``, ``"-Infinity"`` for the values JSON has no number for).
+``"Infinity"``, ``"-Infinity"`` for the values JSON has no number for). The outputs the header lists in
+``follow_cycle`` (the ``cycle_r`` counters) equal the cycle mod 2**31 unless a line lists them.
 """
 
 from __future__ import annotations
