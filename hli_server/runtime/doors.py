@@ -32,18 +32,27 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any
 
+from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     AccessPolicy,
     AdapterHost,
     EventFeed,
     ImagePort,
     OperatorPort,
+    RecorderPort,
     Trace,
     Value,
     door_host,
 )
 from hli_server.adapters.registry import Adapter, create_adapter
-from hli_server.runtime.remote import EventMirror, OperatorService, RemoteLink, RemoteOperator
+from hli_server.runtime.remote import (
+    EventMirror,
+    OperatorService,
+    RemoteFaults,
+    RemoteLink,
+    RemoteOperator,
+    RemoteRecorder,
+)
 from plc_clients.shm import ImageClient
 from schemas import image_format as fmt
 from schemas.layout import Direction, Layout, Signal
@@ -140,6 +149,9 @@ class DoorsHost(AdapterHost):
         self._listeners: list[Callable[[int], None]] = []
         self._watch: asyncio.Task[None] | None = None
         self._t_a_s = t_a_us * 1e-6
+        self._faults = RemoteFaults(link, lambda: image.cycle)
+        """A mirror of the server's communication faults (the engine's process owns them, issue 25)."""
+        self._recorder = RemoteRecorder(link)
 
     @property
     def image(self) -> ImagePort:
@@ -164,6 +176,14 @@ class DoorsHost(AdapterHost):
     @property
     def policy(self) -> AccessPolicy:
         return self._policy
+
+    @property
+    def recorder(self) -> RecorderPort:
+        return self._recorder
+
+    @property
+    def faults(self) -> CommFaults:
+        return self._faults
 
     async def step(self, cycles: int = 1) -> int:
         return await self._operator.step(cycles)
@@ -241,9 +261,9 @@ async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -
     events = EventMirror()
     events.start(loop)
     link = RemoteLink(sock, events.take)
-    link.start(loop)
     policy = plan.policy
     host = DoorsHost(image, link, events, t_a_us=plan.t_a_us, clock=plan.clock, bind=plan.bind, policy=policy)
+    link.start(loop)  # the host's fault mirror takes the engine's table from the first message on
     started: list[Adapter] = []
     try:
         for name, options in plan.specs:

@@ -13,16 +13,26 @@ What crosses the socket (frames: a 4-byte length, then a pickle; both ends are t
                       ("timing", id)                           the clock's statistics, unsorted
                       ("step", id, cycles, signals | None)     the stepped clock (async at the doors)
                       ("cancel", id)                           the client of that step went away
+                      ("recorder", id, method, args)           the session recorder (issue 25)
+                      ("faults", id, op, args)                 set, end or reset communication faults
+                      ("fault-ended", 0, fault id, reason)     a fault the doors used up (no answer)
     engine -> doors   ("ok", id, result) / ("err", id, exception)
                       ("events", [(seq, event), ...])          every engine event, numbered, in order
+                      ("faults", table)                        the communication faults, on every change
 
 The doors process keeps its own copy of the event log (``GET /api/events`` and the streams read it there),
 answers what never changes from a cache (channels, axes, program tables, the machine's name), reads cycle
 and time from the image it attached, and sorts the timing samples itself: a read, however large its
 answer, reaches the engine as one small request or not at all.
 
+The engine's process owns the communication faults (issue 25: the recording notes every change, a stall
+acts on the publish); the doors process keeps a mirror that its connections consult (:class:`RemoteFaults`),
+which sends what users set through the doors (the HTTP API) to the engine and takes the engine's table on
+every change.
+
 * :class:`OperatorService`: the engine's end, an ``asyncio.Protocol`` on the clock's loop;
-* :class:`RemoteLink`, :class:`RemoteOperator`, :class:`EventMirror`: the doors process' end.
+* :class:`RemoteLink`, :class:`RemoteOperator`, :class:`EventMirror`, :class:`RemoteFaults`,
+  :class:`RemoteRecorder`: the doors process' end.
 """
 
 from __future__ import annotations
@@ -38,8 +48,10 @@ import struct
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from hli_server.adapters.faults import ActiveFault, CommFaults, FaultError, FaultSpec
 from hli_server.adapters.host import (
     Accepted,
     EventFeed,
@@ -47,6 +59,7 @@ from hli_server.adapters.host import (
     LoggedEvent,
     OperatorError,
     OperatorPort,
+    RecorderPort,
     Trace,
     UnavailableError,
 )
@@ -62,8 +75,10 @@ __all__ = [
     "OPERATOR_CALLS",
     "EventMirror",
     "OperatorService",
+    "RemoteFaults",
     "RemoteLink",
     "RemoteOperator",
+    "RemoteRecorder",
 ]
 
 logger = logging.getLogger(__name__)
@@ -97,6 +112,9 @@ OPERATOR_CALLS = frozenset(
         "scene",
         "programs",
         "collision_pairs",
+        "soft_limits",
+        "set_soft_limits",
+        "update_axis_record",
         "machine_name",
         "t_a_us",
     }
@@ -105,6 +123,8 @@ OPERATOR_CALLS = frozenset(
 too: a call of a property's name returns its value)."""
 
 _STATIC = frozenset({"channel_numbers", "axis_names", "programs", "machine_name", "t_a_us"})
+_RECORDER_CALLS = frozenset({"status", "start", "stop", "files", "file"})
+"""The :class:`~hli_server.adapters.host.RecorderPort` members the doors process may call."""
 """Calls whose answer never changes while the server runs: asked once, then answered by the doors."""
 
 
@@ -169,6 +189,8 @@ class OperatorService(asyncio.Protocol):
         self._steps: dict[int, asyncio.Task[None]] = {}
         self._outbox: list[tuple[int, Event]] = []
         self._unsubscribe = runtime.event_log.subscribe(self._on_event)
+        self._faults_changed = runtime.comm_faults.active  # the doors start with the engine's table
+        self._unsubscribe_faults = runtime.comm_faults.subscribe(self._on_fault)
         self.served = 0
         self.closed = asyncio.get_running_loop().create_future()
 
@@ -193,6 +215,7 @@ class OperatorService(asyncio.Protocol):
 
     def close(self) -> None:
         self._unsubscribe()
+        self._unsubscribe_faults()
         for task in self._steps.values():
             task.cancel()
         self._steps.clear()
@@ -204,11 +227,20 @@ class OperatorService(asyncio.Protocol):
     def _on_event(self, event: Event) -> None:
         self._outbox.append((self._rt.event_log.latest, event))
 
+    def _on_fault(self, _change: dict[str, Any]) -> None:
+        self._faults_changed = True  # sent with the next flush (a change may come inside the cycle)
+
     def flush(self) -> None:
-        """Send the events of the cycles run since the last flush (after each batch of cycles)."""
-        if self._outbox and self._transport is not None:
+        """Send the events of the cycles run since the last flush (after each batch of cycles), and the
+        table of communication faults if it changed."""
+        if self._transport is None:
+            return
+        if self._outbox:
             self._transport.write(frame(("events", self._outbox)))
             self._outbox = []
+        if self._faults_changed:
+            self._faults_changed = False
+            self._transport.write(frame(("faults", self._rt.comm_faults.export())))
 
     def serve(self, deadline: float) -> bool:
         """Serve queued requests until ``deadline`` (``time.monotonic``), at least one if any wait;
@@ -251,10 +283,36 @@ class OperatorService(asyncio.Protocol):
                 task = self._steps.pop(ident, None)
                 if task is not None:
                     task.cancel()
+            elif kind == "recorder":
+                _, _, name, args = message
+                if name not in _RECORDER_CALLS:
+                    raise OperatorError(f"{name!r} is not a request of the session recorder")
+                self._answer(ident, getattr(self._rt.recorder_port, name)(*args))
+            elif kind == "faults":
+                _, _, op, args = message
+                self._answer(ident, self._fault_request(op, args))
+            elif kind == "fault-ended":
+                _, _, fault_id, reason = message
+                faults = self._rt.comm_faults
+                if faults.get(fault_id) is not None:
+                    faults.end(fault_id, reason)
             else:
                 raise ValueError(f"unknown request {kind!r}")
         except Exception as exc:
             self._fail(ident, exc)
+
+    def _fault_request(self, op: str, args: Sequence[Any]) -> Any:
+        """What the doors' users ask of the communication faults; the answer carries the new table."""
+        faults = self._rt.comm_faults
+        self._faults_changed = False  # the answer carries it
+        if op == "add":
+            return faults.add(args[0]).id, faults.export()
+        if op == "end":
+            fault = faults.end(args[0], args[1])
+            return (fault.mirror(), fault.ended), faults.export()
+        if op == "reset":
+            return faults.reset(args[0]), faults.export()
+        raise OperatorError(f"{op!r} is not a request of the communication faults")
 
     def _call(self, name: str, args: Sequence[Any], kwargs: dict[str, Any]) -> Any:
         if name not in OPERATOR_CALLS:
@@ -283,7 +341,7 @@ class OperatorService(asyncio.Protocol):
             self._transport.write(frame(("ok", ident, result)))
 
     def _fail(self, ident: int, exc: BaseException) -> None:
-        if not isinstance(exc, OperatorError | LookupError | ValueError):
+        if not isinstance(exc, OperatorError | LookupError | ValueError):  # FaultError is a ValueError
             logger.exception("request %r of the doors process failed", ident, exc_info=exc)
         if self._transport is not None:
             self._transport.write(frame(("err", ident, _portable(exc))))
@@ -303,6 +361,8 @@ class RemoteLink:
         sock.setblocking(False)
         self._sock = sock
         self._on_events = on_events
+        self.on_faults: Callable[[list[dict[str, Any]]], None] | None = None
+        """Takes the engine's table of communication faults (:class:`RemoteFaults`)."""
         self._reader = FrameReader()
         self._ids = itertools.count(1)
         self._answers: dict[int, tuple[str, Any]] = {}
@@ -344,6 +404,10 @@ class RemoteLink:
         kind = message[0]
         if kind == "events":
             self._on_events(message[1])
+            return
+        if kind == "faults":
+            if self.on_faults is not None:
+                self.on_faults(message[1])
             return
         ident = message[1]
         future = self._futures.pop(ident, None)
@@ -409,6 +473,11 @@ class RemoteLink:
         if status == "err":
             raise value
         return value
+
+    def tell(self, kind: str, *fields: Any) -> None:
+        """Send ``(kind, 0, *fields)``, which gets no answer."""
+        with contextlib.suppress(UnavailableError):
+            self._send(frame((kind, 0, *fields)))
 
     async def call_async(self, kind: str, *fields: Any) -> Any:
         """Send ``(kind, id, *fields)`` and await the answer; cancelling the awaiting task tells the
@@ -544,6 +613,18 @@ class RemoteOperator(OperatorPort):
         out: dict[str, Any] = self._call("clear_faults", axis)
         return out
 
+    def soft_limits(self, axis: str) -> dict[str, Any]:
+        out: dict[str, Any] = self._call("soft_limits", axis)
+        return out
+
+    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+        out: dict[str, Any] = self._call("set_soft_limits", axis, **values)
+        return out
+
+    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+        out: dict[str, Any] = self._call("update_axis_record", axis, **values)
+        return out
+
     def snapshot(self) -> dict[str, Any]:
         out: dict[str, Any] = self._call("snapshot")
         return out
@@ -580,3 +661,101 @@ class RemoteOperator(OperatorPort):
     async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
         trace: Trace = await self._link.call_async("step", cycles, list(signals))
         return trace
+
+
+class RemoteFaults(CommFaults):
+    """The doors process' communication faults: a mirror of the engine's table, which its connections
+    consult; what users set, end or reset through the doors (the HTTP API) is done by the engine, whose
+    answer updates the mirror at once; what the doors use up (a count, a duration) ends here too and is
+    told to the engine. Each change of the engine's table reaches the mirror's listeners (MQTT's
+    disconnect fault) as a change of this one."""
+
+    def __init__(self, link: RemoteLink, cycle: Callable[[], int]) -> None:
+        super().__init__(cycle)
+        self._link = link
+        self._taking = False
+        link.on_faults = self.take
+        self.subscribe(self._report)
+
+    def _report(self, change: dict[str, Any]) -> None:
+        if change["fault"] == "end" and not self._taking and change.get("reason") in ("count", "duration"):
+            self._link.tell("fault-ended", change["id"], change["reason"])
+
+    def take(self, table: list[dict[str, Any]]) -> None:
+        """The engine's table: load it and tell the listeners what was set and what ended."""
+        before = self.get_ids()
+        self._taking = True
+        try:
+            self.load(table)
+            after = self.get_ids()
+            for fault_id in sorted(after - before):
+                fault = self.get(fault_id)
+                assert fault is not None
+                spec = fault.spec.model_dump(mode="json", exclude_none=True)
+                self._tell({"fault": "set", "id": fault_id, "spec": spec})
+            for fault_id in sorted(before - after):
+                self._tell({"fault": "end", "id": fault_id, "reason": "engine"})
+        finally:
+            self._taking = False
+
+    def get_ids(self) -> set[int]:
+        return {f["id"] for f in self.export()}
+
+    def add(self, spec: FaultSpec | dict[str, Any]) -> ActiveFault:
+        data = spec.model_dump(mode="json", exclude_none=True) if isinstance(spec, FaultSpec) else dict(spec)
+        fault_id, table = self._link.call("faults", "add", (data,))
+        self.take(table)
+        fault = self.get(fault_id)
+        if fault is None:  # it ended in the engine before the answer came (a duration of 0, ...)
+            raise FaultError(f"communication fault {fault_id} ended as soon as it was set")
+        return fault
+
+    def end(self, fault_id: int, reason: str = "api") -> ActiveFault:
+        if reason in ("count", "duration"):  # the doors' own: ends here, told to the engine
+            return super().end(fault_id, reason)
+        (mirror, ended), table = self._link.call("faults", "end", (fault_id, reason))
+        self.take(table)
+        spec = FaultSpec.model_validate(mirror["spec"])
+        return ActiveFault(
+            id=mirror["id"],
+            spec=spec,
+            started_cycle=mirror["started_cycle"],
+            started_at=mirror["started_at"],
+            expires_at=mirror["expires_at"],
+            used=mirror["used"],
+            ended=ended,
+        )
+
+    def reset(self, reason: str = "reset") -> int:
+        ended, table = self._link.call("faults", "reset", (reason,))
+        self.take(table)
+        count: int = ended
+        return count
+
+
+class RemoteRecorder(RecorderPort):
+    """The session recorder of the engine's process, asked over the link (issue 25). A recording's file
+    is on the machine's file system, which both processes see: ``file`` gives its path."""
+
+    def __init__(self, link: RemoteLink) -> None:
+        self._link = link
+
+    def status(self) -> dict[str, Any]:
+        out: dict[str, Any] = self._link.call("recorder", "status", ())
+        return out
+
+    def start(self, name: str | None = None) -> dict[str, Any]:
+        out: dict[str, Any] = self._link.call("recorder", "start", (name,))
+        return out
+
+    def stop(self) -> dict[str, Any]:
+        out: dict[str, Any] = self._link.call("recorder", "stop", ())
+        return out
+
+    def files(self) -> list[dict[str, Any]]:
+        out: list[dict[str, Any]] = self._link.call("recorder", "files", ())
+        return out
+
+    def file(self, name: str) -> Path:
+        out: Path = self._link.call("recorder", "file", (name,))
+        return out
