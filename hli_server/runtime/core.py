@@ -324,6 +324,10 @@ class Runtime:
         self._step_lock = asyncio.Lock()
         if self.stop_after_cycles is not None:
             self._stop_cycle = self.machine.cycle + self.stop_after_cycles
+        if self.clock is Clock.REALTIME:
+            # before the doors process starts, so that it knows whether the clock goes first anyway; the
+            # processes and threads started from here on do not inherit it (SCHED_RESET_ON_FORK)
+            self.priority_granted = raise_priority(self.priority)
         try:
             self._image = self._image_factory(self.config, self.image_name)
             self._image.init_from(self.machine.hli, self.machine.cycle)
@@ -340,9 +344,9 @@ class Runtime:
         self.stats.started_at = time.monotonic()
         self.stats.cycles_at_start = self.machine.cycle
         if self.clock is Clock.REALTIME:
-            # after the doors process started: it must not inherit the clock's priority
-            low_latency = ask_for_low_latency()
-            self.priority_granted = ", ".join([raise_priority(self.priority), *low_latency])
+            # after the doors process started: it must not inherit the short time slice (it serves many
+            # clients: a longer slice suits it)
+            self.priority_granted = ", ".join([self.priority_granted, *ask_for_low_latency()])
             self.stats.gc.install()
             self._pacer = asyncio.create_task(
                 run_realtime(

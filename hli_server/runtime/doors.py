@@ -236,13 +236,17 @@ class DoorsPlan:
     policy: AccessPolicy
     t_a_us: int
     clock: str
+    nice: int = 0
+    """How much nicer than the clock's process the doors run (:data:`DOORS_NICE` unless the clock runs at
+    the realtime priority, which goes first anyway: then the doors need not give way to other work)."""
 
 
 def doors_main(plan: DoorsPlan, link: socket.socket, conn: Connection) -> None:
     """The doors process: attach the image, start the adapters, report their ports, serve until the
     parent says stop, goes away, or closes the image."""
-    with contextlib.suppress(OSError):  # the clock's process wins the CPU from its doors (issue 26)
-        os.nice(DOORS_NICE)
+    if plan.nice:
+        with contextlib.suppress(OSError):  # the clock's process wins the CPU from its doors (issue 26)
+            os.nice(plan.nice)
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s doors %(name)s: %(message)s")
     # asyncio's own loop: the doors need no timer finer than a millisecond, and its one epoll_wait a turn
     # costs less than the precise loop's select-then-epoll (Modbus: about a fifth less CPU per request)
@@ -268,7 +272,11 @@ async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -
     try:
         for name, options in plan.specs:
             adapter = create_adapter(name, bind=plan.bind, options=options)
-            await adapter.start(door_host(host, name))
+            try:
+                await adapter.start(door_host(host, name))
+            except Exception as exc:  # a port in use, ...: the parent says it (no traceback of ours)
+                conn.send(("error", str(exc)))
+                return
             started.append(adapter)
         conn.send(("ready", [(a.name, getattr(a, "port", None), a.endpoints(), _url(a)) for a in started]))
         # what was built to serve lives as long as the process: out of the collector's full passes
@@ -351,6 +359,7 @@ class DoorsProcess:
             policy=rt.policy,
             t_a_us=rt.config.cycle_time_us,
             clock=str(rt.clock),
+            nice=0 if rt.priority_granted.startswith("realtime") else DOORS_NICE,
         )
         self._process = ctx.Process(
             target=doors_main, args=(plan, theirs, child_conn), name="hli-doors", daemon=True

@@ -258,7 +258,10 @@ def raise_priority(priority: str) -> str:
             os.setpriority(os.PRIO_PROCESS, 0, -10)
             return "high (nice -10)"
         if priority == "realtime":
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(10))
+            # the processes and threads this one starts later (the doors process, executor threads) do not
+            # inherit the policy
+            policy = os.SCHED_FIFO | getattr(os, "SCHED_RESET_ON_FORK", 0)
+            os.sched_setscheduler(0, policy, os.sched_param(10))
             return "realtime (SCHED_FIFO 10)"
     except (PermissionError, OSError, AttributeError) as exc:
         why = getattr(exc, "strerror", None) or exc

@@ -123,9 +123,9 @@ OPERATOR_CALLS = frozenset(
 too: a call of a property's name returns its value)."""
 
 _STATIC = frozenset({"channel_numbers", "axis_names", "programs", "machine_name", "t_a_us"})
+"""Calls whose answer never changes while the server runs: asked once, then answered by the doors."""
 _RECORDER_CALLS = frozenset({"status", "start", "stop", "files", "file"})
 """The :class:`~hli_server.adapters.host.RecorderPort` members the doors process may call."""
-"""Calls whose answer never changes while the server runs: asked once, then answered by the doors."""
 
 
 def frame(message: object) -> bytes:
@@ -299,20 +299,26 @@ class OperatorService(asyncio.Protocol):
             else:
                 raise ValueError(f"unknown request {kind!r}")
         except Exception as exc:
-            self._fail(ident, exc)
+            if ident == 0:  # a message that wants no answer
+                logger.warning("message %r of the doors process failed: %s", kind, exc)
+            else:
+                self._fail(ident, exc)
 
     def _fault_request(self, op: str, args: Sequence[Any]) -> Any:
         """What the doors' users ask of the communication faults; the answer carries the new table."""
         faults = self._rt.comm_faults
-        self._faults_changed = False  # the answer carries it
+        result: Any
         if op == "add":
-            return faults.add(args[0]).id, faults.export()
-        if op == "end":
+            result = faults.add(args[0]).id
+        elif op == "end":
             fault = faults.end(args[0], args[1])
-            return (fault.mirror(), fault.ended), faults.export()
-        if op == "reset":
-            return faults.reset(args[0]), faults.export()
-        raise OperatorError(f"{op!r} is not a request of the communication faults")
+            result = (fault.mirror(), fault.ended)
+        elif op == "reset":
+            result = faults.reset(args[0])
+        else:
+            raise OperatorError(f"{op!r} is not a request of the communication faults")
+        self._faults_changed = False  # the answer carries the table
+        return result, faults.export()
 
     def _call(self, name: str, args: Sequence[Any], kwargs: dict[str, Any]) -> Any:
         if name not in OPERATOR_CALLS:
