@@ -217,6 +217,8 @@ def ask_for_low_latency() -> list[str]:
         libc = ctypes.CDLL(None, use_errno=True)
         if int(libc.prctl(29, 1, 0, 0, 0)) == 0:  # PR_SET_TIMERSLACK
             granted.append("timer slack 1 ns")
+        if os.sched_getscheduler(0) & ~getattr(os, "SCHED_RESET_ON_FORK", 0) != os.SCHED_OTHER:
+            return granted  # a realtime policy has no slices (and sched_setattr would end it)
         nice = os.getpriority(os.PRIO_PROCESS, 0)
         # struct sched_attr (SCHED_ATTR_SIZE_VER1): size, policy SCHED_OTHER, flags, nice, priority,
         # runtime (the slice), deadline, period, util_min, util_max
