@@ -323,7 +323,8 @@ function drawScene(c) {
   const areas = svg("g", { class: "areas" }, c.top);
   for (const area of scene.areas) {
     const band = `${area.height_axis} ${area.min}..${area.max}`;
-    const how = RELATION_TEXT[`${area.relation} ${area.kind}`] || RELATION_TEXT[area.relation] || area.relation;
+    // the scene says what happened (hli_server/scene.py, relation_text); the table is for older scenes
+    const how = area.relation_text || RELATION_TEXT[`${area.relation} ${area.kind}`] || RELATION_TEXT[area.relation] || area.relation;
     const label = `ID${area.id} ${area.kind} ${area.state}, ${band}: ${how}`;
     const li = el("li", { class: `area ${area.kind} ${area.state}`, "data-area": area.id, "data-relation": area.relation, text: label });
     if (!area.in_view) li.append(` (plane ${area.axes.join("/")}, not drawn)`);
