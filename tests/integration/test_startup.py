@@ -27,7 +27,7 @@ import pytest
 from hli_server.configuration import load_machine
 from hli_server.runtime import Runtime
 
-pytestmark = pytest.mark.req("H-01")
+pytestmark = pytest.mark.req("H-10")
 
 CLI = str(Path(sys.executable).parent / "hli-server")
 SEED = int(os.environ.get("HLI_FUZZ_SEED", "23"))

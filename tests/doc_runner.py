@@ -1,0 +1,244 @@
+"""Runs the ``doc-run`` blocks of one session of a doc, as a user would, against a real server (issue 23).
+
+``python -m tests.doc_runner`` reads a session (JSON on stdin: the server's arguments, a broker or not,
+the blocks' commands) and prints what each command printed and its exit status (JSON on stdout).
+``tests/integration/test_docs_run.py`` starts it inside a network namespace of its own (``unshare
+--net``), so that the server, the broker and the commands use the documented ports (8080, 5020, 48898,
+1883) as written, and no two sessions, test workers or other servers on the machine ever meet.
+
+The commands run as written, in one ``bash`` per block (a variable set by one command is seen by the
+next), in a scratch directory, with the project's interpreter's ``bin`` first on ``PATH``. Two
+rewrites, both of the set-up and not of what is shown: ``.venv/bin/`` is that ``bin`` (the suite may
+run from another virtual environment), and ``make run ARGS="..."`` is ``hli-server run ...`` (what
+``make run`` runs once the virtual environment exists). A command with a ``timeout`` is interrupted
+with SIGINT (Ctrl+C) after it, and what it printed until then is its output; with ``until``, as soon as
+it has printed that text (a server's banner), or after the timeout. Background commands run
+until the session's blocks are done, then get SIGINT.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import re
+import shlex
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+BIN = Path(sys.executable).parent
+_MARK = "@@doc-run@@"
+
+
+def rewrite(command: str) -> str:
+    """The two set-up rewrites of the module docstring."""
+    command = command.replace(".venv/bin/", f"{BIN}/")
+
+    def make_run(match: re.Match[str]) -> str:
+        args = match.group(2) if match.group(2) is not None else ""
+        return f"{BIN}/hli-server run {args}".rstrip()
+
+    return re.sub(r'make run( ARGS="([^"]*)")?', make_run, command)
+
+
+def _lo_up() -> None:
+    """The namespace's loopback starts down: up with it (SIOCSIFFLAGS, as ``ip link set lo up``)."""
+    import fcntl
+    import struct
+
+    siocgifflags, siocsifflags, iff_up = 0x8913, 0x8914, 0x1
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        request = struct.pack("16sh14x", b"lo", 0)
+        flags = struct.unpack("16sh14x", fcntl.ioctl(s, siocgifflags, request))[1]
+        fcntl.ioctl(s, siocsifflags, struct.pack("16sh14x", b"lo", flags | iff_up))
+
+
+def _wait_port(port: int, timeout: float, proc: subprocess.Popen[Any] | None = None) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if proc is not None and proc.poll() is not None:
+            raise RuntimeError(f"the process for port {port} ended: exit {proc.returncode}")
+        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=0.5):
+            return
+        time.sleep(0.05)
+    raise RuntimeError(f"nothing listens on 127.0.0.1:{port} after {timeout} s")
+
+
+def _broker(work: Path) -> subprocess.Popen[bytes]:
+    import getpass
+
+    conf = work / "mosquitto.conf"
+    conf.write_text(
+        f"user {getpass.getuser()}\nlistener 1883 127.0.0.1\nallow_anonymous true\npersistence false\n",
+        encoding="utf-8",
+    )
+    mosquitto = next(
+        (p for p in ("/usr/sbin/mosquitto", "/usr/local/sbin/mosquitto") if Path(p).exists()), "mosquitto"
+    )
+    proc = subprocess.Popen([mosquitto, "-c", str(conf)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    _wait_port(1883, 10, proc)
+    return proc
+
+
+def _server(args: str, work: Path) -> tuple[subprocess.Popen[str], Path]:
+    log = work / "server.log"
+    with log.open("w", encoding="utf-8") as out:
+        proc = subprocess.Popen(
+            [str(BIN / "hli-server"), "run", *shlex.split(args)],
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            text=True,
+            cwd=work,
+        )
+    deadline = time.monotonic() + 60
+    while "stop with" not in log.read_text(encoding="utf-8"):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f"hli-server run {args}: no banner\n{log.read_text(encoding='utf-8')}")
+        time.sleep(0.05)
+    return proc, log
+
+
+def _script(commands: list[str], timeout: float | None, background: bool, work: Path, tag: str) -> str:
+    lines = ["exec 2>&1", f"cd {shlex.quote(str(work))}"]
+    for k, command in enumerate(commands):
+        command = rewrite(command)
+        if background:
+            out = work / f"background-{tag}-{k}.out"
+            lines.append(f"( {command} ) > {shlex.quote(str(out))} 2>&1 &")
+            lines.append(f"echo $! >> {shlex.quote(str(work / 'background.pids'))}")
+            lines.append(f'printf "\\n{_MARK} 0\\n"')
+            continue
+        if timeout is not None:
+            # the command as Ctrl+C would end it: SIGINT after the timeout (KILL 10 s later)
+            command = f"timeout -s INT -k 10 {timeout} bash -c {shlex.quote(command)}"
+        lines.append(command)
+        lines.append(f'printf "\\n{_MARK} %s\\n" "$?"')
+    return "\n".join(lines) + "\n"
+
+
+def _split(output: str, count: int) -> list[tuple[str, int]]:
+    """(output, exit status) of each of ``count`` commands; -1: the command did not end (the block's
+    shell was killed)."""
+    parts = output.split(f"\n{_MARK} ")
+    found = []
+    for k in range(count):
+        if k >= len(parts):
+            found.append(("", -1))
+            continue
+        text = parts[0] if k == 0 else parts[k].partition("\n")[2]
+        status = int(parts[k + 1].partition("\n")[0]) if k + 1 < len(parts) else -1
+        found.append((text.strip("\n"), status))
+    return found
+
+
+def _run_until(command: str, until: str, timeout: float, env: dict[str, str], work: Path) -> tuple[str, int]:
+    """A command that runs until stopped (a server): Ctrl+C (SIGINT to its process group) once it
+    printed ``until`` (or after ``timeout``); its output and exit status."""
+    import selectors
+
+    proc = subprocess.Popen(
+        ["bash", "-c", rewrite(command)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        env=env,
+        cwd=work,
+        start_new_session=True,
+    )
+    assert proc.stdout is not None
+    out = b""
+    deadline = time.monotonic() + timeout
+    with selectors.DefaultSelector() as sel:
+        sel.register(proc.stdout, selectors.EVENT_READ)
+        while until.encode() not in out and time.monotonic() < deadline and proc.poll() is None:
+            if sel.select(timeout=0.1):
+                chunk = os.read(proc.stdout.fileno(), 65536)
+                if not chunk:
+                    break
+                out += chunk
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(proc.pid, signal.SIGINT)
+    try:
+        rest, _ = proc.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        rest, _ = proc.communicate()
+    return (out + rest).decode("utf-8", "replace").strip("\n"), proc.returncode
+
+
+def run_session(session: dict[str, Any]) -> dict[str, Any]:
+    work = Path(tempfile.mkdtemp(prefix="hli-doc-run-"))
+    procs: list[subprocess.Popen[Any]] = []
+    results: list[dict[str, Any]] = []
+    server_log: Path | None = None
+    env = {**os.environ, "PATH": f"{BIN}:{os.environ.get('PATH', '')}", "HOME": str(work), "COLUMNS": "100"}
+    try:
+        if session.get("lo_up", True):
+            _lo_up()
+        if session.get("broker"):
+            procs.append(_broker(work))
+        if session.get("server") is not None:
+            proc, server_log = _server(session["server"], work)
+            procs.append(proc)
+        for n, block in enumerate(session["blocks"]):
+            commands = [*block.get("setup", []), *block["commands"]]
+            if block.get("python") is not None:
+                script = work / f"block{n}.py"
+                script.write_text(block["python"], encoding="utf-8")
+                commands = [*block.get("setup", []), f"{BIN}/python {script}"]
+            timeout = block.get("timeout")
+            if block.get("until") is not None:
+                outputs = [
+                    _run_until(c, block["until"], timeout or 60.0, env, work) for c in block["commands"]
+                ]
+                results.append({"outputs": outputs, "background": False})
+                continue
+            text = _script(commands, timeout, bool(block.get("background")), work, str(n))
+            done = subprocess.run(
+                ["bash", "-c", text],
+                capture_output=True,
+                text=True,
+                env=env,
+                timeout=60 + len(commands) * (30 + (timeout or 0)),
+                check=False,
+                errors="replace",
+            )
+            outputs = _split(done.stdout, len(commands))[len(block.get("setup", [])) :]
+            results.append({"outputs": outputs, "background": bool(block.get("background"))})
+        background = []
+        pids = work / "background.pids"
+        if pids.exists():
+            time.sleep(float(session.get("settle", 1.0)))  # the last events reach the subscribers
+            for pid in pids.read_text().split():
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(int(pid), signal.SIGINT)
+            time.sleep(0.5)
+            for out in sorted(work.glob("background-*.out")):
+                background.append(out.read_text(encoding="utf-8", errors="replace").strip("\n"))
+        return {"blocks": results, "background": background}
+    finally:
+        for proc in reversed(procs):
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+                try:
+                    proc.wait(15)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+        if server_log is not None and server_log.exists():
+            sys.stderr.write(server_log.read_text(encoding="utf-8", errors="replace")[-4000:])
+
+
+def main() -> int:
+    session = json.loads(sys.stdin.read())
+    print(json.dumps(run_session(session)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
