@@ -81,7 +81,8 @@ def _broker(work: Path) -> subprocess.Popen[bytes]:
     mosquitto = next(
         (p for p in ("/usr/sbin/mosquitto", "/usr/local/sbin/mosquitto") if Path(p).exists()), "mosquitto"
     )
-    proc = subprocess.Popen([mosquitto, "-c", str(conf)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    quiet = subprocess.DEVNULL
+    proc = subprocess.Popen([mosquitto, "-c", str(conf)], stdout=quiet, stderr=quiet)
     _wait_port(1883, 10, proc)
     return proc
 

@@ -50,7 +50,12 @@ from hli_server.codecs.ads import (
 )
 from schemas.layout import Layout
 
-pytestmark = [pytest.mark.docker, pytest.mark.slow, pytest.mark.req("H-09", "H-10"), pytest.mark.timeout(1500)]
+pytestmark = [
+    pytest.mark.docker,
+    pytest.mark.slow,
+    pytest.mark.req("H-09", "H-10"),
+    pytest.mark.timeout(1500),
+]
 
 ROOT = Path(__file__).resolve().parents[2]
 COMPOSE_FILE = ROOT / "docker-compose.yml"
