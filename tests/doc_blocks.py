@@ -60,6 +60,7 @@ RUN_OPTIONS = {
     "head": "the expected output is the beginning of what the command prints",
     "any-order": "the expected lines in any order (several event sources)",
     "python": "a python block: run with the project's interpreter (its expected output: an `output` block)",
+    "pytest": "a python block that is a test file: run with pytest (it must pass)",
 }
 """What a ``doc-run`` marker may say (a flag, or ``key=value`` with shell quoting)."""
 

@@ -38,7 +38,7 @@ _MARK = "@@doc-run@@"
 
 def rewrite(command: str) -> str:
     """The two set-up rewrites of the module docstring."""
-    command = command.replace(".venv/bin/", f"{BIN}/")
+    command = re.sub(r"(?<![\w/.])\.venv/bin/", f"{BIN}/", command)  # the relative path a user types
 
     def make_run(match: re.Match[str]) -> str:
         args = match.group(2) if match.group(2) is not None else ""
@@ -192,6 +192,11 @@ def run_session(session: dict[str, Any]) -> dict[str, Any]:
                 script = work / f"block{n}.py"
                 script.write_text(block["python"], encoding="utf-8")
                 commands = [*block.get("setup", []), f"{BIN}/python {script}"]
+            if block.get("pytest") is not None:
+                script = work / f"test_doc_block{n}.py"
+                script.write_text(block["pytest"], encoding="utf-8")
+                run = f"{BIN}/python -m pytest -q -p no:cacheprovider -p no:randomly {script.name}"
+                commands = [*block.get("setup", []), run]
             timeout = block.get("timeout")
             if block.get("until") is not None:
                 outputs = [

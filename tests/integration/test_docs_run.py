@@ -59,6 +59,7 @@ class Session:
                     "until": o.get("until"),
                     "background": "background" in o,
                     "python": block.body if "python" in o else None,
+                    "pytest": block.body if "pytest" in o else None,
                 }
             )
         return {"server": options.get("server"), "broker": "broker" in options, "blocks": blocks}
@@ -211,7 +212,7 @@ def test_the_doc_runs_as_written(session: Session) -> None:
     for block, ran in zip(session.blocks, result["blocks"], strict=True):
         options = block.options
         want_status = int(options.get("status", "0"))
-        commands = block.commands() if "python" not in options else []
+        commands = block.commands() if not {"python", "pytest"} & set(options) else []
         for k, (text, status) in enumerate(ran["outputs"]):
             shown = commands[k].text if commands else "python block"
             where = f"{block.where}: $ {shown}"
