@@ -105,16 +105,11 @@ def _server(args: str, work: Path) -> tuple[subprocess.Popen[str], Path]:
     return proc, log
 
 
-def _script(commands: list[str], timeout: float | None, background: bool, work: Path, tag: str) -> str:
+def _script(commands: list[str], timeout: float | None, work: Path) -> str:
+    """One bash for the commands, each followed by a marker line with its exit status."""
     lines = ["exec 2>&1", f"cd {shlex.quote(str(work))}"]
-    for k, command in enumerate(commands):
+    for command in commands:
         command = rewrite(command)
-        if background:
-            out = work / f"background-{tag}-{k}.out"
-            lines.append(f"( {command} ) > {shlex.quote(str(out))} 2>&1 &")
-            lines.append(f"echo $! >> {shlex.quote(str(work / 'background.pids'))}")
-            lines.append(f'printf "\\n{_MARK} 0\\n"')
-            continue
         if timeout is not None:
             # the command as Ctrl+C would end it: SIGINT after the timeout (KILL 10 s later)
             command = f"timeout -s INT -k 10 {timeout} bash -c {shlex.quote(command)}"
@@ -138,30 +133,40 @@ def _split(output: str, count: int) -> list[tuple[str, int]]:
     return found
 
 
-def _run_until(command: str, until: str, timeout: float, env: dict[str, str], work: Path) -> tuple[str, int]:
-    """A command that runs until stopped (a server): Ctrl+C (SIGINT to its process group) once it
-    printed ``until`` (or after ``timeout``); its output and exit status."""
-    import selectors
-
-    proc = subprocess.Popen(
+def _start(
+    command: str, env: dict[str, str], work: Path, out: Any = subprocess.PIPE
+) -> subprocess.Popen[bytes]:
+    """``command`` in a process group of its own (so that Ctrl+C reaches all of it)."""
+    return subprocess.Popen(
         ["bash", "-c", rewrite(command)],
-        stdout=subprocess.PIPE,
+        stdout=out,
         stderr=subprocess.STDOUT,
         env=env,
         cwd=work,
         start_new_session=True,
     )
+
+
+def _read_until(proc: subprocess.Popen[bytes], until: str, timeout: float) -> bytes:
+    """What ``proc`` prints until it printed ``until``, ended, or ``timeout`` passed."""
+    import selectors
+
     assert proc.stdout is not None
     out = b""
     deadline = time.monotonic() + timeout
     with selectors.DefaultSelector() as sel:
         sel.register(proc.stdout, selectors.EVENT_READ)
-        while until.encode() not in out and time.monotonic() < deadline and proc.poll() is None:
+        while until.encode() not in out and time.monotonic() < deadline:
             if sel.select(timeout=0.1):
                 chunk = os.read(proc.stdout.fileno(), 65536)
                 if not chunk:
                     break
                 out += chunk
+    return out
+
+
+def _interrupt(proc: subprocess.Popen[bytes]) -> bytes:
+    """Ctrl+C: SIGINT to the process group; what it prints until it ends (SIGKILL after 30 s)."""
     with contextlib.suppress(ProcessLookupError):
         os.killpg(proc.pid, signal.SIGINT)
     try:
@@ -169,12 +174,18 @@ def _run_until(command: str, until: str, timeout: float, env: dict[str, str], wo
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         rest, _ = proc.communicate()
-    return (out + rest).decode("utf-8", "replace").strip("\n"), proc.returncode
+    return rest or b""
+
+
+def _text(data: bytes) -> str:
+    return data.decode("utf-8", "replace").strip("\n")
 
 
 def run_session(session: dict[str, Any]) -> dict[str, Any]:
     work = Path(tempfile.mkdtemp(prefix="hli-doc-run-"))
     procs: list[subprocess.Popen[Any]] = []
+    serving: list[subprocess.Popen[bytes]] = []
+    background: list[tuple[list[tuple[str, int]], int, subprocess.Popen[bytes], Path]] = []
     results: list[dict[str, Any]] = []
     server_log: Path | None = None
     env = {**os.environ, "PATH": f"{BIN}:{os.environ.get('PATH', '')}", "HOME": str(work), "COLUMNS": "100"}
@@ -187,47 +198,54 @@ def run_session(session: dict[str, Any]) -> dict[str, Any]:
             proc, server_log = _server(session["server"], work)
             procs.append(proc)
         for n, block in enumerate(session["blocks"]):
-            commands = [*block.get("setup", []), *block["commands"]]
+            setup = block.get("setup", [])
+            commands = list(block["commands"])
             if block.get("python") is not None:
                 script = work / f"block{n}.py"
                 script.write_text(block["python"], encoding="utf-8")
-                commands = [*block.get("setup", []), f"{BIN}/python {script}"]
+                commands = [f"{BIN}/python {script}"]
             if block.get("pytest") is not None:
                 script = work / f"test_doc_block{n}.py"
                 script.write_text(block["pytest"], encoding="utf-8")
-                run = f"{BIN}/python -m pytest -q -p no:cacheprovider -p no:randomly {script.name}"
-                commands = [*block.get("setup", []), run]
+                commands = [f"{BIN}/python -m pytest -q -p no:cacheprovider -p no:randomly {script.name}"]
             timeout = block.get("timeout")
-            if block.get("until") is not None:
-                outputs = [
-                    _run_until(c, block["until"], timeout or 60.0, env, work) for c in block["commands"]
-                ]
-                results.append({"outputs": outputs, "background": False})
-                continue
-            text = _script(commands, timeout, bool(block.get("background")), work, str(n))
-            done = subprocess.run(
-                ["bash", "-c", text],
-                capture_output=True,
-                text=True,
-                env=env,
-                timeout=60 + len(commands) * (30 + (timeout or 0)),
-                check=False,
-                errors="replace",
-            )
-            outputs = _split(done.stdout, len(commands))[len(block.get("setup", [])) :]
-            results.append({"outputs": outputs, "background": bool(block.get("background"))})
-        background = []
-        pids = work / "background.pids"
-        if pids.exists():
-            time.sleep(float(session.get("settle", 1.0)))  # the last events reach the subscribers
-            for pid in pids.read_text().split():
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(int(pid), signal.SIGINT)
-            time.sleep(0.5)
-            for out in sorted(work.glob("background-*.out")):
-                background.append(out.read_text(encoding="utf-8", errors="replace").strip("\n"))
-        return {"blocks": results, "background": background}
+            failed_setup = []
+            if setup:
+                ran = _split(_bash(_script(setup, None, work), env, len(setup)), len(setup))
+                failed_setup = [f"$ {c}\n{t}" for c, (t, status) in zip(setup, ran, strict=True) if status]
+            outputs: list[tuple[str, int]] = []
+            if block.get("serve"):  # the session's server, started by the doc's own command
+                for command in commands:
+                    proc = _start(command, env, work)
+                    serving.append(proc)
+                    outputs.append((_text(_read_until(proc, "stop with", timeout or 60.0)), 0))
+            elif block.get("background"):  # a second terminal: runs until the session's end
+                for k, command in enumerate(commands):
+                    out = work / f"background-{n}-{k}.out"
+                    with out.open("wb") as sink:
+                        background.append((outputs, k, _start(command, env, work, sink), out))
+                    outputs.append(("", -1))
+                time.sleep(float(block.get("settle", 1.0)))  # subscribed before the next block acts
+            elif block.get("until") is not None:
+                for command in commands:
+                    proc = _start(command, env, work)
+                    head = _read_until(proc, block["until"], timeout or 60.0)
+                    rest = _interrupt(proc)
+                    outputs.append((_text(head + rest), proc.returncode))
+            else:
+                text = _script(commands, timeout, work)
+                outputs = _split(_bash(text, env, len(commands) * (30 + (timeout or 0))), len(commands))
+            results.append({"outputs": outputs, "setup_failed": failed_setup})
+        if background:
+            time.sleep(float(session.get("settle", 1.5)))  # the last events reach the subscribers
+            for outputs, k, proc, out in background:
+                _interrupt(proc)
+                outputs[k] = (_text(out.read_bytes()), proc.returncode)
+        return {"blocks": results}
     finally:
+        for proc in serving:
+            if proc.poll() is None:
+                _interrupt(proc)
         for proc in reversed(procs):
             if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)
@@ -238,6 +256,19 @@ def run_session(session: dict[str, Any]) -> dict[str, Any]:
                     proc.wait()
         if server_log is not None and server_log.exists():
             sys.stderr.write(server_log.read_text(encoding="utf-8", errors="replace")[-4000:])
+
+
+def _bash(script: str, env: dict[str, str], timeout: float) -> str:
+    done = subprocess.run(
+        ["bash", "-c", script],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=60 + timeout,
+        check=False,
+        errors="replace",
+    )
+    return done.stdout
 
 
 def main() -> int:
