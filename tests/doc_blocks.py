@@ -17,6 +17,8 @@ Two kinds of markers, an HTML comment right before a block's fence (the page sho
       $ curl -s -X POST http://127.0.0.1:8080/api/channels/1/start
       -->
 
+  Text after `` -- `` in the first line is a note for the reader of the Markdown.
+
 In a ``console``-like block, a line ``$ command`` is a command (a line ending in ``\\`` goes on in the
 next), and the lines up to the next command are what it prints. :func:`unmarked_blocks` lists the
 blocks that hold commands or code and carry no marker: a test keeps that list empty.
@@ -60,8 +62,10 @@ RUN_OPTIONS = {
     "numbers": "every number of the expected output stands for any number (timings, counters)",
     "head": "the expected output is the beginning of what the command prints",
     "any-order": "the expected lines in any order (several event sources)",
+    "ignore": "a regular expression: printed lines it finds are not compared (a loaded machine's warnings)",
     "python": "a python block: run with the project's interpreter (its expected output: an `output` block)",
     "pytest": "a python block that is a test file: run with pytest (it must pass)",
+    "file": "a block that is a file: written as this name into the session's directory, not run",
 }
 """What a ``doc-run`` marker may say (a flag, or ``key=value`` with shell quoting)."""
 
@@ -135,7 +139,7 @@ def _marker(before: str) -> tuple[str | None, dict[str, str], list[str], str]:
         return "skip", {}, [], head.partition(":")[2].strip()
     if head.startswith(("doc-run", "doc-output")):
         options: dict[str, str] = {"output": ""} if head.startswith("doc-output") else {}
-        for word in shlex.split(head.partition(":")[2]):
+        for word in shlex.split(head.partition(":")[2].partition(" -- ")[0]):  # " -- ": a note
             key, _, value = word.partition("=")
             if key not in RUN_OPTIONS:
                 raise ValueError(f"unknown doc-run option {key!r} (known: {', '.join(RUN_OPTIONS)})")

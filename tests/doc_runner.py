@@ -197,6 +197,9 @@ def run_session(session: dict[str, Any]) -> dict[str, Any]:
         if session.get("server") is not None:
             proc, server_log = _server(session["server"], work)
             procs.append(proc)
+        for block in session["blocks"]:  # the session's files first: a command may use a later one
+            if block.get("file"):
+                (work / block["file"]).write_text(block["text"], encoding="utf-8")
         for n, block in enumerate(session["blocks"]):
             setup = block.get("setup", [])
             commands = list(block["commands"])
@@ -208,6 +211,8 @@ def run_session(session: dict[str, Any]) -> dict[str, Any]:
                 script = work / f"test_doc_block{n}.py"
                 script.write_text(block["pytest"], encoding="utf-8")
                 commands = [f"{BIN}/python -m pytest -q -p no:cacheprovider -p no:randomly {script.name}"]
+            if block.get("file"):
+                commands = []
             timeout = block.get("timeout")
             failed_setup = []
             if setup:
@@ -226,6 +231,8 @@ def run_session(session: dict[str, Any]) -> dict[str, Any]:
                         background.append((outputs, k, _start(command, env, work, sink), out))
                     outputs.append(("", -1))
                 time.sleep(float(block.get("settle", 1.0)))  # subscribed before the next block acts
+            elif not commands:
+                pass
             elif block.get("until") is not None:
                 for command in commands:
                     proc = _start(command, env, work)

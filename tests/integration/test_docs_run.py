@@ -61,6 +61,8 @@ class Session:
                     "serve": "serve" in o,
                     "python": block.body if "python" in o else None,
                     "pytest": block.body if "pytest" in o else None,
+                    "file": o.get("file"),
+                    "text": block.body,
                 }
             )
         return {"server": options.get("server"), "broker": "broker" in options, "blocks": blocks}
@@ -129,6 +131,9 @@ def _line_pattern(line: str, numbers: bool) -> re.Pattern[str]:
 def mismatch(expected: list[str], actual: str, options: dict[str, str]) -> str | None:
     """None when ``actual`` is what ``expected`` shows (the rules of the module docstring), else why."""
     numbers = "numbers" in options
+    if "ignore" in options:
+        noise = re.compile(options["ignore"])
+        actual = "\n".join(line for line in actual.splitlines() if not noise.search(line))
     if "json" in options:
         want = "".join("".join(expected).split())
         have = "".join(actual.split())
@@ -175,6 +180,7 @@ def test_the_matcher_is_strict_where_the_doc_is_exact() -> None:
     assert mismatch(['{"a":1,', ' "b":[...]}'], '{"a":1,"b":[2, 3]}', {"json": ""}) is None
     assert mismatch(["b", "a"], "a\nx\nb", {"any-order": ""}) is None
     assert mismatch(["b", "b"], "a\nb", {"any-order": ""}) is not None
+    assert mismatch(["a", "b"], "a\nWARNING: late\nb", {"ignore": "^WARNING"}) is None
 
 
 # --------------------------------------------------------------------------------------------
