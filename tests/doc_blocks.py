@@ -56,7 +56,8 @@ RUN_OPTIONS = {
     "until": "Ctrl+C (SIGINT to its process group) once the command printed this text (a server's banner)",
     "serve": "the block's command is the session's server: started, its banner compared, kept running",
     "background": "the block's commands are started and run (a second terminal) until the session ends",
-    "output": "the expected output of the session's background commands (a block of output only)",
+    "output": "a block of output only: what the session's background commands (if any), else the block "
+    "before it printed",
     "status": "the exit status every command of the block must end with (default 0)",
     "json": "whitespace does not count (long JSON wrapped for the page)",
     "numbers": "every number of the expected output stands for any number (timings, counters)",
@@ -65,6 +66,7 @@ RUN_OPTIONS = {
     "ignore": "a regular expression: printed lines it finds are not compared (a loaded machine's warnings)",
     "python": "a python block: run with the project's interpreter (its expected output: an `output` block)",
     "pytest": "a python block that is a test file: run with pytest (it must pass)",
+    "node": "a js block: run with node, ads-client from tests/interop/node (npm ci; else the session skips)",
     "file": "a block that is a file: written as this name into the session's directory, not run",
 }
 """What a ``doc-run`` marker may say (a flag, or ``key=value`` with shell quoting)."""

@@ -33,6 +33,8 @@ from pathlib import Path
 from typing import Any
 
 BIN = Path(sys.executable).parent
+NODE_MODULES = Path(__file__).resolve().parent / "interop" / "node" / "node_modules"
+"""Node's ads-client for the js blocks (``npm ci`` in tests/interop/node, as ``.ci/run`` does)."""
 _MARK = "@@doc-run@@"
 
 
@@ -188,7 +190,13 @@ def run_session(session: dict[str, Any]) -> dict[str, Any]:
     background: list[tuple[list[tuple[str, int]], int, subprocess.Popen[bytes], Path]] = []
     results: list[dict[str, Any]] = []
     server_log: Path | None = None
-    env = {**os.environ, "PATH": f"{BIN}:{os.environ.get('PATH', '')}", "HOME": str(work), "COLUMNS": "100"}
+    env = {
+        **os.environ,
+        "PATH": f"{BIN}:{os.environ.get('PATH', '')}",
+        "HOME": str(work),
+        "COLUMNS": "100",
+        "NODE_PATH": str(NODE_MODULES),
+    }
     try:
         if session.get("lo_up", True):
             _lo_up()
@@ -211,6 +219,10 @@ def run_session(session: dict[str, Any]) -> dict[str, Any]:
                 script = work / f"test_doc_block{n}.py"
                 script.write_text(block["pytest"], encoding="utf-8")
                 commands = [f"{BIN}/python -m pytest -q -p no:cacheprovider -p no:randomly {script.name}"]
+            if block.get("node") is not None:
+                script = work / f"block{n}.js"
+                script.write_text(block["node"], encoding="utf-8")
+                commands = [f"node {script.name}"]
             if block.get("file"):
                 commands = []
             timeout = block.get("timeout")

@@ -62,6 +62,7 @@ class Session:
                     "python": block.body if "python" in o else None,
                     "pytest": block.body if "pytest" in o else None,
                     "file": o.get("file"),
+                    "node": block.body if "node" in o else None,
                     "text": block.body,
                 }
             )
@@ -204,6 +205,11 @@ def test_the_doc_runs_as_written(session: Session) -> None:
     command = _namespace_command()
     if isinstance(command, str):
         pytest.skip(command)
+    if any("node" in b.options for b in session.blocks):
+        from tests.doc_runner import NODE_MODULES
+
+        if shutil.which("node") is None or not (NODE_MODULES / "ads-client").is_dir():
+            pytest.skip("Node or its ads-client is missing (npm ci in tests/interop/node; .ci/run does)")
     done = subprocess.run(
         command,
         input=json.dumps(session.spec()),
@@ -217,11 +223,13 @@ def test_the_doc_runs_as_written(session: Session) -> None:
     result = json.loads(done.stdout)
     problems = []
     printed_in_background = []
+    printed_by: dict[int, str] = {}
     for block, ran in zip(session.blocks, result["blocks"], strict=True):
+        printed_by[block.line] = "\n".join(text for text, _ in ran["outputs"])
         options = block.options
         problems.extend(f"{block.where}: its set-up failed:\n{text}" for text in ran["setup_failed"])
         want_status = int(options.get("status", "0"))
-        commands = block.commands() if not {"python", "pytest"} & set(options) else []
+        commands = block.commands() if not {"python", "pytest", "node"} & set(options) else []
         for k, (text, status) in enumerate(ran["outputs"]):
             shown = commands[k].text if commands else "(the python block)"
             where = f"{block.where}: $ {shown}"
@@ -239,7 +247,8 @@ def test_the_doc_runs_as_written(session: Session) -> None:
                 if why is not None:
                     problems.append(f"{where}\n{why}")
     for out_block in session.outputs:
-        printed = "\n".join(printed_in_background)
+        before = max(b.line for b in session.blocks if b.line < out_block.line)
+        printed = "\n".join(printed_in_background) if printed_in_background else printed_by[before]
         why = mismatch(out_block.body.splitlines(), printed, out_block.options)
         if why is not None:
             problems.append(f"{out_block.where} (what the background commands printed)\n{why}")
