@@ -2,9 +2,10 @@
 
 ``python -m tests.doc_runner`` reads a session (JSON on stdin: the server's arguments, a broker or not,
 the blocks' commands) and prints what each command printed and its exit status (JSON on stdout).
-``tests/integration/test_docs_run.py`` starts it inside a network namespace of its own (``unshare
---net``), so that the server, the broker and the commands use the documented ports (8080, 5020, 48898,
-1883) as written, and no two sessions, test workers or other servers on the machine ever meet.
+``tests/integration/test_docs_run.py`` starts it inside a network and mount namespace of its own
+(``unshare --net --mount``, with a /dev/shm of its own), so that the server, the broker and the commands
+use the documented ports (8080, 5020, 48898, 1883) and image names (hli_demo) as written, and no two
+sessions, test workers or other servers on the machine ever meet.
 
 The commands run as written, in one ``bash`` per block (a variable set by one command is seen by the
 next), in a scratch directory, with the project's interpreter's ``bin`` first on ``PATH``. Two
@@ -200,6 +201,11 @@ def run_session(session: dict[str, Any]) -> dict[str, Any]:
     try:
         if session.get("lo_up", True):
             _lo_up()
+            # a /dev/shm of the session's own: the documented image names (hli_demo) never meet
+            # another session's, another test's or another server's on this machine
+            subprocess.run(
+                ["mount", "-t", "tmpfs", "-o", "size=64m", "tmpfs", "/dev/shm"], check=True, timeout=30
+            )
         if session.get("broker"):
             procs.append(_broker(work))
         if session.get("server") is not None:

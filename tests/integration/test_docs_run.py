@@ -2,15 +2,15 @@
 that a user would copy is run against a real server, so that the docs cannot drift.
 
 The blocks to run carry a ``doc-run`` marker (``tests/doc_blocks.py`` says what it may say); each
-session of them runs in ``tests/doc_runner.py`` inside a network namespace of its own (``unshare
---net``), with ``hli-server run`` (and a Mosquitto broker where asked) on the documented ports. What
-a command prints must match the lines under it in the doc: ``...`` stands for any text in a line, a
-line ``...`` for any lines; the marker's ``json``, ``numbers``, ``head``, ``any-order`` loosen it where
-the doc says so. Every block that holds commands or code and is not run says why (``doc-skip: ...``),
-or names the test that runs it: :func:`test_every_block_is_run_or_says_why_not`.
+session of them runs in ``tests/doc_runner.py`` inside a network and mount namespace of its own
+(``unshare --net --mount``, a /dev/shm of its own), with ``hli-server run`` (and a Mosquitto broker
+where asked) on the documented ports. What a command prints must match the lines under it in the doc:
+``...`` stands for any text in a line, a line ``...`` for any lines; runs of blanks count as one; the
+marker's ``json``, ``numbers``, ``head``, ``any-order``, ``ignore`` loosen it where the doc says so.
+Every block that holds commands or code and is not run says why (``doc-skip: ...``), or names the test
+that runs it: :func:`test_every_block_is_run_or_says_why_not`.
 
-Without ``unshare`` and network namespaces (root, or unprivileged user namespaces) the sessions skip,
-saying so.
+Without ``unshare`` and namespaces (root, or unprivileged user namespaces) the sessions skip, saying so.
 """
 
 from __future__ import annotations
@@ -99,8 +99,14 @@ def _namespace_command() -> list[str] | str:
     unshare = shutil.which("unshare")
     if unshare is None:
         return "unshare (util-linux) is not installed"
-    command = [unshare, "--net"] + ([] if os.geteuid() == 0 else ["--map-root-user"])
-    probe = subprocess.run([*command, "true"], capture_output=True, text=True, timeout=30, check=False)
+    command = [unshare, "--net", "--mount"] + ([] if os.geteuid() == 0 else ["--map-root-user"])
+    probe = subprocess.run(
+        [*command, "mount", "-t", "tmpfs", "tmpfs", "/dev/shm"],
+        capture_output=True,
+        text=True,
+        timeout=30,
+        check=False,
+    )
     if probe.returncode != 0:
         return f"no network namespace here ({' '.join(command)}: {probe.stderr.strip()[:200]})"
     return [*command, sys.executable, "-m", "tests.doc_runner"]
