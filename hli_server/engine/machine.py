@@ -26,10 +26,13 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
+from pydantic import ValidationError
+
 from hli_server.engine.alarms import ALARMS, Reaction, Severity
 from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis, AxisFaults, check_fault_value
 from hli_server.engine.channel import Channel
+from hli_server.engine.external import ExternalType, ExternalVariables, ExternalVarSpec
 from hli_server.engine.hli import AxisHli, ChannelHli, MachineHli
 from hli_server.engine.monitors.base import Monitor, MonitorFactory
 from hli_server.engine.monitors.collision import CollisionMonitor
@@ -37,7 +40,8 @@ from hli_server.engine.monitors.dyn_pos_limit import DynPosLimits
 from hli_server.engine.monitors.position import PositionMonitor
 from hli_server.engine.monitors.soft_limits import SoftLimits
 from hli_server.engine.ports import ChannelRef
-from schemas.config import MachineConfig
+from hli_server.engine.programs import MemoryLibrary, ProgramLibrary
+from schemas.config import AxisConfig, MachineConfig
 from schemas.events import (
     Alarm,
     AlarmRaised,
@@ -70,6 +74,9 @@ first (a block beyond them is refused before the areas look at it), then the are
 limits (they steer the path before interpolation), collision and position monitoring."""
 M = TypeVar("M", bound=Monitor)
 
+SOFT_LIMIT_RECORD_FIELDS: tuple[str, ...] = ("swe_neg", "swe_pos", "swe_toleranz")
+"""The axis record's fields :meth:`Machine.update_axis_record` changes (P-AXIS-00177/00178/00179)."""
+
 
 def _overrides(monitor: Monitor, hook: str) -> bool:
     return getattr(type(monitor), hook) is not getattr(Monitor, hook)
@@ -79,18 +86,27 @@ class Machine:
     """The simulated CNC. ``Machine(config).step(n)`` runs n interpolation cycles.
 
     ``monitors`` builds the monitoring functions (default: all of them, ``DEFAULT_MONITORS``);
-    ``read_program`` loads a program-table entry given by path (the engine does no I/O itself; the
-    runtime passes a file reader)."""
+    ``read_program`` loads a program-table entry given by path and ``programs`` finds the global
+    subprograms a program calls (the engine does no I/O itself; the runtime passes a file reader and
+    a library over the program directories)."""
 
     def __init__(
         self,
         config: MachineConfig,
         read_program: Callable[[str], str] | None = None,
         *,
+        programs: ProgramLibrary | None = None,
         monitors: Iterable[MonitorFactory] | None = None,
     ) -> None:
         self.config = config
         self.read_program = read_program
+        self.programs: ProgramLibrary = MemoryLibrary() if programs is None else programs
+        self.external = ExternalVariables(
+            [
+                ExternalVarSpec(v.name, ExternalType(v.type), tuple(v.dims), v.channel, v.synchronous)
+                for v in config.external_variables
+            ]
+        )
         self.t_a = s_from_us(config.cycle_time_us)
         self.cycle = 0
         self.axes = [Axis(cfg, i) for i, cfg in enumerate(config.axes)]
@@ -171,6 +187,31 @@ class Machine:
 
     def channel_of(self, axis: Axis) -> Channel:
         return self.channels[axis.channel]
+
+    def update_axis_record(self, axis_name: str, **values: int) -> AxisConfig:
+        """Change the software limits in the axis record (a parameter download, 0.1 µm): they take
+        effect where the kernel takes them from the record, at the next reset, mode change or axis
+        exchange (P-AXIS-00177/00178 "Anmerkungen"); until then the limits in effect stay. ValueError
+        for an unknown field or a value the parameter refuses (then nothing changes)."""
+        axis = self.axes_by_name.get(axis_name)
+        if axis is None:
+            raise KeyError(f"no axis {axis_name!r} (axes: {', '.join(self.axes_by_name)})")
+        unknown = sorted(set(values) - set(SOFT_LIMIT_RECORD_FIELDS))
+        if unknown:
+            raise ValueError(
+                f"axis {axis_name}: {', '.join(unknown)} cannot be changed at run time; the software limit "
+                f"parameters can: {', '.join(SOFT_LIMIT_RECORD_FIELDS)}"
+            )
+        try:
+            record = AxisConfig.model_validate({**axis.config.model_dump(), **values})
+        except ValidationError as exc:
+            problems = "; ".join(str(e["msg"]) for e in exc.errors())
+            raise ValueError(f"axis {axis_name}: {problems}") from None
+        axis.config = record
+        self.config = self.config.model_copy(
+            update={"axes": [record if a.name == axis_name else a for a in self.config.axes]}
+        )
+        return record
 
     def inject_fault(self, axis_name: str, **fields: object) -> None:
         """Fault injection (A3-05): set fields of the axis' :class:`AxisFaults` (friction,

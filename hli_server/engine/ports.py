@@ -10,6 +10,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Protocol
 
+from hli_server.engine.external import ExternalVariables
+from hli_server.engine.programs import ProgramLibrary
 from schemas.events import Alarm, Event
 from schemas.wire import Mode
 
@@ -39,6 +41,16 @@ class MachinePort(Protocol):
 
     @property
     def read_program(self) -> Callable[[str], str] | None: ...
+
+    @property
+    def programs(self) -> ProgramLibrary:
+        """Where ``L name`` finds global subprograms and cycles (N-02)."""
+        ...
+
+    @property
+    def external(self) -> ExternalVariables:
+        """The ``V.E.`` variables shared with the PLC (N-05)."""
+        ...
 
     def raise_alarm(
         self,

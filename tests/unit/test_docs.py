@@ -25,7 +25,7 @@ def test_the_requirement_list_has_every_id_once_in_order() -> None:
     import re
 
     doc = (ROOT / "docs" / "requirements.md").read_text(encoding="utf-8")
-    ids = re.findall(r"^- ((?:E|C14|C43|C3|A3|H)-\d+) ", doc, flags=re.MULTILINE)
+    ids = re.findall(r"^- ((?:E|C14|C43|C3|A3|H|N|B)-\d+) ", doc, flags=re.MULTILINE)
     expected = (
         [f"E-{i:02d}" for i in range(1, 8)]
         + [f"C14-{i:02d}" for i in range(1, 24)]
@@ -33,6 +33,8 @@ def test_the_requirement_list_has_every_id_once_in_order() -> None:
         + [f"C3-{i:02d}" for i in range(1, 11)]
         + [f"A3-{i:02d}" for i in range(1, 6)]
         + [f"H-{i:02d}" for i in range(1, 10)]
+        + [f"N-{i:02d}" for i in range(1, 10)]
+        + [f"B-{i:02d}" for i in range(1, 5)]
     )
     assert ids == expected
 
