@@ -151,7 +151,11 @@ def test_an_operator_starts_the_demo_program_sees_a_violation_and_resets(server:
     legend = p.locator("#ch1-legend")
     expect(legend).to_contain_text("refused block N70")
     expect(legend).to_contain_text("violation at X100.0000 Y0.0000 Z0.0000, area 4 (alarm 912001)")
-    expect(legend).to_contain_text("ID4 PROT active, Z -70..70: path goes through it")
+    # what happened (issue 23): the block was refused before it entered the cylinder
+    expect(legend).to_contain_text(
+        "ID4 PROT active, Z -70..70: the refused block N70 would enter it; the axes stopped before it"
+    )
+    expect(legend).not_to_contain_text("path goes through it")
     expect(p.locator("#events")).to_contain_text("area_violation")
     p.screenshot(path=str(ARTIFACTS / "dashboard-area-violation.png"), full_page=True)
 
