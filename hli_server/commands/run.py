@@ -22,6 +22,7 @@ import asyncio
 import ipaddress
 import logging
 import signal
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -90,18 +91,27 @@ def _farewell(runtime: Runtime) -> None:
 class _EarlySignals:
     """SIGINT/SIGTERM from the first line of the command until the runtime's own handlers take over
     (``Runtime.serve`` installs them before its first step): a signal is noted, never raised in the
-    middle of a start-up step, and the runtime stops between two steps, undoing what it started."""
+    middle of a start-up step, and the runtime stops between two steps, undoing what it started.
+    :meth:`restore` puts the previous handlers back (the command run in-process, by a test)."""
 
     def __init__(self) -> None:
         self.runtime: Runtime | None = None
         self.signalled = False
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, self._note)
+        self._previous: dict[int, Any] = {}
+        if threading.current_thread() is threading.main_thread():  # else Python has no handlers to set
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self._note)
 
     def _note(self, signum: int, frame: object) -> None:
         self.signalled = True
         if self.runtime is not None:
             self.runtime.stop_requested = True  # a plain flag: the event loop may be mid-step here
+
+    def restore(self) -> None:
+        for sig, handler in self._previous.items():
+            if handler is not None:
+                signal.signal(sig, handler)
+        self._previous.clear()
 
 
 def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
@@ -228,6 +238,7 @@ def run(
 ) -> None:
     """Run the machine with its process image and adapters until stopped."""
     early = _EarlySignals()
+    ctx.call_on_close(early.restore)
     try:
         config = load_machine(config_path)
     except ConfigFileError as exc:
