@@ -25,7 +25,7 @@ from typing import Any, TypeVar
 import pyads
 import pytest
 
-from hli_server.adapters.ads import AdsAdapter
+from hli_server.adapters.ads import VIEW_GROUP, AdsAdapter
 from hli_server.codecs.ads import (
     AmsAddress,
     AmsPacket,
@@ -312,12 +312,17 @@ async def test_symbol_info_and_upload(runtime: Runtime) -> None:
         assert (symbol.index_group, symbol.index_offset, symbol.symbol_type) == (F020, s.offset, "UDINT")
         assert "distance between the axes" in symbol.comment
         assert await c(symbol.read) == 200_000
-        everything = await c.get_all_symbols()
-        assert [x.name for x in everything] == [s.st_path for s in layout.signals]
-        by_name = {x.name: x for x in everything}
+        everything = await c.get_all_symbols()  # the top level, as TwinCAT's upload
+        assert [(x.name, x.symbol_type) for x in everything] == [
+            ("gpCh", f"ARRAY [0..{len(layout.channels) - 1}] OF HLI_CH"),
+            ("gpAx", f"ARRAY [0..{len(layout.axes) - 1}] OF HLI_AX"),
+        ]
+        cmd_low = await c(c.conn.get_symbol, CMD_LOW)
         cmd = layout.signal(CMD_LOW)
-        assert (by_name[CMD_LOW].index_group, by_name[CMD_LOW].index_offset) == (F030, cmd.offset)
-        assert by_name["gpAx[0]^ipo_state.referenced_r"].symbol_type == "BOOL"
+        assert (cmd_low.index_group, cmd_low.index_offset) == (F030, cmd.offset)
+        assert (await c(c.conn.get_symbol, "gpAx[0]^ipo_state.referenced_r")).symbol_type == "BOOL"
+        unit = await c(c.conn.get_symbol, "gpAx[0]^ipo_mc_control.dyn_pos_limit_low")
+        assert (unit.symbol_type, unit.index_group) == ("MC_CONTROL_SGN32_UNIT", VIEW_GROUP)
         # every entry fits pyads' 798-byte symbol info read
         for name in [layout.signals[0].st_path, layout.signals[-1].st_path]:
             info = await c(pyads.pyads_ex.adsGetSymbolInfo, c.conn._port, c.conn._adr, name)
@@ -327,8 +332,8 @@ async def test_symbol_info_and_upload(runtime: Runtime) -> None:
 async def test_device_info_state_and_write_control(runtime: Runtime) -> None:
     async with plc(runtime) as c, plc(runtime, 551) as geo:
         name, version = await c.read_device_info()
-        assert name == "HLI-Server"
-        assert (version.version, version.revision) == (0, 1)
+        assert name == "Plc30 App"  # what a TwinCAT 3 PLC runtime calls itself
+        assert (version.version, version.revision, version.build) == (3, 1, 4024)
         assert await c.read_state() == (pyads.ADSSTATE_RUN, 0)
         assert (await geo.read_device_info())[0] == "HLI-Server GEO"
         assert await geo.read_state() == (pyads.ADSSTATE_RUN, 0)
@@ -651,7 +656,7 @@ async def test_256_clients_at_once() -> None:
 
 
 async def test_idle_clients_are_closed_and_never_lock_out_a_new_one() -> None:
-    rt = await start_runtime(max_connections=4, idle_timeout_s=0.4, evict_idle_after_s=0.1)
+    rt = await start_runtime(max_connections=4, idle_timeout_s=0.4)
     try:
         port = ads(rt).port or 0
         idle = [await RawClient.connect(port) for _ in range(4)]
@@ -685,16 +690,22 @@ async def test_a_client_that_only_watches_notifications_is_not_idle() -> None:
         await rt.stop()
 
 
-async def test_a_full_server_refuses_when_nobody_is_idle() -> None:
-    rt = await start_runtime(max_connections=2, evict_idle_after_s=60)
+@pytest.mark.req("H-04")
+async def test_a_full_house_of_busy_clients_makes_room_for_a_newcomer() -> None:
+    """Issue 27, finding 3: a newcomer is never refused; the connection whose last request is oldest goes."""
+    rt = await start_runtime(max_connections=3)
     try:
         port = ads(rt).port or 0
-        busy = [await RawClient.connect(port) for _ in range(2)]
-        for c in busy:
+        busy = [await RawClient.connect(port) for _ in range(3)]
+        for c in busy:  # busy[0] asked first, so its last request is the oldest
             assert result_of(await c.request(CommandId.READ_STATE, b"")) == 0
+            await asyncio.sleep(0.02)
         late = await RawClient.connect(port)
-        assert await late.closed()
-        assert ads(rt).stats.refused_full == 1
+        assert result_of(await late.request(CommandId.READ_STATE, b"")) == 0
+        assert await busy[0].closed(2.0)
+        assert ads(rt).stats.evicted == 1
+        for c in busy[1:]:
+            assert result_of(await c.request(CommandId.READ_STATE, b"")) == 0
         for c in [*busy, late]:
             c.close()
     finally:
@@ -869,7 +880,7 @@ def test_layout_names_every_symbol_once() -> None:
 
     layout = build_layout(load_machine(None))
     table = SymbolTable(layout)
-    assert len(table) == len(layout.signals)
+    assert table.leaf_count == len(layout.signals)
     for s in layout.signals:
         found = table.find(s.st_path.replace("]^", "]."))
         assert found is not None

@@ -15,7 +15,15 @@ from typing import Any
 
 import pytest
 
-from hli_server.adapters.ads import AdsDevice, AdsOptions, DeviceLimits, Session, SymbolTable, normalize_name
+from hli_server.adapters.ads import (
+    VIEW_GROUP,
+    AdsDevice,
+    AdsOptions,
+    DeviceLimits,
+    Session,
+    SymbolTable,
+    normalize_name,
+)
 from hli_server.adapters.ads.symbols import MAX_SYMBOL_INFO
 from hli_server.adapters.registry import AdapterError, plan_adapters
 from hli_server.codecs.ads import (
@@ -31,6 +39,7 @@ from hli_server.codecs.ads import (
     ReadWriteRequest,
     SumRead,
     SumReadItem,
+    SymbolEntry,
     WriteRequest,
     decode_response,
     decode_symbol_upload,
@@ -132,14 +141,28 @@ def test_names_that_are_no_symbol(layout: Layout) -> None:
     assert normalize_name("MAIN.counter") == "main.counter"  # only the gpCh/gpAx dereference is rewritten
 
 
-def test_symbol_upload_is_the_layout_and_every_entry_fits_pyads_read(layout: Layout) -> None:
+def test_symbol_upload_lists_the_top_level_and_every_entry_fits_pyads_read(layout: Layout) -> None:
+    """As TwinCAT's: the upload holds the top-level symbols; their members are in the types (0xF00E)."""
     table = SymbolTable(layout)
     entries = decode_symbol_upload(table.upload)
-    assert [(e.name, e.index_group, e.index_offset, e.size, e.type_name) for e in entries] == [
-        (s.st_path, s.image_ads_group, s.offset, s.size, s.type.value) for s in layout.signals
+    n_ch, n_ax = len(layout.channels), len(layout.axes)
+    assert [(e.name, e.index_group, e.type_name) for e in entries] == [
+        ("gpCh", VIEW_GROUP, f"ARRAY [0..{n_ch - 1}] OF HLI_CH"),
+        ("gpAx", VIEW_GROUP, f"ARRAY [0..{n_ax - 1}] OF HLI_AX"),
     ]
-    assert max(len(table.find(s.st_path).entry) for s in layout.signals) <= MAX_SYMBOL_INFO  # type: ignore[union-attr]
-    assert struct.unpack("<II", table.upload_info) == (len(layout.signals), len(table.upload))
+    for s in layout.signals:  # every leaf by name, at its place in the image
+        symbol = table.find(s.st_path)
+        assert symbol is not None
+        info = SymbolEntry.decode(symbol.entry)[0]
+        assert (info.name, info.index_group, info.index_offset, info.size, info.type_name) == (
+            s.st_path,
+            s.image_ads_group,
+            s.offset,
+            s.size,
+            s.type.value,
+        )
+    assert max(len(symbol.entry) for symbol in table.all_symbols()) <= MAX_SYMBOL_INFO
+    assert struct.unpack("<II", table.upload_info) == (2, len(table.upload))
 
 
 # ================================================================================================
@@ -277,7 +300,9 @@ def test_the_cycle_takes_one_copy_per_cycle_and_only_when_something_is_due(
     image: ProcessImage, layout: Layout
 ) -> None:
     counting = CountingImage(image)
-    device = make_device(counting, max_notifications=600, max_notifications_total=600)
+    device = make_device(
+        counting, max_notifications=600, max_notifications_per_net_id=600, max_notifications_total=600
+    )
     x = layout.signal(X_POS)
     for cycle in range(1, 4):
         device.on_cycle(cycle)
@@ -385,9 +410,12 @@ def test_upload_infos_data_types_and_symbol_version(image: ProcessImage, layout:
     info64 = answer(device, session, CommandId.READ, ReadRequest(0xF00F, 0, 64).encode())
     assert (len(info24.data), len(info64.data)) == (24, 64)  # ads-client asks 64, older clients 24
     info = UploadInfo2.decode(info64.data)
-    assert info.symbol_count == len(layout.signals)
+    assert info.symbol_count == 2  # gpCh, gpAx
     types = answer(device, session, CommandId.READ, ReadRequest(0xF00E, 0, info.data_type_length).encode())
-    assert [t.name for t in decode_data_type_upload(types.data)] == ["BOOL", "DINT", "UDINT", "LREAL"]
+    names = [t.name for t in decode_data_type_upload(types.data)]
+    assert names[:4] == ["BOOL", "DINT", "UDINT", "LREAL"]
+    assert {"MC_CONTROL_BOOL_UNIT", "MC_CONTROL_SGN32_UNIT", "HLI_AX", "HLI_CH"} <= set(names)
+    assert len(names) == info.data_type_count
     dint = answer(
         device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF011, 0, 0xFFFF, b"dint\0").encode()
     )
