@@ -783,6 +783,8 @@ async def test_fuzz_random_and_mutated_frames_never_crash_and_refusals_change_no
     port = ads(runtime).port or 0
     proto = RawClient(None, None)  # type: ignore[arg-type]
     cmd, en = layout.signal(CMD_LOW), layout.signal(EN_LOW)
+    unit = ads(runtime).device.symbols.find(HIGH)
+    assert unit is not None
     valid = [
         proto.frame(CommandId.READ, ReadRequest(F020, 0, 16).encode()),
         proto.frame(CommandId.READ, ReadRequest(0x120300, (5 << 16) | 0x0246, 4).encode(), port=551),
@@ -800,6 +802,25 @@ async def test_fuzz_random_and_mutated_frames_never_crash_and_refusals_change_no
         ),
         proto.frame(CommandId.READ_STATE, b""),
         encode_router_frame(0x1000, b"\x00\x00"),
+        # issue 22: structures, the system service, types
+        proto.frame(CommandId.READ, ReadRequest(VIEW_GROUP, unit.index_offset, unit.size).encode()),
+        proto.frame(
+            CommandId.WRITE,
+            WriteRequest(VIEW_GROUP, unit.index_offset, struct.pack("<i?ii", 1, True, 9, 1)).encode(),
+        ),
+        proto.frame(CommandId.READ, ReadRequest(0xF0, 0, 16).encode(), port=10000),
+        proto.frame(CommandId.READ_DEVICE_INFO, b"", port=10000),
+        proto.frame(
+            CommandId.READ_WRITE,
+            struct.pack("<IIII", 0xF009, 0, 0xFFFF, len(unit.name) + 1) + unit.name.encode() + b"\0",
+        ),
+        proto.frame(
+            CommandId.READ_WRITE, struct.pack("<IIII", 0xF011, 0, 0xFFFF, 22) + b"MC_CONTROL_SGN32_UNIT\0"
+        ),
+        proto.frame(
+            CommandId.ADD_DEVICE_NOTIFICATION,
+            struct.pack("<IIIIII16s", VIEW_GROUP, unit.index_offset, unit.size, 3, 10_000, 10_000, bytes(16)),
+        ),
     ]
     expected = runtime.image.read_half(Direction.PLC_TO_CNC)
     closed_by_server = 0
@@ -885,3 +906,65 @@ def test_layout_names_every_symbol_once() -> None:
         found = table.find(s.st_path.replace("]^", "]."))
         assert found is not None
         assert found.signal is s
+
+
+async def test_the_ads_transport_checks_its_layout_against_the_server(runtime: Runtime) -> None:
+    """plc_clients.AdsTransport asks the symbol info of every signal (0xF082 of 0xF009) on connect."""
+    from dataclasses import replace
+
+    from plc_clients.ads import AdsTransport
+    from schemas.layout import Layout, LayoutError, SignalType
+
+    layout = runtime.layout
+    port = ads(runtime).port or 0
+    transport = await asyncio.to_thread(AdsTransport.connect, "127.0.0.1", port, layout=layout)
+    await asyncio.to_thread(transport.close)
+    sizes = {d: layout.size(d) for d in Direction}
+    renamed = {layout.signals[0].st_path: {"st_path": "gpCh[0]^bahn_state.bogus_r"}}
+    retyped = {X_POS: {"type": SignalType.UDINT}}
+    for changes, message in (
+        (renamed, r"no symbol gpCh\[0\]\^bahn_state.bogus_r"),
+        (retyped, r"the layout is not the server's: here \('gpAx\[0\]\^ipo_state.cmd_pos_r', .*'UDINT'\)"),
+    ):
+        signals = [replace(s, **changes.get(s.st_path, {})) for s in layout.signals]
+        other = Layout(
+            machine="other", channels=layout.channels, axes=layout.axes, signals=signals, sizes=sizes
+        )
+        with pytest.raises(LayoutError, match=message):
+            await asyncio.to_thread(AdsTransport.connect, "127.0.0.1", port, layout=other)
+
+
+UNIT_DEF = (
+    ("request_r", pyads.PLCTYPE_DINT, 1),
+    ("enable_w", pyads.PLCTYPE_BOOL, 1),
+    ("command_w", pyads.PLCTYPE_DINT, 1),
+    ("state_r", pyads.PLCTYPE_DINT, 1),
+)
+"""MC_CONTROL_SGN32_UNIT as pyads' structure definition: the kernel's members in the kernel's order."""
+
+
+async def test_pyads_reads_and_writes_a_control_unit_as_a_structure(runtime: Runtime) -> None:
+    """Issue 22: read_structure_by_name works; a whole-structure write sets the _w members and leaves
+    the _r members to the CNC (docs/ads.md, Structures)."""
+    low = "gpAx[0]^ipo_mc_control.dyn_pos_limit_low"
+    async with plc(runtime) as c:
+        assert await c.read_structure_by_name(low, UNIT_DEF) == {
+            "request_r": 0,
+            "enable_w": False,
+            "command_w": 0,
+            "state_r": 0,
+        }
+        value = {"request_r": 7, "enable_w": True, "command_w": -100_000, "state_r": 99}
+        await c.write_structure_by_name(low, value, UNIT_DEF)
+        await runtime.step(2)
+        unit = await c.read_structure_by_name(low.replace("]^", "]."), UNIT_DEF)
+        assert (unit["enable_w"], unit["command_w"]) == (True, -100_000)
+        assert unit["request_r"] == 0  # not supported by the kernel: always 0, whatever was written
+        assert unit["state_r"] == runtime.image.read(STATE_LOW) != 99  # the CNC's monitoring state
+        # a whole axis as one structure: the array element, with every unit inside
+        size = ads(runtime).device.symbols.find("gpAx[0]").size  # type: ignore[union-attr]
+        axis = await c.read_by_name("gpAx[0]", pyads.PLCTYPE_BYTE * size)
+        assert len(axis) == size
+        with pytest.raises(pyads.ADSError) as info:  # the size of the structure, or 0x705
+            await c.read_structure_by_name(low, UNIT_DEF[:3])
+        assert info.value.err_code == 0x705

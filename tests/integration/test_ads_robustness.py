@@ -84,20 +84,24 @@ async def test_a_full_house_of_tricklers_makes_room_for_an_honest_client() -> No
 
 async def test_the_notification_budget_is_shared_per_net_id() -> None:
     """Issue 27 finding 5: connections of one NetId cannot take the whole budget; another NetId finds room."""
-    rt = await start_runtime(
-        max_notifications=4, max_notifications_per_net_id=8, max_notifications_total=16
-    )
+    rt = await start_runtime(max_notifications=4, max_notifications_per_net_id=8, max_notifications_total=16)
     try:
         port = ads(rt).port or 0
         x = rt.layout.signal(X_POS)
         add = struct.pack("<IIIIII16s", F020, x.offset, 4, 4, 0, 0, bytes(16))
         greedy = [await RawClient.connect(port) for _ in range(4)]  # one NetId, four connections
-        results = [result_of(await c.request(CommandId.ADD_DEVICE_NOTIFICATION, add)) for c in greedy for _ in range(4)]
+        results = [
+            result_of(await c.request(CommandId.ADD_DEVICE_NOTIFICATION, add))
+            for c in greedy
+            for _ in range(4)
+        ]
         assert results.count(0) == 8
         assert results.count(0x716) == 8
         newcomer = await RawClient.connect(port)
         newcomer.source = newcomer.source._replace(net_id=type(newcomer.source.net_id).parse("10.5.5.5.1.1"))
-        assert [result_of(await newcomer.request(CommandId.ADD_DEVICE_NOTIFICATION, add)) for _ in range(4)] == [0] * 4
+        assert [
+            result_of(await newcomer.request(CommandId.ADD_DEVICE_NOTIFICATION, add)) for _ in range(4)
+        ] == [0] * 4
         assert ads(rt).device.notification_count == 12
         for c in [*greedy, newcomer]:
             c.close()

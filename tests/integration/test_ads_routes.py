@@ -160,13 +160,16 @@ async def test_the_discovery_answer_read_with_a_plain_udp_socket() -> None:
         message = decode_udp(reply)
         assert (str(message.net_id), message.port) == ("192.168.7.8.1.1", 10000)
         host = message.tag(UdpTag.COMPUTER_NAME)
-        assert host is not None and host.rstrip(b"\0").decode() == socket.gethostname()[:64]
+        assert host is not None
+        assert host.rstrip(b"\0").decode() == socket.gethostname()[:64]
         assert message.tag(UdpTag.TC_VERSION) == struct.pack("<BBH", 3, 1, 4024)
         os_version = message.tag(UdpTag.OS_VERSION)
-        assert os_version is not None and len(os_version) == 276
+        assert os_version is not None
+        assert len(os_version) == 276
         assert "hli-server" in os_version[20:].decode("utf-16-le")
         assert len(reply) < 400  # no amplification worth the name
-        assert ads(rt).udp is not None and ads(rt).udp.stats.discovery == 1
+        assert ads(rt).udp is not None
+        assert ads(rt).udp.stats.discovery == 1
     finally:
         udp.close()
         await rt.stop()
@@ -183,7 +186,10 @@ async def test_the_banner_names_the_udp_door() -> None:
     rt = await start()
     try:
         lines = ads(rt).endpoints()
-        assert lines[1] == f"ADS (UDP): 127.0.0.1:{ads(rt).udp_port}  (discovery; AddRoute refused (no credentials set))"
+        assert (
+            lines[1]
+            == f"ADS (UDP): 127.0.0.1:{ads(rt).udp_port}  (discovery; AddRoute refused (no credentials set))"
+        )
         assert "port 10000 system service" in lines[0]
     finally:
         await rt.stop()
@@ -219,16 +225,22 @@ async def test_pyads_add_route_to_plc_then_a_connection_through_the_added_route(
         finally:
             await asyncio.to_thread(close_pyads, refused)
         assert ads(rt).stats.refused_route >= 1
-        ok = await asyncio.to_thread(pyads.add_route_to_plc, LOCAL, "127.0.0.1", address, USER, PASSWORD, "tests")
+        ok = await asyncio.to_thread(
+            pyads.add_route_to_plc, LOCAL, "127.0.0.1", address, USER, PASSWORD, "tests"
+        )
         assert ok is True
         conn = await asyncio.to_thread(open_pyads, SERVER, 851, f"{address}:{port}", 2.0)
         try:
             assert await asyncio.to_thread(conn.read_state) == (pyads.ADSSTATE_RUN, 0)
-            value = await asyncio.to_thread(conn.read_by_name, "gpAx[0]^ipo_state.referenced_r", pyads.PLCTYPE_BOOL)
+            value = await asyncio.to_thread(
+                conn.read_by_name, "gpAx[0]^ipo_state.referenced_r", pyads.PLCTYPE_BOOL
+            )
             assert value is True
         finally:
             await asyncio.to_thread(close_pyads, conn)
-        assert [(r.name, str(r.net_id), r.address) for r in ads(rt).routes.routes] == [("tests", LOCAL, "127.0.0.1")]
+        assert [(r.name, str(r.net_id), r.address) for r in ads(rt).routes.routes] == [
+            ("tests", LOCAL, "127.0.0.1")
+        ]
     saved = json.loads(routes.read_text())
     assert [(r["net_id"], r["ips"]) for r in saved["routes"]] == [(LOCAL, ["127.0.0.1"])]
     rt = await start(allow="192.168.77.1.1.1", routes_file=str(routes))  # the next start reads it
@@ -246,19 +258,24 @@ async def test_pyads_add_route_to_plc_then_a_connection_through_the_added_route(
 @linux_only
 @pytest.mark.slow
 async def test_add_route_with_wrong_credentials_is_refused_as_twincat_refuses_it() -> None:
-    async with own_loopback(allow="192.168.77.1.1.1", route_user=USER, route_password=PASSWORD) as (rt, address):
+    async with own_loopback(allow="192.168.77.1.1.1", route_user=USER, route_password=PASSWORD) as (
+        rt,
+        address,
+    ):
         udp = Udp((address, 48899))
         try:
             for user, password in ((USER, "2"), ("guest", PASSWORD), ("", "")):
                 reply = await udp.ask(add_route(LOCAL, "127.0.0.1", user, password))
-                assert reply is not None and status_of(reply) == 0x704  # ADSERR_DEVICE_INVALIDACCESS
+                assert reply is not None
+                assert status_of(reply) == 0x704  # ADSERR_DEVICE_INVALIDACCESS
             # a fourth at once is beyond AddRoute's rate (bursts of 3, one a second per sender): dropped
             assert await udp.ask(add_route(LOCAL, "127.0.0.1", USER, "3"), timeout=0.3) is None
             await asyncio.sleep(1.0)
             with pytest.raises(RuntimeError, match="Unexpected response"):  # pyads 3.6 misreads 0x704 (#460)
                 await asyncio.to_thread(pyads.add_route_to_plc, LOCAL, "127.0.0.1", address, USER, "wrong")
             assert ads(rt).routes.routes == []
-            assert ads(rt).udp is not None and ads(rt).udp.stats.routes_refused == 4
+            assert ads(rt).udp is not None
+            assert ads(rt).udp.stats.routes_refused == 4
         finally:
             udp.close()
 
@@ -268,7 +285,8 @@ async def test_add_route_without_configured_credentials_is_refused() -> None:
     udp = Udp(("127.0.0.1", ads(rt).udp_port or 0))
     try:
         reply = await udp.ask(add_route("10.1.1.1.1.1", "127.0.0.1", USER, PASSWORD))
-        assert reply is not None and status_of(reply) == 0x704
+        assert reply is not None
+        assert status_of(reply) == 0x704
         assert ads(rt).routes.routes == []
     finally:
         udp.close()
@@ -296,7 +314,14 @@ async def test_a_route_admits_its_net_id_from_its_address_only() -> None:
 
 async def test_a_bad_routes_file_stops_the_start_with_its_name(tmp_path: Path) -> None:
     bad = tmp_path / "routes.json"
-    bad.write_text('{"format": "hli-ads-routes", "routes": [{"name": "x", "net_id": "1.2.3", "address": "a", "ips": []}]}')
+    bad.write_text(
+        json.dumps(
+            {
+                "format": "hli-ads-routes",
+                "routes": [{"name": "x", "net_id": "1.2.3", "address": "a", "ips": []}],
+            }
+        )
+    )
     with pytest.raises(ValueError, match=r"routes\.json: route 0: .*six numbers"):
         AdsAdapter(port=0, routes_file=str(bad))
     bad.write_text("not json")
@@ -324,7 +349,8 @@ async def test_discovery_is_rate_limited_per_sender() -> None:
                     answers += 1
         assert 10 <= answers <= 14  # a burst of 10 and the rate's 5 per second meanwhile
         door = ads(rt).udp
-        assert door is not None and door.stats.rate_limited >= 46
+        assert door is not None
+        assert door.stats.rate_limited >= 46
         other = Udp(("127.0.0.1", ads(rt).udp_port or 0))  # the limit is per sender: another is answered
         assert await other.ask(discovery()) is not None
         other.close()
@@ -341,7 +367,11 @@ async def test_fuzz_the_udp_door_never_crashes_and_still_answers() -> None:
     rt = await start(udp_rate=1e5, udp_rate_total=1e6, route_user=USER, route_password=PASSWORD)
     port = ads(rt).udp_port or 0
     udp = Udp(("127.0.0.1", port))
-    valid = [discovery(), add_route(LOCAL, "127.0.0.1", USER, "wrong"), add_route(LOCAL, "host.invalid", "x", "y")]
+    valid = [
+        discovery(),
+        add_route(LOCAL, "127.0.0.1", USER, "wrong"),
+        add_route(LOCAL, "host.invalid", "x", "y"),
+    ]
     loop = asyncio.get_running_loop()
     try:
         for _ in range(count(1500)):

@@ -59,7 +59,9 @@ async def runtime() -> AsyncIterator[Runtime]:
         yield rt
 
 
-async def node(rt: Runtime, job: dict[str, Any] | list[dict[str, Any]], script: str = "interop.js") -> dict[str, Any]:
+async def node(
+    rt: Runtime, job: dict[str, Any] | list[dict[str, Any]], script: str = "interop.js"
+) -> dict[str, Any]:
     assert NODE is not None
     port = getattr(rt.adapter("ads"), "port")  # noqa: B009 - the ADS adapter's attribute
     proc = await asyncio.create_subprocess_exec(

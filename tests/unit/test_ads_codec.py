@@ -25,7 +25,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tests.fuzz import count, seed_for
 from hli_server.codecs.ads import (
     MAX_AMS_LENGTH,
     NEED_DATA,
@@ -102,6 +101,7 @@ from hli_server.codecs.ads import (
     port_of_port_request,
     unix_ns_to_filetime,
 )
+from tests.fuzz import count, seed_for
 
 pytestmark = pytest.mark.req("H-04")
 
@@ -969,7 +969,9 @@ def _pyads_datagram(monkeypatch: pytest.MonkeyPatch, call: Callable[[], Any], re
     return datagram
 
 
-def test_udp_add_route_as_pyads_sends_it_and_our_answers_as_pyads_reads_them(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_udp_add_route_as_pyads_sends_it_and_our_answers_as_pyads_reads_them(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     import pyads
 
     from hli_server.codecs.ads.udp import AddRouteRequest, UdpService, decode_udp, encode_add_route_reply
@@ -982,13 +984,19 @@ def test_udp_add_route_as_pyads_sends_it_and_our_answers_as_pyads_reads_them(mon
     datagram = _pyads_datagram(
         monkeypatch,
         lambda: results.append(
-            pyads.pyads_ex.adsAddRouteToPLC("10.1.2.3.1.1", "10.1.2.3", "192.168.7.8", "Administrator", "1", "route-a")
+            pyads.pyads_ex.adsAddRouteToPLC(
+                "10.1.2.3.1.1", "10.1.2.3", "192.168.7.8", "Administrator", "1", "route-a"
+            )
         ),
         ok,
     )
     assert results == [True]
     message = decode_udp(datagram)
-    assert (message.service, str(message.net_id), message.port) == (UdpService.ADD_ROUTE, "10.1.2.3.1.1", 10000)
+    assert (message.service, str(message.net_id), message.port) == (
+        UdpService.ADD_ROUTE,
+        "10.1.2.3.1.1",
+        10000,
+    )
     route = AddRouteRequest.from_message(message)
     assert (route.route_name, str(route.net_id), route.address, route.user, route.password) == (
         "route-a",
@@ -1011,13 +1019,21 @@ def _add_route_bytes() -> bytes:
 def test_udp_discovery_as_pyads_sends_it_and_reads_our_answer(monkeypatch: pytest.MonkeyPatch) -> None:
     import pyads
 
-    from hli_server.codecs.ads.udp import UdpService, UdpTag, decode_udp, encode_discovery_reply, os_version_tag
+    from hli_server.codecs.ads.udp import (
+        UdpService,
+        UdpTag,
+        decode_udp,
+        encode_discovery_reply,
+        os_version_tag,
+    )
 
     server = NetId.parse("5.6.7.8.1.1")
     probe = decode_udp(_discovery_bytes())
     reply = encode_discovery_reply(probe, server, "cnc-sim", (3, 1, 4024), os_version_tag(0, 0, 0, 0, "x"))
     found: list[str] = []
-    datagram = _pyads_datagram(monkeypatch, lambda: found.append(pyads.pyads_ex.adsGetNetIdForPLC("10.0.0.9")), reply)
+    datagram = _pyads_datagram(
+        monkeypatch, lambda: found.append(pyads.pyads_ex.adsGetNetIdForPLC("10.0.0.9")), reply
+    )
     assert found == ["5.6.7.8.1.1"]
     message = decode_udp(datagram)
     assert (message.service, message.tags, message.port) == (UdpService.SERVER_INFO, (), 10000)
@@ -1039,7 +1055,10 @@ def _discovery_bytes() -> bytes:
         (b"\x00" * 24, "cookie"),
         (struct.pack("<III6sHI", 0x71146603, 0, 1, bytes(6), 10000, 65), "65 tags"),
         (struct.pack("<III6sHI", 0x71146603, 0, 1, bytes(6), 10000, 1) + b"\x05\x00", "its header runs past"),
-        (struct.pack("<III6sHIHH", 0x71146603, 0, 1, bytes(6), 10000, 1, 5, 9) + b"abc", "runs past the datagram"),
+        (
+            struct.pack("<III6sHIHH", 0x71146603, 0, 1, bytes(6), 10000, 1, 5, 9) + b"abc",
+            "runs past the datagram",
+        ),
     ],
 )
 def test_udp_datagrams_that_do_not_parse_say_why(data: bytes, message: str) -> None:

@@ -443,7 +443,12 @@ def test_control_units_are_their_kernel_structures(layout: Layout) -> None:
     table = SymbolTable(layout)
     unit = table.find(UNIT_LOW)
     assert unit is not None
-    assert (unit.type_name, unit.size, unit.index_group, unit.signal) == ("MC_CONTROL_SGN32_UNIT", 13, VIEW_GROUP, None)
+    assert (unit.type_name, unit.size, unit.index_group, unit.signal) == (
+        "MC_CONTROL_SGN32_UNIT",
+        13,
+        VIEW_GROUP,
+        None,
+    )
     entry = table.data_type("mc_control_sgn32_unit")
     assert entry is not None
     decoded, _ = DataTypeEntry.decode(entry)
@@ -454,13 +459,19 @@ def test_control_units_are_their_kernel_structures(layout: Layout) -> None:
         ("state_r", "DINT", 9, 4),
     ]
     feedhold = table.find("gpCh[0]^bahn_mc_control.feedhold")
-    assert feedhold is not None and (feedhold.type_name, feedhold.size) == ("MC_CONTROL_BOOL_UNIT", 4)
+    assert feedhold is not None
+    assert (feedhold.type_name, feedhold.size) == ("MC_CONTROL_BOOL_UNIT", 4)
     axes = table.find("gpAx")
-    assert axes is not None and axes.type_name == f"ARRAY [0..{len(layout.axes) - 1}] OF HLI_AX"
+    assert axes is not None
+    assert axes.type_name == f"ARRAY [0..{len(layout.axes) - 1}] OF HLI_AX"
     array = table.data_type("ARRAY [0..5]  OF  hli_ax")  # spaces and case as a client may send them
     assert array is not None
     decoded, _ = DataTypeEntry.decode(array)
-    assert (decoded.type_name, decoded.array_dims[0].lower_bound, decoded.array_dims[0].elements) == ("HLI_AX", 0, 6)
+    assert (decoded.type_name, decoded.array_dims[0].lower_bound, decoded.array_dims[0].elements) == (
+        "HLI_AX",
+        0,
+        6,
+    )
     assert table.find("gpAx[0]") is table.find("gpAx[0]^")  # the pointer and what it points to
 
 
@@ -474,7 +485,9 @@ def test_a_structure_is_read_from_both_halves(image: ProcessImage, layout: Layou
     raw = answer(device, session, CommandId.READ, ReadRequest(VIEW_GROUP, unit.index_offset, 13).encode())
     assert raw.result == 0
     assert struct.unpack("<i?ii", raw.data) == (0, True, -1234, 2)  # pack mode 1, as pyads reads it
-    by_name = answer(device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF004, 0, 13, UNIT_LOW.encode()).encode())
+    by_name = answer(
+        device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF004, 0, 13, UNIT_LOW.encode()).encode()
+    )
     assert by_name.data == raw.data
 
 
@@ -490,7 +503,9 @@ def test_a_whole_structure_write_sets_the_w_members_and_leaves_the_r_members_to_
     assert (image.read(CMD_LOW), image.read(EN_LOW)) == (300_000, True)
     assert image.read(STATE_LOW) == 2  # the CNC's value: the written 99 is ignored
     # by handle, as pyads' write_structure_by_name does
-    handle = answer(device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF003, 0, 4, UNIT_LOW.encode()).encode())
+    handle = answer(
+        device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF003, 0, 4, UNIT_LOW.encode()).encode()
+    )
     h = struct.unpack("<I", handle.data)[0]
     by_handle = WriteRequest(0xF005, h, struct.pack("<i?ii", 0, False, -5, 0)).encode()
     assert answer(device, session, CommandId.WRITE, by_handle).result == 0
@@ -501,10 +516,15 @@ def test_structure_writes_that_cannot_be_taken_change_nothing(image: ProcessImag
     device, session = make_device(image), Session()
     unit = device.symbols.find(UNIT_LOW)
     state = device.symbols.find("gpAx[0]^ipo_state")
-    assert unit is not None and state is not None
+    assert unit is not None
+    assert state is not None
     before = image.read_half(Direction.PLC_TO_CNC)
     cases = [
-        (unit.index_offset, struct.pack("<i?ii", 0, True, 1, 0)[:12], ErrorCode.SIZE_WRONG),  # ends in a field
+        (
+            unit.index_offset,
+            struct.pack("<i?ii", 0, True, 1, 0)[:12],
+            ErrorCode.SIZE_WRONG,
+        ),  # ends in a field
         (unit.index_offset + 1, bytes(4), ErrorCode.INVALID_INDEX_OFFSET),  # starts inside request_r
         (unit.index_offset, struct.pack("<iBii", 0, 2, 1, 0), ErrorCode.INVALID_VALUE),  # a BOOL byte of 2
         (state.index_offset, bytes(state.size), ErrorCode.READ_WRITE_NOT_PERMITTED),  # only _r members
@@ -556,11 +576,17 @@ def _extended_layout(base: Layout) -> Layout:
         offset = -(-sizes[d] // template.size) * template.size
         sizes[d] = offset + template.size
         extra.append(
-            replace(template, name=path, st_path=path, offset=offset, modbus_address=address, ads_offset=offset)
+            replace(
+                template, name=path, st_path=path, offset=offset, modbus_address=address, ads_offset=offset
+            )
         )
         address += 4
     return LayoutClass(
-        machine="extended", channels=base.channels, axes=base.axes, signals=[*base.signals, *extra], sizes=sizes
+        machine="extended",
+        channels=base.channels,
+        axes=base.axes,
+        signals=[*base.signals, *extra],
+        sizes=sizes,
     )
 
 
@@ -573,17 +599,22 @@ def test_signals_a_later_layout_adds_become_symbols_and_members_without_a_change
     table = SymbolTable(_extended_layout(layout))
     names = [(s.name, s.type_name) for s in table.symbols]
     # channel 1 has a member channel 2 lacks: they are no array any more, each is a symbol of its own
-    assert ("gpCh[0]", "HLI_CH") in names and ("gpCh[1]", "HLI_CH_2") in names
+    assert ("gpCh[0]", "HLI_CH") in names
+    assert ("gpCh[1]", "HLI_CH_2") in names
     assert ("gVE", "HLI_VE") in names
     ve_table = table.find("gve.TABLE")
-    assert ve_table is not None and (ve_table.type_name, ve_table.size) == ("ARRAY [0..3] OF DINT", 16)
+    assert ve_table is not None
+    assert (ve_table.type_name, ve_table.size) == ("ARRAY [0..3] OF DINT", 16)
     element = table.find("gVE.table[2]")
-    assert element is not None and element.signal is not None and element.signal.st_path == "gVE.table[2]"
+    assert element is not None
+    assert element.signal is not None
+    assert element.signal.st_path == "gVE.table[2]"
     entry = table.data_type("HLI_VE")
     assert entry is not None
     assert [i.name for i in DataTypeEntry.decode(entry)[0].sub_items] == ["table", "flag"]
     counter = table.find("gpCh[0]^v_e.counter")
-    assert counter is not None and counter.index_group == 0xF020
+    assert counter is not None
+    assert counter.index_group == 0xF020
 
 
 def test_port_10000_answers_as_the_twincat_system_service(image: ProcessImage) -> None:
@@ -610,16 +641,25 @@ def test_the_dispatch_tables_answer_every_command_and_refuse_from_the_tables(ima
     assert all(callable(getattr(device, method)) for method in COMMANDS.values())
     for command in (0, 8, 10, 0xFFFF):  # no request: 0x701
         reply = device.handle(session, request(command, b""))
-        assert reply is not None and struct.unpack_from("<I", reply, 38)[0] == 0x701
+        assert reply is not None
+        assert struct.unpack_from("<I", reply, 38)[0] == 0x701
     # a group the port serves with another command: 0x701; one it does not know: 0x702
     assert answer(device, session, CommandId.READ, ReadRequest(0xF003, 0, 4).encode()).result == 0x701
     assert answer(device, session, CommandId.WRITE, WriteRequest(0xF009, 0, b"x").encode()).result == 0x701
-    assert answer(device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF020, 0, 4, b"").encode()).result == 0x701
+    assert (
+        answer(device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF020, 0, 4, b"").encode()).result
+        == 0x701
+    )
     assert answer(device, session, CommandId.READ, ReadRequest(0x1234, 0, 4).encode()).result == 0x702
-    assert answer(device, session, CommandId.WRITE, WriteRequest(0x120300, 0, b"x").encode(), port=551).result == 0x704
+    assert (
+        answer(device, session, CommandId.WRITE, WriteRequest(0x120300, 0, b"x").encode(), port=551).result
+        == 0x704
+    )
 
 
-def test_max_delay_batches_samples_of_several_cycles_in_one_frame(image: ProcessImage, layout: Layout) -> None:
+def test_max_delay_batches_samples_of_several_cycles_in_one_frame(
+    image: ProcessImage, layout: Layout
+) -> None:
     """TwinCAT's nMaxDelay: samples of several cycles go out in one DeviceNotification, a stamp each."""
     timers: list[tuple[float, Any]] = []
     device = AdsDevice(image, SERVER, call_later=lambda delay, fn: timers.append((delay, fn)))
@@ -634,7 +674,8 @@ def test_max_delay_batches_samples_of_several_cycles_in_one_frame(image: Process
     for cycle in range(1, 4):
         publish(image, cycle, **{X_POS: cycle})
         device.on_cycle(cycle)
-    assert session.pending_samples == 3 and session.sent == []  # held
+    assert session.pending_samples == 3
+    assert session.sent == []  # held
     ((delay, send),) = timers
     assert delay == pytest.approx(0.005)
     send()
@@ -643,7 +684,9 @@ def test_max_delay_batches_samples_of_several_cycles_in_one_frame(image: Process
     assert [struct.unpack("<i", s.samples[0].data)[0] for s in notification.stamps] == [1, 2, 3]
 
 
-def test_a_deleted_notification_sends_nothing_more_and_per_host_budgets(image: ProcessImage, layout: Layout) -> None:
+def test_a_deleted_notification_sends_nothing_more_and_per_host_budgets(
+    image: ProcessImage, layout: Layout
+) -> None:
     device = make_device(image, max_notifications_per_host=2)
     x = layout.signal(X_POS)
     remote, local = Session(remote_host="192.0.2.7"), Session()
@@ -669,12 +712,14 @@ def test_routes_admit_their_net_id_from_their_address_and_survive_in_their_file(
     remote = NetId.parse("10.1.1.1.1.1")
     assert not routes.admits_ip("192.0.2.10")
     routes.add("pc", remote, "pc.example", frozenset({"192.0.2.10"}))
-    assert routes.admits_ip("192.0.2.10") and routes.admits(bytes(remote), "::ffff:192.0.2.10")
+    assert routes.admits_ip("192.0.2.10")
+    assert routes.admits(bytes(remote), "::ffff:192.0.2.10")
     assert not routes.admits(bytes(remote), "192.0.2.11")  # its NetId from elsewhere
     assert not routes.admits(bytes(NetId.parse("10.1.1.2.1.1")), "192.0.2.10")  # another NetId from there
     assert routes.admits(bytes(NetId.parse("192.168.1.50.1.1")), "127.0.0.1")  # the allowlist still counts
     routes.add("pc2", remote, "192.0.2.20", frozenset({"192.0.2.20"}))  # the same NetId: replaced
-    assert len(routes) == 1 and not routes.admits_ip("192.0.2.10")
+    assert len(routes) == 1
+    assert not routes.admits_ip("192.0.2.10")
     routes.add("b", NetId.parse("10.2.2.2.1.1"), "192.0.2.30", frozenset({"192.0.2.30"}))
     with pytest.raises(ValueError, match="max_routes"):
         routes.add("c", NetId.parse("10.3.3.3.1.1"), "192.0.2.40", frozenset({"192.0.2.40"}))
@@ -685,5 +730,9 @@ def test_routes_admit_their_net_id_from_their_address_and_survive_in_their_file(
     ]
     # router messages: answered unless the allowlist names NetIds and not the server's
     assert not routes.answers_router_messages("127.0.0.1")
-    assert Routes(AdsOptions(allow="loopback").allowlist(), bytes(SERVER)).answers_router_messages("127.0.0.1")
-    assert Routes(AdsOptions(allow=[str(SERVER)]).allowlist(), bytes(SERVER)).answers_router_messages("127.0.0.1")
+    assert Routes(AdsOptions(allow="loopback").allowlist(), bytes(SERVER)).answers_router_messages(
+        "127.0.0.1"
+    )
+    assert Routes(AdsOptions(allow=[str(SERVER)]).allowlist(), bytes(SERVER)).answers_router_messages(
+        "127.0.0.1"
+    )

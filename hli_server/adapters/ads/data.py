@@ -134,9 +134,9 @@ class DataService:
             axes = ", ".join(f"{a.name}=0x{a.number:X}" for a in self.layout.axes)
             raise AdsError(
                 ErrorCode.INVALID_INDEX_OFFSET,
-                f"port 551 group 0x{ADS_GROUP_GEO_AXIS:X}: no CNC object at offset 0x{offset:08X}; the offset "
-                f"is (A_ID << 16) | element, A_ID of the axes: {axes}; elements 0x0234 active, 0x0244 "
-                "velocity, 0x0245 brake_dist, 0x0246 coll_offset, 0x0247 deceleration (FCT-C3 4.3)",
+                f"port 551 group 0x{ADS_GROUP_GEO_AXIS:X}: no CNC object at offset 0x{offset:08X}; "
+                f"the offset is (A_ID << 16) | element, A_ID of the axes: {axes}; elements 0x0234 active, "
+                "0x0244 velocity, 0x0245 brake_dist, 0x0246 coll_offset, 0x0247 deceleration (FCT-C3 4.3)",
             )
         if length != signal.size:
             raise AdsError(

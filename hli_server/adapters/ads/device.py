@@ -355,7 +355,8 @@ class AdsDevice:
                 IndexGroup.DEVICE_DATA: i.watch_device_state,
             },
             hint=f"port 851 serves 0x{ADS_GROUP_PLC_TO_CNC:X} (PLC->CNC half), 0x{ADS_GROUP_CNC_TO_PLC:X} "
-            f"(CNC->PLC half), 0x{VIEW_GROUP:X} (structures) and the symbol services 0xF003..0xF100 (docs/ads.md)",
+            f"(CNC->PLC half), 0x{VIEW_GROUP:X} (structures) and the symbol services 0xF003..0xF100 "
+            "(docs/ads.md)",
         )
         geo = PortTable(
             ADS_PORT_GEO,

@@ -35,9 +35,9 @@ from __future__ import annotations
 
 import heapq
 import time
-from functools import partial
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Final
 
 from hli_server.codecs.ads import (
@@ -131,7 +131,8 @@ class _Budget:
         if by_id >= lim.max_notifications_per_net_id:
             raise AdsError(
                 ErrorCode.NO_MORE_NOTIFICATION_HANDLES,
-                f"NetId {'.'.join(str(b) for b in net_id)} holds {by_id} notifications on all its connections "
+                f"NetId {'.'.join(str(b) for b in net_id)} holds {by_id} notifications on all its "
+                f"connections "
                 f"(max_notifications_per_net_id {lim.max_notifications_per_net_id}): delete some first",
             )
         if host is not None:
@@ -219,7 +220,8 @@ class NotificationService:
         if mode not in _SERVER_MODES:
             raise AdsError(
                 ErrorCode.TRANSMISSION_MODE_NOT_SUPPORTED,
-                f"transmission mode {mode}: this server sends server cycle (3, 5) and server on change (4, 6)",
+                f"transmission mode {mode}: this server sends server cycle (3, 5) and server on change "
+                "(4, 6)",
             )
         net_id = bytes(header.source_net_id)
         host = session.remote_host
@@ -338,7 +340,9 @@ class NotificationService:
                     _cancel(self._delayed.pop(session, None))
                     self._request_flush(session)
                 elif session not in self._delayed:
-                    self._delayed[session] = self._call_later(sub.max_delay, partial(self._send_delayed, session))
+                    self._delayed[session] = self._call_later(
+                        sub.max_delay, partial(self._send_delayed, session)
+                    )
 
     def _send_delayed(self, session: Session) -> None:
         if self._delayed.pop(session, None) is not None:

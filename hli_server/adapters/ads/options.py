@@ -125,13 +125,14 @@ class AdsOptions(BaseModel):
         default=None,
         ge=0,
         le=65535,
-        description="UDP port (default: 48899 when `port` is 48898, as TwinCAT's, else any free port; 0: any free)",
+        description="UDP port (default: 48899 when `port` is 48898, as TwinCAT's, else any free port; "
+        "0: any free)",
     )
     route_user: str | None = Field(
         default=None,
         max_length=256,
-        description="user name AddRoute must carry (pyads.add_route_to_plc's username); unset: every AddRoute "
-        "is refused with 0x704 as TwinCAT refuses wrong credentials",
+        description="user name AddRoute must carry (pyads.add_route_to_plc's username); unset: every "
+        "AddRoute is refused with 0x704 as TwinCAT refuses wrong credentials",
     )
     route_password: str | None = Field(
         default=None, max_length=256, description="password AddRoute must carry, with `route_user`"
@@ -202,7 +203,8 @@ class AdsOptions(BaseModel):
         default=1024,
         ge=1,
         le=1_000_000,
-        description="device notifications of one remote host, all its NetIds (loopback peers are not counted so)",
+        description="device notifications of one remote host, all its NetIds (loopback peers are not "
+        "counted so)",
     )
     max_notifications_total: int = Field(
         default=2048, ge=1, le=1_000_000, description="device notifications of all connections together"

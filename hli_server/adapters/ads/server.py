@@ -163,7 +163,8 @@ class _Connection(asyncio.Protocol):
             self._adapter.stats.refused_route += 1
             logger.warning(
                 "ADS: no route for %s: closing its connection as a TwinCAT router does; add the address "
-                "to the allowlist (--adapter ads:allow=...) or add a route (AddRoute, docs/ads.md) to admit it",
+                "to the allowlist (--adapter ads:allow=...) or add a route (AddRoute, docs/ads.md) to "
+                "admit it",
                 host,
             )
             self._transport = None

@@ -511,7 +511,7 @@ class SymbolTable:
 
     # --- the structured view --------------------------------------------------------------------
     def view_pieces(self, offset: int, length: int) -> tuple[Piece, ...]:
-        """The half slices behind bytes ``offset`` .. ``offset + length`` of the view (reads may cut fields)."""
+        """The half slices behind ``length`` bytes at ``offset`` of the view (reads may cut fields)."""
         self._check_view(offset, length)
         starts, leaves = self._view_starts, self._view_leaves
         i = bisect.bisect_right(starts, offset) - 1

@@ -221,7 +221,8 @@ class UdpDoor(asyncio.DatagramProtocol):
         if not ips:
             own = canonical_ip(sender)
             logger.warning(
-                "ADS/UDP: the route address %r does not resolve; the route admits %s, where AddRoute came from",
+                "ADS/UDP: the route address %r does not resolve; the route admits %s, where AddRoute "
+                "came from",
                 request.address,
                 own,
             )
@@ -263,7 +264,8 @@ class UdpDoor(asyncio.DatagramProtocol):
         if now - self._last_warning > 10.0:
             self._last_warning = now
             logger.warning(
-                "ADS/UDP: datagrams from %s beyond the rate limit dropped (%d so far; udp_rate, udp_rate_total)",
+                "ADS/UDP: datagrams from %s beyond the rate limit dropped (%d so far; udp_rate, "
+                "udp_rate_total)",
                 sender,
                 self.stats.rate_limited,
             )

@@ -128,7 +128,8 @@ def decode_udp(data: bytes) -> UdpMessage:
         pos += _TAG.size
         if len(data) - pos < length:
             raise AdsCodecError(
-                f"ADS/UDP tag {i} (id {tag}) of {length} bytes runs past the datagram's end ({len(data)} bytes)"
+                f"ADS/UDP tag {i} (id {tag}) of {length} bytes runs past the datagram's end "
+                f"({len(data)} bytes)"
             )
         tags.append((tag, bytes(data[pos : pos + length])))
         pos += length
