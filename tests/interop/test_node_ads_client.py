@@ -110,7 +110,7 @@ async def test_ads_client_without_a_local_net_id_gets_one_from_the_server_and_su
     cycles = [struct.unpack("<I", bytes.fromhex(s["hex"]))[0] for s in result["samples"]]
     assert len(cycles) == 4
     assert all(b > a for a, b in itertools.pairwise(cycles)), cycles
-    for _ in range(100):  # ads-client unsubscribed and disconnected: nothing is left behind
+    for _ in range(250):  # ads-client unsubscribed and disconnected: nothing is left behind
         if getattr(runtime.adapter("ads"), "connection_count") == 0:  # noqa: B009
             break
         await asyncio.sleep(0.02)
@@ -176,7 +176,7 @@ async def test_ads_client_with_its_default_settings_connects_as_to_a_twincat(run
     assert axes["value"][0]["ipo_mc_control"]["dyn_pos_limit_low"]["command_w"] == 555
     assert refused["adsError"] == 0x704  # a _r field by name: only the CNC writes it
     adapter: Any = runtime.adapter("ads")
-    for _ in range(100):  # ads-client unsubscribed everything and disconnected
+    for _ in range(250):  # ads-client unsubscribed everything and disconnected
         if adapter.connection_count == 0:
             break
         await asyncio.sleep(0.02)

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Final
 
 from hli_server.adapters.ads.notifications import Watch
 from hli_server.adapters.ads.symbols import VIEW_GROUP, Symbol, SymbolTable
-from hli_server.codecs.ads import AdsError, ErrorCode, HandleInfo, decode_name, encode_handle_reply
+from hli_server.codecs.ads import AdsError, ErrorCode, decode_name
 from schemas.layout import (
     ADS_GROUP_CNC_TO_PLC,
     ADS_GROUP_GEO_AXIS,
@@ -289,9 +289,9 @@ class DataService:
         return symbol
 
     def symbol(self, data: bytes) -> Symbol:
-        name = decode_name(data)
-        symbol = self.symbols.find(name)
+        symbol = self.symbols.find_raw(data)
         if symbol is None:
+            name = decode_name(data)
             raise AdsError(
                 ErrorCode.SYMBOL_NOT_FOUND,
                 f"no symbol {name[:200]!r}: symbols are the ST paths of `hli-server map` and every level "
@@ -310,8 +310,9 @@ class DataService:
             )
         if read_length < 4:
             raise AdsError(ErrorCode.SIZE_WRONG, f"0xF003 answers a 4-byte handle, read length {read_length}")
-        handle = session.new_handle(symbol)
-        return encode_handle_reply(read_length, HandleInfo(handle, symbol.size, symbol.type_name))
+        handle = _U32.pack(session.new_handle(symbol))
+        tail = symbol.handle_tail  # the extended reply when it fits (ads-client), else the handle (pyads)
+        return handle + tail if read_length >= 4 + len(tail) else handle
 
     def value_by_name(self, session: Session, offset: int, read_length: int, data: bytes) -> bytes:
         symbol = self.symbol(data)

@@ -248,6 +248,13 @@ class AdsOptions(BaseModel):
                         ) from None
         return value
 
+    @field_validator("route_user", "route_password", mode="before")
+    @classmethod
+    def _text(cls, value: object) -> object:
+        if isinstance(value, int) and not isinstance(value, bool):  # --adapter ads:route_password=1
+            return str(value)
+        return value
+
     @model_validator(mode="after")
     def _credentials(self) -> AdsOptions:
         if (self.route_user is None) != (self.route_password is None):

@@ -52,11 +52,13 @@ from hli_server.codecs.ads import (
     ArrayInfo,
     DataTypeEntry,
     ErrorCode,
+    HandleInfo,
     SymbolEntry,
     SymbolFlag,
     UploadInfo,
     UploadInfo2,
     UploadInfoFlag,
+    decode_name,
 )
 from schemas.layout import Direction, Layout, Signal
 
@@ -247,6 +249,8 @@ class Symbol:
     """Its place in the structured view (:data:`VIEW_GROUP`)."""
     writable: bool
     """A leaf the PLC may write, or a structure/array with at least one such member."""
+    handle_tail: bytes = b""
+    """The extended 0xF003 reply after the handle: size, type decoration, type name (ads-client asks it)."""
 
 
 class SymbolTable:
@@ -292,6 +296,7 @@ class SymbolTable:
         self.upload_info2 = info2.encode(24)
         self.upload_info2_long = info2.encode(64)
         self._names: dict[str, Symbol | None] = {}
+        self._raw: dict[bytes, Symbol | None] = {}
         """names asked for -> their symbol (or None): clients ask the same few names again and again"""
 
     # --- building -----------------------------------------------------------------------------
@@ -435,6 +440,7 @@ class SymbolTable:
                 pieces,
                 view_offset,
                 s.plc_writable,
+                _handle_tail(s.size, t.name),
             )
         else:
             collected: list[Piece] = []
@@ -456,6 +462,7 @@ class SymbolTable:
                 _merge(collected),
                 view_offset,
                 writable,
+                _handle_tail(t.size, t.name),
             )
         self._by_key[node.key] = symbol
         return symbol
@@ -498,6 +505,16 @@ class SymbolTable:
         if len(self._names) >= 4096:  # a client cycling through names: stay bounded
             self._names.clear()
         self._names[name] = symbol
+        return symbol
+
+    def find_raw(self, data: bytes) -> Symbol | None:
+        """:meth:`find` of a name as a client sends it (NUL-terminated, Windows-1252), cached by its bytes."""
+        if data in self._raw:
+            return self._raw[data]
+        symbol = self.find(decode_name(data))
+        if len(self._raw) >= 4096:
+            self._raw.clear()
+        self._raw[bytes(data)] = symbol
         return symbol
 
     def data_type(self, name: str) -> bytes | None:
@@ -564,6 +581,10 @@ class SymbolTable:
                 f"index group 0x{VIEW_GROUP:X} (structured view, {self.view_size} bytes): {length} bytes "
                 f"from offset {offset} run past its end",
             )
+
+
+def _handle_tail(size: int, type_name: str) -> bytes:
+    return HandleInfo(0, size, type_name).encode()[4:]
 
 
 def _type_key(name: str) -> str:

@@ -318,7 +318,18 @@ class AmsStreamDecoder:
                     f"AMS header at stream byte {pos} announces {data_length} data bytes, its AMS/TCP "
                     f"length {length} leaves {length - AMS_HEADER_SIZE}: the frame cannot be delimited"
                 )
-            header = AmsHeader(_net_id(tn), tp, _net_id(sn), sp, cmd, flags, data_length, error, invoke)
+            nets = _NET_IDS
+            header = AmsHeader(
+                nets.get(tn) or _net_id(tn),
+                tp,
+                nets.get(sn) or _net_id(sn),
+                sp,
+                cmd,
+                flags,
+                data_length,
+                error,
+                invoke,
+            )
             frame = AmsPacket(header, bytes(buf[pos + 38 : stop]))
         else:
             frame = AmsTcpFrame(reserved, bytes(buf[pos + AMS_TCP_HEADER_SIZE : stop]))
@@ -326,8 +337,12 @@ class AmsStreamDecoder:
         return frame
 
     def _need_data(self) -> Literal[NeedData.NEED_DATA]:
-        if self._pos:
-            del self._buffer[: self._pos]
+        pos = self._pos
+        if pos:
+            if pos == len(self._buffer):
+                self._buffer.clear()
+            else:
+                del self._buffer[:pos]
             self._pos = 0
         return NEED_DATA
 

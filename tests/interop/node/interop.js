@@ -45,7 +45,7 @@ async function main() {
       samples.push({ hex: data.value.toString('hex'), time: data.timestamp.toISOString() });
       if (samples.length >= job.samples) done();
     }, cycleMs, false);
-    await Promise.race([finished, new Promise((_, no) => setTimeout(() => no(new Error('too few samples')), 5000))]);
+    await Promise.race([finished, new Promise((_, no) => setTimeout(() => no(new Error('too few samples')), 10000))]);
     await sub.unsubscribe();
     out.samples = samples;
   }
