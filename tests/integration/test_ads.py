@@ -431,6 +431,7 @@ async def test_a_notification_reaches_a_separate_process(runtime: Runtime) -> No
     assert ads(runtime).connection_count == 0
 
 
+@pytest.mark.req("B-01")
 async def test_notifications_on_change_and_cyclic_with_distinct_handles(runtime: Runtime) -> None:
     received: queue.Queue[tuple[str, int, Any]] = queue.Queue()
     async with plc(runtime) as c, plc(runtime, 551) as geo:
@@ -943,6 +944,7 @@ UNIT_DEF = (
 """MC_CONTROL_SGN32_UNIT as pyads' structure definition: the kernel's members in the kernel's order."""
 
 
+@pytest.mark.req("B-01")
 async def test_pyads_reads_and_writes_a_control_unit_as_a_structure(runtime: Runtime) -> None:
     """Issue 22: read_structure_by_name works; a whole-structure write sets the _w members and leaves
     the _r members to the CNC (docs/ads.md, Structures)."""

@@ -23,7 +23,7 @@ from tests.doc_blocks import DOCS, marked_block
 from tests.integration.servers import read_banner, start_server, stop_server
 
 pytestmark = [
-    pytest.mark.req("H-04"),
+    pytest.mark.req("H-04", "B-01"),
     pytest.mark.slow,
     pytest.mark.timeout(120),
     pytest.mark.skipif(not sys.platform.startswith("linux"), reason="binds 127.x.y.z (Linux answers all of 127/8)"),

@@ -40,7 +40,7 @@ from plc_clients.ads import close_pyads, open_pyads
 from tests.fuzz import count, seed_for
 from tests.integration.test_ads import LOCAL, SERVER, RawClient, result_of
 
-pytestmark = [pytest.mark.req("H-04"), pytest.mark.timeout(60)]
+pytestmark = [pytest.mark.req("H-04", "B-01"), pytest.mark.timeout(60)]
 
 linux_only = pytest.mark.skipif(
     not sys.platform.startswith("linux"), reason="binds 127.x.y.z, which only Linux answers without set-up"

@@ -120,6 +120,7 @@ async def test_ads_client_without_a_local_net_id_gets_one_from_the_server_and_su
 UNIT = "gpAx[0]^ipo_mc_control.dyn_pos_limit_low"
 
 
+@pytest.mark.req("B-01")
 async def test_ads_client_with_its_default_settings_connects_as_to_a_twincat(runtime: Runtime) -> None:
     """Issue 22: ads-client's defaults (no rawClient, no local NetId) connect; readValue of a control unit
     gives the structure, writeValue of it sets the _w members and leaves the _r members to the CNC,

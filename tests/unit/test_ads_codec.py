@@ -969,6 +969,7 @@ def _pyads_datagram(monkeypatch: pytest.MonkeyPatch, call: Callable[[], Any], re
     return datagram
 
 
+@pytest.mark.req("B-01")
 def test_udp_add_route_as_pyads_sends_it_and_our_answers_as_pyads_reads_them(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -1016,6 +1017,7 @@ def _add_route_bytes() -> bytes:
     return encode_udp(UdpMessage(0, UdpService.ADD_ROUTE, NetId.parse("10.1.2.3.1.1"), 10000, tags))
 
 
+@pytest.mark.req("B-01")
 def test_udp_discovery_as_pyads_sends_it_and_reads_our_answer(monkeypatch: pytest.MonkeyPatch) -> None:
     import pyads
 

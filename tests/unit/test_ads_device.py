@@ -436,6 +436,7 @@ UNIT_LOW = "gpAx[0]^ipo_mc_control.dyn_pos_limit_low"
 STATE_LOW = f"{UNIT_LOW}.state_r"
 
 
+@pytest.mark.req("B-01")
 def test_control_units_are_their_kernel_structures(layout: Layout) -> None:
     """FCT-C43 3.1.1: dyn_pos_limit_low is an MC_CONTROL_SGN32_UNIT, members in the kernel's order."""
     from hli_server.codecs.ads import DataTypeEntry
@@ -475,6 +476,7 @@ def test_control_units_are_their_kernel_structures(layout: Layout) -> None:
     assert table.find("gpAx[0]") is table.find("gpAx[0]^")  # the pointer and what it points to
 
 
+@pytest.mark.req("B-01")
 def test_a_structure_is_read_from_both_halves(image: ProcessImage, layout: Layout) -> None:
     device, session = make_device(image), Session()
     image.write(CMD_LOW, -1234)
@@ -491,6 +493,7 @@ def test_a_structure_is_read_from_both_halves(image: ProcessImage, layout: Layou
     assert by_name.data == raw.data
 
 
+@pytest.mark.req("B-01")
 def test_a_whole_structure_write_sets_the_w_members_and_leaves_the_r_members_to_the_cnc(
     image: ProcessImage, layout: Layout
 ) -> None:
@@ -512,6 +515,7 @@ def test_a_whole_structure_write_sets_the_w_members_and_leaves_the_r_members_to_
     assert (image.read(CMD_LOW), image.read(EN_LOW)) == (-5, False)
 
 
+@pytest.mark.req("B-01")
 def test_structure_writes_that_cannot_be_taken_change_nothing(image: ProcessImage, layout: Layout) -> None:
     device, session = make_device(image), Session()
     unit = device.symbols.find(UNIT_LOW)
@@ -539,6 +543,7 @@ def test_structure_writes_that_cannot_be_taken_change_nothing(image: ProcessImag
     assert image.read_half(Direction.PLC_TO_CNC) == before
 
 
+@pytest.mark.req("B-01")
 def test_a_notification_on_a_structure_sends_the_whole_structure(image: ProcessImage, layout: Layout) -> None:
     device, session = make_device(image), Session()
     unit = device.symbols.find(UNIT_LOW)
@@ -590,6 +595,7 @@ def _extended_layout(base: Layout) -> Layout:
     )
 
 
+@pytest.mark.req("B-01")
 def test_signals_a_later_layout_adds_become_symbols_and_members_without_a_change(
     image: ProcessImage, layout: Layout
 ) -> None:
@@ -617,6 +623,7 @@ def test_signals_a_later_layout_adds_become_symbols_and_members_without_a_change
     assert counter.index_group == 0xF020
 
 
+@pytest.mark.req("B-01")
 def test_port_10000_answers_as_the_twincat_system_service(image: ProcessImage) -> None:
     """What Node ads-client reads first with its defaults (extended state, 0xF0) and what TwinCAT asks."""
     device, session = make_device(image), Session()
@@ -657,6 +664,7 @@ def test_the_dispatch_tables_answer_every_command_and_refuse_from_the_tables(ima
     )
 
 
+@pytest.mark.req("B-01")
 def test_max_delay_batches_samples_of_several_cycles_in_one_frame(
     image: ProcessImage, layout: Layout
 ) -> None:
@@ -703,6 +711,7 @@ def test_a_deleted_notification_sends_nothing_more_and_per_host_budgets(
     assert [s.handle for st in notification.stamps for s in st.samples] == [handles[1]]
 
 
+@pytest.mark.req("B-01")
 def test_routes_admit_their_net_id_from_their_address_and_survive_in_their_file(tmp_path: Any) -> None:
     from hli_server.adapters.ads import Routes
 
