@@ -91,6 +91,7 @@ from hli_server.codecs.ads import (
     encode_port_close_reply,
     encode_port_connect_reply,
     encode_request,
+    encode_router_frame,
     encode_response,
     encode_sum_read_reply,
     encode_sum_read_write_reply,
@@ -1087,3 +1088,21 @@ def test_fuzz_udp_decoding_raises_only_its_own_error() -> None:
             message = decode_udp(bytes(data))
             with contextlib.suppress(AdsCodecError):
                 AddRouteRequest.from_message(message)
+
+
+def test_single_frame_is_the_decoders_shortcut_for_one_request_in_flight() -> None:
+    """What ``next_frame`` gives for a read that is exactly one AMS frame, and None for anything else."""
+    target, source = AmsAddress(NetId.parse("127.0.0.1.1.1"), 851), AmsAddress(NetId.parse("10.1.2.3.1.1"), 30000)
+    frame = encode_request(target, source, 2, 7, ReadRequest(0xF020, 4, 4).encode())
+    decoder = AmsStreamDecoder()
+    packet = decoder.single_frame(frame)
+    assert packet == next(AmsStreamDecoder().feed(frame))
+    assert decoder.pending == 0
+    for other in (frame * 2, frame[:-1], frame + b"\0", encode_router_frame(0x1000, b"\0\0")):
+        assert AmsStreamDecoder().single_frame(other) is None
+    bad_length = bytearray(frame)
+    bad_length[26] ^= 1  # the AMS header's data length disagrees: left to next_frame, which breaks
+    assert AmsStreamDecoder().single_frame(bytes(bad_length)) is None
+    busy = AmsStreamDecoder()
+    busy.receive_data(frame[:10])  # something is buffered: the frame must go through the buffer
+    assert busy.single_frame(frame) is None

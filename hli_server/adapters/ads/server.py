@@ -183,10 +183,29 @@ class _Connection(asyncio.Protocol):
         logger.debug("ADS: connection from %s", self.session.name)
 
     def data_received(self, data: bytes) -> None:
-        if self._transport is None or self._transport.is_closing():
+        transport = self._transport
+        if transport is None or transport.is_closing():
             return
+        if not self._read_paused and not self._scheduled:
+            packet = self._decoder.single_frame(data)
+            if packet is not None:  # one request in flight, all of it in this read: no buffering
+                self._serve_one(transport, packet)
+                return
         self._decoder.receive_data(data)
         self._serve()
+
+    def _serve_one(self, transport: asyncio.Transport, packet: AmsPacket) -> None:
+        """:meth:`_serve_turn` for a read that is exactly one AMS frame (the decoder holds nothing)."""
+        self._adapter.stats.turns += 1
+        reply = self._answer(packet)
+        self.frames += 1
+        self.last_activity = time.monotonic()
+        self.partial_since = None
+        if reply is _REFUSED:
+            self._transport = None
+            transport.close()
+        elif reply is not None:
+            transport.write(reply)
 
     def eof_received(self) -> bool | None:
         """The client sent all it will send: answer what is buffered, then close."""
