@@ -38,6 +38,7 @@ async function step(client, s) {
       let done;
       const finished = new Promise((resolve) => { done = resolve; });
       const sub = await client.subscribeValue(s.path, (data) => {
+        if (samples.length >= s.samples) return;  // a loaded machine delivers several at once: keep N
         samples.push({ value: data.value, time: data.timestamp.toISOString() });
         if (samples.length >= s.samples) done();
       }, s.cycleTime ?? 10, s.sendOnChange ?? true);

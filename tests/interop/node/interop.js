@@ -42,6 +42,7 @@ async function main() {
     let done;
     const finished = new Promise((resolve) => { done = resolve; });
     const sub = await client.subscribeRaw(group, offset, size, (data) => {
+      if (samples.length >= job.samples) return;  // a loaded machine delivers several at once: keep N
       samples.push({ hex: data.value.toString('hex'), time: data.timestamp.toISOString() });
       if (samples.length >= job.samples) done();
     }, cycleMs, false);
