@@ -26,7 +26,9 @@ pytestmark = [
     pytest.mark.req("H-04", "B-01"),
     pytest.mark.slow,
     pytest.mark.timeout(120),
-    pytest.mark.skipif(not sys.platform.startswith("linux"), reason="binds 127.x.y.z (Linux answers all of 127/8)"),
+    pytest.mark.skipif(
+        not sys.platform.startswith("linux"), reason="binds 127.x.y.z (Linux answers all of 127/8)"
+    ),
 ]
 
 ADS_MD = DOCS / "ads.md"
@@ -58,7 +60,9 @@ def server() -> Iterator[str]:
 
 
 def run_block(code: str) -> str:
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=False)
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=False
+    )
     assert done.returncode == 0, done.stderr
     return done.stdout
 
@@ -66,9 +70,13 @@ def run_block(code: str) -> str:
 def test_discover_add_a_route_and_connect_pyads_as_the_document_says(server: str) -> None:
     found = run_block(marked_block(ADS_MD, "discover").replace('"127.0.0.1"', f'"{server}"'))
     assert found.strip() == "127.0.0.1.1.1"
-    add = marked_block(ADS_MD, "add_route").replace('"127.0.0.1", "Administrator"', f'"{server}", "Administrator"')
+    add = marked_block(ADS_MD, "add_route").replace(
+        '"127.0.0.1", "Administrator"', f'"{server}", "Administrator"'
+    )
     assert run_block(add).strip() == "True"
-    lines = run_block(marked_block(ADS_MD, "pyads").replace("127.0.0.1:48898", f"{server}:48898")).splitlines()
+    lines = run_block(
+        marked_block(ADS_MD, "pyads").replace("127.0.0.1:48898", f"{server}:48898")
+    ).splitlines()
     assert lines[0] == "(5, 0)"
     int(lines[1])  # a position
     assert "('enable_w', True), ('command_w', -500000)" in lines[2]
@@ -86,7 +94,9 @@ def test_the_ads_client_block_runs_as_written(server: str, tmp_path: Path) -> No
     script = tmp_path / "block.js"
     script.write_text(code)
     env = {**os.environ, "NODE_PATH": str(NODE_DIR / "node_modules")}
-    done = subprocess.run(["node", str(script)], capture_output=True, text=True, timeout=60, env=env, check=False)
+    done = subprocess.run(
+        ["node", str(script)], capture_output=True, text=True, timeout=60, env=env, check=False
+    )
     assert done.returncode == 0, done.stderr
     assert "command_w:" in done.stdout
     assert "'DINT'" in done.stdout or '"DINT"' in done.stdout

@@ -91,8 +91,8 @@ from hli_server.codecs.ads import (
     encode_port_close_reply,
     encode_port_connect_reply,
     encode_request,
-    encode_router_frame,
     encode_response,
+    encode_router_frame,
     encode_sum_read_reply,
     encode_sum_read_write_reply,
     encode_sum_write_reply,
@@ -1092,7 +1092,10 @@ def test_fuzz_udp_decoding_raises_only_its_own_error() -> None:
 
 def test_single_frame_is_the_decoders_shortcut_for_one_request_in_flight() -> None:
     """What ``next_frame`` gives for a read that is exactly one AMS frame, and None for anything else."""
-    target, source = AmsAddress(NetId.parse("127.0.0.1.1.1"), 851), AmsAddress(NetId.parse("10.1.2.3.1.1"), 30000)
+    target, source = (
+        AmsAddress(NetId.parse("127.0.0.1.1.1"), 851),
+        AmsAddress(NetId.parse("10.1.2.3.1.1"), 30000),
+    )
     frame = encode_request(target, source, 2, 7, ReadRequest(0xF020, 4, 4).encode())
     decoder = AmsStreamDecoder()
     packet = decoder.single_frame(frame)
