@@ -59,6 +59,12 @@ async function main() {
     targetAmsNetId: '127.0.0.1.1.1', targetAdsPort: 851, routerAddress: '127.0.0.1', routerTcpPort: port,
   });
   const conn = await client.connect();
+  // the PLC runtime's state comes by the notification ads-client adds on connect (0xF100); its first
+  // sample follows the add response by first_sample_delay_ms, so a loaded machine may finish connect()
+  // before it is there: wait for it as a program that reads metaData would
+  for (let i = 0; i < 200 && client.metaData.plcRuntimeState === undefined; i++) {
+    await new Promise((resolve) => setTimeout(resolve, 10));
+  }
   const out = { connection: { localAmsNetId: conn.localAmsNetId, localAdsPort: conn.localAdsPort,
     tcSystemState: client.metaData.tcSystemState, plcRuntimeState: client.metaData.plcRuntimeState,
     deviceInfo: client.metaData.plcDeviceInfo, uploadInfo: client.metaData.plcUploadInfo,
