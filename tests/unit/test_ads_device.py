@@ -745,3 +745,22 @@ def test_routes_admit_their_net_id_from_their_address_and_survive_in_their_file(
     assert Routes(AdsOptions(allow=[str(SERVER)]).allowlist(), bytes(SERVER)).answers_router_messages(
         "127.0.0.1"
     )
+
+
+def test_the_kernels_type_names_are_served_as_their_iec_names() -> None:
+    """A V.E. variable of the kernel's type SGN16 is an INT symbol for ADS clients (and pyads' types)."""
+    from hli_server.adapters.ads.symbols import ads_data_type
+    from hli_server.codecs.ads import AdsDataType, ads_type_name
+
+    assert [ads_type_name(n) for n in ("BOOLEAN", "SGN08", "UNS16", "SGN32", "REAL64", "dint")] == [
+        "BOOL",
+        "SINT",
+        "UINT",
+        "DINT",
+        "LREAL",
+        "DINT",
+    ]
+    assert ads_data_type("SGN16") == (AdsDataType.INT16, 2)
+    assert ads_data_type("REAL32") == (AdsDataType.REAL32, 4)
+    with pytest.raises(ValueError, match="no IEC base type"):
+        ads_data_type("STRING(80)")

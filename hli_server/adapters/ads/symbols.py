@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from hli_server.codecs.ads import (
+    BASE_TYPES,
     AdsDataType,
     AdsError,
     ArrayInfo,
@@ -58,6 +59,7 @@ from hli_server.codecs.ads import (
     UploadInfo,
     UploadInfo2,
     UploadInfoFlag,
+    ads_type_name,
     decode_name,
 )
 from schemas.layout import Direction, Layout, Signal
@@ -81,25 +83,6 @@ MAX_SYMBOL_INFO: Final = 798
 VIEW_GROUP: Final = 0x4040
 """Index group of the structured view (TwinCAT's group of a PLC's own data; project's choice)."""
 
-_BASE_TYPES: Final[dict[str, tuple[AdsDataType, int]]] = {
-    "BOOL": (AdsDataType.BIT, 1),
-    "BYTE": (AdsDataType.UINT8, 1),
-    "USINT": (AdsDataType.UINT8, 1),
-    "SINT": (AdsDataType.INT8, 1),
-    "WORD": (AdsDataType.UINT16, 2),
-    "UINT": (AdsDataType.UINT16, 2),
-    "INT": (AdsDataType.INT16, 2),
-    "DWORD": (AdsDataType.UINT32, 4),
-    "UDINT": (AdsDataType.UINT32, 4),
-    "DINT": (AdsDataType.INT32, 4),
-    "LWORD": (AdsDataType.UINT64, 8),
-    "ULINT": (AdsDataType.UINT64, 8),
-    "LINT": (AdsDataType.INT64, 8),
-    "REAL": (AdsDataType.REAL32, 4),
-    "LREAL": (AdsDataType.REAL64, 8),
-}
-"""IEC 61131-3 elementary types and their ADS data type ids (ADST_*)."""
-
 _UNIT_KINDS: Final = {
     "BOOL": "BOOL",
     "SINT": "SGN08",
@@ -111,7 +94,7 @@ _UNIT_KINDS: Final = {
     "REAL": "REAL32",
     "LREAL": "REAL64",
 }
-"""The kernel's names of a control unit's value type (``MC_CONTROL_<kind>_UNIT``)."""
+"""The kernel's names of a control unit's value type (``MC_CONTROL_<kind>_UNIT``), by the IEC name."""
 
 _UNIT_MEMBERS: Final = ("request_r", "enable_w", "command_w", "state_r")
 """A control unit's members in the kernel's order (H-02; tf5200_hli_interface "Control unit")."""
@@ -188,10 +171,11 @@ def _key_text(key: tuple[Step, ...]) -> str:
 
 
 def ads_data_type(type_name: str) -> tuple[AdsDataType, int]:
-    """The ADS data type id and size of an IEC base type name (``DINT`` -> INT32, 4)."""
-    found = _BASE_TYPES.get(type_name.upper())
+    """The ADS data type id and size of a base type name (``DINT`` -> INT32, 4; the kernel's ``SGN32``
+    too)."""
+    found = BASE_TYPES.get(ads_type_name(type_name))
     if found is None:
-        raise ValueError(f"{type_name!r} is no IEC base type the ADS door knows ({', '.join(_BASE_TYPES)})")
+        raise ValueError(f"{type_name!r} is no IEC base type the ADS door knows ({', '.join(BASE_TYPES)})")
     return found
 
 
@@ -327,7 +311,8 @@ class SymbolTable:
         return list(roots.values())
 
     def _base(self, name: str, size: int = 0) -> _Type:
-        sig = ("base", name.upper())
+        name = ads_type_name(name)
+        sig = ("base", name)
         found = self._types.get(sig)
         if found is None:
             try:
