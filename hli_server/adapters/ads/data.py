@@ -329,9 +329,18 @@ def _check_size(symbol: Symbol, length: int, what: str) -> None:
 
 
 def _check_value(s: Signal, raw: bytes) -> None:
-    """Refuse (0x706) bytes the field cannot take, before anything is written."""
-    if s.type is SignalType.BOOL and raw[0] > 1:
-        raise AdsError(ErrorCode.INVALID_VALUE, f"{s.st_path}: BOOL byte must be 0 or 1, got {raw[0]}")
+    """Refuse (0x706) bytes the field cannot take, before anything is written: a BOOL byte other than
+    0/1, and whatever the signal's own check refuses (a V.E. variable's kernel range, for one)."""
+    if s.type is SignalType.BOOL:
+        if raw[0] > 1:
+            raise AdsError(ErrorCode.INVALID_VALUE, f"{s.st_path}: BOOL byte must be 0 or 1, got {raw[0]}")
+        value: bool | int | float = bool(raw[0])
+    else:
+        value = struct.unpack("<" + s.type.struct_char, raw)[0]
+    try:
+        s.coerce(value)
+    except SignalValueError as exc:
+        raise AdsError(ErrorCode.INVALID_VALUE, str(exc)) from None
 
 
 def _read_only_text(s: Signal) -> str:
