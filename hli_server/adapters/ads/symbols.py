@@ -442,7 +442,16 @@ class SymbolTable:
                 t.size,
                 VIEW_GROUP,
                 view_offset,
-                _entry(VIEW_GROUP, view_offset, t.size, t.data_type, node.name, t.name, "", 0),
+                _entry(
+                    VIEW_GROUP,
+                    view_offset,
+                    t.size,
+                    t.data_type,
+                    node.name,
+                    t.name,
+                    "",
+                    0 if writable else int(SymbolFlag.READ_ONLY),  # only CNC->PLC members
+                ),
                 None,
                 _merge(collected),
                 view_offset,
