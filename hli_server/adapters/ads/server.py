@@ -59,6 +59,7 @@ from hli_server.adapters.ads.device import AdsDevice, DeviceLimits, Session
 from hli_server.adapters.ads.options import AdsOptions, is_loopback
 from hli_server.adapters.ads.routes import RouteError, Routes
 from hli_server.adapters.ads.udp import UdpDoor
+from hli_server.adapters.faults import CommFaults, Door
 from hli_server.adapters.tcp import listen
 from hli_server.codecs.ads import (
     NEED_DATA,
@@ -124,7 +125,12 @@ _TIMED_TURN_BYTES: Final = 256
 CPU time measured (``longest_turn_us``); a turn of one small request costs less than the two
 ``thread_time`` calls would (about 3 us each on a loaded machine)."""
 
-_REFUSED: Final = b""
+
+class _Refused:
+    """The type of :data:`_REFUSED`."""
+
+
+_REFUSED: Final = _Refused()
 """What :meth:`_Connection._answer` returns for a frame whose sender has no route: close after the
 answers before it."""
 
@@ -138,6 +144,7 @@ class _Connection(asyncio.Protocol):
         self._options = adapter.options
         self._routes = adapter.routes
         self._decoder = AmsStreamDecoder()
+        self._gate = adapter.faults.gate(Door.ADS, None)
         self._transport: asyncio.Transport | None = None
         self.peer: Any = None
         self.host: str | None = None
@@ -179,6 +186,8 @@ class _Connection(asyncio.Protocol):
         self._adapter._accept(self)
         limit = self._options.max_queued_output
         transport.set_write_buffer_limits(high=limit, low=limit // 2)
+        self._gate = self._adapter.faults.gate(Door.ADS, transport)  # communication faults on demand
+        self._transport = self._gate.transport
         self._adapter.stats.connections += 1
         logger.debug("ADS: connection from %s", self.session.name)
 
@@ -201,7 +210,7 @@ class _Connection(asyncio.Protocol):
         self.frames += 1
         self.last_activity = time.monotonic()
         self.partial_since = None
-        if reply is _REFUSED:
+        if isinstance(reply, _Refused):
             self._transport = None
             transport.close()
         elif reply is not None:
@@ -272,7 +281,7 @@ class _Connection(asyncio.Protocol):
             reply = self._answer(frame)
             if reply is None:
                 continue
-            if reply is _REFUSED:
+            if isinstance(reply, _Refused):
                 refused = True
                 break
             out.append(reply)
@@ -321,11 +330,14 @@ class _Connection(asyncio.Protocol):
         if self._transport is not None and not self._transport.is_closing():
             self._serve()
 
-    def _answer(self, frame: AmsPacket | AmsTcpFrame) -> bytes | None:
+    def _answer(self, frame: AmsPacket | AmsTcpFrame) -> bytes | _Refused | None:
         if isinstance(frame, AmsPacket):
             source = frame.header.source_net_id
             if source is not self._admitted and not self._admit(source):
                 return _REFUSED
+            faulted = self._gate.ads(frame)  # a fault's answer (adapters/faults.py), or None: serve it
+            if faulted is not None:
+                return faulted or None
             return self._device.handle(self.session, frame)
         return self._router_message(frame)
 
@@ -342,7 +354,7 @@ class _Connection(asyncio.Protocol):
         )
         return False
 
-    def _router_message(self, frame: AmsTcpFrame) -> bytes | None:
+    def _router_message(self, frame: AmsTcpFrame) -> bytes | _Refused | None:
         command = frame.command
         if command in (AmsTcpCommand.PORT_CONNECT, AmsTcpCommand.GET_LOCAL_NETID) and not (
             self._routes.answers_router_messages(self.host)
@@ -478,6 +490,8 @@ class AdsAdapter:
         self.udp: UdpDoor | None = None
         self.stats = ServerStats()
         self.device: AdsDevice
+        self.faults = CommFaults()
+        """The communication faults the connections consult (the host's, once started)."""
         self._listener: asyncio.Server | None = None
         self._udp_transport: asyncio.DatagramTransport | None = None
         self._slots = _Slots(self.options.max_connections)
@@ -539,6 +553,7 @@ class AdsAdapter:
         return self.device
 
     async def start(self, host: AdapterHost) -> None:
+        self.faults = host.faults
         self.serve_image(host.image, host.operator.t_a_us, read_only=host.policy.read_only)
         self._host = host
         try:
