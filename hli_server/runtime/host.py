@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     Accepted,
     AccessPolicy,
@@ -21,6 +22,7 @@ from hli_server.adapters.host import (
     NotFoundError,
     OperatorPort,
     Readiness,
+    RecorderPort,
     StepRefusedError,
     Trace,
 )
@@ -275,7 +277,15 @@ class RuntimeHost:
 
     @property
     def operator(self) -> OperatorPort:
-        return self._operator
+        return self._rt.operator  # the panel, with every request noted by the session recorder
+
+    @property
+    def recorder(self) -> RecorderPort:
+        return self._rt.recorder_port
+
+    @property
+    def faults(self) -> CommFaults:
+        return self._rt.comm_faults
 
     @property
     def events(self) -> EventFeed:
