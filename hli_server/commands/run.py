@@ -21,6 +21,8 @@ from __future__ import annotations
 import asyncio
 import ipaddress
 import logging
+import signal
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -107,6 +109,32 @@ def _farewell(runtime: Runtime) -> None:
             "machine): the realtime priority (root or CAP_SYS_NICE, e.g. docker run --cap-add SYS_NICE) lets "
             "the clock go first (docs/runtime.md)"
         )
+
+
+class _EarlySignals:
+    """SIGINT/SIGTERM from the first line of the command until the runtime's own handlers take over
+    (``Runtime.serve`` installs them before its first step): a signal is noted, never raised in the
+    middle of a start-up step, and the runtime stops between two steps, undoing what it started.
+    :meth:`restore` puts the previous handlers back (the command run in-process, by a test)."""
+
+    def __init__(self) -> None:
+        self.runtime: Runtime | None = None
+        self.signalled = False
+        self._previous: dict[int, Any] = {}
+        if threading.current_thread() is threading.main_thread():  # else Python has no handlers to set
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self._note)
+
+    def _note(self, signum: int, frame: object) -> None:
+        self.signalled = True
+        if self.runtime is not None:
+            self.runtime.stop_requested = True  # a plain flag: the event loop may be mid-step here
+
+    def restore(self) -> None:
+        for sig, handler in self._previous.items():
+            if handler is not None:
+                signal.signal(sig, handler)
+        self._previous.clear()
 
 
 def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
@@ -295,6 +323,8 @@ def run(
     **alias_values: Any,
 ) -> None:
     """Run the machine with its process image and adapters until stopped."""
+    early = _EarlySignals()
+    ctx.call_on_close(early.restore)
     try:
         config = load_machine(config_path)
     except ConfigFileError as exc:
@@ -364,6 +394,10 @@ def run(
     except (AdapterError, ValueError) as exc:
         click.echo(f"error: {exc}", err=True)
         ctx.exit(_EXIT_START)
+    early.runtime = runtime
+    if early.signalled:
+        click.echo("hli-server: stopped before it started")
+        return
 
     try:
         loop_factory = precise_event_loop if event_loop == "select" else probed_default_loop
@@ -378,4 +412,7 @@ def run(
         logger.exception("the runtime failed")
         click.echo(f"error: the runtime failed at cycle {runtime.machine.cycle}: {exc!r}", err=True)
         ctx.exit(_EXIT_FAILED)
+    if runtime.stats.started_at is None:
+        click.echo("hli-server: stopped during start-up")
+        return
     _farewell(runtime)

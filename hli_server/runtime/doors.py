@@ -25,7 +25,9 @@ import gc
 import logging
 import multiprocessing
 import os
+import signal
 import socket
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -39,6 +41,7 @@ from hli_server.adapters.host import (
     EventFeed,
     ImagePort,
     OperatorPort,
+    Readiness,
     RecorderPort,
     Trace,
     Value,
@@ -219,6 +222,12 @@ class DoorsHost(AdapterHost):
                 except Exception:
                     logger.exception("cycle listener %r failed at cycle %d", listener, cycle)
 
+    def readiness(self) -> Readiness:
+        """The server's readiness, the engine's process' to say (it knows the clock, and these doors once
+        this process reported them listening)."""
+        readiness: Readiness = self._link.call("readiness")
+        return readiness
+
     async def close(self) -> None:
         if self._watch is not None:
             self._watch.cancel()
@@ -243,7 +252,9 @@ class DoorsPlan:
 
 def doors_main(plan: DoorsPlan, link: socket.socket, conn: Connection) -> None:
     """The doors process: attach the image, start the adapters, report their ports, serve until the
-    parent says stop, goes away, or closes the image."""
+    parent says stop, goes away, or closes the image, or SIGTERM. SIGINT is ignored (the parent spawns
+    it so, and it stays so): a Ctrl+C reaches the whole process group, and the parent stops the doors."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if plan.nice:
         with contextlib.suppress(OSError):  # the clock's process wins the CPU from its doors (issue 26)
             os.nice(plan.nice)
@@ -256,12 +267,15 @@ def doors_main(plan: DoorsPlan, link: socket.socket, conn: Connection) -> None:
 
 async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -> None:
     parent = os.getppid()
+    loop = asyncio.get_running_loop()
+    terminated = asyncio.Event()
+    with contextlib.suppress(NotImplementedError, RuntimeError):
+        loop.add_signal_handler(signal.SIGTERM, terminated.set)
     try:
         image = AttachedImage(ImageClient.attach(plan.image_name, timeout=5.0))
     except Exception as exc:
-        conn.send(("error", f"the doors process cannot attach the image {plan.image_name!r}: {exc}"))
+        _tell(conn, ("error", f"the doors process cannot attach the image {plan.image_name!r}: {exc}"))
         return
-    loop = asyncio.get_running_loop()
     events = EventMirror()
     events.start(loop)
     link = RemoteLink(sock, events.take)
@@ -275,21 +289,23 @@ async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -
             try:
                 await adapter.start(door_host(host, name))
             except Exception as exc:  # a port in use, ...: the parent says it (no traceback of ours)
-                conn.send(("error", str(exc)))
+                _tell(conn, ("error", str(exc)))
                 return
             started.append(adapter)
-        conn.send(("ready", [(a.name, getattr(a, "port", None), a.endpoints(), _url(a)) for a in started]))
-        # what was built to serve lives as long as the process: out of the collector's full passes
-        gc.collect()
-        gc.freeze()
-        while True:  # until the parent says stop, goes away, or closes the image
-            if await loop.run_in_executor(None, conn.poll, 0.2):
-                break
-            if os.getppid() != parent or image.closed or link.closed:
-                break
+        # the parent may have gone while the doors started (stopped during its start-up): then stop too
+        if _tell(
+            conn, ("ready", [(a.name, getattr(a, "port", None), a.endpoints(), _url(a)) for a in started])
+        ):
+            # what was built to serve lives as long as the process: out of the collector's full passes
+            gc.collect()
+            gc.freeze()
+            while not terminated.is_set():  # until the parent says stop, goes away, or closes the image
+                if await loop.run_in_executor(None, conn.poll, 0.2):
+                    break
+                if os.getppid() != parent or image.closed or link.closed:
+                    break
     except Exception as exc:
-        with contextlib.suppress(Exception):
-            conn.send(("error", f"the doors process failed: {exc}"))
+        _tell(conn, ("error", f"the doors process failed: {exc}"))
         raise
     finally:
         for adapter in reversed(started):
@@ -306,6 +322,15 @@ def _url(adapter: Adapter) -> str | None:
     except RuntimeError:
         return None
     return url if isinstance(url, str) else None
+
+
+def _tell(conn: Connection, message: tuple[str, object]) -> bool:
+    """Send ``message`` to the parent; False when the parent has gone (a broken pipe is no error here)."""
+    try:
+        conn.send(message)
+    except (OSError, EOFError):
+        return False
+    return True
 
 
 class DoorsProcess:
@@ -364,7 +389,15 @@ class DoorsProcess:
         self._process = ctx.Process(
             target=doors_main, args=(plan, theirs, child_conn), name="hli-doors", daemon=True
         )
-        self._process.start()
+        # the child starts with SIGINT ignored (inherited through exec): a Ctrl+C while it imports would
+        # otherwise print its traceback; the parent stops it
+        in_main = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None
+        try:
+            self._process.start()
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGINT, previous)
         child_conn.close()
         theirs.close()
         began = time.monotonic()

@@ -11,6 +11,7 @@ What crosses the socket (frames: a 4-byte length, then a pickle; both ends are t
 
     doors -> engine   ("call", id, method, args, kwargs)     an OperatorPort method (sync at the doors)
                       ("timing", id)                           the clock's statistics, unsorted
+                      ("readiness", id)                        the server's readiness (GET /api/ready)
                       ("step", id, cycles, signals | None)     the stepped clock (async at the doors)
                       ("cancel", id)                           the client of that step went away
                       ("recorder", id, method, args)           the session recorder (issue 25)
@@ -274,6 +275,8 @@ class OperatorService(asyncio.Protocol):
                 self._answer(ident, result)
             elif kind == "timing":
                 self._answer(ident, self._rt.timing_raw())
+            elif kind == "readiness":
+                self._answer(ident, self._rt.readiness())
             elif kind == "step":
                 _, _, cycles, signals = message
                 self._steps[ident] = asyncio.get_running_loop().create_task(

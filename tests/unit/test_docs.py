@@ -32,11 +32,19 @@ def test_the_requirement_list_has_every_id_once_in_order() -> None:
         + [f"C43-{i:02d}" for i in range(1, 11)]
         + [f"C3-{i:02d}" for i in range(1, 11)]
         + [f"A3-{i:02d}" for i in range(1, 6)]
-        + [f"H-{i:02d}" for i in range(1, 10)]
+        + [f"H-{i:02d}" for i in range(1, 12)]
         + [f"N-{i:02d}" for i in range(1, 10)]
         + [f"B-{i:02d}" for i in range(1, 5)]
     )
     assert ids == expected
+
+
+def test_ads_doc_describes_every_option() -> None:
+    from hli_server.adapters.ads import AdsOptions
+
+    doc = (ROOT / "docs" / "ads.md").read_text(encoding="utf-8")
+    missing = [name for name in AdsOptions.model_fields if f"`{name}`" not in doc]
+    assert not missing, f"docs/ads.md does not describe the ADS options {missing}"
 
 
 def test_mqtt_doc_lists_every_topic_and_option() -> None:

@@ -246,12 +246,17 @@ class LiveFeed:
         return True
 
     def hello(self, *, events: bool = True) -> bytes:
+        return b"retry: 2000\n\n" + _sse(b"hello", json_bytes(self.hello_body(events=events)))
+
+    def hello_body(self, *, events: bool = True) -> dict[str, Any]:
+        """The ``hello`` message (also what the page carries when it is served); ``events``: whether the
+        stream carries the events (with a token set: only to a holder of it)."""
         op = self.host.operator
         policy = self.host.policy
         channels = [
             {"number": n, "axes": op.axis_names(n), "programs": op.programs(n)} for n in op.channel_numbers()
         ]
-        body = {
+        return {
             "machine": op.machine_name,
             "clock": self.host.clock,
             "t_a_us": op.t_a_us,
@@ -262,7 +267,6 @@ class LiveFeed:
             "events": events,
             "rate_hz": round(1.0 / self.period, 3),
         }
-        return b"retry: 2000\n\n" + _sse(b"hello", json_bytes(body))
 
     def release(self, stream: Stream) -> None:
         """The stream's page went away (or the stream ended)."""
