@@ -555,7 +555,7 @@ class RemoteOperator(OperatorPort):
 
     @property
     def time_s(self) -> float:
-        return self._image.cycle * self._t_a_us * 1e-6
+        return self._image.cycle * self._t_a_us / 1_000_000  # exact to the µs, as the engine's
 
     @property
     def t_a_us(self) -> int:
