@@ -344,6 +344,9 @@ def test_the_token_guards_the_event_log_and_the_streams_events() -> None:
         assert hello["events"] is False
         with c.stream("GET", "/api/live?access_token=s3cret") as r:
             assert _first_sse(r, "hello")["events"] is True
+        page = c.get("/").text  # the page is served with the machine's state: the events only with the token
+        assert '"events":[]' in page
+        assert '"kind":"program_state"' in c.get("/?access_token=s3cret").text
 
 
 def _first_sse(response: httpx.Response, name: str) -> dict[str, Any]:
