@@ -41,5 +41,6 @@ HEALTHCHECK --interval=10s --timeout=5s --start-period=20s --retries=3 \
 # them on the host's loopback only (docker run -p 127.0.0.1:8080:8080 ...), as docker-compose.yml does,
 # or give -e HLI_API_TOKEN=... so that only holders of the token change the machine (docs/docker.md).
 # Connections published by docker arrive from its bridge network: ADS admits the private networks.
+# --insecure warns that HTTP and Modbus take writes from anyone who reaches them (docs/docker.md).
 CMD ["hli-server", "run", "--bind", "0.0.0.0", "--insecure", "--http-port", "8080", "--modbus-port", "5020", \
      "--ads-port", "48898", "--adapter", "ads:allow=loopback;10.0.0.0/8;172.16.0.0/12;192.168.0.0/16"]

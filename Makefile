@@ -71,7 +71,8 @@ bench: $(TEST_STAMP)
 	$(BIN)/python -m benchmarks $(ARGS)
 
 # The fuzz tests of the suite (marker `fuzz`), long: SOAK_SCALE times their examples, a new seed each
-# run unless HLI_FUZZ_SEED is given (docs/reliability.md, "NC programs and configuration").
+# run unless HLI_FUZZ_SEED is given (docs/reliability.md, "NC programs and configuration"); among them the
+# slow-client and large-read attacks on a realtime server, SOAK_SCALE x 3 s (at most 5 minutes; issue 27).
 SOAK_SCALE ?= 100
 soak: $(TEST_STAMP)
 	@seed=$${HLI_FUZZ_SEED:-$$(date +%s)}; echo "soak: HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed"; \

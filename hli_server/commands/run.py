@@ -30,10 +30,18 @@ from typing import Any
 import click
 
 from hli_server.adapters.host import AccessPolicy
-from hli_server.adapters.registry import CLI_ALIASES, AdapterError, options_model, plan_adapters
+from hli_server.adapters.registry import (
+    CLI_ALIASES,
+    AdapterError,
+    DoorGuard,
+    door_guards,
+    options_model,
+    plan_adapters,
+)
 from hli_server.configuration import ConfigError, ConfigFileError, load_machine, machine_summary
 from hli_server.recording.tap import RecordingOptions
 from hli_server.runtime import Clock, Runtime, precise_event_loop
+from hli_server.runtime.pacing import PRIORITIES, probed_default_loop
 
 __all__ = ["run"]
 
@@ -43,10 +51,13 @@ _EXIT_FAILED = 1
 _EXIT_START = 2
 
 
-def _banner(runtime: Runtime, event_loop: str) -> None:
+def _banner(runtime: Runtime, event_loop: str, guards: list[DoorGuard]) -> None:
     config = runtime.config
     click.echo(f"hli-server: {machine_summary(config)}")
-    click.echo(f"  clock: {runtime.clock} (T_A = {config.cycle_time_us} µs, event loop: {event_loop})")
+    clock = f"  clock: {runtime.clock} (T_A = {config.cycle_time_us} µs, event loop: {event_loop}"
+    if runtime.clock == "realtime":
+        clock += f", priority: {runtime.priority_granted}"
+    click.echo(clock + ")")
     image = runtime.image
     layout = runtime.layout
     click.echo(
@@ -57,12 +68,11 @@ def _banner(runtime: Runtime, event_loop: str) -> None:
         for line in adapter.endpoints():
             click.echo(f"  {line}")
     policy = runtime.policy
-    guards = [
-        "read-only" if policy.read_only else "",
-        "API token required for changes" if policy.api_token else "",
-    ]
-    if any(guards):
-        click.echo(f"  access: {', '.join(g for g in guards if g)}")
+    if not _is_loopback(runtime.bind) or policy.read_only or policy.read_only_doors or policy.api_token:
+        where = "loopback only" if _is_loopback(runtime.bind) else f"bound to {runtime.bind}"
+        click.echo(f"  access ({where}):")
+        for guard in guards:  # by door name: a script that reads the banner's door lines is not misled
+            click.echo(f"    door {guard.door}: {guard.how}")
     status = runtime.session.status()
     if status.recording:
         click.echo(f"  recording to {status.file} from cycle {status.started_cycle}")
@@ -90,6 +100,15 @@ def _farewell(runtime: Runtime) -> None:
             f"max {lateness['max']:.0f} µs, {timing['slipped_cycles']} cycles dropped"
         )
     click.echo(text)
+    causes = timing.get("late_causes") or {}
+    late = sum(causes.values())
+    machine = causes.get("os", 0) + causes.get("preempted", 0)
+    if late >= 10 and machine > late / 2 and not runtime.priority_granted.startswith("realtime"):
+        click.echo(
+            f"hli-server: {machine} of the {late} cycles later than T_A waited for a CPU (other load on the "
+            "machine): the realtime priority (root or CAP_SYS_NICE, e.g. docker run --cap-add SYS_NICE) lets "
+            "the clock go first (docs/runtime.md)"
+        )
 
 
 class _EarlySignals:
@@ -166,10 +185,14 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     envvar="HLI_API_TOKEN",
     default=None,
     metavar="TOKEN",
-    help="state-changing HTTP requests need 'Authorization: Bearer TOKEN' (or env HLI_API_TOKEN); "
-    "required with a --bind beyond loopback",
+    help="the HTTP door's changes and its event log need 'Authorization: Bearer TOKEN' (or env "
+    "HLI_API_TOKEN); it guards HTTP only: Modbus and ADS by their allow lists or --read-only-door",
 )
-@click.option("--insecure", is_flag=True, help="allow a --bind beyond loopback without --api-token")
+@click.option(
+    "--insecure",
+    is_flag=True,
+    help="allow a --bind beyond loopback with doors that accept writes from anyone (a warning says which)",
+)
 @click.option(
     "--doors-process/--no-doors-process",
     default=True,
@@ -178,6 +201,13 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     "load does not compete with the cycle (docs/reliability.md)",
 )
 @click.option("--read-only", is_flag=True, help="the network doors accept no writes (HTTP, Modbus, ADS)")
+@click.option(
+    "--read-only-door",
+    "read_only_doors",
+    multiple=True,
+    type=click.Choice(["http", "modbus", "ads"]),
+    help="this door accepts no writes, the others do (repeatable)",
+)
 @click.option(
     "--allow-host",
     "allow_hosts",
@@ -218,6 +248,15 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     default="select",
     show_default=True,
     help="select: microsecond timers (realtime lateness ~0.1 ms); default: asyncio's (epoll, whole ms)",
+)
+@click.option(
+    "--priority",
+    type=click.Choice(list(PRIORITIES)),
+    default="auto",
+    show_default=True,
+    help="the realtime clock's thread: realtime (SCHED_FIFO) or high (nice -10) where permitted (root or "
+    "CAP_SYS_NICE), so that other load on the machine delays the cycle less; auto: realtime if permitted, "
+    "else normal (docs/runtime.md)",
 )
 @click.option("--cycles", type=click.IntRange(min=0), default=None, help="stop after N cycles (for scripts)")
 @click.option(
@@ -267,12 +306,14 @@ def run(
     insecure: bool,
     doors_process: bool,
     read_only: bool,
+    read_only_doors: tuple[str, ...],
     allow_hosts: tuple[str, ...],
     allow_origins: tuple[str, ...],
     image_name: str | None,
     adapter_specs: tuple[str, ...],
     max_catch_up: int,
     event_loop: str,
+    priority: str,
     cycles: int | None,
     record_file: Path | None,
     record_dir: Path | None,
@@ -296,19 +337,12 @@ def run(
         click.echo("the configuration is invalid: check it with `hli-server config validate FILE`", err=True)
         ctx.exit(_EXIT_START)
 
-    if not _is_loopback(bind) and not api_token and not insecure:
-        click.echo(
-            f"error: --bind {bind} lets other machines in: give an --api-token (or HLI_API_TOKEN) so that "
-            "only holders of the token can change the machine's state, or --insecure if this network is "
-            "yours alone",
-            err=True,
-        )
-        ctx.exit(_EXIT_START)
     policy = AccessPolicy(
         api_token=api_token or None,
         read_only=read_only,
         allowed_hosts=tuple(allow_hosts),
         allowed_origins=tuple(allow_origins),
+        read_only_doors=tuple(read_only_doors),
     )
     aliases = {
         alias.flag: alias_values.get("alias_" + alias.flag.removeprefix("--").replace("-", "_"))
@@ -316,6 +350,28 @@ def run(
     }
     try:
         adapters = plan_adapters([(a.name, dict(a.options)) for a in config.adapters], adapter_specs, aliases)
+    except (AdapterError, ValueError) as exc:
+        click.echo(f"error: {exc}", err=True)
+        ctx.exit(_EXIT_START)
+    guards = door_guards(adapters, policy)
+    open_doors = [g for g in guards if not g.guarded]
+    if not _is_loopback(bind) and open_doors:
+        if not insecure:
+            lines = [f"  {g.label} ({g.how}): {g.fix}" for g in open_doors]
+            click.echo(
+                f"error: --bind {bind} lets other machines in, and these doors would take their writes "
+                "unguarded (the API token guards the HTTP door only):\n"
+                + "\n".join(lines)
+                + "\nor give --insecure if this network is yours alone",
+                err=True,
+            )
+            ctx.exit(_EXIT_START)
+        click.echo(
+            f"warning: --insecure: on {bind}, anyone on the network can change the machine through "
+            + ", ".join(g.label for g in open_doors),
+            err=True,
+        )
+    try:
         runtime = Runtime(
             config,
             clock=clock,
@@ -326,6 +382,7 @@ def run(
             stop_after_cycles=cycles,
             policy=policy,
             doors_process=doors_process,
+            priority=priority,
             recording=RecordingOptions(
                 file=record_file,
                 directory=record_dir or (None if record_file is not None else Path("recordings")),
@@ -343,9 +400,9 @@ def run(
         return
 
     try:
-        loop_factory = precise_event_loop if event_loop == "select" else None
+        loop_factory = precise_event_loop if event_loop == "select" else probed_default_loop
         with asyncio.Runner(loop_factory=loop_factory) as runner:
-            runner.run(runtime.serve(ready=lambda rt: _banner(rt, event_loop)))
+            runner.run(runtime.serve(ready=lambda rt: _banner(rt, event_loop, guards)))
     except KeyboardInterrupt:  # Ctrl+C before the signal handlers were installed
         pass
     except Exception as exc:

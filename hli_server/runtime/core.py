@@ -28,10 +28,10 @@ import logging
 import signal
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from hli_server.adapters.faults import CommFaults
-from hli_server.adapters.host import AccessPolicy, LoggedEvent, Readiness, Trace
+from hli_server.adapters.host import AccessPolicy, LoggedEvent, Readiness, Trace, door_host
 from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
 from hli_server.engine.machine import Machine
 from hli_server.recording.tap import JournaledOperator, RecordingOptions, SessionRecorderPort, SessionTap
@@ -40,12 +40,16 @@ from hli_server.runtime.host import OperatorPanel, RuntimeHost
 from hli_server.runtime.image import ImageFactory, RuntimeImage, shared_memory_image
 from hli_server.runtime.pacing import (
     FREE_SLICE_S,
+    PRIORITIES,
     STEP_BATCH,
     Clock,
     ClockError,
     PacingStats,
+    ask_for_low_latency,
+    raise_priority,
     run_free,
     run_realtime,
+    summarize,
 )
 from hli_server.runtime.programs import read_program_file
 
@@ -57,12 +61,24 @@ if TYPE_CHECKING:
     from schemas.events import Event
     from schemas.layout import Layout
 
-__all__ = ["AdapterSpec", "Recording", "Runtime", "RuntimeStateError"]
+__all__ = ["AdapterSpec", "Recording", "RequestService", "Runtime", "RuntimeStateError", "summarize_timing"]
 
 logger = logging.getLogger(__name__)
 
 FAILURE_LOG_INTERVAL_S = 5.0
 """A cycle that keeps failing is logged with its traceback at most this often."""
+
+
+class RequestService(Protocol):
+    """Work the clock's loop does between cycles (``runtime/remote.py``'s ``OperatorService``)."""
+
+    def flush(self) -> None: ...
+
+    def serve(self, deadline: float) -> bool:
+        """Serve what waits until ``deadline``; whether there was anything."""
+        ...
+
+    def serve_all(self) -> None: ...
 
 
 class RuntimeStateError(RuntimeError):
@@ -102,6 +118,7 @@ class Runtime:
         read_program: Callable[[str], str] | None = read_program_file,
         policy: AccessPolicy | None = None,
         doors_process: bool = False,
+        priority: str = "normal",
         recording: RecordingOptions | None = None,
     ) -> None:
         try:
@@ -118,7 +135,13 @@ class Runtime:
         self.bind = bind
         self.policy = policy or AccessPolicy()
         self.doors_process = doors_process
-        """Run the image-only doors (Modbus, ADS) in a process of their own (``runtime/doors.py``)."""
+        """Run the network doors in a process of their own (``runtime/doors.py``)."""
+        if priority not in PRIORITIES:
+            raise ValueError(f"unknown priority {priority!r}; use one of {', '.join(PRIORITIES)}")
+        self.priority = priority
+        """What the realtime clock's thread asks of the operating system (``pacing.raise_priority``)."""
+        self.priority_granted = "normal"
+        """What it got, in words (the banner)."""
         self.http_port = http_port
         self.image_name = image_name
         self.max_catch_up = max_catch_up
@@ -137,6 +160,7 @@ class Runtime:
         self.event_log = EventLog()
         self.machine.event_listeners.append(self.event_log)
         self._cycle_listeners: list[Callable[[int], None]] = []
+        self._services: list[RequestService] = []
         self._recorders: list[SignalRecorder] = []
         self.panel = OperatorPanel(self.machine, self.timing)
         self.operator = JournaledOperator(self.panel, self.session)
@@ -188,9 +212,16 @@ class Runtime:
 
     @property
     def http_url(self) -> str:
-        """Base URL of the HTTP control API (after start)."""
-        url: str = getattr(self.adapter("http"), "url")  # noqa: B009 - the HTTP adapter's own attribute
-        return url
+        """Base URL of the HTTP control API (after start; in this process or the doors process)."""
+        for a in self.adapters:
+            if a.name == "http":
+                url: str = getattr(a, "url")  # noqa: B009 - the HTTP adapter's own attribute
+                return url
+            door_url = getattr(a, "door_url", None)
+            if door_url is not None and door_url("http") is not None:
+                found: str = door_url("http")
+                return found
+        raise KeyError(f"no HTTP adapter is running (running: {[a.name for a in self.adapters]})")
 
     def endpoints(self) -> list[str]:
         """Where everything listens, one line each (the ``run`` banner)."""
@@ -237,6 +268,34 @@ class Runtime:
                 self._cycle_listeners.remove(listener)
 
         return unsubscribe
+
+    # --- requests served between cycles (the doors process: runtime/remote.py) ------------------
+    def add_service(self, service: RequestService) -> Callable[[], None]:
+        """Serve ``service`` between cycles: ``flush()`` after every batch of cycles, ``serve(deadline)``
+        in the slack before the next realtime cycle is due (see :attr:`defers_requests`). Returns the
+        call that removes it."""
+        self._services.append(service)
+
+        def remove() -> None:
+            with contextlib.suppress(ValueError):
+                self._services.remove(service)
+
+        return remove
+
+    @property
+    def defers_requests(self) -> bool:
+        """True while the realtime clock runs: a service queues what arrives and the clock serves it
+        between cycles; otherwise a service answers at once."""
+        return self.clock is Clock.REALTIME and self._pacer is not None and not self._pacer.done()
+
+    def _serve_between_cycles(self, deadline: float) -> bool:
+        served = False
+        for service in self._services:
+            try:
+                served = service.serve(deadline) or served
+            except Exception:  # a service's bug must not stop the clock
+                logger.exception("service %r failed between cycles", service)
+        return served
 
     # --- per-cycle traces (H-07) -------------------------------------------------------------
     def record(self, signals: Sequence[str]) -> Recording:
@@ -288,6 +347,10 @@ class Runtime:
         self._step_lock = asyncio.Lock()
         if self.stop_after_cycles is not None:
             self._stop_cycle = self.machine.cycle + self.stop_after_cycles
+        if self.clock is Clock.REALTIME:
+            # before the doors process starts, so that it knows whether the clock goes first anyway; the
+            # processes and threads started from here on do not inherit it (SCHED_RESET_ON_FORK)
+            self.priority_granted = raise_priority(self.priority)
         try:
             self._image = self._image_factory(self.config, self.image_name)
             self._image.init_from(self.machine.hli, self.machine.cycle)
@@ -296,7 +359,7 @@ class Runtime:
                 self._check_interrupted()
                 adapter = self._make_adapter(spec)
                 self.adapters.append(adapter)
-                await adapter.start(self.host)
+                await adapter.start(door_host(self.host, adapter.name))
                 self._started_adapters.append(adapter)
                 logger.info("adapter %s started: %s", adapter.name, "; ".join(adapter.endpoints()))
             self._check_interrupted()
@@ -306,6 +369,10 @@ class Runtime:
         self.stats.started_at = time.monotonic()
         self.stats.cycles_at_start = self.machine.cycle
         if self.clock is Clock.REALTIME:
+            # after the doors process started: it must not inherit the short time slice (it serves many
+            # clients: a longer slice suits it)
+            self.priority_granted = ", ".join([self.priority_granted, *ask_for_low_latency()])
+            self.stats.gc.install()
             self._pacer = asyncio.create_task(
                 run_realtime(
                     self._one_cycle,
@@ -313,6 +380,7 @@ class Runtime:
                     self._cycles_left,
                     self.stats,
                     max_catch_up=self.max_catch_up,
+                    serve=self._serve_between_cycles,
                 ),
                 name="hli-runtime-realtime",
             )
@@ -332,15 +400,17 @@ class Runtime:
         adapter = self._make_adapter(spec)
         if any(a.name == adapter.name for a in self.adapters):
             raise AdapterError(f"adapter {adapter.name!r} runs already: {'; '.join(adapter.endpoints())}")
-        await adapter.start(self.host)
+        await adapter.start(door_host(self.host, adapter.name))
         self.adapters.append(adapter)
         self._started_adapters.append(adapter)
         logger.info("adapter %s started: %s", adapter.name, "; ".join(adapter.endpoints()))
         return adapter
 
     def _in_process_specs(self) -> list[AdapterSpec]:
-        """The adapters to start here; with ``doors_process`` the image-only ones go to one
-        :class:`~hli_server.runtime.doors.DoorsProcess`, started in their place."""
+        """The adapters to start here; with ``doors_process`` the network doors (every registered kind
+        that can: ``image_only`` or ``doors``) go to one :class:`~hli_server.runtime.doors.DoorsProcess`,
+        started in their place, and the clock's loop keeps only the cycle and the requests it serves
+        between cycles."""
         if not self.doors_process:
             return list(self._adapter_specs)
         from hli_server.adapters.registry import ADAPTERS
@@ -353,7 +423,7 @@ class Runtime:
                 (spec, {}) if isinstance(spec, str) else spec if isinstance(spec, tuple) else ("", {})
             )
             kind = ADAPTERS.get(name)
-            if kind is not None and kind.image_only:
+            if kind is not None and (kind.image_only or kind.doors):
                 moved.append((name, dict(options)))
             else:
                 here.append(spec)
@@ -362,15 +432,7 @@ class Runtime:
                 raise RuntimeStateError(
                     "the doors process needs the image in shared memory (the default image)"
                 )
-            here.append(
-                DoorsProcess(
-                    moved,
-                    bind=self.bind,
-                    policy=self.policy,
-                    t_a_us=self.config.cycle_time_us,
-                    machine_name=self.config.name,
-                )
-            )
+            here.append(DoorsProcess(moved, runtime=self))
         return here
 
     def _make_adapter(self, spec: AdapterSpec) -> Adapter:
@@ -395,6 +457,7 @@ class Runtime:
             # a failure of the clock was recorded by _pacer_done and is raised by wait_stopped/serve;
             # here it must not keep the adapters and the image from being closed
             await asyncio.wait([self._pacer])
+        self.stats.gc.uninstall()
         await self.session.close()
         errors: list[BaseException] = []
         for adapter in reversed(self._started_adapters):
@@ -484,6 +547,8 @@ class Runtime:
         self.request_stop()
 
     def _pacer_done(self, task: asyncio.Task[None]) -> None:
+        for service in self._services:  # what waited for the clock's slack is served now
+            asyncio.get_running_loop().call_soon(service.serve_all)
         if task.cancelled():
             return
         exc = task.exception()
@@ -538,6 +603,8 @@ class Runtime:
 
     def _after_cycles(self) -> None:
         cycle = self.machine.cycle
+        for service in self._services:
+            service.flush()
         if self._cycle_waiters:
             keep: list[tuple[int, asyncio.Future[None]]] = []
             for target, fut in self._cycle_waiters:
@@ -618,13 +685,24 @@ class Runtime:
     # --- reporting ------------------------------------------------------------------------
     def timing(self) -> dict[str, Any]:
         """Pacing statistics (``GET /api/timing``)."""
-        out = self.stats.summary(self.clock, self.machine.cycle)
-        out["failed_cycles"] = self.failed_cycles
-        return out
+        return summarize_timing(self.timing_raw())
+
+    def timing_raw(self) -> dict[str, Any]:
+        """:meth:`timing` before its percentiles are sorted out (cheap: the doors process sorts)."""
+        raw = self.stats.raw(self.clock, self.machine.cycle)
+        raw["failed_cycles"] = self.failed_cycles
+        return raw
 
     def __repr__(self) -> str:
         state = "stopped" if self.stopped else "running" if self.started else "new"
         return f"Runtime({self.config.name!r}, {self.clock} clock, cycle {self.machine.cycle}, {state})"
+
+
+def summarize_timing(raw: dict[str, Any]) -> dict[str, Any]:
+    """``GET /api/timing`` from :meth:`Runtime.timing_raw`."""
+    out = summarize(raw)
+    out["failed_cycles"] = raw.get("failed_cycles", 0)
+    return out
 
 
 def _spec_name(spec: AdapterSpec) -> str:

@@ -64,7 +64,8 @@ async def test_the_page_is_served_at_the_root_with_its_script_and_style(runtime:
         assert "frame-ancestors 'none'" in csp
         script = await c.get("/dashboard.js")
         assert script.headers["content-type"].startswith("text/javascript")
-        assert 'new EventSource("/api/live")' in script.text
+        assert "new EventSource(liveUrl())" in script.text
+        assert '"/api/live?access_token="' in script.text  # the token reaches the stream (RFC 6750)
         style = await c.get("/dashboard.css")
         assert style.headers["content-type"].startswith("text/css")
 

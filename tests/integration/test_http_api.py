@@ -15,6 +15,7 @@ import pytest
 
 from hli_server.configuration import load_machine
 from hli_server.runtime import Runtime
+from hli_server.runtime.pacing import CAUSES
 from hli_server.testing import Harness
 from schemas.config import MachineConfig, ProgramEntry
 from schemas.wire import HoldSource, ProgramState
@@ -218,7 +219,9 @@ async def test_step_outside_the_stepped_clock_is_409() -> None:
         assert "stepped clock" in r.json()["detail"]
         timing = (await c.get("/api/timing")).json()
         assert timing["clock"] == "realtime"
-        assert set(timing["lateness_us"] or {}) <= {"p50", "p99", "max"}
+        assert set(timing["lateness_us"] or {}) <= {"p50", "p99", "p999", "max"}
+        assert len(timing["worst"]) <= 5
+        assert all(w["cause"] in CAUSES for w in timing["worst"])
 
 
 # --------------------------------------------------------------------------------------------

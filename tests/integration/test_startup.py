@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import random
@@ -121,22 +122,37 @@ def test_the_health_check_waits_for_the_doors_process() -> None:
 
 
 def _wait_http_url(pid: int, timeout: float) -> str:
-    """The URL of the HTTP API of process ``pid`` as soon as it listens (from /proc/net/tcp and the
-    process' socket inodes; the banner comes only after the whole start-up)."""
+    """The URL of the HTTP API of process ``pid`` as soon as it listens (from /proc/net/tcp and the socket
+    inodes of the process and its children: the HTTP API is served by the doors process; the banner
+    comes only after the whole start-up). Of the listening ports, the one that answers HTTP."""
     deadline = time.monotonic() + timeout
+    tried: set[int] = set()
     while time.monotonic() < deadline:
         inodes = set()
-        try:
-            for fd in os.listdir(f"/proc/{pid}/fd"):
-                target = os.readlink(f"/proc/{pid}/fd/{fd}")
-                if target.startswith("socket:["):
-                    inodes.add(target[8:-1])
-        except OSError:
-            pass
+        pids = [pid]
+        with contextlib.suppress(OSError):
+            pids += [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+        for owner in pids:
+            try:
+                for fd in os.listdir(f"/proc/{owner}/fd"):
+                    target = os.readlink(f"/proc/{owner}/fd/{fd}")
+                    if target.startswith("socket:["):
+                        inodes.add(target[8:-1])
+            except OSError:
+                pass
         for line in Path("/proc/net/tcp").read_text().splitlines()[1:]:
             fields = line.split()
             if fields[3] == "0A" and fields[9] in inodes:  # LISTEN
-                return f"http://127.0.0.1:{int(fields[1].split(':')[1], 16)}"
+                port = int(fields[1].split(":")[1], 16)
+                if port in tried:
+                    continue
+                url = f"http://127.0.0.1:{port}"
+                try:
+                    _ready(url)
+                except (OSError, ValueError):  # not the HTTP API (Modbus, ADS)
+                    tried.add(port)
+                    continue
+                return url
         time.sleep(0.005)  # the moment the socket listens: bounded by the deadline above
     pytest.fail(f"process {pid} did not listen within {timeout} s")
 

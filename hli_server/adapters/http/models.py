@@ -23,8 +23,10 @@ __all__ = [
     "StepBody",
 ]
 
-MAX_STEP = 10_000_000
-"""Most cycles one ``POST /api/step`` may ask for (10 000 s of simulated time at 1 ms)."""
+MAX_STEP = 1_000_000
+"""Most cycles one ``POST /api/step`` may ask for (1 000 s of simulated time at 1 ms; about ten seconds of
+the compiled engine's CPU, a minute or two of the pure-Python one). Longer runs go in parts: one step runs
+at a time, and closing its connection cancels it (issue 27, finding 6)."""
 MAX_TRACE_SIGNALS = 64
 """Most signals one ``POST /api/step`` may trace."""
 MAX_TRACE_VALUES = 2_000_000

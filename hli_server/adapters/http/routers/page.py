@@ -15,6 +15,7 @@ stream) and shows what happened before it was opened; the stream then carries it
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import cache
 from importlib import resources
 from typing import Any
@@ -22,6 +23,7 @@ from typing import Any
 from fastapi import APIRouter, Request
 from fastapi.responses import Response
 
+from hli_server.adapters.host import LoggedEvent
 from hli_server.adapters.http.deps import json_bytes
 from hli_server.adapters.http.live import LiveFeed
 
@@ -62,7 +64,9 @@ EVENTS_SHOWN = 200
 _INITIAL_MARK = b"<!-- initial state -->"
 
 
-def _initial(feed: LiveFeed) -> dict[str, Any]:
+def _initial(feed: LiveFeed, events_allowed: bool = True) -> dict[str, Any]:
+    """``events_allowed``: whether the request may read the event log (with a token set: only a holder of
+    it, issue 27 finding 8; the page then asks for the token and its stream brings the events)."""
     host = feed.host
     scenes = []
     for number in host.operator.channel_numbers():
@@ -70,10 +74,12 @@ def _initial(feed: LiveFeed) -> dict[str, Any]:
             scenes.append(host.operator.scene(number))
         except Exception:  # the stream says so (once); the page goes without this picture
             continue
-    _, latest = host.events.since(0, 1)
-    events, _ = host.events.since(max(0, latest - EVENTS_SHOWN), EVENTS_SHOWN)
+    events: Sequence[LoggedEvent] = []
+    if events_allowed:
+        _, latest = host.events.since(0, 1)
+        events, _ = host.events.since(max(0, latest - EVENTS_SHOWN), EVENTS_SHOWN)
     return {
-        "hello": feed.hello_body(),
+        "hello": feed.hello_body(events=events_allowed),
         "state": feed.state(),
         "scenes": scenes,
         "events": [event.to_json() for event in events],
@@ -84,7 +90,8 @@ def _initial(feed: LiveFeed) -> dict[str, Any]:
 async def index(request: Request) -> Response:
     feed: LiveFeed = request.app.state.live
     # JSON inside HTML: "<" escaped, so that no text of an event can end the data block
-    data = json_bytes(_initial(feed)).replace(b"<", b"\\u003c")
+    events_allowed = bool(getattr(request.state, "hli_token", True))
+    data = json_bytes(_initial(feed, events_allowed)).replace(b"<", b"\\u003c")
     block = b'<script type="application/json" id="initial">' + data + b"</script>"
     page = _read("index.html").replace(_INITIAL_MARK, block, 1)
     return Response(page, media_type=PAGE_FILES["index.html"], headers=_HEADERS)

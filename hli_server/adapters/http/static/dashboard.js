@@ -9,7 +9,9 @@
 // from the 20 Hz states.
 //
 // With --api-token the server refuses state changes without `Authorization: Bearer <token>`: the page
-// asks for the token once (kept in this tab's sessionStorage) and sends it with every POST.
+// asks for the token once (kept in this tab's sessionStorage) and sends it with every POST. The events
+// (the event log, live) come on the stream only with the token: an EventSource sends no headers, so the
+// page puts it on the stream's URL (`?access_token=`, RFC 6750) and reconnects once it has it.
 "use strict";
 
 const SVG = "http://www.w3.org/2000/svg";
@@ -31,6 +33,7 @@ const state = {
   channels: new Map(), // number -> {el, scene, tail, ...}
   axisRows: new Map(),
   token: sessionStorage.getItem("hli-token") || "",
+  source: null,
   pending: null,
   lastAlarms: "",
   lastPairs: "",
@@ -145,6 +148,7 @@ function setUpToken() {
     state.token = document.getElementById("token").value.trim();
     sessionStorage.setItem("hli-token", state.token);
     form.hidden = true;
+    if (state.hello && state.hello.events === false) connect();  // again, with the events
     const retry = state.pending;
     state.pending = null;
     if (retry) retry();
@@ -476,7 +480,7 @@ function onHello(hello) {
     }
   }
   if (hello.read_only) say("the server runs --read-only: actions are refused", "error");
-  else if (hello.token && !state.token) askToken("this server needs its API token for actions");
+  else if (hello.token && !state.token) askToken("this server needs its API token for actions and its events");
 }
 
 function onScene(scene) {
@@ -662,9 +666,15 @@ async function loadHistory() {
   } catch (_) { /* the stream will tell */ }
 }
 
+function liveUrl() {
+  return state.token ? "/api/live?access_token=" + encodeURIComponent(state.token) : "/api/live";
+}
+
 function connect() {
   const conn = document.getElementById("conn");
-  const source = new EventSource("/api/live");
+  if (state.source) state.source.close();
+  const source = new EventSource(liveUrl());
+  state.source = source;
   const parse = (handler) => (msg) => {
     try { handler(JSON.parse(msg.data)); } catch (err) { console.error(err); }
   };
