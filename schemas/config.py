@@ -434,6 +434,13 @@ class ExternalVariableConfig(_Strict):
     synchronous: bool = Field(
         default=False, description="read by the interpolator (reading it empties the channel first)"
     )
+    access_rights: Literal["READ_WRITE", "READ_ONLY", "WRITE_ONLY"] = Field(
+        default="READ_WRITE",
+        description="P-EXTV-00006: what an NC program may do with it (the PLC may always read and write)",
+    )
+    description: str = Field(
+        default="", max_length=200, description="what it means (shown by `hli-server map` and the dashboard)"
+    )
 
 
 class MachineConfig(_Strict):
@@ -522,6 +529,12 @@ class MachineConfig(_Strict):
                     )
                 )
             seen_vars.add(key)
+        if not issues:
+            from schemas.layout import check_external_fits
+
+            too_much = check_external_fits(self)
+            if too_much is not None:
+                issues.append(ParameterIssue(too_much, field="external_variables"))
         by_number = {a.number: a for a in self.axes}
         for ax in self.axes:
             if not ax.coll_check_ax_nr:

@@ -98,7 +98,9 @@ class Machine:
         self.programs: ProgramLibrary = MemoryLibrary() if programs is None else programs
         self.external = ExternalVariables(
             [
-                ExternalVarSpec(v.name, ExternalType(v.type), tuple(v.dims), v.channel, v.synchronous)
+                ExternalVarSpec(
+                    v.name, ExternalType(v.type), tuple(v.dims), v.channel, v.synchronous, v.access_rights
+                )
                 for v in config.external_variables
             ]
         )
@@ -110,6 +112,7 @@ class Machine:
         self.hli = MachineHli(
             channels=[ChannelHli() for _ in config.channels],
             axes=[AxisHli() for _ in config.axes],
+            external=self.external,
         )
         self.channels: list[Channel] = []
         for i, ch_cfg in enumerate(config.channels):

@@ -50,7 +50,9 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Final
 
+from hli_server.engine.external import ExternalVariables
 from hli_server.engine.hli import MachineHli
+from hli_server.image.external import ExternalSync
 from hli_server.image.projection import Projection, compile_projection, diagnose
 from schemas import image_format as fmt
 from schemas.layout import Direction, Layout, Signal, SignalType, SignalValueError
@@ -175,7 +177,8 @@ class ProcessImage:
         self.layout = layout
         self.plan = plan
         self._projection: Projection = compile_projection(layout)
-        self._p2c_struct = layout.struct(_P2C)
+        self._p2c_struct = _field_struct(list(layout.hli_half(_P2C)))
+        self._external = ExternalSync(layout, plan.p2c_offset) if layout.external_signals else None
         self._c2p_struct = struct.Struct("<Q" + layout.struct_format(_C2P).removeprefix("<"))
         self._c2p_private = bytearray(self._c2p_struct.size)
         self._seq = [0, 0]
@@ -368,14 +371,28 @@ class ProcessImage:
         """Copy the PLC->CNC half (one memcpy) and assign it to the engine's ``_w`` fields."""
         off = self.plan.p2c_offset
         data = bytes(self._buf[off : off + self.plan.p2c_size])
-        values = self._p2c_struct.unpack(data)
+        values = self._p2c_struct.unpack_from(data)
         try:
             self._projection.unpack[_P2C](machine, values)
         except (IndexError, AttributeError) as exc:
             raise diagnose(self.layout, machine, _P2C, exc) from exc
+        if self._external is not None:
+            self._external.latch(data, self._buf, self._store_of(machine))
+
+    def _store_of(self, machine: MachineHli) -> ExternalVariables:
+        store = machine.external
+        if store is None:
+            raise ValueError(
+                f"the image layout has {len(self.layout.external_signals)} V.E. elements and the engine no "
+                "V.E. store: build both from the same machine file"
+            )
+        return store
 
     def publish_from(self, machine: MachineHli, cycle: int) -> None:
-        """Pack the engine's CNC->PLC fields and publish them as ``cycle`` (seqlock, one memcpy)."""
+        """Pack the engine's CNC->PLC fields and publish them as ``cycle`` (seqlock, one memcpy); the
+        V.E. elements the NC changed go into their fields (``hli_server/image/external.py``)."""
+        if self._external is not None:
+            self._external.publish(self._buf)
         private = self._c2p_private
         try:
             self._projection.pack[_C2P](machine, self._c2p_struct.pack_into, private, 0, cycle)
@@ -421,6 +438,8 @@ class ProcessImage:
             raise diagnose(self.layout, machine, _P2C, exc) from exc
         off = self.plan.p2c_offset
         self._buf[off : off + len(p2c)] = p2c
+        if self._external is not None:
+            self._external.init(self._buf, self._store_of(machine))
         self.publish_from(machine, cycle)
 
     @property
