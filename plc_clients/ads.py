@@ -65,7 +65,7 @@ _GROUP = {_C2P: 0xF020, _P2C: 0xF030}
 _SUM_WRITE: Final = 0xF081
 _UPLOAD: Final = 0xF00B
 _UPLOAD_INFO: Final = 0xF00C
-_FORMAT = {t: "<" + t.struct_char for t in SignalType}
+_FORMAT = {SignalType.BOOL: "<?", SignalType.DINT: "<i", SignalType.UDINT: "<I", SignalType.LREAL: "<d"}
 _ROUTER_IN_USE: Final = 1286
 
 _routes_lock = threading.Lock()

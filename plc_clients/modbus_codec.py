@@ -140,14 +140,14 @@ class ModbusCodec:
         words = list(registers)
         if len(words) != signal.modbus_count:
             raise ValueError(f"{signal.st_path}: {len(words)} registers, expected {signal.modbus_count}")
-        return modbus_words.value(signal.type.modbus_char, words, self.word_order)
+        return modbus_words.value(signal.type.struct_char, words, self.word_order)
 
     # --- writes ------------------------------------------------------------------------------
     def registers(self, signal: Signal, value: int | float) -> list[int]:
         """The registers of a (coerced) DINT/UDINT/LREAL value in this codec's word order."""
         if signal.type is SignalType.BOOL:
             raise ValueError(f"{signal.st_path} is a BOOL: it is a coil, not registers")
-        return modbus_words.registers(signal.type.modbus_char, value, self.word_order)
+        return modbus_words.registers(signal.type.struct_char, value, self.word_order)
 
 
 def _address(s: Signal) -> int:

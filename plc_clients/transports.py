@@ -109,8 +109,10 @@ CYCLE_R_MODULUS: Final = 2**31
 
 _P2C, _C2P = Direction.PLC_TO_CNC, Direction.CNC_TO_PLC
 _ZERO: Final[dict[SignalType, Value]] = {
-    t: False if t is SignalType.BOOL else 0.0 if t in (SignalType.LREAL, SignalType.REAL) else 0
-    for t in SignalType
+    SignalType.BOOL: False,
+    SignalType.DINT: 0,
+    SignalType.UDINT: 0,
+    SignalType.LREAL: 0.0,
 }
 
 

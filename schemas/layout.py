@@ -42,6 +42,7 @@ import hashlib
 import itertools
 import json
 import math
+import sys
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
@@ -76,7 +77,7 @@ __all__ = [
     "MODBUS_EXTERNAL_BASE",
     "MODBUS_EXTERNAL_END",
     "MODBUS_SNAPSHOT_REGISTER",
-    "REAL_MAX",
+    "REAL32_MAX",
     "AxisInfo",
     "ChannelInfo",
     "Direction",
@@ -123,9 +124,6 @@ MODBUS_EXTERNAL_BASE: Final = _CHANNEL_BLOCKS_END
 MODBUS_EXTERNAL_END: Final = MODBUS_SNAPSHOT_REGISTER
 """One past the last address of the V.E. variables: 1900 (the snapshot register follows)."""
 
-EXTERNAL_TYPES: Final[dict[str, SignalType]] = {}
-"""The kernel's V.E. data types (P-EXTV-00003) -> the image's type, filled in below ``SignalType``."""
-
 ADS_PORT_HLI: Final = 851
 """ADS port of the HLI image (the port where a TwinCAT PLC runtime serves its symbols; project's choice)."""
 ADS_GROUP_CNC_TO_PLC: Final = 0xF020
@@ -160,20 +158,12 @@ class SignalValueError(ValueError):
 
 
 class SignalType(StrEnum):
-    """IEC 61131-3 elementary types used in the image. BOOL is one byte (0 or 1).
-
-    The HLI signals use BOOL, DINT, UDINT and LREAL; the V.E. variables (N-05) also SINT, USINT, INT,
-    UINT and REAL, the TwinCAT types of the kernel's SGN08, UNS08, SGN16, UNS16 and REAL32."""
+    """IEC 61131-3 elementary types used in the image. BOOL is one byte (0 or 1)."""
 
     BOOL = "BOOL"
     DINT = "DINT"
     UDINT = "UDINT"
     LREAL = "LREAL"
-    SINT = "SINT"
-    USINT = "USINT"
-    INT = "INT"
-    UINT = "UINT"
-    REAL = "REAL"
 
     @property
     def size(self) -> int:
@@ -185,66 +175,35 @@ class SignalType(StrEnum):
         return _TYPE_CHAR[self]
 
     @property
-    def modbus_char(self) -> str:
-        """The ``struct`` character of the value in its Modbus registers: a SINT/USINT takes a whole
-        16-bit register (sign-extended), every other type its own bytes."""
-        return _MODBUS_CHAR.get(self, _TYPE_CHAR[self])
-
-    @property
     def modbus_count(self) -> int:
         """Bits (BOOL) or 16-bit registers the type takes in its Modbus table."""
-        return 1 if self is SignalType.BOOL else max(1, self.size // 2)
-
-    @property
-    def integer_range(self) -> tuple[int, int] | None:
-        """(lowest, highest) of an integer type, None for BOOL and the reals."""
-        return _INT_RANGE.get(self)
+        return 1 if self is SignalType.BOOL else self.size // 2
 
 
-_TYPE_SIZE: Final = {
-    SignalType.BOOL: 1,
-    SignalType.DINT: 4,
-    SignalType.UDINT: 4,
-    SignalType.LREAL: 8,
-    SignalType.SINT: 1,
-    SignalType.USINT: 1,
-    SignalType.INT: 2,
-    SignalType.UINT: 2,
-    SignalType.REAL: 4,
+_TYPE_SIZE: Final = {SignalType.BOOL: 1, SignalType.DINT: 4, SignalType.UDINT: 4, SignalType.LREAL: 8}
+_TYPE_CHAR: Final = {SignalType.BOOL: "?", SignalType.DINT: "i", SignalType.UDINT: "I", SignalType.LREAL: "d"}
+_INT_RANGE: Final = {SignalType.DINT: (DINT_MIN, DINT_MAX), SignalType.UDINT: (0, UDINT_MAX)}
+
+REAL32_MAX: Final = 3.4028234663852886e38
+"""The largest finite REAL32 (IEEE 754 single)."""
+
+EXTERNAL_TYPES: Final[dict[str, tuple[SignalType, tuple[float, float] | None]]] = {
+    "BOOLEAN": (SignalType.BOOL, None),
+    "SGN08": (SignalType.DINT, (-(2**7), 2**7 - 1)),
+    "UNS08": (SignalType.UDINT, (0, 2**8 - 1)),
+    "SGN16": (SignalType.DINT, (-(2**15), 2**15 - 1)),
+    "UNS16": (SignalType.UDINT, (0, 2**16 - 1)),
+    "SGN32": (SignalType.DINT, None),
+    "UNS32": (SignalType.UDINT, None),
+    "REAL32": (SignalType.LREAL, (-REAL32_MAX, REAL32_MAX)),
+    "REAL64": (SignalType.LREAL, (-sys.float_info.max, sys.float_info.max)),
 }
-_TYPE_CHAR: Final = {
-    SignalType.BOOL: "?",
-    SignalType.DINT: "i",
-    SignalType.UDINT: "I",
-    SignalType.LREAL: "d",
-    SignalType.SINT: "b",
-    SignalType.USINT: "B",
-    SignalType.INT: "h",
-    SignalType.UINT: "H",
-    SignalType.REAL: "f",
-}
-_MODBUS_CHAR: Final = {SignalType.SINT: "h", SignalType.USINT: "H"}
-_INT_RANGE: Final = {
-    SignalType.DINT: (DINT_MIN, DINT_MAX),
-    SignalType.UDINT: (0, UDINT_MAX),
-    SignalType.SINT: (-(2**7), 2**7 - 1),
-    SignalType.USINT: (0, 2**8 - 1),
-    SignalType.INT: (-(2**15), 2**15 - 1),
-    SignalType.UINT: (0, 2**16 - 1),
-}
-EXTERNAL_TYPES.update(
-    BOOLEAN=SignalType.BOOL,
-    SGN08=SignalType.SINT,
-    UNS08=SignalType.USINT,
-    SGN16=SignalType.INT,
-    UNS16=SignalType.UINT,
-    SGN32=SignalType.DINT,
-    UNS32=SignalType.UDINT,
-    REAL32=SignalType.REAL,
-    REAL64=SignalType.LREAL,
-)
-REAL_MAX: Final = 3.4028234663852886e38
-"""The largest finite REAL (IEEE 754 single)."""
+"""The kernel's V.E. data types (P-EXTV-00003) -> the image's type and the values it takes (N-05).
+
+The image carries the four types of the HLI signals (BOOL, DINT, UDINT, LREAL), which every door
+serves: an SGN08/SGN16 lies in a DINT, an UNS08/UNS16 in a UDINT and a REAL32 in an LREAL, and every
+door refuses a value outside the kernel type's range (:attr:`Signal.limits`). The reals must be
+finite, as the kernel's store keeps them."""
 
 
 class Direction(StrEnum):
@@ -583,6 +542,9 @@ class Signal:
     ads_port: int
     ads_group: int
     ads_offset: int
+    limits: tuple[float, float] | None = None
+    """The values a V.E. variable takes, where its kernel type is narrower than the field (an SGN16 in
+    a DINT) or a real must be finite; None: the field type's own range."""
 
     @property
     def size(self) -> int:
@@ -643,20 +605,22 @@ class Signal:
             if isinstance(value, int) and value in (0, 1):
                 return bool(value)
             raise SignalValueError(f"{self.st_path}: BOOL takes True/False or 0/1, got {value!r}")
-        if t is SignalType.LREAL or t is SignalType.REAL:
+        if t is SignalType.LREAL:
             if not isinstance(value, (int, float)) or isinstance(value, bool):
-                raise SignalValueError(f"{self.st_path}: {t} takes a number, got {value!r}")
+                raise SignalValueError(f"{self.st_path}: LREAL takes a number, got {value!r}")
             real = float(value)
-            if t is SignalType.REAL and math.isfinite(real) and abs(real) > REAL_MAX:
+            if self.limits is not None and not self.limits[0] <= real <= self.limits[1]:
                 raise SignalValueError(
-                    f"{self.st_path}: {value} is beyond the range of REAL (±{REAL_MAX:.7g})"
+                    f"{self.st_path}: {value} is out of range for the V.E. variable "
+                    f"[{self.limits[0]:.7g}, {self.limits[1]:.7g}] (finite numbers only)"
                 )
             return real
         if not isinstance(value, int) or isinstance(value, bool):
             raise SignalValueError(f"{self.st_path}: {t} takes an integer, got {value!r}")
-        low, high = _INT_RANGE[t]
+        low, high = self.limits or _INT_RANGE[t]
         if not low <= value <= high:
-            raise SignalValueError(f"{self.st_path}: {value} is out of range for {t} [{low}, {high}]")
+            what = "the V.E. variable" if self.limits else str(t)
+            raise SignalValueError(f"{self.st_path}: {value} is out of range for {what} [{low}, {high}]")
         return value
 
     def check_plc_write(self) -> None:
@@ -704,6 +668,7 @@ _SIGNAL_KEYS: Final = (
     "ads_port",
     "ads_group",
     "ads_offset",
+    "limits",
 )
 
 _HASHED_KEYS: Final = (
@@ -717,6 +682,7 @@ _HASHED_KEYS: Final = (
     "ads_port",
     "ads_group",
     "ads_offset",
+    "limits",
 )
 """What the layout hash covers: everything a peer relies on to read and write the right bytes.
 Names, descriptions, requirement IDs and origins are documentation and do not change it."""
@@ -1001,6 +967,7 @@ class Layout:
                     ads_port=int(d["ads_port"]),
                     ads_group=int(d["ads_group"]),
                     ads_offset=int(d["ads_offset"]),
+                    limits=_limits(d.get("limits")),
                 )
                 for d in data["signals"]
             ]
@@ -1069,8 +1036,10 @@ class Layout:
 
 
 _ZERO: Final[dict[SignalType, bool | int | float]] = {
-    t: False if t is SignalType.BOOL else 0.0 if t in (SignalType.LREAL, SignalType.REAL) else 0
-    for t in SignalType
+    SignalType.BOOL: False,
+    SignalType.DINT: 0,
+    SignalType.UDINT: 0,
+    SignalType.LREAL: 0.0,
 }
 
 _CONSTRUCT_TYPE: Final[dict[SignalType, Any]] = {
@@ -1078,12 +1047,16 @@ _CONSTRUCT_TYPE: Final[dict[SignalType, Any]] = {
     SignalType.DINT: cs.Int32sl,
     SignalType.UDINT: cs.Int32ul,
     SignalType.LREAL: cs.Float64l,
-    SignalType.SINT: cs.Int8sl,
-    SignalType.USINT: cs.Int8ul,
-    SignalType.INT: cs.Int16sl,
-    SignalType.UINT: cs.Int16ul,
-    SignalType.REAL: cs.Float32l,
 }
+
+
+def _limits(raw: Any) -> tuple[float, float] | None:
+    if raw is None:
+        return None
+    low, high = raw
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in (low, high)):
+        raise TypeError(f"limits must be two numbers, got {raw!r}")
+    return low, high  # as written: the hash sees -128 and -128.0 apart
 
 
 def _plain(value: object) -> object:
@@ -1235,7 +1208,7 @@ def external_modbus_use(config: MachineConfig) -> dict[ModbusTable, int]:
     last address), without expanding their elements: the check of the machine file uses it."""
     cursor = {ModbusTable.COIL: MODBUS_EXTERNAL_BASE, ModbusTable.HOLDING_REGISTER: MODBUS_EXTERNAL_BASE}
     for _, var in _external_order(config):
-        sig_type = EXTERNAL_TYPES[var.type]
+        sig_type, _ = EXTERNAL_TYPES[var.type]
         table = _modbus_table(sig_type, Direction.PLC_TO_CNC)
         count = sig_type.modbus_count
         cursor[table] = _round_up(cursor[table], count) + count * math.prod(var.dims or [1])
@@ -1278,7 +1251,7 @@ def _external_signals(config: MachineConfig, start: int) -> tuple[list[Signal], 
     byte_cursor = start
     modbus = {ModbusTable.COIL: MODBUS_EXTERNAL_BASE, ModbusTable.HOLDING_REGISTER: MODBUS_EXTERNAL_BASE}
     for ch_index, var in _external_order(config):
-        sig_type = EXTERNAL_TYPES[var.type]
+        sig_type, limits = EXTERNAL_TYPES[var.type]
         table = _modbus_table(sig_type, Direction.PLC_TO_CNC)
         count = sig_type.modbus_count
         if ch_index is None:
@@ -1320,6 +1293,7 @@ def _external_signals(config: MachineConfig, start: int) -> tuple[list[Signal], 
                     ads_port=ADS_PORT_HLI,
                     ads_group=ADS_GROUP_PLC_TO_CNC,
                     ads_offset=offset,
+                    limits=limits,
                 )
             )
     return signals, byte_cursor

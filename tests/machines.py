@@ -49,13 +49,13 @@ def distinct_values(layout: Layout, direction: Direction, salt: int) -> dict[str
     for i, s in enumerate(layout.half(direction)):
         if s.type is SignalType.BOOL:
             values[s.st_path] = (i + salt) % 3 != 0
+        elif s.limits is not None and s.type is not SignalType.LREAL:  # a V.E. SGN08 .. UNS16
+            low, high = int(s.limits[0]), int(s.limits[1])
+            values[s.st_path] = low + (37 * i + salt) % (high - low + 1)
         elif s.type is SignalType.DINT:
             values[s.st_path] = (-1) ** i * (100_000 * (i + 1) + salt)
         elif s.type is SignalType.UDINT:
             values[s.st_path] = 3_000_000_000 + 1000 * i + salt
-        elif s.type.integer_range is not None:  # the V.E. variables' SINT .. UINT
-            low, high = s.type.integer_range
-            values[s.st_path] = low + (37 * i + salt) % (high - low + 1)
         else:
             values[s.st_path] = i + 0.125 + salt
     return values

@@ -123,11 +123,6 @@ _DTYPE = {
     SignalType.DINT: "int32",
     SignalType.UDINT: "uint32",
     SignalType.LREAL: "float64",
-    SignalType.SINT: "int8",
-    SignalType.USINT: "uint8",
-    SignalType.INT: "int16",
-    SignalType.UINT: "uint16",
-    SignalType.REAL: "float32",
 }
 
 

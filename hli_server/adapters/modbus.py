@@ -7,7 +7,7 @@ says (:mod:`schemas.layout`: ``Signal.modbus_table`` / ``modbus_address``):
 table               function codes        signals                                  half
 =================== ===================== ======================================== ===========
 coils               1 read, 5, 15 write   BOOL PLC->CNC (``enable_w``, ``start_w``) PLC->CNC
-                                          and BOOL V.E. variables (1200..1899)
+                                          and BOOLEAN V.E. variables (1200..1899)
 discrete inputs     2 read                BOOL CNC->PLC (``state_r``, flags)        CNC->PLC
 holding registers   3, 23 read; 6, 16, 23 DINT/UDINT PLC->CNC (``command_w``)       PLC->CNC
                                           and numeric V.E. variables (1200..1899)
@@ -15,8 +15,8 @@ input registers     4 read                DINT/UDINT/LREAL CNC->PLC             
 =================== ===================== ======================================== ===========
 
 The V.E. variables (N-05) are written by the NC as well: a read returns the value last stored by
-either side (hli_server/image/external.py). SINT/USINT/INT/UINT take one register (a SINT
-sign-extended), REAL two, as DINT.
+either side (hli_server/image/external.py); a write outside the range of the variable's kernel type
+(an SGN16 carried in a DINT) is refused with exception 0x03.
 
 * **Live.** A read of coils or holding registers returns the PLC->CNC half as it is now (what any
   PLC door, shared memory, ADS or Modbus, wrote last); a read of discrete inputs or input registers
@@ -312,7 +312,7 @@ class RegisterMap:
             fmt.append(s.type.struct_char)
             cursor = s.offset + s.size
         unpack_from = struct.Struct("".join(fmt)).unpack_from
-        chars = "".join(s.type.modbus_char for s in signals)
+        chars = "".join(s.type.struct_char for s in signals)
         order = [by_offset.index(i) for i in range(len(signals))]
         permute = None if order == sorted(order) else itemgetter(*order)
         nbytes = 2 * sum(s.modbus_count for s in signals)
@@ -355,7 +355,7 @@ class RegisterMap:
 
     # --- writes ------------------------------------------------------------------------------
     def _decode_register_value(self, signal: Signal, data: bytes) -> int | float:
-        return decode_value(signal.type.modbus_char, data, self.word_order)
+        return decode_value(signal.type.struct_char, data, self.word_order)
 
     def _commit(self, fc: int, writes: list[tuple[Signal, object]]) -> None:
         """Check every value first, then write them all: a refused request changes nothing."""

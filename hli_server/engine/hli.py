@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from hli_server.engine.external import ExternalVariables
 from schemas.wire import Mode, ProgramState
 
 __all__ = [
@@ -167,10 +166,7 @@ class AxisHli:
 @dataclass(slots=True)
 class MachineHli:
     """All of it: ``channels[i]`` is ``gpCh[i]``, ``axes[i]`` is ``gpAx[i]`` (axis index = order of the
-    axes in the configuration, 0-based; the logical axis number A_ID is separate). ``external`` is the
-    store of the V.E. variables (``gpVEGlob^``, ``gpVECh[i]^``, N-05), which the image keeps in step
-    with its V.E. fields (``hli_server/image/external.py``); None for an HLI without V.E. variables."""
+    axes in the configuration, 0-based; the logical axis number A_ID is separate)."""
 
     channels: list[ChannelHli]
     axes: list[AxisHli]
-    external: ExternalVariables | None = None

@@ -112,7 +112,6 @@ class Machine:
         self.hli = MachineHli(
             channels=[ChannelHli() for _ in config.channels],
             axes=[AxisHli() for _ in config.axes],
-            external=self.external,
         )
         self.channels: list[Channel] = []
         for i, ch_cfg in enumerate(config.channels):

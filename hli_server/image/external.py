@@ -5,13 +5,13 @@ In the kernel, the PLC and the NC channel share the memory of the external varia
 https://infosys.beckhoff.com/content/1033/tf5200_hli_interface/174843915.html): whoever stores last
 wins. Here the fields live in the PLC->CNC half (after the axis blocks, ``schemas/layout.py``), where
 every PLC door writes them, and the engine keeps its own store (``machine.external``,
-``hli_server/engine/external.py``) that NC programs read and write. :class:`ExternalSync` keeps the
-two in step, once per cycle, with the cycle's latch and publish:
+``hli_server/engine/external.py``, handed to ``ProcessImage.init_from``) that NC programs read and
+write. :class:`ExternalSync` keeps the two in step, once per cycle, with the cycle's latch and publish:
 
-* **latch** (before the step): every field whose bytes differ from what the image last saw there was
-  written by a PLC; its value goes into the store. A value the store refuses (NaN or infinity in a
-  REAL, which the kernel's types cannot hold here) is not taken: the field gets the store's value back
-  and a warning is logged.
+* **latch** (before the step): every field whose value differs from what the image last saw there
+  was written by a PLC; its value goes into the store. The doors refuse a value outside the kernel
+  type's range (``Signal.limits``); a PLC on shared memory that stores one all the same (a NaN, 40000
+  in an SGN16) is not taken: the field gets the store's value back and a warning is logged.
 * **publish** (after the step): every element the NC changed in the step (the store differs from what
   the image last gave it or took from it) is stored into its field, one single store per element.
 
@@ -40,21 +40,11 @@ from hli_server.engine.external import (
     ExternalVarSpec,
 )
 from schemas import image_format as fmt
-from schemas.layout import Layout, Scope, Signal, SignalType
+from schemas.layout import Layout, Scope, Signal
 
 __all__ = ["ExternalSync"]
 
 log = logging.getLogger(__name__)
-
-_REAL = struct.Struct("<f")
-
-
-def _as_field(signal: Signal, value: ExternalValue) -> ExternalValue:
-    """The value as the field gives it back once stored (a REAL keeps single precision)."""
-    if signal.type is SignalType.REAL:
-        stored: float = _REAL.unpack(_REAL.pack(value))[0]
-        return stored
-    return value
 
 
 class ExternalSync:
@@ -122,13 +112,13 @@ class ExternalSync:
         for signal, value in zip(self.signals, current, strict=True):
             fmt.write_field(buf, self._p2c, signal, value)
         self._store_seen = current
-        self._field_seen = [_as_field(s, v) for s, v in zip(self.signals, current, strict=True)]
+        self._field_seen = list(current)
 
-    def latch(self, half: bytes, buf: memoryview, store: ExternalVariables) -> None:
+    def latch(self, half: bytes, buf: memoryview) -> None:
         """The PLC's writes into the store. ``half`` is the latch's copy of the PLC->CNC half;
         corrections go to ``buf``, the image."""
-        if store is not self._store:
-            self.init(buf, store)
+        if self._store is None:
+            return
         fields = self._unpack_from(half, self._area)
         seen = self._field_seen
         if list(fields) == seen:
@@ -152,7 +142,7 @@ class ExternalSync:
                 )
                 taken = values[flat]
                 fmt.write_field(buf, self._p2c, signal, taken)
-                seen[k] = _as_field(signal, taken)
+                seen[k] = taken
                 store_seen[k] = taken
                 continue
             values[flat] = taken
@@ -173,7 +163,7 @@ class ExternalSync:
                 continue
             signal = self.signals[k]
             fmt.write_field(buf, self._p2c, signal, value)
-            field_seen[k] = _as_field(signal, value)
+            field_seen[k] = value
         self._store_seen = current
 
     def values(self) -> dict[str, Any]:

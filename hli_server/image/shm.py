@@ -377,16 +377,7 @@ class ProcessImage:
         except (IndexError, AttributeError) as exc:
             raise diagnose(self.layout, machine, _P2C, exc) from exc
         if self._external is not None:
-            self._external.latch(data, self._buf, self._store_of(machine))
-
-    def _store_of(self, machine: MachineHli) -> ExternalVariables:
-        store = machine.external
-        if store is None:
-            raise ValueError(
-                f"the image layout has {len(self.layout.external_signals)} V.E. elements and the engine no "
-                "V.E. store: build both from the same machine file"
-            )
-        return store
+            self._external.latch(data, self._buf)
 
     def publish_from(self, machine: MachineHli, cycle: int) -> None:
         """Pack the engine's CNC->PLC fields and publish them as ``cycle`` (seqlock, one memcpy); the
@@ -429,8 +420,12 @@ class ProcessImage:
         self._buf[start : start + len(cycle_and_half)] = cycle_and_half
         self._end_publish(b, cycle)
 
-    def init_from(self, machine: MachineHli, cycle: int = 0) -> None:
-        """Start-up: the PLC->CNC half takes the engine's ``_w`` values, the CNC->PLC half is published."""
+    def init_from(
+        self, machine: MachineHli, cycle: int = 0, external: ExternalVariables | None = None
+    ) -> None:
+        """Start-up: the PLC->CNC half takes the engine's ``_w`` values, the CNC->PLC half is published.
+        ``external`` is the engine's store of V.E. variables (``machine.external``), which the image
+        keeps in step with its V.E. fields from now on; needed when the layout has any."""
         p2c = bytearray(self.plan.p2c_size)
         try:
             self._projection.pack[_P2C](machine, self._p2c_struct.pack_into, p2c, 0)
@@ -439,7 +434,12 @@ class ProcessImage:
         off = self.plan.p2c_offset
         self._buf[off : off + len(p2c)] = p2c
         if self._external is not None:
-            self._external.init(self._buf, self._store_of(machine))
+            if external is None:
+                raise ValueError(
+                    f"the image layout has {len(self.layout.external_signals)} V.E. elements: pass the "
+                    "engine's store (init_from(hli, cycle, external=machine.external))"
+                )
+            self._external.init(self._buf, external)
         self.publish_from(machine, cycle)
 
     @property

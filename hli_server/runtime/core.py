@@ -255,7 +255,7 @@ class Runtime:
             self._stop_cycle = self.machine.cycle + self.stop_after_cycles
         try:
             self._image = self._image_factory(self.config, self.image_name)
-            self._image.init_from(self.machine.hli, self.machine.cycle)
+            self._image.init_from(self.machine.hli, self.machine.cycle, self.machine.external)
             for spec in self._in_process_specs():
                 adapter = self._make_adapter(spec)
                 self.adapters.append(adapter)

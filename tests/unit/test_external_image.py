@@ -10,6 +10,7 @@ cycle by cycle with the image in a buffer and the engine stepped by hand.
 from __future__ import annotations
 
 import math
+import sys
 
 import pytest
 from pydantic import ValidationError
@@ -17,11 +18,13 @@ from pydantic import ValidationError
 from hli_server.engine.machine import Machine
 from hli_server.image import ProcessImage
 from plc_clients import ImageClient
+from schemas import image_format as fmt
 from schemas.config import ExternalVariableConfig, MachineConfig
 from schemas.layout import (
     ADS_GROUP_PLC_TO_CNC,
     MODBUS_EXTERNAL_BASE,
     MODBUS_EXTERNAL_END,
+    REAL32_MAX,
     Direction,
     Layout,
     LayoutError,
@@ -52,7 +55,13 @@ def layout(config: MachineConfig) -> Layout:
 
 def test_every_element_is_a_signal_named_as_the_plc_programmer_declares_it(layout: Layout) -> None:
     paths = [s.st_path for s in layout.external_signals]
-    assert paths[:5] == ["gpVEGlob^PLC_READY", "gpVEGlob^S8", "gpVEGlob^U8[0]", "gpVEGlob^U8[1]", "gpVEGlob^U8[2]"]
+    assert paths[:5] == [
+        "gpVEGlob^PLC_READY",
+        "gpVEGlob^S8",
+        "gpVEGlob^U8[0]",
+        "gpVEGlob^U8[1]",
+        "gpVEGlob^U8[2]",
+    ]
     assert "gpVECh[0]^PART_COUNT" in paths
     # row-major, as the engine's store counts them (ExternalVarSpec.flat_index)
     pos = [p for p in paths if p.startswith("gpVECh[1]^POS")]
@@ -65,36 +74,39 @@ def test_every_element_is_a_signal_named_as_the_plc_programmer_declares_it(layou
     assert layout.signal("gpVEGlob^S8").name == "V.E.S8"
 
 
-def test_the_kernel_types_become_the_twincat_types(layout: Layout) -> None:
+def test_the_kernel_types_lie_in_the_images_types_with_their_own_ranges(layout: Layout) -> None:
     want = {
-        "gpVEGlob^PLC_READY": SignalType.BOOL,
-        "gpVEGlob^S8": SignalType.SINT,
-        "gpVEGlob^U8[0]": SignalType.USINT,
-        "gpVECh[0]^S16": SignalType.INT,
-        "gpVECh[0]^U16": SignalType.UINT,
-        "gpVECh[0]^PART_COUNT": SignalType.DINT,
-        "gpVECh[0]^U32": SignalType.UDINT,
-        "gpVECh[1]^R32[0]": SignalType.REAL,
-        "gpVECh[1]^POS[0,0]": SignalType.LREAL,
+        "gpVEGlob^PLC_READY": (SignalType.BOOL, None),
+        "gpVEGlob^S8": (SignalType.DINT, (-128, 127)),
+        "gpVEGlob^U8[0]": (SignalType.UDINT, (0, 255)),
+        "gpVECh[0]^S16": (SignalType.DINT, (-32768, 32767)),
+        "gpVECh[0]^U16": (SignalType.UDINT, (0, 65535)),
+        "gpVECh[0]^PART_COUNT": (SignalType.DINT, None),
+        "gpVECh[0]^U32": (SignalType.UDINT, None),
+        "gpVECh[1]^R32[0]": (SignalType.LREAL, (-REAL32_MAX, REAL32_MAX)),
+        "gpVECh[1]^POS[0,0]": (SignalType.LREAL, (-sys.float_info.max, sys.float_info.max)),
     }
-    assert {p: layout.signal(p).type for p in want} == want
+    assert {p: (layout.signal(p).type, layout.signal(p).limits) for p in want} == want
+    assert "(SGN16, area of channel 1)" in layout.signal("gpVECh[0]^S16").description
 
 
 def test_elements_are_plc_writable_shared_fields_with_their_own_addresses(layout: Layout) -> None:
     hli_end = max(s.offset + s.size for s in layout.hli_half(P2C))
     for s in layout.external_signals:
-        assert s.direction is P2C and s.plc_writable and s.access == "read/write"
+        assert s.direction is P2C
+        assert s.access == "read/write"
         assert s.scope in (Scope.VE_GLOBAL, Scope.VE_CHANNEL)
-        assert s.offset >= hli_end and s.offset % s.size == 0
+        assert s.offset >= hli_end
+        assert s.offset % s.size == 0
         assert (s.ads_group, s.ads_offset) == (ADS_GROUP_PLC_TO_CNC, s.offset)
         assert MODBUS_EXTERNAL_BASE <= s.modbus_address < MODBUS_EXTERNAL_END
         table = ModbusTable.COIL if s.type is SignalType.BOOL else ModbusTable.HOLDING_REGISTER
         assert s.modbus_table is table
         assert s.modbus_address % s.modbus_count == 0  # 2- and 4-register values aligned
-        assert s.reqs == ("N-05",) and "last writer wins" in s.description
+        assert s.reqs == ("N-05",)
+        assert "last writer wins" in s.description
     assert layout.signal("gpVEGlob^PLC_READY").description.startswith("the PLC is ready. V.E.PLC_READY")
-    assert layout.signal("gpVEGlob^S8").modbus_count == 1  # a SINT takes a whole register
-    assert layout.signal("gpVECh[1]^R32[1]").modbus_count == 2
+    assert layout.signal("gpVECh[0]^S16").modbus_count == 2  # an SGN16 in a DINT
     assert layout.reference_digits == 5  # the V.E. area keeps the map's 40001-style references
     assert layout.modbus_reference(layout.signal("gpVEGlob^PLC_READY")) == "01201"
 
@@ -129,24 +141,35 @@ def test_construct_and_struct_agree_on_the_v_e_area(layout: Layout) -> None:
     assert layout.unpack(P2C, packed)["gpVECh[1]^R32[1]"] == 0.5
 
 
-def test_values_are_checked_against_the_twincat_type(layout: Layout) -> None:
+def test_every_door_refuses_what_the_kernel_type_cannot_hold(layout: Layout) -> None:
     from schemas.layout import SignalValueError
 
     assert layout.signal("gpVEGlob^S8").coerce(-128) == -128
     for path, bad in (("gpVEGlob^S8", 128), ("gpVEGlob^U8[0]", -1), ("gpVECh[0]^S16", 40_000)):
-        with pytest.raises(SignalValueError, match="out of range"):
+        with pytest.raises(SignalValueError, match=r"out of range for the V\.E\. variable"):
             layout.signal(path).coerce(bad)
-    with pytest.raises(SignalValueError, match="beyond the range of REAL"):
-        layout.signal("gpVECh[1]^R32[0]").coerce(1e39)
+    for bad_real in (1e39, math.nan, math.inf):
+        with pytest.raises(SignalValueError, match="finite numbers only"):
+            layout.signal("gpVECh[1]^R32[0]").coerce(bad_real)
+    with pytest.raises(SignalValueError, match="finite numbers only"):
+        layout.signal("gpVECh[1]^POS[0,0]").coerce(math.nan)
+    assert layout.signal("gpVECh[1]^POS[0,0]").coerce(1e300) == 1e300
+    assert layout.signal("gpVECh[0]^PART_COUNT").coerce(-(2**31)) == -(2**31)
 
 
 def test_the_machine_file_is_refused_when_the_modbus_area_is_too_small() -> None:
     base = demo_config()
     too_big = [ExternalVariableConfig(name="TRACK", type="REAL64", dims=[176])]  # 704 registers
-    with pytest.raises(ValidationError, match=r"need 704 Modbus holding registers.*reserves 700 \(1200..1899\)"):
-        MachineConfig.model_validate({**base.model_dump(), "external_variables": [v.model_dump() for v in too_big]})
+    with pytest.raises(
+        ValidationError, match=r"need 704 Modbus holding registers.*reserves 700 \(1200..1899\)"
+    ):
+        MachineConfig.model_validate(
+            {**base.model_dump(), "external_variables": [v.model_dump() for v in too_big]}
+        )
     fits = [ExternalVariableConfig(name="TRACK", type="REAL64", dims=[175])]
-    config = MachineConfig.model_validate({**base.model_dump(), "external_variables": [v.model_dump() for v in fits]})
+    config = MachineConfig.model_validate(
+        {**base.model_dump(), "external_variables": [v.model_dump() for v in fits]}
+    )
     assert build_layout(config).external_signals[-1].modbus_address == MODBUS_EXTERNAL_END - 4
     with pytest.raises(ValidationError, match="coils for their BOOLEAN elements"):
         MachineConfig.model_validate(
@@ -171,7 +194,7 @@ class Rig:
     def __init__(self, config: MachineConfig) -> None:
         self.machine = Machine(config)
         self.image = ProcessImage.in_memory(build_layout(config))
-        self.image.init_from(self.machine.hli, 0)
+        self.image.init_from(self.machine.hli, 0, self.machine.external)
         self.plc = ImageClient.over(self.image.buffer, name=self.image.name, expect=self.image.layout)
 
     def latch(self) -> None:
@@ -204,7 +227,11 @@ def test_a_plc_write_reaches_the_store_at_the_next_latch(rig: Rig) -> None:
     assert rig.machine.external.read("PART_COUNT", 1) == 0  # not before the latch
     rig.latch()
     ext = rig.machine.external
-    assert (ext.read("PART_COUNT", 1), ext.read("PLC_READY", None), ext.read("POS", 2, (1, 2))) == (41, True, -2.5)
+    assert (ext.read("PART_COUNT", 1), ext.read("PLC_READY", None), ext.read("POS", 2, (1, 2))) == (
+        41,
+        True,
+        -2.5,
+    )
     assert ext.read("PLC_READY", 2) is True  # a channel sees the global variable
 
 
@@ -266,14 +293,12 @@ def test_rewriting_the_value_a_field_holds_changes_nothing(rig: Rig) -> None:
     assert rig.machine.external.read("U16", 1) == 13
 
 
-def test_a_real32_keeps_single_precision_without_phantom_plc_writes(rig: Rig) -> None:
+def test_an_sgn16_stored_past_the_doors_is_refused_at_the_latch(rig: Rig) -> None:
+    raw = rig.image.layout.signal("gpVECh[0]^S16")
+    fmt.write_field(rig.image.buffer, rig.image.plan.p2c_offset, raw, 40_000)
     rig.latch()
-    rig.machine.external.write("R32", 2, 0.1, (0,))
-    rig.publish()
-    assert rig.plc.read("gpVECh[1]^R32[0]") == pytest.approx(0.1, rel=1e-7)
-    for _ in range(3):
-        rig.cycle()
-    assert rig.machine.external.read("R32", 2, (0,)) == 0.1  # the field's rounding did not come back
+    assert rig.machine.external.read("S16", 1) == 0
+    assert rig.plc.read("gpVECh[0]^S16") == 0
 
 
 def test_a_value_the_store_refuses_is_not_taken_and_the_field_is_restored(
@@ -281,7 +306,8 @@ def test_a_value_the_store_refuses_is_not_taken_and_the_field_is_restored(
 ) -> None:
     rig.plc.write("gpVECh[1]^POS[0,0]", 4.0)
     rig.latch()
-    rig.plc.write("gpVECh[1]^POS[0,0]", math.nan)
+    raw = rig.image.layout.signal("gpVECh[1]^POS[0,0]")
+    fmt.write_field(rig.image.buffer, rig.image.plan.p2c_offset, raw, math.nan)  # past every door's check
     rig.plc.write("gpVECh[1]^POS[0,1]", 2.0)
     rig.latch()
     ext = rig.machine.external
@@ -294,17 +320,17 @@ def test_start_up_gives_every_field_the_stores_value(config: MachineConfig) -> N
     machine = Machine(config)
     machine.external.write("PART_COUNT", 1, 99)
     with ProcessImage.in_memory(build_layout(config)) as image:
-        image.init_from(machine.hli, 0)
+        image.init_from(machine.hli, 0, machine.external)
         assert image.read("gpVECh[0]^PART_COUNT") == 99
 
 
 def test_an_image_with_v_e_fields_needs_the_engines_store(config: MachineConfig) -> None:
-    from hli_server.engine.hli import AxisHli, ChannelHli, MachineHli
-
-    with ProcessImage.in_memory(build_layout(config)) as image:
-        bare = MachineHli(channels=[ChannelHli(), ChannelHli()], axes=[AxisHli() for _ in range(6)])
-        with pytest.raises(ValueError, match="no V.E. store"):
-            image.init_from(bare, 0)
+    machine = Machine(config)
+    with (
+        ProcessImage.in_memory(build_layout(config)) as image,
+        pytest.raises(ValueError, match="pass the engine's store"),
+    ):
+        image.init_from(machine.hli, 0)
 
 
 def test_every_kernel_type_round_trips_through_plc_and_nc(rig: Rig) -> None:
@@ -316,7 +342,7 @@ def test_every_kernel_type_round_trips_through_plc_and_nc(rig: Rig) -> None:
         ("U16", 1, (), "gpVECh[0]^U16", 65535),
         ("PART_COUNT", 1, (), "gpVECh[0]^PART_COUNT", -(2**31)),
         ("U32", 1, (), "gpVECh[0]^U32", 2**32 - 1),
-        ("R32", 2, (1,), "gpVECh[1]^R32[1]", -1.5),
+        ("R32", 2, (1,), "gpVECh[1]^R32[1]", -REAL32_MAX),
         ("POS", 2, (0, 2), "gpVECh[1]^POS[0,2]", 1e300),
     ]
     for _name, _ch, _index, path, value in cases:
