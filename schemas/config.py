@@ -456,6 +456,12 @@ class MachineConfig(_Strict):
     external_variables: list[ExternalVariableConfig] = Field(
         default_factory=list, max_length=1024, description="V.E. variables shared by NC programs and the PLC"
     )
+    program_directories: list[Annotated[str, Field(min_length=1, max_length=4096)]] = Field(
+        default_factory=list,
+        max_length=64,
+        description="where `L name` finds global subprograms and cycles, in order (relative to the machine "
+        "file)",
+    )
 
     @model_validator(mode="after")
     def _check_machine(self) -> MachineConfig:

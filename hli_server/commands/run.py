@@ -53,6 +53,10 @@ def _banner(runtime: Runtime, event_loop: str) -> None:
     for adapter in runtime.adapters:
         for line in adapter.endpoints():
             click.echo(f"  {line}")
+    click.echo(f"  NC output directory (#MSG SAVE report files): {runtime.nc_files.directory}")
+    searched = runtime.programs.directories.searched()
+    if searched:
+        click.echo(f"  program directories (L name): {', '.join(searched)}")
     policy = runtime.policy
     guards = [
         "read-only" if policy.read_only else "",
@@ -188,6 +192,21 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     help="select: microsecond timers (realtime lateness ~0.1 ms); default: asyncio's (epoll, whole ms)",
 )
 @click.option("--cycles", type=click.IntRange(min=0), default=None, help="stop after N cycles (for scripts)")
+@click.option(
+    "--program-dir",
+    "program_dirs",
+    multiple=True,
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    help="a directory where `L name` finds global subprograms and cycles; searched before the machine "
+    "file's program_directories (repeatable, in order)",
+)
+@click.option(
+    "--nc-output-dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="where #MSG SAVE writes the programs' report files (never elsewhere); default: a new "
+    "temporary directory, named in the banner",
+)
 @click.pass_context
 def run(
     ctx: click.Context,
@@ -206,6 +225,8 @@ def run(
     max_catch_up: int,
     event_loop: str,
     cycles: int | None,
+    program_dirs: tuple[Path, ...],
+    nc_output_dir: Path | None,
     **alias_values: Any,
 ) -> None:
     """Run the machine with its process image and adapters until stopped."""
@@ -251,6 +272,8 @@ def run(
             stop_after_cycles=cycles,
             policy=policy,
             doors_process=doors_process,
+            program_dirs=program_dirs,
+            nc_output_dir=nc_output_dir,
         )
     except (AdapterError, ValueError) as exc:
         click.echo(f"error: {exc}", err=True)

@@ -101,6 +101,7 @@ class _Loader:
         self.toml = _TomlLines(text)
         self._import_lists()
         self._resolve_program_paths()
+        self._resolve_program_directories()
         config: MachineConfig | None = None
         try:
             config = MachineConfig.model_validate(self.data)
@@ -258,6 +259,21 @@ class _Loader:
                     where = self._origin(("channels", c_index, "programs", p_index, "path")).where()
                     self.errors.append(f"{where}: program file {program_path} not found")
                 program["path"] = str(program_path.resolve())
+
+    def _resolve_program_directories(self) -> None:
+        """``program_directories`` are relative to the machine file; each must be a directory (N-02)."""
+        directories = self.data.get("program_directories")
+        if not isinstance(directories, list):
+            return
+        for index, entry in enumerate(directories):
+            if not isinstance(entry, str) or not entry:
+                continue  # the model's own error says why
+            path = (self.path.parent / entry).resolve()
+            if not path.is_dir():
+                where = self._origin(("program_directories", index)).where()
+                what = "is not a directory" if path.exists() else "not found"
+                self.errors.append(f"{where}: program directory {path} {what}")
+            directories[index] = str(path)
 
     # -- locations ---------------------------------------------------------------------------
 

@@ -25,6 +25,7 @@ import asyncio
 import contextlib
 import gc
 import logging
+import os
 import signal
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -36,6 +37,7 @@ from hli_server.engine.machine import Machine
 from hli_server.runtime.events import EventLog
 from hli_server.runtime.host import OperatorPanel, RuntimeHost
 from hli_server.runtime.image import ImageFactory, RuntimeImage, shared_memory_image
+from hli_server.runtime.nc_files import NcFileWriter
 from hli_server.runtime.pacing import (
     FREE_SLICE_S,
     STEP_BATCH,
@@ -45,7 +47,7 @@ from hli_server.runtime.pacing import (
     run_free,
     run_realtime,
 )
-from hli_server.runtime.programs import read_program_file
+from hli_server.runtime.programs import RuntimeLibrary, read_program_file
 
 if TYPE_CHECKING:
     from types import TracebackType
@@ -96,6 +98,8 @@ class Runtime:
         read_program: Callable[[str], str] | None = read_program_file,
         policy: AccessPolicy | None = None,
         doors_process: bool = False,
+        program_dirs: Sequence[str | os.PathLike[str]] = (),
+        nc_output_dir: str | os.PathLike[str] | None = None,
     ) -> None:
         try:
             self.clock = Clock(clock)
@@ -116,7 +120,12 @@ class Runtime:
         self.image_name = image_name
         self.max_catch_up = max_catch_up
         self.stop_after_cycles = stop_after_cycles
-        self.machine = Machine(config, read_program=read_program)
+        self.programs = RuntimeLibrary([*program_dirs, *config.program_directories])
+        """Where ``L name`` finds global subprograms: uploads, ``program_dirs``, the machine file's (N-02)."""
+        self.machine = Machine(config, read_program=read_program, programs=self.programs)
+        self.nc_files = NcFileWriter(self.machine, nc_output_dir)
+        """Carries out the programs' ``#MSG SAVE`` writes inside its output directory (N-07)."""
+        self.machine.event_listeners.append(self.nc_files)
         self.t_a = self.machine.t_a
         self.stats = PacingStats(self.t_a)
         self.event_log = EventLog()
@@ -375,6 +384,7 @@ class Runtime:
             image.close()
         with contextlib.suppress(ValueError):
             self.machine.event_listeners.remove(self.event_log)
+        self.nc_files.close()
         if errors:
             raise errors[0]
 
