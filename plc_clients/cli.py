@@ -147,7 +147,7 @@ def _load_program(http: str, demo: Demo) -> None:
         deadline = time.monotonic() + 5.0
         while True:
             try:
-                _http(base + "/program", {"text": demo.nc_program, "name": demo.name})
+                _http(base + "/program", {"text": demo.nc_program, "name": demo.name, "files": demo.nc_files})
                 break
             except urllib.error.HTTPError as exc:
                 if exc.code != 409 or time.monotonic() > deadline:
