@@ -7,7 +7,7 @@
     hli-plc c3-collision --transport ads --host 127.0.0.1 --port 48898
     hli-plc --list
 
-The demos are :mod:`plc_clients.demos` (the examples of FCT-C43, FCT-C14 and FCT-C3). First the
+The demos are :mod:`plc_clients.demos` (the examples of FCT-C43, FCT-C14, FCT-C3 and V.E.). First the
 operator's part: the demo's NC program is loaded into its channel through the server's HTTP API
 (``--http``; the channel is reset first; ``--no-load`` skips it). Then the PLC program runs in a
 :class:`~plc_clients.task.PlcTask` paced to ``--cycle-ms`` until the demo is over, printing what it
@@ -49,8 +49,8 @@ class UsageError(Exception):
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="hli-plc",
-        description="Run a demo PLC program (the examples of FCT-C43, FCT-C14, FCT-C3) against a running "
-        "hli-server, printing what it does.",
+        description="Run a demo PLC program (the examples of FCT-C43, FCT-C14, FCT-C3 and V.E. variables) "
+        "against a running hli-server, printing what it does.",
         epilog="demos: " + ", ".join(DEMOS),
     )
     ap.add_argument("demo", nargs="?", choices=DEMOS, help="the demo to run")
