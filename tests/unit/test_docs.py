@@ -55,5 +55,5 @@ def test_the_readme_tour_shows_the_program_the_example_runs() -> None:
     from plc_clients.demos.ve_mode import POCKET, PROGRAM
 
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    assert f"```\n{PROGRAM}```" in readme, "README.md's tour program differs from plc_clients/demos/ve_mode.py"
+    assert f"```\n{PROGRAM}```" in readme, "README.md's tour program differs from demos/ve_mode.py"
     assert f"```\n{POCKET}```" in readme, "README.md's pocket.nc differs from plc_clients/demos/ve_mode.py"
