@@ -436,7 +436,7 @@ class ExternalVariableConfig(_Strict):
     )
     access_rights: Literal["READ_WRITE", "READ_ONLY", "WRITE_ONLY"] = Field(
         default="READ_WRITE",
-        description="P-EXTV-00006: what an NC program may do with it (the PLC may always read and write)",
+        description="what an NC program may do with it (the PLC may always read and write)",
     )
     description: str = Field(
         default="", max_length=200, description="what it means (shown by `hli-server map` and the dashboard)"
@@ -666,6 +666,20 @@ CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = tuple(
     )
 )
 """ISG text-list names of the channel parameters the documents name."""
+
+EXTERNAL_VARIABLE_PARAMETERS: tuple[ParameterInfo, ...] = tuple(
+    ParameterInfo(path=p, field=f, pid=i, unit="-")
+    for p, f, i in (
+        ("var[0].name", "name", "P-EXTV-00001"),
+        ("var[0].type", "type", "P-EXTV-00003"),
+        ("var[0].array_elements", "dims", "P-EXTV-00007"),
+        ("var[0].scope", "channel", "P-EXTV-00004"),
+        ("var[0].synchronisation", "synchronous", "P-EXTV-00005"),
+        ("var[0].access_rights", "access_rights", "P-EXTV-00006"),
+    )
+)
+"""The kernel's list of external variables (``external_variables_list``; ``var[i]`` stands for the
+variable's index): which entry gives which field of :class:`ExternalVariableConfig` (N-05)."""
 
 MANUAL_PARAMETERS: tuple[ParameterInfo, ...] = (
     ParameterInfo(path="move_limit_warning", field="move_limit_warning", pid="P-MANU-00014", unit="0/1"),
