@@ -25,6 +25,7 @@ from schemas.config import (
     CHANNEL_PARAMETERS,
     MANUAL_PARAMETERS,
     AxisConfig,
+    ChannelConfig,
     MachineConfig,
     ParameterIssues,
 )
@@ -461,6 +462,8 @@ def _unknown_key(model: type[BaseModel], key: str, *, list_allowed: bool) -> str
     candidates = list(model.model_fields)
     if list_allowed:
         candidates.append(_LIST_KEY)
+    if model is ChannelConfig:
+        candidates.append(_EXTERNAL_LIST_KEY)
     for table in _TABLES.values():
         for info in table[0]:
             if key in {info.path, _display_path(info.path, 0).replace("[0]", "[i]")}:

@@ -181,3 +181,32 @@ def test_random_names_never_escape(dirs: tuple[Path, Path], tmp_path: Path) -> N
         if found is not None:
             assert Path(found.origin).resolve().is_relative_to(dirs[0].resolve()), (name, found.origin)
             assert "%secret" not in found.text
+
+
+def test_the_machine_files_program_directories_are_relative_to_it(tmp_path: Path) -> None:
+    from hli_server.configuration import ConfigError, load_machine
+    from tests.unit.config_helpers import write
+
+    (tmp_path / "nc").mkdir()
+    base = """
+        program_directories = ["nc", "{missing}"]
+        [[axes]]
+        number = 1
+        name = "X"
+        [[axes]]
+        number = 2
+        name = "Y"
+        [[axes]]
+        number = 3
+        name = "Z"
+        [[channels]]
+        axes = ["X", "Y", "Z"]
+    """
+    with pytest.raises(ConfigError) as refused:
+        load_machine(write(tmp_path, "m.toml", base.format(missing="gone")))
+    assert any(
+        "m.toml:1: program_directories[1]: program directory" in m and "gone not found" in m
+        for m in refused.value.messages
+    ), refused.value.messages
+    config = load_machine(write(tmp_path, "m.toml", base.format(missing="nc")))
+    assert config.program_directories == [str((tmp_path / "nc").resolve())] * 2
