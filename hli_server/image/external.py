@@ -47,6 +47,23 @@ __all__ = ["ExternalSync"]
 log = logging.getLogger(__name__)
 
 
+class _Variable:
+    """One variable of the store with its run of elements in the layout (consecutive signals)."""
+
+    __slots__ = ("first", "seen", "signals", "spec", "values")
+
+    def __init__(
+        self, spec: ExternalVarSpec, values: list[ExternalValue], first: int, signals: list[Signal]
+    ) -> None:
+        self.spec = spec
+        self.values = values
+        """The store's live list (``ExternalVariables.values``)."""
+        self.seen = list(values)
+        """The values the image and the store last agreed on."""
+        self.first = first
+        self.signals = signals
+
+
 class ExternalSync:
     """Latches the PLC's writes of V.E. fields into the store and publishes the NC's into the fields."""
 
@@ -56,30 +73,29 @@ class ExternalSync:
             raise ValueError("the layout has no V.E. variables")
         self._layout = layout
         self._p2c = p2c_offset
-        start = self.signals[0].offset
-        parts = ["<"]
-        cursor = start
-        for s in self.signals:
-            if s.offset > cursor:
-                parts.append(f"{s.offset - cursor}x")
-            parts.append(s.type.struct_char)
-            cursor = s.offset + s.size
-        self._unpack_from = struct.Struct("".join(parts)).unpack_from
-        self._area = start
+        self._start = self.signals[0].offset
         """Byte offset of the V.E. area in the PLC->CNC half."""
+        self._end = max(s.offset + s.size for s in self.signals)
+        self._element_of_byte = [-1] * (self._end - self._start)
+        for k, s in enumerate(self.signals):
+            for b in range(s.offset - self._start, s.offset - self._start + s.size):
+                self._element_of_byte[b] = k
+        self._formats = [struct.Struct("<" + s.type.struct_char) for s in self.signals]
+        self._raw = bytearray(self._end - self._start)
+        """The V.E. area's bytes as the image last saw or wrote them."""
         self._store: ExternalVariables | None = None
-        self._specs: list[ExternalVarSpec] = []
-        self._slots: list[tuple[list[ExternalValue], int, ExternalVarSpec]] = []
-        self._field_seen: list[ExternalValue] = []
-        self._store_seen: list[ExternalValue] = []
+        self._variables: list[_Variable] = []
+        self._slot: list[tuple[_Variable, int]] = []
+        """element (signal index) -> (its variable, its flat index)"""
         self.refused = 0
-        """PLC values the store refused (NaN, infinity), counted."""
+        """PLC values the store refused (outside the kernel type, NaN), counted."""
 
     # --- binding ---------------------------------------------------------------------------
     def _bind(self, store: ExternalVariables) -> None:
         """Match the layout's elements with the store's variables (the same machine file made both)."""
-        specs: list[ExternalVarSpec] = []
-        slots: list[tuple[list[ExternalValue], int, ExternalVarSpec]] = []
+        variables: list[_Variable] = []
+        slot: list[tuple[_Variable, int]] = []
+        first = 0
         for (scope, index, name), group in itertools.groupby(
             self.signals, key=lambda s: (s.scope, s.index, s.external_element[0])
         ):
@@ -92,81 +108,90 @@ class ExternalSync:
                     f"V.E.{name} of {where}: the engine's store and the image layout differ; build both "
                     "from the same machine file"
                 )
-            values = store.values(spec)
-            specs.append(spec)
-            slots += [(values, k, spec) for k in range(spec.size)]
+            variable = _Variable(spec, store.values(spec), first, members)
+            variables.append(variable)
+            slot += [(variable, k) for k in range(spec.size)]
+            first += len(members)
         self._store = store
-        self._specs = specs
-        self._slots = slots
+        self._variables = variables
+        self._slot = slot
 
-    def _gather(self) -> list[ExternalValue]:
-        assert self._store is not None
-        store = self._store
-        return list(itertools.chain.from_iterable(store.values(spec) for spec in self._specs))
+    def _store_field(self, buf: memoryview, k: int, value: ExternalValue) -> None:
+        """One store into element ``k``'s field, and its bytes in :attr:`_raw`."""
+        signal = self.signals[k]
+        fmt.write_field(buf, self._p2c, signal, value)
+        at = signal.offset - self._start
+        self._formats[k].pack_into(self._raw, at, value)
 
     # --- the cycle -------------------------------------------------------------------------
     def init(self, buf: memoryview, store: ExternalVariables) -> None:
         """Start-up: every field takes the store's value."""
         self._bind(store)
-        current = self._gather()
-        for signal, value in zip(self.signals, current, strict=True):
-            fmt.write_field(buf, self._p2c, signal, value)
-        self._store_seen = current
-        self._field_seen = list(current)
+        for variable in self._variables:
+            for flat, value in enumerate(variable.values):
+                self._store_field(buf, variable.first + flat, value)
+            variable.seen = list(variable.values)
 
     def latch(self, half: bytes, buf: memoryview) -> None:
         """The PLC's writes into the store. ``half`` is the latch's copy of the PLC->CNC half;
-        corrections go to ``buf``, the image."""
+        corrections go to ``buf``, the image. Quiet cycles cost one comparison of the area's bytes."""
         if self._store is None:
             return
-        fields = self._unpack_from(half, self._area)
-        seen = self._field_seen
-        if list(fields) == seen:
+        raw = half[self._start : self._end]
+        if raw == self._raw:
             return
-        store_seen = self._store_seen
-        for k, value in enumerate(fields):
-            if value == seen[k]:
+        changed = int.from_bytes(raw, "little") ^ int.from_bytes(self._raw, "little")
+        self._raw[:] = raw
+        element_of_byte = self._element_of_byte
+        while changed:
+            low = changed & -changed
+            byte = (low.bit_length() - 1) >> 3
+            k = element_of_byte[byte]
+            if k < 0:  # padding between fields: nothing to take
+                changed &= ~((1 << ((byte + 1) * 8)) - 1)
                 continue
-            values, flat, spec = self._slots[k]
             signal = self.signals[k]
-            try:
-                taken = spec.coerce(value)
-            except ExternalVariableError as exc:
-                self.refused += 1
-                log.warning(
-                    "%s: the PLC wrote %r, refused (%s); the field keeps %r",
-                    signal.st_path,
-                    value,
-                    exc,
-                    values[flat],
-                )
-                taken = values[flat]
-                fmt.write_field(buf, self._p2c, signal, taken)
-                seen[k] = taken
-                store_seen[k] = taken
-                continue
-            values[flat] = taken
-            store_seen[k] = taken
-            seen[k] = value
+            end = signal.offset - self._start + signal.size
+            changed &= ~((1 << (end * 8)) - 1)  # this element done
+            self._take(buf, k, self._formats[k].unpack_from(raw, signal.offset - self._start)[0])
+
+    def _take(self, buf: memoryview, k: int, value: ExternalValue) -> None:
+        variable, flat = self._slot[k]
+        try:
+            taken = variable.spec.coerce(value)
+        except ExternalVariableError as exc:
+            self.refused += 1
+            kept = variable.values[flat]
+            log.warning(
+                "%s: the PLC wrote %r, refused (%s); the field keeps %r",
+                self.signals[k].st_path,
+                value,
+                exc,
+                kept,
+            )
+            self._store_field(buf, k, kept)
+            return
+        variable.values[flat] = taken
+        variable.seen[flat] = taken
 
     def publish(self, buf: memoryview) -> None:
-        """The NC's writes of the step into the fields (one store per changed element)."""
-        if self._store is None:
-            return
-        current = self._gather()
-        seen = self._store_seen
-        if current == seen:
-            return
-        field_seen = self._field_seen
-        for k, value in enumerate(current):
-            if value == seen[k]:
+        """The NC's writes of the step into the fields (one store per changed element). Quiet cycles
+        cost one list comparison per variable."""
+        for variable in self._variables:
+            values = variable.values
+            seen = variable.seen
+            if values == seen:
                 continue
-            signal = self.signals[k]
-            fmt.write_field(buf, self._p2c, signal, value)
-            field_seen[k] = value
-        self._store_seen = current
+            first = variable.first
+            for flat, value in enumerate(values):
+                if value != seen[flat]:
+                    self._store_field(buf, first + flat, value)
+            variable.seen = list(values)
 
     def values(self) -> dict[str, Any]:
         """ST path -> value as the store holds it (diagnostics and tests)."""
-        current = self._gather() if self._store is not None else [None] * len(self.signals)
-        return {s.st_path: v for s, v in zip(self.signals, current, strict=True)}
+        out: dict[str, Any] = {}
+        for variable in self._variables:
+            for signal, value in zip(variable.signals, variable.values, strict=True):
+                out[signal.st_path] = value
+        return out

@@ -362,3 +362,18 @@ def test_the_variables_the_test_machine_declares_cover_every_kernel_type() -> No
     assert {v.type for v in EXTERNAL_VARIABLES} == {
         "BOOLEAN", "SGN08", "UNS08", "SGN16", "UNS16", "SGN32", "UNS32", "REAL32", "REAL64",
     }  # fmt: skip
+
+
+def test_bytes_between_the_fields_are_not_taken_for_a_write(rig: Rig) -> None:
+    """The latch compares the V.E. area's bytes; a store into the padding between two fields (only a
+    PLC on shared memory can make one) changes no variable."""
+    layout = rig.image.layout
+    a, b = layout.signal("gpVEGlob^PLC_READY"), layout.signal("gpVEGlob^S8")
+    assert b.offset - (a.offset + a.size) > 0  # the BOOL is followed by padding up to the DINT
+    rig.image.buffer[rig.image.plan.p2c_offset + a.offset + 1] = 0xFF
+    rig.plc.write("gpVEGlob^S8", -5)
+    rig.latch()
+    assert (rig.machine.external.read("PLC_READY", None), rig.machine.external.read("S8", None)) == (
+        False,
+        -5,
+    )
