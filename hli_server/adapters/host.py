@@ -269,6 +269,18 @@ class OperatorPort(Protocol):
 
     def clear_faults(self, axis: str) -> dict[str, Any]: ...
 
+    def soft_limits(self, axis: str) -> dict[str, Any]:
+        """The software limits in effect and in the axis record [0.1 µm] (P-AXIS-00177/00178/00179)."""
+        ...
+
+    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+        """Limits in effect until the next reset or mode change (the kernel's G98/G99) [0.1 µm]."""
+        ...
+
+    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+        """The axis record's limits [0.1 µm]: taken over at the next reset or mode change."""
+        ...
+
     def snapshot(self) -> dict[str, Any]:
         """Channels, axes, active alarms, the V.E. variables (``external``): ``GET /api/state``."""
         ...
