@@ -33,7 +33,7 @@ def run(hli: Harness, transport: object, mode: int) -> tuple[VeModeDemo, object]
     demo = VeModeDemo(mode=mode, release_after=RELEASE_AFTER)
     hli.load_program(demo.channel, demo.nc_program, files=demo.nc_files, name="ve_mode.nc")
     task = PlcTask(transport, 0.001, demo, watch=demo.watch)
-    with hli.trace(X, Z, PROGRAM_STATE, "gpVECh[0]^PART_COUNT") as recording:
+    with hli.trace(X, Z, PROGRAM_STATE, "gpVEGlob^PART_COUNT") as recording:
         hli.run_until(lambda: demo.done, max_cycles=8000, plc=task)
     return demo, recording.trace()
 
@@ -44,7 +44,7 @@ def test_the_plc_selects_the_pocket_and_the_program_counts_three_parts(
     demo, trace = run(hli, plc_transport, mode=1)
     assert not demo.failed, demo.log
     x, z, state = trace[X], trace[Z], trace[PROGRAM_STATE]
-    count = trace["gpVECh[0]^PART_COUNT"]
+    count = trace["gpVEGlob^PART_COUNT"]
     # the program runs, but does not move while it waits for V.E.PLC_READY
     waiting = np.flatnonzero(state == 1)[: RELEASE_AFTER - 5]
     assert len(waiting) > 100
@@ -56,7 +56,7 @@ def test_the_plc_selects_the_pocket_and_the_program_counts_three_parts(
     assert [t for _, t in demo.log if t.startswith("part")] == [
         f"part {n} done (V.E.PART_COUNT = {n})" for n in (1, 2, 3)
     ]
-    assert (state[-1], x[-1], hli.runtime.machine.external.read("PART_COUNT", 1)) == (FINISHED, 0, 3)
+    assert (state[-1], x[-1], hli.runtime.machine.external.read("PART_COUNT", None)) == (FINISHED, 0, 3)
     # #MSG SAVE wrote into the server's NC output directory (the kernel's default file name), each
     # line after its time stamp
     lines = (hli.nc_files / "message.txt").read_text(encoding="utf-8").splitlines()
@@ -72,4 +72,4 @@ def test_with_the_contour_selected_the_program_takes_the_other_branch(
     assert not demo.failed, demo.log
     assert trace[Z].min() == 0  # no pocket: Z never goes down
     assert trace[X].max() > 3 * 30 * 10_000  # the third part's circle reaches beyond X = 90 mm
-    assert hli.runtime.machine.external.read("PART_COUNT", 1) == 3
+    assert hli.runtime.machine.external.read("PART_COUNT", None) == 3

@@ -4,10 +4,12 @@ External variables are how PLC and NC programs talk in the kernel (programming m
 variables (V.E.)", https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/207988747.html;
 the PLC's side: gpVECh[i]^ / gpVEGlob^). The demo machine declares three (``hli-server map``):
 
-* ``V.E.PLC_READY`` (global, BOOLEAN): the program waits for it in a ``$WHILE`` loop;
-* ``V.E.MODE`` (channel 1, SGN32): 1 = pocket, 2 = contour; the program branches on it with ``$IF``
-  and calls the subprogram ``pocket.nc`` or ``contour.nc`` (``L name``, uploaded with the program);
-* ``V.E.PART_COUNT`` (channel 1, UNS32): the program counts its parts in it; the PLC reads it.
+* ``V.E.PLC_READY`` (BOOLEAN): the program waits for it in a ``$WHILE`` loop;
+* ``V.E.MODE`` (SGN32): 1 = pocket, 2 = contour; the program branches on it with ``$IF`` and calls
+  the subprogram ``pocket.nc`` or ``contour.nc`` (``L name``, uploaded with the program);
+* ``V.E.PART_COUNT`` (UNS32): the program counts its parts in it; the PLC reads it.
+
+All three lie in the global area (``gpVEGlob^``), which every channel's programs see.
 
 The PLC program, cycle by cycle:
 
@@ -38,8 +40,8 @@ PROGRAM_STATE = CH + "bahn_state.program_state_r"
 ERROR_ID = CH + "bahn_state.error_id_r"
 START = CH + "mc_command.start_w"
 READY = "gpVEGlob^PLC_READY"
-MODE = "gpVECh[0]^MODE"
-PART_COUNT = "gpVECh[0]^PART_COUNT"
+MODE = "gpVEGlob^MODE"
+PART_COUNT = "gpVEGlob^PART_COUNT"
 
 PROGRAM = """\
 %ve_mode

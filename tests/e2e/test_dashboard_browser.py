@@ -248,14 +248,14 @@ def test_the_v_e_variables_show_what_the_plc_wrote(server: str, page: Any) -> No
     p = page
     _open(p, server)
     row = p.locator("#external tr[data-variable='V.E.MODE']")
-    expect(row).to_contain_text("channel 1")
+    expect(row).to_contain_text("global")
     expect(row).to_contain_text("SGN32")
-    expect(row).to_contain_text("gpVECh[0]^MODE")
+    expect(row).to_contain_text("gpVEGlob^MODE")
     expect(p.locator("#external tr[data-variable='V.E.PLC_READY']")).to_contain_text("global")
-    answer = p.request.put(f"{server}/api/image/gpVECh[0].MODE", data={"value": 2})
+    answer = p.request.put(f"{server}/api/image/gpVEGlob.MODE", data={"value": 2})
     assert answer.ok, answer.text()
     expect(row.locator("td.value")).to_have_text("2")
-    answer = p.request.put(f"{server}/api/image/gpVECh[0].MODE", data={"value": 0})
+    answer = p.request.put(f"{server}/api/image/gpVEGlob.MODE", data={"value": 0})
     assert answer.ok, answer.text()
     expect(row.locator("td.value")).to_have_text("0")
 

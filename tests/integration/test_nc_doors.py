@@ -306,3 +306,28 @@ def test_the_plugins_program_directory_is_part_of_the_repository() -> None:
         N10 G01 X1 F1000
         N20 M17
     """)
+
+
+@pytest.mark.req("N-05", "H-04")
+def test_the_ads_door_finds_a_v_e_symbol_by_its_exact_name() -> None:
+    from hli_server.adapters.ads.symbols import SymbolTable
+    from schemas.layout import build_layout
+
+    table = SymbolTable(build_layout(demo_config(external=True)))
+    for name in ("gpVECh[0]^S16", "gpvech[0]^s16", "gpVEGlob^S8", "gpVECh[1]^POS[1,2]"):
+        found = table.find(name)
+        assert found is not None, name
+
+
+@pytest.mark.req("N-05", "H-04")
+@pytest.mark.xfail(
+    strict=True,
+    reason="needs the ADS door to accept gpVECh[i].name and gpVECh[i]^.name as it does gpCh[i] (ADS branch)",
+)
+def test_the_ads_door_accepts_the_plc_spellings_of_a_v_e_symbol() -> None:
+    from hli_server.adapters.ads.symbols import SymbolTable
+    from schemas.layout import build_layout
+
+    table = SymbolTable(build_layout(demo_config(external=True)))
+    for spelling in ("gpVECh[0].S16", "gpVECh[0]^.S16", "gpVEGlob.S8", "gpVEGlob^.S8"):
+        assert table.find(spelling) is not None, spelling
