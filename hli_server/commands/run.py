@@ -275,7 +275,7 @@ def run(
             program_dirs=program_dirs,
             nc_output_dir=nc_output_dir,
         )
-    except (AdapterError, ValueError) as exc:
+    except (AdapterError, ValueError, OSError) as exc:  # OSError: --nc-output-dir cannot be made
         click.echo(f"error: {exc}", err=True)
         ctx.exit(_EXIT_START)
 

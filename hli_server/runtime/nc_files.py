@@ -8,8 +8,9 @@ appended to the end of the file (a new line unless ``#MSG SAVE CONTINUE``); a fi
 delete it before the program starts for a new one.
 
 Every file lies inside the server's NC output directory: ``hli-server run --nc-output-dir DIR``, by
-default a directory of its own under the system's temporary directory (the ``run`` banner names it;
-kept after the server stops when a program wrote into it, removed when empty). A name may hold
+default a directory of its own under the system's temporary directory, ``hli_nc_<pid>_<random>`` (the
+``run`` banner names it; made at the first write, so a server that writes nothing leaves nothing
+behind; kept after the server stops when a program wrote into it). A name may hold
 subdirectories below it (``reports/part.txt``, made as needed). Refused, with warning 919010 in the
 program's channel and nothing written:
 
@@ -27,6 +28,7 @@ from __future__ import annotations
 
 import logging
 import os
+import secrets
 import shutil
 import tempfile
 from pathlib import Path
@@ -57,10 +59,20 @@ class NcFileWriter:
     """An event listener of the machine that carries out :class:`NcFileWrite` in ``directory``."""
 
     def __init__(self, machine: Machine, directory: str | os.PathLike[str] | None = None) -> None:
+        """``directory`` is made now when given (OSError when it cannot be); the temporary one at the
+        first write."""
         self._machine = machine
         self._given = Path(directory) if directory is not None else None
         self._directory: Path | None = None
         self._temporary = directory is None
+        self._made = False
+        if not self._temporary:  # the user's directory: made now, so that a wrong one fails at the start
+            try:
+                self._make()
+            except OSError as exc:
+                raise OSError(
+                    f"NC output directory {self._given}: cannot be made ({exc.strerror or exc})"
+                ) from None
         self._sizes: dict[Path, int] = {}
         self.written = 0
         """Writes carried out."""
@@ -69,14 +81,24 @@ class NcFileWriter:
 
     @property
     def directory(self) -> Path:
-        """The output directory (made on first use: the given one, or a new temporary one)."""
+        """The output directory: the given one, or ``hli_nc_<pid>_<random>`` in the system's temporary
+        directory. Made at the first write (so a server that writes nothing leaves nothing behind)."""
         if self._directory is None:
             if self._given is None:
-                self._directory = Path(tempfile.mkdtemp(prefix="hli_nc_")).resolve()
+                name = f"hli_nc_{os.getpid()}_{secrets.token_hex(4)}"
+                self._directory = Path(tempfile.gettempdir()).resolve() / name
             else:
-                self._given.mkdir(parents=True, exist_ok=True)
                 self._directory = self._given.resolve()
         return self._directory
+
+    def _make(self) -> None:
+        if self._made:
+            return
+        if self._temporary:
+            self.directory.mkdir(mode=0o700)  # a new name: never a directory someone else made
+        else:
+            self.directory.mkdir(parents=True, exist_ok=True)
+        self._made = True
 
     def __call__(self, event: Event) -> None:
         if isinstance(event, NcFileWrite):
@@ -85,6 +107,7 @@ class NcFileWriter:
     def write(self, event: NcFileWrite) -> Path | None:
         """Append ``event.text`` to its file; the path written, or None when refused (warning 919010)."""
         try:
+            self._make()
             path = self._path(event.file)
             ending = _MODES.get(event.mode)
             if ending is None:
@@ -148,5 +171,5 @@ class NcFileWriter:
 
     def close(self) -> None:
         """At the server's stop: a temporary directory nothing was written to is removed."""
-        if self._temporary and self._directory is not None and not any(self._directory.iterdir()):
-            shutil.rmtree(self._directory, ignore_errors=True)
+        if self._temporary and self._made and not any(self.directory.iterdir()):
+            shutil.rmtree(self.directory, ignore_errors=True)

@@ -248,9 +248,13 @@ def test_a_report_file_stops_growing_at_its_bound(tmp_path: Path) -> None:
 def test_the_default_output_directory_is_temporary_and_removed_when_empty() -> None:
     with Harness() as hli:
         directory = hli.nc_files
+        assert directory.name.startswith(f"hli_nc_{os.getpid()}_")
+        assert not directory.exists()  # made at the first write: a server that writes none leaves none
+        _write(hli, "gone.txt", "")
         assert directory.is_dir()
-        assert directory.name.startswith("hli_nc_")
-    assert not directory.exists()
+        assert oct(directory.stat().st_mode & 0o777) == "0o700"
+        (directory / "gone.txt").unlink()
+    assert not directory.exists()  # empty at the stop: removed
     with Harness() as hli:
         _write(hli, "kept.txt", "kept")
         kept = hli.nc_files
