@@ -367,8 +367,9 @@ class ProcessImage:
         return f"ProcessImage({self.name!r}, {self.backing}, {self.plan.total_size} bytes, {state})"
 
     # --- the cycle ---------------------------------------------------------------------------
-    def latch_into(self, machine: MachineHli) -> None:
-        """Copy the PLC->CNC half (one memcpy) and assign it to the engine's ``_w`` fields."""
+    def latch_into(self, machine: MachineHli) -> bytes:
+        """Copy the PLC->CNC half (one memcpy) and assign it to the engine's ``_w`` fields; returns the
+        bytes latched (what the session recorder keeps, ``hli_server/recording``)."""
         off = self.plan.p2c_offset
         data = bytes(self._buf[off : off + self.plan.p2c_size])
         values = self._p2c_struct.unpack_from(data)
@@ -378,11 +379,16 @@ class ProcessImage:
             raise diagnose(self.layout, machine, _P2C, exc) from exc
         if self._external is not None:
             self._external.latch(data, self._buf)
+        return data
 
-    def publish_from(self, machine: MachineHli, cycle: int) -> None:
+    def publish_from(self, machine: MachineHli, cycle: int, *, commit: bool = True) -> bytearray:
         """Pack the engine's CNC->PLC fields and publish them as ``cycle`` (seqlock, one memcpy); the
-        V.E. elements the NC changed go into their fields (``hli_server/image/external.py``)."""
-        if self._external is not None:
+        V.E. elements the NC changed go into their fields (``hli_server/image/external.py``).
+
+        Returns the packed buffer (the cycle as u64, then the half; valid until the next call).
+        ``commit=False`` packs without publishing: the readers keep the previous publish (a stalled
+        publish, issue 25's communication fault), and the NC's V.E. writes wait for the next publish."""
+        if commit and self._external is not None:
             self._external.publish(self._buf)
         private = self._c2p_private
         try:
@@ -391,7 +397,9 @@ class ProcessImage:
             if isinstance(exc, struct.error) and not 0 <= cycle < 2**64:
                 raise SignalValueError(f"cycle {cycle} does not fit the image's u64 cycle counter") from exc
             raise diagnose(self.layout, machine, _C2P, exc) from exc
-        self._commit(private, cycle)
+        if commit:
+            self._commit(private, cycle)
+        return private
 
     def publish_bytes(self, half: bytes | bytearray, cycle: int) -> None:
         """Publish a ready-made CNC->PLC half (replay, tests); same protocol as :meth:`publish_from`."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
+from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     Accepted,
     AccessPolicy,
@@ -20,6 +21,7 @@ from hli_server.adapters.host import (
     InvalidRequestError,
     NotFoundError,
     OperatorPort,
+    RecorderPort,
     StepRefusedError,
     Trace,
 )
@@ -41,8 +43,12 @@ __all__ = ["OperatorPanel", "RuntimeHost"]
 class OperatorPanel(OperatorPort):
     """:class:`~hli_server.adapters.host.OperatorPort` on a :class:`Machine`."""
 
-    def __init__(self, machine: Machine, timing: Callable[[], dict[str, Any]]) -> None:
+    def __init__(
+        self, machine: Machine, timing: Callable[[], dict[str, Any]], *, library: RuntimeLibrary | None = None
+    ) -> None:
         self._m = machine
+        self._library = library
+        """The runtime's program library, which takes the files uploaded with a program (N-02)."""
         self._timing = timing
         self.recorder = TrailRecorder(machine)
         """The trails and scene revisions; fed by the runtime host (a cycle listener, an event listener)."""
@@ -95,9 +101,9 @@ class OperatorPanel(OperatorPort):
         self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
     ) -> dict[str, Any]:
         ch = self._channel(channel)
-        library = self._m.programs
+        library = self._library
         uploads: dict[str, str] = {}
-        if isinstance(library, RuntimeLibrary):
+        if library is not None:
             try:
                 uploads = library.check_uploads(files or {})
             except ValueError as exc:
@@ -107,7 +113,7 @@ class OperatorPanel(OperatorPort):
         refused = ch.load_program(text, name)
         if refused is not None:
             raise ConflictError(f"channel {channel}: {refused.message}; reset the channel first")
-        if isinstance(library, RuntimeLibrary):
+        if library is not None:
             library.set_uploads(channel, uploads)
         lines = text.count("\n") + (0 if text.endswith("\n") else 1)
         return {
@@ -318,7 +324,15 @@ class RuntimeHost:
 
     @property
     def operator(self) -> OperatorPort:
-        return self._operator
+        return self._rt.operator  # the panel, with every request noted by the session recorder
+
+    @property
+    def recorder(self) -> RecorderPort:
+        return self._rt.recorder_port
+
+    @property
+    def faults(self) -> CommFaults:
+        return self._rt.comm_faults
 
     @property
     def events(self) -> EventFeed:

@@ -335,3 +335,27 @@ def test_the_ads_door_accepts_the_plc_spellings_of_a_v_e_symbol() -> None:
     table = SymbolTable(build_layout(demo_config(external=True)))
     for spelling in ("gpVECh[0].S16", "gpVECh[0]^.S16", "gpVEGlob.S8", "gpVEGlob^.S8"):
         assert table.find(spelling) is not None, spelling
+
+
+@pytest.mark.req("N-05", "N-02", "B-02")
+def test_a_session_with_v_e_writes_and_uploaded_subprograms_records_and_replays(
+    hli: Harness, tmp_path: Path
+) -> None:
+    """The PLC's V.E. writes are inputs like any PLC->CNC field, the files uploaded with a program are
+    part of the operator's request: a recording of both replays (issue 25's recorder)."""
+    from hli_server.recording.format import read_records
+
+    path = tmp_path / "ve.jsonl.gz"
+    with hli.record(path):
+        hli.image["gpVEGlob^MODE"] = 2
+        hli.step(3)
+        hli.load_program(1, "N10 G01 X5 F6000\nN20 M30\n", files={"UP1.NC": UP1})
+        hli.operator.start(1)
+        hli.image["gpVEGlob^PART_COUNT"] = 7
+        hli.step(400)
+    assert hli.runtime.machine.external.read("MODE", None) == 2
+    records = list(read_records(path))
+    (load,) = [r for r in records if r.get("op") == "load_program"]
+    assert load["args"]["files"] == {"UP1.NC": UP1}
+    report = hli.replay(path)
+    assert report.verdict.name == "PASS"
