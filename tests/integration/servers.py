@@ -12,7 +12,7 @@ import httpx
 
 __all__ = ["DOORS", "door_port", "hli_server_cmd", "http_step", "read_banner", "start_server", "stop_server"]
 
-DOORS = ("HTTP control API", "Modbus TCP", "ADS (AMS/TCP)", "MQTT")
+DOORS = ("HTTP control API", "Modbus TCP", "ADS (AMS/TCP)", "ADS (UDP)", "MQTT")
 """The doors' names as the banner starts their lines."""
 
 

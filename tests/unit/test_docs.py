@@ -39,6 +39,14 @@ def test_the_requirement_list_has_every_id_once_in_order() -> None:
     assert ids == expected
 
 
+def test_ads_doc_describes_every_option() -> None:
+    from hli_server.adapters.ads import AdsOptions
+
+    doc = (ROOT / "docs" / "ads.md").read_text(encoding="utf-8")
+    missing = [name for name in AdsOptions.model_fields if f"`{name}`" not in doc]
+    assert not missing, f"docs/ads.md does not describe the ADS options {missing}"
+
+
 def test_mqtt_doc_lists_every_topic_and_option() -> None:
     from hli_server.adapters.mqtt import MqttOptions
     from hli_server.commands.events import mqtt_markdown
