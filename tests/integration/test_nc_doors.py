@@ -324,10 +324,6 @@ def test_the_ads_door_finds_a_v_e_symbol_by_its_exact_name() -> None:
 
 
 @pytest.mark.req("N-05", "H-04")
-@pytest.mark.xfail(
-    strict=True,
-    reason="needs the ADS door to accept gpVECh[i].name and gpVECh[i]^.name as it does gpCh[i] (ADS branch)",
-)
 def test_the_ads_door_accepts_the_plc_spellings_of_a_v_e_symbol() -> None:
     from hli_server.adapters.ads.symbols import SymbolTable
     from schemas.layout import build_layout
