@@ -51,6 +51,7 @@ __all__ = [
     "NotFoundError",
     "OperatorError",
     "OperatorPort",
+    "Readiness",
     "RecorderPort",
     "StepRefusedError",
     "Trace",
@@ -131,6 +132,24 @@ _DTYPE = {
     SignalType.UDINT: "uint32",
     SignalType.LREAL: "float64",
 }
+
+
+@dataclass(frozen=True, slots=True)
+class Readiness:
+    """Whether the server is ready: the clock runs and every door asked for listens (``GET /api/ready``,
+    the health checks of the image and the compose bench).
+
+    ``doors`` maps each adapter asked for (``http``, ``modbus``, ``ads``, ``mqtt``, ...) to whether it
+    has started: a listening door listens, MQTT has its client task (it never waits for the broker).
+    ``state`` is ``starting``, ``running`` or ``stopping``; ``ready`` is ``running`` with every door up."""
+
+    ready: bool
+    state: str
+    doors: Mapping[str, bool]
+
+    def to_json(self) -> dict[str, Any]:
+        waiting = [name for name, up in self.doors.items() if not up]
+        return {"ready": self.ready, "state": self.state, "doors": dict(self.doors), "waiting_for": waiting}
 
 
 @dataclass(frozen=True, slots=True)
@@ -411,4 +430,8 @@ class AdapterHost(Protocol):
     def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
         """Call ``listener(cycle)`` after every published cycle (keep it short). Returns the
         unsubscribe call."""
+        ...
+
+    def readiness(self) -> Readiness:
+        """Whether every door asked for listens and the clock runs (``GET /api/ready``)."""
         ...

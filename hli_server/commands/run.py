@@ -21,6 +21,8 @@ from __future__ import annotations
 import asyncio
 import ipaddress
 import logging
+import signal
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -92,6 +94,32 @@ def _farewell(runtime: Runtime) -> None:
             f"max {lateness['max']:.0f} µs, {timing['slipped_cycles']} cycles dropped"
         )
     click.echo(text)
+
+
+class _EarlySignals:
+    """SIGINT/SIGTERM from the first line of the command until the runtime's own handlers take over
+    (``Runtime.serve`` installs them before its first step): a signal is noted, never raised in the
+    middle of a start-up step, and the runtime stops between two steps, undoing what it started.
+    :meth:`restore` puts the previous handlers back (the command run in-process, by a test)."""
+
+    def __init__(self) -> None:
+        self.runtime: Runtime | None = None
+        self.signalled = False
+        self._previous: dict[int, Any] = {}
+        if threading.current_thread() is threading.main_thread():  # else Python has no handlers to set
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self._note)
+
+    def _note(self, signum: int, frame: object) -> None:
+        self.signalled = True
+        if self.runtime is not None:
+            self.runtime.stop_requested = True  # a plain flag: the event loop may be mid-step here
+
+    def restore(self) -> None:
+        for sig, handler in self._previous.items():
+            if handler is not None:
+                signal.signal(sig, handler)
+        self._previous.clear()
 
 
 def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
@@ -275,6 +303,8 @@ def run(
     **alias_values: Any,
 ) -> None:
     """Run the machine with its process image and adapters until stopped."""
+    early = _EarlySignals()
+    ctx.call_on_close(early.restore)
     try:
         config = load_machine(config_path)
     except ConfigFileError as exc:
@@ -330,6 +360,10 @@ def run(
     except (AdapterError, ValueError, OSError) as exc:  # OSError: --nc-output-dir cannot be made
         click.echo(f"error: {exc}", err=True)
         ctx.exit(_EXIT_START)
+    early.runtime = runtime
+    if early.signalled:
+        click.echo("hli-server: stopped before it started")
+        return
 
     try:
         loop_factory = precise_event_loop if event_loop == "select" else None
@@ -344,4 +378,7 @@ def run(
         logger.exception("the runtime failed")
         click.echo(f"error: the runtime failed at cycle {runtime.machine.cycle}: {exc!r}", err=True)
         ctx.exit(_EXIT_FAILED)
+    if runtime.stats.started_at is None:
+        click.echo("hli-server: stopped during start-up")
+        return
     _farewell(runtime)

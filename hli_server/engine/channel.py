@@ -134,7 +134,7 @@ class Channel:
         m.emit(
             ProgramStateChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * self.t_a,
+                time_s=m.time,
                 channel=self.number,
                 state=new.label,
                 code=int(new),
@@ -149,7 +149,7 @@ class Channel:
         m.emit(
             ModeChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * self.t_a,
+                time_s=m.time,
                 channel=self.number,
                 mode=new.label,
                 previous=previous.label,
@@ -261,7 +261,7 @@ class Channel:
         m.emit(
             ControlUnitChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * self.t_a,
+                time_s=m.time,
                 channel=self.number,
                 unit=f"gpCh[{self.index}]^bahn_mc_control.{unit}",
                 state=state,
@@ -418,7 +418,7 @@ class Channel:
         m.emit(
             HoldChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * self.t_a,
+                time_s=m.time,
                 channel=self.number,
                 hold_source=int(holds),
                 sources=tuple(holds.labels),

@@ -247,8 +247,9 @@ class Machine:
 
     @property
     def time(self) -> float:
-        """Simulated time [s]."""
-        return self.cycle * self.t_a
+        """Simulated time [s], exact to the µs of the cycle (T_A is whole µs): 0.013, not
+        0.013000000000000001 (only reported, never computed with)."""
+        return self.cycle * self.config.cycle_time_us / 1_000_000
 
     # --- stepping ------------------------------------------------------------------------
     def step(self, cycles: int = 1) -> None:

@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from hli_server.adapters.faults import CommFaults
-from hli_server.adapters.host import AccessPolicy, LoggedEvent, Trace
+from hli_server.adapters.host import AccessPolicy, LoggedEvent, Readiness, Trace
 from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
 from hli_server.engine.machine import Machine
 from hli_server.recording.tap import JournaledOperator, RecordingOptions, SessionRecorderPort, SessionTap
@@ -69,6 +69,10 @@ FAILURE_LOG_INTERVAL_S = 5.0
 
 class RuntimeStateError(RuntimeError):
     """The runtime is not in the state the call needs (not started, already stopped)."""
+
+
+class _StartInterrupted(BaseException):  # like KeyboardInterrupt: not an error, not caught as one
+    """A stop was asked for (a signal) while the runtime started: :meth:`Runtime.serve` stops cleanly."""
 
 
 AdapterSpec = Adapter | str | tuple[str, Mapping[str, Any]]
@@ -168,6 +172,9 @@ class Runtime:
         self._last_failure_log = -FAILURE_LOG_INTERVAL_S
         self.started = False
         self.stopped = False
+        self._serving = False
+        self.stop_requested = False
+        """Set by :meth:`request_stop`, also before :meth:`start` (a signal during start-up)."""
 
     # --- properties -----------------------------------------------------------------------
     @property
@@ -203,6 +210,22 @@ class Runtime:
         for a in self.adapters:
             lines.extend(a.endpoints())
         return lines
+
+    def readiness(self) -> Readiness:
+        """Ready: the clock runs and every adapter asked for has started (``GET /api/ready``). The doors
+        of the doors process count once that process reports them listening."""
+        doors = {_spec_name(spec): False for spec in self._adapter_specs}
+        for adapter in self._started_adapters:
+            inner = getattr(adapter, "doors", None)  # the doors process: the doors it serves
+            for name in inner if isinstance(inner, dict) else (adapter.name,):
+                doors[name] = True
+        if self.stopped or self.stop_requested:
+            state = "stopping"
+        elif self.started and self.stats.started_at is not None:
+            state = "running"
+        else:
+            state = "starting"
+        return Readiness(ready=state == "running" and all(doors.values()), state=state, doors=doors)
 
     # --- events and cycle listeners --------------------------------------------------------
     def events_since(self, since: int = 0, limit: int = 1000) -> tuple[list[LoggedEvent], int]:
@@ -281,11 +304,13 @@ class Runtime:
             self._image.init_from(self.machine.hli, self.machine.cycle, self.machine.external)
             self.session.attach(self._image)
             for spec in self._in_process_specs():
+                self._check_interrupted()
                 adapter = self._make_adapter(spec)
                 self.adapters.append(adapter)
                 await adapter.start(self.host)
                 self._started_adapters.append(adapter)
                 logger.info("adapter %s started: %s", adapter.name, "; ".join(adapter.endpoints()))
+            self._check_interrupted()
         except BaseException:
             await self.stop()
             raise
@@ -405,9 +430,15 @@ class Runtime:
             raise errors[0]
 
     def request_stop(self) -> None:
-        """Ask :meth:`wait_stopped` / :meth:`serve` to shut down (signal handlers, ``--cycles``)."""
+        """Ask :meth:`wait_stopped` / :meth:`serve` to shut down (signal handlers, ``--cycles``). Asked
+        before or while :meth:`serve` starts, it stops the start between two steps, cleanly."""
+        self.stop_requested = True
         if self._stop_event is not None:
             self._stop_event.set()
+
+    def _check_interrupted(self) -> None:
+        if self.stop_requested and self._serving:
+            raise _StartInterrupted("stopped during start-up")
 
     async def wait_stopped(self) -> None:
         """Until :meth:`request_stop` (or a failure of the clock); re-raises the clock's failure."""
@@ -422,17 +453,27 @@ class Runtime:
     ) -> None:
         """Start, run until SIGINT/SIGTERM (or ``stop_after_cycles``), stop cleanly.
 
-        ``ready`` is called once everything listens (the CLI prints its banner there).
+        ``ready`` is called once everything listens (the CLI prints its banner there). The signal
+        handlers are in place before the first step of the start: a signal at any moment of the
+        start-up stops it after the step under way and undoes what was started (nothing is left: no
+        process, no socket, no shared memory), and ``ready`` is not called.
         """
         loop = asyncio.get_running_loop()
         handled: list[signal.Signals] = []
+        if install_signal_handlers:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                with contextlib.suppress(NotImplementedError, RuntimeError):
+                    loop.add_signal_handler(sig, self._on_signal, sig)
+                    handled.append(sig)
+        self._serving = True
         try:
-            await self.start()
-            if install_signal_handlers:
-                for sig in (signal.SIGINT, signal.SIGTERM):
-                    with contextlib.suppress(NotImplementedError, RuntimeError):
-                        loop.add_signal_handler(sig, self._on_signal, sig)
-                        handled.append(sig)
+            if self.stop_requested:
+                return
+            try:
+                await self.start()
+            except _StartInterrupted:
+                logger.info("stopped during start-up")
+                return
             # everything built so far lives as long as the process: keep it out of the cyclic garbage
             # collector's full passes, which otherwise scan it again and again and delay cycles by
             # tens of milliseconds (measured under a flooding client, issue 12). Before the banner: a
@@ -444,9 +485,11 @@ class Runtime:
             await self.wait_stopped()
         finally:
             gc.unfreeze()
-            for sig in handled:
-                loop.remove_signal_handler(sig)
-            await self.stop()
+            try:
+                await self.stop()  # a second signal meanwhile changes nothing: the handlers stay till done
+            finally:
+                for sig in handled:
+                    loop.remove_signal_handler(sig)
 
     def _on_signal(self, sig: int) -> None:
         logger.info("received %s: shutting down", signal.Signals(sig).name)
@@ -594,6 +637,14 @@ class Runtime:
     def __repr__(self) -> str:
         state = "stopped" if self.stopped else "running" if self.started else "new"
         return f"Runtime({self.config.name!r}, {self.clock} clock, cycle {self.machine.cycle}, {state})"
+
+
+def _spec_name(spec: AdapterSpec) -> str:
+    if isinstance(spec, str):
+        return spec
+    if isinstance(spec, tuple):
+        return spec[0]
+    return spec.name
 
 
 def _trace(recorder: SignalRecorder) -> Trace:

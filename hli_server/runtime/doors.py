@@ -22,6 +22,8 @@ import contextlib
 import logging
 import multiprocessing
 import os
+import signal
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict
@@ -37,6 +39,7 @@ from hli_server.adapters.host import (
     ImagePort,
     LoggedEvent,
     OperatorPort,
+    Readiness,
     RecorderPort,
     StepRefusedError,
     Trace,
@@ -123,7 +126,7 @@ class _DoorsOperator:
 
     @property
     def time_s(self) -> float:
-        return self._image.cycle * self._t_a_us * 1e-6
+        return self._image.cycle * self._t_a_us / 1_000_000
 
     @property
     def t_a_us(self) -> int:
@@ -230,6 +233,10 @@ class DoorsHost(AdapterHost):
                 except Exception:
                     logger.exception("cycle listener %r failed at cycle %d", listener, cycle)
 
+    def readiness(self) -> Readiness:
+        """The doors process serves once its doors listen; the server's own readiness is the parent's."""
+        return Readiness(ready=True, state="running", doors={})
+
     async def close(self) -> None:
         if self._watch is not None:
             self._watch.cancel()
@@ -247,8 +254,11 @@ def doors_main(
     conn: Connection,
 ) -> None:
     """The doors process: attach the image, start the adapters, report their ports, serve until the
-    parent says stop, goes away, or closes the image."""
+    parent says stop, goes away, or closes the image, or SIGTERM. SIGINT is ignored (the parent spawns
+    it so, and it stays so): a Ctrl+C reaches the whole process group, and the parent stops the doors."""
     from hli_server.runtime.pacing import precise_event_loop
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s doors %(name)s: %(message)s")
     with asyncio.Runner(loop_factory=precise_event_loop) as runner:
@@ -265,10 +275,14 @@ async def _serve_doors(
     conn: Connection,
 ) -> None:
     parent = os.getppid()
+    loop = asyncio.get_running_loop()
+    terminated = asyncio.Event()
+    with contextlib.suppress(NotImplementedError, RuntimeError):
+        loop.add_signal_handler(signal.SIGTERM, terminated.set)
     try:
         image = AttachedImage(ImageClient.attach(image_name, timeout=5.0))
     except Exception as exc:
-        conn.send(("error", f"the doors process cannot attach the image {image_name!r}: {exc}"))
+        _tell(conn, ("error", f"the doors process cannot attach the image {image_name!r}: {exc}"))
         return
     host = DoorsHost(image, t_a_us, machine_name, bind, policy)
     started: list[Adapter] = []
@@ -277,26 +291,27 @@ async def _serve_doors(
             adapter = create_adapter(name, bind=bind, options=options)
             await adapter.start(host)
             started.append(adapter)
-        conn.send(("ready", [(a.name, getattr(a, "port", None), a.endpoints()) for a in started]))
+        # the parent may have gone while the doors started (stopped during its start-up): then stop too
+        if _tell(conn, ("ready", [(a.name, getattr(a, "port", None), a.endpoints()) for a in started])):
+            # what ends here by count goes back to the server, which owns the faults
+            def report(change: dict[str, Any]) -> None:
+                if change["fault"] == "end":
+                    _tell(conn, ("fault-ended", change))
 
-        # what ends here by count goes back to the server, which owns the faults
-        def report(change: dict[str, Any]) -> None:
-            if change["fault"] == "end":
-                conn.send(("fault-ended", change))
-
-        host.faults.subscribe(report)
-        loop = asyncio.get_running_loop()
-        while True:  # until the parent says stop, goes away, or closes the image
-            if await loop.run_in_executor(None, conn.poll, 0.2):
-                kind, payload = conn.recv()
-                if kind != "faults":
+            host.faults.subscribe(report)
+            while not terminated.is_set():  # until the parent says stop, goes away, or closes the image
+                if await loop.run_in_executor(None, conn.poll, 0.2):
+                    try:
+                        kind, payload = conn.recv()
+                    except (EOFError, OSError):  # the parent went away
+                        break
+                    if kind != "faults":
+                        break
+                    host.faults.load(payload)
+                if os.getppid() != parent or image.closed:
                     break
-                host.faults.load(payload)
-            if os.getppid() != parent or image.closed:
-                break
     except Exception as exc:
-        with contextlib.suppress(Exception):
-            conn.send(("error", f"the doors process failed: {exc}"))
+        _tell(conn, ("error", f"the doors process failed: {exc}"))
         raise
     finally:
         for adapter in reversed(started):
@@ -304,6 +319,15 @@ async def _serve_doors(
                 await adapter.stop()
         await host.close()
         image.close()
+
+
+def _tell(conn: Connection, message: tuple[str, object]) -> bool:
+    """Send ``message`` to the parent; False when the parent has gone (a broken pipe is no error here)."""
+    try:
+        conn.send(message)
+    except (OSError, EOFError):
+        return False
+    return True
 
 
 class DoorsProcess:
@@ -356,7 +380,15 @@ class DoorsProcess:
             name="hli-doors",
             daemon=True,
         )
-        self._process.start()
+        # the child starts with SIGINT ignored (inherited through exec): a Ctrl+C while it imports would
+        # otherwise print its traceback; the parent stops it
+        in_main = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None
+        try:
+            self._process.start()
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGINT, previous)
         child_conn.close()
         loop = asyncio.get_running_loop()
         began = time.monotonic()

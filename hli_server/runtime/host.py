@@ -21,6 +21,7 @@ from hli_server.adapters.host import (
     InvalidRequestError,
     NotFoundError,
     OperatorPort,
+    Readiness,
     RecorderPort,
     StepRefusedError,
     Trace,
@@ -370,6 +371,9 @@ class RuntimeHost:
 
     def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
         return self._rt.on_cycle(listener)
+
+    def readiness(self) -> Readiness:
+        return self._rt.readiness()
 
     def __repr__(self) -> str:
         return f"RuntimeHost({self._rt!r})"

@@ -76,6 +76,27 @@ async def test_load_program_start_step_and_see_positions_change(client: httpx.As
     assert later > x
 
 
+async def test_time_is_the_cycle_exact_to_the_microsecond(client: httpx.AsyncClient) -> None:
+    """Issue 23: ``/api/step`` answered ``"time_s": 0.013000000000000001``; the time of a cycle is
+    cycle x T_A, shown as the decimal it is (T_A is whole µs), in the answers and the events."""
+    r = await client.post("/api/step", json={"cycles": 13})
+    assert r.text.endswith('"time_s":0.013}'), r.text
+    for cycles in (1, 2, 3, 7, 11, 29, 97, 1001):
+        answer = await client.post("/api/step", json={"cycles": cycles})
+        body = answer.json()
+        assert body["time_s"] == round(body["cycle"] / 1000, 6)
+        assert len(repr(body["time_s"]).split(".")[1]) <= 6, body
+    await client.post(
+        "/api/channels/1/program", content="N10 G01 X1 F6000\n", headers={"content-type": "text/plain"}
+    )
+    await client.post("/api/channels/1/start")
+    await step(client, 3)
+    events = (await client.get("/api/events")).json()["events"]
+    assert events
+    for event in events:
+        assert event["time_s"] == round(event["cycle"] / 1000, 6)
+
+
 async def test_program_as_json_and_refused_while_running(client: httpx.AsyncClient) -> None:
     r = await client.post("/api/channels/1/program", json={"text": PROGRAM, "name": "json"})
     assert r.status_code == 200

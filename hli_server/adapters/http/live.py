@@ -212,12 +212,16 @@ class LiveFeed:
         return stream
 
     def hello(self) -> bytes:
+        return b"retry: 2000\n\n" + _sse(b"hello", json_bytes(self.hello_body()))
+
+    def hello_body(self) -> dict[str, Any]:
+        """The ``hello`` message (also what the page carries when it is served)."""
         op = self.host.operator
         policy = self.host.policy
         channels = [
             {"number": n, "axes": op.axis_names(n), "programs": op.programs(n)} for n in op.channel_numbers()
         ]
-        body = {
+        return {
             "machine": op.machine_name,
             "clock": self.host.clock,
             "t_a_us": op.t_a_us,
@@ -227,7 +231,6 @@ class LiveFeed:
             "read_only": policy.read_only,
             "rate_hz": round(1.0 / self.period, 3),
         }
-        return b"retry: 2000\n\n" + _sse(b"hello", json_bytes(body))
 
     def release(self, stream: Stream) -> None:
         """The stream's page went away (or the stream ended)."""

@@ -222,7 +222,7 @@ class ChannelAreaTables:
         m.emit(
             AreasChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * m.t_a,
+                time_s=m.time,
                 channel=self.channel.number,
                 areas=tuple(self.effective.to_json()),
             )

@@ -338,7 +338,7 @@ class MeasuringMoves(AreaRole):
         m.emit(
             Measurement(
                 cycle=m.cycle,
-                time_s=m.cycle * m.t_a,
+                time_s=m.time,
                 channel=ch.number,
                 block=tag.block.label,
                 line=tag.block.line,

@@ -265,7 +265,7 @@ class CollisionMonitor(Monitor):
         machine.emit(
             CollisionStop(
                 cycle=machine.cycle,
-                time_s=machine.cycle * t,
+                time_s=machine.time,
                 channel=machine.channels[pair.master.channel].number,
                 master=pair.master.name,
                 partner=pair.partner.name,

@@ -344,7 +344,7 @@ class DynPosLimits(Monitor):
         m.emit(
             DynPosLimitChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * m.t_a,
+                time_s=m.time,
                 channel=lim.channel.number,
                 axis=lim.axis.name,
                 side="high" if lim.side > 0 else "low",

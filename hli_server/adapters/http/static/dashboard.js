@@ -1,7 +1,9 @@
 // The hli-server dashboard (docs/dashboard.md): one script, no build step, no library.
 //
-// It listens to the server's event stream /api/live (hello once, state at 20 Hz, every typed event,
-// a channel's scene when it changed) and acts through the control API (docs/api.md). The pictures are
+// It draws the machine as it was when the page was served (the data block #initial: hello, state,
+// scenes and the newest events, put in by the server) before the page's load event, then listens to the
+// server's event stream /api/live (hello once, state at 20 Hz, every typed event, a channel's scene
+// when it changed) and acts through the control API (docs/api.md). The pictures are
 // the scenes the server computes with hli_server/scene.py, the same function `check --plot` draws:
 // this script only draws them (SVG). Between two scenes it moves the TCP and draws its newest trail
 // from the 20 Hz states.
@@ -324,7 +326,8 @@ function drawScene(c) {
   const areas = svg("g", { class: "areas" }, c.top);
   for (const area of scene.areas) {
     const band = `${area.height_axis} ${area.min}..${area.max}`;
-    const how = RELATION_TEXT[`${area.relation} ${area.kind}`] || RELATION_TEXT[area.relation] || area.relation;
+    // the scene says what happened (hli_server/scene.py, relation_text); the table is for older scenes
+    const how = area.relation_text || RELATION_TEXT[`${area.relation} ${area.kind}`] || RELATION_TEXT[area.relation] || area.relation;
     const label = `ID${area.id} ${area.kind} ${area.state}, ${band}: ${how}`;
     const li = el("li", { class: `area ${area.kind} ${area.state}`, "data-area": area.id, "data-relation": area.relation, text: label });
     if (!area.in_view) li.append(` (plane ${area.axes.join("/")}, not drawn)`);
@@ -670,7 +673,9 @@ function alarmList(alarms) {
   for (const a of alarms) list.append(alarmItem(a));
 }
 
-function onEvent(ev) {
+// `live`: from the stream (an alarm goes to the history too); else one of the events the page was
+// served with (the history comes from /api/alarms)
+function onEvent(ev, live = true) {
   const list = document.getElementById("events");
   const data = Object.entries(ev.data || {}).filter(([k]) => k !== "alarm").map(([k, v]) => `${k}=${typeof v === "object" ? JSON.stringify(v) : v}`).join(" ");
   const text = ev.kind === "alarm" ? `${ev.data.alarm.severity} ${ev.data.alarm.id}: ${ev.data.alarm.message}` : data;
@@ -679,7 +684,7 @@ function onEvent(ev) {
     el("span", { class: "kind", text: ev.kind }), ev.channel ? ` ch${ev.channel} ` : " ", text));
   while (list.children.length > EVENTS_SHOWN) list.lastChild.remove();
   if (ev.kind === "nc_message") ncMessage(ev);
-  if (ev.kind === "alarm") {
+  if (ev.kind === "alarm" && live) {
     const history = document.getElementById("alarm-history");
     history.prepend(alarmItem(ev.data.alarm));
     while (history.children.length > HISTORY_SHOWN) history.lastChild.remove();
@@ -716,6 +721,19 @@ function connect() {
   source.addEventListener("state", parse(onState));
   source.addEventListener("event", parse(onEvent));
   source.addEventListener("dropped", parse((d) => say(`this page lost ${d.dropped} events (it read too slowly)`, "error")));
+}
+
+// the machine as it was when the page was served: drawn at once, before the stream says anything
+function drawInitial() {
+  const block = document.getElementById("initial");
+  if (!block) return;
+  let data;
+  try { data = JSON.parse(block.textContent); } catch (err) { console.error(err); return; }
+  onHello(data.hello);
+  for (const scene of data.scenes) onScene(scene);
+  onState(data.state);
+  showNumbers(data.state);
+  for (const ev of data.events) onEvent(ev, false);
 }
 
 // --- recording the session (docs/record-replay.md) -----------------------------------------------
@@ -759,5 +777,6 @@ function setUpRecorder() {
 
 setUpToken();
 setUpRecorder();
+drawInitial();
 loadHistory();
 connect();
