@@ -8,7 +8,7 @@
     hli-plc c43-obstacle --transport modbus --host cnc1 --http http://cnc1:8080 --repeat   # a bench's PLC
     hli-plc --list
 
-The demos are :mod:`plc_clients.demos` (the examples of FCT-C43, FCT-C14 and FCT-C3). First the PLC's
+The demos are :mod:`plc_clients.demos` (the examples of FCT-C43, FCT-C14, FCT-C3 and V.E.). First the PLC's
 door is opened (the transport connects, the layout is read): a PLC that cannot reach the CNC changes
 nothing. Then the operator's part: the demo's NC program is loaded into its channel through the
 server's HTTP API (``--http``; the channel is reset first; ``--no-load`` skips it). Then the PLC
@@ -63,8 +63,8 @@ def _on_sigterm(signum: int, frame: object) -> None:
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="hli-plc",
-        description="Run a demo PLC program (the examples of FCT-C43, FCT-C14, FCT-C3) against a running "
-        "hli-server, printing what it does.",
+        description="Run a demo PLC program (the examples of FCT-C43, FCT-C14, FCT-C3 and V.E. variables) "
+        "against a running hli-server, printing what it does.",
         epilog="demos: " + ", ".join(DEMOS),
     )
     ap.add_argument("demo", nargs="?", choices=DEMOS, help="the demo to run")
@@ -189,7 +189,7 @@ def _load_program(http: str, demo: Demo) -> None:
         deadline = time.monotonic() + 5.0
         while True:
             try:
-                _http(base + "/program", {"text": demo.nc_program, "name": demo.name})
+                _http(base + "/program", {"text": demo.nc_program, "name": demo.name, "files": demo.nc_files})
                 break
             except urllib.error.HTTPError as exc:
                 if exc.code != 409 or time.monotonic() > deadline:

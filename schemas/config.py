@@ -537,6 +537,13 @@ class ExternalVariableConfig(_Strict):
     synchronous: bool = Field(
         default=False, description="read by the interpolator (reading it empties the channel first)"
     )
+    access_rights: Literal["READ_WRITE", "READ_ONLY", "WRITE_ONLY"] = Field(
+        default="READ_WRITE",
+        description="what an NC program may do with it (the PLC may always read and write)",
+    )
+    description: str = Field(
+        default="", max_length=200, description="what it means (shown by `hli-server map` and the dashboard)"
+    )
 
 
 class MachineConfig(_Strict):
@@ -551,6 +558,12 @@ class MachineConfig(_Strict):
     )
     external_variables: list[ExternalVariableConfig] = Field(
         default_factory=list, max_length=1024, description="V.E. variables shared by NC programs and the PLC"
+    )
+    program_directories: list[Annotated[str, Field(min_length=1, max_length=4096)]] = Field(
+        default_factory=list,
+        max_length=64,
+        description="where `L name` finds global subprograms and cycles, in order (relative to the machine "
+        "file)",
     )
 
     @model_validator(mode="after")
@@ -625,6 +638,12 @@ class MachineConfig(_Strict):
                     )
                 )
             seen_vars.add(key)
+        if not issues:
+            from schemas.layout import check_external_fits
+
+            too_much = check_external_fits(self)
+            if too_much is not None:
+                issues.append(ParameterIssue(too_much, field="external_variables"))
         by_number = {a.number: a for a in self.axes}
         for ax in self.axes:
             if not ax.coll_check_ax_nr:
@@ -905,3 +924,38 @@ MANUAL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
     (("move_limit_warning", "move_limit_warning", "P-MANU-00014", "0/1", "FCT-C14 6.2", ""),)
 )
 """ISG text-list names of the manual-mode parameters (FCT-C14 6.2)."""
+
+_EXTV = "https://infosys.beckhoff.com/content/1033/tf5200_external_variables/"
+EXTERNAL_VARIABLE_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        ("var[0].name", "name", "P-EXTV-00001", "-", _EXTV + "307199243.html", ""),
+        (
+            "var[0].type",
+            "type",
+            "P-EXTV-00003",
+            "-",
+            _EXTV + "307199243.html",
+            "the kernel's default is UNS32 (a list without var[i].type reads so); REAL64 here",
+        ),
+        ("var[0].array_elements", "dims", "P-EXTV-00007", "-", _EXTV + "307199243.html", ""),
+        (
+            "var[0].scope",
+            "channel",
+            "P-EXTV-00004",
+            "-",
+            _EXTV + "307199243.html",
+            "the kernel's default is CHANNEL (the list's channel); a table names no channel: the global area",
+        ),
+        (
+            "var[0].synchronisation",
+            "synchronous",
+            "P-EXTV-00005",
+            "-",
+            _EXTV + "112461195.html",
+            "the kernel's default is TRUE (a list without the entry reads so); FALSE here",
+        ),
+        ("var[0].access_rights", "access_rights", "P-EXTV-00006", "-", _EXTV + "112462731.html", ""),
+    )
+)
+"""The kernel's list of external variables (``external_variables_list``; ``var[i]`` stands for the
+variable's index): which entry gives which field of :class:`ExternalVariableConfig` (N-05)."""

@@ -343,7 +343,14 @@ class OperatorPort(Protocol):
         """All axes, or those of one channel, in their order."""
         ...
 
-    def load_program(self, channel: int, text: str, name: str = "program") -> dict[str, Any]: ...
+    def load_program(
+        self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
+    ) -> dict[str, Any]:
+        """Load ``text`` as the channel's program; ``files`` (name -> text) are its subprograms and
+        cycles, found by ``L name`` before the program directories (they replace the files of the
+        channel's previous load). InvalidRequestError for a file name that leaves its directory
+        (``..``, absolute), too many or too large files; ConflictError while a program runs."""
+        ...
 
     def select_program(self, channel: int, number: int) -> dict[str, Any]: ...
 
@@ -382,7 +389,7 @@ class OperatorPort(Protocol):
         ...
 
     def snapshot(self) -> dict[str, Any]:
-        """Channels, axes, active alarms: ``GET /api/state``."""
+        """Channels, axes, active alarms, the V.E. variables (``external``): ``GET /api/state``."""
         ...
 
     def alarms(self, history: int = 200) -> dict[str, Any]:

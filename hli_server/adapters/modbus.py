@@ -7,10 +7,16 @@ says (:mod:`schemas.layout`: ``Signal.modbus_table`` / ``modbus_address``):
 table               function codes        signals                                  half
 =================== ===================== ======================================== ===========
 coils               1 read, 5, 15 write   BOOL PLC->CNC (``enable_w``, ``start_w``) PLC->CNC
+                                          and BOOLEAN V.E. variables (1200..1899)
 discrete inputs     2 read                BOOL CNC->PLC (``state_r``, flags)        CNC->PLC
 holding registers   3, 23 read; 6, 16, 23 DINT/UDINT PLC->CNC (``command_w``)       PLC->CNC
+                                          and numeric V.E. variables (1200..1899)
 input registers     4 read                DINT/UDINT/LREAL CNC->PLC                 CNC->PLC
 =================== ===================== ======================================== ===========
+
+The V.E. variables (N-05) are written by the NC as well: a read returns the value last stored by
+either side (hli_server/image/external.py); a write outside the range of the variable's kernel type
+(an SGN16 carried in a DINT) is refused with exception 0x03.
 
 * **Live.** A read of coils or holding registers returns the PLC->CNC half as it is now (what any
   PLC door, shared memory, ADS or Modbus, wrote last); a read of discrete inputs or input registers

@@ -67,6 +67,10 @@ def _banner(runtime: Runtime, event_loop: str, guards: list[DoorGuard]) -> None:
     for adapter in runtime.adapters:
         for line in adapter.endpoints():
             click.echo(f"  {line}")
+    click.echo(f"  NC output directory (#MSG SAVE report files): {runtime.nc_files.directory}")
+    searched = runtime.programs.directories.searched()
+    if searched:
+        click.echo(f"  program directories (L name): {', '.join(searched)}")
     policy = runtime.policy
     if not _is_loopback(runtime.bind) or policy.read_only or policy.read_only_doors or policy.api_token:
         where = "loopback only" if _is_loopback(runtime.bind) else f"bound to {runtime.bind}"
@@ -295,6 +299,21 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     help="the input journal in memory (what makes a recording started later replayable) is dropped "
     "beyond this",
 )
+@click.option(
+    "--program-dir",
+    "program_dirs",
+    multiple=True,
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    help="a directory where `L name` finds global subprograms and cycles; searched before the machine "
+    "file's program_directories (repeatable, in order)",
+)
+@click.option(
+    "--nc-output-dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="where #MSG SAVE writes the programs' report files (never elsewhere); default: a new "
+    "temporary directory, named in the banner",
+)
 @click.pass_context
 def run(
     ctx: click.Context,
@@ -320,6 +339,8 @@ def run(
     record_flush: float,
     record_max_mb: int,
     journal_limit_mb: int,
+    program_dirs: tuple[Path, ...],
+    nc_output_dir: Path | None,
     **alias_values: Any,
 ) -> None:
     """Run the machine with its process image and adapters until stopped."""
@@ -390,8 +411,10 @@ def run(
                 max_bytes=record_max_mb * 1024 * 1024,
                 journal_limit=journal_limit_mb * 1024 * 1024,
             ),
+            program_dirs=program_dirs,
+            nc_output_dir=nc_output_dir,
         )
-    except (AdapterError, ValueError) as exc:
+    except (AdapterError, ValueError, OSError) as exc:  # OSError: --nc-output-dir cannot be made
         click.echo(f"error: {exc}", err=True)
         ctx.exit(_EXIT_START)
     early.runtime = runtime

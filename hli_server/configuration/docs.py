@@ -11,10 +11,12 @@ from pydantic.fields import FieldInfo
 from hli_server.configuration.fields import _range_text
 from hli_server.configuration.tables import _PARAMETERS_OF_MODEL
 from schemas.config import (
+    EXTERNAL_VARIABLE_PARAMETERS,
     AdapterEntry,
     AxisConfig,
     ChannelConfig,
     DriveModel,
+    ExternalVariableConfig,
     MachineConfig,
     ManualConfig,
     ParameterInfo,
@@ -52,9 +54,19 @@ _SECTIONS: tuple[tuple[str, type[BaseModel], frozenset[str]], ...] = (
     ("Programs `[[channels.programs]]` (project's own program table)", ProgramEntry, frozenset()),
     ("Manual mode `[manual]`", ManualConfig, frozenset()),
     ("Adapters `[[adapters]]` (project's own; `hli-server run`)", AdapterEntry, frozenset()),
+    ("V.E. variables `[[external_variables]]` (N-05)", ExternalVariableConfig, frozenset()),
 )
+_LIST_PATHS: dict[type[BaseModel], tuple[ParameterInfo, ...]] = {
+    ExternalVariableConfig: EXTERNAL_VARIABLE_PARAMETERS
+}
+"""Fields that come from a list of their own (not a parameter list of the table's kind)."""
 
 _RANGE_NOTES: dict[tuple[type[BaseModel], str], str] = {
+    (ExternalVariableConfig, "name"): "`[A-Za-z_][A-Za-z0-9_]{0,19}`, unique in its area (any case)",
+    (ExternalVariableConfig, "type"): "BOOLEAN, SGN08, UNS08, SGN16, UNS16, SGN32, UNS32, REAL32, REAL64",
+    (ExternalVariableConfig, "dims"): "at most 4 dimensions of 1..65535; all V.E. elements fit the Modbus "
+    "area 1200..1899",
+    (ExternalVariableConfig, "access_rights"): "READ_WRITE, READ_ONLY, WRITE_ONLY",
     (AxisConfig, "name"): "`[A-Z][A-Z0-9]{0,7}`, unique",
     (AxisConfig, "number"): "1 ≤ value ≤ MAX(UNS32), unique",
     (AxisConfig, "axis_type"): "T or R",
@@ -131,7 +143,8 @@ def parameter_table_markdown() -> str:
     below a section say where and why ours differs (issue 21)."""
     out: list[str] = []
     for title, model, skip in _SECTIONS:
-        paths = {info.field: info for info in _PARAMETERS_OF_MODEL.get(model, ())}
+        known = _PARAMETERS_OF_MODEL.get(model, ()) or _LIST_PATHS.get(model, ())
+        paths = {info.field: info for info in known}
         out += [
             f"### {title}",
             "",
@@ -150,6 +163,8 @@ def parameter_table_markdown() -> str:
                 path = "(none known)"
             else:
                 path = f"`{pinfo.path.replace('[0]', '[i]')}`"
+            if pinfo and name == "channel" and model is ExternalVariableConfig:
+                path += " (CHANNEL: the list's channel; GLOBAL: none)"
             range_text = _RANGE_NOTES.get((model, name)) or _range_text(model, name) or "-"
             if info.annotation is bool:
                 range_text = "0/1"

@@ -275,6 +275,11 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(913000, "Collision pair may only move apart after a collision stop", "project (FCT-C3, C3-02)"),
     # --- project's own: the simulator itself (919xxx) -----------------------------------------
     _e(919000, "Internal error: a cycle failed; the axes were stopped", "project", Reaction.AXIS_STOP),
+    _w(
+        919010,
+        "#MSG SAVE: report file not written (its name leaves the NC output directory, or it is full)",
+        "project (N-07)",
+    ),
 )
 
 ALARMS: dict[int, AlarmDef] = {a.number: a for a in _TABLE}

@@ -103,7 +103,9 @@ class Machine:
         self.programs: ProgramLibrary = MemoryLibrary() if programs is None else programs
         self.external = ExternalVariables(
             [
-                ExternalVarSpec(v.name, ExternalType(v.type), tuple(v.dims), v.channel, v.synchronous)
+                ExternalVarSpec(
+                    v.name, ExternalType(v.type), tuple(v.dims), v.channel, v.synchronous, v.access_rights
+                )
                 for v in config.external_variables
             ]
         )

@@ -50,7 +50,9 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Final
 
+from hli_server.engine.external import ExternalVariables
 from hli_server.engine.hli import MachineHli
+from hli_server.image.external import ExternalSync
 from hli_server.image.projection import Projection, compile_projection, diagnose
 from schemas import image_format as fmt
 from schemas.layout import Direction, Layout, Signal, SignalType, SignalValueError
@@ -175,7 +177,8 @@ class ProcessImage:
         self.layout = layout
         self.plan = plan
         self._projection: Projection = compile_projection(layout)
-        self._p2c_struct = layout.struct(_P2C)
+        self._p2c_struct = _field_struct(list(layout.hli_half(_P2C)))
+        self._external = ExternalSync(layout, plan.p2c_offset) if layout.external_signals else None
         self._c2p_struct = struct.Struct("<Q" + layout.struct_format(_C2P).removeprefix("<"))
         self._c2p_private = bytearray(self._c2p_struct.size)
         self._seq = [0, 0]
@@ -369,19 +372,24 @@ class ProcessImage:
         bytes latched (what the session recorder keeps, ``hli_server/recording``)."""
         off = self.plan.p2c_offset
         data = bytes(self._buf[off : off + self.plan.p2c_size])
-        values = self._p2c_struct.unpack(data)
+        values = self._p2c_struct.unpack_from(data)
         try:
             self._projection.unpack[_P2C](machine, values)
         except (IndexError, AttributeError) as exc:
             raise diagnose(self.layout, machine, _P2C, exc) from exc
+        if self._external is not None:
+            self._external.latch(data, self._buf)
         return data
 
     def publish_from(self, machine: MachineHli, cycle: int, *, commit: bool = True) -> bytearray:
-        """Pack the engine's CNC->PLC fields and publish them as ``cycle`` (seqlock, one memcpy).
+        """Pack the engine's CNC->PLC fields and publish them as ``cycle`` (seqlock, one memcpy); the
+        V.E. elements the NC changed go into their fields (``hli_server/image/external.py``).
 
         Returns the packed buffer (the cycle as u64, then the half; valid until the next call).
         ``commit=False`` packs without publishing: the readers keep the previous publish (a stalled
-        publish, issue 25's communication fault)."""
+        publish, issue 25's communication fault), and the NC's V.E. writes wait for the next publish."""
+        if commit and self._external is not None:
+            self._external.publish(self._buf)
         private = self._c2p_private
         try:
             self._projection.pack[_C2P](machine, self._c2p_struct.pack_into, private, 0, cycle)
@@ -420,8 +428,12 @@ class ProcessImage:
         self._buf[start : start + len(cycle_and_half)] = cycle_and_half
         self._end_publish(b, cycle)
 
-    def init_from(self, machine: MachineHli, cycle: int = 0) -> None:
-        """Start-up: the PLC->CNC half takes the engine's ``_w`` values, the CNC->PLC half is published."""
+    def init_from(
+        self, machine: MachineHli, cycle: int = 0, external: ExternalVariables | None = None
+    ) -> None:
+        """Start-up: the PLC->CNC half takes the engine's ``_w`` values, the CNC->PLC half is published.
+        ``external`` is the engine's store of V.E. variables (``machine.external``), which the image
+        keeps in step with its V.E. fields from now on; needed when the layout has any."""
         p2c = bytearray(self.plan.p2c_size)
         try:
             self._projection.pack[_P2C](machine, self._p2c_struct.pack_into, p2c, 0)
@@ -429,6 +441,13 @@ class ProcessImage:
             raise diagnose(self.layout, machine, _P2C, exc) from exc
         off = self.plan.p2c_offset
         self._buf[off : off + len(p2c)] = p2c
+        if self._external is not None:
+            if external is None:
+                raise ValueError(
+                    f"the image layout has {len(self.layout.external_signals)} V.E. elements: pass the "
+                    "engine's store (init_from(hli, cycle, external=machine.external))"
+                )
+            self._external.init(self._buf, external)
         self.publish_from(machine, cycle)
 
     @property

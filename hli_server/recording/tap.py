@@ -31,7 +31,7 @@ import platform
 import re
 import struct
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
@@ -715,10 +715,14 @@ class JournaledOperator(OperatorPort):
         return result
 
     # --- what is noted ---------------------------------------------------------------------------
-    def load_program(self, channel: int, text: str, name: str = "program") -> dict[str, Any]:
-        args = {"channel": channel, "text": text, "name": name}
+    def load_program(
+        self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
+    ) -> dict[str, Any]:
+        args: dict[str, Any] = {"channel": channel, "text": text, "name": name}
+        if files:  # the subprograms uploaded with it (N-02): the replay uploads them again
+            args["files"] = dict(files)
         result: dict[str, Any] = self._do(
-            "load_program", args, lambda: self.panel.load_program(channel, text, name)
+            "load_program", args, lambda: self.panel.load_program(channel, text, name, files)
         )
         return result
 

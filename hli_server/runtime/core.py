@@ -25,6 +25,7 @@ import asyncio
 import contextlib
 import gc
 import logging
+import os
 import signal
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -38,6 +39,7 @@ from hli_server.recording.tap import JournaledOperator, RecordingOptions, Sessio
 from hli_server.runtime.events import EventLog
 from hli_server.runtime.host import OperatorPanel, RuntimeHost
 from hli_server.runtime.image import ImageFactory, RuntimeImage, shared_memory_image
+from hli_server.runtime.nc_files import NcFileWriter
 from hli_server.runtime.pacing import (
     FREE_SLICE_S,
     PRIORITIES,
@@ -51,7 +53,7 @@ from hli_server.runtime.pacing import (
     run_realtime,
     summarize,
 )
-from hli_server.runtime.programs import read_program_file
+from hli_server.runtime.programs import RuntimeLibrary, read_program_file
 
 if TYPE_CHECKING:
     from types import TracebackType
@@ -120,6 +122,8 @@ class Runtime:
         doors_process: bool = False,
         priority: str = "normal",
         recording: RecordingOptions | None = None,
+        program_dirs: Sequence[str | os.PathLike[str]] = (),
+        nc_output_dir: str | os.PathLike[str] | None = None,
     ) -> None:
         try:
             self.clock = Clock(clock)
@@ -146,11 +150,18 @@ class Runtime:
         self.image_name = image_name
         self.max_catch_up = max_catch_up
         self.stop_after_cycles = stop_after_cycles
+        self.programs = RuntimeLibrary([*program_dirs, *config.program_directories])
+        """Where ``L name`` finds global subprograms: uploads, ``program_dirs``, the machine file's (N-02)."""
         self.session = SessionTap(config, recording)
         """Records the session (issue 25): the input journal always, a recording file on demand."""
-        self.machine = Machine(config, read_program=self.session.wrap_reader(read_program))
+        self.machine = Machine(
+            config, read_program=self.session.wrap_reader(read_program), programs=self.programs
+        )
         self.session.bind(self.machine)
         self.machine.programs = self.session.wrap_library(self.machine.programs)
+        self.nc_files = NcFileWriter(self.machine, nc_output_dir)
+        """Carries out the programs' ``#MSG SAVE`` writes inside its output directory (N-07)."""
+        self.machine.event_listeners.append(self.nc_files)
         self.comm_faults = CommFaults(lambda: self.machine.cycle)
         """Faults in the PLC's communication on demand (issue 25, ``adapters/faults.py``)."""
         self.comm_faults.subscribe(self.session.note_fault)
@@ -162,7 +173,7 @@ class Runtime:
         self._cycle_listeners: list[Callable[[int], None]] = []
         self._services: list[RequestService] = []
         self._recorders: list[SignalRecorder] = []
-        self.panel = OperatorPanel(self.machine, self.timing)
+        self.panel = OperatorPanel(self.machine, self.timing, library=self.programs)
         self.operator = JournaledOperator(self.panel, self.session)
         self.host = RuntimeHost(self, self.panel)
         self._image_factory = image_factory or shared_memory_image
@@ -353,7 +364,7 @@ class Runtime:
             self.priority_granted = raise_priority(self.priority)
         try:
             self._image = self._image_factory(self.config, self.image_name)
-            self._image.init_from(self.machine.hli, self.machine.cycle)
+            self._image.init_from(self.machine.hli, self.machine.cycle, self.machine.external)
             self.session.attach(self._image)
             for spec in self._in_process_specs():
                 self._check_interrupted()
@@ -477,6 +488,7 @@ class Runtime:
             image.close()
         with contextlib.suppress(ValueError):
             self.machine.event_listeners.remove(self.event_log)
+        self.nc_files.close()
         if errors:
             raise errors[0]
 

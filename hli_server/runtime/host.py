@@ -8,7 +8,7 @@ engine rule.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from hli_server.adapters.faults import CommFaults
@@ -31,6 +31,7 @@ from hli_server.engine.axis import Axis
 from hli_server.engine.channel import Channel
 from hli_server.engine.machine import Machine
 from hli_server.runtime.live import TrailRecorder, collision_pairs, live_scene, program_table, scene_key
+from hli_server.runtime.programs import RuntimeLibrary
 from schemas.units import increments_from_mm, mm_from_increments
 from schemas.wire import Mode
 
@@ -43,8 +44,12 @@ __all__ = ["OperatorPanel", "RuntimeHost"]
 class OperatorPanel(OperatorPort):
     """:class:`~hli_server.adapters.host.OperatorPort` on a :class:`Machine`."""
 
-    def __init__(self, machine: Machine, timing: Callable[[], dict[str, Any]]) -> None:
+    def __init__(
+        self, machine: Machine, timing: Callable[[], dict[str, Any]], *, library: RuntimeLibrary | None = None
+    ) -> None:
         self._m = machine
+        self._library = library
+        """The runtime's program library, which takes the files uploaded with a program (N-02)."""
         self._timing = timing
         self.recorder = TrailRecorder(machine)
         """The trails and scene revisions; fed by the runtime host (a cycle listener, an event listener)."""
@@ -93,13 +98,32 @@ class OperatorPanel(OperatorPort):
         return Accepted(channel=ch.number, request=what, cycle=cycle, effective_cycle=cycle + 1)
 
     # --- programs -------------------------------------------------------------------------
-    def load_program(self, channel: int, text: str, name: str = "program") -> dict[str, Any]:
+    def load_program(
+        self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
+    ) -> dict[str, Any]:
         ch = self._channel(channel)
+        library = self._library
+        uploads: dict[str, str] = {}
+        if library is not None:
+            try:
+                uploads = library.check_uploads(files or {})
+            except ValueError as exc:
+                raise InvalidRequestError(f"channel {channel}: {exc}") from None
+        elif files:
+            raise InvalidRequestError("this machine takes no subprograms with a program (no program library)")
         refused = ch.load_program(text, name)
         if refused is not None:
             raise ConflictError(f"channel {channel}: {refused.message}; reset the channel first")
+        if library is not None:
+            library.set_uploads(channel, uploads)
         lines = text.count("\n") + (0 if text.endswith("\n") else 1)
-        return {"channel": channel, "program": name, "lines": lines, "cycle": self._m.cycle}
+        return {
+            "channel": channel,
+            "program": name,
+            "lines": lines,
+            "files": sorted(uploads),
+            "cycle": self._m.cycle,
+        }
 
     def select_program(self, channel: int, number: int) -> dict[str, Any]:
         ch = self._channel(channel)
@@ -227,7 +251,31 @@ class OperatorPanel(OperatorPort):
 
     # --- state ----------------------------------------------------------------------------
     def snapshot(self) -> dict[str, Any]:
-        return self._m.snapshot()
+        snap = self._m.snapshot()
+        snap["external"] = self.external_variables()
+        return snap
+
+    def external_variables(self) -> list[dict[str, Any]]:
+        """The V.E. variables and their values now (N-05): ``name`` (``V.E.MODE``), ``channel`` (None:
+        the global area), ``symbol`` (the image's ST path, ``gpVECh[0]^MODE``; an array's elements add
+        ``[i]``), ``type`` (the kernel's), ``dims``, ``value`` (a list, row-major, for an array)."""
+        m = self._m
+        index_of = {ch.number: i for i, ch in enumerate(m.channels)}
+        out: list[dict[str, Any]] = []
+        for spec in m.external:
+            values = m.external.values(spec)
+            head = "gpVEGlob^" if spec.channel is None else f"gpVECh[{index_of[spec.channel]}]^"
+            out.append(
+                {
+                    "name": spec.path,
+                    "channel": spec.channel,
+                    "symbol": head + spec.name,
+                    "type": spec.type.value,
+                    "dims": list(spec.dims),
+                    "value": list(values) if spec.dims else values[0],
+                }
+            )
+        return out
 
     def alarms(self, history: int = 200) -> dict[str, Any]:
         m = self._m

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Protocol
 from hli_server.adapters.host import ImagePort
 
 if TYPE_CHECKING:
+    from hli_server.engine.external import ExternalVariables
     from hli_server.engine.hli import MachineHli
     from hli_server.image import SignalRecorder
     from schemas.config import MachineConfig
@@ -34,8 +35,9 @@ class RuntimeImage(ImagePort, Protocol):
         (the cycle as u64, then the half)."""
         ...
 
-    def init_from(self, hli: MachineHli, cycle: int) -> None:
-        """Start-up: the PLC->CNC half takes the engine's ``_w`` values; the CNC->PLC half is published."""
+    def init_from(self, hli: MachineHli, cycle: int, external: ExternalVariables | None = None) -> None:
+        """Start-up: the PLC->CNC half takes the engine's ``_w`` values; the CNC->PLC half is published;
+        the V.E. fields take the store's values and are kept in step with it from now on (N-05)."""
         ...
 
     def close(self) -> None:

@@ -43,7 +43,7 @@ import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Coroutine, Iterable, Iterator, Sequence
+from collections.abc import Callable, Coroutine, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar, cast
 
@@ -96,6 +96,13 @@ def _demo_machine() -> MachineConfig:
     from hli_server.configuration import load_machine
 
     return load_machine(None)
+
+
+def _relative_to(path: Path, base: Path | None) -> Path:
+    """``path``, or ``base / path`` for a relative path that exists there (the test file's directory)."""
+    if not path.is_absolute() and base is not None and (base / path).exists():
+        return base / path
+    return path
 
 
 def load_machine_spec(machine: Any, base: Path | None = None) -> MachineConfig:
@@ -270,15 +277,22 @@ class Harness:
         bind: str = "127.0.0.1",
         base: Path | None = None,
         timeout_s: float = 120.0,
+        program_dirs: Iterable[str | os.PathLike[str]] = (),
+        nc_output_dir: str | os.PathLike[str] | None = None,
     ) -> None:
         if image not in ("memory", "shm"):
             raise ValueError(f"image={image!r}: use 'memory' (a buffer of this process) or 'shm' (/dev/shm)")
         self.config = load_machine_spec(machine, base)
+        self._base = base
         self.image_kind = image
         self.image_name = image_name
         self.bind = bind
         self.timeout_s = timeout_s
         self._adapter_specs = [_with_free_port(spec) for spec in adapters]
+        self.program_dirs = [_relative_to(Path(os.fspath(d)), base) for d in program_dirs]
+        """Where ``L name`` finds global subprograms (N-02), before the machine file's directories."""
+        self.nc_output_dir = nc_output_dir
+        """Where ``#MSG SAVE`` writes (N-07); None: a temporary directory (``hli.nc_output_dir``)."""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._runtime: Runtime | None = None
@@ -327,6 +341,8 @@ class Harness:
             image_name=self.image_name,
             adapters=self._adapter_specs,
             image_factory=memory_image if self.image_kind == "memory" else shared_memory_image,
+            program_dirs=self.program_dirs,
+            nc_output_dir=self.nc_output_dir,
         )
         await runtime.start()
         return runtime
@@ -492,6 +508,43 @@ class Harness:
     def comm_faults(self) -> CommFaultsView:
         """Faults in the PLC's communication on demand (docs/record-replay.md)."""
         return CommFaultsView(self)
+
+    # --- programs (N-02, N-07) -----------------------------------------------------------------
+    def load_program(
+        self,
+        channel: int,
+        program: str | os.PathLike[str],
+        *,
+        files: Mapping[str, str | os.PathLike[str]] | Iterable[str | os.PathLike[str]] = (),
+        name: str | None = None,
+    ) -> dict[str, Any]:
+        """Load a program into ``channel`` with the subprograms and cycles it calls.
+
+        ``program`` is NC text, or the path of a program file (a :class:`~pathlib.Path`, relative to
+        the test file's directory for the plugin's ``hli``). ``files`` are its subprograms: paths
+        (found by ``L`` under their file name), or ``{name: text or path}``. They are found before the
+        program directories, as files uploaded with the program (``POST /api/channels/{n}/program``).
+        Raises the operator's errors (a program runs: ConflictError; a name with ``..``:
+        InvalidRequestError)."""
+        if isinstance(program, os.PathLike):
+            path = _relative_to(Path(program), self._base)
+            text, name = path.read_text(encoding="utf-8"), name or path.name
+        else:
+            text, name = program, name or "program"
+        uploads: dict[str, str] = {}
+        items = files.items() if isinstance(files, Mapping) else ((None, f) for f in files)
+        for key, value in items:
+            if isinstance(value, os.PathLike) or key is None:
+                file = _relative_to(Path(os.fspath(value)), self._base)
+                uploads[key or file.name] = file.read_text(encoding="utf-8")
+            else:
+                uploads[key] = value
+        return self.operator.load_program(channel, text, name, uploads)
+
+    @property
+    def nc_files(self) -> Path:
+        """The directory where this server's ``#MSG SAVE`` writes its report files."""
+        return self.runtime.nc_files.directory
 
     # --- doors ------------------------------------------------------------------------------------
     def serve(self, adapter: str, **options: Any) -> Adapter:

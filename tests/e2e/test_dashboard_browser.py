@@ -317,3 +317,36 @@ def test_the_record_button_records_the_session_into_the_recording_directory(
     assert len(files) == 1
     ops = [r["op"] for r in read_records(files[0]) if "op" in r]
     assert ops == ["select_program", "start"]
+
+
+@pytest.mark.req("N-05")
+def test_the_v_e_variables_show_what_the_plc_wrote(server: str, page: Any) -> None:
+    """The demo machine's V.E. variables in their table; a PLC's write (over HTTP, as an image write)
+    shows on the page within a few state messages."""
+    p = page
+    _open(p, server)
+    row = p.locator("#external tr[data-variable='V.E.MODE']")
+    expect(row).to_contain_text("global")
+    expect(row).to_contain_text("SGN32")
+    expect(row).to_contain_text("gpVEGlob^MODE")
+    expect(p.locator("#external tr[data-variable='V.E.PLC_READY']")).to_contain_text("global")
+    answer = p.request.put(f"{server}/api/image/gpVEGlob.MODE", data={"value": 2})
+    assert answer.ok, answer.text()
+    expect(row.locator("td.value")).to_have_text("2")
+    answer = p.request.put(f"{server}/api/image/gpVEGlob.MODE", data={"value": 0})
+    assert answer.ok, answer.text()
+    expect(row.locator("td.value")).to_have_text("0")
+
+
+@pytest.mark.req("N-07")
+@pytest.mark.xfail(strict=True, reason="needs the NC interpreter (nc branch)")
+def test_an_nc_message_shows_on_the_page(server: str, page: Any) -> None:
+    p = page
+    _open(p, server)
+    p.click("#ch1-reset")
+    p.click("#ch1-card details.load summary")
+    p.fill("#ch1-text", '%msg\nN10 #MSG["hello from the NC"]\nN20 M30\n')
+    p.click("#ch1-load")
+    expect(p.locator("#message")).to_contain_text("load program: done")
+    p.click("#ch1-start")
+    expect(p.locator("#nc-messages li").first).to_contain_text("hello from the NC", timeout=5_000)

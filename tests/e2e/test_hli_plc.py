@@ -23,12 +23,13 @@ from plc_clients.cli import main
 pytestmark = pytest.mark.req("H-06")
 
 HLI_PLC = str(Path(sys.executable).parent / "hli-plc")
+NEEDS_INTERPRETER = "needs the NC interpreter (nc branch)"
 
 
 def test_list_names_every_demo(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["--list"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert [line.split()[0] for line in lines] == ["c43-obstacle", "c14-manual", "c3-collision"]
+    assert [line.split()[0] for line in lines] == ["c43-obstacle", "c14-manual", "c3-collision", "ve-mode"]
     assert "FCT-C43" in lines[0]
     assert main([]) == 2  # no demo: the list, and the usage exit code
 
@@ -57,8 +58,14 @@ def test_usage_errors_exit_2_with_what_to_do(capsys: pytest.CaptureFixture[str])
         ),
         ("c14-manual", "modbus", ["work area", "manual mode", "X stopped before the boundary", "suppress"]),
         ("c3-collision", "shm", ["program started", "feedhold", "carriages at rest"]),
+        pytest.param(
+            "ve-mode",
+            "modbus",
+            ["program started with V.E.MODE = 1", "V.E.PLC_READY = TRUE", "part 3 done", "program finished"],
+            marks=[pytest.mark.req("N-05"), pytest.mark.xfail(strict=True, reason=NEEDS_INTERPRETER)],
+        ),
     ],
-    ids=["c43-shm", "c14-modbus", "c3-shm"],
+    ids=["c43-shm", "c14-modbus", "c3-shm", "ve-modbus"],
 )
 def test_hli_plc_runs_a_demo_against_hli_server_run(
     hli_server_process: dict[str, str], demo: str, transport: str, steps: list[str]

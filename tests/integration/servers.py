@@ -50,6 +50,7 @@ def read_banner(proc: subprocess.Popen[str], timeout: float = 20.0) -> dict[str,
             if line.strip().startswith(door + ":"):
                 found[door] = line.strip()
         if "stop with" in line:
+            found["text"] = "".join(lines)
             return found
     stderr = proc.stderr.read() if proc.stderr and proc.poll() is not None else ""
     raise AssertionError(f"no banner from hli-server run: {''.join(lines)} {stderr}")

@@ -316,6 +316,7 @@ async def test_symbol_info_and_upload(runtime: Runtime) -> None:
         assert [(x.name, x.symbol_type) for x in everything] == [
             ("gpCh", f"ARRAY [0..{len(layout.channels) - 1}] OF HLI_CH"),
             ("gpAx", f"ARRAY [0..{len(layout.axes) - 1}] OF HLI_AX"),
+            ("gpVEGlob", "HLI_VEGLOB"),  # the demo machine's global V.E. variables (N-05)
         ]
         cmd_low = await c(c.conn.get_symbol, CMD_LOW)
         cmd = layout.signal(CMD_LOW)

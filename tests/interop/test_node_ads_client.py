@@ -151,7 +151,7 @@ async def test_ads_client_with_its_default_settings_connects_as_to_a_twincat(run
     assert (conn["tcSystemState"]["version"], conn["tcSystemState"]["build"]) == (3, 4024)
     assert conn["plcRuntimeState"]["adsState"] == 5
     assert conn["deviceInfo"]["deviceName"] == "Plc30 App"
-    assert (conn["uploadInfo"]["symbolCount"], conn["symbolVersion"]) == (2, 1)
+    assert (conn["uploadInfo"]["symbolCount"], conn["symbolVersion"]) == (3, 1)  # gpCh, gpAx, gpVEGlob
     read, written, reread, leaf, symbol, unit_type, subscribed, axes, refused = result["results"]
     assert (read["type"], read["size"]) == ("MC_CONTROL_SGN32_UNIT", 13)
     assert list(read["value"]) == ["request_r", "enable_w", "command_w", "state_r"]  # the kernel's order

@@ -149,6 +149,7 @@ def test_symbol_upload_lists_the_top_level_and_every_entry_fits_pyads_read(layou
     assert [(e.name, e.index_group, e.type_name) for e in entries] == [
         ("gpCh", VIEW_GROUP, f"ARRAY [0..{n_ch - 1}] OF HLI_CH"),
         ("gpAx", VIEW_GROUP, f"ARRAY [0..{n_ax - 1}] OF HLI_AX"),
+        ("gpVEGlob", VIEW_GROUP, "HLI_VEGLOB"),  # the demo machine's global V.E. variables (N-05)
     ]
     for s in layout.signals:  # every leaf by name, at its place in the image
         symbol = table.find(s.st_path)
@@ -162,7 +163,7 @@ def test_symbol_upload_lists_the_top_level_and_every_entry_fits_pyads_read(layou
             s.type.value,
         )
     assert max(len(symbol.entry) for symbol in table.all_symbols()) <= MAX_SYMBOL_INFO
-    assert struct.unpack("<II", table.upload_info) == (2, len(table.upload))
+    assert struct.unpack("<II", table.upload_info) == (len(entries), len(table.upload))
 
 
 # ================================================================================================
@@ -410,7 +411,7 @@ def test_upload_infos_data_types_and_symbol_version(image: ProcessImage, layout:
     info64 = answer(device, session, CommandId.READ, ReadRequest(0xF00F, 0, 64).encode())
     assert (len(info24.data), len(info64.data)) == (24, 64)  # ads-client asks 64, older clients 24
     info = UploadInfo2.decode(info64.data)
-    assert info.symbol_count == 2  # gpCh, gpAx
+    assert info.symbol_count == 3  # gpCh, gpAx, gpVEGlob (the demo machine's V.E. variables)
     types = answer(device, session, CommandId.READ, ReadRequest(0xF00E, 0, info.data_type_length).encode())
     names = [t.name for t in decode_data_type_upload(types.data)]
     assert names[:4] == ["BOOL", "DINT", "UDINT", "LREAL"]

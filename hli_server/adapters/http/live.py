@@ -447,6 +447,7 @@ class LiveFeed:
             "axes": axes,
             "pairs": op.collision_pairs(),
             "alarms": snap["alarms"],
+            "external": snap.get("external", []),
             "streams": len(self.streams),
             "dropped": self.dropped,
         }

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, model_validator
 
 __all__ = [
+    "MAX_PROGRAM_FILES",
     "MAX_STEP",
     "MAX_TRACE_SIGNALS",
     "MAX_TRACE_VALUES",
@@ -37,9 +38,19 @@ class _Body(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
+MAX_PROGRAM_FILES = 256
+"""Most subprogram files one program load may bring (``ProgramBody.files``)."""
+
+
 class ProgramBody(_Body):
     text: str = Field(min_length=1, description="the NC program (DIN 66025 blocks, one per line)")
     name: str = Field(default="program", min_length=1, max_length=200, description="shown in the state")
+    files: dict[Annotated[str, Field(min_length=1, max_length=255)], str] = Field(
+        default_factory=dict,
+        max_length=MAX_PROGRAM_FILES,
+        description="its subprograms and cycles, file name -> NC text: `L name` finds them before the "
+        "program directories (a name below a directory, e.g. cycles/drill.nc; no '..', not absolute)",
+    )
 
 
 class SelectBody(_Body):

@@ -37,7 +37,10 @@ const state = {
   pending: null,
   lastAlarms: "",
   lastPairs: "",
+  lastExternal: "",
 };
+const EXTERNAL_ELEMENTS_SHOWN = 32;
+const MESSAGES_SHOWN = 200;
 
 // --- small helpers -----------------------------------------------------------------------------
 function el(tag, attrs = {}, ...children) {
@@ -553,6 +556,40 @@ function showNumbers(s) {
   axisTable(s.axes);
   pairTable(s.pairs);
   alarmList(s.alarms);
+  externalTable(s.external || []);
+}
+
+// the V.E. variables (N-05): one row each, the value as the engine's store holds it
+function externalTable(variables) {
+  const text = JSON.stringify(variables);
+  if (text === state.lastExternal) return;
+  state.lastExternal = text;
+  const body = document.querySelector("#external tbody");
+  body.replaceChildren();
+  if (!variables.length) body.append(el("tr", {}, el("td", { colspan: 5, text: "no V.E. variables configured" })));
+  for (const v of variables) {
+    let value = v.value;
+    if (Array.isArray(value)) {
+      const shown = value.slice(0, EXTERNAL_ELEMENTS_SHOWN).map((x) => String(x)).join(", ");
+      value = `[${shown}${value.length > EXTERNAL_ELEMENTS_SHOWN ? `, … (${value.length})` : ""}]`;
+    }
+    const dims = v.dims.length ? `[${v.dims.join(",")}]` : "";
+    body.append(el("tr", { "data-variable": v.name },
+      el("th", { text: v.name }), el("td", { text: v.channel === null ? "global" : `channel ${v.channel}` }),
+      el("td", { text: `${v.type}${dims}` }), el("td", { class: "value", text: String(value) }),
+      el("td", { text: v.symbol })));
+  }
+}
+
+// #MSG of the NC programs (N-07)
+function ncMessage(ev) {
+  const list = document.getElementById("nc-messages");
+  const where = [ev.channel ? `channel ${ev.channel}` : "", ev.data.program, ev.data.line ? `line ${ev.data.line}` : "", ev.data.block || ""]
+    .filter(Boolean).join(", ");
+  list.prepend(el("li", { class: "nc-message" },
+    el("span", { class: "when", text: `${num(ev.time_s, 3)} s` }), " ",
+    el("span", { class: "text", text: ev.data.text }), where ? ` (${where})` : "", ev.data.save ? " [saved]" : ""));
+  while (list.children.length > MESSAGES_SHOWN) list.lastChild.remove();
 }
 
 function axisTable(axes) {
@@ -650,6 +687,7 @@ function onEvent(ev, live = true) {
     el("span", { class: "when", text: `${num(ev.time_s, 3)} s` }), " ",
     el("span", { class: "kind", text: ev.kind }), ev.channel ? ` ch${ev.channel} ` : " ", text));
   while (list.children.length > EVENTS_SHOWN) list.lastChild.remove();
+  if (ev.kind === "nc_message") ncMessage(ev);
   if (ev.kind === "alarm" && live) {
     const history = document.getElementById("alarm-history");
     history.prepend(alarmItem(ev.data.alarm));
