@@ -52,6 +52,8 @@ from schemas.events import (
     HoldChanged,
     Measurement,
     ModeChanged,
+    NcFileWrite,
+    NcMessage,
     PositionError,
     ProgramStateChanged,
     ReferenceChanged,
@@ -264,6 +266,27 @@ def sample_events() -> list[Event]:
             cycle=22, time_s=0.022, channel=1, block="N40", line=4, position={"X": 1.5}, setpoint={"X": 1.25}
         ),
         ReferenceChanged(cycle=23, time_s=0.023, channel=1, axis="X", state="referenced"),
+        NcMessage(
+            cycle=24,
+            time_s=0.024,
+            channel=1,
+            text="part 7 done",
+            save=True,
+            program="main.nc",
+            line=9,
+            block="N90",
+        ),
+        NcFileWrite(
+            cycle=25,
+            time_s=0.025,
+            channel=1,
+            file="prog_flow.txt",
+            text="part 7 done",
+            mode="line",
+            program="main.nc",
+            line=9,
+            block="N90",
+        ),
     ]
 
 
