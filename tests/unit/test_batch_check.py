@@ -28,6 +28,7 @@ from hli_server.commands.check import BATCH_ENV, CheckResult, batch_in_use, chec
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine
 from hli_server.engine import batch as batch_module
+from hli_server.engine.nc import source as source_module
 from hli_server.engine.alarms import Severity
 from hli_server.engine.areas.geometry import Circle, Group, Polygon, Prism, first_violation
 from hli_server.engine.areas.prefilter import PathBatch, clear_of_areas
@@ -54,13 +55,13 @@ def config() -> MachineConfig:
 def _batch_settings(exact: bool, chunk: int | None = None, small: int | None = None) -> Iterator[None]:
     saved = (
         os.environ.get(BATCH_ENV),
-        batch_module.CHUNK_CHARS,
+        source_module.CHUNK_CHARS,
         batch_module.SMALL_RUN,
         batch_module.SMALL_RUN_PER_AREA,
     )
     os.environ[BATCH_ENV] = "0" if exact else "1"
     if chunk is not None:
-        batch_module.CHUNK_CHARS = chunk
+        source_module.CHUNK_CHARS = chunk
     if small is not None:
         batch_module.SMALL_RUN = small
         batch_module.SMALL_RUN_PER_AREA = 0
@@ -71,7 +72,7 @@ def _batch_settings(exact: bool, chunk: int | None = None, small: int | None = N
             os.environ.pop(BATCH_ENV, None)
         else:
             os.environ[BATCH_ENV] = saved[0]
-        batch_module.CHUNK_CHARS, batch_module.SMALL_RUN, batch_module.SMALL_RUN_PER_AREA = saved[1:]
+        source_module.CHUNK_CHARS, batch_module.SMALL_RUN, batch_module.SMALL_RUN_PER_AREA = saved[1:]
 
 
 def run(
