@@ -149,7 +149,9 @@ class BatchGeometryCheck:
         self.exact_blocks = 0
 
     # --- the program -----------------------------------------------------------------------------
-    def items(self, text: str | TextIO | ProgramText, *, iteration_cap: int | None = None) -> Iterator[list[Item]]:
+    def items(
+        self, text: str | TextIO | ProgramText, *, iteration_cap: int | None = None
+    ) -> Iterator[list[Item]]:
         decoder = self.decoder
         interpreter = self.channel.interpreter
         source = text if isinstance(text, ProgramText) else ProgramText(text, self.channel.program_name)
@@ -160,7 +162,7 @@ class BatchGeometryCheck:
         interpreter.iteration_cap = iteration_cap
         self._chunk = None
         try:
-            while not decoder.finished:
+            while not self._finished():
                 if interpreter.at_main_level:
                     line = interpreter.main_line
                     chunk = self._chunk_at(source, line)
@@ -170,7 +172,7 @@ class BatchGeometryCheck:
                         o = chunk.others[at] if at < len(chunk.others) else chunk.lines
                         if o > i:
                             yield from self._plain_lines(chunk, i, o)
-                            if decoder.finished:
+                            if self._finished():
                                 return
                             interpreter.advance_to(chunk.first_line + o)
                             self.line = chunk.first_line + o
@@ -184,6 +186,9 @@ class BatchGeometryCheck:
                 self.line = interpreter.main_line
         finally:
             interpreter.budget, interpreter.iteration_cap = saved
+
+    def _finished(self) -> bool:
+        return self.decoder.finished
 
     def _chunk_at(self, source: ProgramText, line: int) -> _Chunk | None:
         """The chunk of lines holding ``line`` (None past the end of the text)."""

@@ -19,8 +19,8 @@ from typing import Protocol
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
 from hli_server.engine.decoder import DecodeError, Decoder
-from hli_server.engine.geometry import Point
 from hli_server.engine.external import ExternalVariables
+from hli_server.engine.geometry import Point
 from hli_server.engine.hli import AxisHli, ChannelHli
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.interpreter import Interpreter
@@ -97,7 +97,9 @@ class ChannelHost:
             )
         )
         if save:
-            m.emit(NcFileWrite(cycle=m.cycle, time_s=m.cycle * ch.t_a, channel=ch.number, file=file, text=text))
+            m.emit(
+                NcFileWrite(cycle=m.cycle, time_s=m.cycle * ch.t_a, channel=ch.number, file=file, text=text)
+            )
 
     def warn(self, alarm: int, message: str, line: int, block: str) -> None:
         ch = self._channel
@@ -539,7 +541,7 @@ class Channel:
     def _marker(self, marker: Marker) -> None:
         if marker.block is not None:
             self.current_block = marker.block
-        if marker.kind == MarkerKind.ACTION or marker.kind == MarkerKind.SYNC:
+        if marker.kind in (MarkerKind.ACTION, MarkerKind.SYNC):
             marker.payload()
         elif marker.kind == MarkerKind.END:
             self.warn_missing_program_end(marker)
@@ -560,7 +562,9 @@ class Channel:
         params = err.params
         if block is not None and block.program and "program" not in params:
             params = {**params, "program": block.program}
-        self.machine.raise_alarm(err.alarm, self, err.message, line=line, block=label, params=params, axis=err.axis)
+        self.machine.raise_alarm(
+            err.alarm, self, err.message, line=line, block=label, params=params, axis=err.axis
+        )
 
     def warn_missing_program_end(self, marker: Marker) -> None:
         """Warning 911005 when the program ran off the end of its text without M30 / M02."""

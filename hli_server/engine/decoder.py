@@ -323,13 +323,13 @@ class Decoder:
         acceleration per axis). G132..G339 (ramp times, feedhold): accepted, no effect (the simulator's
         profile has no jerk): docs/nc-language.md."""
         m = self.modal
-        if g == 131 or g == 231:
+        if g in {131, 231}:
             weight = min(max(block.extra.get(f"G{g}", 100.0), 0.0), 100.0) / 100.0
             if g == 131:
                 m.accel_weight_feed = weight
             else:
                 m.accel_weight_rapid = weight
-        elif g == 130 or g == 230:
+        elif g in {130, 230}:
             weights = m.axis_accel_weight_feed if g == 130 else m.axis_accel_weight_rapid
             weights.clear()  # "all axes not programmed are set to 100 %"
             for key, value in block.extra.items():

@@ -204,7 +204,7 @@ class Planner:
         for item in self.queue:
             if isinstance(item, Motion):
                 return item
-            if item.kind != MarkerKind.ACTION and item.kind != MarkerKind.SYNC:
+            if item.kind not in (MarkerKind.ACTION, MarkerKind.SYNC):
                 return None
         return None
 
@@ -248,7 +248,7 @@ class Planner:
             marker = self.queue.popleft()
             assert isinstance(marker, Marker)
             reached.append(marker)
-            if marker.kind != MarkerKind.ACTION and marker.kind != MarkerKind.SYNC:
+            if marker.kind not in (MarkerKind.ACTION, MarkerKind.SYNC):
                 return None, reached
         if not self.queue:
             self.velocity = 0.0

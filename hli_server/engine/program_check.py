@@ -28,7 +28,7 @@ from hli_server.engine.batch import BatchGeometryCheck, unsupported
 from hli_server.engine.channel import Channel
 from hli_server.engine.geometry import ArcSegment, Segment
 from hli_server.engine.machine import Machine
-from hli_server.engine.nc.interpreter import IterationCap
+from hli_server.engine.nc.interpreter import IterationCapError
 from hli_server.engine.nc.source import ProgramText
 from hli_server.engine.planner import Marker, MarkerKind, Motion
 from schemas.events import Event, NcMessage
@@ -314,7 +314,7 @@ class ProgramCheck:
                     self._exact(ch, source, result)
                 finally:
                     interpreter.budget, interpreter.iteration_cap = saved
-        except IterationCap as cap:
+        except IterationCapError as cap:
             result.capped = "iterations"
             result.cap = cap.cap
             self.machine.raise_alarm(
@@ -352,7 +352,7 @@ class ProgramCheck:
     @staticmethod
     def _marker(ch: Channel, item: Marker, result: CheckResult) -> None:
         """A marker of a geometry check: without cycles, the path is at every marker at once."""
-        if item.kind == MarkerKind.ACTION or item.kind == MarkerKind.SYNC:
+        if item.kind in (MarkerKind.ACTION, MarkerKind.SYNC):
             item.payload()
         elif item.kind == MarkerKind.END:
             ch.warn_missing_program_end(item)

@@ -28,7 +28,6 @@ from hli_server.commands.check import BATCH_ENV, CheckResult, batch_in_use, chec
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine
 from hli_server.engine import batch as batch_module
-from hli_server.engine.nc import source as source_module
 from hli_server.engine.alarms import Severity
 from hli_server.engine.areas.geometry import Circle, Group, Polygon, Prism, first_violation
 from hli_server.engine.areas.prefilter import PathBatch, clear_of_areas
@@ -36,6 +35,7 @@ from hli_server.engine.batch import BatchGeometryCheck
 from hli_server.engine.geometry import ArcSegment, LineSegment, Segment
 from hli_server.engine.monitors.base import ChannelHooks, Monitor
 from hli_server.engine.nc import NcError, parse_line
+from hli_server.engine.nc import source as source_module
 from hli_server.engine.nc.plain import EMPTY, PLAIN, PlainTokenizer
 from schemas.config import MachineConfig, ZeroOffset
 

@@ -26,8 +26,8 @@ from typing import Final
 
 __all__ = [
     "BinOp",
-    "ConstantEnv",
     "Const",
+    "ConstantEnv",
     "EvalError",
     "Expr",
     "Func",
@@ -212,12 +212,20 @@ class BinOp(Expr):
     def evaluate(self, env: Env) -> Value:
         op = self.op
         if op == OP_AND:
-            return 1.0 if _truth(self.left.evaluate(env), "AND") and _truth(self.right.evaluate(env), "AND") else 0.0
+            return (
+                1.0
+                if _truth(self.left.evaluate(env), "AND") and _truth(self.right.evaluate(env), "AND")
+                else 0.0
+            )
         if op == OP_OR:
-            return 1.0 if _truth(self.left.evaluate(env), "OR") or _truth(self.right.evaluate(env), "OR") else 0.0
+            return (
+                1.0
+                if _truth(self.left.evaluate(env), "OR") or _truth(self.right.evaluate(env), "OR")
+                else 0.0
+            )
         a = self.left.evaluate(env)
         b = self.right.evaluate(env)
-        if op == OP_EQ or op == OP_NE:
+        if op in (OP_EQ, OP_NE):
             if isinstance(a, str) != isinstance(b, str):
                 raise EvalError(
                     ALARM_TYPE,
@@ -325,12 +333,12 @@ def call_function(name: str, args: list[float]) -> float:
         if x < 0.0:
             raise EvalError(ALARM_DOMAIN, f"SQRT[{format_value(x)}]: square root of a negative number")
         return math.sqrt(x)
-    if name == "EXP" or name == "DEXP":
+    if name in {"EXP", "DEXP"}:
         try:
             return math.exp(x) if name == "EXP" else math.pow(10.0, x)
         except OverflowError:
             raise EvalError(ALARM_DOMAIN, f"{name}[{format_value(x)}] overflows") from None
-    if name == "LN" or name == "LOG":
+    if name in {"LN", "LOG"}:
         if x <= 0.0:
             raise EvalError(ALARM_DOMAIN, f"{name}[{format_value(x)}]: logarithm of a number <= 0")
         return math.log(x) if name == "LN" else math.log10(x)
@@ -343,9 +351,11 @@ def call_function(name: str, args: list[float]) -> float:
     if name == "COT":
         t = math.tan(math.radians(x))
         if t == 0.0:
-            raise EvalError(ALARM_DIVISION, f"COT[{format_value(x)}]: the cotangent of this angle is infinite")
+            raise EvalError(
+                ALARM_DIVISION, f"COT[{format_value(x)}]: the cotangent of this angle is infinite"
+            )
         return 1.0 / t
-    if name == "ASIN" or name == "ACOS":
+    if name in {"ASIN", "ACOS"}:
         if not -1.0 <= x <= 1.0:
             raise EvalError(ALARM_DOMAIN, f"{name}[{format_value(x)}]: the argument must lie within -1 .. 1")
         return math.degrees(math.asin(x) if name == "ASIN" else math.acos(x))
@@ -392,7 +402,10 @@ class Func(Expr):
         values = [as_number(a.evaluate(env), f"{self.name}[..]") for a in self.args]
         result = call_function(self.name, values)
         if math.isnan(result) or math.isinf(result):
-            raise EvalError(ALARM_DOMAIN, f"{self.name}[{', '.join(format_value(v) for v in values)}] is not a finite number")
+            raise EvalError(
+                ALARM_DOMAIN,
+                f"{self.name}[{', '.join(format_value(v) for v in values)}] is not a finite number",
+            )
         return result
 
 

@@ -20,7 +20,7 @@ pages give one (docs/nc-language.md lists them), raised from :meth:`Interpreter.
 Work per cycle is bounded (issue 20, "Bad input"): every statement run or skipped spends one unit of
 the budget that :meth:`Interpreter.refill` sets each cycle; a program that computes without moving
 goes on in the next cycle instead of stalling the clock. A geometry check, which has no cycles, caps
-loop iterations instead (:class:`IterationCap`).
+loop iterations instead (:class:`IterationCapError`).
 """
 
 from __future__ import annotations
@@ -59,7 +59,6 @@ from hli_server.engine.nc.expr import (
 from hli_server.engine.nc.source import ProgramText
 from hli_server.engine.nc.syntax import (
     A_NOT_SIMULATED,
-    AXIS_VALUE_G_CODES,
     C_BREAK,
     C_CASE,
     C_CONTINUE,
@@ -81,9 +80,6 @@ from hli_server.engine.nc.syntax import (
     C_SWITCH,
     C_UNTIL,
     C_WHILE,
-    KNOWN_G,
-    MOTION_G_CODES,
-    VALUE_G_CODES,
     Assign,
     Call,
     Compiler,
@@ -104,7 +100,6 @@ from hli_server.engine.nc.syntax import (
 )
 from hli_server.engine.nc.variables import P_COUNT, Variable, coerce
 from hli_server.engine.programs import ProgramFile
-from schemas.units import DINT_MAX, DISTANCE_LIMIT_MM, POSITION_LIMIT_MM, VELOCITY_LIMIT_MM_PER_MIN
 
 __all__ = [
     "MAX_CALL_DEPTH",
@@ -115,13 +110,13 @@ __all__ = [
     "FlushWait",
     "Host",
     "Interpreter",
-    "IterationCap",
+    "IterationCapError",
     "SyncAction",
 ]
 
-STATEMENTS_PER_CYCLE: Final = 256
+STATEMENTS_PER_CYCLE: Final = 128
 """Statements the interpreter runs or skips in one cycle at most (issue 20): 800,000 blocks without
-motion take 3,125 cycles, not one cycle of 3.9 s; a ``$WHILE`` without motion runs on, cycle by cycle,
+motion take 6,250 cycles, not one cycle of 3.9 s; a ``$WHILE`` without motion runs on, cycle by cycle,
 and a reset still stops it."""
 MAX_CALL_DEPTH: Final = 20
 """Program levels (main program, subroutines, cycles) nested at most; deeper is ID 20360 (a recursion)."""
@@ -168,6 +163,7 @@ A_CONTROL: Final = 914015
 A_STEP: Final = 914021
 A_SUB_END: Final = 914030
 A_MESSAGE: Final = 914031
+A_MAIN_RETURN: Final = 914032
 
 _OPENING: Final = frozenset((C_IF, C_SWITCH, C_WHILE, C_DO, C_REPEAT, C_FOR))
 _CLOSING: Final[dict[str, str]] = {
@@ -216,7 +212,7 @@ class FlushWait(Directive):
     """``#FLUSH WAIT`` (or a synchronous read): decoding waits until the path is at rest here."""
 
 
-class IterationCap(Exception):
+class IterationCapError(Exception):
     """A geometry check ran more loop iterations than its cap (an endless loop, or a cap too low)."""
 
     def __init__(self, cap: int, line: int, place: str) -> None:
@@ -278,16 +274,26 @@ class _Units:
         self._eof = False
         self.main_start = -1
 
-    def statement(self, line: int, program: str) -> Stmt | None:
+    def statement(self, line: int, program: str, keep: bool) -> Stmt | Block | None:
+        """The statement at ``line``, compiled once; ``keep``: the flow may come back (a loop is open,
+        a subroutine is called again), so even a block of constant words is kept. A line of constant
+        words (nearly every line of a CAM program) is its :class:`Block` at once."""
         stmt = self.cache.get(line)
         if stmt is None:
+            if not keep:
+                raw_line = self.text.line(line)
+                if raw_line is not None:
+                    block = self.compiler.plain_block(raw_line, line, program)
+                    if block is not None:
+                        return block
             raw = read_block(self.text, line)
             if raw is None:
                 return None
             stmt = self.compiler.compile(raw, program)
-            if len(self.cache) >= _STATEMENT_CACHE:
-                self.cache.clear()
-            self.cache[line] = stmt
+            if keep or not (isinstance(stmt, (ConstBlock, Empty))):
+                if len(self.cache) >= _STATEMENT_CACHE:
+                    self.cache.clear()
+                self.cache[line] = stmt
         return stmt
 
     def _scan_line(self, line: int) -> bool:
@@ -401,6 +407,8 @@ class _Frame:
         """The line whose synchronous reads were flushed for (re-run after a #FLUSH WAIT)."""
         self.returning = False
         self.program = "" if kind == "main" else name
+        self.keep = kind != "main"
+        """Keep every compiled statement: a subroutine is called again."""
 
 
 # --- the interpreter --------------------------------------------------------------------------------------
@@ -437,7 +445,7 @@ class Interpreter(Env):
         """Statements run or skipped since the program started (for reports)."""
         self.program_name = ""
 
-    # --- program control --------------------------------------------------------------------------------
+    # --- program control -------------------------------------------------------------------------------
     def start(self, text: str | TextIO | ProgramText, name: str = "program") -> None:
         """Start the main program ``text`` (P parameters and V.P. variables start empty)."""
         source = text if isinstance(text, ProgramText) else ProgramText(text, name)
@@ -487,7 +495,7 @@ class Interpreter(Env):
         """The batch geometry check ran the main program's lines up to ``line`` (exclusive) itself."""
         self._frames[0].line = line
 
-    # --- the loop ------------------------------------------------------------------------------------------
+    # --- the loop --------------------------------------------------------------------------------------
     def next(self) -> Block | Directive | None:
         """The next block or directive; None at the end of the main program's text."""
         pending = self._pending
@@ -522,7 +530,14 @@ class Interpreter(Env):
                 if self._ended:
                     return None
                 continue
-            stmt = frame.units.statement(frame.line, frame.program)
+            stmt = frame.units.statement(frame.line, frame.program, frame.keep or bool(frame.open))
+            if isinstance(stmt, Block):
+                frame.line += 1
+                if frame.seek is not None:
+                    continue  # constant words: neither a control statement nor a label
+                if stmt.m_codes:
+                    self._program_flow(frame, stmt)
+                return stmt
             if stmt is None or isinstance(stmt, Header):
                 self._unit_end(frame, stmt)
                 if self._ended:
@@ -538,13 +553,13 @@ class Interpreter(Env):
             if pending:
                 return pending.popleft()
 
-    # --- statements --------------------------------------------------------------------------------------
+    # --- statements ------------------------------------------------------------------------------------
     def _execute(self, frame: _Frame, stmt: Stmt) -> None:
         if isinstance(stmt, ConstBlock):
             block = stmt.block
             self._pending.append(block)
             if block.m_codes:
-                self._program_flow(frame, stmt, block)
+                self._program_flow(frame, block)
             return
         if isinstance(stmt, Empty):
             return
@@ -579,8 +594,13 @@ class Interpreter(Env):
     def _needs_flush(self, frame: _Frame, stmt: Stmt, exprs: list[Expr]) -> bool:
         """Does the statement read a synchronous variable (V.E. declared synchronous, V.A.ACT_POS)?
         Then decoding first waits for the path (``#FLUSH WAIT``), once, and the statement runs again."""
-        if frame.synced == stmt.first:
+        if frame.synced == stmt.first or stmt.sync_reads == 0:
             return False
+        if stmt.sync_reads < 0:
+            stmt.sync_reads = 1 if self._reads_synchronous(exprs) else 0
+        return stmt.sync_reads == 1
+
+    def _reads_synchronous(self, exprs: list[Expr]) -> bool:
         external = self.host.external
         for expr in exprs:
             for ref in expr.references():
@@ -601,18 +621,7 @@ class Interpreter(Env):
         return Block(stmt.first, stmt.number, stmt.text, program=frame.program)
 
     def _words(self, frame: _Frame, stmt: Words) -> None:
-        exprs: list[Expr] = []
-        for item in stmt.items:
-            if isinstance(item, Word):
-                exprs.append(item.value)
-                if item.extra is not None:
-                    exprs.append(item.extra)
-            elif isinstance(item, Assign):
-                exprs.append(item.value)
-                exprs.extend(item.target.indices)
-            elif isinstance(item, Call):
-                exprs.extend(v for _, v in item.params)
-        if self._needs_flush(frame, stmt, exprs):
+        if stmt.sync_reads != 0 and self._needs_flush(frame, stmt, self._word_exprs(stmt)):
             self._flush_wait(frame, stmt)
             return
         words: list[tuple[Word, float, float | None]] = []
@@ -634,59 +643,66 @@ class Interpreter(Env):
         for action in syncs:
             self._pending.append(SyncAction(place, action))
         if block is not None and block.m_codes:
-            self._program_flow(frame, stmt, block)
-            if frame.returning or self._ended:
-                if stmt.call is not None or stmt.goto is not None:
-                    raise stmt.error(A_CONTROL, "a block that ends the program or subroutine calls or jumps")
+            self._program_flow(frame, block)
+            if (frame.returning or self._ended) and (stmt.call is not None or stmt.goto is not None):
+                raise stmt.error(A_CONTROL, "a block that ends the program or subroutine calls or jumps")
         if stmt.call is not None:
             self._call(frame, stmt, stmt.call, place)
         elif stmt.goto is not None:
             self._goto(frame, stmt, stmt.goto)
 
-    def _program_flow(self, frame: _Frame, stmt: Stmt, block: Block) -> None:
+    @staticmethod
+    def _word_exprs(stmt: Words) -> list[Expr]:
+        exprs: list[Expr] = []
+        for item in stmt.items:
+            if isinstance(item, Word):
+                exprs.append(item.value)
+                if item.extra is not None:
+                    exprs.append(item.extra)
+            elif isinstance(item, Assign):
+                exprs.append(item.value)
+                exprs.extend(item.target.indices)
+            elif isinstance(item, Call):
+                exprs.extend(v for _, v in item.params)
+        return exprs
+
+    def _program_flow(self, frame: _Frame, block: Block) -> None:
         """M30/M02 end the program (a subroutine's with a warning), M17/M29 end a subroutine."""
         m = block.m_codes
+        line = block.line
+        place = block.label
         if 30 in m or 2 in m:
             if frame.kind != "main":
                 self.host.warn(
                     A_SUB_END,
                     f"M{30 if 30 in m else 2:02d} in {frame.kind} subroutine {frame.name}: it ends the whole "
                     "program (end a subroutine with M17 or M29)",
-                    stmt.first,
-                    stmt.place,
+                    line,
+                    place,
                 )
-            self._warn_open(stmt)
+            for level in self._frames:
+                self._warn_open(level, line, place)
             self._ended = True
             return
         if 17 in m or 29 in m:
             if frame.kind == "main":
-                raise stmt.error(
-                    A_SUB_END,
+                raise NcError(
+                    A_MAIN_RETURN,
+                    line,
+                    place,
                     f"M{17 if 17 in m else 29} ends a subroutine; the main program ends with M30 or M02",
                 )
-            self._warn_open_frame(frame, stmt)
+            self._warn_open(frame, line, place)
             frame.returning = True
 
-    def _warn_open(self, stmt: Stmt) -> None:
-        for frame in self._frames:
-            self._warn_open_frame(frame, stmt)
+    def _warn_open(self, frame: _Frame, line: int, place: str) -> None:
+        """Warning 20375: control blocks still open where a program level ends."""
 
-    def _warn_open_frame(self, frame: _Frame, stmt: Stmt) -> None:
-        if frame.open:
-            top = frame.open[-1]
-            self.host.warn(
-                A_OPEN_VALID,
-                f"{len(frame.open)} control block(s) still open at the end of {frame.kind} program "
-                f"{frame.name}: ${top.keyword} of line {top.start} has no ${_END_OF.get(top.keyword, top.keyword)}",
-                stmt.first,
-                stmt.place,
-            )
-
-    # --- the block for the decoder ---------------------------------------------------------------------------
+    # --- the block for the decoder ---------------------------------------------------------------------
     def _build(self, frame: _Frame, stmt: Stmt, words: list[tuple[Word, float, float | None]]) -> Block:
         return build_block(stmt.text, stmt.first, stmt.number, words, frame.program)
 
-    # --- variables -------------------------------------------------------------------------------------------
+    # --- variables -------------------------------------------------------------------------------------
     def _indices(self, ref: Ref) -> list[float]:
         return [as_number(i.evaluate(self), f"the index of {ref.text}") for i in ref.indices]
 
@@ -701,7 +717,8 @@ class Interpreter(Env):
         if number != int(number) or not 0 <= number < P_COUNT:
             raise EvalError(
                 A_INDEX,
-                f"{ref.text}: P{format_value(number)} is not a parameter (P0 .. P{P_COUNT - 1}, P-CHAN-00517)",
+                f"{ref.text}: P{format_value(number)} is not a parameter (P0 .. P{P_COUNT - 1}, "
+                "P-CHAN-00517)",
             )
         return int(number)
 
@@ -738,7 +755,7 @@ class Interpreter(Env):
 
     def read(self, ref: Ref) -> Value:
         kind = ref.kind
-        if kind == KIND_P or kind == KIND_PP:
+        if kind in (KIND_P, KIND_PP):
             p = self._p_number(ref)
             if ref.indices:
                 key = (p, tuple(int(i) for i in self._indices(ref)))
@@ -757,11 +774,19 @@ class Interpreter(Env):
         if kind in (KIND_VP, KIND_VL, KIND_VS, KIND_CYC):
             var = self._user_var(ref)
             if var is None:
-                raise EvalError(A_UNDECLARED, f"{ref.text.split('[')[0]} is not declared (declare it in #VAR .. #ENDVAR)")
+                raise EvalError(
+                    A_UNDECLARED, f"{ref.text.split('[')[0]} is not declared (declare it in #VAR .. #ENDVAR)"
+                )
             return var.get(self._indices(ref))
         if kind == KIND_VE:
             try:
-                return float(self.host.external.read(ref.name, self.host.channel_number, [int(i) if i == int(i) else -1 for i in self._indices(ref)]))
+                return float(
+                    self.host.external.read(
+                        ref.name,
+                        self.host.channel_number,
+                        [int(i) if i == int(i) else -1 for i in self._indices(ref)],
+                    )
+                )
             except ExternalVariableError as exc:
                 raise EvalError(A_UNDECLARED, str(exc)) from None
         if kind == KIND_AT_P:
@@ -790,17 +815,22 @@ class Interpreter(Env):
             index = self._indices(ref)[0]
             axis = self.host.axis_name(int(index)) if index == int(index) else None
             if axis is None:
-                raise EvalError(A_INDEX, f"{ref.text}: no axis with index {format_value(index)} in this channel")
+                raise EvalError(
+                    A_INDEX, f"{ref.text}: no axis with index {format_value(index)} in this channel"
+                )
             variable = name
         else:
             variable, _, axis = name.rpartition(".")
             if not variable:
-                raise EvalError(A_UNDECLARED, f"{ref.text}: write V.A.<variable>.<axis> or V.A.<variable>[index]")
+                raise EvalError(
+                    A_UNDECLARED, f"{ref.text}: write V.A.<variable>.<axis> or V.A.<variable>[index]"
+                )
         value = self.host.axis_value(variable, axis)
         if value is None:
             raise EvalError(
                 A_NOT_SIMULATED,
-                f"V.A.{variable}.{axis} is not simulated (V.A.ABS, PROG, ACT_POS, -SWE, +SWE, -SWE_MDS, +SWE_MDS "
+                f"V.A.{variable}.{axis} is not simulated (V.A.ABS, PROG, ACT_POS, -SWE, +SWE, -SWE_MDS, "
+                "+SWE_MDS "
                 "of the channel's axes are): see docs/nc-language.md",
             )
         return value
@@ -816,14 +846,16 @@ class Interpreter(Env):
             )
         value = frame.params.get(index)
         if value is None:
-            raise EvalError(A_UNDECLARED, f"{ref.text} was not given at the cycle's call (test it with EXIST[{ref.text}])")
+            raise EvalError(
+                A_UNDECLARED, f"{ref.text} was not given at the cycle's call (test it with EXIST[{ref.text}])"
+            )
         return value
 
     def exists(self, ref: Ref) -> bool:
         kind = ref.kind
         if kind == KIND_MH:
             return True
-        if kind == KIND_P or kind == KIND_PP:
+        if kind in (KIND_P, KIND_PP):
             try:
                 p = self._p_number(ref)
             except EvalError:
@@ -860,20 +892,23 @@ class Interpreter(Env):
         path gets there) or None."""
         try:
             kind = ref.kind
-            if kind == KIND_P or kind == KIND_PP:
+            if kind in (KIND_P, KIND_PP):
                 p = self._p_number(ref)
                 if ref.indices:
                     key = (p, tuple(int(i) for i in self._indices(ref)))
                     self._param_arrays[key] = coerce(value, "REAL64", 0, ref.text)
                 else:
-                    self._params[p] = value if isinstance(value, str) else coerce(value, "REAL64", 0, ref.text)
+                    self._params[p] = (
+                        value if isinstance(value, str) else coerce(value, "REAL64", 0, ref.text)
+                    )
                 return None
             if kind in (KIND_VP, KIND_VL, KIND_VS, KIND_CYC):
                 var = self._user_var(ref)
                 if var is None:
                     raise EvalError(
                         A_UNDECLARED,
-                        f"{ref.text.split('[')[0]} is not declared: declare it in #VAR .. #ENDVAR before writing it",
+                        f"{ref.text.split('[')[0]} is not declared: declare it in #VAR .. #ENDVAR "
+                        "before writing it",
                     )
                 var.set(self._indices(ref), value)
                 return None
@@ -898,7 +933,9 @@ class Interpreter(Env):
         channel = self.host.channel_number
         spec = external.spec(ref.name, channel)
         if spec is None:
-            raise EvalError(A_UNDECLARED, f"V.E.{ref.name} is not declared in the machine file (external_variables)")
+            raise EvalError(
+                A_UNDECLARED, f"V.E.{ref.name} is not declared in the machine file (external_variables)"
+            )
         number = as_number(value, ref.text)
         index = [int(i) if i == int(i) else -1 for i in self._indices(ref)]
         try:
@@ -916,7 +953,7 @@ class Interpreter(Env):
 
         return write
 
-    # --- #VAR ------------------------------------------------------------------------------------------------
+    # --- #VAR ------------------------------------------------------------------------------------------
     def _declare(self, frame: _Frame, stmt: VarBlock) -> None:
         for declaration in stmt.declarations:
             ref = declaration.ref
@@ -961,7 +998,7 @@ class Interpreter(Env):
             return frame.cycle_vars
         return frame.locals
 
-    # --- # commands --------------------------------------------------------------------------------------------
+    # --- # commands ------------------------------------------------------------------------------------
     def _hash(self, frame: _Frame, stmt: Hash) -> None:
         command = stmt.command
         if command == "FLUSH":
@@ -985,15 +1022,15 @@ class Interpreter(Env):
         host = self.host
         program = frame.program or self.program_name
         line = stmt.first
-        place = stmt.place
+        label = stmt.place
         if "SYN" in stmt.options or "SYN_ACK" in stmt.options:
 
             def emit() -> None:
-                host.message(text, save, file, program, line, place)
+                host.message(text, save, file, program, line, label)
 
             self._pending.append(SyncAction(self._place_block(frame, stmt), emit))
             return
-        host.message(text, save, file, program, line, place)
+        host.message(text, save, file, program, line, label)
 
     def _format(self, stmt: Stmt, values: list[Value]) -> str:
         """The message text: the format string's ``%d``, ``%f``, ``%s``, ... filled in (printf, as the
@@ -1034,7 +1071,9 @@ class Interpreter(Env):
             if conversion not in "diufFeEgGxXos":
                 raise stmt.error(A_MESSAGE, f"#MSG: unknown format {fmt[i : j + 1]!r} (%d, %f, %s, ...)")
             if used >= len(args):
-                raise stmt.error(A_MESSAGE, f"#MSG: the text has more formats than values ({len(args)} given)")
+                raise stmt.error(
+                    A_MESSAGE, f"#MSG: the text has more formats than values ({len(args)} given)"
+                )
             value = args[used]
             used += 1
             if len(spec) > 12:
@@ -1059,7 +1098,7 @@ class Interpreter(Env):
             raise stmt.error(914020, f"#MSG: the message has {len(text)} characters, at most {MAX_MESSAGE}")
         return text
 
-    # --- calls --------------------------------------------------------------------------------------------------
+    # --- calls -----------------------------------------------------------------------------------------
     def _call(self, frame: _Frame, stmt: Stmt, call: Call, place: Block) -> None:
         if len(self._frames) >= MAX_CALL_DEPTH:
             raise stmt.error(
@@ -1086,7 +1125,8 @@ class Interpreter(Env):
                 where = ", ".join(searched) if searched else "no program directory is configured"
                 raise stmt.error(
                     A_NOT_FOUND,
-                    f"{'cycle' if call.cycle else 'global subroutine'} {call.name} not found; searched: {where}",
+                    f"{'cycle' if call.cycle else 'global subroutine'} {call.name} not found; searched: "
+                    f"{where}",
                 )
             units = _Units(ProgramText(found.text, found.name), self.compiler)
             kind = "cycle" if call.cycle else "global"
@@ -1108,7 +1148,9 @@ class Interpreter(Env):
             return
         if frame.seek is not None:
             top = frame.open[-1] if frame.open else None
-            alarm = {"main": A_OPEN_INVALID_MAIN, "local": A_OPEN_INVALID_LOCAL}.get(frame.kind, A_OPEN_INVALID_GLOBAL)
+            alarm = {"main": A_OPEN_INVALID_MAIN, "local": A_OPEN_INVALID_LOCAL}.get(
+                frame.kind, A_OPEN_INVALID_GLOBAL
+            )
             keyword = top.keyword if top is not None else "?"
             raise NcError(
                 alarm,
@@ -1117,23 +1159,19 @@ class Interpreter(Env):
                 f"{len(frame.open)} control block(s) not closed at the end of {frame.kind} program "
                 f"{frame.name}: ${keyword}{f' of line {top.start}' if top else ''} has no "
                 f"${_END_OF.get(keyword, keyword)} (its branch was not run)",
-                {"open": len(frame.open), "keyword": f"${keyword}", "expected": f"${_END_OF.get(keyword, keyword)}"},
+                {
+                    "open": len(frame.open),
+                    "keyword": f"${keyword}",
+                    "expected": f"${_END_OF.get(keyword, keyword)}",
+                },
             )
-        if frame.open:
-            top = frame.open[-1]
-            self.host.warn(
-                A_OPEN_VALID,
-                f"{len(frame.open)} control block(s) still open at the end of {frame.kind} program {frame.name}: "
-                f"${top.keyword} of line {top.start} has no ${_END_OF.get(top.keyword, top.keyword)}",
-                place_line,
-                place,
-            )
+        self._warn_open(frame, place_line, place)
         if frame.kind == "main":
             self._ended = True
             return
         self._return(frame)
 
-    # --- control flow --------------------------------------------------------------------------------------------
+    # --- control flow ----------------------------------------------------------------------------------
     def _truth(self, stmt: Stmt, expr: Expr, what: str) -> bool:
         return self._number(stmt, expr, what) != 0.0
 
@@ -1175,7 +1213,7 @@ class Interpreter(Env):
             if not condition:
                 frame.seek = _Seek(_SEEK_BRANCH, 0, stmt.first)
             return
-        if keyword == C_ELSEIF or keyword == C_ELSE:
+        if keyword in (C_ELSEIF, C_ELSE):
             self._top(frame, stmt, C_IF)
             frame.seek = _Seek(_SEEK_END, 0, stmt.first)
             return
@@ -1189,7 +1227,7 @@ class Interpreter(Env):
             self._push(frame, stmt, entry)
             frame.seek = _Seek(_SEEK_CASE, 0, stmt.first)
             return
-        if keyword == C_CASE or keyword == C_DEFAULT:
+        if keyword in (C_CASE, C_DEFAULT):
             self._top(frame, stmt, C_SWITCH)  # reached by falling through: go on
             return
         if keyword == C_ENDSWITCH:
@@ -1209,10 +1247,10 @@ class Interpreter(Env):
             self._iterate(frame, stmt)
             frame.line = entry.start
             return
-        if keyword == C_DO or keyword == C_REPEAT:
+        if keyword in (C_DO, C_REPEAT):
             self._push(frame, stmt, _Open(keyword, stmt.first, stmt.last + 1))
             return
-        if keyword == C_ENDDO or keyword == C_UNTIL:
+        if keyword in (C_ENDDO, C_UNTIL):
             entry = self._top(frame, stmt, C_DO if keyword == C_ENDDO else C_REPEAT)
             condition = self._truth(stmt, stmt.exprs[0], f"${keyword}")
             if condition == (keyword == C_ENDDO):
@@ -1237,7 +1275,7 @@ class Interpreter(Env):
             else:
                 frame.open.pop()
             return
-        if keyword == C_BREAK or keyword == C_CONTINUE:
+        if keyword in (C_BREAK, C_CONTINUE):
             self._break(frame, stmt)
             return
         if keyword == C_HASH_IF:
@@ -1279,7 +1317,7 @@ class Interpreter(Env):
         self.iterations += 1
         cap = self.iteration_cap
         if cap is not None and self.iterations > cap:
-            raise IterationCap(cap, stmt.first, stmt.place)
+            raise IterationCapError(cap, stmt.first, stmt.place)
 
     def _break(self, frame: _Frame, stmt: Control) -> None:
         """$BREAK leaves the innermost loop or $SWITCH, $CONTINUE goes to the innermost loop's end."""
@@ -1318,15 +1356,20 @@ class Interpreter(Env):
                 A_LABEL,
                 seek.origin,
                 f"line {seek.origin}",
-                f"$GOTO {seek.label}: no jump label {seek.label}{':' if seek.label.startswith('N') else ''} in "
+                f"$GOTO {seek.label}: no jump label "
+                f"{seek.label}{':' if seek.label.startswith('N') else ''} in "
                 f"{frame.kind} program {frame.name}"
-                + (" (a block N.. is a jump target only with ':', N10:)" if seek.label.startswith("N") else ""),
+                + (
+                    " (a block N.. is a jump target only with ':', N10:)"
+                    if seek.label.startswith("N")
+                    else ""
+                ),
             )
         seek.wrapped = True
         seek.pending = []
         frame.line = frame.start
 
-    # --- skipping -------------------------------------------------------------------------------------------------
+    # --- skipping --------------------------------------------------------------------------------------
     def _seek(self, frame: _Frame, stmt: Stmt) -> None:
         """Skip ``stmt`` while looking for where the program goes on (the frame's seek)."""
         seek = frame.seek
@@ -1336,10 +1379,12 @@ class Interpreter(Env):
         if mode == _SEEK_LABEL:
             self._seek_label(frame, seek, stmt)
             return
+        if isinstance(stmt, Refused) and stmt.keyword:
+            raise stmt.failure  # a malformed control statement: the structure cannot be followed
         if not isinstance(stmt, Control):
             return
         keyword = stmt.keyword
-        if mode == _SEEK_HASH or mode == _SEEK_HASH_END:
+        if mode in (_SEEK_HASH, _SEEK_HASH_END):
             if keyword == C_HASH_IF:
                 seek.depth += 1
             elif keyword == C_HASH_ENDIF:
@@ -1393,7 +1438,10 @@ class Interpreter(Env):
                 for expr in stmt.exprs:
                     value = self._evaluate(stmt, expr)
                     if isinstance(value, str) != isinstance(top.value, str):
-                        raise stmt.error(ALARM_TYPE, f"$CASE {format_value(value)}: the $SWITCH value is {format_value(top.value)}")
+                        raise stmt.error(
+                            ALARM_TYPE,
+                            f"$CASE {format_value(value)}: the $SWITCH value is {format_value(top.value)}",
+                        )
                     if value == top.value:
                         frame.seek = None
                         return
@@ -1433,14 +1481,10 @@ class Interpreter(Env):
         """The labelled block is where the program goes on: it runs next (``frame.line`` is on it)."""
         return
 
-    # --- (end of seek) ----------------------------------------------------------------------------------------
+    # --- (end of seek) ---------------------------------------------------------------------------------
 
 
 def _round_half_away(value: float) -> int:
     if not math.isfinite(value):
         return -1
-    return int(math.floor(value + 0.5)) if value >= 0 else -int(math.floor(-value + 0.5))
-
-
-def _unused(_: object) -> None:  # pragma: no cover - keeps imports used by type checkers only
-    del ALARM_TYPE, Header
+    return math.floor(value + 0.5) if value >= 0 else -math.floor(-value + 0.5)

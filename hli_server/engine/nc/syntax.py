@@ -71,7 +71,7 @@ from hli_server.engine.nc.expr import (
     Ref,
     Unary,
 )
-from hli_server.engine.nc.source import LineTooLong, ProgramText
+from hli_server.engine.nc.source import LineTooLongError, ProgramText
 
 __all__ = [
     "Assign",
@@ -207,13 +207,112 @@ _CONDITION_ONLY: Final[dict[str, int]] = {
 
 # --- the # commands -----------------------------------------------------------------------------------
 KERNEL_HASH_COMMANDS: Final = frozenset(
-    """ACS ADD AKIMA ANG AX BACKWARD BCS BLOCKSEARCH CACHE CALL CAX CAXTRACK CHANNEL CHF CHR CLEAR COMMAND
-    CONTOUR CORNER CS CYL DELETE DEL DIST DISTANCE DISABLE DRIVE DYNAMIC ECS EDGE EDM ENABLE ERROR EXPL
-    EXPORT EXTCOMP FACE FF FGROUP FILTER FREE FRC GANTRY GEAR GET HANDWHEEL HSC IDENT INIT JOG KIN LAH
-    LOAD LOCK UNLOCK LIMIT MACHINE MAIN MANUAL MCS MEAS NIBBLE OPTIONAL ORI OTC OVERRIDE PSET PRESET PTP
-    PUNCH PUT RETAIN RND ROTATION RT SAVE SCALE SEGMENTATION SET SIGNAL SINGLE SLOPE SPLINE STOP STROKE
-    SUPPRESS SYNC TANGFEED TIME TIMER TLAX TLC TOOL TRACK TRAFO TRANSFORM TRANSVELMIN TRC TURN VECTOR VIB
-    VOLCOMP WAIT WCS""".split()
+    (
+        "ACS",
+        "ADD",
+        "AKIMA",
+        "ANG",
+        "AX",
+        "BACKWARD",
+        "BCS",
+        "BLOCKSEARCH",
+        "CACHE",
+        "CALL",
+        "CAX",
+        "CAXTRACK",
+        "CHANNEL",
+        "CHF",
+        "CHR",
+        "CLEAR",
+        "COMMAND",
+        "CONTOUR",
+        "CORNER",
+        "CS",
+        "CYL",
+        "DELETE",
+        "DEL",
+        "DIST",
+        "DISTANCE",
+        "DISABLE",
+        "DRIVE",
+        "DYNAMIC",
+        "ECS",
+        "EDGE",
+        "EDM",
+        "ENABLE",
+        "ERROR",
+        "EXPL",
+        "EXPORT",
+        "EXTCOMP",
+        "FACE",
+        "FF",
+        "FGROUP",
+        "FILTER",
+        "FREE",
+        "FRC",
+        "GANTRY",
+        "GEAR",
+        "GET",
+        "HANDWHEEL",
+        "HSC",
+        "IDENT",
+        "INIT",
+        "JOG",
+        "KIN",
+        "LAH",
+        "LOAD",
+        "LOCK",
+        "UNLOCK",
+        "LIMIT",
+        "MACHINE",
+        "MAIN",
+        "MANUAL",
+        "MCS",
+        "MEAS",
+        "NIBBLE",
+        "OPTIONAL",
+        "ORI",
+        "OTC",
+        "OVERRIDE",
+        "PSET",
+        "PRESET",
+        "PTP",
+        "PUNCH",
+        "PUT",
+        "RETAIN",
+        "RND",
+        "ROTATION",
+        "RT",
+        "SAVE",
+        "SCALE",
+        "SEGMENTATION",
+        "SET",
+        "SIGNAL",
+        "SINGLE",
+        "SLOPE",
+        "SPLINE",
+        "STOP",
+        "STROKE",
+        "SUPPRESS",
+        "SYNC",
+        "TANGFEED",
+        "TIME",
+        "TIMER",
+        "TLAX",
+        "TLC",
+        "TOOL",
+        "TRACK",
+        "TRAFO",
+        "TRANSFORM",
+        "TRANSVELMIN",
+        "TRC",
+        "TURN",
+        "VECTOR",
+        "VIB",
+        "VOLCOMP",
+        "WAIT",
+        "WCS",
+    )
 )
 """``#`` commands of the kernel (the programming manual's command overview, as ISG's editor lists them);
 any of them that the simulator does not model is refused by name with alarm 910110, any other ``#``
@@ -258,7 +357,9 @@ _LETTERS: Final = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZ")
 _PROG_DELIMITERS: Final = frozenset(' \t();"[],#$')
 _SKIP_HEAD: Final = re.compile(r"\s*/\s*([0-9]{0,2})")
 _N_LABEL: Final = re.compile(r"\s*N\s*([0-9]{1,9})\s*:", re.ASCII | re.IGNORECASE)
-_STRING_LABEL: Final = re.compile(r"\s*(?:N\s*([0-9]{1,9})\s*)?\[([^\]\[\"]*)\]\s*:?", re.ASCII | re.IGNORECASE)
+_STRING_LABEL: Final = re.compile(
+    r"\s*(?:N\s*([0-9]{1,9})\s*)?\[([^\]\[\"]*)\]\s*:?", re.ASCII | re.IGNORECASE
+)
 _CONTROL_HEAD: Final = re.compile(r"\s*(?:N\s*[0-9]{1,9}\s*)?#\s*CONTROL\b", re.ASCII | re.IGNORECASE)
 _COMMENT_BEGIN: Final = re.compile(r"\s*(?:N\s*[0-9]+\s*)?#\s*COMMENT\s+BEGIN\b", re.ASCII | re.IGNORECASE)
 _COMMENT_END: Final = re.compile(r"\s*(?:N\s*[0-9]+\s*)?#\s*COMMENT\s+END\b", re.ASCII | re.IGNORECASE)
@@ -312,7 +413,9 @@ class RawBlock:
 
     __slots__ = ("code", "first", "last", "text", "var_lines")
 
-    def __init__(self, first: int, last: int, code: str, text: str, var_lines: list[tuple[int, str]] | None) -> None:
+    def __init__(
+        self, first: int, last: int, code: str, text: str, var_lines: list[tuple[int, str]] | None
+    ) -> None:
         self.first = first
         self.last = last
         self.code = code
@@ -332,7 +435,7 @@ def _leading_number(code: str) -> int | None:
 def _line(source: ProgramText, number: int) -> str | None:
     try:
         return source.line(number)
-    except LineTooLong as exc:
+    except LineTooLongError as exc:
         raise _nc_error(
             A_LIMIT, number, None, f"line {number} is longer than {exc.length - 1} characters allowed"
         ) from None
@@ -509,11 +612,15 @@ class ConstBlock(Stmt):
 
 
 class Refused(Stmt):
-    """A block that cannot run: its alarm is raised when the program's flow reaches it."""
+    """A block that cannot run: its alarm is raised when the program's flow reaches it. ``keyword``
+    is the control word it begins with (``$ELSE G1 X1``: ``ELSE``), if any: a control statement's
+    error is raised even while its branch is skipped (the interpreter must know the program's
+    structure)."""
 
     def __init__(self, raw: RawBlock, number: int | None, failure: NcError) -> None:
         super().__init__(raw, number)
         self.failure = failure
+        self.keyword = _control_keyword(raw.code)
 
 
 class Item:
@@ -547,7 +654,9 @@ class Call(Item):
     """``L name`` (global), ``LL name`` (local), ``L CYCLE [NAME=.. @P1=..]`` (``cycle``): the last
     item of its block. ``params`` are the cycle's ``@P`` numbers and values."""
 
-    def __init__(self, text: str, local: bool, name: str, cycle: bool, params: list[tuple[int, Expr]]) -> None:
+    def __init__(
+        self, text: str, local: bool, name: str, cycle: bool, params: list[tuple[int, Expr]]
+    ) -> None:
         super().__init__(text)
         self.local = local
         self.name = name
@@ -651,7 +760,7 @@ class Hash(Stmt):
 
 
 # --- the compiler --------------------------------------------------------------------------------------
-class _Fail(Exception):
+class _CompileError(Exception):
     """A compile error inside the scanner (turned into an NcError with the block's place)."""
 
     def __init__(self, alarm: int, message: str) -> None:
@@ -669,6 +778,7 @@ class Compiler:
         self.main_axes = main_axes
         self._axis_list = ", ".join(sorted(names)) or "none"
         self._words = word_parser._LineParser(names)
+        self._fast = self._words._words
         single = sorted(n for n in names if len(n) == 1 and n not in "GMFNIJKSTDHPLEROQ")
         letters = "NGMFIJKSTDH" + "".join(single)
         lower = letters.lower()
@@ -680,6 +790,17 @@ class Compiler:
         """Axes with a one-letter name written ``X10`` (the batch geometry check's plain lines use the
         same letters)."""
 
+    def plain_block(self, raw: str, line: int, program: str) -> Block | None:
+        """The block of a line of constant words (``N10 G01 X10 F1000``, no comment), or None for any
+        other line or a line the word parser refuses (the compiler then explains it)."""
+        if self._plain(raw) is None or not raw or raw.isspace():
+            return None
+        try:
+            block = self._fast(raw.strip(), raw.translate(_UPPER), 0, _TO_END, line, None, True)
+        except NcError:
+            return None
+        return _with_program(block, program) if program else block
+
     # --- entry --------------------------------------------------------------------------------------
     def compile(self, raw: RawBlock, program: str = "") -> Stmt:
         """The statement of ``raw``; ``program`` names the subroutine it belongs to ("" for the main
@@ -687,6 +808,17 @@ class Compiler:
         code = raw.code
         if not code.strip():
             return Empty(raw, None)
+        if raw.var_lines is None and self._plain(code) is not None:
+            # the fast path of nearly every CAM line: constant words only (the word parser's own)
+            try:
+                block = self._fast(raw.text, code.translate(_UPPER), 0, _TO_END, raw.first, None, True)
+            except NcError as exc:
+                if exc.alarm != A_UNKNOWN_G:
+                    return Refused(raw, _leading_number(code), exc)
+            else:
+                if program:
+                    return ConstBlock(raw, _with_program(block, program))
+                return ConstBlock(raw, block)
         stripped = code.lstrip()
         if stripped.startswith("%"):
             rest = stripped[1:]
@@ -699,42 +831,26 @@ class Compiler:
                 return self._var_block(raw, number)
             stmt = self._compile(raw, code)
             if program and isinstance(stmt, ConstBlock):
-                block = stmt.block
-                stmt.block = Block(
-                    block.line,
-                    block.number,
-                    block.text,
-                    block.g_codes,
-                    block.m_codes,
-                    block.axes,
-                    block.centre,
-                    block.feed,
-                    block.area,
-                    block.two_path,
-                    block.extra,
-                    program,
-                )
+                stmt.block = _with_program(stmt.block, program)
             return stmt
         except NcError as exc:
             return Refused(raw, number, exc)
-        except _Fail as exc:
+        except _CompileError as exc:
             return Refused(raw, number, _nc_error(exc.alarm, raw.first, number, exc.message))
         except RecursionError:
-            return Refused(
-                raw, number, _nc_error(A_LIMIT, raw.first, number, "expression nested too deeply")
-            )
+            return Refused(raw, number, _nc_error(A_LIMIT, raw.first, number, "expression nested too deeply"))
 
     def _compile(self, raw: RawBlock, code: str) -> Stmt:
         skip_level = -1
-        head = _SKIP_HEAD.match(code)
+        head = _SKIP_HEAD.match(code) if "/" in code else None
         if head is not None:
             skip_level = int(head.group(1)) if head.group(1) else 0
             code = code[head.end() :]
         label: str | None = None
-        n_label = _N_LABEL.match(code)
+        n_label = _N_LABEL.match(code) if ":" in code else None
         if n_label is not None:
             label = f"N{int(n_label.group(1))}"
-        else:
+        elif "[" in code:
             s_label = _STRING_LABEL.match(code)
             if s_label is not None and "=" not in code[s_label.start(2) : s_label.end(2)]:
                 after = code[s_label.end() :]
@@ -749,14 +865,28 @@ class Compiler:
 
     def _statement(self, raw: RawBlock, code: str) -> Stmt:
         if self._plain(code) is not None or _CONTROL_HEAD.match(code) or _two_path(code):
-            block = self._words.parse_code(raw.text, code, raw.first)
+            try:
+                block = self._words.parse_code(raw.text, code, raw.first)
+            except NcError as exc:
+                # a G code the word parser does not know may be one the interpreter takes (G130, G131
+                # ...) or refuses by name (G41, issue 24): its own parser decides
+                if exc.alarm != A_UNKNOWN_G or _CONTROL_HEAD.match(code):
+                    raise
+                return self._parsed(raw, code)
             if block is None:
                 return Empty(raw, _leading_number(code))
             return ConstBlock(raw, block)
+        return self._parsed(raw, code)
+
+    def _parsed(self, raw: RawBlock, code: str) -> Stmt:
         stmt = _BlockParser(self, raw, code).parse()
-        if isinstance(stmt, Words) and stmt.items and all(
-            isinstance(i, Word) and i.value.is_constant() and (i.extra is None or i.extra.is_constant())
-            for i in stmt.items
+        if (
+            isinstance(stmt, Words)
+            and stmt.items
+            and all(
+                isinstance(i, Word) and i.value.is_constant() and (i.extra is None or i.extra.is_constant())
+                for i in stmt.items
+            )
         ):
             words: list[tuple[Word, float, float | None]] = []
             for item in stmt.items:
@@ -777,9 +907,44 @@ class Compiler:
             sub = RawBlock(line, line, text, text, None)
             try:
                 declarations.append(_BlockParser(self, sub, text).declaration())
-            except _Fail as exc:
+            except _CompileError as exc:
                 raise _nc_error(exc.alarm, line, _leading_number(text), exc.message) from None
         return VarBlock(raw, number, declarations)
+
+
+_CONTROL_WORD: Final = re.compile(r"\s*(?:/[0-9]*\s*)?(?:N\s*[0-9]+\s*:?\s*)?\$([A-Za-z]+)", re.ASCII)
+_HASH_CONDITION: Final = re.compile(r"\s*#\s*(IF|ELSE|ENDIF)\b", re.ASCII | re.IGNORECASE)
+
+
+def _control_keyword(code: str) -> str:
+    """The control word a block's code begins with (``IF``, ``#ELSE``), or ""."""
+    found = _CONTROL_WORD.match(code)
+    if found is not None:
+        word = found.group(1).upper()
+        return word if word in CONTROL_WORDS and word != C_GOTO else ""
+    found = _HASH_CONDITION.match(code)
+    return "#" + found.group(1).upper() if found is not None else ""
+
+
+_TO_END: Final = 1 << 62
+
+
+def _with_program(block: Block, program: str) -> Block:
+    """``block`` as a block of subroutine ``program``."""
+    return Block(
+        block.line,
+        block.number,
+        block.text,
+        block.g_codes,
+        block.m_codes,
+        block.axes,
+        block.centre,
+        block.feed,
+        block.area,
+        block.two_path,
+        block.extra,
+        program,
+    )
 
 
 def _two_path(code: str) -> bool:
@@ -806,7 +971,11 @@ class _BlockParser:
 
     # --- low level -------------------------------------------------------------------------------------
     def fail(self, alarm: int, message: str) -> NoReturn:
-        raise _Fail(alarm, message)
+        raise _CompileError(alarm, message)
+
+    def failure(self, alarm: int, message: str) -> _CompileError:
+        """The error to raise (for a function whose last statement raises it)."""
+        return _CompileError(alarm, message)
 
     def blanks(self) -> None:
         u = self.u
@@ -909,13 +1078,12 @@ class _BlockParser:
             if isinstance(item, Call):
                 seen_call = item
             items.append(item)
-            if isinstance(item, Goto):
-                if not self.at_end():
-                    self.fail(
-                        A_GOTO_CHAR,
-                        f"{self.word_at(self.pos)!r} after {item.text!r}: the jump is the last action "
-                        "of its block",
-                    )
+            if isinstance(item, Goto) and not self.at_end():
+                self.fail(
+                    A_GOTO_CHAR,
+                    f"{self.word_at(self.pos)!r} after {item.text!r}: the jump is the last action "
+                    "of its block",
+                )
         return items
 
     def item(self) -> Item:
@@ -942,7 +1110,10 @@ class _BlockParser:
         if c == "@":
             return self.at_word(start)
         if c == "[":
-            self.fail(A_UNKNOWN_WORD, f"unexpected {self.word_at(start)!r}: a label [name] stands at the block's start")
+            self.fail(
+                A_UNKNOWN_WORD,
+                f"unexpected {self.word_at(start)!r}: a label [name] stands at the block's start",
+            )
         if c == ")":
             self.fail(A_UNKNOWN_WORD, "')' without '(': comments are written ( ... )")
         if c not in _LETTERS:
@@ -953,16 +1124,16 @@ class _BlockParser:
         if c == "P" and (self.peek(1) in _DIGITS or self.peek(1) in ("P", "[")):
             ref = self.parameter()
             return self.assignment(start, ref)
-        if c == "L" and (self.peek(1) in (" ", "\t") or (self.peek(1) == "L" and self.peek(2) in (" ", "\t"))):
+        if c == "L" and (
+            self.peek(1) in (" ", "\t") or (self.peek(1) == "L" and self.peek(2) in (" ", "\t"))
+        ):
             return self.call(start)
         if c == "L" and self.peek(1) not in _LETTERS and self.peek(1) != "":
             return self.call(start)
         if c == "N":
             word = self.word_at(start)
             if self.number is not None:
-                self.fail(
-                    A_BAD_N, f"second block number {word}: N stands once, at the start of the block"
-                )
+                self.fail(A_BAD_N, f"second block number {word}: N stands once, at the start of the block")
             self.fail(A_BAD_N, f"block number {word} must stand at the start of the block")
         return self.address(start)
 
@@ -1007,7 +1178,7 @@ class _BlockParser:
                 A_UNKNOWN_AXIS,
                 f"unknown axis name {letter} in {word!r} (axes of this channel: {self.c._axis_list})",
             )
-        self.fail(
+        raise self.failure(
             A_UNKNOWN_WORD,
             f"unknown word {word!r}: use N, G, M, H, F, S, T, D, I, J, K, P, V., L, $, # or an axis "
             f"({self.c._axis_list})",
@@ -1035,9 +1206,10 @@ class _BlockParser:
         if letter in "ABCUVWXYZ" or len(full) > 1:
             self.fail(
                 A_UNKNOWN_AXIS,
-                f"unknown axis name {full} in {self.word_at(start)!r} (axes of this channel: {self.c._axis_list})",
+                f"unknown axis name {full} in {self.word_at(start)!r} (axes of this channel: "
+                f"{self.c._axis_list})",
             )
-        self.fail(A_UNKNOWN_WORD, f"unknown word {self.word_at(start)!r}")
+        raise self.failure(A_UNKNOWN_WORD, f"unknown word {self.word_at(start)!r}")
 
     def function_word(self, start: int, letter: str) -> Word:
         """G, M, H: a whole number (``G01``, ``M30``) or an expression (``MP10``), M/H with an optional
@@ -1071,7 +1243,12 @@ class _BlockParser:
         if c in "0123456789.":
             at = self.pos
             number = self.number_literal()
-            if number is not None and (self.pos >= self.n or self.u[self.pos] in " \t" or self.u[self.pos] in _LETTERS or self.u[self.pos] in "#$@"):
+            if number is not None and (
+                self.pos >= self.n
+                or self.u[self.pos] in " \t"
+                or self.u[self.pos] in _LETTERS
+                or self.u[self.pos] in "#$@"
+            ):
                 return Const(number)
             self.pos = at
         return self.expression(stop_at_blank=True)
@@ -1090,8 +1267,12 @@ class _BlockParser:
             self.pos += 2
             return Word(self.word_at(start), letter, letter, self.word_value(start))
         if letter == "S":
-            self.fail(A_NOT_SIMULATED, "@S (the main spindle in a cycle) is not simulated: see docs/nc-language.md")
-        self.fail(A_UNKNOWN_WORD, f"unexpected {self.word_at(start)!r}: @P.., @X, @Y, @Z, @I, @J, @K in cycles")
+            self.fail(
+                A_NOT_SIMULATED, "@S (the main spindle in a cycle) is not simulated: see docs/nc-language.md"
+            )
+        raise self.failure(
+            A_UNKNOWN_WORD, f"unexpected {self.word_at(start)!r}: @P.., @X, @Y, @Z, @I, @J, @K in cycles"
+        )
 
     def assignment(self, start: int, ref: Ref) -> Assign:
         self.blanks()
@@ -1140,7 +1321,9 @@ class _BlockParser:
         if not name:
             self.fail(A_CONTROL_SYNTAX, f"{'LL' if local else 'L'} without a program name")
         if len(name) > MAX_NAME:
-            self.fail(A_LIMIT, f"program name {word_parser._short(name)!r} is longer than {MAX_NAME} characters")
+            self.fail(
+                A_LIMIT, f"program name {word_parser._short(name)!r} is longer than {MAX_NAME} characters"
+            )
         return Call(u[start : self.pos].strip(), local, name, False, [])
 
     def cycle_call(self, start: int, local: bool) -> Call:
@@ -1164,7 +1347,7 @@ class _BlockParser:
                 if self.peek() == '"':
                     close = self.code.find('"', begin + 1)
                     if close < 0:
-                        self.fail(A_CONTROL_SYNTAX, "L CYCLE: NAME=\" quote not closed")
+                        self.fail(A_CONTROL_SYNTAX, 'L CYCLE: NAME=" quote not closed')
                     name = self.code[begin + 1 : close]
                     self.pos = close + 1
                 else:
@@ -1197,7 +1380,9 @@ class _BlockParser:
         if not name:
             self.fail(A_CONTROL_SYNTAX, "L CYCLE [..]: NAME=<cycle> missing")
         if len(name) > MAX_NAME:
-            self.fail(A_LIMIT, f"cycle name {word_parser._short(name)!r} is longer than {MAX_NAME} characters")
+            self.fail(
+                A_LIMIT, f"cycle name {word_parser._short(name)!r} is longer than {MAX_NAME} characters"
+            )
         return Call(self.u[start : self.pos].strip(), local, name, True, params)
 
     def goto(self, start: int) -> Goto:
@@ -1216,7 +1401,7 @@ class _BlockParser:
             number = self.word_value(start)
             return Goto(self.u[start : self.pos], None, number)
         got = repr(c) if c else "nothing"
-        self.fail(A_GOTO_CHAR, f"$GOTO followed by {got}: write $GOTO N<number> or $GOTO [label]")
+        raise self.failure(A_GOTO_CHAR, f"$GOTO followed by {got}: write $GOTO N<number> or $GOTO [label]")
 
     # --- control statements --------------------------------------------------------------------------------
     def control(self) -> Stmt:
@@ -1269,7 +1454,8 @@ class _BlockParser:
                 alarm = _CONDITION_ONLY.get(keyword, A_CONTROL_SYNTAX)
                 self.fail(
                     alarm,
-                    f"{self.word_at(self.pos)!r} after ${keyword}'s {'value' if keyword == C_CASE else 'condition'}: "
+                    f"{self.word_at(self.pos)!r} after ${keyword}'s "
+                    f"{'value' if keyword == C_CASE else 'condition'}: "
                     f"only the {'value' if keyword == C_CASE else 'condition'} may follow ${keyword}; "
                     "move the rest to the next block",
                 )
@@ -1341,9 +1527,16 @@ class _BlockParser:
         if name == "ENDVAR":
             self.fail(A_DECLARATION, "#ENDVAR without #VAR")
         if name == "VAR":
-            self.fail(A_DECLARATION, "#VAR must stand alone on its line; the declarations follow on the next lines")
+            self.fail(
+                A_DECLARATION, "#VAR must stand alone on its line; the declarations follow on the next lines"
+            )
         if name == "COMMENT":
-            self.fail(A_COMMENT_OPEN, "#COMMENT END without #COMMENT BEGIN" if self.keyword("END") else "#COMMENT: BEGIN or END expected")
+            self.fail(
+                A_COMMENT_OPEN,
+                "#COMMENT END without #COMMENT BEGIN"
+                if self.keyword("END")
+                else "#COMMENT: BEGIN or END expected",
+            )
         if name in MOTION_FUNCTIONS:
             self.fail(
                 A_NOT_SIMULATED,
@@ -1355,7 +1548,7 @@ class _BlockParser:
                 A_NOT_SIMULATED,
                 f"#{name} is a command of the kernel this simulator does not model: see docs/nc-language.md",
             )
-        self.fail(
+        raise self.failure(
             A_UNKNOWN_HASH,
             f"unknown # command #{word_parser._short(name)}; the commands simulated here: #CONTROL AREA, "
             "#VAR/#ENDVAR, #MSG, #FILE NAME, #FLUSH, #IF/#ELSE/#ENDIF, #COMMENT BEGIN/END "
@@ -1365,7 +1558,19 @@ class _BlockParser:
     def message(self) -> Stmt:
         """``#MSG [SAVE] [SYN|SYN_ACK|ACK] [receiver] ["format", args]`` (207145355, 207171211)."""
         options: list[str] = []
-        words = ("SAVE", "EXCLUSIVE", "INFO", "SYN_ACK", "SYN", "ACK", "ISG_DIAG_BED", "DIAG", "HMI", "PLC", "EVENT_LOGGER")
+        words = (
+            "SAVE",
+            "EXCLUSIVE",
+            "INFO",
+            "SYN_ACK",
+            "SYN",
+            "ACK",
+            "ISG_DIAG_BED",
+            "DIAG",
+            "HMI",
+            "PLC",
+            "EVENT_LOGGER",
+        )
         progress = True
         while progress:
             progress = False
@@ -1471,14 +1676,19 @@ class _BlockParser:
                 self.fail(A_DECLARATION, f"{self.word_at(start)}: a parameter is P<number>")
             ref = Ref(KIND_P, "", [], Const(number), 1, f"P{int(number)}")
         else:
-            self.fail(A_DECLARATION, f"unexpected {self.word_at(start)!r} in #VAR: declare V.P.NAME, V.L.NAME, V.S.NAME or P1")
+            self.fail(
+                A_DECLARATION,
+                f"unexpected {self.word_at(start)!r} in #VAR: declare V.P.NAME, V.L.NAME, V.S.NAME or P1",
+            )
         while self.peek() == "[":
             self.pos += 1
             self.blanks()
             size = self.number_literal()
             self.blanks()
             if size is None or size != int(size) or not 1 <= size <= 1_000_000 or self.peek() != "]":
-                self.fail(A_DECLARATION, f"{ref.text}: an array dimension is a whole number 1..1000000 in [ ]")
+                self.fail(
+                    A_DECLARATION, f"{ref.text}: an array dimension is a whole number 1..1000000 in [ ]"
+                )
             self.pos += 1
             dims.append(int(size))
             if len(dims) > 4:
@@ -1492,10 +1702,22 @@ class _BlockParser:
             type_name = self.name()
             if type_name == "REAL":
                 type_name = "REAL64"
-            if type_name not in ("BOOLEAN", "SGN08", "UNS08", "SGN16", "UNS16", "SGN32", "UNS32", "REAL32", "REAL64", "STRING"):
+            if type_name not in (
+                "BOOLEAN",
+                "SGN08",
+                "UNS08",
+                "SGN16",
+                "UNS16",
+                "SGN32",
+                "UNS32",
+                "REAL32",
+                "REAL64",
+                "STRING",
+            ):
                 self.fail(
                     A_DECLARATION,
-                    f"{ref.text}: unknown type {word_parser._short(type_name)!r} (BOOLEAN, SGN08, UNS08, SGN16, "
+                    f"{ref.text}: unknown type {word_parser._short(type_name)!r} (BOOLEAN, SGN08, "
+                    "UNS08, SGN16, "
                     "UNS16, SGN32, UNS32, REAL32, REAL64, STRING[n])",
                 )
             if type_name == "STRING":
@@ -1527,7 +1749,9 @@ class _BlockParser:
             else:
                 init.append(self.expression(stop_at_blank=False))
         if not self.at_end():
-            self.fail(A_DECLARATION, f"unexpected {self.word_at(self.pos)!r} in the declaration of {ref.text}")
+            self.fail(
+                A_DECLARATION, f"unexpected {self.word_at(self.pos)!r} in the declaration of {ref.text}"
+            )
         return Declaration(self.raw.first, ref, dims, type_name, string_size, init)
 
     # --- expressions --------------------------------------------------------------------------------------
@@ -1644,7 +1868,7 @@ class _BlockParser:
         while True:
             self.skip()
             c = self.peek()
-            if c == "+" or c == "-":
+            if c in {"+", "-"}:
                 self.pos += 1
                 self.count()
                 left = BinOp(OP_ADD if c == "+" else OP_SUB, left, self.term())
@@ -1672,7 +1896,7 @@ class _BlockParser:
     def unary(self) -> Expr:
         self.skip()
         c = self.peek()
-        if c == "-" or c == "+":
+        if c in {"-", "+"}:
             self.pos += 1
             self.count()
             self.depth_guard()
@@ -1714,13 +1938,15 @@ class _BlockParser:
         if c == '"':
             close = self.code.find('"', self.pos + 1)
             if close < 0:
-                self.fail(ALARM_EXPRESSION, f"string not closed: {self.word_at(self.pos)!r} has no closing '\"'")
+                self.fail(
+                    ALARM_EXPRESSION, f"string not closed: {self.word_at(self.pos)!r} has no closing '\"'"
+                )
             text = self.code[self.pos + 1 : close]
             if len(text) > MAX_STRING:
                 self.fail(A_LIMIT, f"a string has at most {MAX_STRING} characters ({len(text)} given)")
             self.pos = close + 1
             return Const(text)
-        if c == "@" or c == "P" and (self.peek(1) in _DIGITS or self.peek(1) in ("P", "[")):
+        if c == "@" or (c == "P" and (self.peek(1) in _DIGITS or self.peek(1) in ("P", "["))):
             return self.primary_ref()
         if c == "V" and self.peek(1) == "." and self.peek(2) in _LETTERS:
             return self.variable()
@@ -1740,7 +1966,7 @@ class _BlockParser:
             )
         if c == "]":
             self.fail(ALARM_EXPRESSION, "']' without '['")
-        self.fail(ALARM_EXPRESSION, f"unexpected {self.word_at(self.pos)!r} where a value belongs")
+        raise self.failure(ALARM_EXPRESSION, f"unexpected {self.word_at(self.pos)!r} where a value belongs")
 
     def bracket(self) -> Expr:
         self.pos += 1
@@ -1803,12 +2029,15 @@ class _BlockParser:
             while self.pos < self.n and self.u[self.pos] in _DIGITS:
                 self.pos += 1
             ref = Ref(KIND_MH, c + self.u[begin : self.pos], [], text=c + self.u[begin : self.pos])
-        elif c == "P" or c == "@":
+        elif c in {"P", "@"}:
             ref = self.primary_ref()
         elif c == "V" and self.peek(1) == ".":
             ref = self.variable()
         else:
-            self.fail(ALARM_EXPRESSION, f"EXIST[..] takes a variable, a parameter or M/H function, got {self.word_at(self.pos)!r}")
+            self.fail(
+                ALARM_EXPRESSION,
+                f"EXIST[..] takes a variable, a parameter or M/H function, got {self.word_at(self.pos)!r}",
+            )
         self.expect("]", "after EXIST's variable")
         self.depth -= 1
         return Exist(ref)
@@ -1817,7 +2046,10 @@ class _BlockParser:
     def var_name(self) -> str:
         start = self.pos
         u = self.u
-        while self.pos < self.n and (u[self.pos] in _NAME_CHARS or (u[self.pos] == "." and self.pos + 1 < self.n and u[self.pos + 1] in _NAME_CHARS)):
+        while self.pos < self.n and (
+            u[self.pos] in _NAME_CHARS
+            or (u[self.pos] == "." and self.pos + 1 < self.n and u[self.pos + 1] in _NAME_CHARS)
+        ):
             self.pos += 1
         name = u[start : self.pos]
         if not name:
@@ -1840,19 +2072,29 @@ class _BlockParser:
         return out
 
     def variable(self) -> Ref:
-        """``V.P.NAME[i]..``, ``V.L.``, ``V.S.``, ``V.E.``, ``V.A.ABS.X`` / ``V.A.ABS[0]``, ``V.G.NAME``, ``V.CYC.``."""
+        """``V.P.NAME[i]..``, ``V.L.``, ``V.S.``, ``V.E.``, ``V.A.ABS.X`` / ``V.A.ABS[0]``, ``V.G.NAME``,
+        ``V.CYC.``."""
         start = self.pos
         self.pos += 2
         area = self.name()
         if self.peek() != ".":
             self.fail(ALARM_EXPRESSION, f"malformed variable {self.word_at(start)!r}")
         self.pos += 1
-        kinds = {"P": KIND_VP, "L": KIND_VL, "S": KIND_VS, "E": KIND_VE, "A": KIND_VA, "G": KIND_VG, "CYC": KIND_CYC}
+        kinds = {
+            "P": KIND_VP,
+            "L": KIND_VL,
+            "S": KIND_VS,
+            "E": KIND_VE,
+            "A": KIND_VA,
+            "G": KIND_VG,
+            "CYC": KIND_CYC,
+        }
         kind = kinds.get(area)
         if kind is None:
             self.fail(
                 A_NOT_SIMULATED,
-                f"V.{area}. variables are not simulated (V.P., V.L., V.S., V.E., V.CYC., a subset of V.A. and "
+                f"V.{area}. variables are not simulated (V.P., V.L., V.S., V.E., V.CYC., a subset of "
+                "V.A. and "
                 "V.G.): see docs/nc-language.md",
             )
         name = self.var_name()
@@ -1888,7 +2130,9 @@ class _BlockParser:
         if self.peek() == "@":
             start = self.pos
             if self.peek(1) != "P" or self.peek(2) not in _DIGITS:
-                self.fail(ALARM_EXPRESSION, f"unexpected {self.word_at(start)!r}: a cycle parameter is @P<number>")
+                self.fail(
+                    ALARM_EXPRESSION, f"unexpected {self.word_at(start)!r}: a cycle parameter is @P<number>"
+                )
             self.pos += 2
             at = self.pos
             while self.pos < self.n and self.u[self.pos] in _DIGITS:
@@ -1917,9 +2161,7 @@ def build_block(
     centre: dict[str, float] = {}
     extra: dict[str, float] = {}
     feed: float | None = None
-    weights = any(
-        w.letter == "G" and v == int(v) and int(v) in AXIS_VALUE_G_CODES for w, v, _ in words
-    )
+    weights = any(w.letter == "G" and v == int(v) and int(v) in AXIS_VALUE_G_CODES for w, v, _ in words)
     for word, value, more in words:
         letter = word.letter
         if letter == "AXIS":
@@ -1929,7 +2171,12 @@ def build_block(
                 continue
             if name in axes:
                 word_parser._twice(
-                    f"axis {name}", name if len(name) == 1 else name + "=", axes[name], _shown(value), line, number
+                    f"axis {name}",
+                    name if len(name) == 1 else name + "=",
+                    axes[name],
+                    _shown(value),
+                    line,
+                    number,
                 )
             if not -word_parser._POSITION_MAX <= value <= word_parser._POSITION_MAX:
                 word_parser._fail(
@@ -1938,14 +2185,17 @@ def build_block(
             axes[name] = value
         elif letter == "G":
             if value != int(value) or value < 0:
-                word_parser._fail(A_BAD_NUMBER, line, number, f"{word.text}: a G code takes a whole number (G1, G01)")
+                word_parser._fail(
+                    A_BAD_NUMBER, line, number, f"{word.text}: a G code takes a whole number (G1, G01)"
+                )
             g = int(value)
             if g in MOTION_G_CODES:
                 word_parser._fail(
                     A_NOT_SIMULATED,
                     line,
                     number,
-                    f"G{g}: {MOTION_G_CODES[g]} is not simulated yet (issue 24, N-09): see docs/nc-language.md",
+                    f"G{g}: {MOTION_G_CODES[g]} is not simulated yet (issue 24, N-09): see "
+                    "docs/nc-language.md",
                 )
             if g not in KNOWN_G:
                 known = " ".join(f"G{c}" for c in sorted(KNOWN_G))
@@ -1955,14 +2205,15 @@ def build_block(
                     word_parser._fail(A_BAD_NUMBER, line, number, f"G{g} takes a value: G{g}=<percent>")
                 extra[f"G{g}"] = more
             g_codes.append(g)
-        elif letter == "M" or letter == "H":
+        elif letter in {"M", "H"}:
             code = math.floor(value + 0.5) if value >= 0 else -1
             if not 0 <= code <= 999_999_999:
                 word_parser._fail(
                     A_BAD_NUMBER,
                     line,
                     number,
-                    f"{word.text}: an {letter} function is a whole number 0 .. 999999999, got {_shown(value)}",
+                    f"{word.text}: an {letter} function is a whole number 0 .. 999999999, got "
+                    f"{_shown(value)}",
                 )
             if letter == "M":
                 m_codes.append(int(code))
@@ -1972,19 +2223,33 @@ def build_block(
             if feed is not None:
                 word_parser._twice("feed", "F", feed, _shown(value), line, number)
             if not word_parser._FEED_MIN <= value <= word_parser._FEED_MAX:
-                word_parser._fail(A_RANGE, line, number, f"F{_shown(value)} is out of range: {word_parser._FEED_RANGE}")
+                word_parser._fail(
+                    A_RANGE, line, number, f"F{_shown(value)} is out of range: {word_parser._FEED_RANGE}"
+                )
             feed = value
         elif letter in ("I", "J", "K"):
             if letter in centre:
-                word_parser._twice(f"circle centre {letter}", letter, centre[letter], _shown(value), line, number)
+                word_parser._twice(
+                    f"circle centre {letter}", letter, centre[letter], _shown(value), line, number
+                )
             if not -word_parser._CENTRE_MAX <= value <= word_parser._CENTRE_MAX:
-                word_parser._fail(A_RANGE, line, number, f"{letter}{_shown(value)} is out of range: {word_parser._CENTRE_RANGE}")
+                word_parser._fail(
+                    A_RANGE,
+                    line,
+                    number,
+                    f"{letter}{_shown(value)} is out of range: {word_parser._CENTRE_RANGE}",
+                )
             centre[letter] = value
         else:  # S, T, D
             if letter in extra:
                 word_parser._twice(letter, letter, extra[letter], _shown(value), line, number)
             if not -word_parser._EXTRA_MAX <= value <= word_parser._EXTRA_MAX:
-                word_parser._fail(A_RANGE, line, number, f"{letter}{_shown(value)} is out of range: {word_parser._EXTRA_RANGE}")
+                word_parser._fail(
+                    A_RANGE,
+                    line,
+                    number,
+                    f"{letter}{_shown(value)} is out of range: {word_parser._EXTRA_RANGE}",
+                )
             extra[letter] = value
     if len(g_codes) > 1:
         g_codes = word_parser._check_g_codes(g_codes, line, number)

@@ -51,9 +51,7 @@ def coerce(value: Value, type_name: str, string_size: int, what: str) -> Value:
         if not isinstance(value, str):
             raise EvalError(ALARM_TYPE, f"{what} is a STRING: {format_value(value)} is a number")
         if len(value) > string_size:
-            raise EvalError(
-                914020, f"{what} holds at most {string_size} characters, {len(value)} given"
-            )
+            raise EvalError(914020, f"{what} holds at most {string_size} characters, {len(value)} given")
         return value
     if isinstance(value, str):
         raise EvalError(ALARM_TYPE, f"{what} is a number ({type_name}): {format_value(value)} is a string")
@@ -70,9 +68,7 @@ def coerce(value: Value, type_name: str, string_size: int, what: str) -> Value:
     low, high = _INT_RANGES[type_name]
     number = math.trunc(value)
     if not low <= number <= high:
-        raise EvalError(
-            914002, f"{what}: {format_value(value)} is outside {low} .. {high} ({type_name})"
-        )
+        raise EvalError(914002, f"{what}: {format_value(value)} is outside {low} .. {high} ({type_name})")
     return float(number)
 
 
