@@ -56,7 +56,7 @@ from hli_server.engine.nc.expr import (
     as_number,
     format_value,
 )
-from hli_server.engine.nc.source import ProgramText
+from hli_server.engine.nc.source import LineTooLongError, ProgramText
 from hli_server.engine.nc.syntax import (
     A_NOT_SIMULATED,
     C_BREAK,
@@ -281,7 +281,10 @@ class _Units:
         stmt = self.cache.get(line)
         if stmt is None:
             if not keep:
-                raw_line = self.text.line(line)
+                try:
+                    raw_line = self.text.line(line)
+                except LineTooLongError:
+                    raw_line = None  # read_block explains it
                 if raw_line is not None:
                     block = self.compiler.plain_block(raw_line, line, program)
                     if block is not None:
@@ -297,7 +300,10 @@ class _Units:
         return stmt
 
     def _scan_line(self, line: int) -> bool:
-        raw = self.text.line(line)
+        try:
+            raw = self.text.line(line)
+        except LineTooLongError:
+            raw = "?"  # no header; the interpreter refuses the line when it gets there
         if raw is None:
             return False
         stripped = raw.lstrip()
@@ -697,6 +703,16 @@ class Interpreter(Env):
 
     def _warn_open(self, frame: _Frame, line: int, place: str) -> None:
         """Warning 20375: control blocks still open where a program level ends."""
+        if frame.open:
+            top = frame.open[-1]
+            self.host.warn(
+                A_OPEN_VALID,
+                f"{len(frame.open)} control block(s) still open at the end of {frame.kind} program "
+                f"{frame.name}: ${top.keyword} of line {top.start} has no "
+                f"${_END_OF.get(top.keyword, top.keyword)}",
+                line,
+                place,
+            )
 
     # --- the block for the decoder ---------------------------------------------------------------------
     def _build(self, frame: _Frame, stmt: Stmt, words: list[tuple[Word, float, float | None]]) -> Block:
@@ -1413,6 +1429,10 @@ class Interpreter(Env):
             if mode == _SEEK_CONTINUE:
                 frame.seek = None
                 frame.line = stmt.first  # the loop's closing statement runs
+                return
+            if mode == _SEEK_CASE and entry.default >= 0:
+                frame.seek = None
+                frame.line = entry.default  # no $CASE matched: on after $DEFAULT
                 return
             frame.open.pop()
             frame.seek = None

@@ -71,7 +71,7 @@ from hli_server.engine.nc.expr import (
     Ref,
     Unary,
 )
-from hli_server.engine.nc.source import LineTooLongError, ProgramText
+from hli_server.engine.nc.source import MAX_LINE_CHARS, LineTooLongError, ProgramText
 
 __all__ = [
     "Assign",
@@ -437,7 +437,10 @@ def _line(source: ProgramText, number: int) -> str | None:
         return source.line(number)
     except LineTooLongError as exc:
         raise _nc_error(
-            A_LIMIT, number, None, f"line {number} is longer than {exc.length - 1} characters allowed"
+            A_LIMIT,
+            number,
+            None,
+            f"line {number} has {exc.length} characters or more: a line has at most {MAX_LINE_CHARS}",
         ) from None
 
 
@@ -457,7 +460,7 @@ def read_block(source: ProgramText, first: int) -> RawBlock | None:
     texts = [raw.strip()]
     if stripped.endswith("\\"):
         codes = [stripped[:-1]]
-        while codes[-1].rstrip().endswith("\\") or len(codes) == 1 or _continues(codes):
+        while True:
             nxt = _line(source, last + 1)
             if nxt is None:
                 raise _nc_error(
@@ -469,11 +472,10 @@ def read_block(source: ProgramText, first: int) -> RawBlock | None:
             last += 1
             texts.append(nxt.strip())
             piece = strip_comments(nxt).strip()
-            if piece.endswith("\\"):
-                codes.append(piece[:-1])
-                continue
-            codes.append(piece)
-            break
+            if not piece.endswith("\\"):
+                codes.append(piece)
+                break
+            codes.append(piece[:-1])
         code = " ".join(codes)
         return RawBlock(first, last, code, " ".join(texts), None)
     if "#" in stripped:
@@ -484,10 +486,6 @@ def read_block(source: ProgramText, first: int) -> RawBlock | None:
         if "[" in stripped and stripped.count("[") > stripped.count("]") and _CONTROL_HEAD.match(stripped):
             return _wrapped_control(source, first, raw, code)
     return RawBlock(first, first, code, texts[0], None)
-
-
-def _continues(codes: list[str]) -> bool:
-    return codes[-1].rstrip().endswith("\\")
 
 
 def _comment_block(source: ProgramText, first: int, raw: str) -> RawBlock:
@@ -1581,7 +1579,10 @@ class _BlockParser:
                     options.append(word)
                     progress = True
         if "INFO" in options:
-            self.fail(A_NOT_SIMULATED, "#MSG INFO (message information for a receiver) is not simulated")
+            self.fail(
+                A_NOT_SIMULATED,
+                "#MSG INFO (message information for a receiver) is not simulated: see docs/nc-language.md",
+            )
         self.expect("[", "before the message text")
         self.depth += 1
         self.blanks()
@@ -2097,7 +2098,11 @@ class _BlockParser:
                 "V.A. and "
                 "V.G.): see docs/nc-language.md",
             )
-        name = self.var_name()
+        sign = ""
+        if kind == KIND_VA and self.peek() in ("+", "-"):
+            sign = self.peek()  # V.A.+SWE.X, V.A.-SWE.X: the software limits
+            self.pos += 1
+        name = sign + self.var_name()
         indices = self.indices()
         return Ref(kind, name, indices, text=self.u[start : self.pos])
 
