@@ -14,7 +14,7 @@ from hli_server.engine.nc import STATEMENTS_PER_CYCLE, Compiler, Interpreter
 from hli_server.engine.nc.interpreter import MAX_CALL_DEPTH, PAUSE, FlushStop, FlushWait
 from tests.unit.nc_helpers import FakeHost, error, interpret, real
 
-# --- program structure (N-01) --------------------------------------------------------------------------------
+# --- program structure (N-01) ----------------------------------------------------------------------------
 
 
 @pytest.mark.req("N-01")
@@ -117,7 +117,7 @@ def test_m17_ends_a_subroutine_m30_in_a_subroutine_ends_the_program_with_a_warni
     assert err.alarm == 914032
 
 
-# --- subroutines and cycles (N-02) ---------------------------------------------------------------------------
+# --- subroutines and cycles (N-02) -----------------------------------------------------------------------
 
 
 @pytest.mark.req("N-02")
@@ -204,7 +204,7 @@ def test_call_depth_as_the_kernel_allows():
     assert interpret("L s0.nc\nM30\n", files).values() == [1.0]
 
 
-# --- expressions (N-03) --------------------------------------------------------------------------------------
+# --- expressions (N-03) ----------------------------------------------------------------------------------
 
 
 @pytest.mark.req("N-03")
@@ -328,7 +328,7 @@ def test_strings_compare_and_concatenate():
     assert interpret(text).values() == [1.0]
 
 
-# --- variables (N-04) ----------------------------------------------------------------------------------------
+# --- variables (N-04) ------------------------------------------------------------------------------------
 
 
 @pytest.mark.req("N-04")
@@ -457,7 +457,7 @@ def test_system_variables_of_the_axes_and_the_channel():
     assert run.axes == [{"X": 13.5, "Y": 12.5, "Z": 500.0}]
 
 
-# --- V.E. variables (N-05) -----------------------------------------------------------------------------------
+# --- V.E. variables (N-05) -------------------------------------------------------------------------------
 
 
 @pytest.mark.req("N-05")
@@ -486,7 +486,7 @@ def test_a_synchronous_external_variable_waits_for_the_path_and_is_written_at_pa
     assert host.external.read("SYNC", 1) == 3.0
 
 
-# --- control flow (N-06) -------------------------------------------------------------------------------------
+# --- control flow (N-06) ---------------------------------------------------------------------------------
 
 
 @pytest.mark.req("N-06")
@@ -695,7 +695,7 @@ def test_nesting_and_iterations_are_bounded():
     assert error(deep).alarm == 914014
 
 
-# --- messages, files, flush (N-07) ---------------------------------------------------------------------------
+# --- messages, files, flush (N-07) -----------------------------------------------------------------------
 
 
 @pytest.mark.req("N-07")
@@ -746,7 +746,7 @@ def test_flush_stops_the_path_flush_wait_waits_flush_continue_neither():
     assert [type(o) for o in run.outputs[1:3]] == [FlushStop, FlushWait]
 
 
-# --- not simulated: refused by name (N-08) -------------------------------------------------------------------
+# --- not simulated: refused by name (N-08) ---------------------------------------------------------------
 
 
 @pytest.mark.req("N-08")
@@ -803,7 +803,7 @@ def test_a_refused_construct_in_a_skipped_branch_does_not_stop_the_program():
     assert interpret("$IF 0\n#SLOPE [TYPE=STEP]\nG41\n$ENDIF\nX1\nM30\n").values() == [1.0]
 
 
-# --- the per-cycle budget (issue 20, "Bad input") ------------------------------------------------------------
+# --- the per-cycle budget (issue 20, "Bad input") --------------------------------------------------------
 
 
 def test_the_interpreter_pauses_when_its_budget_for_the_cycle_is_spent():

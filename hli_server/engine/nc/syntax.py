@@ -889,8 +889,11 @@ class Compiler:
             words: list[tuple[Word, float, float | None]] = []
             for item in stmt.items:
                 assert isinstance(item, Word)
-                value = item.value.evaluate(_CONSTANT)
-                extra = item.extra.evaluate(_CONSTANT) if item.extra is not None else None
+                try:
+                    value = item.value.evaluate(_CONSTANT)
+                    extra = item.extra.evaluate(_CONSTANT) if item.extra is not None else None
+                except EvalError:
+                    return stmt  # X[1/0]: the interpreter raises it when the block runs, with its place
                 if isinstance(value, str) or isinstance(extra, str):
                     return stmt  # the error is the interpreter's, with its message
                 words.append((item, value, extra))
