@@ -4,6 +4,7 @@ interpreter's budget per cycle, the caps of ``check``."""
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import pytest
@@ -114,7 +115,7 @@ def test_a_synchronous_ve_write_happens_when_the_path_passes_without_stopping_it
     assert 49.0 <= first <= 51.0
     # the path did not stop at X50: the velocity there is well above zero
     at = [x for x, _ in seen]
-    steps = [b - a for a, b in zip(at, at[1:], strict=False)]
+    steps = [b - a for a, b in itertools.pairwise(at)]
     k = min(range(len(at)), key=lambda i: abs(at[i] - 50.0))
     assert steps[k] > 0.05
 
@@ -167,7 +168,7 @@ def test_acceleration_weighting_g131_slows_the_ramp():
     assert half > full * 1.3
 
 
-# --- the budget per cycle (issue 20, "Bad input") ----------------------------------------------------------------
+# --- the budget per cycle (issue 20, "Bad input") --------------------------------------------------------
 
 
 def test_blocks_without_motion_spend_a_budget_per_cycle_and_go_on_next_cycle():
@@ -200,7 +201,7 @@ def test_a_while_without_motion_runs_on_cycle_by_cycle_and_a_reset_stops_it():
     assert ch.state == ProgramState.FINISHED
 
 
-# --- errors carry the subroutine's name ---------------------------------------------------------------------------
+# --- errors carry the subroutine's name ------------------------------------------------------------------
 
 
 @pytest.mark.req("N-02", "N-08")
@@ -221,7 +222,7 @@ def test_an_error_in_a_subroutine_names_it_with_line_and_block():
     assert (alarm.number, alarm.line, alarm.block, alarm.params["program"]) == (914001, 1, "N5", "sub.nc")
 
 
-# --- check --------------------------------------------------------------------------------------------------------
+# --- check -----------------------------------------------------------------------------------------------
 
 
 @pytest.mark.req("N-02", "N-06")
