@@ -385,7 +385,7 @@ M30
 @pytest.mark.parametrize(
     ("program", "alarm", "words"),
     [
-        ("V.P.NOPE = 1", 914003, "V.P.NOPE is not declared"),
+        ("V.P.NOPE[2] = 1", 914003, "V.P.NOPE is not declared"),
         ("X[V.L.NOPE]", 914003, "V.L.NOPE"),
         ("#VAR\nV.P.A : UNS08\n#ENDVAR\nV.P.A = 256", 914002, "0 .. 255"),
         ("#VAR\nV.P.A : UNS08\n#ENDVAR\nV.P.A = -1", 914002, "UNS08"),
@@ -407,6 +407,13 @@ def test_variable_errors(program, alarm, words):
     err = error(program + "\nM30\n")
     assert err.alarm == alarm, err
     assert words in err.message
+
+
+@pytest.mark.req("N-04")
+def test_a_write_creates_an_undeclared_scalar_variable_a_read_does_not():
+    """As the kernel's own example of ID 21382 does: ``N25 V.L.VAR1=10`` without #VAR."""
+    assert interpret("V.L.VAR1 = 10\nX[V.L.VAR1]\nM30\n").values() == [10.0]
+    assert error("X[V.L.NEVER]\nM30\n").alarm == 914003
 
 
 @pytest.mark.req("N-04")

@@ -175,6 +175,14 @@ _CLOSING: Final[dict[str, str]] = {
     C_ENDFOR: C_FOR,
 }
 _END_OF: Final[dict[str, str]] = {v: k for k, v in _CLOSING.items()}
+_MIDDLE: Final[dict[str, str]] = {
+    C_ELSE: C_IF,
+    C_ELSEIF: C_IF,
+    C_CASE: C_SWITCH,
+    C_DEFAULT: C_SWITCH,
+    C_HASH_ELSE: C_HASH_IF,
+    C_HASH_ENDIF: C_HASH_IF,
+}
 _LOOPS: Final = frozenset((C_WHILE, C_DO, C_REPEAT, C_FOR))
 
 _POSITION_RANGE: Final = word_parser._POSITION_RANGE
@@ -576,6 +584,10 @@ class Interpreter(Env):
             self._control(frame, stmt)
             return
         if isinstance(stmt, Refused):
+            keyword = stmt.keyword
+            if keyword in A_UNEXPECTED and not self._fits(frame, keyword):
+                # as the kernel: a control word where it does not belong is that, whatever follows it
+                raise self._unexpected_word(frame, stmt, keyword)
             raise stmt.failure
         if isinstance(stmt, VarBlock):
             self._declare(frame, stmt)
@@ -920,6 +932,11 @@ class Interpreter(Env):
                 return None
             if kind in (KIND_VP, KIND_VL, KIND_VS, KIND_CYC):
                 var = self._user_var(ref)
+                if var is None and not ref.indices:
+                    # a write creates a scalar REAL64 variable (as in the kernel's own example of
+                    # ID 21382: N25 V.L.VAR1=10 without #VAR)
+                    var = Variable(ref.text, "REAL64", [], 0)
+                    self._scope(frame, ref)[ref.name] = var
                 if var is None:
                     raise EvalError(
                         A_UNDECLARED,
@@ -1201,8 +1218,19 @@ class Interpreter(Env):
             raise self._unexpected(frame, stmt)
         return frame.open[-1]
 
+    def _fits(self, frame: _Frame, keyword: str) -> bool:
+        """Could ``keyword`` run here: its block is the innermost open one (or, for $BREAK and
+        $CONTINUE, a loop or $SWITCH is open)?"""
+        if keyword in (C_BREAK, C_CONTINUE):
+            kinds = _LOOPS | {C_SWITCH} if keyword == C_BREAK else _LOOPS
+            return any(entry.keyword in kinds for entry in frame.open)
+        want = _CLOSING.get(keyword) or _MIDDLE.get(keyword)
+        return bool(frame.open) and frame.open[-1].keyword == want
+
     def _unexpected(self, frame: _Frame, stmt: Control) -> NcError:
-        keyword = stmt.keyword
+        return self._unexpected_word(frame, stmt, stmt.keyword)
+
+    def _unexpected_word(self, frame: _Frame, stmt: Stmt, keyword: str) -> NcError:
         current = frame.open[-1] if frame.open else None
         shown = keyword if keyword.startswith("#") else f"${keyword}"
         where = (

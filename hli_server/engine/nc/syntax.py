@@ -1515,8 +1515,8 @@ class _BlockParser:
             return Control(raw, self.number, keyword, exprs)
         if name == "MSG":
             return self.message()
-        if name == "FILE":
-            return self.file_name()
+        if name in {"FILE", "FILENAME"}:
+            return self.file_name(named=name == "FILENAME")
         if name == "FLUSH":
             options: list[str] = []
             for word in ("WAIT", "CONTINUE"):
@@ -1606,9 +1606,10 @@ class _BlockParser:
             )
         return Hash(self.raw, self.number, "MSG", options, args)
 
-    def file_name(self) -> Stmt:
-        """``#FILE NAME [MSG="report.txt"]`` (207504523): the file ``#MSG SAVE`` writes to."""
-        if not self.keyword("NAME"):
+    def file_name(self, named: bool = False) -> Stmt:
+        """``#FILE NAME [MSG="report.txt"]`` (207504523; older ``#FILENAME``): the file ``#MSG SAVE``
+        writes to."""
+        if not named and not self.keyword("NAME"):
             rest = self.word_at(self.pos) if self.pos < self.n else ""
             self.fail(
                 A_NOT_SIMULATED,
@@ -1963,6 +1964,12 @@ class _BlockParser:
                 return self.exist(start)
             if name in FUNCTION_ARITY:
                 return self.function(start, name)
+            if (name[:1] in ("M", "H") and name[1:].isdigit()) or name in ("REV", "POS"):
+                raise self.failure(
+                    A_NOT_SIMULATED,
+                    f"axis- or spindle-specific technology words ({name} in [..], X[M54=..], S[REV ..]) "
+                    "are not simulated: see docs/nc-language.md",
+                )
             self.fail(
                 ALARM_EXPRESSION,
                 f"unknown name {word_parser._short(name)!r} in an expression (a variable is P1, V.P.NAME, "
