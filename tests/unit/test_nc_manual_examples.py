@@ -64,8 +64,8 @@ DIAGNOSIS: dict[int, tuple[str, str | None]] = {
     20224: (
         "N10 G00 X0 Y0 Z0\nN20 P1=5\nN50 $SWITCH P1\n:\nN62 $DEFAULT G01 X100 F10000\n:\nN65 $ENDSWITCH\n:\n"
         "N1000 M30\n",
-        "N10 G00 X0 Y0 Z0\nN20 P1=5\nN50 $SWITCH P1\n:\nN62 $DEFAULT\nN63 G01 X100 F10000\n:\nN65 $ENDSWITCH\n"
-        ":\nN1000 M30\n",
+        "N10 G00 X0 Y0 Z0\nN20 P1=5\nN50 $SWITCH P1\n:\nN62 $DEFAULT\nN63 G01 X100 F10000\n:\n"
+        "N65 $ENDSWITCH\n:\nN1000 M30\n",
     ),
     20225: (
         "N10 G00 X0 Y0 Z0\nN20 P1=5\nN30 $ENDSWITCH\n:\nN1000 M30\n",
@@ -117,7 +117,8 @@ DIAGNOSIS: dict[int, tuple[str, str | None]] = {
     21382: (
         "%main\nN05 X0 Y0 Z0 G00\nN20 G01 X200 F3000\nN25 @P1=10\nN40 L CYCLE [NAME=dummy1.cyc]\n"
         "N50 G01 Y300 F1000\nN60 G01 Z300 F2000\nN90 M30\n",
-        "%main\nN05 X0 Y0 Z0 G00\nN20 G01 X200 F3000\nN25 V.L.VAR1=10\nN40 L CYCLE [NAME=dummy1.cyc @P1=V.L.VAR1]\n"
+        "%main\nN05 X0 Y0 Z0 G00\nN20 G01 X200 F3000\nN25 V.L.VAR1=10\n"
+        "N40 L CYCLE [NAME=dummy1.cyc @P1=V.L.VAR1]\n"
         "N50 G01 Y300 F1000\nN60 G01 Z300 F2000\nN90 M30\n",
     ),
 }
@@ -145,7 +146,10 @@ def test_each_diagnosis_pages_correct_program_runs(alarm, program):
 
 @pytest.mark.req("N-06")
 def test_the_open_control_block_example_of_20375_warns_and_goes_on():
-    wrong = "N10 G00 X0 Y0 Z0\nN20 P1=1 P2=2\nN30 $IF P1 == 1\nN40 Y100\nN50 $IF P2==4\nN60 Z200\nN70 $ENDIF\n:\nN100 X100\n:\nN1000 M30\n"
+    wrong = (
+        "N10 G00 X0 Y0 Z0\nN20 P1=1 P2=2\nN30 $IF P1 == 1\nN40 Y100\nN50 $IF P2==4\nN60 Z200\nN70 $ENDIF\n:\n"
+        "N100 X100\n:\nN1000 M30\n"
+    )
     correct = wrong.replace("N70 $ENDIF\n", "N70 $ENDIF\nN80 $ENDIF\n")
     run = interpret(wrong)
     assert run.warnings == [20375]
@@ -162,7 +166,7 @@ def test_the_correct_programs_pass_check(alarm, program):
     assert not result.stopped_by_error, result.alarms
 
 
-# --- the programming manual's examples ------------------------------------------------------------------------
+# --- the programming manual's examples -------------------------------------------------------------------
 
 
 @pytest.mark.req("N-04")
