@@ -319,7 +319,7 @@ FUNCTION_ARITY: Final[dict[str, int]] = {
 
 
 def _round_half_away(x: float) -> float:
-    return math.floor(x + 0.5) if x >= 0.0 else -math.floor(-x + 0.5)
+    return float(math.floor(x + 0.5)) if x >= 0.0 else -float(math.floor(-x + 0.5))
 
 
 def call_function(name: str, args: list[float]) -> float:
@@ -368,7 +368,7 @@ def call_function(name: str, args: list[float]) -> float:
     if name == "INT":
         return float(math.trunc(x)) if math.isfinite(x) else x
     if name == "FRACT":
-        return x - math.trunc(x) if math.isfinite(x) else math.nan
+        return x - float(math.trunc(x)) if math.isfinite(x) else math.nan
     if name == "ROUND":
         return _round_half_away(x) if math.isfinite(x) else x
     if name == "FLOOR":

@@ -89,6 +89,7 @@ __all__ = [
     "Word",
     "Words",
     "build_block",
+    "parse_expression",
     "read_block",
     "strip_comments",
 ]
@@ -2157,6 +2158,22 @@ class _BlockParser:
                 self.fail(A_BAD_NUMBER, f"malformed cycle parameter {self.word_at(start)!r}")
             return Ref(KIND_AT_P, "", [], Const(float(int(digits))), 1, self.u[start : self.pos])
         return self.parameter()
+
+
+def parse_expression(text: str) -> Expr:
+    """``text`` as one expression (blanks allowed, as after ``P1 =``); :class:`NcError` if it is not
+    one. For tools and tests: programs are compiled block by block (:class:`Compiler`)."""
+    raw = RawBlock(1, 1, text, text, None)
+    parser = _BlockParser(Compiler((), ("X", "Y", "Z")), raw, text)
+    try:
+        expr = parser.expression(stop_at_blank=False)
+        if not parser.at_end():
+            raise parser.failure(
+                ALARM_EXPRESSION, f"unexpected {parser.word_at(parser.pos)!r} after the expression"
+            )
+    except _CompileError as exc:
+        raise _nc_error(exc.alarm, 1, None, exc.message) from None
+    return expr
 
 
 # --- the decoder's block from evaluated words ----------------------------------------------------------
