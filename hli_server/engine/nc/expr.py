@@ -118,6 +118,8 @@ def format_value(value: Value) -> str:
     """A value as the messages show it: ``20``, ``2.5``, ``'text'``."""
     if isinstance(value, str):
         return _shown(value)
+    if not math.isfinite(value):
+        return str(value)
     if value == int(value) and abs(value) < 1e15:
         return str(int(value))
     return f"{value:.10g}"
@@ -238,7 +240,12 @@ class BinOp(Expr):
         name = OPERATOR_TEXT[op]
         x = as_number(a, f"'{name}'")
         y = as_number(b, f"'{name}'")
-        return _arith(op, x, y)
+        result = _arith(op, x, y)
+        if not math.isfinite(result):
+            raise EvalError(
+                ALARM_DOMAIN, f"{format_value(x)} {name} {format_value(y)} is not a finite number (overflow)"
+            )
+        return result
 
 
 def _arith(op: int, x: float, y: float) -> float:
@@ -400,7 +407,13 @@ class Func(Expr):
 
     def evaluate(self, env: Env) -> Value:
         values = [as_number(a.evaluate(env), f"{self.name}[..]") for a in self.args]
-        result = call_function(self.name, values)
+        if not all(math.isfinite(v) for v in values):
+            raise EvalError(ALARM_DOMAIN, f"{self.name}[..] of a number that is not finite")
+        try:
+            result = call_function(self.name, values)
+        except (ValueError, OverflowError) as exc:
+            shown = ", ".join(format_value(v) for v in values)
+            raise EvalError(ALARM_DOMAIN, f"{self.name}[{shown}]: {exc}") from None
         if math.isnan(result) or math.isinf(result):
             raise EvalError(
                 ALARM_DOMAIN,

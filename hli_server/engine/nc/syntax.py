@@ -1043,7 +1043,10 @@ class _BlockParser:
         if p < self.n and u[p] == ".":
             self.fail(A_BAD_NUMBER, f"malformed number in {self.word_at(start)!r}")
         self.pos = p
-        return float(text)
+        value = float(text)
+        if value > 1e300:
+            self.fail(A_RANGE, f"{word_parser._shown_number('', text)} is out of range: too large a number")
+        return value
 
     # --- the block -------------------------------------------------------------------------------------
     def parse(self) -> Stmt:
