@@ -826,3 +826,14 @@ def test_the_interpreter_pauses_when_its_budget_for_the_cycle_is_spent():
 
 def test_bad_input_is_bounded():
     assert error("X[" + "1" * 70_000 + "]\nM30\n").alarm == 914020
+
+
+@pytest.mark.req("N-08")
+def test_docs_nc_language_names_every_alarm_of_the_language():
+    from pathlib import Path
+
+    doc = (Path(__file__).parents[2] / "docs" / "nc-language.md").read_text(encoding="utf-8")
+    language = [n for n, a in ALARMS.items() if a.source == "TF5200 diagnosis" or 914000 <= n < 915000]
+    assert len(language) > 40
+    missing = [n for n in language if str(n) not in doc]
+    assert missing == [], f"docs/nc-language.md does not name {missing}"

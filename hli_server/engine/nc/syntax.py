@@ -1325,6 +1325,11 @@ class _BlockParser:
             name = self.code[begin : self.pos]
         if not name:
             self.fail(A_CONTROL_SYNTAX, f"{'LL' if local else 'L'} without a program name")
+        if name.upper() == "SEQUENCE":
+            self.fail(
+                A_NOT_SIMULATED,
+                "L SEQUENCE (calling block sequences) is not simulated: see docs/nc-language.md",
+            )
         if len(name) > MAX_NAME:
             self.fail(
                 A_LIMIT, f"program name {word_parser._short(name)!r} is longer than {MAX_NAME} characters"
