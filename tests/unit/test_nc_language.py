@@ -12,6 +12,7 @@ import pytest
 from hli_server.engine.alarms import ALARMS
 from hli_server.engine.nc import STATEMENTS_PER_CYCLE, Compiler, Interpreter
 from hli_server.engine.nc.interpreter import MAX_CALL_DEPTH, PAUSE, FlushStop, FlushWait
+from hli_server.engine.programs import ProgramFile
 from tests.unit.nc_helpers import FakeHost, error, interpret, real
 
 # --- program structure (N-01) ----------------------------------------------------------------------------
@@ -132,6 +133,24 @@ def test_global_subroutine_name_is_matched_case_insensitively_and_may_hold_local
     sub = "%L INNER\nY[P1]\nM17\n%SUBMAIN\nLL INNER\nM29\n"
     run = interpret("P1 = 4\nL SUB.NC\nM30\n", {"sub.nc": sub})
     assert run.values("Y") == [4.0]
+
+
+@pytest.mark.req("N-02")
+def test_a_global_subroutine_is_compiled_once_but_its_new_text_is_run_when_it_changed():
+    class ChangingHost(FakeHost):
+        calls = 0
+
+        def find_program(self, name: str) -> ProgramFile | None:
+            self.calls += 1
+            x = 1 if self.calls <= 2 else 5
+            return ProgramFile("sub.nc", f"G01 X[P1 + {x}] F100\nM17\n", "upload:sub.nc")
+
+    program = "P1 = 0\nL sub.nc\nP1 = 10\nL sub.nc\nP1 = 20\nL sub.nc\nM30\n"
+    host = ChangingHost()
+    it = Interpreter(Compiler(host.axes, ("X", "Y", "Z")), host, budget=None)
+    run = interpret(program, host=host, interpreter=it)
+    assert run.values() == [1.0, 11.0, 25.0]
+    assert [b.program for b in run.blocks if b.axes] == ["sub.nc"] * 3
 
 
 @pytest.mark.req("N-02")

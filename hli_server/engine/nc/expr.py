@@ -470,6 +470,13 @@ class Ref(Expr):
         self.depth = depth
         self.text = text
         """The reference as written (upper case), for messages."""
+        self.fixed = -1
+        """A direct P parameter's or cycle parameter's number where it is a constant (``P3``,
+        ``@P2``) and no index follows: the interpreter's fast path; -1 otherwise."""
+        if depth == 1 and not indices and isinstance(number, Const) and isinstance(number.value, float):
+            n = number.value
+            if n == int(n) and 0 <= n < 1_000_000_000:
+                self.fixed = int(n)
 
     def evaluate(self, env: Env) -> Value:
         return env.read(self)

@@ -126,6 +126,10 @@ MAX_MESSAGE: Final = 255
 """Characters of a ``#MSG`` text after formatting."""
 _STATEMENT_CACHE: Final = 50_000
 """Compiled statements kept per program text (a loop body is compiled once; a CAM file streams)."""
+_NO_INDICES: Final[list[float]] = []
+"""The indices of a reference without any (never changed)."""
+_GLOBAL_UNITS: Final = 64
+"""Global subprograms kept compiled (by name) in one program run."""
 
 # --- alarm numbers: the kernel's (TF5200 diagnosis) and the project's (914xxx) -------------------------
 A_UNEXPECTED: Final[dict[str, int]] = {
@@ -273,9 +277,12 @@ class _Units:
     """The program units of one text: ``%L name`` local subroutines and where the main part begins
     (manual "Subroutine techniques", 206822155), found by scanning the text's ``%`` headers lazily."""
 
-    def __init__(self, text: ProgramText, compiler: Compiler) -> None:
+    def __init__(self, text: ProgramText, compiler: Compiler, source: str = "") -> None:
         self.text = text
         self.compiler = compiler
+        self.source = source
+        """A global subprogram's text as its library gave it (the interpreter reuses these units, and
+        the statements compiled in them, while the library gives the same text)."""
         self.cache: dict[int, Stmt] = {}
         self._locals: dict[str, int] = {}
         self._scanned = 0
@@ -458,6 +465,9 @@ class Interpreter(Env):
         self.statements = 0
         """Statements run or skipped since the program started (for reports)."""
         self.program_name = ""
+        self._globals: dict[str, _Units] = {}
+        """Global subprograms and cycles called in this program, compiled once (a pocket calls one
+        cycle thousands of times)."""
 
     # --- program control -------------------------------------------------------------------------------
     def start(self, text: str | TextIO | ProgramText, name: str = "program") -> None:
@@ -475,6 +485,7 @@ class Interpreter(Env):
         self.iterations = 0
         self.statements = 0
         self._left = self.budget if self.budget is not None else 0
+        self._globals = {}
 
     def reset(self) -> None:
         """Channel reset: the program is gone; V.S. variables stay."""
@@ -732,6 +743,8 @@ class Interpreter(Env):
 
     # --- variables -------------------------------------------------------------------------------------
     def _indices(self, ref: Ref) -> list[float]:
+        if not ref.indices:
+            return _NO_INDICES
         return [as_number(i.evaluate(self), f"the index of {ref.text}") for i in ref.indices]
 
     def _p_number(self, ref: Ref) -> int:
@@ -783,6 +796,18 @@ class Interpreter(Env):
 
     def read(self, ref: Ref) -> Value:
         kind = ref.kind
+        fixed = ref.fixed
+        if fixed >= 0:  # P3, @P2: a constant number, no index
+            if kind == KIND_P and fixed < P_COUNT:
+                value = self._params.get(fixed)
+                if value is not None:
+                    return value
+            elif kind == KIND_AT_P:
+                params = self._frames[-1].params
+                if params is not None:
+                    found = params.get(fixed)
+                    if found is not None:
+                        return found
         if kind in (KIND_P, KIND_PP):
             p = self._p_number(ref)
             if ref.indices:
@@ -1161,11 +1186,23 @@ class Interpreter(Env):
                     f"{'cycle' if call.cycle else 'global subroutine'} {call.name} not found; searched: "
                     f"{where}",
                 )
-            units = _Units(ProgramText(found.text, found.name), self.compiler)
+            units = self._global_units(found.name, found.text)
             kind = "cycle" if call.cycle else "global"
             new = _Frame(kind, units, found.name, units.main(), place)
         new.params = params
         self._frames.append(new)
+
+    def _global_units(self, name: str, text: str) -> _Units:
+        """The units of global subprogram ``name``: those of an earlier call while its text is the same
+        (the file may have changed on disk or been uploaded again between two calls)."""
+        key = name.upper()
+        units = self._globals.get(key)
+        if units is None or units.source != text:
+            if len(self._globals) >= _GLOBAL_UNITS:
+                self._globals.clear()
+            units = _Units(ProgramText(text, name), self.compiler, text)
+            self._globals[key] = units
+        return units
 
     def _return(self, frame: _Frame) -> None:
         self._frames.pop()

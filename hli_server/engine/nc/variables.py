@@ -91,6 +91,8 @@ class Variable:
 
     def flat(self, indices: list[float]) -> int:
         dims = self.dims
+        if not dims and not indices:
+            return 0
         if len(indices) != len(dims):
             want = "no index" if not dims else f"{len(dims)} index(es)"
             raise EvalError(ALARM_INDEX, f"{self.text} takes {want}, {len(indices)} given")
