@@ -10,6 +10,9 @@
    step and the direction) against the exact path (block by block, ``HLI_BATCH_CHECK=0``) of the same
    moves written out as plain lines: the language may not be slower than the exact path.
 3. The same two in a full check (cycles), the language program against its plain twin.
+4. The realtime clock with blocks that do not move (``--still-blocks`` of them, a running machine, cycle by
+   cycle): the longest cycle and the median, this checkout against the reference (which decoded them all
+   in one cycle: 800,000 such blocks stalled the clock 3.9 s), and a ``$WHILE`` without motion.
 
     .venv/bin/python -m benchmarks.bench_language [--blocks N] [--rounds R] [--reference REV]
 """
@@ -91,6 +94,45 @@ with open(path, encoding="utf-8", newline="") as f:
 errors = [a.number for a in result.alarms if str(a.severity) == "error"]
 print(json.dumps({"elapsed": elapsed, "blocks": result.blocks, "errors": errors, "cycles": machine.cycle}))
 """
+
+
+_REALTIME = """
+import json, statistics, sys, time
+from hli_server.configuration import load_machine
+from hli_server.engine import Machine
+from schemas.wire import ProgramState
+path, limit = sys.argv[1], int(sys.argv[2])
+machine = Machine(load_machine(None))
+ch = machine.channel(1)
+with open(path, encoding="utf-8") as f:
+    ch.load_program(f.read())
+ch.request_start()
+times, cpu = [], []
+for _ in range(limit):
+    began, began_cpu = time.perf_counter(), time.thread_time()
+    machine.step(1)
+    times.append(time.perf_counter() - began)
+    cpu.append(time.thread_time() - began_cpu)
+    if ch.state not in (ProgramState.RUNNING, ProgramState.HELD):
+        break
+print(json.dumps({"cycles": len(times), "max": max(times), "median": statistics.median(times),
+                  "cpu_max": max(cpu), "total": sum(times), "state": str(ch.state)}))
+"""
+
+
+def _realtime(checkout: Path, program: Path, env: dict[str, str], limit: int) -> dict[str, float]:
+    done = subprocess.run(
+        [sys.executable, "-c", _REALTIME, str(program), str(limit)],
+        cwd=checkout,
+        env={**env, "PYTHONPATH": str(checkout)},
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if done.returncode != 0:
+        raise RuntimeError(done.stderr[-3000:])
+    out: dict[str, float] = json.loads(done.stdout.strip().splitlines()[-1])
+    return out
 
 
 def _run(
@@ -178,6 +220,9 @@ def main() -> None:
     ap.add_argument(
         "--full-blocks", type=int, default=500, help="motion blocks of the language program in a full check"
     )
+    ap.add_argument(
+        "--still-blocks", type=int, default=800_000, help="blocks without motion on the running machine"
+    )
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--reference", default="main", help="git revision of the code before the language")
     args = ap.parse_args()
@@ -215,6 +260,9 @@ def main() -> None:
             )
         else:
             print(f"reference {args.reference}: skipped (git archive failed)")
+
+        if args.still_blocks:
+            _still(d, args, reference, env)
 
         # the language program against the exact path of its plain twin
         language, plain, moves, statements = _pocket_files(d / "lang", args.language_blocks)
@@ -255,6 +303,32 @@ def main() -> None:
             f"its plain twin {figures['full_plain']:,.0f} cycles/s; "
             f"ratio {figures['full_language'] / figures['full_plain']:.2f}"
         )
+
+
+def _still(d: Path, args: argparse.Namespace, reference: Path | None, env: dict[str, str]) -> None:
+    still = d / "still.nc"
+    still.write_text("N10 G90 G01 X0 Y0 F1000\n" * args.still_blocks + "M30\n", encoding="utf-8")
+    ours = _realtime(ROOT, still, env, 1_000_000)
+    line = (
+        f"{args.still_blocks:,} blocks without motion on a running machine: {ours['cycles']:,.0f} cycles, "
+        f"longest {ours['max'] * 1000:.1f} ms (CPU time of the longest: {ours['cpu_max'] * 1000:.1f} ms), "
+        f"median {ours['median'] * 1000:.2f} ms"
+    )
+    if reference is not None:
+        ref = _realtime(reference, still, env, 1_000_000)
+        line += (
+            f"; reference {args.reference}: {ref['cycles']:,.0f} cycles, longest {ref['max'] * 1000:.1f} ms, "
+            f"median {ref['median'] * 1000:.2f} ms"
+        )
+    print(line)
+    spin = d / "spin.nc"
+    spin.write_text("P1 = 0\n$WHILE 1\nP1 = P1 + 1\n$ENDWHILE\nM30\n", encoding="utf-8")
+    ours = _realtime(ROOT, spin, env, 5_000)
+    print(
+        f"a $WHILE without motion, 5,000 cycles: longest {ours['max'] * 1000:.1f} ms "
+        f"(CPU: {ours['cpu_max'] * 1000:.1f} ms), "
+        f"median {ours['median'] * 1000:.2f} ms (the program runs on; the reference would hang the clock)"
+    )
 
 
 def _pocket_files(where: Path, blocks: int) -> tuple[Path, Path, int, int]:
