@@ -10,6 +10,10 @@ An adapter never sees the runtime or the machine. It is handed an :class:`Adapte
   Requests are latched by the channel at the next cycle, as a PLC's are. The HTTP API and the
   dashboard use it; the PLC doors do not;
 * ``events`` (:class:`EventFeed`): the typed events of ``schemas.events``, live and as a log;
+* ``recorder`` (:class:`RecorderPort`): start and stop a recording of the session, list and fetch
+  recordings (issue 25; the HTTP API and the dashboard);
+* ``faults`` (:class:`~hli_server.adapters.faults.CommFaults`): faults in the PLC's communication on
+  demand, which the doors consult once per request (issue 25);
 * ``step(n)`` for the stepped clock (``step_traced(n, signals)`` also returns chosen signals in every
   one of those cycles, :class:`Trace`), and ``on_cycle`` for work that must follow every published
   cycle (ADS device notifications).
@@ -23,8 +27,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
+from hli_server.adapters.faults import CommFaults
 from schemas.events import Event
 from schemas.layout import Direction, Layout, Signal, SignalType
 from schemas.wire import Mode
@@ -45,6 +51,7 @@ __all__ = [
     "NotFoundError",
     "OperatorError",
     "OperatorPort",
+    "RecorderPort",
     "StepRefusedError",
     "Trace",
     "Value",
@@ -262,6 +269,18 @@ class OperatorPort(Protocol):
 
     def clear_faults(self, axis: str) -> dict[str, Any]: ...
 
+    def soft_limits(self, axis: str) -> dict[str, Any]:
+        """The software limits in effect and in the axis record [0.1 µm] (P-AXIS-00177/00178/00179)."""
+        ...
+
+    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+        """Limits in effect until the next reset or mode change (the kernel's G98/G99) [0.1 µm]."""
+        ...
+
+    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+        """The axis record's limits [0.1 µm]: taken over at the next reset or mode change."""
+        ...
+
     def snapshot(self) -> dict[str, Any]:
         """Channels, axes, active alarms: ``GET /api/state``."""
         ...
@@ -293,6 +312,31 @@ class OperatorPort(Protocol):
     def collision_pairs(self) -> list[dict[str, Any]]:
         """The collision pairs (FCT-C3) now: ``{"master", "partner", "distance", "min_distance",
         "brake_master", "brake_partner", "monitoring", "stopped", "latched"}``."""
+        ...
+
+
+class RecorderPort(Protocol):
+    """Recording the session (issue 25, docs/record-replay.md): one recording at a time, by name in the
+    server's recording directory. Errors are :class:`OperatorError` subclasses."""
+
+    def status(self) -> dict[str, Any]:
+        """``{"recording", "file", "name", "started_cycle", "cycles", "bytes_written", ...}``."""
+        ...
+
+    def start(self, name: str | None = None) -> dict[str, Any]:
+        """Start recording into ``<dir>/<name>.jsonl.gz`` (None: a name from the time); the status."""
+        ...
+
+    def stop(self) -> dict[str, Any]:
+        """End the recording (flushed, closed); its final status."""
+        ...
+
+    def files(self) -> list[dict[str, Any]]:
+        """The recordings in the directory: ``[{"name", "bytes", "modified", "recording"}]``."""
+        ...
+
+    def file(self, name: str) -> Path:
+        """The path of one of them (:class:`NotFoundError` when there is none)."""
         ...
 
 
@@ -335,6 +379,16 @@ class AdapterHost(Protocol):
     @property
     def policy(self) -> AccessPolicy:
         """Who may do what through the network doors."""
+        ...
+
+    @property
+    def recorder(self) -> RecorderPort:
+        """Recording the session (issue 25)."""
+        ...
+
+    @property
+    def faults(self) -> CommFaults:
+        """Faults in the PLC's communication on demand (issue 25); the doors consult it per request."""
         ...
 
     async def step(self, cycles: int = 1) -> int:

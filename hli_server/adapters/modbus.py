@@ -71,6 +71,7 @@ from typing import TYPE_CHECKING, Any, Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from hli_server.adapters.faults import CommFaults, Door
 from hli_server.adapters.tcp import Admission, ConnectionSlots, close, listen
 from hli_server.codecs.modbus_frames import (
     ExceptionCode,
@@ -540,6 +541,7 @@ class _Connection(asyncio.Protocol):
     def __init__(self, adapter: ModbusAdapter) -> None:
         self._adapter = adapter
         self._server = adapter.server
+        self._gate = adapter.faults.gate(Door.MODBUS, None)
         self._decoder = MbapDecoder()
         self._session = Session()
         self._transport: asyncio.Transport | None = None
@@ -558,6 +560,8 @@ class _Connection(asyncio.Protocol):
             transport.abort()
             self._transport = None
             return
+        self._gate = self._adapter.faults.gate(Door.MODBUS, transport)  # communication faults on demand
+        self._transport = self._gate.transport
         self._server.stats.connections += 1
         logger.debug("Modbus: connection from %s", self._peer)
         self._arm_idle()
@@ -601,11 +605,14 @@ class _Connection(asyncio.Protocol):
         if transport is None or transport.is_closing():
             self._queue.clear()
             return
-        queue, answer, session = self._queue, self._server.answer, self._session
+        queue, answer, session, gate = self._queue, self._server.answer, self._session, self._gate
         out: list[bytes] = []
         for _ in range(min(BATCH, len(queue))):
-            reply = answer(queue.popleft(), session)
-            if reply is not None:
+            frame = queue.popleft()
+            reply = gate.modbus(frame)  # a fault's answer (adapters/faults.py), or None: serve it
+            if reply is None:
+                reply = answer(frame, session)
+            if reply:
                 out.append(reply)
         if out:
             transport.write(out[0] if len(out) == 1 else b"".join(out))
@@ -719,6 +726,8 @@ class ModbusAdapter:
         self.evict_after = self.options.evict_after
         self.port: int | None = None
         self.server: ModbusServer
+        self.faults = CommFaults()
+        """The communication faults the connections consult (the host's, once started)."""
         self._listener: asyncio.Server | None = None
         self._slots: ConnectionSlots[_Connection] = ConnectionSlots(
             "Modbus", self.options.max_connections, self.options.evict_after
@@ -745,6 +754,7 @@ class ModbusAdapter:
         )
 
     async def start(self, host: AdapterHost) -> None:
+        self.faults = host.faults
         await self.start_for(host.image, read_only=host.policy.read_only)
 
     async def start_for(self, image: ImagePort, *, read_only: bool = False) -> None:

@@ -30,6 +30,7 @@ import click
 from hli_server.adapters.host import AccessPolicy
 from hli_server.adapters.registry import CLI_ALIASES, AdapterError, options_model, plan_adapters
 from hli_server.configuration import ConfigError, ConfigFileError, load_machine, machine_summary
+from hli_server.recording.tap import RecordingOptions
 from hli_server.runtime import Clock, Runtime, precise_event_loop
 
 __all__ = ["run"]
@@ -60,6 +61,9 @@ def _banner(runtime: Runtime, event_loop: str) -> None:
     ]
     if any(guards):
         click.echo(f"  access: {', '.join(g for g in guards if g)}")
+    status = runtime.session.status()
+    if status.recording:
+        click.echo(f"  recording to {status.file} from cycle {status.started_cycle}")
     if runtime.stop_after_cycles is not None:
         click.echo(f"  stops after {runtime.stop_after_cycles} cycles")
     click.echo("  stop with Ctrl+C or SIGTERM")
@@ -188,6 +192,42 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     help="select: microsecond timers (realtime lateness ~0.1 ms); default: asyncio's (epoll, whole ms)",
 )
 @click.option("--cycles", type=click.IntRange(min=0), default=None, help="stop after N cycles (for scripts)")
+@click.option(
+    "--record",
+    "record_file",
+    type=click.Path(path_type=Path, dir_okay=False),
+    default=None,
+    help="record the session from the first cycle into FILE (.jsonl.gz; docs/record-replay.md)",
+)
+@click.option(
+    "--record-dir",
+    type=click.Path(path_type=Path, file_okay=False),
+    default=None,
+    help="where recordings started through the HTTP API or the dashboard go [default: the --record "
+    "file's directory, else ./recordings]",
+)
+@click.option(
+    "--record-flush",
+    type=click.FloatRange(0.05, 60.0),
+    default=1.0,
+    show_default=True,
+    help="seconds between flushes of a recording (what a crash can lose at most)",
+)
+@click.option(
+    "--record-max-mb",
+    type=click.IntRange(1, 1_000_000),
+    default=2048,
+    show_default=True,
+    help="a recording is closed when it reaches this size",
+)
+@click.option(
+    "--journal-limit-mb",
+    type=click.IntRange(1, 100_000),
+    default=256,
+    show_default=True,
+    help="the input journal in memory (what makes a recording started later replayable) is dropped "
+    "beyond this",
+)
 @click.pass_context
 def run(
     ctx: click.Context,
@@ -206,6 +246,11 @@ def run(
     max_catch_up: int,
     event_loop: str,
     cycles: int | None,
+    record_file: Path | None,
+    record_dir: Path | None,
+    record_flush: float,
+    record_max_mb: int,
+    journal_limit_mb: int,
     **alias_values: Any,
 ) -> None:
     """Run the machine with its process image and adapters until stopped."""
@@ -251,6 +296,13 @@ def run(
             stop_after_cycles=cycles,
             policy=policy,
             doors_process=doors_process,
+            recording=RecordingOptions(
+                file=record_file,
+                directory=record_dir or (None if record_file is not None else Path("recordings")),
+                flush_s=record_flush,
+                max_bytes=record_max_mb * 1024 * 1024,
+                journal_limit=journal_limit_mb * 1024 * 1024,
+            ),
         )
     except (AdapterError, ValueError) as exc:
         click.echo(f"error: {exc}", err=True)

@@ -17,6 +17,7 @@ from schemas.config import (
     DriveModel,
     MachineConfig,
     ManualConfig,
+    ParameterInfo,
     ProgramEntry,
     ZeroOffset,
 )
@@ -63,6 +64,11 @@ _RANGE_NOTES: dict[tuple[type[BaseModel], str], str] = {
     "both axes need bit 0x8000 in achs_mode",
     (AxisConfig, "coll_offset"): "0 (none) or 1 < value < MAX(UNS32)",
     (AxisConfig, "achs_mode"): "0x00000001 ≤ value ≤ 0x10000000; bit 0x8000: collision monitoring",
+    (AxisConfig, "a_emergency"): "0 (a_max applies) or 1 ≤ value ≤ 2*a_max",
+    (AxisConfig, "acs_limit_neg"): "swe_neg ≤ value ≤ swe_pos, less than acs_limit_pos; both 0: off",
+    (AxisConfig, "acs_limit_pos"): "swe_neg ≤ value ≤ swe_pos, greater than acs_limit_neg; both 0: off",
+    (AxisConfig, "vb_messen"): "1 ≤ value ≤ the axis' v_max (P-AXIS-00212)",
+    (ChannelConfig, "messtyp"): "1 ≤ value ≤ 7; G100 takes 1..4",
     (ChannelConfig, "axes"): "names of `[[axes]]`; each axis in one channel",
     (ChannelConfig, "main_axes"): "three different axes of the channel",
     (ChannelConfig, "interpolator_function"): "keywords FCT_IPO_DEFAULT, FCT_LOOK_AHEAD_STANDARD, "
@@ -111,35 +117,58 @@ def _meaning(info: FieldInfo) -> str:
     return text.strip() or "-"
 
 
+def _kernel_column(pinfo: ParameterInfo | None) -> str:
+    if pinfo is None or pinfo.pid is None:
+        return "-"
+    if pinfo.page.startswith("http"):
+        return f"[page]({pinfo.page})"
+    return pinfo.page or "-"
+
+
 def parameter_table_markdown() -> str:
-    """Every configuration parameter: key, P-ID, ISG path, unit, default, range (docs/configuration.md)."""
+    """Every configuration parameter: key, P-ID, ISG path, unit, default, range, the kernel's page
+    (docs/configuration.md). The default is the kernel's wherever the row has no note; the notes
+    below a section say where and why ours differs (issue 21)."""
     out: list[str] = []
     for title, model, skip in _SECTIONS:
         paths = {info.field: info for info in _PARAMETERS_OF_MODEL.get(model, ())}
         out += [
             f"### {title}",
             "",
-            "| TOML key | P-ID | ISG text-list path | unit | default | range | meaning |",
-            "|---|---|---|---|---|---|---|",
+            "| TOML key | P-ID | ISG text-list path | unit | default | range | kernel | meaning |",
+            "|---|---|---|---|---|---|---|---|",
         ]
+        notes: list[str] = []
         for name, info in model.model_fields.items():
             if name in skip:
                 continue
             pinfo = paths.get(name)
             pid = (pinfo.pid or "-") if pinfo else "project's own"
-            path = f"`{pinfo.path.replace('[0]', '[i]')}`" if pinfo else "-"
+            if pinfo is None:
+                path = "-"
+            elif pinfo.path is None:
+                path = "(none known)"
+            else:
+                path = f"`{pinfo.path.replace('[0]', '[i]')}`"
             range_text = _RANGE_NOTES.get((model, name)) or _range_text(model, name) or "-"
             if info.annotation is bool:
                 range_text = "0/1"
+            default = _default_text(model, name, info)
+            if pinfo is not None and pinfo.note:
+                default += " (note)"
+                notes.append(f"* `{name}` ({pinfo.pid}): {pinfo.note}.")
             cells = (
                 f"`{name}`",
                 pid,
                 path,
                 _unit_of(model, name, info),
-                _default_text(model, name, info),
+                default,
                 range_text,
+                _kernel_column(pinfo),
                 _meaning(info),
             )
             out.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
         out.append("")
+        if notes:
+            out += ["Where this differs from the kernel's page:", "", *notes, ""]
     return "\n".join(out)

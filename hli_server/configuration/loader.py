@@ -362,7 +362,7 @@ _TOML_NAME_OF_PATH: dict[str, str] = {
     info.path.rsplit(".", 1)[-1]: info.field
     for table in (AXIS_PARAMETERS, CHANNEL_PARAMETERS, MANUAL_PARAMETERS)
     for info in table
-    if info.path.rsplit(".", 1)[-1] != info.field
+    if info.path is not None and info.path.rsplit(".", 1)[-1] != info.field
 }
 
 
@@ -373,7 +373,10 @@ def _unknown_key(model: type[BaseModel], key: str, *, list_allowed: bool) -> str
         candidates.append(_LIST_KEY)
     for table in _TABLES.values():
         for info in table[0]:
-            if key in {info.path, _display_path(info.path, 0).replace("[0]", "[i]")}:
+            if info.path is not None and key in {
+                info.path,
+                _display_path(info.path, 0).replace("[0]", "[i]"),
+            }:
                 return (
                     f"unknown key: {key} is an ISG text-list path; in the machine file write "
                     f"`{info.field} = ...`, or put the line in a parameter list"

@@ -440,6 +440,8 @@ class Channel:
         self._jog_keys = [0] * len(self.axes)
         self.current_block = None
         self._state.apply(Cause.RESET)
+        for axis in self.axes:
+            axis.reload_soft_limits()  # P-AXIS-00177/00178: from the axis record at reset
         self.machine.channel_reset(self)
 
     def change_mode(self, mode: int) -> None:
@@ -456,6 +458,9 @@ class Channel:
             return
         if not self.machine.allow_mode_change(self, target):
             return
+        if target != self.mode:
+            for axis in self.axes:
+                axis.reload_soft_limits()  # P-AXIS-00177/00178: from the axis record at a mode change
         self._state.set_mode(target)
 
     def abort(self) -> None:

@@ -97,6 +97,8 @@ class MeasuringMove:
     segment: LineSegment
     done: Callable[[], None]
     tag: Any = None
+    feed: float | None = None
+    """mm/min: the measuring feed when it is not the programmed F (measuring type 2: P-AXIS-00215)."""
 
 
 class MeasureHandler(Protocol):
@@ -128,6 +130,9 @@ class ModalState:
     """G130 <axis><percent>: per axis, for G01/G02/G03."""
     axis_accel_weight_rapid: dict[str, float] = field(default_factory=dict)
     """G230 <axis><percent>: per axis, for G00."""
+    meas_type: int | None = None
+    """The measuring type of G100 selected in the program (the kernel's ``#MEAS MODE [n]``); None: the
+    channel's default P-CHAN-00057. A hook for the NC language: nothing here sets it yet."""
 
     def offset(self, axis: str) -> float:
         base = self.zero_offsets.get(self.zero_offset, {}).get(axis, 0.0) if self.zero_offset else 0.0
@@ -414,9 +419,7 @@ class Decoder:
         if not block.axes:
             return self._error(block, 912011, "G100 measuring move without a target position")
         if self.modal.in_area_definition:
-            return self._error(block, 912011, "G100 is not allowed inside an area definition")
-        if self.modal.feed is None:
-            return self._error(block, 911000, "no feed (F word) programmed for the G100 measuring move")
+            return self._error(block, 21793, "G100 is not allowed inside a control area definition")
         segment = LineSegment(tuple(self.position), tuple(self._target(block)))
         if segment.length <= 1e-12:
             return self._error(block, 912011, "G100 measuring move: the target is the current position")
@@ -427,17 +430,18 @@ class Decoder:
             err = check(result.segment, block)
             if err is not None:
                 return [Marker(MarkerKind.ERROR, block, payload=err)]
-        v_max, accel = self._limits(result.segment, rapid=False)
+        v_max, accel = self._limits(result.segment, rapid=False, feed=result.feed)
         motion = Motion(
             segment=result.segment, block=block, v_max=v_max, accel=accel, exact_stop=True, tag=result.tag
         )
         self.finished = True  # until result.done resumes from where the move ended
         return [motion, Marker(MarkerKind.ACTION, block, payload=result.done)]
 
-    def _limits(self, segment: Segment, rapid: bool) -> tuple[float, float]:
-        """Path velocity and acceleration the axes allow along the segment (mm/s, mm/s²)."""
+    def _limits(self, segment: Segment, rapid: bool, feed: float | None = None) -> tuple[float, float]:
+        """Path velocity and acceleration the axes allow along the segment (mm/s, mm/s²); ``feed``
+        (mm/min) instead of the programmed F where given."""
         length = segment.length
-        v = math.inf if rapid else (self.modal.feed or 0.0) / 60.0
+        v = math.inf if rapid else (feed if feed is not None else self.modal.feed or 0.0) / 60.0
         a = math.inf
         if isinstance(segment, LineSegment):
             for k, name in enumerate(self.axes):
@@ -485,9 +489,8 @@ class Decoder:
             m.in_area_definition = True
             # the contour blocks do not move the axes: END puts the position back
             self._position_before_area = list(self.position)
-        elif isinstance(cmd, AreaEnd):
-            if not m.in_area_definition:
-                return self._error(block, 912002, "#CONTROL AREA END without BEGIN")
+        elif isinstance(cmd, AreaEnd) and m.in_area_definition:
+            # (an END without BEGIN goes to the area handler: the kernel's warning 21288, no effect)
             m.in_area_definition = False
             if self._position_before_area is not None:
                 self.position = self._position_before_area

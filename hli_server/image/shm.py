@@ -364,8 +364,9 @@ class ProcessImage:
         return f"ProcessImage({self.name!r}, {self.backing}, {self.plan.total_size} bytes, {state})"
 
     # --- the cycle ---------------------------------------------------------------------------
-    def latch_into(self, machine: MachineHli) -> None:
-        """Copy the PLC->CNC half (one memcpy) and assign it to the engine's ``_w`` fields."""
+    def latch_into(self, machine: MachineHli) -> bytes:
+        """Copy the PLC->CNC half (one memcpy) and assign it to the engine's ``_w`` fields; returns the
+        bytes latched (what the session recorder keeps, ``hli_server/recording``)."""
         off = self.plan.p2c_offset
         data = bytes(self._buf[off : off + self.plan.p2c_size])
         values = self._p2c_struct.unpack(data)
@@ -373,9 +374,14 @@ class ProcessImage:
             self._projection.unpack[_P2C](machine, values)
         except (IndexError, AttributeError) as exc:
             raise diagnose(self.layout, machine, _P2C, exc) from exc
+        return data
 
-    def publish_from(self, machine: MachineHli, cycle: int) -> None:
-        """Pack the engine's CNC->PLC fields and publish them as ``cycle`` (seqlock, one memcpy)."""
+    def publish_from(self, machine: MachineHli, cycle: int, *, commit: bool = True) -> bytearray:
+        """Pack the engine's CNC->PLC fields and publish them as ``cycle`` (seqlock, one memcpy).
+
+        Returns the packed buffer (the cycle as u64, then the half; valid until the next call).
+        ``commit=False`` packs without publishing: the readers keep the previous publish (a stalled
+        publish, issue 25's communication fault)."""
         private = self._c2p_private
         try:
             self._projection.pack[_C2P](machine, self._c2p_struct.pack_into, private, 0, cycle)
@@ -383,7 +389,9 @@ class ProcessImage:
             if isinstance(exc, struct.error) and not 0 <= cycle < 2**64:
                 raise SignalValueError(f"cycle {cycle} does not fit the image's u64 cycle counter") from exc
             raise diagnose(self.layout, machine, _C2P, exc) from exc
-        self._commit(private, cycle)
+        if commit:
+            self._commit(private, cycle)
+        return private
 
     def publish_bytes(self, half: bytes | bytearray, cycle: int) -> None:
         """Publish a ready-made CNC->PLC half (replay, tests); same protocol as :meth:`publish_from`."""

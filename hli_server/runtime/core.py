@@ -30,9 +30,11 @@ import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
+from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import AccessPolicy, LoggedEvent, Trace
 from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
 from hli_server.engine.machine import Machine
+from hli_server.recording.tap import JournaledOperator, RecordingOptions, SessionRecorderPort, SessionTap
 from hli_server.runtime.events import EventLog
 from hli_server.runtime.host import OperatorPanel, RuntimeHost
 from hli_server.runtime.image import ImageFactory, RuntimeImage, shared_memory_image
@@ -96,6 +98,7 @@ class Runtime:
         read_program: Callable[[str], str] | None = read_program_file,
         policy: AccessPolicy | None = None,
         doors_process: bool = False,
+        recording: RecordingOptions | None = None,
     ) -> None:
         try:
             self.clock = Clock(clock)
@@ -116,15 +119,24 @@ class Runtime:
         self.image_name = image_name
         self.max_catch_up = max_catch_up
         self.stop_after_cycles = stop_after_cycles
-        self.machine = Machine(config, read_program=read_program)
+        self.session = SessionTap(config, recording)
+        """Records the session (issue 25): the input journal always, a recording file on demand."""
+        self.machine = Machine(config, read_program=self.session.wrap_reader(read_program))
+        self.session.bind(self.machine)
+        self.machine.programs = self.session.wrap_library(self.machine.programs)
+        self.comm_faults = CommFaults(lambda: self.machine.cycle)
+        """Faults in the PLC's communication on demand (issue 25, ``adapters/faults.py``)."""
+        self.comm_faults.subscribe(self.session.note_fault)
+        self.recorder_port = SessionRecorderPort(self.session)
         self.t_a = self.machine.t_a
         self.stats = PacingStats(self.t_a)
         self.event_log = EventLog()
         self.machine.event_listeners.append(self.event_log)
         self._cycle_listeners: list[Callable[[int], None]] = []
         self._recorders: list[SignalRecorder] = []
-        self.operator = OperatorPanel(self.machine, self.timing)
-        self.host = RuntimeHost(self, self.operator)
+        self.panel = OperatorPanel(self.machine, self.timing)
+        self.operator = JournaledOperator(self.panel, self.session)
+        self.host = RuntimeHost(self, self.panel)
         self._image_factory = image_factory or shared_memory_image
         self._image: RuntimeImage | None = None
         specs: list[AdapterSpec]
@@ -256,6 +268,7 @@ class Runtime:
         try:
             self._image = self._image_factory(self.config, self.image_name)
             self._image.init_from(self.machine.hli, self.machine.cycle)
+            self.session.attach(self._image)
             for spec in self._in_process_specs():
                 adapter = self._make_adapter(spec)
                 self.adapters.append(adapter)
@@ -357,6 +370,7 @@ class Runtime:
             # a failure of the clock was recorded by _pacer_done and is raised by wait_stopped/serve;
             # here it must not keep the adapters and the image from being closed
             await asyncio.wait([self._pacer])
+        await self.session.close()
         errors: list[BaseException] = []
         for adapter in reversed(self._started_adapters):
             try:
@@ -441,15 +455,21 @@ class Runtime:
         if image is None:
             raise RuntimeStateError("the runtime is stopped")
         machine = self.machine
+        session = self.session  # the recording tap at the latch boundary (hli_server/recording)
+        latched = b""
+        packed: bytearray | None = None
         try:
-            image.latch_into(machine.hli)
+            session.before_cycle(machine.cycle + 1)
+            latched = image.latch_into(machine.hli)
             machine.step(1)
         except Exception as exc:  # the server outlives a failing cycle: the channels take an error
             self._cycle_failed(exc)
         try:
-            image.publish_from(machine.hli, machine.cycle)
+            stalled = self.comm_faults.publish_stalled(machine.cycle)  # a stalled publish, on demand
+            packed = image.publish_from(machine.hli, machine.cycle, commit=not stalled)
         except Exception as exc:
             self._cycle_failed(exc)
+        session.after_cycle(machine.cycle, latched, packed)
         for recorder in self._recorders:
             recorder.sample()
         for listener in self._cycle_listeners:

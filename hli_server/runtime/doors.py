@@ -28,6 +28,7 @@ from dataclasses import asdict
 from multiprocessing.connection import Connection
 from typing import Any, cast
 
+from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     AccessPolicy,
     AdapterHost,
@@ -36,6 +37,7 @@ from hli_server.adapters.host import (
     ImagePort,
     LoggedEvent,
     OperatorPort,
+    RecorderPort,
     StepRefusedError,
     Trace,
     Value,
@@ -159,6 +161,8 @@ class DoorsHost(AdapterHost):
         self._listeners: list[Callable[[int], None]] = []
         self._watch: asyncio.Task[None] | None = None
         self._t_a_s = t_a_us * 1e-6
+        self._faults = CommFaults(lambda: image.cycle)
+        """A mirror of the server's communication faults (sent by the parent, issue 25)."""
 
     @property
     def image(self) -> ImagePort:
@@ -183,6 +187,14 @@ class DoorsHost(AdapterHost):
     @property
     def policy(self) -> AccessPolicy:
         return self._policy
+
+    @property
+    def recorder(self) -> RecorderPort:
+        return cast(RecorderPort, self._operator)  # the engine's process records; this raises ConflictError
+
+    @property
+    def faults(self) -> CommFaults:
+        return self._faults
 
     async def step(self, cycles: int = 1) -> int:
         raise StepRefusedError("the doors process does not step the clock")
@@ -266,10 +278,20 @@ async def _serve_doors(
             await adapter.start(host)
             started.append(adapter)
         conn.send(("ready", [(a.name, getattr(a, "port", None), a.endpoints()) for a in started]))
+
+        # what ends here by count goes back to the server, which owns the faults
+        def report(change: dict[str, Any]) -> None:
+            if change["fault"] == "end":
+                conn.send(("fault-ended", change))
+
+        host.faults.subscribe(report)
         loop = asyncio.get_running_loop()
         while True:  # until the parent says stop, goes away, or closes the image
             if await loop.run_in_executor(None, conn.poll, 0.2):
-                break
+                kind, payload = conn.recv()
+                if kind != "faults":
+                    break
+                host.faults.load(payload)
             if os.getppid() != parent or image.closed:
                 break
     except Exception as exc:
@@ -306,6 +328,8 @@ class DoorsProcess:
         self.doors: dict[str, tuple[int | None, list[str]]] = {}
         self._process: multiprocessing.process.BaseProcess | None = None
         self._conn: Connection | None = None
+        self._faults_link: Callable[[], None] | None = None
+        self._reader: asyncio.Task[None] | None = None
 
     def endpoints(self) -> list[str]:
         pid = self._process.pid if self._process is not None else "-"
@@ -347,10 +371,45 @@ class DoorsProcess:
         if kind != "ready":
             raise RuntimeError(str(payload))
         self.doors = {name: (port, lines) for name, port, lines in payload}
+        self._link_faults(host.faults, parent_conn)
+
+    def _link_faults(self, faults: CommFaults, conn: Connection) -> None:
+        """The communication faults go to the doors' mirror on every change; what ends there by count
+        comes back (issue 25)."""
+
+        def send(_change: dict[str, Any]) -> None:
+            with contextlib.suppress(OSError, EOFError, BrokenPipeError):
+                conn.send(("faults", faults.export()))
+
+        self._faults_link = faults.subscribe(send)
+        if faults.active:
+            send({})
+
+        async def read() -> None:
+            loop = asyncio.get_running_loop()
+            while True:
+                if not await loop.run_in_executor(None, conn.poll, 0.2):
+                    continue
+                try:
+                    kind, change = conn.recv()
+                except (OSError, EOFError):
+                    return
+                if kind == "fault-ended" and faults.get(change["id"]) is not None:
+                    faults.end(change["id"], change.get("reason", "count"))
+
+        self._reader = asyncio.get_running_loop().create_task(read(), name="hli-doors-faults")
 
     async def stop(self) -> None:
         process, conn = self._process, self._conn
         self._process = self._conn = None
+        if self._faults_link is not None:
+            self._faults_link()
+            self._faults_link = None
+        if self._reader is not None:
+            self._reader.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._reader
+            self._reader = None
         if conn is not None:
             with contextlib.suppress(OSError, EOFError, BrokenPipeError):
                 conn.send(("stop", None))

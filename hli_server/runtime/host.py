@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     Accepted,
     AccessPolicy,
@@ -20,6 +21,7 @@ from hli_server.adapters.host import (
     InvalidRequestError,
     NotFoundError,
     OperatorPort,
+    RecorderPort,
     StepRefusedError,
     Trace,
 )
@@ -28,6 +30,7 @@ from hli_server.engine.axis import Axis
 from hli_server.engine.channel import Channel
 from hli_server.engine.machine import Machine
 from hli_server.runtime.live import TrailRecorder, collision_pairs, live_scene, program_table, scene_key
+from schemas.units import increments_from_mm, mm_from_increments
 from schemas.wire import Mode
 
 if TYPE_CHECKING:
@@ -183,6 +186,44 @@ class OperatorPanel(OperatorPort):
         self._m.inject_fault(ax.name)
         return self.faults(axis)
 
+    # --- software limits (E-06, P-AXIS-00177/00178/00179) ------------------------------------
+    def soft_limits(self, axis: str) -> dict[str, Any]:
+        ax = self._axis(axis)
+        rec = ax.config
+        return {
+            "axis": ax.name,
+            "in_effect": {
+                "swe_neg": increments_from_mm(ax.swe_neg),
+                "swe_pos": increments_from_mm(ax.swe_pos),
+                "swe_toleranz": increments_from_mm(ax.swe_tol),
+            },
+            "record": {"swe_neg": rec.swe_neg, "swe_pos": rec.swe_pos, "swe_toleranz": rec.swe_toleranz},
+        }
+
+    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+        ax = self._axis(axis)
+        unknown = sorted(set(values) - {"swe_neg", "swe_pos"})
+        if unknown or not values:
+            raise InvalidRequestError("give swe_neg and/or swe_pos [0.1 µm] (the limits in effect)")
+        try:
+            ax.set_soft_limits(
+                mm_from_increments(values["swe_neg"]) if "swe_neg" in values else None,
+                mm_from_increments(values["swe_pos"]) if "swe_pos" in values else None,
+            )
+        except ValueError as exc:
+            raise InvalidRequestError(str(exc)) from None
+        return self.soft_limits(axis)
+
+    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+        ax = self._axis(axis)
+        if not values:
+            raise InvalidRequestError("give swe_neg, swe_pos and/or swe_toleranz [0.1 µm]")
+        try:
+            self._m.update_axis_record(ax.name, **values)
+        except ValueError as exc:
+            raise InvalidRequestError(str(exc)) from None
+        return self.soft_limits(axis)
+
     # --- state ----------------------------------------------------------------------------
     def snapshot(self) -> dict[str, Any]:
         return self._m.snapshot()
@@ -235,7 +276,15 @@ class RuntimeHost:
 
     @property
     def operator(self) -> OperatorPort:
-        return self._operator
+        return self._rt.operator  # the panel, with every request noted by the session recorder
+
+    @property
+    def recorder(self) -> RecorderPort:
+        return self._rt.recorder_port
+
+    @property
+    def faults(self) -> CommFaults:
+        return self._rt.comm_faults
 
     @property
     def events(self) -> EventFeed:

@@ -35,6 +35,7 @@ POSIX shared memory, for a PLC in another process.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import inspect
 import logging
@@ -42,7 +43,7 @@ import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Coroutine, Iterable, Sequence
+from collections.abc import Callable, Coroutine, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar, cast
 
@@ -56,7 +57,16 @@ if TYPE_CHECKING:
     from plc_clients.transports import Transport
     from schemas.config import MachineConfig
 
-__all__ = ["ConditionNotMetError", "Harness", "HarnessError", "ImageView", "load_machine_spec"]
+__all__ = [
+    "CommFaultsView",
+    "ConditionNotMetError",
+    "Harness",
+    "HarnessError",
+    "ImageView",
+    "ReplayFailedError",
+    "SessionRecording",
+    "load_machine_spec",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -147,6 +157,75 @@ class ImageView:
 
     def __repr__(self) -> str:
         return f"ImageView({self._image.name!r})"
+
+
+class ReplayFailedError(AssertionError):
+    """:meth:`Harness.replay` found a difference, or cannot replay the recording: the message is the
+    replay's report (the first difference with its cycle, signal, expected and actual value)."""
+
+    def __init__(self, report: Any) -> None:
+        super().__init__(report.text())
+        self.report = report
+
+
+class SessionRecording:
+    """A recording of the harness' session (:meth:`Harness.record`); stopped by :meth:`stop` or at the
+    end of a ``with`` block (and when the harness stops)."""
+
+    def __init__(self, harness: Harness, path: Path) -> None:
+        self._harness = harness
+        self.path = path
+
+    def stop(self) -> Path:
+        runtime = self._harness.runtime
+        if runtime.session.recording:
+            self._harness._call_soon(runtime.session.stop)
+        return self.path
+
+    def __enter__(self) -> SessionRecording:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+class CommFaultsView:
+    """The communication faults of the harness' server (issue 25, ``hli.comm_faults``): each call is
+    handed to the server's loop. ``with hli.comm_faults.fault(kind="delay", door="modbus", delay_ms=50,
+    count=3): ...`` ends the fault at the end of the block."""
+
+    def __init__(self, harness: Harness) -> None:
+        self._harness = harness
+
+    def add(self, **spec: Any) -> dict[str, Any]:
+        """Set a fault (the fields of ``POST /api/comm/faults``); returns it with its ``id``."""
+        faults = self._harness.runtime.comm_faults
+        result: dict[str, Any] = self._harness._call_soon(lambda: faults.add(spec).to_json())
+        return result
+
+    def end(self, fault_id: int) -> None:
+        faults = self._harness.runtime.comm_faults
+        self._harness._call_soon(lambda: faults.end(fault_id, "api"))
+
+    def reset(self) -> int:
+        faults = self._harness.runtime.comm_faults
+        ended: int = self._harness._call_soon(lambda: faults.reset("reset"))
+        return ended
+
+    def table(self) -> list[dict[str, Any]]:
+        faults = self._harness.runtime.comm_faults
+        table: list[dict[str, Any]] = self._harness._call_soon(faults.table)
+        return table
+
+    @contextlib.contextmanager
+    def fault(self, **spec: Any) -> Iterator[dict[str, Any]]:
+        fault = self.add(**spec)
+        try:
+            yield fault
+        finally:
+            with contextlib.suppress(Exception):  # ended by itself already
+                if any(f["id"] == fault["id"] for f in self.table()):
+                    self.end(fault["id"])
 
 
 class _OperatorInLoop:
@@ -382,6 +461,37 @@ class Harness:
         ``stop()`` or the end of a ``with`` block; ``recording.trace()[path]`` is a numpy array."""
         self._loop_or_raise()
         return self._call_soon(lambda: self.runtime.record(signals))
+
+    # --- recording and replay (issue 25) -----------------------------------------------------------
+    def record(self, path: str | os.PathLike[str], *, overwrite: bool = True) -> SessionRecording:
+        """Record this session into ``path`` (gzip JSON Lines, docs/record-replay.md) from the next cycle
+        on, with every input since the first cycle; ``with hli.record(p): ...`` or ``.stop()``."""
+        self._loop_or_raise()
+        target = Path(os.fspath(path))
+        runtime = self.runtime
+        self._call_soon(lambda: runtime.session.start(target, origin="pytest", overwrite=overwrite))
+        return SessionRecording(self, target)
+
+    def replay(self, path: str | os.PathLike[str], **options: Any) -> Any:
+        """Replay a recording as a test: raises :class:`ReplayFailedError` (an AssertionError, with the
+        report: the first difference's cycle, signal, expected and actual value) unless it passes;
+        returns the :class:`~hli_server.recording.replay.ReplayReport`. Options: ``until``, ``signals``,
+        ``events``, ``all_differences``, ``config``, ``same_version`` (as ``hli-server replay``). The
+        replay runs on a machine of its own, built from the recording; this harness' machine is left
+        as it is."""
+        __tracebackhide__ = True
+        from hli_server.recording.replay import Verdict, replay
+
+        self._loop_or_raise()
+        report = self._call(replay(Path(os.fspath(path)), **options))
+        if report.verdict is not Verdict.PASS:
+            raise ReplayFailedError(report)
+        return report
+
+    @property
+    def comm_faults(self) -> CommFaultsView:
+        """Faults in the PLC's communication on demand (docs/record-replay.md)."""
+        return CommFaultsView(self)
 
     # --- doors ------------------------------------------------------------------------------------
     def serve(self, adapter: str, **options: Any) -> Adapter:

@@ -20,6 +20,7 @@ from typing import Any
 
 import pytest
 
+from hli_server.recording.format import read_records
 from tests.integration.servers import hli_server_cmd, read_banner, stop_server
 from tests.spec_examples import CIRC_PROT_OLD
 
@@ -239,3 +240,34 @@ def test_with_an_api_token_the_page_asks_for_it_once(browser: Any, tmp_path: Pat
         context.close()
     finally:
         stop_server(proc)
+
+
+@pytest.mark.req("B-02")
+def test_the_record_button_records_the_session_into_the_recording_directory(
+    browser: Any, tmp_path: Path
+) -> None:
+    proc, url = _start("--record-dir", str(tmp_path), log=tmp_path / "server.log")
+    try:
+        context = browser.new_context()
+        p = context.new_page()
+        p.set_default_timeout(WAIT_MS)
+        _open(p, url)
+        button = p.locator("#record")
+        expect(button).to_have_text("● Record")
+        expect(p.locator("#record-status")).to_have_text("not recording")
+        button.click()
+        expect(button).to_have_text("■ Stop recording")
+        expect(p.locator("#record-status")).to_contain_text("recording session-")
+        p.click("#ch1-select")
+        p.click("#ch1-start")
+        expect(p.locator("#ch1-state")).to_have_text("running")
+        button.click()
+        expect(button).to_have_text("● Record")
+        expect(p.locator("#message")).to_contain_text("hli-server replay FILE replays it")
+        context.close()
+    finally:
+        stop_server(proc)
+    files = list(tmp_path.glob("session-*.jsonl.gz"))
+    assert len(files) == 1
+    ops = [r["op"] for r in read_records(files[0]) if "op" in r]
+    assert ops == ["select_program", "start"]

@@ -291,6 +291,32 @@ async def test_fault_injection(hli: Harness, client: httpx.AsyncClient) -> None:
     assert "X, Y, Z, X1, X2, Z1" in r.json()["detail"]
 
 
+@pytest.mark.req("E-06", "B-04")
+async def test_soft_limits_in_effect_and_in_the_axis_record(hli: Harness, client: httpx.AsyncClient) -> None:
+    """P-AXIS-00177/00178 "Anmerkungen": the limits are taken from the axis record at reset and mode
+    change (FCT-C14 6.2); in between the limits in effect may differ (the kernel's G98/G99)."""
+    r = await client.get("/api/axes/X/soft-limits")
+    demo = {"swe_neg": -6_000_000, "swe_pos": 6_000_000, "swe_toleranz": 1_000}
+    assert r.json() == {"axis": "X", "in_effect": demo, "record": demo}
+    r = await client.put("/api/axes/X/soft-limits", json={"swe_pos": 1_000_000})
+    assert r.status_code == 200
+    assert r.json()["in_effect"]["swe_pos"] == 1_000_000
+    assert r.json()["record"]["swe_pos"] == 6_000_000
+    r = await client.put("/api/axes/X/record", json={"swe_neg": -2_000_000})
+    assert (r.json()["in_effect"]["swe_neg"], r.json()["record"]["swe_neg"]) == (-6_000_000, -2_000_000)
+    await client.post("/api/channels/1/reset")
+    await step(client, 2)
+    r = await client.get("/api/axes/X/soft-limits")
+    assert r.json()["in_effect"] == {"swe_neg": -2_000_000, "swe_pos": 6_000_000, "swe_toleranz": 1_000}
+    assert hli.runtime.machine.axis("X").swe_pos == 600.0
+    assert (await client.put("/api/axes/X/soft-limits", json={"swe_neg": 7_000_000})).status_code == 422
+    r = await client.put("/api/axes/X/record", json={"swe_pos": -3_000_000})
+    assert r.status_code == 422
+    assert "swe_neg" in r.json()["detail"]
+    assert (await client.put("/api/axes/X/record", json={"a_max": 5})).status_code == 422
+    assert (await client.put("/api/axes/Q/record", json={"swe_pos": 5})).status_code == 404
+
+
 async def test_faults_take_effect_in_the_position_loop(client: httpx.AsyncClient) -> None:
     await client.post("/api/axes/Y/faults", json={"encoder_drift": 10.0})
     await step(client, 100)
@@ -444,7 +470,7 @@ async def test_an_error_abort_reads_aborted_until_reset_and_a_new_program_loads(
     await client.post("/api/channels/1/start")
     await step(client, 3000)
     assert await image_value(client, PROGRAM_STATE) == ProgramState.ABORTED
-    assert await image_value(client, "gpCh[0]^bahn_state.error_id_r") == 911011
+    assert await image_value(client, "gpCh[0]^bahn_state.error_id_r") == 120002
     state = await channel_state(client)
     assert (state["program_state"], state["program_state_name"]) == (3, "aborted")
     r = await client.post("/api/channels/1/program", content="N10 G01 X5 F6000\nN20 M30\n")

@@ -551,10 +551,10 @@ def test_a_program_without_m30_ends_with_the_last_blocks_warning(config: Machine
 def test_soft_limits_mid_chunk(config: MachineConfig) -> None:
     for move, alarm in (
         ("G01 X600 Y0", None),
-        ("G01 X600.0001 Y0", 911011),
+        ("G01 X600.0001 Y0", 120002),
         ("G02 X0 Y0 I0 J-300", None),  # a whole circle down to the limit
-        ("G02 X0 Y0 I0 J-300.0001", 911010),
-        ("G03 X0 Y0 I300.0001 J0", 911011),
+        ("G02 X0 Y0 I0 J-300.0001", 120003),
+        ("G03 X0 Y0 I300.0001 J0", 120002),
     ):
         text = "G90 G01 X0 Y0 F6000\n" + "\n".join([*_zigzag(100), "G01 X0 Y0", move, *_zigzag(100), "M30"])
         result = assert_same(config, text)

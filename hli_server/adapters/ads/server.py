@@ -47,6 +47,7 @@ from pydantic import ValidationError
 
 from hli_server.adapters.ads.device import AdsDevice, DeviceLimits, Session
 from hli_server.adapters.ads.options import AdsOptions
+from hli_server.adapters.faults import CommFaults, Door
 from hli_server.adapters.tcp import Admission, ConnectionSlots, close, listen
 from hli_server.codecs.ads import (
     NEED_DATA,
@@ -113,6 +114,7 @@ class _Connection(asyncio.Protocol):
         self._device = adapter.device
         self._options = adapter.options
         self._decoder = AmsStreamDecoder()
+        self._gate = adapter.faults.gate(Door.ADS, None)
         self._transport: asyncio.Transport | None = None
         self.peer: Any = None
         self.session = Session(self._send, self._backlogged)
@@ -146,6 +148,8 @@ class _Connection(asyncio.Protocol):
             return
         limit = self._options.max_queued_output
         transport.set_write_buffer_limits(high=limit, low=limit // 2)
+        self._gate = self._adapter.faults.gate(Door.ADS, transport)  # communication faults on demand
+        self._transport = self._gate.transport
         self._adapter.stats.connections += 1
         logger.debug("ADS: connection from %s", self.session.name)
 
@@ -262,6 +266,9 @@ class _Connection(asyncio.Protocol):
                 )
                 self.abort()
                 return None
+            faulted = self._gate.ads(frame)  # a fault's answer (adapters/faults.py), or None: serve it
+            if faulted is not None:
+                return faulted or None
             return self._device.handle(self.session, frame)
         return self._router_message(frame)
 
@@ -342,6 +349,8 @@ class AdsAdapter:
         self.port: int | None = None
         self.stats = ServerStats()
         self.device: AdsDevice
+        self.faults = CommFaults()
+        """The communication faults the connections consult (the host's, once started)."""
         self._listener: asyncio.Server | None = None
         self._slots: ConnectionSlots[_Connection] = ConnectionSlots(
             "ADS", self.options.max_connections, self.options.evict_idle_after_s
@@ -391,6 +400,7 @@ class AdsAdapter:
         return self.device
 
     async def start(self, host: AdapterHost) -> None:
+        self.faults = host.faults
         self.serve_image(host.image, host.operator.t_a_us, read_only=host.policy.read_only)
         self._unsubscribe = host.on_cycle(self.device.on_cycle)
         try:

@@ -97,6 +97,23 @@ class FaultsBody(_Body):
     drive_error: StrictBool | None = Field(default=None, description="the drive reports an error")
 
 
+class SoftLimitsBody(_Body):
+    """The software limits in effect (E-06), 0.1 µm: they hold until the next reset or mode change, when
+    the axis record's come back (P-AXIS-00177/00178), as the kernel's G98/G99 do."""
+
+    swe_neg: StrictInt | None = Field(default=None, description="negative software limit [0.1 µm]")
+    swe_pos: StrictInt | None = Field(default=None, description="positive software limit [0.1 µm]")
+
+
+class AxisRecordBody(_Body):
+    """The axis record's software limit parameters, 0.1 µm: a parameter download, taken over at the
+    next reset or mode change (P-AXIS-00177/00178 "Anmerkungen"); ranges as in the machine file."""
+
+    swe_neg: StrictInt | None = Field(default=None, description="P-AXIS-00177 [0.1 µm]")
+    swe_pos: StrictInt | None = Field(default=None, description="P-AXIS-00178 [0.1 µm]")
+    swe_toleranz: StrictInt | None = Field(default=None, description="P-AXIS-00179 [0.1 µm]")
+
+
 class ImageWriteBody(_Body):
     # strict: "yes" or "300" are refused (422), not read as true or 300; the field's type is checked
     # by the layout afterwards (Signal.coerce), with its own one-line message

@@ -680,6 +680,46 @@ function connect() {
   source.addEventListener("dropped", parse((d) => say(`this page lost ${d.dropped} events (it read too slowly)`, "error")));
 }
 
+// --- recording the session (docs/record-replay.md) -----------------------------------------------
+function showRecording(st) {
+  const button = document.getElementById("record");
+  const status = document.getElementById("record-status");
+  state.recording = !!(st && st.recording);
+  button.textContent = state.recording ? "■ Stop recording" : "● Record";
+  button.classList.toggle("on", state.recording);
+  if (!st) return;
+  if (st.recording) {
+    const kb = (st.bytes_written / 1024).toFixed(0);
+    status.textContent = `recording ${st.name}: ${st.cycles} cycles since cycle ${st.started_cycle}, ${kb} KiB`;
+  } else {
+    status.textContent = st.error ? `not recording (${st.error})` : "not recording";
+  }
+}
+
+async function pollRecording() {
+  try {
+    const answer = await fetch("/api/recording");
+    if (answer.ok) showRecording(await answer.json());
+  } catch (_) { /* the stream will tell */ }
+}
+
+function setUpRecorder() {
+  document.getElementById("record").addEventListener("click", async () => {
+    const data = state.recording
+      ? await api("POST", "/api/recording/stop", undefined, "stop recording")
+      : await api("POST", "/api/recording/start", {}, "record");
+    if (data) {
+      showRecording(data);
+      if (!data.recording && data.name) {
+        say(`recorded ${data.name}: download it from /api/recordings/${data.name}; hli-server replay FILE replays it`);
+      }
+    }
+  });
+  pollRecording();
+  setInterval(pollRecording, 1000);
+}
+
 setUpToken();
+setUpRecorder();
 loadHistory();
 connect();
