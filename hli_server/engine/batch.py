@@ -199,7 +199,7 @@ class BatchGeometryCheck:
         if window is None or not window.lines:
             return None
         lines = window.lines
-        data = ("\n".join(lines) + "\n").encode("utf-8", "surrogatepass")
+        data = (window.text or "\n".join(lines) + "\n").encode("utf-8", "surrogatepass")
         plain = self._tokenizer.tokenize(data)
         chunk = _Chunk(lines, plain, window.first)
         self._comments_as_blank(chunk)

@@ -64,13 +64,16 @@ class _StringStream:
 class _Window:
     """Whole lines ``first .. first + len(lines) - 1`` and where they begin in the stream."""
 
-    __slots__ = ("first", "lines", "long_lines")
+    __slots__ = ("first", "lines", "long_lines", "text")
 
-    def __init__(self, first: int, lines: list[str], long_lines: dict[int, int]) -> None:
+    def __init__(self, first: int, lines: list[str], long_lines: dict[int, int], text: str = "") -> None:
         self.first = first
         self.lines = lines
         self.long_lines = long_lines
         """Line number -> length of the lines over the limit (kept as empty strings in ``lines``)."""
+        self.text = text
+        """The lines joined, each ending in ``\\n`` (the batch check tokenizes it); empty where a line is
+        over the limit."""
 
 
 class ProgramText:
@@ -184,11 +187,15 @@ class ProgramText:
         if lines and lines[-1] == "":
             lines.pop()
         long_lines: dict[int, int] = {}
-        for i, line in enumerate(lines):
-            if len(line) > MAX_LINE_CHARS:
-                long_lines[first + i] = len(line)
-                lines[i] = ""
-        window = _Window(first, lines, long_lines)
+        if lines and max(map(len, lines)) > MAX_LINE_CHARS:  # rare: look line by line only then
+            for i, line in enumerate(lines):
+                if len(line) > MAX_LINE_CHARS:
+                    long_lines[first + i] = len(line)
+                    lines[i] = ""
+        joined = text if text.endswith("\n") else text + "\n"
+        if long_lines or not lines:
+            joined = ""
+        window = _Window(first, lines, long_lines, joined)
         if k + 1 == len(self._starts):
             if at_end:
                 self._last_line = first + len(lines) - 1
