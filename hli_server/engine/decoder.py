@@ -19,7 +19,7 @@ from typing import Any, Protocol
 
 from hli_server.engine.geometry import LineSegment, Point, Segment, arc_from_centre
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
-from hli_server.engine.nc.interpreter import PAUSE, Directive, FlushStop, FlushWait, SyncAction
+from hli_server.engine.nc.interpreter import PAUSE, Directive, FlushStop, FlushWait, MeasMode, SyncAction
 from hli_server.engine.planner import Marker, MarkerKind, Motion
 
 __all__ = [
@@ -132,7 +132,7 @@ class ModalState:
     """G230 <axis><percent>: per axis, for G00."""
     meas_type: int | None = None
     """The measuring type of G100 selected in the program (the kernel's ``#MEAS MODE [n]``); None: the
-    channel's default P-CHAN-00057. A hook for the NC language: nothing here sets it yet."""
+    channel's default P-CHAN-00057. ``#MEAS MODE`` sets it (the interpreter's ``MeasMode``)."""
 
     def offset(self, axis: str) -> float:
         base = self.zero_offsets.get(self.zero_offset, {}).get(axis, 0.0) if self.zero_offset else 0.0
@@ -231,6 +231,9 @@ class Decoder:
             return [Marker(MarkerKind.ACTION, block, payload=self._end_wait)]
         if isinstance(out, FlushStop):
             return [Marker(MarkerKind.ACTION, block, payload=_nothing)]
+        if isinstance(out, MeasMode):
+            self.modal.meas_type = out.meas_type  # modal, decoded in order (the G100 blocks after it)
+            return []
         return []  # pragma: no cover - every directive is handled above
 
     def _end_wait(self) -> None:

@@ -305,3 +305,38 @@ def test_check_reports_the_programs_messages(tmp_path):
     result = _invoke(tmp_path, 'N10 P1 = 3\nN20 #MSG ["P1 is %d", P1]\nN30 M30\n')
     assert result.exit_code == 0
     assert "message (prog.nc, line 2, N20): P1 is 3" in result.stdout
+
+
+# --- #MEAS MODE: the measuring type of G100 (C14-23's hook, manual 207084683) -----------------------------
+
+
+@pytest.mark.req("N-01", "C14-23")
+def test_meas_mode_selects_the_measuring_type_of_the_g100_blocks_after_it():
+    from tests.unit.areas.helpers import only_alarm
+    from tests.unit.areas.test_area_measuring import make_machine, run_with_probe_at
+
+    # the channel's default is type 5 (G310's): G100 is ID 20138 until #MEAS MODE [3] selects type 3
+    m = make_machine(messtyp=5)
+    run_with_probe_at(m, "N10 #MEAS MODE [3]\nN20 G100 X50 F6000\nN30 G01 Y5\nM30\n", None)
+    assert list(m.alarm_history) == []
+    assert m.channel(1).setpoints()[:2] == [pytest.approx(50.0), pytest.approx(5.0)]
+    # #MEAS MODE without a value: the default again
+    m = make_machine(messtyp=5)
+    program = "N10 #MEAS MODE [1 + 2]\nN20 G100 X50 F6000\nN30 #MEAS MODE\nN40 G100 X60\nM30\n"
+    run_with_probe_at(m, program, None)
+    assert only_alarm(m, 20138).params == {"type": 5}
+    # a type from the program that G100 does not allow
+    m = make_machine(messtyp=1)
+    run_with_probe_at(m, "N10 P1 = 6\nN20 #MEAS MODE [P1]\nN30 G100 X50 F6000\nM30\n", None)
+    assert only_alarm(m, 20138).params == {"type": 6}
+
+
+@pytest.mark.req("N-01")
+def test_meas_mode_out_of_range_or_with_other_words_and_other_meas_commands_are_alarms():
+    from tests.unit.nc_helpers import error
+
+    assert error("#MEAS MODE [8]\nM30\n").alarm == 914005
+    assert error("#MEAS MODE [3] X10\nM30\n").alarm == 914015
+    err = error("#MEAS [TYPE3]\nM30\n")
+    assert err.alarm == 910110
+    assert "#MEAS" in err.message

@@ -122,6 +122,8 @@ MAX_CALL_DEPTH: Final = 20
 """Program levels (main program, subroutines, cycles) nested at most; deeper is ID 20360 (a recursion)."""
 MAX_OPEN_BLOCKS: Final = 64
 """Control blocks open at once in one program level (the kernel's limit is not public)."""
+MEAS_TYPES: Final = 7
+"""Measuring types of ``#MEAS MODE`` (P-CHAN-00057: 1 .. 7)."""
 MAX_MESSAGE: Final = 255
 """Characters of a ``#MSG`` text after formatting."""
 _STATEMENT_CACHE: Final = 50_000
@@ -222,6 +224,14 @@ class FlushStop(Directive):
 
 class FlushWait(Directive):
     """``#FLUSH WAIT`` (or a synchronous read): decoding waits until the path is at rest here."""
+
+
+class MeasMode(Directive):
+    """``#MEAS MODE``: the measuring type of the G100 blocks after it (None: the channel's default)."""
+
+    def __init__(self, block: Block, meas_type: int | None) -> None:
+        super().__init__(block)
+        self.meas_type = meas_type
 
 
 class IterationCapError(Exception):
@@ -1065,6 +1075,18 @@ class Interpreter(Env):
                 self._pending.append(FlushWait(place))
             elif "CONTINUE" not in stmt.options:
                 self._pending.append(FlushStop(place))
+            return
+        if command == "MEAS MODE":
+            meas_type: int | None = None
+            if stmt.args:
+                value = self._number(stmt, stmt.args[0], "the measuring type of #MEAS MODE")
+                if value != int(value) or not 1 <= value <= MEAS_TYPES:
+                    raise stmt.error(
+                        A_INDEX,
+                        f"#MEAS MODE [{format_value(value)}]: the measuring types are 1 .. {MEAS_TYPES}",
+                    )
+                meas_type = int(value)
+            self._pending.append(MeasMode(self._place_block(frame, stmt), meas_type))
             return
         if command == "FILE NAME":
             self._message_file = stmt.files.get("MSG", self._message_file)

@@ -736,11 +736,12 @@ class VarBlock(Stmt):
 
 
 class Hash(Stmt):
-    """``#MSG``, ``#FILE NAME``, ``#FLUSH``: ``command`` with its options.
+    """``#MSG``, ``#FILE NAME``, ``#FLUSH``, ``#MEAS MODE``: ``command`` with its options.
 
     ``#MSG``: ``options`` holds the mode and receiver words (``SAVE``, ``SYN``, ``HMI``, ...), ``args``
     the format string and its values. ``#FILE NAME``: ``files`` maps ``MSG`` to its file name.
-    ``#FLUSH``: ``options`` holds ``WAIT`` or ``CONTINUE``."""
+    ``#FLUSH``: ``options`` holds ``WAIT`` or ``CONTINUE``. ``#MEAS MODE``: ``args`` holds the
+    measuring type, or nothing (the channel's default)."""
 
     def __init__(
         self,
@@ -1534,6 +1535,8 @@ class _BlockParser:
             if not self.at_end():
                 self.fail(A_CONTROL_SYNTAX, f"#FLUSH: unexpected {self.word_at(self.pos)!r} (WAIT, CONTINUE)")
             return Hash(raw, self.number, "FLUSH", options, [])
+        if name == "MEAS" and self.keyword("MODE"):
+            return self.meas_mode()
         if name == "ENDVAR":
             self.fail(A_DECLARATION, "#ENDVAR without #VAR")
         if name == "VAR":
@@ -1614,6 +1617,26 @@ class _BlockParser:
                 f"{self.word_at(self.pos)!r} after #MSG [..]: a message stands alone in its block",
             )
         return Hash(self.raw, self.number, "MSG", options, args)
+
+    def meas_mode(self) -> Stmt:
+        """``#MEAS MODE [ [<meas_type>] ]`` (207084683): the measuring type of G100 from here to the
+        program's end; without a value the channel's default (P-CHAN-00057)."""
+        self.blanks()
+        args: list[Expr] = []
+        if self.peek() == "[":
+            self.pos += 1
+            self.depth += 1
+            self.blanks()
+            args.append(self.expression(stop_at_blank=False))
+            self.blanks()
+            self.expect("]", "after #MEAS MODE [<type>")
+            self.depth -= 1
+        if not self.at_end():
+            self.fail(
+                A_CONTROL_SYNTAX,
+                f"{self.word_at(self.pos)!r} after #MEAS MODE: #MEAS MODE [<type>] stands alone in its block",
+            )
+        return Hash(self.raw, self.number, "MEAS MODE", [], args)
 
     def file_name(self, named: bool = False) -> Stmt:
         """``#FILE NAME [MSG="report.txt"]`` (207504523; older ``#FILENAME``): the file ``#MSG SAVE``
