@@ -4,7 +4,8 @@ The kernel's own numbers are used wherever the kernel documents one (B-04, issue
 function descriptions give (FCT-C14: 120484, 120486, 120499, 50961, 50962, 50706; FCT-C3: 70092,
 70162; FCT-A3: 70082) and the IDs of the kernel's diagnosis pages (TF5200 / ISG kernel: software
 limit switches 120002/120003 and 70021/70022, the ``#CONTROL AREA`` errors 21286, 21288, 21292,
-21793, 21797, 50774, 50785, 50786, 120477, 120479, the G100 errors 20138, 50059, 50061). Each such
+21793, 21797, 50774, 50785, 50786, 120477, 120479, the G100 errors 20138, 50059, 50061, the NC
+language's control blocks, subroutines and cycles 20212 .. 21542, docs/nc-language.md). Each such
 row names its page (``page``). The project's own numbers live in the 9xxxxx range, grouped by
 subject, only where the kernel has none; ``docs/alarms.md`` (generated from this table:
 ``hli-server alarms``) marks which is which and keeps the old project numbers that kernel IDs
@@ -235,6 +236,115 @@ _TABLE: tuple[AlarmDef, ...] = (
         "kernel",
         page=_DIAG + "257543563.html",
     ),
+    # --- the NC language: the kernel's IDs (TF5200 diagnosis pages; docs/nc-language.md) ----------------
+    _e(20212, "After 'IF' only the condition is permissible", "kernel", page=_DIAG + "251115659.html"),
+    _e(
+        20214,
+        "Unexpected ELSE: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251124363.html",
+    ),
+    _e(
+        20215,
+        "'ELSE' must be programmed exclusively in the NC block",
+        "kernel",
+        page=_DIAG + "251128715.html",
+    ),
+    _e(
+        20216,
+        "Unexpected ELSEIF: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251133067.html",
+    ),
+    _e(20217, "After 'ELSEIF' only the condition is permissible", "kernel", page=_DIAG + "251137419.html"),
+    _e(
+        20218,
+        "Unexpected ENDIF: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251141771.html",
+    ),
+    _e(
+        20219,
+        "'ENDIF' must be programmed exclusively in the NC block",
+        "kernel",
+        page=_DIAG + "251146123.html",
+    ),
+    _e(
+        20221,
+        "Unexpected CASE: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251154827.html",
+    ),
+    _e(
+        20223,
+        "Unexpected DEFAULT: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251163531.html",
+    ),
+    _e(
+        20224,
+        "'DEFAULT' must be programmed exclusively in the NC block",
+        "kernel",
+        page=_DIAG + "251167883.html",
+    ),
+    _e(
+        20225,
+        "Unexpected ENDSWITCH: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251172235.html",
+    ),
+    _e(
+        20232,
+        "Unexpected ENDFOR: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251202699.html",
+    ),
+    _e(20235, "After 'WHILE' only the condition is permissible", "kernel", page=_DIAG + "251215755.html"),
+    _e(
+        20237,
+        "Unexpected ENDWHILE: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251224459.html",
+    ),
+    _e(
+        20238,
+        "'ENDWHILE' must be programmed exclusively in the NC block",
+        "kernel",
+        page=_DIAG + "251228811.html",
+    ),
+    _e(20239, "'DO' must be programmed exclusively in the NC block", "kernel", page=_DIAG + "251233163.html"),
+    _e(20241, "After 'ENDDO' only the condition is permissible", "kernel", page=_DIAG + "251241867.html"),
+    _e(20243, "Unexpected BREAK: no valid open control block", "kernel", page=_DIAG + "251250571.html"),
+    _e(20244, "Unexpected CONTINUE: no valid open control block", "kernel", page=_DIAG + "251254923.html"),
+    _e(20360, "Stack overflow of subroutines (call depth exceeded)", "kernel", page=_DIAG + "251402891.html"),
+    _w(20375, "Valid control blocks still open at program end", "kernel", page=_DIAG + "251459467.html"),
+    _e(
+        20593,
+        "Conditional interpretation (#IF/#ELSE/#ENDIF) has to be the first command in the block",
+        "kernel",
+        page=_DIAG + "251929483.html",
+    ),
+    _e(20839, "The character after $GOTO is not permitted", "kernel", page=_DIAG + "252734603.html"),
+    _e(21382, "Impermissible write/read access to cycle parameters", "kernel", page=_DIAG + "254440587.html"),
+    _e(
+        21500,
+        "Invalid control blocks pending at local subroutine end",
+        "kernel",
+        page=_DIAG + "254941067.html",
+    ),
+    _e(21501, "Invalid control blocks pending at main program end", "kernel", page=_DIAG + "254945419.html"),
+    _e(
+        21502,
+        "Invalid control blocks pending at global subroutine end",
+        "kernel",
+        page=_DIAG + "254949771.html",
+    ),
+    _e(
+        21542,
+        "No further NC commands allowed after a subroutine or cycle call",
+        "kernel",
+        page=_DIAG + "255123851.html",
+    ),
     # --- project's own: NC program syntax (910xxx) ------------------------------------------
     _e(910100, "Unknown word in NC block", "project"),
     _e(910101, "Malformed number in NC block", "project"),
@@ -273,6 +383,35 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(912011, "Measuring move (G100) invalid", "project (FCT-C14, C14-23)"),
     # --- project's own: axis collision and position monitoring (913xxx) ----------------------
     _e(913000, "Collision pair may only move apart after a collision stop", "project (FCT-C3, C3-02)"),
+    # --- project's own: the NC language where the kernel's ID is not public (914xxx) -----------
+    _e(914000, "Malformed expression or statement", "project (N-03)"),
+    _e(914001, "Division by zero", "project (N-03)"),
+    _e(914002, "Value outside the domain of the operation or the range of the type", "project (N-03)"),
+    _e(914003, "Variable not declared, or not given", "project (N-04)"),
+    _e(914004, "Variable is read-only", "project (N-04)"),
+    _e(914005, "Index or parameter number out of range", "project (N-04)"),
+    _e(914006, "A string where a number is needed, or the other way round", "project (N-03)"),
+    _e(914007, "P parameter read before it was written", "project (N-04)"),
+    _e(914008, "Malformed declaration (#VAR)", "project (N-04)"),
+    _e(914010, "Subroutine or cycle not found", "project (N-02)"),
+    _e(914013, "Jump label of $GOTO not found", "project (N-06)"),
+    _e(914014, "Control blocks nested too deeply", "project (N-06)"),
+    _e(914015, "Malformed control statement", "project (N-06)"),
+    _e(914016, "#COMMENT BEGIN without #COMMENT END", "project (N-01)"),
+    _e(
+        914017, "Unexpected ENDDO, UNTIL, #ELSE or #ENDIF: does not match the current block", "project (N-06)"
+    ),
+    _e(914020, "NC input over its bound (line, expression, string, message)", "project (issue 20)"),
+    _e(914021, "Counting loop with step 0", "project (N-06)"),
+    _w(914030, "M30/M02 in a subroutine ends the whole program", "project (N-01)"),
+    _e(914031, "Malformed #MSG text or values", "project (N-07)"),
+    _e(914032, "M17/M29 in the main program (it ends with M30 or M02)", "project (N-01)"),
+    _w(914050, "Check stopped at its cycle cap: the program did not end", "project (issue 20)"),
+    _w(
+        914051,
+        "Geometry check stopped at its cap of loop iterations: the program did not end",
+        "project (issue 20)",
+    ),
     # --- project's own: the simulator itself (919xxx) -----------------------------------------
     _e(919000, "Internal error: a cycle failed; the axes were stopped", "project", Reaction.AXIS_STOP),
     _w(
