@@ -17,10 +17,7 @@ from hli_server.testing import Harness
 from plc_clients import PlcTask
 from plc_clients.demos.ve_mode import VeModeDemo
 
-pytestmark = [
-    pytest.mark.req("N-05", "N-06", "N-02", "N-07", "H-06", "H-07"),
-    pytest.mark.xfail(strict=True, reason="needs the NC interpreter (nc branch)"),
-]
+pytestmark = pytest.mark.req("N-05", "N-06", "N-02", "N-07", "H-06", "H-07")
 
 X, Z = "gpAx[0]^ipo_state.cmd_pos_r", "gpAx[2]^ipo_state.cmd_pos_r"
 PROGRAM_STATE = "gpCh[0]^bahn_state.program_state_r"

@@ -48,7 +48,7 @@ import socket
 import struct
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -574,8 +574,10 @@ class RemoteOperator(OperatorPort):
         out: list[str] = self._call("axis_names", channel)
         return out
 
-    def load_program(self, channel: int, text: str, name: str = "program") -> dict[str, Any]:
-        out: dict[str, Any] = self._call("load_program", channel, text, name)
+    def load_program(
+        self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
+    ) -> dict[str, Any]:
+        out: dict[str, Any] = self._call("load_program", channel, text, name, dict(files) if files else None)
         return out
 
     def select_program(self, channel: int, number: int) -> dict[str, Any]:

@@ -339,7 +339,6 @@ def test_the_v_e_variables_show_what_the_plc_wrote(server: str, page: Any) -> No
 
 
 @pytest.mark.req("N-07")
-@pytest.mark.xfail(strict=True, reason="needs the NC interpreter (nc branch)")
 def test_an_nc_message_shows_on_the_page(server: str, page: Any) -> None:
     p = page
     _open(p, server)

@@ -23,7 +23,6 @@ from plc_clients.cli import main
 pytestmark = pytest.mark.req("H-06")
 
 HLI_PLC = str(Path(sys.executable).parent / "hli-plc")
-NEEDS_INTERPRETER = "needs the NC interpreter (nc branch)"
 
 
 def test_list_names_every_demo(capsys: pytest.CaptureFixture[str]) -> None:
@@ -62,7 +61,7 @@ def test_usage_errors_exit_2_with_what_to_do(capsys: pytest.CaptureFixture[str])
             "ve-mode",
             "modbus",
             ["program started with V.E.MODE = 1", "V.E.PLC_READY = TRUE", "part 3 done", "program finished"],
-            marks=[pytest.mark.req("N-05"), pytest.mark.xfail(strict=True, reason=NEEDS_INTERPRETER)],
+            marks=pytest.mark.req("N-05"),
         ),
     ],
     ids=["c43-shm", "c14-modbus", "c3-shm", "ve-modbus"],

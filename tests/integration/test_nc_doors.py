@@ -6,8 +6,9 @@
 * ``#MSG SAVE``: the report file written inside the NC output directory, never elsewhere;
 * V.E. variables in ``GET /api/state`` and writable by ST path over HTTP.
 
-The engine's side (the interpreter calling ``machine.programs.find`` and emitting the events) is the
-nc branch's; here the events are emitted as the engine emits them, between stepped cycles.
+The engine's side (the interpreter calling ``machine.programs.find`` and emitting the events) has its
+unit tests (tests/unit/test_nc_language.py); here the events are emitted as the engine emits them,
+between stepped cycles.
 """
 
 from __future__ import annotations
