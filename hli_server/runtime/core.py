@@ -36,6 +36,7 @@ from hli_server.adapters.host import AccessPolicy, LoggedEvent, Readiness, Trace
 from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
 from hli_server.engine.machine import Machine
 from hli_server.recording.tap import JournaledOperator, RecordingOptions, SessionRecorderPort, SessionTap
+from hli_server.runtime.checks import ProgramChecker
 from hli_server.runtime.events import EventLog
 from hli_server.runtime.host import OperatorPanel, RuntimeHost
 from hli_server.runtime.image import ImageFactory, RuntimeImage, shared_memory_image
@@ -152,6 +153,8 @@ class Runtime:
         self.stop_after_cycles = stop_after_cycles
         self.programs = RuntimeLibrary([*program_dirs, *config.program_directories])
         """Where ``L name`` finds global subprograms: uploads, ``program_dirs``, the machine file's (N-02)."""
+        self.checker = ProgramChecker(config, self.programs.directories.directories)
+        """Checks programs offline for ``POST /api/check`` (a worker process, started at the first check)."""
         self.session = SessionTap(config, recording)
         """Records the session (issue 25): the input journal always, a recording file on demand."""
         self.machine = Machine(
@@ -489,6 +492,7 @@ class Runtime:
         with contextlib.suppress(ValueError):
             self.machine.event_listeners.remove(self.event_log)
         self.nc_files.close()
+        await self.checker.close()
         if errors:
             raise errors[0]
 

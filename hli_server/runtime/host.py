@@ -15,6 +15,7 @@ from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     Accepted,
     AccessPolicy,
+    CheckPort,
     ConflictError,
     EventFeed,
     ImagePort,
@@ -334,6 +335,10 @@ class RuntimeHost:
     @property
     def faults(self) -> CommFaults:
         return self._rt.comm_faults
+
+    @property
+    def checker(self) -> CheckPort:
+        return self._rt.checker
 
     @property
     def events(self) -> EventFeed:

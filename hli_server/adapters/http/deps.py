@@ -14,6 +14,7 @@ from fastapi.responses import JSONResponse
 from hli_server.adapters.host import (
     Accepted,
     AdapterHost,
+    CheckTimeoutError,
     ConflictError,
     InvalidRequestError,
     NotFoundError,
@@ -106,6 +107,7 @@ _STATUS: tuple[tuple[type[OperatorError], int], ...] = (
     (StepRefusedError, 409),
     (InvalidRequestError, 422),
     (UnavailableError, 503),
+    (CheckTimeoutError, 504),
 )
 
 
