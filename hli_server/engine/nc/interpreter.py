@@ -198,6 +198,22 @@ _EXTRA_RANGE: Final = word_parser._EXTRA_RANGE
 
 
 # --- what the interpreter hands out besides blocks ------------------------------------------------------
+
+_OUTSIDE = (
+    " (a path that is absolute or leaves its directory is never read here: programs are found by name "
+    "below the program directories; see docs/nc-language.md)"
+)
+
+
+def _leaves_directories(name: str) -> bool:
+    """``D:\\prog\\x.nc``, ``/prog/x.nc``, ``..\\x.nc``: a name the program libraries never follow."""
+    unified = name.replace("\\", "/")
+    return (
+        unified.startswith("/")
+        or (len(unified) > 1 and unified[1] == ":" and unified[0].isalpha())
+        or ".." in unified.split("/")
+    )
+
 class Directive:
     """An output that is not a block (see the module's description)."""
 
@@ -1206,7 +1222,7 @@ class Interpreter(Env):
                 raise stmt.error(
                     A_NOT_FOUND,
                     f"{'cycle' if call.cycle else 'global subroutine'} {call.name} not found; searched: "
-                    f"{where}",
+                    f"{where}{_OUTSIDE if _leaves_directories(call.name) else ''}",
                 )
             units = self._global_units(found.name, found.text)
             kind = "cycle" if call.cycle else "global"

@@ -954,7 +954,14 @@ def _two_path(code: str) -> bool:
     """A two-path line (``N50 : G0 X.. : G0 U..``, FCT-C14 2.4) or a lone ``:`` (the word parser's)."""
     if ":" not in code or '"' in code or "[" in code or "=" in code:
         return False
+    if _CALL_WORD.search(code) is not None:  # L D:\prog\x.nc: a call whose name holds a ':'
+        return False
     return _N_LABEL.match(code) is None or code.count(":") > 1
+
+
+_M_RETURN_BEFORE = re.compile(r"(?:^|[\s])M0*(?:17|29)[ \t]*$")
+"""``M17 [MAIN ..]``: the M17/M29 right before a ``[`` (the parameterised jump)."""
+_CALL_WORD = re.compile(r"(?:^|[\s:])LL?[ \t]", re.IGNORECASE)
 
 
 class _BlockParser:
@@ -1116,6 +1123,12 @@ class _BlockParser:
         if c == "@":
             return self.at_word(start)
         if c == "[":
+            if _M_RETURN_BEFORE.search(u, 0, start) is not None:
+                self.fail(
+                    A_NOT_SIMULATED,
+                    f"the parameterised jump of M17/M29 ({u[start:].strip()}: PM 206781707) is not "
+                    "simulated: see docs/nc-language.md",
+                )
             self.fail(
                 A_UNKNOWN_WORD,
                 f"unexpected {self.word_at(start)!r}: a label [name] stands at the block's start",

@@ -1,0 +1,73 @@
+"""Programs of the ISG programming manual through ``hli-server check`` (issue 20): each runs, or stops with
+the alarm that names what is not simulated. The files and their pages: tests/data/manual_programs/README.md."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+from click.testing import CliRunner
+
+from hli_server.cli import main
+
+PROGRAMS = Path(__file__).resolve().parents[1] / "data" / "manual_programs"
+
+
+def check(name: str, *args: str) -> tuple[int, dict[str, Any]]:
+    done = CliRunner().invoke(main, ["check", "--format", "json", *args, str(PROGRAMS / name)])
+    assert done.exit_code in (0, 1), done.output
+    report: dict[str, Any] = json.loads(done.stdout)
+    return done.exit_code, report
+
+
+@pytest.mark.req("N-01", "N-02")
+@pytest.mark.parametrize("mode", [(), ("--geometry-only",)])
+def test_local_subroutines_206828043_run(mode: tuple[str, ...]) -> None:
+    code, report = check("local_subroutines.nc", *mode)
+    assert code == 0, report["alarms"]
+    assert report["completed"]
+    assert (report["final_position"]["X"], report["final_position"]["Y"]) == (10.0, 10.0)
+
+
+@pytest.mark.req("N-02", "N-08")
+@pytest.mark.parametrize("mode", [(), ("--geometry-only",)])
+def test_global_subroutines_206834699_run_until_the_absolute_path(mode: tuple[str, ...]) -> None:
+    code, report = check("global_subroutines.nc", *mode)
+    assert code == 1
+    assert report["final_position"]["X"] == 20.0  # L gup_1.nc ran
+    [alarm] = [a for a in report["alarms"] if a["severity"] == "error"]
+    assert (alarm["id"], alarm["line"], alarm["block"]) == (914010, 6, "N250")
+    assert "D:\\prog\\ini_1.nc not found" in alarm["message"]
+    assert str(PROGRAMS) in alarm["message"]  # the directory searched
+    assert "absolute" in alarm["message"]
+    assert "unknown word" not in alarm["message"]
+
+
+@pytest.mark.req("N-03", "N-06")
+@pytest.mark.parametrize("mode", [(), ("--geometry-only",)])
+def test_counting_loop_206929163_runs(mode: tuple[str, ...]) -> None:
+    code, report = check("counting_loop.nc", *mode)
+    assert code == 0, report["alarms"]
+    assert report["final_position"]["X"] == pytest.approx(math.sin(math.radians(500)), abs=1e-4)
+    assert report["final_position"]["Y"] == pytest.approx(math.cos(math.radians(500)), abs=1e-4)
+
+
+@pytest.mark.req("N-08")
+def test_the_parameterised_subroutine_jump_206781707_is_refused_by_name() -> None:
+    code, report = check("subroutine_jump.nc")
+    assert code == 1
+    [alarm] = [a for a in report["alarms"] if a["severity"] == "error"]
+    assert (alarm["id"], alarm["line"], alarm["block"]) == (910110, 3, "N20")
+    assert "parameterised jump of M17/M29" in alarm["message"]
+    assert "not simulated" in alarm["message"]
+    assert report["final_position"]["X"] == 10.0  # the subroutine's motion ran up to it
+
+
+def test_every_program_of_the_directory_is_tested_and_cited() -> None:
+    readme = (PROGRAMS / "README.md").read_text(encoding="utf-8")
+    for program in PROGRAMS.glob("*.nc"):
+        assert f"`{program.name}`" in readme
+    assert readme.count("https://infosys.beckhoff.com/") >= 4
