@@ -71,3 +71,40 @@ def test_every_program_of_the_directory_is_tested_and_cited() -> None:
     for program in PROGRAMS.glob("*.nc"):
         assert f"`{program.name}`" in readme
     assert readme.count("https://infosys.beckhoff.com/") >= 4
+
+
+# --- messages that must name the right thing (issue 20's list, and those found since) -----------------------
+MESSAGES = [
+    # (program line, None: runs; else (alarm, words the message must hold, words it must not))
+    ("N20 P1 = 0", None),
+    ("M110=0", None),
+    ("(a (nested) b)", None),
+    ("N10 G01 X1 F100 (a (nested) b) Y2", None),
+    ("V.E.X1 = 5", (914003, ["V.E.X1", "not declared"], ["axis"])),
+    ("N250 L D:\\prog\\ini_1.nc", (914010, ["D:\\prog\\ini_1.nc", "absolute"], ["unknown word"])),
+    ("N10 L", (914015, ["L without a program name"], ["unknown word"])),
+    ("N10 LL", (914015, ["LL without a program name"], ["global subroutine"])),
+    ("N10 M17 MAIN [ERR]", (910110, ["parameterised jump of M17/M29"], ["unknown name"])),
+    ("N10 M29 JUMPS=2 N100", (910110, ["parameterised jump of M17/M29"], [])),
+    ("N10 M17 [MAIN [ERR]]", (910110, ["parameterised jump of M17/M29"], ["label"])),
+]
+
+
+@pytest.mark.req("N-01", "N-08")
+@pytest.mark.parametrize(("line", "expected"), MESSAGES)
+def test_no_message_names_the_wrong_thing(tmp_path: Path, line: str, expected: Any) -> None:
+    program = tmp_path / "prog.nc"
+    program.write_text(f"%prog\n{line}\nM30\n", encoding="utf-8")
+    done = CliRunner().invoke(main, ["check", "--format", "json", str(program)])
+    report = json.loads(done.stdout)
+    errors = [a for a in report["alarms"] if a["severity"] == "error"]
+    if expected is None:
+        assert done.exit_code == 0, errors
+        return
+    alarm, holds, never = expected
+    assert done.exit_code == 1
+    assert (errors[0]["id"], errors[0]["line"]) == (alarm, 2)
+    for words in holds:
+        assert words in errors[0]["message"]
+    for words in never:
+        assert words not in errors[0]["message"]

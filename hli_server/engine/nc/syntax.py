@@ -1122,13 +1122,15 @@ class _BlockParser:
             )
         if c == "@":
             return self.at_word(start)
+        if (c == "[" or u.startswith(("MAIN", "JUMPS", "N"), start)) and _M_RETURN_BEFORE.search(
+            u, 0, start
+        ) is not None:
+            self.fail(
+                A_NOT_SIMULATED,
+                f"the parameterised jump of M17/M29 ({u[start:].strip()}: PM 206781707) is not "
+                "simulated: see docs/nc-language.md",
+            )
         if c == "[":
-            if _M_RETURN_BEFORE.search(u, 0, start) is not None:
-                self.fail(
-                    A_NOT_SIMULATED,
-                    f"the parameterised jump of M17/M29 ({u[start:].strip()}: PM 206781707) is not "
-                    "simulated: see docs/nc-language.md",
-                )
             self.fail(
                 A_UNKNOWN_WORD,
                 f"unexpected {self.word_at(start)!r}: a label [name] stands at the block's start",
@@ -1144,7 +1146,7 @@ class _BlockParser:
             ref = self.parameter()
             return self.assignment(start, ref)
         if c == "L" and (
-            self.peek(1) in (" ", "\t") or (self.peek(1) == "L" and self.peek(2) in (" ", "\t"))
+            self.peek(1) in (" ", "\t", "") or (self.peek(1) == "L" and self.peek(2) in (" ", "\t", ""))
         ):
             return self.call(start)
         if c == "L" and self.peek(1) not in _LETTERS and self.peek(1) != "":
@@ -1314,7 +1316,7 @@ class _BlockParser:
 
     # --- calls -------------------------------------------------------------------------------------------
     def call(self, start: int) -> Call:
-        local = self.u.startswith("LL", start) and self.peek(2) in (" ", "\t")
+        local = self.u.startswith("LL", start) and self.peek(2) in (" ", "\t", "")
         self.pos = start + (2 if local else 1)
         self.blanks()
         if self.keyword("CYCLE"):
