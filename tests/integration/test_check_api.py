@@ -5,6 +5,7 @@ against ``hli-server check``: one engine ``ProgramCheck``, the same report."""
 from __future__ import annotations
 
 import json
+import random
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,8 @@ from click.testing import CliRunner
 from hli_server.cli import main as cli
 from hli_server.testing import Harness
 from schemas.wire import ProgramState
-from tests.integration.servers import read_banner, start_server, stop_server
+from tests import fuzz
+from tests.integration.servers import http_step, read_banner, start_server, stop_server
 
 HERE = Path(__file__).parent
 DRILL = (HERE / "programs_for_the_check" / "DRILL.NC").read_text(encoding="utf-8")
@@ -57,6 +59,7 @@ def _cli_report(tmp_path: Path, text: str, *args: str, files: dict[str, str] | N
     return report
 
 
+@pytest.mark.slow
 @pytest.mark.req("N-10", "N-02", "N-06")
 async def test_the_api_checks_a_program_with_its_cycle_as_check_does(
     hli: Harness, client: httpx.AsyncClient, tmp_path: Path
@@ -79,6 +82,7 @@ async def test_the_api_checks_a_program_with_its_cycle_as_check_does(
     assert state["channels"][0]["program_state"] == ProgramState.IDLE
 
 
+@pytest.mark.slow
 @pytest.mark.req("N-10")
 async def test_a_text_body_with_query_parameters_and_an_error_alarm(
     client: httpx.AsyncClient, tmp_path: Path
@@ -100,6 +104,7 @@ async def test_a_text_body_with_query_parameters_and_an_error_alarm(
         assert _without_time(report) == _without_time(_cli_report(tmp_path, BEYOND, *args))
 
 
+@pytest.mark.slow
 @pytest.mark.req("N-10", "N-08")
 async def test_an_endless_loop_stops_at_its_cap_with_status_capped(client: httpx.AsyncClient) -> None:
     r = await client.post("/api/check", json={"text": ENDLESS, "max_cycles": 3000})
@@ -115,6 +120,7 @@ async def test_an_endless_loop_stops_at_its_cap_with_status_capped(client: httpx
     assert [a["id"] for a in report["alarms"]] == [914051]
 
 
+@pytest.mark.slow
 @pytest.mark.req("N-10")
 async def test_bad_requests_are_refused_with_a_reason_and_the_next_is_served(
     client: httpx.AsyncClient,
@@ -170,7 +176,9 @@ async def test_the_api_documents_the_check_and_its_typed_report(client: httpx.As
     ref = post["responses"]["200"]["content"]["application/json"]["schema"]["$ref"]
     assert ref.endswith("/CheckReport")
     report = spec["components"]["schemas"]["CheckReport"]
-    assert {"status", "exit_code", "alarms", "messages", "capped", "final_position"} <= set(report["properties"])
+    assert {"status", "exit_code", "alarms", "messages", "capped", "final_position"} <= set(
+        report["properties"]
+    )
 
 
 # --- the pytest plugin ------------------------------------------------------------------------------------
@@ -182,7 +190,9 @@ def test_the_plugin_checks_with_the_program_directories_of_the_test(hli: Harness
     assert [m.text for m in result.messages] == ["row 1 done", "row 2 done"]
     assert result.final_position["X"] == pytest.approx(10.0)
     assert hli.cycle == 0  # the harness' machine did not run
-    assert _without_time(result.to_json()) == _without_time(_cli_report(tmp_path, MAIN, files={"DRILL.NC": DRILL}))
+    assert _without_time(result.to_json()) == _without_time(
+        _cli_report(tmp_path, MAIN, files={"DRILL.NC": DRILL})
+    )
     stopped = hli.check(BEYOND, geometry_only=True)
     assert stopped.stopped_by_error
     assert [(a.line, a.block) for a in stopped.alarms if a.severity == "error"][:1] == [(2, "N20")]
@@ -218,3 +228,62 @@ def test_hli_server_run_checks_in_its_doors_process(tmp_path: Path) -> None:
             assert client.get("/api/state").json()["cycle"] == 0
     finally:
         stop_server(proc)
+
+
+@pytest.mark.slow
+# --- bad input: the server is never hung -------------------------------------------------------------------
+@pytest.mark.req("N-08")
+async def test_a_while_without_motion_does_not_hang_the_server(client: httpx.AsyncClient) -> None:
+    text = "N10 P1 = 0\nN20 $WHILE 1\nN30 P1 = P1 + 1\nN40 $ENDWHILE\nN50 M30\n"
+    r = await client.post(
+        "/api/channels/1/program?name=spin", content=text, headers={"content-type": "text/plain"}
+    )
+    assert r.status_code == 200, r.text
+    assert (await client.post("/api/channels/1/start")).status_code == 202
+    assert (await http_step(client, 300))["cycle"] == 300  # every cycle came back, 128 statements each
+    state = (await client.get("/api/state")).json()
+    assert state["channels"][0]["program_state"] == ProgramState.RUNNING
+    assert (await client.post("/api/channels/1/reset")).status_code == 202
+    await http_step(client, 5)
+    state = (await client.get("/api/state")).json()
+    assert state["channels"][0]["program_state"] != ProgramState.RUNNING
+    # and a check of the same program stops at its cap, the server answering meanwhile
+    r = await client.post("/api/check", json={"text": text, "max_cycles": 1000})
+    assert (r.json()["status"], r.json()["capped"]) == ("capped", {"by": "cycles", "cap": 1000})
+
+
+@pytest.mark.slow
+@pytest.mark.fuzz
+@pytest.mark.req("N-08", "N-10")
+async def test_fuzz_the_check_endpoint_answers_every_request(client: httpx.AsyncClient) -> None:
+    """Bounded and seeded: random language programs, mutated lines and mutated request bodies; every
+    answer is a report or a refusal with a reason, and the next request is served."""
+    rng = random.Random(fuzz.seed_for("api-check"))
+    statuses: dict[int, int] = {}
+    for example in range(fuzz.count(30)):
+        kind = example % 3
+        if kind == 0:
+            body: Any = {"text": fuzz.language_program(rng), "geometry_only": True, "max_iterations": 2000}
+            r = await client.post("/api/check", json=body)
+        elif kind == 1:
+            lines = [fuzz.mutate(rng, fuzz.nc_line(rng)) for _ in range(rng.randint(1, 20))]
+            body = {"text": "\n".join(lines) + "\n", "max_cycles": 20_000, "files": {"A.NC": "M17\n"}}
+            r = await client.post("/api/check", json=body)
+        else:
+            raw = json.dumps({"text": MAIN, "max_cycles": 1000, "channel": 1})
+            r = await client.post(
+                "/api/check",
+                content=fuzz.mutate(rng, raw).encode(),
+                headers={"content-type": "application/json"},
+            )
+        statuses[r.status_code] = statuses.get(r.status_code, 0) + 1
+        assert r.status_code in (200, 404, 422), (r.status_code, r.text, body if kind < 2 else "")
+        if r.status_code == 200:
+            report = r.json()
+            assert report["status"] in ("ok", "stopped", "capped")
+            assert all(isinstance(a["id"], int) and a["id"] > 0 for a in report["alarms"])
+        else:
+            assert r.json()["detail"]
+    print(f"POST /api/check: {fuzz.count(30)} requests, answers {statuses}")
+    r = await client.post("/api/check", json={"text": MAIN, "files": {"DRILL.NC": DRILL}})
+    assert r.json()["status"] == "ok"
