@@ -1,5 +1,6 @@
 """Programs of the ISG programming manual through ``hli-server check`` (issue 20): each runs, or stops with
-the alarm that names what is not simulated. The files and their pages: tests/data/manual_programs/README.md."""
+the alarm that names what is not simulated. The files and their pages:
+tests/data/manual_programs/README.md."""
 
 from __future__ import annotations
 
