@@ -214,6 +214,7 @@ def _leaves_directories(name: str) -> bool:
         or ".." in unified.split("/")
     )
 
+
 class Directive:
     """An output that is not a block (see the module's description)."""
 
