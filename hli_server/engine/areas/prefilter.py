@@ -45,7 +45,7 @@ import numpy.typing as npt
 
 from hli_server.engine.areas.geometry import Circle, Group, Polygon, Prism
 
-__all__ = ["MARGIN", "PathBatch", "clear_of_areas"]
+__all__ = ["MARGIN", "PathBatch", "clear_of_areas", "cut_into_chords"]
 
 MARGIN = 1e-5
 """mm: a path this far from every boundary is decided without the exact check (project's own)."""
@@ -95,6 +95,12 @@ def clear_of_areas(groups: list[Group], paths: PathBatch) -> Bools:
 
 _CARDINAL = np.array([0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi])[:, None]
 """The angles of a circle's extremes: +first axis, +second, -first, -second."""
+
+
+def cut_into_chords(groups: list[Group], plane: tuple[int, int]) -> bool:
+    """Does the exact check cut the arcs of ``plane`` into chords for some group (a prism sees them at
+    an angle)? Then an arc costs it hundreds of chords."""
+    return any(_stacks(group).plane(plane).chords for group in groups)
 
 
 def _swept_boxes(p: PathBatch) -> PathBatch:
@@ -379,19 +385,19 @@ def _pairs(
     result = np.zeros(prism.shape[0], np.bool_)
     arcs = p.arc[path]
     plane = p.plane
-    a, b = st.axes[0, prism], st.axes[1, prism]
+    a, b = _axis(st, 0, prism), _axis(st, 1, prism)
     # segments in the prism's base plane: lines, arcs whose plane has none of the prism's axes (a line
     # from start to end for it), arcs it sees at an angle (projected)
-    sx, sy, ex, ey = p.start[a, path], p.start[b, path], p.end[a, path], p.end[b, path]
+    sx, sy, ex, ey = _at(p.start, a, path), _at(p.start, b, path), _at(p.end, a, path), _at(p.end, b, path)
     segment = ~arcs | rel.linear[prism]
     if plane is not None:
         mixed = arcs & rel.mixed[prism]
         if mixed.any():
             a_in, b_in = rel.a_in[prism] & mixed, rel.b_in[prism] & mixed
-            sx = np.where(a_in, p.lo[a, path], sx)
-            ex = np.where(a_in, p.hi[a, path], ex)
-            sy = np.where(b_in, p.lo[b, path], sy)
-            ey = np.where(b_in, p.hi[b, path], ey)
+            sx = np.where(a_in, _at(p.lo, a, path), sx)
+            ex = np.where(a_in, _at(p.hi, a, path), ex)
+            sy = np.where(b_in, _at(p.lo, b, path), sy)
+            ey = np.where(b_in, _at(p.hi, b, path), ey)
             segment |= mixed & ((a_in & (sy == ey)) | (b_in & (sx == ex)) | (~a_in & ~b_in))
     k = np.flatnonzero(segment)
     if k.shape[0]:
@@ -429,6 +435,28 @@ def _segments(
     if k.shape[0]:
         result[k] = _line_polygon(st, prism[k], sx[k], sy[k], ex[k], ey[k], protection)
     return result
+
+
+def _axis(st: _Stack, row: int, prism: Ints) -> int | Ints:
+    """The prisms' axis of ``row`` (a, b, c): one number where they share it, else one per pair."""
+    shared = st.shared[row]
+    if shared >= 0:
+        return shared
+    axes: Ints = st.axes[row, prism]
+    return axes
+
+
+def _sub(axis: int | Ints, k: Ints) -> int | Ints:
+    if isinstance(axis, int):
+        return axis
+    taken: Ints = axis[k]
+    return taken
+
+
+def _at(values: Floats, axis: int | Ints, path: Ints) -> Floats:
+    """``values[axis, path]``: a row taken where the axis is shared (a third of the cost)."""
+    taken: Floats = values[axis].take(path) if isinstance(axis, int) else values[axis, path]
+    return taken
 
 
 def _by_table(st: _Stack, prism: Ints) -> list[tuple[Ints, _Table, Ints]]:
@@ -470,7 +498,7 @@ def _line_circle(
         apart: Bools = _point_segment(cx, cy, sx, sy, ex, ey) > r + MARGIN
         return apart
     limit = r - MARGIN
-    within: Bools = (np.hypot(sx - cx, sy - cy) < limit) & (np.hypot(ex - cx, ey - cy) < limit)
+    within: Bools = (_norm(sx - cx, sy - cy) < limit) & (_norm(ex - cx, ey - cy) < limit)
     return within
 
 
@@ -518,7 +546,7 @@ def _separated(
     limit = line + MARGIN
     beyond = np.any((x * nx + y * ny > limit) & (u * nx + v * ny > limit), axis=1)
     dx, dy = u - x, v - y
-    length = np.hypot(dx, dy)
+    length = _norm(dx, dy)
     safe = np.where(length > 0.0, length, 1.0)
     side = (_take(table.x0, rows, table) - x) * (-dy / safe) + (_take(table.y0, rows, table) - y) * (
         dx / safe
@@ -550,8 +578,8 @@ def _arc_circle(
     py = np.where(swap, st.cx[prism], st.cy[prism])
     cx, cy, r = p.centre[0, path], p.centre[1, path], p.radius[path]
     dx, dy = px - cx, py - cy
-    d = np.hypot(dx, dy)
-    to_end = np.hypot(px - p.end[i, path], py - p.end[j, path])
+    d = _norm(dx, dy)
+    to_end = _norm(px - p.end[i, path], py - p.end[j, path])
     radius = st.r[prism]
     if protection:
         limit = radius + MARGIN
@@ -574,7 +602,7 @@ def _arc_circle_swept(
     dx, dy = px - cx, py - cy
     ends = np.minimum if protection else np.maximum
     at_ends = ends(
-        np.hypot(dx - r * np.cos(a0), dy - r * np.sin(a0)), np.hypot(dx - r * np.cos(a1), dy - r * np.sin(a1))
+        _norm(dx - r * np.cos(a0), dy - r * np.sin(a0)), _norm(dx - r * np.cos(a1), dy - r * np.sin(a1))
     )
     if protection:
         towards = _on_sweep(np.arctan2(dy, dx), a0, sweep)
@@ -592,7 +620,7 @@ def _arc_polygon(
 ) -> Bools:
     """Arcs in the base plane of polygon prisms (the edges in the arcs' plane coordinates)."""
     i, j = plane
-    a, b = st.axes[0, prism], st.axes[1, prism]
+    a, b = _axis(st, 0, prism), _axis(st, 1, prism)
     result = np.zeros(prism.shape[0], np.bool_)
     for k, table, rows in _by_table(st, prism):
         pk = path[k]
@@ -630,9 +658,9 @@ def _arc_polygon(
         apart = (to_arc.min(axis=1) > MARGIN) & (to_end.min(axis=1) > MARGIN)
         # start and end inside: in the prism's own coordinates, with its own edges (a convex polygon:
         # outside where beyond an edge's line; the points are more than MARGIN from every edge here)
-        ak, bk = a[k], b[k]
-        s_a, s_b = p.start[ak, pk][:, None], p.start[bk, pk][:, None]
-        e_a, e_b = p.end[ak, pk][:, None], p.end[bk, pk][:, None]
+        ak, bk = _sub(a, k), _sub(b, k)
+        s_a, s_b = _at(p.start, ak, pk)[:, None], _at(p.start, bk, pk)[:, None]
+        e_a, e_b = _at(p.end, ak, pk)[:, None], _at(p.end, bk, pk)[:, None]
         if table.convex:
             hx, hy, line = (
                 _take(table.nx, rows, table),
@@ -667,7 +695,8 @@ def _arc_half_planes(
 
 def _on_sweep(angle: Floats, a0: Floats, sweep: Floats) -> Bools:
     """Is ``angle`` on the arc (within :data:`_ANGLE_TOLERANCE`)? Whole circles: always."""
-    delta = np.where(sweep >= 0.0, angle - a0, a0 - angle) % _TAU
+    delta = np.where(sweep >= 0.0, angle - a0, a0 - angle)
+    delta = delta - _TAU * np.floor(delta * (1.0 / _TAU))  # in [0, TAU] (as ``%``, cheaper)
     span = np.abs(sweep)
     return (
         (span >= _TAU - _ANGLE_TOLERANCE)
@@ -699,14 +728,14 @@ def _arc_segment(
     safe = np.where(l2 > 0.0, l2, 1.0)
     t = np.where(l2 > 0.0, ((cx - qx0) * ux + (cy - qy0) * uy) / safe, 0.0)
     fx, fy = qx0 + t * ux, qy0 + t * uy
-    df = np.hypot(fx - cx, fy - cy)
+    df = _norm(fx - cx, fy - cy)
     h = np.sqrt(np.maximum(r * r - df * df, 0.0) / safe)
     tt = np.stack((t - h, t + h))
     # the angles of the segment's ends, its foot point and where its line crosses the circle, at once
     dx = np.concatenate((np.stack((qx0, qx1)) - cx, (fx - cx)[None], qx0 + tt * ux - cx))
     dy = np.concatenate((np.stack((qy0, qy1)) - cy, (fy - cy)[None], qy0 + tt * uy - cy))
     on = _on_sweep(np.arctan2(dy, dx), a0, sweep)
-    dq = np.hypot(dx[:2], dy[:2])
+    dq = _norm(dx[:2], dy[:2])
     best = np.minimum(best, np.where(on[:2] | (dq <= 1e-12), np.abs(dq - r), inf).min(axis=0))
     foot_on = (t >= 0.0) & (t <= 1.0) & (on[2] | (df <= 1e-12))
     best = np.minimum(best, np.where(foot_on, np.abs(df - r), inf))
@@ -763,6 +792,12 @@ def _half_planes(poly: Polygon) -> tuple[Floats, Floats, Floats] | None:
     return halves
 
 
+def _norm(dx: Floats, dy: Floats) -> Floats:
+    """``hypot`` at a third of its cost: the coordinates the parser accepts cannot overflow a square."""
+    result: Floats = np.sqrt(dx * dx + dy * dy)
+    return result
+
+
 def _point_segment(
     px: Floats | float, py: Floats | float, ax: Floats, ay: Floats, bx: Floats, by: Floats
 ) -> Floats:
@@ -770,7 +805,7 @@ def _point_segment(
     l2 = dx * dx + dy * dy
     safe = np.where(l2 > 0.0, l2, 1.0)
     t = np.clip(np.where(l2 > 0.0, ((px - ax) * dx + (py - ay) * dy) / safe, 0.0), 0.0, 1.0)
-    result: Floats = np.hypot(px - (ax + t * dx), py - (ay + t * dy))
+    result: Floats = _norm(px - (ax + t * dx), py - (ay + t * dy))
     return result
 
 
