@@ -30,10 +30,15 @@ Then the hard case for arcs (issue 26, ``near_area_arcs``): a program of as many
 them arcs close to the same 20 areas (rings of G02/G03 and short chords hugging the protection circles,
 offset curves and bulging arcs round the squares, travel arcs, arcs in G18 and G19 beside the areas,
 G161/G162 tour by tour), against ``rs274 -g`` on the same moves (``near_area_arcs_rs274``), the same
-program without areas, and the plain-line figure above, all in the same run; the exact path on a
-twentieth of it (an arc in G18/G19 is cut into chords there: slow).
+program without areas, and the plain-line figure above, all in the same run; the exact path on
+its first 1/200 (an arc in G18/G19 is cut into chords there: slow).
 
-    .venv/bin/python -m benchmarks.bench_check [--blocks N] [--rounds R]
+With ``--before DIR`` (another checkout of this repository with its engine built, e.g. the commit
+before a change, ``python setup.py build_ext --inplace`` there for the compiled engine), the plain-line
+and the arc programs are also checked by that engine and by this one, each in a process of its own,
+interleaved round by round: before and after in the same run.
+
+    .venv/bin/python -m benchmarks.bench_check [--blocks N] [--rounds R] [--only-arcs] [--before DIR]
 """
 
 from __future__ import annotations
@@ -96,6 +101,40 @@ def _exact_share(path: Path) -> tuple[int, int]:
                 if isinstance(item, Marker) and item.kind == MarkerKind.ACTION:
                     item.payload()
     return batch.exact_blocks, batch.exact_blocks + batch.batched_blocks
+
+
+_TIMED = """
+import sys, time
+from hli_server._compiled import ENGINE_COMPILED
+from hli_server.commands.check import check_program
+from hli_server.configuration import load_machine
+from hli_server.engine import Machine
+machine = Machine(load_machine(sys.argv[1]))
+with open(sys.argv[2], encoding="utf-8", newline="") as f:
+    began = time.perf_counter()
+    result = check_program(machine, f, geometry_only=True)
+    elapsed = time.perf_counter() - began
+assert result.completed and not result.alarms
+print(result.blocks / elapsed, "compiled" if ENGINE_COMPILED else "pure")
+"""
+
+
+def _ours_in(tree: Path, path: Path) -> tuple[float, str]:
+    """blocks/s of ``check --geometry-only`` on ``path`` with the engine of the checkout ``tree``, in a
+    process of its own (and whether that engine ran compiled)."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    env.pop(BATCH_ENV, None)
+    done = subprocess.run(
+        [sys.executable, "-c", _TIMED, str(FULL_MACHINE), str(path)],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=1200,
+        env=env,
+        cwd=tree,
+    )
+    rate, engine = done.stdout.split()
+    return float(rate), engine
 
 
 def _arc_share(path: Path) -> float:
@@ -185,6 +224,7 @@ def main() -> None:
     ap.add_argument(
         "--only-arcs", action="store_true", help="only the arc program, the lines and rs274 on both"
     )
+    ap.add_argument("--before", type=Path, help="another checkout: its engine against this one, same run")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
@@ -197,7 +237,7 @@ def main() -> None:
         write_lines(arcs, near_area_arcs(args.blocks))
         write_lines(arcs_plain, near_area_arcs(args.blocks, with_areas=False))
         write_lines(arcs_ngc, near_area_arcs_rs274(args.blocks))
-        write_lines(arcs_short, near_area_arcs(max(args.blocks // 20, 1)))
+        write_lines(arcs_short, near_area_arcs(max(args.blocks // 200, 1)))
         tool_table = d / "tool.tbl"
         tool_table.write_text("T1 P1 D0 Z0 ;\n", encoding="utf-8")
         mixes = [] if args.only_arcs else [(5, "(a comment)"), (50, "M08"), (200, "M08"), (1000, "M08")]
@@ -216,7 +256,14 @@ def main() -> None:
             "arcs_exact": 0.0,
         }
         blocks = arc_blocks = 0
+        here = Path(__file__).resolve().parent.parent
+        trees = {"before": args.before.resolve(), "after": here} if args.before else {}
+        versus = {(name, kind): 0.0 for name in trees for kind in ("lines", "arcs")}
+        engines: dict[str, str] = {}
         for _ in range(args.rounds):
+            for (name, kind), figure in versus.items():
+                rate, engines[name] = _ours_in(trees[name], with_areas if kind == "lines" else arcs_short)
+                versus[name, kind] = max(figure, rate)
             t, blocks = _ours(with_areas)
             best["areas"] = max(best["areas"], blocks / t)
             t, arc_blocks = _ours(arcs)
@@ -283,7 +330,7 @@ def main() -> None:
             )
         if best["arcs_exact"]:
             print(
-                f"reference: the exact path on the first {max(args.blocks // 20, 1):,} blocks of the arc "
+                f"reference: the exact path on the first {max(args.blocks // 200, 1):,} blocks of the arc "
                 f"program: {best['arcs_exact']:,.0f} blocks/s; batch / exact: "
                 f"{best['arcs'] / best['arcs_exact']:.1f}"
             )
@@ -299,6 +346,14 @@ def main() -> None:
             print(
                 f"reference: shapely batched intersects, the program's {n:,} lines x 20 areas, one call: "
                 f"{n / t:,.0f} lines/s (yes/no only); ratio ours / shapely: {best['areas'] / (n / t):.2f}"
+            )
+        for kind in ("lines", "arcs") if trees else ():
+            before, after = versus["before", kind], versus["after", kind]
+            print(
+                f"before / after ({kind} near 20 areas{'' if kind == 'lines' else ', the first 1/200'}, "
+                f"{engines['before']} / {engines['after']} engine, own "
+                f"processes, same run): {before:,.0f} / {after:,.0f} blocks/s; after / before: "
+                f"{after / before:.2f}"
             )
         if not args.no_memory and not args.only_arcs:
             double = d / "near2.nc"
