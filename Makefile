@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 RUNTIME_STAMP := $(VENV)/.installed-runtime
 TEST_STAMP    := $(VENV)/.installed-test
 
-.PHONY: run test test-fast lint format bench soak clean venv compile
+.PHONY: run test test-fast lint format bench soak clean venv compile node-deps
 
 $(BIN)/python:
 	@$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -22,6 +22,20 @@ $(TEST_STAMP): pyproject.toml | $(BIN)/python
 	@touch $(TEST_STAMP) $(RUNTIME_STAMP)
 
 venv: $(TEST_STAMP)
+
+# Node's ads-client, the second ADS client of tests/interop (H-04): installed with the lock file's versions
+# when npm is there; without it the interop tests skip and say why
+NODE_DIR   := tests/interop/node
+NODE_STAMP := $(NODE_DIR)/node_modules/.package-lock.json
+$(NODE_STAMP): $(NODE_DIR)/package-lock.json
+	@if command -v npm >/dev/null 2>&1; then \
+		(cd $(NODE_DIR) && npm ci --no-audit --no-fund --loglevel=error) \
+			|| echo "warning: npm ci in $(NODE_DIR) failed: the ads-client interop tests will be skipped"; \
+	else \
+		echo "note: npm not found: the ads-client interop tests (tests/interop) will be skipped"; \
+	fi
+
+node-deps: $(NODE_STAMP)
 
 # rebuild the compiled engine after editing it (an edited engine runs as pure Python until then:
 # hli_server/_compiled.py says so once); HLI_PURE_PYTHON=1 make compile removes the compiled modules
@@ -46,18 +60,19 @@ format: $(TEST_STAMP)
 # the suite on one worker per core (pytest-xdist): every test binds port 0 and names its own shared
 # memory, so workers never meet (issue 16: 3.5 min on one worker, about 1.5 on two cores)
 XDIST ?= -n auto
-test: $(TEST_STAMP) lint
+test: $(TEST_STAMP) node-deps lint
 	$(BIN)/python -m pytest $(XDIST) $(PYTEST_ARGS)
 
 # the edit-test loop: no lint, no test marked `slow` (subprocess servers, xdist, long property runs)
-test-fast: $(TEST_STAMP)
+test-fast: $(TEST_STAMP) node-deps
 	$(BIN)/python -m pytest -m "not slow" $(PYTEST_ARGS)
 
 bench: $(TEST_STAMP)
 	$(BIN)/python -m benchmarks $(ARGS)
 
 # The fuzz tests of the suite (marker `fuzz`), long: SOAK_SCALE times their examples, a new seed each
-# run unless HLI_FUZZ_SEED is given (docs/reliability.md, "NC programs and configuration").
+# run unless HLI_FUZZ_SEED is given (docs/reliability.md, "NC programs and configuration"); among them the
+# slow-client and large-read attacks on a realtime server, SOAK_SCALE x 3 s (at most 5 minutes; issue 27).
 SOAK_SCALE ?= 100
 soak: $(TEST_STAMP)
 	@seed=$${HLI_FUZZ_SEED:-$$(date +%s)}; echo "soak: HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed"; \

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import atexit
 import multiprocessing as mp
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,8 +27,11 @@ class Server:
     @classmethod
     def start(cls, name: str, target: Callable[[Connection], None]) -> Server:
         parent, child = CTX.Pipe()
-        process = CTX.Process(target=target, args=(child,), daemon=True)
+        # not a daemon: a server may start a process of its own (the doors process of hli-server run);
+        # a server left behind by a benchmark that failed is ended on exit instead
+        process = CTX.Process(target=target, args=(child,), daemon=False)
         process.start()
+        atexit.register(_end, process)
         if not parent.poll(30):
             process.kill()
             raise RuntimeError(f"{name}: the server did not start within 30 s")
@@ -41,6 +45,12 @@ class Server:
         if self.process.is_alive():
             self.process.kill()
         return report
+
+
+def _end(process: Any) -> None:
+    if process.is_alive():
+        process.kill()
+        process.join(5)
 
 
 def print_lateness(timing: dict[str, Any] | None) -> None:

@@ -1,4 +1,4 @@
-"""The command line: ``hli-server run | check | config | map | alarms | events``.
+"""The command line: ``hli-server run | check | config | map | alarms | events | record | replay``.
 
 Each command lives in its own module under ``hli_server/commands``; this file only assembles them.
 Exit codes: 0 success, 1 the checked program or the validated file has an error, 2 usage, file or
@@ -22,6 +22,8 @@ _COMMANDS = {
     "map": "hli_server.commands.map:map_command",
     "alarms": "hli_server.commands.alarms:alarms",
     "events": "hli_server.commands.events:events",
+    "record": "hli_server.commands.record:record",
+    "replay": "hli_server.commands.record:replay_command",
 }
 
 

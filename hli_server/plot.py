@@ -40,6 +40,8 @@ from matplotlib.patches import Circle as CirclePatch
 from matplotlib.patches import Polygon as PolygonPatch
 from matplotlib.patches import Rectangle
 
+from hli_server.scene import relation_text
+
 __all__ = ["PlotTargetError", "check_plot_target", "plot_scene", "supported_formats"]
 
 _WORK = "#2e8b57"  # green: the allowed space
@@ -47,14 +49,6 @@ _PROT = "#c0392b"  # red: never to be touched
 _PATH = "#1f4e9c"
 _REFUSED = "#e31a1c"
 _STOP = "#d35400"
-_RELATION_TEXT = {
-    "crosses": "path goes through it",
-    "crosses WORK": "path in it",
-    "above": "path passes above",
-    "below": "path passes below",
-    "above_and_below": "path passes above and below",
-    "apart": "path never over it",
-}
 
 
 class PlotTargetError(ValueError):
@@ -172,9 +166,8 @@ def _draw_top(fig: Figure, ax: Any, scene: Mapping[str, Any]) -> None:
         if not area["in_view"]:
             continue
         colour, style = _area_style(area)
-        relation = area.get("relation", "apart")
         band = f"{area.get('height_axis')} {_num(area['min'])}..{_num(area['max'])}"
-        how = _RELATION_TEXT.get(f"{relation} {area['kind']}") or _RELATION_TEXT.get(relation, relation)
+        how = area.get("relation_text") or relation_text(area, scene.get("refused"), scene.get("violation"))
         label = f"ID{area['id']} {area['kind']} {area['state']}, {band}: {how}"
         ax.add_patch(_patch(area, label=label, **style))
         outline = _patch(area, fill=False)  # the outline fully opaque, whatever the fill

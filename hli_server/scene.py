@@ -43,7 +43,8 @@ point (a side view plots ``h`` over ``s``: the path's footprint unrolled, plunge
           "band_in_view": true,   # in view and its height axis is the view's (band drawn in the side view)
           "relation": "crosses" | "above" | "below" | "above_and_below" | "apart",
           "spans": [{"from": s0, "to": s1, "relation": "crosses" | "above" | "below" | "above_and_below",
-                     "refused": false}]
+                     "refused": false}],
+          "relation_text": "the refused block N70 would enter it; the axes stopped before it"
       }],
       "path": [[[a, b, h, s], ...]],           # polylines of the path the axes travelled
       "refused": null | {"alarm": 912001, "line": 7, "block": "N70", "area": 4, "kind": "PROT",
@@ -61,9 +62,11 @@ boundaries included: the engine counts a touch, C14-15); ``above`` / ``below``: 
 region only above / below the band; ``above_and_below``: both, never inside; ``apart``: it never comes
 over the base region. ``spans`` are the stretches of ``s`` where the path is over the base region, with
 the relation on each (``refused``: the stretch belongs to the refused block); a touch is a span with
-``from == to``. The relation is computed on the recorded points joined by straight lines (``check``
-records every 10th cycle, and arcs every few degrees), so it is a picture's precision, not the
-monitor's: the monitor's exact verdict is the alarm.
+``from == to``. ``relation_text`` says it in words for a legend, and says what happened
+(:func:`relation_text`): the refused block that would have entered (or left) the area, the axes that
+reached it, or how the travelled path meets it. The relation is computed on the recorded points joined
+by straight lines (``check`` records every 10th cycle, and arcs every few degrees), so it is a
+picture's precision, not the monitor's: the monitor's exact verdict is the alarm.
 
 ``position`` and ``ahead`` are the live dashboard's (``check`` leaves them ``null`` and empty): the TCP
 and the path the channel has decoded ahead of it (its look-ahead), ``s`` going on from the travelled path's
@@ -91,6 +94,7 @@ __all__ = [
     "RESOLUTION_MM",
     "SCENE_VERSION",
     "build_scene",
+    "relation_text",
     "round_mm",
     "round_numbers",
 ]
@@ -264,6 +268,42 @@ def _band_relation(h0: float, h1: float, lo: float, hi: float) -> str:
     if min(h0, h1) > hi + _TOL:
         return "above"
     return "crosses"
+
+
+_RELATION_TEXT = {
+    "crosses": "path goes through it",
+    "crosses WORK": "path in it",
+    "above": "path passes above",
+    "below": "path passes below",
+    "above_and_below": "path passes above and below",
+    "apart": "path never over it",
+}
+
+
+def relation_text(
+    area: Mapping[str, Any], refused: Mapping[str, Any] | None, violation: Mapping[str, Any] | None
+) -> str:
+    """What the legend says of ``area`` (a scene's area with its ``spans``): what happened there.
+
+    The area whose check refused a block: the block would have entered it (a protection area) or left it
+    (a work area), and the axes stopped before (FCT-C14: the block is refused before it starts). An area
+    the axes reached without a refused block (jog, a measured violation): they reached it. Otherwise how
+    the travelled path meets it, and whether the refused block would have crossed it as well."""
+    kind = area.get("kind")
+    if refused is not None and refused.get("area") == area.get("id"):
+        block = refused.get("block") or (f"of line {refused['line']}" if refused.get("line") else "")
+        what = f"the refused block {block}".rstrip()
+        if kind == "WORK":
+            return f"{what} would leave it; the axes stopped inside"
+        return f"{what} would enter it; the axes stopped before it"
+    if violation is not None and refused is None and violation.get("area") == area.get("id"):
+        return "the axes reached its boundary" if kind == "WORK" else "the axes reached it"
+    spans = area.get("spans") or []
+    travelled = _combine(sp["relation"] for sp in spans if not sp.get("refused"))
+    text = _RELATION_TEXT.get(f"{travelled} {kind}") or _RELATION_TEXT[travelled]
+    if travelled != "crosses" and any(sp.get("refused") and sp["relation"] == "crosses" for sp in spans):
+        text += "; the refused block would cross it"
+    return text
 
 
 def _combine(relations: Iterable[str]) -> str:
@@ -560,6 +600,8 @@ def build_scene(
         entry["spans"] = spans or []
         entry["relation"] = _combine(sp["relation"] for sp in spans) if spans is not None else "apart"
         out_areas.append(entry)
+    for entry in out_areas:
+        entry["relation_text"] = relation_text(entry, refused, violation)
 
     position_view: list[float | None] | None = None
     ahead_view: list[list[float | None]] = []

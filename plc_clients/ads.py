@@ -14,8 +14,9 @@ calls run in a worker thread, for PLC tasks in an event loop) have the protocol 
 
 **The layout** must be the server's, as for Modbus (a :class:`~schemas.layout.Layout`, the file of
 ``hli-server map --format json`` or the URL of the HTTP API); unlike Modbus, ADS can check it:
-:meth:`AdsTransport.connect` compares it with the server's symbol upload (0xF00B) and raises
-:class:`~schemas.layout.LayoutError` naming the first difference.
+:meth:`AdsTransport.connect` asks the server's symbol info (0xF009) of every signal, 50 in one sum
+read/write (0xF082), and raises :class:`~schemas.layout.LayoutError` naming the first signal the server
+does not have at the same place with the same type.
 
 **pyads/AdsLib on Linux** has one AMS router per process with one route per NetId. This module adds
 the route on connect and deletes it with the last transport of the process that uses it (AdsLib
@@ -35,7 +36,14 @@ import threading
 from collections.abc import Collection, Iterable
 from typing import Any, ClassVar, Final
 
-from hli_server.codecs.ads import AdsCodecError, decode_symbol_upload
+from hli_server.codecs.ads import (
+    AdsCodecError,
+    SumReadWrite,
+    SumReadWriteItem,
+    SymbolEntry,
+    ads_type_name,
+    decode_sum_read_write_reply,
+)
 from plc_clients._closing import ClosesOnExit
 from plc_clients.transports import (
     CYCLE_SIGNAL,
@@ -63,10 +71,18 @@ _TCP_PORT: Final = 48898
 _C2P, _P2C = Direction.CNC_TO_PLC, Direction.PLC_TO_CNC
 _GROUP = {_C2P: 0xF020, _P2C: 0xF030}
 _SUM_WRITE: Final = 0xF081
-_UPLOAD: Final = 0xF00B
-_UPLOAD_INFO: Final = 0xF00C
+_SUM_READ_WRITE: Final = 0xF082
+_SYMBOL_INFO: Final = 0xF009
+_SYMBOL_INFO_LENGTH: Final = 798
+"""The read length pyads asks symbol info with (the server keeps every entry within it)."""
+_CHECK_CHUNK: Final = 50
+_TAKE_IT: Final = (
+    "take it from this server (`hli-server map --format json` of its machine file, or its HTTP API)"
+)
 _FORMAT = {SignalType.BOOL: "<?", SignalType.DINT: "<i", SignalType.UDINT: "<I", SignalType.LREAL: "<d"}
 _ROUTER_IN_USE: Final = 1286
+
+_NO_ENTRY: Final = SymbolEntry(0, 0, 0, 0, "", "")
 
 _routes_lock = threading.Lock()
 _routes: dict[str, tuple[str, int]] = {}
@@ -245,24 +261,52 @@ class AdsTransport(ClosesOnExit):
         return bytes(data)
 
     def _check_layout(self) -> None:
-        _count, length = struct.unpack("<II", self._read_raw("reading the upload info", _UPLOAD_INFO, 0, 8))
-        upload = self._read_raw("reading the symbol upload", _UPLOAD, 0, length)
-        try:
-            entries = decode_symbol_upload(upload)
-        except AdsCodecError as exc:
-            raise LayoutError(f"{self.where}: the symbol upload does not decode: {exc}") from exc
-        theirs = [(e.name, e.index_group, e.index_offset, e.size, e.type_name) for e in entries]
-        ours = [(s.st_path, s.image_ads_group, s.offset, s.size, s.type.value) for s in self.layout.signals]
-        if theirs != ours:
-            first = next((i for i, (a, b) in enumerate(zip(ours, theirs, strict=False)) if a != b), None)
-            if first is None:
-                diff = f"{len(ours)} signals here, {len(theirs)} symbols on the server"
-            else:
-                diff = f"signal {first}: here {ours[first]}, on the server {theirs[first]}"
-            raise LayoutError(
-                f"{self.where}: the layout is not the server's ({diff}); take it from this server "
-                "(`hli-server map --format json` of its machine file, or its HTTP API)"
+        signals = self.layout.signals
+        for start in range(0, len(signals), _CHECK_CHUNK):
+            chunk = signals[start : start + _CHECK_CHUNK]
+            for s, (code, entry) in zip(chunk, self._symbol_infos(chunk), strict=True):
+                if code:
+                    raise LayoutError(
+                        f"{self.where}: the server has no symbol {s.st_path} (ADS error 0x{code:X}): "
+                        f"the layout is not the server's; {_TAKE_IT}"
+                    )
+                ours = (s.st_path, s.image_ads_group, s.offset, s.size, ads_type_name(s.type.value))
+                theirs = (entry.name, entry.index_group, entry.index_offset, entry.size, entry.type_name)
+                if ours != theirs:
+                    raise LayoutError(
+                        f"{self.where}: the layout is not the server's: here {ours}, on the server {theirs}; "
+                        f"{_TAKE_IT}"
+                    )
+
+    def _symbol_infos(self, chunk: tuple[Signal, ...]) -> list[tuple[int, SymbolEntry]]:
+        """The symbol info (0xF009) of each signal, in one sum read/write (0xF082)."""
+        pyads = _pyads()
+        items = tuple(
+            SumReadWriteItem(_SYMBOL_INFO, 0, _SYMBOL_INFO_LENGTH, s.st_path.encode("cp1252") + b"\0")
+            for s in chunk
+        )
+        request = SumReadWrite(items).encode()
+        n = len(items)
+        raw = bytes(
+            self._call(
+                "reading the symbol info",
+                self._conn.read_write,
+                _SUM_READ_WRITE,
+                n,
+                pyads.PLCTYPE_BYTE * (n * (8 + _SYMBOL_INFO_LENGTH)),
+                request,
+                pyads.PLCTYPE_BYTE * len(request),
+                return_ctypes=True,
+                check_length=False,
             )
+        )
+        try:
+            heads = struct.unpack_from(f"<{2 * n}I", raw)
+            length = 8 * n + sum(heads[1::2])
+            results = decode_sum_read_write_reply(n, raw[:length])
+            return [(code, SymbolEntry.decode(data)[0] if not code else _NO_ENTRY) for code, data in results]
+        except (AdsCodecError, struct.error) as exc:
+            raise LayoutError(f"{self.where}: the server's symbol info does not decode: {exc}") from exc
 
     # --- the transport protocol ---------------------------------------------------------------
     def snapshot(self, watch: Collection[str] | None = None) -> Inputs:

@@ -5,17 +5,22 @@
     hli-plc c43-obstacle --transport shm --image hli_demo
     hli-plc c14-manual --transport modbus --host 127.0.0.1 --port 5020 --http http://127.0.0.1:8080
     hli-plc c3-collision --transport ads --host 127.0.0.1 --port 48898
+    hli-plc c43-obstacle --transport modbus --host cnc1 --http http://cnc1:8080 --repeat   # a bench's PLC
     hli-plc --list
 
-The demos are :mod:`plc_clients.demos` (the examples of FCT-C43, FCT-C14 and FCT-C3). First the
-operator's part: the demo's NC program is loaded into its channel through the server's HTTP API
-(``--http``; the channel is reset first; ``--no-load`` skips it). Then the PLC program runs in a
-:class:`~plc_clients.task.PlcTask` paced to ``--cycle-ms`` until the demo is over, printing what it
-does with the CNC cycle of each step. The Modbus and ADS transports take the layout from
-``--layout`` (a file of ``hli-server map --format json``) or from the HTTP API.
+The demos are :mod:`plc_clients.demos` (the examples of FCT-C43, FCT-C14, FCT-C3 and V.E.). First the PLC's
+door is opened (the transport connects, the layout is read): a PLC that cannot reach the CNC changes
+nothing. Then the operator's part: the demo's NC program is loaded into its channel through the
+server's HTTP API (``--http``; the channel is reset first; ``--no-load`` skips it). Then the PLC
+program runs in a :class:`~plc_clients.task.PlcTask` paced to ``--cycle-ms`` until the demo is over,
+printing what it does with the CNC cycle of each step. The Modbus and ADS transports take the layout
+from ``--layout`` (a file of ``hli-server map --format json``) or from the HTTP API. ``--repeat`` runs
+the demo again and again (``--pause`` seconds apart) until stopped: the PLC of the compose bench.
 
-Exit codes: 0 the demo ran to its end, 1 the demo failed (the CNC raised an error it should not
-have, a block reported an error), 2 usage or connection errors (no server, wrong image name).
+Exit codes: 0 the demo ran to its end (or, with ``--repeat``, SIGTERM stopped it), 1 the demo failed
+(the CNC raised an error it should not have, a block reported an error), 2 usage or connection errors
+(no server, wrong image name), 130 Ctrl+C. SIGTERM stops it like Ctrl+C (also as a container's first
+process, which ignores an unhandled SIGTERM).
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import argparse
 import importlib
 import json
 import logging
+import signal
 import sys
 import time
 import urllib.error
@@ -46,11 +52,19 @@ class UsageError(Exception):
     """Something the user must fix: a missing option, no server where they said."""
 
 
+class _Terminated(BaseException):  # like KeyboardInterrupt: no `except Exception` swallows it
+    """SIGTERM: stop as after Ctrl+C, exit 0."""
+
+
+def _on_sigterm(signum: int, frame: object) -> None:
+    raise _Terminated
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="hli-plc",
-        description="Run a demo PLC program (the examples of FCT-C43, FCT-C14, FCT-C3) against a running "
-        "hli-server, printing what it does.",
+        description="Run a demo PLC program (the examples of FCT-C43, FCT-C14, FCT-C3 and V.E. variables) "
+        "against a running hli-server, printing what it does.",
         epilog="demos: " + ", ".join(DEMOS),
     )
     ap.add_argument("demo", nargs="?", choices=DEMOS, help="the demo to run")
@@ -75,7 +89,16 @@ def _parser() -> argparse.ArgumentParser:
         "--no-load", action="store_true", help="do not load the NC program (it is loaded already)"
     )
     ap.add_argument("--cycle-ms", type=float, default=10.0, help="the PLC task's cycle (default 10 ms)")
-    ap.add_argument("--timeout", type=float, default=120.0, help="give up after this many seconds")
+    ap.add_argument(
+        "--timeout", type=float, default=120.0, help="give up a run after this many seconds (default 120)"
+    )
+    ap.add_argument(
+        "--repeat",
+        action="store_true",
+        help="run the demo again and again until stopped (SIGTERM, Ctrl+C); a failed run is reported "
+        "and the next one starts",
+    )
+    ap.add_argument("--pause", type=float, default=2.0, help="--repeat: seconds between runs (default 2)")
     ap.add_argument(
         "--wait", type=float, default=5.0, help="shm: wait this long for the server's image (default 5 s)"
     )
@@ -90,6 +113,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"{name:14} {cls.document:8} channel {cls.channel}: {cls.summary}")
         return 0 if args.list else 2
     logging.basicConfig(level=logging.WARNING, format="hli-plc: %(message)s")  # the task's overruns
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return _run(args)
     except (UsageError, TransportError, LayoutError, FileNotFoundError) as exc:
@@ -98,14 +122,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("hli-plc: interrupted", file=sys.stderr)
         return 130
+    except _Terminated:
+        print("hli-plc: stopped (SIGTERM)", file=sys.stderr)
+        return 0
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _run(args: argparse.Namespace) -> int:
+    # the PLC's door first: where the transport cannot connect, the machine is left as it is
+    transport = _open(args)
+    try:
+        runs = 0
+        while True:
+            runs += 1
+            outcome = _run_once(args, transport, runs if args.repeat else None)
+            if not args.repeat:
+                return outcome
+            time.sleep(args.pause)
+    finally:
+        transport.close()
+
+
+def _run_once(args: argparse.Namespace, transport: Transport, run: int | None) -> int:
     demo = demo_class(args.demo)(printer=lambda line: print(line, flush=True))
-    print(f"hli-plc: {demo.name} ({demo.document}): {demo.summary}", flush=True)
+    which = f" (run {run})" if run is not None else ""
+    print(f"hli-plc: {demo.name} ({demo.document}){which}: {demo.summary}", flush=True)
     if not args.no_load:
         _load_program(args.http, demo)
-    transport = _open(args)
     print(f"hli-plc: PLC task every {args.cycle_ms:g} ms over {transport!r}", flush=True)
     task = PlcTask(transport, args.cycle_ms / 1000.0, demo, watch=demo.watch, name=f"hli-plc {demo.name}")
     began = time.monotonic()
@@ -116,8 +160,6 @@ def _run(args: argparse.Namespace) -> int:
             f"hli-plc: the demo did not end within {args.timeout:g} s (step {demo.step!r})", file=sys.stderr
         )
         return 1
-    finally:
-        transport.close()
     st = task.stats
     faults = st.input_faults + st.output_faults
     print(
@@ -147,7 +189,7 @@ def _load_program(http: str, demo: Demo) -> None:
         deadline = time.monotonic() + 5.0
         while True:
             try:
-                _http(base + "/program", {"text": demo.nc_program, "name": demo.name})
+                _http(base + "/program", {"text": demo.nc_program, "name": demo.name, "files": demo.nc_files})
                 break
             except urllib.error.HTTPError as exc:
                 if exc.code != 409 or time.monotonic() > deadline:

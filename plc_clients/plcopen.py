@@ -16,9 +16,10 @@ VAR_IN_OUT  Axis         :class:`AXIS_REF`: index into ``gpAx[]`` (+ optional na
 VAR_INPUT   Enable       BOOL: TRUE writes the limit to the HLI
 VAR_INPUT   Position     DINT: the limit in 0.1 µm (rotary 0.0001°)
 VAR_OUTPUT  Valid        BOOL: the CNC reports the limit in effect
-VAR_OUTPUT  State        DINT: ``state_r`` of the control unit, HLI_DYNPL_STATE_* (see below)
+VAR_OUTPUT  State        DINT: the position limit in effect, 0.1 µm (0 while not Valid; see below)
 VAR_OUTPUT  Error        BOOL
 VAR_OUTPUT  ErrorID      WORD: :class:`ErrorID`
+(extension) MonitoringState DINT: ``state_r`` of the control unit, HLI_DYNPL_STATE_* (FCT-C43 3.1.1)
 (extension) ErrorText    STRING: what went wrong, where, what to do (empty without error)
 =========== ============ ====================================================================
 
@@ -27,12 +28,21 @@ The block drives the SGN32 control unit ``gpAx[Axis.index]^ipo_mc_control.dyn_po
 
 Decisions where the document leaves room:
 
-* **State.** FCT-C43 3.2 describes the output ``State`` (DINT) as "Aktueller Positionsgrenzwert"
-  (current position limit), while its name and type match the control unit's ``state_r``, and the
-  CNC offers no read-back of the limit in effect (``request_r`` is "not supported", 3.1.1). Read
-  literally, the block could only echo its own ``Position`` input back. We take the description for a
-  copy slip: ``State`` is ``state_r``, the state of the monitoring, 0 INACTIVE, 1 ACTIVATION,
-  2 ACTIVE, 3 ACTIVE_BRAKING, 4 ACTIVE_BRAKE (:class:`DynPosLimitState`, C43-03).
+* **State.** FCT-C43 3.2 gives ``State : DINT`` as "Aktueller Positionsgrenzwert", the position
+  limit now in effect (issue 21: the document is followed to the letter). With Valid TRUE ("Ist TRUE,
+  wenn die Sollwertvorgabe aktiviert ist") a limit is in effect, and it is the one the CNC took over:
+  the ``command_w`` this block wrote and the CNC latched (the CNC offers no other read-back,
+  ``request_r`` "wird derzeit nicht unterstützt", 3.1.1). So ``State`` is that value, in the unit of
+  ``Position`` (0.1 µm, rotary 0.0001°); while the CNC has not yet latched a new ``Position``, the
+  limit in effect is still the one before, and ``State`` says so. Without Valid no limit of this
+  block is in effect and ``State`` is 0 (as PLCopen resets outputs; ``Valid`` tells a limit of 0 from
+  none). An error latched while the limit stays in effect (see Errors) leaves ``State`` showing it
+  as long as the CNC reports the monitoring on. The CNC adopts a moved limit only as
+  P-CHAN-00874/00751 allow (docs/monitors.md): a change smaller than P-CHAN-00751 is latched but not
+  taken over.
+* **MonitoringState** (an output of our own, after ErrorID, like ErrorText): ``state_r`` of the
+  control unit, the state of the monitoring, 0 INACTIVE, 1 ACTIVATION, 2 ACTIVE, 3 ACTIVE_BRAKING,
+  4 ACTIVE_BRAKE (:class:`DynPosLimitState`, C43-03), which an earlier version gave as ``State``.
 * **Valid** ("TRUE, wenn die Sollwertvorgabe aktiviert ist") is TRUE once the CNC reports the
   monitoring switched on: ``state_r`` >= 2 (ACTIVE, ACTIVE_BRAKING, ACTIVE_BRAKE). ACTIVATION (1)
   is the transition "until the monitoring of the axis position is activated" (3.1.1), so not yet
@@ -76,11 +86,12 @@ State table (:data:`TRANSITIONS`, :data:`OUTPUTS`; the rows are checked in this 
                                                                             (LIMIT_LOST if it was VALID)
     TRUE   WAITING        otherwise                                WAITING  command_w := Position
 
-    phase    Valid  Error  State                   ErrorID
-    IDLE     FALSE  FALSE  0                       0
-    WAITING  FALSE  FALSE  state_r                 0
-    VALID    TRUE   FALSE  state_r                 0
-    ERROR    FALSE  TRUE   state_r (0 if unknown)  the error's
+    phase    Valid  Error  State                      MonitoringState         ErrorID
+    IDLE     FALSE  FALSE  0                          0                       0
+    WAITING  FALSE  FALSE  0                          state_r                 0
+    VALID    TRUE   FALSE  command_w the CNC latched  state_r                 0
+    ERROR    FALSE  TRUE   the latched command_w      state_r (0 if unknown)  the error's
+                           while enable_w stays set and state_r >= 2, else 0
 
 "command_w := Position" is written to the task's output image every cycle; the task sends it only
 when it changed.
@@ -395,6 +406,7 @@ class _EnableBlock(FunctionBlock):
             return
         unit = self._unit
         assert unit is not None
+        self._before_write(io)
         io.write(f"{unit}.command_w", command)  # command before enable (H-02)
         io.write(f"{unit}.enable_w", True)
         self._armed = True
@@ -412,6 +424,10 @@ class _EnableBlock(FunctionBlock):
 
     def _entered_waiting(self, io: IoImage) -> None:
         return None
+
+    def _before_write(self, io: IoImage) -> None:
+        """This cycle's command is about to be written: what the CNC latched of the last one is known now."""
+        return
 
     # --- per block -------------------------------------------------------------------------------
     def _bind(self, layout: Layout) -> tuple[ErrorID, str] | None:
@@ -438,6 +454,7 @@ class _DynPosLimit(_EnableBlock):
     SIDE: ClassVar[str] = ""
     VAR_IN_OUT: ClassVar[tuple[str, ...]] = ("Axis",)
     VAR_INPUT: ClassVar[tuple[str, ...]] = ("Enable", "Position")
+    VAR_OUTPUT: ClassVar[tuple[str, ...]] = ("Valid", "State", "Error", "ErrorID", "MonitoringState")
 
     def __init__(
         self, *, name: str | None = None, activation_timeout_cycles: int = DEFAULT_ACTIVATION_TIMEOUT_CYCLES
@@ -448,10 +465,14 @@ class _DynPosLimit(_EnableBlock):
         self.Axis: AXIS_REF | None = None
         self.Position: int = 0
         self.activation_timeout_cycles = activation_timeout_cycles
+        self.MonitoringState: Value = 0
+        """``state_r`` of the control unit (HLI_DYNPL_STATE_*): the state of the monitoring."""
         self.bound_axis: AXIS_REF | None = None
         """The Axis taken at the rising edge of Enable."""
         self._deadline = 0
         self._was_valid = False
+        self._latched_command: int | None = None
+        """The ``command_w`` the CNC has latched (the limit in effect while Valid)."""
 
     def __call__(  # type: ignore[override]
         self,
@@ -499,6 +520,30 @@ class _DynPosLimit(_EnableBlock):
 
     def _entered_waiting(self, io: IoImage) -> None:
         self._deadline = io.cycle + self.activation_timeout_cycles
+
+    def _before_write(self, io: IoImage) -> None:
+        path = f"{self._unit}.command_w"
+        if io.latched(path):
+            self._latched_command = int(io.read(path))
+
+    def _refresh(self, io: IoImage) -> None:
+        """MonitoringState follows the CNC's ``state_r``; State is set after the phase (:meth:`cycle`)."""
+        state = self._read_state(io)
+        if state is not None:
+            self.MonitoringState = state
+
+    def cycle(self, io: IoImage) -> None:
+        super().cycle(io)
+        latched = self._latched_command
+        monitoring = int(self.MonitoringState) >= DynPosLimitState.ACTIVE
+        if latched is not None and self._armed and (self.phase is Phase.VALID or monitoring):
+            self.State = latched
+        else:
+            self.State = 0
+
+    def _reset_extra_outputs(self) -> None:
+        self.MonitoringState = 0
+        self._latched_command = None
 
     def _evaluate(self, io: IoImage) -> None:
         unit = self._unit

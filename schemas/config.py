@@ -26,6 +26,7 @@ from schemas.units import ACCELERATION_LIMIT, DINT_MAX, DINT_MIN, UDINT_MAX, VEL
 
 __all__ = [
     "AXIS_PARAMETERS",
+    "AXIS_PARAMETER_ALIASES",
     "CHANNEL_PARAMETERS",
     "COLLISION_MODE_BIT",
     "MANUAL_PARAMETERS",
@@ -130,13 +131,13 @@ class AxisConfig(_Strict):
         description="P-AXIS-00015 operating mode of the axis; bit 0x8000: collision monitoring (FCT-C3)",
     )
     a_emergency: float = Field(
-        default=5000.0,
-        gt=0.0,
+        default=0.0,
+        ge=0.0,
         le=ACCELERATION_LIMIT,
-        description="P-AXIS-00003 emergency deceleration [mm/s²]",
+        description="P-AXIS-00003 emergency deceleration [mm/s²]; 0: P-AXIS-00008 a_max applies",
     )
     a_max: float = Field(
-        default=2000.0, gt=0.0, le=ACCELERATION_LIMIT, description="P-AXIS-00008 maximum acceleration [mm/s²]"
+        default=1000.0, ge=1.0, le=ACCELERATION_LIMIT, description="P-AXIS-00008 maximum acceleration [mm/s²]"
     )
     coll_check_ax_nr: int = Field(
         default=0,
@@ -153,11 +154,32 @@ class AxisConfig(_Strict):
         lt=UDINT_MAX,
         description="P-AXIS-00045 minimum distance of the pair [0.1 µm] (0: none, else > 1)",
     )
-    settling_time_legacy_us: int = Field(
+    mess_offset: int = Field(
         default=0,
+        ge=0,
+        le=UDINT_MAX,
+        description="P-AXIS-00114 distance a type 2 measuring move may run past its target [0.1 µm]",
+    )
+    messachse: bool = Field(
+        default=False, description="P-AXIS-00118 the axis is a measuring axis (G100 may move it)"
+    )
+    offsetgrenze_neg: int = Field(
+        default=-1_000_000,
         ge=DINT_MIN,
+        le=0,
+        description="P-AXIS-00137 relative negative offset limit in manual mode [0.1 µm]; both 0: off",
+    )
+    offsetgrenze_pos: int = Field(
+        default=1_000_000,
+        ge=0,
         le=DINT_MAX,
-        description="P-AXIS-00151 older settling-time parameter, used when P-AXIS-00532 < 0 [µs]",
+        description="P-AXIS-00138 relative positive offset limit in manual mode [0.1 µm]; both 0: off",
+    )
+    settling_time_legacy_us: int = Field(
+        default=1_000_000,
+        ge=0,
+        le=UDINT_MAX // 1000,
+        description="P-AXIS-00151 older settling-time parameter, used when P-AXIS-00532 < 0 [µs]; 0 off",
     )
     # FCT-C14 6.2: MIN(SGN32) < swe_neg < P-AXIS-00178 < swe_pos < MAX(SGN32)
     swe_neg: int = Field(
@@ -173,7 +195,13 @@ class AxisConfig(_Strict):
         description="P-AXIS-00178 positive software limit [0.1 µm]",
     )
     swe_toleranz: int = Field(
-        default=0, ge=0, le=DINT_MAX, description="P-AXIS-00179 tolerance of actual positions [0.1 µm]"
+        default=1000, ge=0, le=UDINT_MAX, description="P-AXIS-00179 tolerance of actual positions [0.1 µm]"
+    )
+    vb_messen: int = Field(
+        default=16666,
+        ge=1,
+        le=UDINT_MAX,
+        description="P-AXIS-00215 measuring feed of measuring type 2 [µm/s] (at most the axis' v_max)",
     )
     window: int = Field(default=500, ge=0, le=DINT_MAX, description="P-AXIS-00236 exact-stop window [0.1 µm]")
     coll_moving_dir_inverted: bool = Field(
@@ -189,6 +217,20 @@ class AxisConfig(_Strict):
     )
     coll_use_a_emergency: bool = Field(
         default=False, description="P-AXIS-00267 brake with a_emergency instead of a_max on a collision"
+    )
+    meas_offset: int = Field(
+        default=0,
+        ge=0,
+        le=UDINT_MAX,
+        description="P-AXIS-00467 distance a measuring move (not type 3) may run past its target [0.1 µm]",
+    )
+    acs_limit_neg: Dint = Field(
+        default=0,
+        description="P-AXIS-00492 absolute negative ACS limit in manual mode [0.1 µm]; both 0: off",
+    )
+    acs_limit_pos: Dint = Field(
+        default=0,
+        description="P-AXIS-00493 absolute positive ACS limit in manual mode [0.1 µm]; both 0: off",
     )
     position_settling_time_us: Dint = Field(
         default=-1, description="P-AXIS-00532 max settling time into the window [µs]; 0 off, <0 P-AXIS-00151"
@@ -233,6 +275,43 @@ class AxisConfig(_Strict):
                     field="swe_neg",
                 )
             )
+        if self.a_emergency > 2.0 * self.a_max:
+            issues.append(
+                ParameterIssue(
+                    f"axis {self.name}: P-AXIS-00003 a_emergency ({self.a_emergency:g}) must be at most "
+                    f"twice P-AXIS-00008 a_max ({self.a_max:g}): 1 ≤ a_emergency ≤ 2*a_max, or 0 for a_max",
+                    field="a_emergency",
+                )
+            )
+        if (self.acs_limit_neg, self.acs_limit_pos) != (0, 0):
+            for name, value in (("acs_limit_neg", self.acs_limit_neg), ("acs_limit_pos", self.acs_limit_pos)):
+                if not self.swe_neg <= value <= self.swe_pos:
+                    pid = "P-AXIS-00492" if name == "acs_limit_neg" else "P-AXIS-00493"
+                    issues.append(
+                        ParameterIssue(
+                            f"axis {self.name}: {pid} {name} ({value}) must lie within the software limits "
+                            f"P-AXIS-00177 ≤ {name} ≤ P-AXIS-00178 ({self.swe_neg} .. {self.swe_pos}); "
+                            "both 0 switch the ACS limits off",
+                            field=name,
+                        )
+                    )
+            if self.acs_limit_neg >= self.acs_limit_pos:
+                issues.append(
+                    ParameterIssue(
+                        f"axis {self.name}: P-AXIS-00492 acs_limit_neg ({self.acs_limit_neg}) must be less "
+                        f"than P-AXIS-00493 acs_limit_pos ({self.acs_limit_pos}) (both 0: off)",
+                        field="acs_limit_neg",
+                    )
+                )
+        vb_max_um_s = self.v_max * 1000.0 / 60.0
+        if self.vb_messen > vb_max_um_s:
+            issues.append(
+                ParameterIssue(
+                    f"axis {self.name}: P-AXIS-00215 vb_messen ({self.vb_messen} µm/s) must be at most the "
+                    f"axis' maximum velocity (v_max {self.v_max:g} mm/min = {vb_max_um_s:.0f} µm/s)",
+                    field="vb_messen",
+                )
+            )
         if self.coll_offset == 1:
             issues.append(
                 ParameterIssue(
@@ -257,6 +336,11 @@ class AxisConfig(_Strict):
     def collision_monitoring(self) -> bool:
         """Bit 0x8000 of P-AXIS-00015 (FCT-C3)."""
         return bool(self.achs_mode & COLLISION_MODE_BIT)
+
+    @property
+    def emergency_deceleration(self) -> float:
+        """P-AXIS-00003 in effect [mm/s²]: ``a_emergency``, or ``a_max`` where it is 0 (its page)."""
+        return self.a_emergency or self.a_max
 
 
 class ZeroOffset(_Strict):
@@ -292,6 +376,24 @@ class ChannelConfig(_Strict):
         default_factory=lambda: [InterpolatorFunction.FCT_IPO_DEFAULT],
         description="P-STUP-00070 functions of the interpolator; FCT_DYN_POS_LIMIT enables FCT-C43",
     )
+    messtyp: int = Field(
+        default=1,
+        ge=1,
+        le=7,
+        description="P-CHAN-00057 default measuring type of G100 (1..4; 5, 6 are G310's, 7 is not simulated)",
+    )
+    rel_offset_limits_std_manual_mode: bool = Field(
+        default=False,
+        description="P-CHAN-00114 the relative offset limits P-AXIS-00137/00138 apply in manual mode G200",
+    )
+    soft_limit_tolerance: bool = Field(
+        default=False,
+        description="P-CHAN-00120 software limit check of programmed positions with P-AXIS-00179 for axes "
+        "the block does not move",
+    )
+    meas_error_no_signal: bool = Field(
+        default=False, description="P-CHAN-00176 measuring type 1: error when no probe signal came"
+    )
     meas_soft_limit_move_path: bool = Field(
         default=False, description="P-CHAN-00268 measuring moves (G100) may target beyond the software limits"
     )
@@ -304,14 +406,15 @@ class ChannelConfig(_Strict):
     dpl_tol_limit_change: int = Field(
         default=0,
         ge=0,
-        le=DINT_MAX,
+        lt=UDINT_MAX,
         description="P-CHAN-00751 tolerance for changing a dynamic position limit (FCT-C43) [0.1 µm]",
     )
     dpl_input_cycles: int = Field(
-        default=1,
-        ge=1,
-        le=1000,
-        description="P-CHAN-00874 input cycles of the dynamic position limits (FCT-C43) [cycles]",
+        default=0,
+        ge=0,
+        lt=UDINT_MAX,
+        description="P-CHAN-00874 a new dynamic position limit is taken every n cycles (FCT-C43) [cycles]; "
+        "0 and 1: every cycle",
     )
     feedhold_deceleration: float = Field(
         default=1000.0,
@@ -434,6 +537,13 @@ class ExternalVariableConfig(_Strict):
     synchronous: bool = Field(
         default=False, description="read by the interpolator (reading it empties the channel first)"
     )
+    access_rights: Literal["READ_WRITE", "READ_ONLY", "WRITE_ONLY"] = Field(
+        default="READ_WRITE",
+        description="what an NC program may do with it (the PLC may always read and write)",
+    )
+    description: str = Field(
+        default="", max_length=200, description="what it means (shown by `hli-server map` and the dashboard)"
+    )
 
 
 class MachineConfig(_Strict):
@@ -448,6 +558,12 @@ class MachineConfig(_Strict):
     )
     external_variables: list[ExternalVariableConfig] = Field(
         default_factory=list, max_length=1024, description="V.E. variables shared by NC programs and the PLC"
+    )
+    program_directories: list[Annotated[str, Field(min_length=1, max_length=4096)]] = Field(
+        default_factory=list,
+        max_length=64,
+        description="where `L name` finds global subprograms and cycles, in order (relative to the machine "
+        "file)",
     )
 
     @model_validator(mode="after")
@@ -522,6 +638,12 @@ class MachineConfig(_Strict):
                     )
                 )
             seen_vars.add(key)
+        if not issues:
+            from schemas.layout import check_external_fits
+
+            too_much = check_external_fits(self)
+            if too_much is not None:
+                issues.append(ParameterIssue(too_much, field="external_variables"))
         by_number = {a.number: a for a in self.axes}
         for ax in self.axes:
             if not ax.coll_check_ax_nr:
@@ -598,57 +720,242 @@ class MachineConfig(_Strict):
 
 
 class ParameterInfo(BaseModel):
+    """One ISG parameter the configuration accepts: its text-list path, model field, P-ID, unit, the
+    kernel page that gives its default and range (B-04, issue 21), and why our default differs where
+    it does (``note``; empty where ours is the kernel's)."""
+
     model_config = ConfigDict(frozen=True)
-    path: str
+    path: str | None
+    """ISG text-list path; None where the kernel's public pages do not name it (TOML only)."""
     field: str
     pid: str | None
     unit: str
+    page: str = ""
+    """URL of the kernel's parameter page, or the function description's section (``FCT-C3 4.2``)."""
+    note: str = ""
 
 
-AXIS_PARAMETERS: tuple[ParameterInfo, ...] = tuple(
-    ParameterInfo(path=p, field=f, pid=i, unit=u)
-    for p, f, i, u in (
-        ("kopf.achs_nr", "number", None, "-"),
-        ("kopf.achs_name", "name", None, "-"),
-        ("kopf.achs_typ", "axis_type", None, "T|R"),
-        ("kenngr.achs_mode", "achs_mode", "P-AXIS-00015", "-"),
-        ("getriebe[0].dynamik.a_emergency", "a_emergency", "P-AXIS-00003", "mm/s²"),
-        ("getriebe[0].dynamik.a_max", "a_max", "P-AXIS-00008", "mm/s²"),
-        ("kenngr.coll_check_ax_nr", "coll_check_ax_nr", "P-AXIS-00043", "-"),
-        ("kenngr.coll_decelerate_chan", "coll_decelerate_chan", "P-AXIS-00044", "0/1"),
-        ("kenngr.coll_offset", "coll_offset", "P-AXIS-00045", "0.1 µm"),
-        ("getriebe[0].settling_time", "settling_time_legacy_us", "P-AXIS-00151", "µs"),
-        ("kenngr.swe_neg", "swe_neg", "P-AXIS-00177", "0.1 µm"),
-        ("kenngr.swe_pos", "swe_pos", "P-AXIS-00178", "0.1 µm"),
-        ("kenngr.swe_toleranz", "swe_toleranz", "P-AXIS-00179", "0.1 µm"),
-        ("getriebe[0].window", "window", "P-AXIS-00236", "0.1 µm"),
-        ("kenngr.coll_moving_dir_inverted", "coll_moving_dir_inverted", "P-AXIS-00262", "0/1"),
-        ("kenngr.coll_zero_position_offset", "coll_zero_position_offset", "P-AXIS-00263", "0.1 µm"),
-        ("kenngr.coll_use_a_emergency", "coll_use_a_emergency", "P-AXIS-00267", "0/1"),
-        ("getriebe[0].position_settling_time", "position_settling_time_us", "P-AXIS-00532", "µs"),
+_AX = "https://infosys.beckhoff.com/content/1033/tf5200_axis_parameter/"
+_AX_DE = "https://infosys.beckhoff.com/content/1031/tf5200_axis_parameter/"
+_CH = "https://infosys.beckhoff.com/content/1033/tf5200_channel_parameter/"
+_FCT_C3 = "https://infosys.beckhoff.com/content/1033/tf5200_axis_collision_mon/286688651.html"
+_OFFSET_LIMITS = "https://infosys.beckhoff.com/content/1033/tf5200_manual_mode_offset_limit/"
+
+
+def _infos(rows: tuple[tuple[str | None, str, str | None, str, str, str], ...]) -> tuple[ParameterInfo, ...]:
+    return tuple(ParameterInfo(path=p, field=f, pid=i, unit=u, page=g, note=n) for p, f, i, u, g, n in rows)
+
+
+AXIS_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        ("kopf.achs_nr", "number", None, "-", "", ""),
+        ("kopf.achs_name", "name", None, "-", "", ""),
+        ("kopf.achs_typ", "axis_type", None, "T|R", "", ""),
+        ("kenngr.achs_mode", "achs_mode", "P-AXIS-00015", "-", "FCT-C3 4.2", ""),
+        (
+            "getriebe[0].dynamik.a_emergency",
+            "a_emergency",
+            "P-AXIS-00003",
+            "mm/s²",
+            _AX + "117643787.html",
+            "",
+        ),
+        (
+            "getriebe[0].dynamik.a_max",
+            "a_max",
+            "P-AXIS-00008",
+            "mm/s²",
+            _AX + "117642251.html",
+            "range: the kernel allows up to 100000000 (a plausibility limit); we stop at 1000000 (about "
+            "100 g), which keeps braking distances and ramp times meaningful",
+        ),
+        ("kenngr.coll_check_ax_nr", "coll_check_ax_nr", "P-AXIS-00043", "-", "FCT-C3 4.2", ""),
+        ("kenngr.coll_decelerate_chan", "coll_decelerate_chan", "P-AXIS-00044", "0/1", "FCT-C3 4.2", ""),
+        ("kenngr.coll_offset", "coll_offset", "P-AXIS-00045", "0.1 µm", "FCT-C3 4.2", ""),
+        ("kenngr.mess_offset", "mess_offset", "P-AXIS-00114", "0.1 µm", _AX_DE + "117323787.html", ""),
+        ("kenngr.messachse", "messachse", "P-AXIS-00118", "0/1", _AX_DE + "117319179.html", ""),
+        (
+            "handbetrieb.offsetgrenze_neg",
+            "offsetgrenze_neg",
+            "P-AXIS-00137",
+            "0.1 µm",
+            _AX + "118110347.html",
+            "",
+        ),
+        (
+            "handbetrieb.offsetgrenze_pos",
+            "offsetgrenze_pos",
+            "P-AXIS-00138",
+            "0.1 µm",
+            _AX + "118108811.html",
+            "",
+        ),
+        (
+            "getriebe[0].pos_einschw_zeit",
+            "settling_time_legacy_us",
+            "P-AXIS-00151",
+            "µs",
+            _AX + "117751051.html",
+            "",
+        ),
+        ("kenngr.swe_neg", "swe_neg", "P-AXIS-00177", "0.1 µm", _AX + "117313035.html", ""),
+        ("kenngr.swe_pos", "swe_pos", "P-AXIS-00178", "0.1 µm", _AX + "117311499.html", ""),
+        ("kenngr.swe_toleranz", "swe_toleranz", "P-AXIS-00179", "0.1 µm", _AX + "117309963.html", ""),
+        ("kenngr.vb_messen", "vb_messen", "P-AXIS-00215", "µm/s", _AX + "117322251.html", ""),
+        (
+            "getriebe[0].window",
+            "window",
+            "P-AXIS-00236",
+            "0.1 µm",
+            "https://infosys.beckhoff.com/content/1033/tf5200_axis_position_monitoring/92801291.html",
+            "",
+        ),
+        (
+            "kenngr.coll_moving_dir_inverted",
+            "coll_moving_dir_inverted",
+            "P-AXIS-00262",
+            "0/1",
+            "FCT-C3 4.2",
+            "",
+        ),
+        (
+            "kenngr.coll_zero_position_offset",
+            "coll_zero_position_offset",
+            "P-AXIS-00263",
+            "0.1 µm",
+            _AX + "117418507.html",
+            "",
+        ),
+        ("kenngr.coll_use_a_emergency", "coll_use_a_emergency", "P-AXIS-00267", "0/1", "FCT-C3 4.2", ""),
+        (
+            None,
+            "meas_offset",
+            "P-AXIS-00467",
+            "0.1 µm",
+            _AX_DE + "117323787.html",
+            "the kernel's public pages name P-AXIS-00467 (on the page of P-AXIS-00114, which it replaces, "
+            "and in FCT-C14's P-CHAN-00268) but show neither its text-list path nor its default: TOML key "
+            "only, default 0 as P-AXIS-00114's",
+        ),
+        (
+            "handbetrieb.acs_limit_neg",
+            "acs_limit_neg",
+            "P-AXIS-00492",
+            "0.1 µm",
+            _OFFSET_LIMITS + "77659787.html",
+            "",
+        ),
+        ("handbetrieb.acs_limit_pos", "acs_limit_pos", "P-AXIS-00493", "0.1 µm", _AX + "118116619.html", ""),
+        (
+            "getriebe[0].position_settling_time",
+            "position_settling_time_us",
+            "P-AXIS-00532",
+            "µs",
+            _AX + "117752587.html",
+            "",
+        ),
     )
 )
-"""ISG text-list paths of the axis parameters the documents name (and the two header entries)."""
+"""ISG text-list paths of the axis parameters (and the three header entries)."""
 
-CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = tuple(
-    ParameterInfo(path=p, field=f, pid=i, unit=u)
-    for p, f, i, u in (
-        ("meas_soft_limit_move_path", "meas_soft_limit_move_path", "P-CHAN-00268", "0/1"),
+AXIS_PARAMETER_ALIASES: dict[str, str] = {"getriebe[0].settling_time": "getriebe[0].pos_einschw_zeit"}
+"""Paths of an earlier version of this project that a list may still use (read with a warning): the
+kernel's path of P-AXIS-00151 is ``getriebe[i].pos_einschw_zeit`` (its parameter page)."""
+
+CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        (
+            "messtyp",
+            "messtyp",
+            "P-CHAN-00057",
+            "-",
+            "https://infosys.beckhoff.com/content/1033/tf5200_measurement/342039563.html",
+            'the kernel\'s page gives no default ("-"); we take 1, the type G100 had here before',
+        ),
+        (
+            "rel_offset_limits_std_manual_mode",
+            "rel_offset_limits_std_manual_mode",
+            "P-CHAN-00114",
+            "0/1",
+            _OFFSET_LIMITS + "77661323.html",
+            "",
+        ),
+        ("soft_limit_tolerance", "soft_limit_tolerance", "P-CHAN-00120", "0/1", _CH + "149357707.html", ""),
+        (
+            "meas_error_no_signal",
+            "meas_error_no_signal",
+            "P-CHAN-00176",
+            "0/1",
+            "https://infosys.beckhoff.com/content/1033/tccncchannelparameter/15274803083.html",
+            "",
+        ),
+        ("meas_soft_limit_move_path", "meas_soft_limit_move_path", "P-CHAN-00268", "0/1", "FCT-C14 6.2", ""),
         (
             "suppress_workspace_monitoring_manual_mode",
             "suppress_workspace_monitoring_manual_mode",
             "P-CHAN-00442",
             "0/1/2",
+            "FCT-C14 6.2",
+            "",
         ),
-        ("dpl_tol_limit_change", "dpl_tol_limit_change", "P-CHAN-00751", "0.1 µm"),
-        ("dpl_input_cycles", "dpl_input_cycles", "P-CHAN-00874", "cycles"),
+        (
+            "dpl_tol_limit_change",
+            "dpl_tol_limit_change",
+            "P-CHAN-00751",
+            "0.1 µm",
+            _CH + "915821323.html",
+            "",
+        ),
+        ("dpl_input_cycles", "dpl_input_cycles", "P-CHAN-00874", "cycles", _CH + "1201698699.html", ""),
         # a start-up parameter (P-STUP) that belongs to one channel; [0] stands for the channel's index
-        ("configuration.channel[0].interpolator.function", "interpolator_function", "P-STUP-00070", "-"),
+        (
+            "configuration.channel[0].interpolator.function",
+            "interpolator_function",
+            "P-STUP-00070",
+            "-",
+            "FCT-C43 3",
+            "",
+        ),
     )
 )
-"""ISG text-list names of the channel parameters the documents name."""
+"""ISG text-list names of the channel parameters."""
 
-MANUAL_PARAMETERS: tuple[ParameterInfo, ...] = (
-    ParameterInfo(path="move_limit_warning", field="move_limit_warning", pid="P-MANU-00014", unit="0/1"),
+MANUAL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (("move_limit_warning", "move_limit_warning", "P-MANU-00014", "0/1", "FCT-C14 6.2", ""),)
 )
-"""ISG text-list names of the manual-mode parameters the documents name (FCT-C14 6.2)."""
+"""ISG text-list names of the manual-mode parameters (FCT-C14 6.2)."""
+
+_EXTV = "https://infosys.beckhoff.com/content/1033/tf5200_external_variables/"
+EXTERNAL_VARIABLE_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        ("var[0].name", "name", "P-EXTV-00001", "-", _EXTV + "307199243.html", ""),
+        (
+            "var[0].type",
+            "type",
+            "P-EXTV-00003",
+            "-",
+            _EXTV + "307199243.html",
+            "the kernel's default is UNS32 (a list without var[i].type reads so); REAL64 here",
+        ),
+        ("var[0].array_elements", "dims", "P-EXTV-00007", "-", _EXTV + "307199243.html", ""),
+        (
+            "var[0].scope",
+            "channel",
+            "P-EXTV-00004",
+            "-",
+            _EXTV + "307199243.html",
+            "the kernel's default is CHANNEL (the list's channel); a table names no channel: the global area",
+        ),
+        (
+            "var[0].synchronisation",
+            "synchronous",
+            "P-EXTV-00005",
+            "-",
+            _EXTV + "112461195.html",
+            "the kernel's default is TRUE (a list without the entry reads so); FALSE here",
+        ),
+        ("var[0].access_rights", "access_rights", "P-EXTV-00006", "-", _EXTV + "112462731.html", ""),
+    )
+)
+"""The kernel's list of external variables (``external_variables_list``; ``var[i]`` stands for the
+variable's index): which entry gives which field of :class:`ExternalVariableConfig` (N-05)."""

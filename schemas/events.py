@@ -37,6 +37,8 @@ __all__ = [
     "HoldChanged",
     "Measurement",
     "ModeChanged",
+    "NcFileWrite",
+    "NcMessage",
     "PositionError",
     "ProgramStateChanged",
     "ReferenceChanged",
@@ -330,6 +332,58 @@ class ReferenceChanged(Event):
     """``referencing``, ``referenced`` or ``unreferenced``."""
 
 
+@dataclass(frozen=True, slots=True, kw_only=True)
+class NcMessage(Event):
+    """``#MSG`` of an NC program (N-07; programming manual "Programming a message (#MSG)",
+    https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/507845131.html)."""
+
+    KIND = "nc_message"
+    TOPIC = "ch/{channel}/messages"
+    DESCRIPTION = (
+        "an NC program sent a message (#MSG, #MSG SAVE), with the formatted text, the program, line and block"
+    )
+
+    text: str
+    """The message as formatted (format string filled in), at most the engine's string bound."""
+    save: bool = False
+    """True for ``#MSG SAVE``: the text is also written to the report file (see :class:`NcFileWrite`)."""
+    program: str = ""
+    """The program (file) name the block belongs to: a subprogram's own name inside a subprogram."""
+    line: int | None = None
+    block: str | None = None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class NcFileWrite(Event):
+    """A write to a report file asked for by an NC program (``#MSG SAVE`` into the file named by
+    ``#FILE NAME``; programming manual "Writing messages to a file (#MSG SAVE)",
+    https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/207171211.html).
+
+    The engine touches no file: the runtime carries the write out inside its NC output directory
+    (``hli-server run --nc-output-dir``) and refuses any name that would leave it."""
+
+    KIND = "nc_file_write"
+    TOPIC = "ch/{channel}/files"
+    DESCRIPTION = (
+        "an NC program appended text to a report file (#MSG SAVE, #FILE NAME); the server writes it inside "
+        "its NC output directory only"
+    )
+
+    file: str
+    """The file name as programmed (``#FILE NAME [MSG="..."]``; programming manual "Definition of
+    file names (#FILE NAME)",
+    https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/207504523.html), or the
+    kernel's default ``message.txt``; relative to the output directory."""
+    text: str
+    """The text to append, time stamp included where the program asked for one."""
+    mode: str = "line"
+    """``line``: append ``text`` and end the line; ``continue`` (``#MSG SAVE CONTINUE``): append
+    ``text`` without a line break, the next write goes on in the same line."""
+    program: str = ""
+    line: int | None = None
+    block: str | None = None
+
+
 EVENT_TYPES: tuple[type[Event], ...] = (
     AlarmRaised,
     AlarmsCleared,
@@ -345,6 +399,8 @@ EVENT_TYPES: tuple[type[Event], ...] = (
     FaultInjected,
     Measurement,
     ReferenceChanged,
+    NcMessage,
+    NcFileWrite,
 )
 """Every kind of event, in the order the docs list them."""
 

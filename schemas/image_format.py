@@ -125,7 +125,7 @@ _ALIGN: Final = 64
 _U64: Final = struct.Struct("@Q")
 """Native 8-byte access: CPython copies it with one memcpy of 8 bytes (a single load/store)."""
 _NATIVE: Final = {t: struct.Struct("@" + t.struct_char) for t in SignalType}
-"""Single-store access per type (1, 4 or 8 bytes)."""
+"""Single-store access per type (1, 2, 4 or 8 bytes)."""
 
 if HEADER.size != HEADER_SIZE:  # pragma: no cover - a typo in the format
     raise RuntimeError(f"header format is {HEADER.size} bytes, expected {HEADER_SIZE}")

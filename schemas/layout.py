@@ -39,7 +39,10 @@ from __future__ import annotations
 
 import difflib
 import hashlib
+import itertools
 import json
+import math
+import sys
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
@@ -53,7 +56,7 @@ from schemas.units import DINT_MAX, DINT_MIN, UDINT_MAX
 from schemas.wire import DynPosLimitState, HoldSource, Mode, ProgramState, describe
 
 if TYPE_CHECKING:
-    from schemas.config import MachineConfig
+    from schemas.config import ExternalVariableConfig, MachineConfig
 
 __all__ = [
     "ADS_GROUP_CNC_TO_PLC",
@@ -63,6 +66,7 @@ __all__ = [
     "ADS_PORT_HLI",
     "AXIS_TEMPLATES",
     "CHANNEL_TEMPLATES",
+    "EXTERNAL_TYPES",
     "LAYOUT_FORMAT",
     "LAYOUT_VERSION",
     "MAX_AXES",
@@ -70,7 +74,10 @@ __all__ = [
     "MODBUS_AXIS_BASE",
     "MODBUS_BLOCK_STRIDE",
     "MODBUS_CHANNEL_BASE",
+    "MODBUS_EXTERNAL_BASE",
+    "MODBUS_EXTERNAL_END",
     "MODBUS_SNAPSHOT_REGISTER",
+    "REAL32_MAX",
     "AxisInfo",
     "ChannelInfo",
     "Direction",
@@ -85,9 +92,11 @@ __all__ = [
     "SignalValueError",
     "UnknownSignalError",
     "build_layout",
+    "check_external_fits",
+    "external_modbus_use",
 ]
 
-LAYOUT_VERSION: Final = 2
+LAYOUT_VERSION: Final = 3
 """Bumped whenever the templates or the addressing rules change (the hash changes with any config)."""
 
 LAYOUT_FORMAT: Final = "hli-layout"
@@ -109,6 +118,11 @@ again (docs/modbus.md, "Consistent snapshots")."""
 _CHANNEL_BLOCKS_END: Final = MODBUS_CHANNEL_BASE + MAX_CHANNELS * MODBUS_BLOCK_STRIDE
 if not _CHANNEL_BLOCKS_END <= MODBUS_SNAPSHOT_REGISTER < MODBUS_AXIS_BASE:  # pragma: no cover - a typo
     raise RuntimeError("the snapshot register must lie between the channel and the axis blocks")
+
+MODBUS_EXTERNAL_BASE: Final = _CHANNEL_BLOCKS_END
+"""First coil and holding register of the V.E. variables (N-05): 1200."""
+MODBUS_EXTERNAL_END: Final = MODBUS_SNAPSHOT_REGISTER
+"""One past the last address of the V.E. variables: 1900 (the snapshot register follows)."""
 
 ADS_PORT_HLI: Final = 851
 """ADS port of the HLI image (the port where a TwinCAT PLC runtime serves its symbols; project's choice)."""
@@ -168,6 +182,28 @@ class SignalType(StrEnum):
 
 _TYPE_SIZE: Final = {SignalType.BOOL: 1, SignalType.DINT: 4, SignalType.UDINT: 4, SignalType.LREAL: 8}
 _TYPE_CHAR: Final = {SignalType.BOOL: "?", SignalType.DINT: "i", SignalType.UDINT: "I", SignalType.LREAL: "d"}
+_INT_RANGE: Final = {SignalType.DINT: (DINT_MIN, DINT_MAX), SignalType.UDINT: (0, UDINT_MAX)}
+
+REAL32_MAX: Final = 3.4028234663852886e38
+"""The largest finite REAL32 (IEEE 754 single)."""
+
+EXTERNAL_TYPES: Final[dict[str, tuple[SignalType, tuple[float, float] | None]]] = {
+    "BOOLEAN": (SignalType.BOOL, None),
+    "SGN08": (SignalType.DINT, (-(2**7), 2**7 - 1)),
+    "UNS08": (SignalType.UDINT, (0, 2**8 - 1)),
+    "SGN16": (SignalType.DINT, (-(2**15), 2**15 - 1)),
+    "UNS16": (SignalType.UDINT, (0, 2**16 - 1)),
+    "SGN32": (SignalType.DINT, None),
+    "UNS32": (SignalType.UDINT, None),
+    "REAL32": (SignalType.LREAL, (-REAL32_MAX, REAL32_MAX)),
+    "REAL64": (SignalType.LREAL, (-sys.float_info.max, sys.float_info.max)),
+}
+"""The kernel's V.E. data types (P-EXTV-00003) -> the image's type and the values it takes (N-05).
+
+The image carries the four types of the HLI signals (BOOL, DINT, UDINT, LREAL), which every door
+serves: an SGN08/SGN16 lies in a DINT, an UNS08/UNS16 in a UDINT and a REAL32 in an LREAL, and every
+door refuses a value outside the kernel type's range (:attr:`Signal.limits`). The reals must be
+finite, as the kernel's store keeps them."""
 
 
 class Direction(StrEnum):
@@ -179,7 +215,18 @@ class Direction(StrEnum):
 
 class Scope(StrEnum):
     CHANNEL = "channel"
+    """``gpCh[i]^...``: an HLI signal of channel index i."""
     AXIS = "axis"
+    """``gpAx[i]^...``: an HLI signal of axis index i."""
+    VE_GLOBAL = "ve_global"
+    """``gpVEGlob^name``: a V.E. variable of the global area (index 0), N-05."""
+    VE_CHANNEL = "ve_channel"
+    """``gpVECh[i]^name``: a V.E. variable of the area of channel index i, N-05."""
+
+    @property
+    def external(self) -> bool:
+        """A V.E. variable: written by the NC and by the PLC (not an object of ``MachineHli``)."""
+        return self in (Scope.VE_GLOBAL, Scope.VE_CHANNEL)
 
 
 class ModbusTable(StrEnum):
@@ -495,6 +542,9 @@ class Signal:
     ads_port: int
     ads_group: int
     ads_offset: int
+    limits: tuple[float, float] | None = None
+    """The values a V.E. variable takes, where its kernel type is narrower than the field (an SGN16 in
+    a DINT) or a real must be finite; None: the field type's own range."""
 
     @property
     def size(self) -> int:
@@ -520,9 +570,22 @@ class Signal:
 
     @property
     def engine_path(self) -> str:
-        """Attribute path below ``MachineHli``: ``axes[1].ipo_mc_control.dyn_pos_limit_low.command_w``."""
+        """Attribute path below ``MachineHli``: ``axes[1].ipo_mc_control.dyn_pos_limit_low.command_w``;
+        a V.E. variable's element in the engine's store: ``external[ch1].V.E.name[2]``."""
+        if self.scope.external:
+            area = "global" if self.scope is Scope.VE_GLOBAL else f"channel index {self.index}"
+            return f"external[{area}].V.E.{self.path}"
         container = "channels" if self.scope is Scope.CHANNEL else "axes"
         return f"{container}[{self.index}].{self.path}"
+
+    @property
+    def external_element(self) -> tuple[str, tuple[int, ...]]:
+        """A V.E. signal's variable name and element index: ``("POS", (1, 2))`` for ``POS[1,2]``."""
+        if not self.scope.external:
+            raise ValueError(f"{self.st_path} is no V.E. variable")
+        name, _, rest = self.path.partition("[")
+        index = tuple(int(i) for i in rest.rstrip("]").split(",")) if rest else ()
+        return name, index
 
     @property
     def image_ads_group(self) -> int:
@@ -543,14 +606,21 @@ class Signal:
                 return bool(value)
             raise SignalValueError(f"{self.st_path}: BOOL takes True/False or 0/1, got {value!r}")
         if t is SignalType.LREAL:
-            if isinstance(value, (int, float)) and not isinstance(value, bool):
-                return float(value)
-            raise SignalValueError(f"{self.st_path}: LREAL takes a number, got {value!r}")
+            if not isinstance(value, (int, float)) or isinstance(value, bool):
+                raise SignalValueError(f"{self.st_path}: LREAL takes a number, got {value!r}")
+            real = float(value)
+            if self.limits is not None and not self.limits[0] <= real <= self.limits[1]:
+                raise SignalValueError(
+                    f"{self.st_path}: {value} is out of range for the V.E. variable "
+                    f"[{self.limits[0]:.7g}, {self.limits[1]:.7g}] (finite numbers only)"
+                )
+            return real
         if not isinstance(value, int) or isinstance(value, bool):
             raise SignalValueError(f"{self.st_path}: {t} takes an integer, got {value!r}")
-        low, high = (DINT_MIN, DINT_MAX) if t is SignalType.DINT else (0, UDINT_MAX)
+        low, high = self.limits or _INT_RANGE[t]
         if not low <= value <= high:
-            raise SignalValueError(f"{self.st_path}: {value} is out of range for {t} [{low}, {high}]")
+            what = "the V.E. variable" if self.limits else str(t)
+            raise SignalValueError(f"{self.st_path}: {value} is out of range for {what} [{low}, {high}]")
         return value
 
     def check_plc_write(self) -> None:
@@ -598,6 +668,7 @@ _SIGNAL_KEYS: Final = (
     "ads_port",
     "ads_group",
     "ads_offset",
+    "limits",
 )
 
 _HASHED_KEYS: Final = (
@@ -611,6 +682,7 @@ _HASHED_KEYS: Final = (
     "ads_port",
     "ads_group",
     "ads_offset",
+    "limits",
 )
 """What the layout hash covers: everything a peer relies on to read and write the right bytes.
 Names, descriptions, requirement IDs and origins are documentation and do not change it."""
@@ -670,6 +742,20 @@ class Layout:
     def half(self, direction: Direction) -> tuple[Signal, ...]:
         """The signals of one half in byte order."""
         return self._halves[direction]
+
+    def hli_half(self, direction: Direction) -> tuple[Signal, ...]:
+        """The HLI signals (channels and axes, the objects of ``MachineHli``) of one half in byte
+        order: the half without its V.E. area."""
+        return self._hli_halves[direction]
+
+    @cached_property
+    def _hli_halves(self) -> dict[Direction, tuple[Signal, ...]]:
+        return {d: tuple(s for s in self.half(d) if not s.scope.external) for d in Direction}
+
+    @cached_property
+    def external_signals(self) -> tuple[Signal, ...]:
+        """The V.E. variables' elements (N-05) in byte order: global area first, then each channel's."""
+        return tuple(s for s in self.half(Direction.PLC_TO_CNC) if s.scope.external)
 
     def size(self, direction: Direction) -> int:
         """Bytes of one half (a multiple of 8)."""
@@ -881,6 +967,7 @@ class Layout:
                     ads_port=int(d["ads_port"]),
                     ads_group=int(d["ads_group"]),
                     ads_offset=int(d["ads_offset"]),
+                    limits=_limits(d.get("limits")),
                 )
                 for d in data["signals"]
             ]
@@ -963,6 +1050,15 @@ _CONSTRUCT_TYPE: Final[dict[SignalType, Any]] = {
 }
 
 
+def _limits(raw: Any) -> tuple[float, float] | None:
+    if raw is None:
+        return None
+    low, high = raw
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in (low, high)):
+        raise TypeError(f"limits must be two numbers, got {raw!r}")
+    return low, high  # as written: the hash sees -128 and -128.0 apart
+
+
 def _plain(value: object) -> object:
     if isinstance(value, StrEnum):
         return value.value
@@ -1042,6 +1138,9 @@ def build_layout(config: MachineConfig) -> Layout:
         d: _axis_area_start(d) + _AXIS_BLOCK.size[d] * len(config.axes)  # multiples of 8 already
         for d in Direction
     }
+    external, p2c_end = _external_signals(config, sizes[Direction.PLC_TO_CNC])
+    signals.extend(external)
+    sizes[Direction.PLC_TO_CNC] = _round_up(p2c_end, _ALIGN_BLOCK)
     return Layout(
         machine=config.name,
         channels=[ChannelInfo(i, c.number, c.name, tuple(c.axes)) for i, c in enumerate(config.channels)],
@@ -1086,3 +1185,115 @@ def _signal(
         ads_group=ads[1],
         ads_offset=ads[2],
     )
+
+
+# --------------------------------------------------------------------------------------------
+# V.E. variables (N-05)
+# --------------------------------------------------------------------------------------------
+
+
+def _external_order(config: MachineConfig) -> list[tuple[int | None, ExternalVariableConfig]]:
+    """(channel index or None, variable): the global area first, then each channel's area in the
+    order of ``config.channels``; inside an area the order of the machine file."""
+    ordered: list[tuple[int | None, ExternalVariableConfig]] = [
+        (None, v) for v in config.external_variables if v.channel is None
+    ]
+    for i, ch in enumerate(config.channels):
+        ordered += [(i, v) for v in config.external_variables if v.channel == ch.number]
+    return ordered
+
+
+def external_modbus_use(config: MachineConfig) -> dict[ModbusTable, int]:
+    """How far the V.E. variables reach in the coils and in the holding registers (one past the
+    last address), without expanding their elements: the check of the machine file uses it."""
+    cursor = {ModbusTable.COIL: MODBUS_EXTERNAL_BASE, ModbusTable.HOLDING_REGISTER: MODBUS_EXTERNAL_BASE}
+    for _, var in _external_order(config):
+        sig_type, _ = EXTERNAL_TYPES[var.type]
+        table = _modbus_table(sig_type, Direction.PLC_TO_CNC)
+        count = sig_type.modbus_count
+        cursor[table] = _round_up(cursor[table], count) + count * math.prod(var.dims or [1])
+    return cursor
+
+
+def check_external_fits(config: MachineConfig) -> str | None:
+    """None when the V.E. variables fit the Modbus area reserved for them, else what is too much."""
+    for table, end in external_modbus_use(config).items():
+        if end > MODBUS_EXTERNAL_END:
+            room = MODBUS_EXTERNAL_END - MODBUS_EXTERNAL_BASE
+            what = (
+                "coils for their BOOLEAN"
+                if table is ModbusTable.COIL
+                else "holding registers for their numeric"
+            )
+            return (
+                f"the V.E. variables need {end - MODBUS_EXTERNAL_BASE} Modbus {what} elements; the map "
+                f"reserves {room} ({MODBUS_EXTERNAL_BASE}..{MODBUS_EXTERNAL_END - 1}) for them: declare "
+                "fewer or smaller arrays"
+            )
+    return None
+
+
+def _element_indices(dims: Sequence[int]) -> Iterator[tuple[int, ...]]:
+    """Row-major, as ``ExternalVarSpec.flat_index`` counts them."""
+    if not dims:
+        yield ()
+        return
+    yield from itertools.product(*(range(d) for d in dims))
+
+
+def _external_signals(config: MachineConfig, start: int) -> tuple[list[Signal], int]:
+    """Place every element of every V.E. variable after the axis blocks of the PLC->CNC half
+    (natural alignment) and in the V.E. area of the coils / holding registers."""
+    problem = check_external_fits(config)
+    if problem is not None:
+        raise LayoutError(problem)
+    signals: list[Signal] = []
+    byte_cursor = start
+    modbus = {ModbusTable.COIL: MODBUS_EXTERNAL_BASE, ModbusTable.HOLDING_REGISTER: MODBUS_EXTERNAL_BASE}
+    for ch_index, var in _external_order(config):
+        sig_type, limits = EXTERNAL_TYPES[var.type]
+        table = _modbus_table(sig_type, Direction.PLC_TO_CNC)
+        count = sig_type.modbus_count
+        if ch_index is None:
+            scope, index, head, prefix = Scope.VE_GLOBAL, 0, "gpVEGlob^", ""
+            area = "global area"
+        else:
+            number = config.channels[ch_index].number
+            scope, index, head, prefix = Scope.VE_CHANNEL, ch_index, f"gpVECh[{ch_index}]^", f"ch{number}."
+            area = f"area of channel {number}"
+        dims = "".join(f"[{d}]" for d in var.dims)
+        text = (
+            f"V.E.{var.name} ({var.type}{dims}, {area}): read and written by NC programs and the PLC "
+            "(last writer wins)"
+        )
+        if var.description:
+            text = f"{var.description}. {text}"
+        for element in _element_indices(var.dims):
+            path = var.name + (f"[{','.join(map(str, element))}]" if element else "")
+            offset = _round_up(byte_cursor, sig_type.size)
+            byte_cursor = offset + sig_type.size
+            address = _round_up(modbus[table], count)
+            modbus[table] = address + count
+            signals.append(
+                Signal(
+                    name=f"{prefix}V.E.{path}",
+                    st_path=head + path,
+                    scope=scope,
+                    index=index,
+                    path=path,
+                    type=sig_type,
+                    direction=Direction.PLC_TO_CNC,
+                    unit="-",
+                    description=text,
+                    reqs=("N-05",),
+                    origin="machine file",
+                    offset=offset,
+                    modbus_table=table,
+                    modbus_address=address,
+                    ads_port=ADS_PORT_HLI,
+                    ads_group=ADS_GROUP_PLC_TO_CNC,
+                    ads_offset=offset,
+                    limits=limits,
+                )
+            )
+    return signals, byte_cursor

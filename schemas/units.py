@@ -5,7 +5,8 @@ The documents' units at the interface (configuration, process image, wire):
 * positions: 0.1 µm for translatory axes, 0.0001° for rotary axes, as DINT (SGN32);
 * times: µs;
 * accelerations: mm/s² (°/s² rotary), as the documents give a_max and the C3-10 deceleration;
-* velocities in the configuration: mm/min (the unit an NC programmer writes with F).
+* velocities in the configuration: mm/min (the unit an NC programmer writes with F) for the project's
+  own keys, µm/s where a kernel parameter gives that unit (P-AXIS-00215 ``vb_messen``).
 
 Inside the engine positions are floats in mm (or °) and time in s. Both position units share the
 factor 10 000 per mm (or per °), so one pair of functions serves translatory and rotary axes.
@@ -25,6 +26,7 @@ __all__ = [
     "increments_from_mm",
     "mm_from_increments",
     "mm_per_min_to_mm_per_s",
+    "mm_per_s_from_um_per_s",
     "s_from_us",
     "us_from_s",
 ]
@@ -80,3 +82,8 @@ def us_from_s(value_s: float) -> int:
 
 def mm_per_min_to_mm_per_s(value: float) -> float:
     return value / 60.0
+
+
+def mm_per_s_from_um_per_s(value: int | float) -> float:
+    """µm/s (0.001°/s rotary), the kernel's unit of axis velocities such as P-AXIS-00215, -> mm/s (°/s)."""
+    return float(value) / 1000.0

@@ -24,8 +24,11 @@ from tests.spec_examples import CIRC_PROT, CIRC_PROT_OLD, EXTRA_AXES_AREA, SELEC
 __all__ = [
     "FUZZ_SCALE",
     "FUZZ_SEED",
+    "LANGUAGE_CORPUS",
     "count",
+    "expression",
     "fault_values",
+    "language_program",
     "mutate",
     "nc_line",
     "nc_program",
@@ -279,6 +282,155 @@ def nc_program(rng: random.Random, axes: tuple[str, str, str] = ("X", "Y", "Z"),
     if rng.random() < 0.8:
         lines.append("M30")
     return "\n".join(lines) + rng.choice(("\n", "", "\r\n"))
+
+
+# --- the NC language (issue 20): expressions, variables, control flow, calls, # commands -------------------
+LANGUAGE_CORPUS = [
+    "P1 = 10 P2 = 30",
+    "N10 G01 X P1*SIN[P2] Y[P1 + 2] F6000",
+    "$IF P1 == 10",
+    "$ELSEIF P1 > 3",
+    "$ELSE",
+    "$ENDIF",
+    "$WHILE P1 > 0",
+    "P1 = P1 - 1",
+    "$ENDWHILE",
+    "$FOR P3 = 1, 3, 1",
+    "$ENDFOR",
+    "$DO",
+    "$ENDDO P1 < 0",
+    "$REPEAT",
+    "$UNTIL P1 <= 0",
+    "$SWITCH P1",
+    "$CASE 1",
+    "$DEFAULT",
+    "$BREAK",
+    "$CONTINUE",
+    "$ENDSWITCH",
+    "N20: X[V.P.A]",
+    "$GOTO N20",
+    "$GOTO [end]",
+    "[end]",
+    "#VAR",
+    "V.P.A : REAL64 = 1.5",
+    "V.L.B[3] = [1, 2, 3]",
+    "#ENDVAR",
+    "V.P.A = V.P.A * 2",
+    "LL SUB",
+    "L sub.nc",
+    "L CYCLE [NAME=cyc.ecy @P1=5 @P2=P1]",
+    '#MSG ["value %d, %.3f", P1, V.P.A]',
+    '#MSG SAVE ["saved"]',
+    '#FILE NAME [MSG="out.txt"]',
+    "#FLUSH",
+    "#FLUSH WAIT",
+    "#IF P1 == 1",
+    "#ELSE",
+    "#ENDIF",
+    "#COMMENT BEGIN",
+    "#COMMENT END",
+    "M200=40 G231=50",
+    "V.E.COUNT = V.E.COUNT + 1",
+    "X[V.A.ABS.X + 1]",
+    "N30 G01 X10 \\",
+    "(a (nested) comment) X1",
+    "M17",
+    "M30",
+    "%L SUB",
+    "%MAIN",
+]
+_FUNCTIONS = (
+    "ABS",
+    "SQR",
+    "SQRT",
+    "EXP",
+    "LN",
+    "SIN",
+    "COS",
+    "TAN",
+    "ASIN",
+    "ATAN2",
+    "INT",
+    "ROUND",
+    "INV",
+    "NOT",
+)
+_OPERATORS = (
+    "+",
+    "-",
+    "*",
+    "/",
+    "**",
+    " MOD ",
+    "==",
+    "!=",
+    "<",
+    ">=",
+    " AND ",
+    " OR ",
+    " XOR ",
+    "&",
+    "|",
+    "^",
+)
+
+
+def expression(rng: random.Random, depth: int = 3) -> str:
+    """A random expression: numbers near and beyond every range, parameters, variables, functions,
+    every operator, brackets (sometimes unbalanced)."""
+    r = rng.random()
+    if depth <= 0 or r < 0.3:
+        return rng.choice(
+            (number(rng), f"P{rng.randint(0, 12)}", "V.P.A", "V.L.B[1]", "@P1", "TRUE", "PI", '"s"')
+        )
+    if r < 0.5:
+        name = rng.choice(_FUNCTIONS)
+        args = expression(rng, depth - 1) + (f", {expression(rng, depth - 1)}" if name == "ATAN2" else "")
+        return f"{name}[{args}]"
+    if r < 0.6:
+        return f"[{expression(rng, depth - 1)}{rng.choice(('', '', ']'))}"
+    if r < 0.65:
+        return f"-{expression(rng, depth - 1)}"
+    return f"{expression(rng, depth - 1)} {rng.choice(_OPERATORS)} {expression(rng, depth - 1)}"
+
+
+def language_line(rng: random.Random) -> str:
+    """One line of the language: a corpus line, mutated or not, or a statement with a random
+    expression."""
+    r = rng.random()
+    if r < 0.4:
+        return rng.choice(LANGUAGE_CORPUS)
+    if r < 0.55:
+        return mutate(rng, rng.choice(LANGUAGE_CORPUS))
+    e = expression(rng)
+    return rng.choice(
+        (
+            f"P{rng.randint(0, 12)} = {e}",
+            f"G01 X[{e}] F6000",
+            f"$IF {e}",
+            f"$WHILE {e}",
+            f"$FOR P{rng.randint(1, 9)} = {e}, {expression(rng, 1)}, {expression(rng, 1)}",
+            f'#MSG ["%d %s", {e}, {expression(rng, 1)}]',
+            f"V.P.A = {e}",
+            f"M[{e}] H{e}",
+            f"$SWITCH {e}",
+            f"$CASE {e}",
+            f"$GOTO N[{e}]",
+            nc_line(rng),
+        )
+    )
+
+
+def language_program(rng: random.Random) -> str:
+    """1..25 lines of the language, often with the blocks it needs closed, so that runs get somewhere."""
+    lines: list[str] = (
+        ["#VAR", "V.P.A = 1", "V.L.B[3] = [1, 2, 3]", "#ENDVAR", "P1 = 3"] if rng.random() < 0.7 else []
+    )
+    for _ in range(rng.randint(1, 25)):
+        lines.append(language_line(rng))
+    if rng.random() < 0.8:
+        lines.append("M30")
+    return "\n".join(lines) + "\n"
 
 
 def fault_values(rng: random.Random) -> dict[str, object]:

@@ -9,21 +9,38 @@ from __future__ import annotations
 
 from typing import Any
 
-from schemas.config import AxisConfig, ChannelConfig, MachineConfig
+from schemas.config import AxisConfig, ChannelConfig, ExternalVariableConfig, MachineConfig
 from schemas.layout import Direction, Layout, SignalType
 
-__all__ = ["demo_config", "distinct_values"]
+__all__ = ["EXTERNAL_VARIABLES", "demo_config", "distinct_values"]
 
 
-def demo_config(extra_axes: int = 0) -> MachineConfig:
-    """The demo-sized machine: channel 1 X/Y/Z, channel 2 the gantry X1/X2 with lift Z1."""
+EXTERNAL_VARIABLES: tuple[ExternalVariableConfig, ...] = (
+    ExternalVariableConfig(name="PLC_READY", type="BOOLEAN", description="the PLC is ready"),
+    ExternalVariableConfig(name="S8", type="SGN08"),
+    ExternalVariableConfig(name="U8", type="UNS08", dims=[3]),
+    ExternalVariableConfig(name="S16", type="SGN16", channel=1),
+    ExternalVariableConfig(name="U16", type="UNS16", channel=1),
+    ExternalVariableConfig(name="PART_COUNT", type="SGN32", channel=1),
+    ExternalVariableConfig(name="U32", type="UNS32", channel=1),
+    ExternalVariableConfig(name="R32", type="REAL32", dims=[2], channel=2),
+    ExternalVariableConfig(name="POS", type="REAL64", dims=[2, 3], channel=2),
+    ExternalVariableConfig(name="FLAGS", type="BOOLEAN", dims=[4], channel=2),
+)
+"""One V.E. variable of every kernel type, global and in both channels, scalars and arrays (N-05)."""
+
+
+def demo_config(extra_axes: int = 0, *, external: bool = False) -> MachineConfig:
+    """The demo-sized machine: channel 1 X/Y/Z, channel 2 the gantry X1/X2 with lift Z1; with
+    ``external``, the V.E. variables of :data:`EXTERNAL_VARIABLES`."""
     names = ["X", "Y", "Z", "X1", "X2", "Z1"] + [f"U{k}" for k in range(extra_axes)]
     axes = [AxisConfig(number=n, name=name) for n, name in enumerate(names, start=1)]
     channels = [
         ChannelConfig(number=1, name="mill", axes=["X", "Y", "Z", *names[6:]]),
         ChannelConfig(number=2, name="gantry", axes=["X1", "X2", "Z1"], main_axes=("X1", "X2", "Z1")),
     ]
-    return MachineConfig(name="demo", axes=axes, channels=channels)
+    variables = list(EXTERNAL_VARIABLES) if external else []
+    return MachineConfig(name="demo", axes=axes, channels=channels, external_variables=variables)
 
 
 def distinct_values(layout: Layout, direction: Direction, salt: int) -> dict[str, Any]:
@@ -32,6 +49,9 @@ def distinct_values(layout: Layout, direction: Direction, salt: int) -> dict[str
     for i, s in enumerate(layout.half(direction)):
         if s.type is SignalType.BOOL:
             values[s.st_path] = (i + salt) % 3 != 0
+        elif s.limits is not None and s.type is not SignalType.LREAL:  # a V.E. SGN08 .. UNS16
+            low, high = int(s.limits[0]), int(s.limits[1])
+            values[s.st_path] = low + (37 * i + salt) % (high - low + 1)
         elif s.type is SignalType.DINT:
             values[s.st_path] = (-1) ** i * (100_000 * (i + 1) + salt)
         elif s.type is SignalType.UDINT:

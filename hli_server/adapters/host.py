@@ -10,6 +10,10 @@ An adapter never sees the runtime or the machine. It is handed an :class:`Adapte
   Requests are latched by the channel at the next cycle, as a PLC's are. The HTTP API and the
   dashboard use it; the PLC doors do not;
 * ``events`` (:class:`EventFeed`): the typed events of ``schemas.events``, live and as a log;
+* ``recorder`` (:class:`RecorderPort`): start and stop a recording of the session, list and fetch
+  recordings (issue 25; the HTTP API and the dashboard);
+* ``faults`` (:class:`~hli_server.adapters.faults.CommFaults`): faults in the PLC's communication on
+  demand, which the doors consult once per request (issue 25);
 * ``step(n)`` for the stepped clock (``step_traced(n, signals)`` also returns chosen signals in every
   one of those cycles, :class:`Trace`), and ``on_cycle`` for work that must follow every published
   cycle (ADS device notifications).
@@ -21,10 +25,14 @@ adapter may use is named here.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+import json
+import math
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
+from hli_server.adapters.faults import CommFaults
 from schemas.events import Event
 from schemas.layout import Direction, Layout, Signal, SignalType
 from schemas.wire import Mode
@@ -38,6 +46,7 @@ __all__ = [
     "AccessPolicy",
     "AdapterHost",
     "ConflictError",
+    "DoorView",
     "EventFeed",
     "ImagePort",
     "InvalidRequestError",
@@ -45,9 +54,13 @@ __all__ = [
     "NotFoundError",
     "OperatorError",
     "OperatorPort",
+    "Readiness",
+    "RecorderPort",
     "StepRefusedError",
     "Trace",
+    "UnavailableError",
     "Value",
+    "door_host",
 ]
 
 Value = bool | int | float
@@ -69,12 +82,32 @@ class AccessPolicy:
       literals (DNS rebinding: a page of another site that resolves to this server is refused).
     * ``allowed_origins``: origins (``http://host:port``) whose pages may send state-changing requests
       besides the server's own (a page of another site in the user's browser is refused).
+
+    * ``read_only_doors``: the doors (``http``, ``modbus``, ``ads``) that accept no write, the others do
+      (``--read-only-door NAME``); :meth:`for_door` is the policy one door sees.
+
+    The token guards the HTTP door only; Modbus and ADS are guarded by their allowlists of peer addresses
+    (their ``allow`` option) or by being read-only (issue 27, finding 8; ``hli-server run`` refuses to
+    open an unguarded write door beyond loopback without ``--insecure``).
     """
 
     api_token: str | None = None
     read_only: bool = False
     allowed_hosts: tuple[str, ...] = ()
     allowed_origins: tuple[str, ...] = ()
+    read_only_doors: tuple[str, ...] = ()
+
+    def for_door(self, door: str) -> AccessPolicy:
+        """The policy door ``door`` applies: read-only if the server is, or if that door is."""
+        if self.read_only or door not in self.read_only_doors:
+            return self
+        return AccessPolicy(
+            api_token=self.api_token,
+            read_only=True,
+            allowed_hosts=self.allowed_hosts,
+            allowed_origins=self.allowed_origins,
+            read_only_doors=self.read_only_doors,
+        )
 
 
 class OperatorError(Exception):
@@ -95,6 +128,10 @@ class InvalidRequestError(OperatorError, ValueError):
 
 class StepRefusedError(OperatorError):
     """``step()`` outside the stepped clock, or while the runtime does not run."""
+
+
+class UnavailableError(OperatorError):
+    """The engine cannot answer now (the doors process lost it, or it did not answer in time): 503."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,47 +164,117 @@ _DTYPE = {
 
 
 @dataclass(frozen=True, slots=True)
+class Readiness:
+    """Whether the server is ready: the clock runs and every door asked for listens (``GET /api/ready``,
+    the health checks of the image and the compose bench).
+
+    ``doors`` maps each adapter asked for (``http``, ``modbus``, ``ads``, ``mqtt``, ...) to whether it
+    has started: a listening door listens, MQTT has its client task (it never waits for the broker).
+    ``state`` is ``starting``, ``running`` or ``stopping``; ``ready`` is ``running`` with every door up."""
+
+    ready: bool
+    state: str
+    doors: Mapping[str, bool]
+
+    def to_json(self) -> dict[str, Any]:
+        waiting = [name for name, up in self.doors.items() if not up]
+        return {"ready": self.ready, "state": self.state, "doors": dict(self.doors), "waiting_for": waiting}
+
+
 class Trace:
     """Chosen signals in every cycle of a run (H-07): the per-cycle record of a scenario.
 
-    ``cycles[k]`` is the cycle of the ``k``-th published cycle; ``values[st_path][k]`` the signal's
-    value in it (CNC->PLC as published, PLC->CNC as latched). ``trace[st_path]`` is the column as a
-    numpy array (``bool``, ``int32``, ``uint32`` or ``float64`` after the signal's type), ready for
-    ``argmax``, ``diff`` and friends; :meth:`to_json` is what ``POST /api/step`` returns.
+    ``trace[st_path]`` is the column as a numpy array (``bool``, ``int32``, ``uint32`` or ``float64``
+    after the signal's type, read-only), ready for ``argmax``, ``diff`` and friends; ``cycles[k]`` is the
+    cycle of the ``k``-th published cycle and ``values[st_path][k]`` the signal's value in it (CNC->PLC as
+    published, PLC->CNC as latched), as Python lists made when asked for. The columns are kept as arrays
+    (a value takes its own width, not a Python object): :meth:`json_chunks` writes ``POST /api/step``'s
+    answer from them a slice at a time, :meth:`to_json` is the same as one dictionary.
     """
 
-    signals: tuple[str, ...]
-    cycles: Sequence[int]
-    values: Mapping[str, Sequence[Value]]
-    types: Mapping[str, SignalType]
+    __slots__ = ("_columns", "_cycles", "signals", "types")
 
-    def __len__(self) -> int:
-        return len(self.cycles)
-
-    def __getitem__(self, st_path: str) -> npt.NDArray[Any]:
+    def __init__(
+        self,
+        signals: Sequence[str],
+        cycles: Sequence[int] | npt.NDArray[Any],
+        values: Mapping[str, Sequence[Value] | npt.NDArray[Any]],
+        types: Mapping[str, SignalType],
+    ) -> None:
         import numpy as np
 
+        self.signals: tuple[str, ...] = tuple(signals)
+        self.types: dict[str, SignalType] = {p: types[p] for p in self.signals}
+        self._cycles = np.asarray(cycles, dtype=np.int64)
+        self._cycles.flags.writeable = False
+        self._columns: dict[str, npt.NDArray[Any]] = {}
+        for path in self.signals:
+            column = np.asarray(values[path], dtype=_DTYPE[self.types[path]])
+            column.flags.writeable = False
+            self._columns[path] = column
+
+    @property
+    def cycles(self) -> list[int]:
+        out: list[int] = self._cycles.tolist()
+        return out
+
+    @property
+    def values(self) -> dict[str, list[Value]]:
+        return {path: column.tolist() for path, column in self._columns.items()}
+
+    def __len__(self) -> int:
+        return len(self._cycles)
+
+    def __getitem__(self, st_path: str) -> npt.NDArray[Any]:
         try:
-            column = self.values[st_path]
+            return self._columns[st_path]
         except KeyError:
             raise KeyError(f"{st_path!r} was not traced; the trace has {', '.join(self.signals)}") from None
-        return np.asarray(column, dtype=_DTYPE[self.types[st_path]])
 
     def at(self, cycle: int) -> dict[str, Value]:
         """Every traced signal in ``cycle`` (KeyError when the trace does not hold that cycle)."""
-        try:
-            k = list(self.cycles).index(cycle)
-        except ValueError:
-            first, last = (self.cycles[0], self.cycles[-1]) if self.cycles else (None, None)
-            raise KeyError(f"cycle {cycle} is not in the trace (cycles {first}..{last})") from None
-        return {path: self.values[path][k] for path in self.signals}
+        import numpy as np
+
+        found = np.flatnonzero(self._cycles == cycle)
+        if not len(found):
+            first, last = (int(self._cycles[0]), int(self._cycles[-1])) if len(self._cycles) else (None, None)
+            raise KeyError(f"cycle {cycle} is not in the trace (cycles {first}..{last})")
+        k = int(found[0])
+        return {path: self._columns[path][k].item() for path in self.signals}
 
     def to_json(self) -> dict[str, Any]:
-        return {
-            "signals": list(self.signals),
-            "cycles": list(self.cycles),
-            "values": {path: list(self.values[path]) for path in self.signals},
-        }
+        return {"signals": list(self.signals), "cycles": self.cycles, "values": self.values}
+
+    def json_chunks(self, slice_size: int = 65_536) -> Iterator[bytes]:
+        """:meth:`to_json` as JSON text in pieces of at most ``slice_size`` values: the answer of a long
+        trace is written without the whole of it ever being Python objects or one string."""
+
+        def array(column: npt.NDArray[Any]) -> Iterator[bytes]:
+            yield b"["
+            for start in range(0, len(column), slice_size):
+                part = column[start : start + slice_size].tolist()
+                text = json.dumps(part, allow_nan=True, separators=(",", ":"))
+                if "N" in text or "I" in text:  # NaN, Infinity: named, as every answer does
+                    text = json.dumps([_finite_or_name(v) for v in part], separators=(",", ":"))
+                yield (b"," if start else b"") + text[1:-1].encode("ascii")
+            yield b"]"
+
+        yield b'{"signals":' + json.dumps(list(self.signals)).encode("ascii") + b',"cycles":'
+        yield from array(self._cycles)
+        yield b',"values":{'
+        for i, path in enumerate(self.signals):
+            yield (b"," if i else b"") + json.dumps(path).encode("ascii") + b":"
+            yield from array(self._columns[path])
+        yield b"}}"
+
+    def __repr__(self) -> str:
+        return f"Trace({len(self)} cycles of {', '.join(self.signals)})"
+
+
+def _finite_or_name(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
+    return value
 
 
 class ImagePort(Protocol):
@@ -236,7 +343,14 @@ class OperatorPort(Protocol):
         """All axes, or those of one channel, in their order."""
         ...
 
-    def load_program(self, channel: int, text: str, name: str = "program") -> dict[str, Any]: ...
+    def load_program(
+        self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
+    ) -> dict[str, Any]:
+        """Load ``text`` as the channel's program; ``files`` (name -> text) are its subprograms and
+        cycles, found by ``L name`` before the program directories (they replace the files of the
+        channel's previous load). InvalidRequestError for a file name that leaves its directory
+        (``..``, absolute), too many or too large files; ConflictError while a program runs."""
+        ...
 
     def select_program(self, channel: int, number: int) -> dict[str, Any]: ...
 
@@ -262,8 +376,20 @@ class OperatorPort(Protocol):
 
     def clear_faults(self, axis: str) -> dict[str, Any]: ...
 
+    def soft_limits(self, axis: str) -> dict[str, Any]:
+        """The software limits in effect and in the axis record [0.1 µm] (P-AXIS-00177/00178/00179)."""
+        ...
+
+    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+        """Limits in effect until the next reset or mode change (the kernel's G98/G99) [0.1 µm]."""
+        ...
+
+    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+        """The axis record's limits [0.1 µm]: taken over at the next reset or mode change."""
+        ...
+
     def snapshot(self) -> dict[str, Any]:
-        """Channels, axes, active alarms: ``GET /api/state``."""
+        """Channels, axes, active alarms, the V.E. variables (``external``): ``GET /api/state``."""
         ...
 
     def alarms(self, history: int = 200) -> dict[str, Any]:
@@ -296,6 +422,31 @@ class OperatorPort(Protocol):
         ...
 
 
+class RecorderPort(Protocol):
+    """Recording the session (issue 25, docs/record-replay.md): one recording at a time, by name in the
+    server's recording directory. Errors are :class:`OperatorError` subclasses."""
+
+    def status(self) -> dict[str, Any]:
+        """``{"recording", "file", "name", "started_cycle", "cycles", "bytes_written", ...}``."""
+        ...
+
+    def start(self, name: str | None = None) -> dict[str, Any]:
+        """Start recording into ``<dir>/<name>.jsonl.gz`` (None: a name from the time); the status."""
+        ...
+
+    def stop(self) -> dict[str, Any]:
+        """End the recording (flushed, closed); its final status."""
+        ...
+
+    def files(self) -> list[dict[str, Any]]:
+        """The recordings in the directory: ``[{"name", "bytes", "modified", "recording"}]``."""
+        ...
+
+    def file(self, name: str) -> Path:
+        """The path of one of them (:class:`NotFoundError` when there is none)."""
+        ...
+
+
 class EventFeed(Protocol):
     """The typed events (``schemas.events``): live, and the runtime's log."""
 
@@ -308,6 +459,66 @@ class EventFeed(Protocol):
         """Logged events with ``seq`` greater than ``seq`` (oldest first, at most ``limit``) and the
         newest sequence number."""
         ...
+
+
+class DoorView:
+    """``host`` as door ``door`` sees it: the same image, operator, events and clock, the door's own policy
+    (:meth:`AccessPolicy.for_door`). The runtime starts each adapter with one."""
+
+    def __init__(self, host: AdapterHost, door: str) -> None:
+        self._host = host
+        self._policy = host.policy.for_door(door)
+
+    @property
+    def image(self) -> ImagePort:
+        return self._host.image
+
+    @property
+    def operator(self) -> OperatorPort:
+        return self._host.operator
+
+    @property
+    def events(self) -> EventFeed:
+        return self._host.events
+
+    @property
+    def clock(self) -> str:
+        return self._host.clock
+
+    @property
+    def bind(self) -> str:
+        return self._host.bind
+
+    @property
+    def policy(self) -> AccessPolicy:
+        return self._policy
+
+    @property
+    def recorder(self) -> RecorderPort:
+        return self._host.recorder
+
+    @property
+    def faults(self) -> CommFaults:
+        return self._host.faults
+
+    async def step(self, cycles: int = 1) -> int:
+        return await self._host.step(cycles)
+
+    async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
+        return await self._host.step_traced(cycles, signals)
+
+    def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
+        return self._host.on_cycle(listener)
+
+    def readiness(self) -> Readiness:
+        return self._host.readiness()
+
+
+def door_host(host: AdapterHost, door: str) -> AdapterHost:
+    """The host door ``door`` is started with (its own policy where it differs)."""
+    if host.policy.for_door(door) is host.policy:
+        return host
+    return DoorView(host, door)
 
 
 class AdapterHost(Protocol):
@@ -337,6 +548,16 @@ class AdapterHost(Protocol):
         """Who may do what through the network doors."""
         ...
 
+    @property
+    def recorder(self) -> RecorderPort:
+        """Recording the session (issue 25)."""
+        ...
+
+    @property
+    def faults(self) -> CommFaults:
+        """Faults in the PLC's communication on demand (issue 25); the doors consult it per request."""
+        ...
+
     async def step(self, cycles: int = 1) -> int:
         """Run ``cycles`` cycles now (stepped clock only; else :class:`StepRefusedError`); returns
         the machine's cycle counter."""
@@ -350,4 +571,8 @@ class AdapterHost(Protocol):
     def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
         """Call ``listener(cycle)`` after every published cycle (keep it short). Returns the
         unsubscribe call."""
+        ...
+
+    def readiness(self) -> Readiness:
+        """Whether every door asked for listens and the clock runs (``GET /api/ready``)."""
         ...

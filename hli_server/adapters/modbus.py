@@ -7,10 +7,16 @@ says (:mod:`schemas.layout`: ``Signal.modbus_table`` / ``modbus_address``):
 table               function codes        signals                                  half
 =================== ===================== ======================================== ===========
 coils               1 read, 5, 15 write   BOOL PLC->CNC (``enable_w``, ``start_w``) PLC->CNC
+                                          and BOOLEAN V.E. variables (1200..1899)
 discrete inputs     2 read                BOOL CNC->PLC (``state_r``, flags)        CNC->PLC
 holding registers   3, 23 read; 6, 16, 23 DINT/UDINT PLC->CNC (``command_w``)       PLC->CNC
+                                          and numeric V.E. variables (1200..1899)
 input registers     4 read                DINT/UDINT/LREAL CNC->PLC                 CNC->PLC
 =================== ===================== ======================================== ===========
+
+The V.E. variables (N-05) are written by the NC as well: a read returns the value last stored by
+either side (hli_server/image/external.py); a write outside the range of the variable's kernel type
+(an SGN16 carried in a DINT) is refused with exception 0x03.
 
 * **Live.** A read of coils or holding registers returns the PLC->CNC half as it is now (what any
   PLC door, shared memory, ADS or Modbus, wrote last); a read of discrete inputs or input registers
@@ -71,7 +77,15 @@ from typing import TYPE_CHECKING, Any, Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from hli_server.adapters.tcp import Admission, ConnectionSlots, close, listen
+from hli_server.adapters.faults import CommFaults, Door
+from hli_server.adapters.tcp import (
+    AddressAllowlist,
+    Admission,
+    ConnectionSlots,
+    check_allowlist,
+    close,
+    listen,
+)
 from hli_server.codecs.modbus_frames import (
     ExceptionCode,
     Frame,
@@ -436,11 +450,15 @@ class ServerStats:
     broken_streams: int = 0
     """connections closed because an MBAP length field could not be resynchronised"""
     refused: int = 0
-    """connections refused at max_connections (none of the others idle long enough to make room)"""
+    """connections refused at max_connections (kept for the counters' shape: the door now makes room)"""
     evicted: int = 0
-    """idle connections closed to make room for a new client"""
+    """connections closed to make room for a new client (the one served longest ago)"""
     idle_closed: int = 0
     """connections closed after idle_timeout seconds of silence"""
+    frame_timeouts: int = 0
+    """connections closed because a frame did not complete within frame_timeout seconds"""
+    not_allowed: int = 0
+    """connections closed at once: the peer's address is not in the allowlist (``allow``)"""
 
 
 @dataclass(slots=True)
@@ -540,6 +558,7 @@ class _Connection(asyncio.Protocol):
     def __init__(self, adapter: ModbusAdapter) -> None:
         self._adapter = adapter
         self._server = adapter.server
+        self._gate = adapter.faults.gate(Door.MODBUS, None)
         self._decoder = MbapDecoder()
         self._session = Session()
         self._transport: asyncio.Transport | None = None
@@ -548,16 +567,30 @@ class _Connection(asyncio.Protocol):
         self._turn: asyncio.Handle | None = None
         self._write_paused = False
         self.last_active = time.monotonic()
+        self.connected_at = self.last_active
+        self.last_answered: float | None = None
+        """When a request of this client was last answered (None until one is)."""
+        self.partial_since: float | None = None
+        """When the bytes of the incomplete frame held back began to arrive (None: no partial frame)."""
         self._idle: asyncio.TimerHandle | None = None
+        self._frame_timer: asyncio.TimerHandle | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
         self._transport = transport
         self._peer = transport.get_extra_info("peername")
+        if not self._adapter.allowlist.allows(self._peer):
+            self._server.stats.not_allowed += 1
+            logger.info("Modbus: closed a connection from %s: not in the allowlist (allow)", self._peer)
+            transport.abort()
+            self._transport = None
+            return
         if not self._adapter._accept(self, self._peer):
             transport.abort()
             self._transport = None
             return
+        self._gate = self._adapter.faults.gate(Door.MODBUS, transport)  # communication faults on demand
+        self._transport = self._gate.transport
         self._server.stats.connections += 1
         logger.debug("Modbus: connection from %s", self._peer)
         self._arm_idle()
@@ -582,13 +615,42 @@ class _Connection(asyncio.Protocol):
             return
         self._idle = asyncio.get_running_loop().call_later(max(timeout - quiet, 0.05), self._idle_check)
 
+    def _frame_check(self) -> None:
+        """A frame must complete within ``frame_timeout`` of its first byte (issue 27, finding 3: a byte
+        every 1.5 s kept a connection "active" for ever)."""
+        self._frame_timer = None
+        began, transport = self.partial_since, self._transport
+        if began is None or transport is None or transport.is_closing():
+            return
+        timeout = self._adapter.frame_timeout
+        waited = time.monotonic() - began
+        if waited >= timeout:
+            self._server.stats.frame_timeouts += 1
+            logger.info(
+                "Modbus: closing connection from %s: a frame did not complete within %.1f s (frame_timeout)",
+                self._peer,
+                timeout,
+            )
+            transport.abort()
+            return
+        self._frame_timer = asyncio.get_running_loop().call_later(timeout - waited, self._frame_check)
+
     def data_received(self, data: bytes) -> None:
         transport = self._transport
         if transport is None or transport.is_closing():
             return
-        self.last_active = time.monotonic()
-        self._queue.extend(self._decoder.feed(data))
-        if self._decoder.broken is not None:
+        now = self.last_active = time.monotonic()
+        decoder = self._decoder
+        self._queue.extend(decoder.feed(data))
+        if not decoder.pending:
+            self.partial_since = None
+        elif self.partial_since is None:
+            self.partial_since = now
+            if self._frame_timer is None and self._adapter.frame_timeout > 0:
+                self._frame_timer = asyncio.get_running_loop().call_later(
+                    self._adapter.frame_timeout, self._frame_check
+                )
+        if decoder.broken is not None:
             self._server.stats.broken_streams += 1
             logger.warning("Modbus: closing connection from %s: %s", self._peer, self._decoder.broken)
         if self._turn is None:
@@ -601,14 +663,18 @@ class _Connection(asyncio.Protocol):
         if transport is None or transport.is_closing():
             self._queue.clear()
             return
-        queue, answer, session = self._queue, self._server.answer, self._session
+        queue, answer, session, gate = self._queue, self._server.answer, self._session, self._gate
         out: list[bytes] = []
         for _ in range(min(BATCH, len(queue))):
-            reply = answer(queue.popleft(), session)
-            if reply is not None:
+            frame = queue.popleft()
+            reply = gate.modbus(frame)  # a fault's answer (adapters/faults.py), or None: serve it
+            if reply is None:
+                reply = answer(frame, session)
+            if reply:
                 out.append(reply)
         if out:
             transport.write(out[0] if len(out) == 1 else b"".join(out))
+            self.last_answered = time.monotonic()
         if queue and not self._write_paused:
             transport.pause_reading()
             self._turn = asyncio.get_running_loop().call_soon(self._serve)
@@ -639,14 +705,23 @@ class _Connection(asyncio.Protocol):
         self._adapter._forget(self)
         self._transport = None
         self._queue.clear()
-        for handle in (self._turn, self._idle):
+        for handle in (self._turn, self._idle, self._frame_timer):
             if handle is not None:
                 handle.cancel()
-        self._turn = self._idle = None
+        self._turn = self._idle = self._frame_timer = None
 
     def idle_since(self, now: float) -> float:
         """When the client was last active; ``now`` while requests of it wait for their turn."""
         return self.last_active if not self._queue and self._turn is None else now
+
+    def usefulness(self, now: float) -> tuple[int, float]:
+        """``adapters/tcp.py``, ``least_useful``: never answered (by connect time) before answered (by
+        the last answer); ``now`` while requests of it wait for their turn."""
+        if self._queue or self._turn is not None:
+            return (1, now)
+        if self.last_answered is None:
+            return (0, self.connected_at)
+        return (1, self.last_answered)
 
     def abort(self) -> None:
         if self._transport is not None:
@@ -670,7 +745,7 @@ class ModbusOptions(BaseModel):
         default=256,
         ge=1,
         le=10_000,
-        description="connections at once; beyond, the longest-idle one (silent for evict_after s) makes room",
+        description="connections at once; beyond, the one answered longest ago makes room for a newcomer",
     )
     idle_timeout: float = Field(
         default=120.0, ge=0.0, le=86_400.0, description="seconds a connection may stay silent (0: no limit)"
@@ -679,8 +754,24 @@ class ModbusOptions(BaseModel):
         default=5.0,
         ge=0.0,
         le=3600.0,
-        description="at max_connections, a connection silent this long is closed for a new client",
+        description="no longer used (kept so that older machine files load): at max_connections the "
+        "connection served longest ago makes room",
     )
+    frame_timeout: float = Field(
+        default=2.0,
+        ge=0.0,
+        le=600.0,
+        description="seconds a request frame may take from its first byte to its last (0: no limit)",
+    )
+    allow: list[str] = Field(
+        default_factory=list,
+        description="peers allowed in: IP addresses, networks (10.0.0.0/8) or 'loopback'; empty: everybody",
+    )
+
+    @field_validator("allow", mode="before")
+    @classmethod
+    def _allow(cls, value: object) -> object:
+        return check_allowlist(value)
 
     @field_validator("word_order", mode="before")
     @classmethod
@@ -694,7 +785,7 @@ class ModbusAdapter:
     Options (``--adapter modbus:port=5020,word_order=CDAB`` or the ``run`` flags): ``port``
     (0 = a free port; :attr:`port` tells which after start), ``word_order`` ``ABCD``/``CDAB``,
     ``unit_id`` (1), ``unknown_unit`` ``exception``/``ignore``, ``max_connections`` (256), ``idle_timeout``
-    (120 s), ``evict_after`` (5 s).
+    (120 s), ``frame_timeout`` (2 s), ``allow`` (the peers let in; empty: everybody).
     """
 
     name = "modbus"
@@ -717,11 +808,15 @@ class ModbusAdapter:
         self.max_connections = self.options.max_connections
         self.idle_timeout = self.options.idle_timeout
         self.evict_after = self.options.evict_after
+        self.frame_timeout = self.options.frame_timeout
+        self.allowlist = AddressAllowlist(self.options.allow)
         self.port: int | None = None
         self.server: ModbusServer
+        self.faults = CommFaults()
+        """The communication faults the connections consult (the host's, once started)."""
         self._listener: asyncio.Server | None = None
         self._slots: ConnectionSlots[_Connection] = ConnectionSlots(
-            "Modbus", self.options.max_connections, self.options.evict_after
+            "Modbus", self.options.max_connections, self.options.evict_after, least_useful=True
         )
 
     @property
@@ -745,6 +840,7 @@ class ModbusAdapter:
         )
 
     async def start(self, host: AdapterHost) -> None:
+        self.faults = host.faults
         await self.start_for(host.image, read_only=host.policy.read_only)
 
     async def start_for(self, image: ImagePort, *, read_only: bool = False) -> None:
@@ -766,8 +862,8 @@ class ModbusAdapter:
         self.port = None
 
     def _accept(self, connection: _Connection, peer: object) -> bool:
-        """Admit ``connection``; at the limit, the connection silent the longest (at least
-        ``evict_after`` seconds) makes room, else it is refused (issue 12, finding 4; ``adapters/tcp.py``)."""
+        """Admit ``connection``; at the limit, the connection whose last request was answered longest ago
+        makes room (issue 12, finding 4; issue 27, finding 3; ``adapters/tcp.py``)."""
         admission = self._slots.admit(connection, peer)
         if admission is Admission.REFUSED:
             self.server.stats.refused += 1

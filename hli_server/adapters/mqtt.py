@@ -68,6 +68,7 @@ from pydantic import (
     model_validator,
 )
 
+from hli_server.adapters.faults import CommFaults, Door
 from schemas.events import AlarmRaised, Event
 
 if TYPE_CHECKING:
@@ -352,6 +353,10 @@ class MqttAdapter:
         """Published, not yet acknowledged, by seq (in the order they were sent)."""
         self._wakeup = asyncio.Event()
         self._stop_requested = asyncio.Event()
+        self._faults = CommFaults()
+        """The communication faults (issue 25): a ``disconnect`` fault cuts the broker connection."""
+        self._cut = asyncio.Event()
+        self._unsubscribe_faults: Any = lambda: None
         self._task: asyncio.Task[None] | None = None
         self._unsubscribe: Any = None
         self._seq = 0
@@ -429,6 +434,8 @@ class MqttAdapter:
         self._loop = asyncio.get_running_loop()
         self._loop_thread = threading.get_ident()
         self._unsubscribe = host.events.subscribe(self._on_event)
+        self._faults = host.faults
+        self._unsubscribe_faults = host.faults.subscribe(self._on_fault)
         self._task = asyncio.create_task(self._run(), name=f"hli-mqtt-{self.machine}")
         logger.info("MQTT: publishing events of %s to %s under %s", self.machine, self.url, self.prefix)
 
@@ -438,6 +445,7 @@ class MqttAdapter:
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
+            self._unsubscribe_faults()
         task, self._task = self._task, None
         if task is None:
             return
@@ -487,6 +495,21 @@ class MqttAdapter:
             return
         self._queue(event, time.time())
 
+    def _on_fault(self, _change: dict[str, Any]) -> None:
+        """A communication fault changed: a ``disconnect`` cuts the session now (issue 25)."""
+        if self._faults.door_down(Door.MQTT):
+            self._cut.set()
+        else:
+            self._cut.clear()
+            self._wakeup.set()
+
+    async def _while_cut(self) -> None:
+        """While a ``disconnect`` fault is in effect, do not connect (it ends by itself or by the API)."""
+        while self._faults.door_down(Door.MQTT) and not self._stop_requested.is_set():
+            self.last_error = "disconnected on demand (communication fault)"
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._stop_requested.wait(), 0.05)
+
     def _queue(self, event: Event, wall: float) -> None:
         self._seq += 1
         self._pending.append(_Queued(self._seq, wall, event))
@@ -517,6 +540,9 @@ class MqttAdapter:
         while not self._stop_requested.is_set():
             was_connected = False
             try:
+                await self._while_cut()
+                if self._stop_requested.is_set():
+                    return
                 was_connected = await self._session()
                 if self._stop_requested.is_set():
                     return
@@ -624,12 +650,16 @@ class MqttAdapter:
             await self._report_drops(client)
             watcher = asyncio.ensure_future(_watch(client))
             pump = asyncio.ensure_future(self._pump(client))
+            cut = asyncio.ensure_future(self._cut.wait())
             try:
-                await asyncio.wait({watcher, pump}, return_when=asyncio.FIRST_COMPLETED)
+                await asyncio.wait({watcher, pump, cut}, return_when=asyncio.FIRST_COMPLETED)
             finally:
-                for task in (watcher, pump):
+                for task in (watcher, pump, cut):
                     task.cancel()
-                await asyncio.gather(watcher, pump, return_exceptions=True)
+                await asyncio.gather(watcher, pump, cut, return_exceptions=True)
+            if self._cut.is_set():
+                _abort_socket(client)  # as a cable pulled: no DISCONNECT, the broker sends the Will
+                raise _BrokerGoneError("disconnected on demand (communication fault)")
             if not pump.cancelled() and pump.exception() is None:
                 # flushed at shutdown: say so, then a clean DISCONNECT (the Will is not sent)
                 await client.publish(self.prefix + STATUS_TOPIC, b"offline", qos=self.qos, retain=True)
@@ -820,6 +850,14 @@ class _PahoLog(logging.LoggerAdapter):  # type: ignore[type-arg]
                 self.owner.library_said = str(msg) % args if args else str(msg)
             level = logging.DEBUG
         super().log(level, msg, *args, **kwargs)
+
+
+def _abort_socket(client: aiomqtt.Client) -> None:
+    """Close the connection's socket under paho (aiomqtt's ``_client``), as a lost link would."""
+    with contextlib.suppress(Exception):
+        sock = client._client.socket()
+        if isinstance(sock, socket.socket):
+            sock.shutdown(socket.SHUT_RDWR)
 
 
 async def _watch(client: aiomqtt.Client) -> None:

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 from pydantic import BaseModel, ValidationError
 
 if TYPE_CHECKING:
-    from hli_server.adapters.host import AdapterHost
+    from hli_server.adapters.host import AccessPolicy, AdapterHost
 
 __all__ = [
     "ADAPTERS",
@@ -44,8 +44,10 @@ __all__ = [
     "AdapterError",
     "AdapterKind",
     "CliAlias",
+    "DoorGuard",
     "available_adapters",
     "create_adapter",
+    "door_guards",
     "options_model",
     "parse_adapter_spec",
     "plan_adapters",
@@ -81,8 +83,16 @@ class AdapterKind:
     """Started by ``hli-server run`` unless switched off (``--no-http``)."""
     summary: str
     image_only: bool = False
-    """Serves the process image and nothing else (no operator, no events): it can run in the doors
-    process (``hli-server run --doors-process``)."""
+    """Serves the process image and nothing else (no operator, no events)."""
+    doors: bool = False
+    """Can be served from the doors process (``hli-server run --doors-process``, the default): its host's
+    operator, events and step reach the engine's process over a socket (``runtime/remote.py``)."""
+    label: str = ""
+    """How the banner and the messages name it (``Modbus TCP``)."""
+    writes: bool = False
+    """A client can change the machine through it (``door_guards``)."""
+    allowlist: str | None = None
+    """The option that holds its allowlist of peer addresses (``allow``), if it has one."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -110,6 +120,9 @@ ADAPTERS: dict[str, AdapterKind] = {
             "hli_server.adapters.http.options:HttpOptions",
             default=True,
             summary="the HTTP control API (operator panel, remote control of tests)",
+            doors=True,
+            label="HTTP control API",
+            writes=True,
         ),
         AdapterKind(
             "modbus",
@@ -118,6 +131,10 @@ ADAPTERS: dict[str, AdapterKind] = {
             default=True,
             summary="Modbus TCP view of the process image (H-03)",
             image_only=True,
+            doors=True,
+            label="Modbus TCP",
+            writes=True,
+            allowlist="allow",
         ),
         AdapterKind(
             "ads",
@@ -126,6 +143,10 @@ ADAPTERS: dict[str, AdapterKind] = {
             default=False,
             summary="ADS over TCP: HLI symbols on AMS port 851, FCT-C3 CNC objects on port 551 (H-04, C3-10)",
             image_only=True,
+            doors=True,
+            label="ADS",
+            writes=True,
+            allowlist="allow",
         ),
         AdapterKind(
             "mqtt",
@@ -133,6 +154,7 @@ ADAPTERS: dict[str, AdapterKind] = {
             "hli_server.adapters.mqtt:MqttOptions",
             default=False,
             summary="MQTT events to a broker, JSON per event kind (H-05; docs/mqtt.md)",
+            label="MQTT",
         ),
     )
 }
@@ -290,6 +312,88 @@ def plan_adapters(
         if alias.adapter in ADAPTERS and _module_exists(ADAPTERS[alias.adapter].target):
             plan.setdefault(alias.adapter, {})[alias.option] = value
     return [(name, check_options(name, options)) for name, options in plan.items()]
+
+
+@dataclass(frozen=True, slots=True)
+class DoorGuard:
+    """What keeps strangers from changing the machine through one door (``door_guards``)."""
+
+    door: str
+    label: str
+    guarded: bool
+    how: str
+    """what guards it, or that nothing does (the banner's ``access`` lines)"""
+    fix: str = ""
+    """for an unguarded door: how to guard it"""
+
+
+def _restricts_addresses(entries: Sequence[str]) -> bool:
+    """Whether an ``allow`` list lets in only some peer addresses (loopback or networks, none of them
+    every address); AMS NetIds do not count: a client sends whichever it likes."""
+    import ipaddress
+
+    some = False
+    for entry in entries:
+        text = entry.strip().lower()
+        parts = text.split(".")
+        if len(parts) == 6 and all(p.isdecimal() for p in parts):
+            continue  # an AMS NetId
+        if text == "loopback":
+            some = True
+            continue
+        try:
+            if ipaddress.ip_network(text, strict=False).prefixlen == 0:
+                return False
+        except ValueError:
+            continue
+        some = True
+    return some
+
+
+def door_guards(plan: Sequence[tuple[str, Mapping[str, Any]]], policy: AccessPolicy) -> list[DoorGuard]:
+    """For each planned door through which a client can change the machine: what guards it (issue 27,
+    finding 8). The API token guards the HTTP door (its changes and the event log); Modbus and ADS are
+    guarded by an allowlist that lets in only some peer addresses (their ``allow``); any door by being
+    read-only (``--read-only``, ``--read-only-door NAME``). MQTT only publishes."""
+    out = []
+    for name, options in plan:
+        kind = ADAPTERS.get(name)
+        if kind is None or not kind.writes:
+            continue
+        label = kind.label or name
+        if policy.for_door(name).read_only:
+            out.append(DoorGuard(name, label, True, "read-only: it accepts no write"))
+            continue
+        if name == "http":
+            if policy.api_token:
+                out.append(DoorGuard(name, label, True, "changes and the event log need the API token"))
+            else:
+                out.append(
+                    DoorGuard(
+                        name,
+                        label,
+                        False,
+                        "no token: anyone who reaches it can change the machine",
+                        "give --api-token TOKEN (or HLI_API_TOKEN), or --read-only-door http",
+                    )
+                )
+            continue
+        entries = [str(e) for e in options.get(kind.allowlist or "", []) or []]
+        if kind.allowlist and _restricts_addresses(entries):
+            out.append(DoorGuard(name, label, True, f"clients from {', '.join(entries)} only"))
+        else:
+            whom = f"its allowlist ({', '.join(entries)}) names no addresses" if entries else "no allowlist"
+            out.append(
+                DoorGuard(
+                    name,
+                    label,
+                    False,
+                    f"{whom}: anyone who reaches it can write the PLC's half of the image",
+                    f"give --adapter {name}:{kind.allowlist}=ADDRESSES (your PLCs' IP addresses or networks, "
+                    f"e.g. 10.0.0.0/8), or --read-only-door {name}",
+                )
+            )
+    return out
 
 
 def parse_adapter_spec(spec: str) -> tuple[str, dict[str, Any]]:

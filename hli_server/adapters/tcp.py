@@ -1,23 +1,41 @@
-"""What the TCP doors (Modbus, ADS) share: listening with a clear error, and bounded connections with a
-slot for a newcomer (issue 12, finding 4).
+"""What the TCP doors (Modbus, ADS) share: listening with a clear error, bounded connections with a slot
+for a newcomer (issue 12, finding 4; issue 27, finding 3), and an allowlist of peer addresses.
 
-A door holds at most ``max_connections``. At the limit a new client is not refused while another has been
-silent for ``evict_after`` seconds: the one silent the longest is closed to make room (a PLC that
-reconnects after a restart must never find the door locked by the dead connections of its former self).
-Only when every connection is busy is the newcomer refused.
+A door holds at most ``max_connections``. At the limit a newcomer is never locked out by connections that
+do nothing for anyone (a PLC that reconnects after a restart must never find the door locked by the dead
+connections of its former self). Two policies:
+
+* ``least_useful`` (Modbus): the least useful connection makes room (:meth:`ServedConnection.usefulness`):
+  one that has never had a request answered (the one connected longest ago first: a connection that
+  trickles a byte now and then without ever completing a frame, or never sends anything), then the one
+  whose last request was answered longest ago; one whose requests are being answered counts as served
+  now. Honest clients that poll keep their slots, even while a burst of new connections comes in. The
+  newcomer is never refused.
+* otherwise (ADS, for now): a connection silent for ``evict_after`` seconds makes room (the one silent the
+  longest); when every connection has been active more recently, the newcomer is refused.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import ipaddress
 import logging
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from enum import Enum
 from typing import Generic, Protocol, TypeVar
 
-__all__ = ["Admission", "Connection", "ConnectionSlots", "close", "listen"]
+__all__ = [
+    "AddressAllowlist",
+    "Admission",
+    "Connection",
+    "ConnectionSlots",
+    "ServedConnection",
+    "check_allowlist",
+    "close",
+    "listen",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -28,6 +46,13 @@ class Connection(Protocol):
         ...
 
     def abort(self) -> None: ...
+
+
+class ServedConnection(Connection, Protocol):
+    def usefulness(self, now: float) -> tuple[int, float]:
+        """``(0, connect time)`` while no request of the client was answered, else ``(1, when the last
+        one was)`` (``now`` while requests of it wait for their answers): the lowest makes room first."""
+        ...
 
 
 C = TypeVar("C", bound=Connection)
@@ -42,10 +67,14 @@ class Admission(Enum):
 class ConnectionSlots(Generic[C]):
     """The connections of one door, bounded (see the module docstring)."""
 
-    def __init__(self, door: str, max_connections: int, evict_after: float) -> None:
+    def __init__(
+        self, door: str, max_connections: int, evict_after: float, *, least_useful: bool = False
+    ) -> None:
         self.door = door
         self.max_connections = max_connections
         self.evict_after = evict_after
+        self.least_useful = least_useful
+        """Make room by closing the connection served longest ago, never refuse (see the module docstring)."""
         self._connections: set[C] = set()
 
     def __len__(self) -> int:
@@ -57,6 +86,22 @@ class ConnectionSlots(Generic[C]):
     def admit(self, connection: C, peer: object = None) -> Admission:
         """Take ``connection``, making room if it must; REFUSED: the caller closes it."""
         admission = Admission.ADMITTED
+        if len(self._connections) >= self.max_connections and self.least_useful:
+            now = time.monotonic()
+            victim = min(self._connections, key=lambda c: c.usefulness(now))  # type: ignore[attr-defined]
+            served, since = victim.usefulness(now)  # type: ignore[attr-defined]
+            logger.info(
+                "%s: %d connections open: closing one %s %.1f s ago to make room for %s",
+                self.door,
+                len(self._connections),
+                "last answered" if served else "never answered, connected",
+                now - since,
+                peer,
+            )
+            self._connections.discard(victim)
+            victim.abort()
+            self._connections.add(connection)
+            return Admission.EVICTED
         if len(self._connections) >= self.max_connections:
             now = time.monotonic()
             oldest = min(self._connections, key=lambda c: c.idle_since(now))
@@ -91,6 +136,67 @@ class ConnectionSlots(Generic[C]):
         for connection in list(self._connections):
             connection.abort()
         self._connections.clear()
+
+
+class AddressAllowlist:
+    """Which peers a door lets in: IP addresses and networks (``10.0.0.0/8``, ``::1``); the word
+    ``loopback`` for 127.0.0.0/8 and ::1. An empty list lets everybody in. IPv4-mapped IPv6 peers are
+    taken as their IPv4 address."""
+
+    def __init__(self, entries: Iterable[str]) -> None:
+        self.entries = [e.strip() for e in entries if e.strip()]
+        self.loopback = any(e.lower() == "loopback" for e in self.entries)
+        self.networks = [
+            ipaddress.ip_network(e, strict=False) for e in self.entries if e.lower() != "loopback"
+        ]
+
+    def __bool__(self) -> bool:
+        return bool(self.entries)
+
+    @property
+    def open_to_all(self) -> bool:
+        """Empty, or a network that holds every address (0.0.0.0/0, ::/0)."""
+        return not self.entries or any(n.prefixlen == 0 for n in self.networks)
+
+    def allows(self, peer: object) -> bool:
+        """``peer``: a transport's ``peername`` (``(host, port, ...)``) or a host text."""
+        if not self.entries:
+            return True
+        host = peer[0] if isinstance(peer, tuple) and peer else peer
+        if not isinstance(host, str):
+            return False
+        try:
+            address = ipaddress.ip_address(host.split("%", 1)[0])
+        except ValueError:
+            return False
+        if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
+            address = address.ipv4_mapped
+        if self.loopback and address.is_loopback:
+            return True
+        return any(address in network for network in self.networks)
+
+    def __str__(self) -> str:
+        return ", ".join(self.entries) or "everybody"
+
+
+def check_allowlist(value: object) -> object:
+    """A pydantic ``before`` validator for an ``allow`` option: one text (entries separated by spaces,
+    commas or ``;``) or a list; every entry an IP address, a network or ``loopback``."""
+    if isinstance(value, str):
+        value = value.replace(";", " ").replace(",", " ").split()
+    if isinstance(value, list):
+        for entry in value:
+            if not isinstance(entry, str):
+                raise ValueError(f"allow entry {entry!r} is not text")
+            if entry.strip().lower() == "loopback":
+                continue
+            try:
+                ipaddress.ip_network(entry.strip(), strict=False)
+            except ValueError:
+                raise ValueError(
+                    f"allow entry {entry!r} is neither an IP address, a network (10.0.0.0/8), nor 'loopback'"
+                ) from None
+    return value
 
 
 async def listen(

@@ -1,105 +1,56 @@
 """``hli-server check PROGRAM``: run a program offline and report what the monitors find.
 
+The check itself is the engine's (:class:`hli_server.engine.program_check.ProgramCheck`); this command
+reads the program and the machine file, draws the progress bar and the picture, and prints the report.
+
 Two modes:
 
 * full (default): the program runs free in automatic mode on the machine, cycle by cycle, with every
   monitor active, from the start to M30/M02 or the end of the file;
-* ``--geometry-only``: the program is decoded and every block's whole path is checked (soft limits,
+* ``--geometry-only``: the program is interpreted and every block's whole path is checked (soft limits,
   work and protection areas), without interpolating cycles - the mode for programs of millions of
   blocks. Cycle-based monitors (dynamic limits, collision, position monitoring) need cycles and are
   not evaluated in this mode.
 
+Subroutines and cycles (``L name``, ``L CYCLE [NAME=..]``) are found in the program's own directory, then
+in each ``--program-dir`` in the order given.
+
 Output: the report on stdout (text, or ``--format json``), numbers rounded to the machine's resolution
-(0.1 µm) where they are shown, not in the engine's math. On stderr: a progress bar (tqdm) when stderr is
-a terminal, and with ``--plot PATH`` ``plot written: PATH`` or ``error: plot not written: ...``. The
-picture is the scene of :mod:`hli_server.scene` drawn by :mod:`hli_server.plot` (docs/areas.md); its
-format and place are checked before the run, and it is drawn after the report is printed, so a failing
-drawing never costs the report or changes the exit code.
+(0.1 µm) where they are shown, not in the engine's math; the program's ``#MSG`` messages with it. On
+stderr: a progress bar (tqdm) when stderr is a terminal, and with ``--plot PATH`` ``plot written: PATH``
+or ``error: plot not written: ...``. The picture is the scene of :mod:`hli_server.scene` drawn by
+:mod:`hli_server.plot` (docs/areas.md); its format and place are checked before the run, and it is drawn
+after the report is printed, so a failing drawing never costs the report or changes the exit code.
 
 Exit codes: 0 ran to the end without an error alarm; 1 an error alarm stopped it; 2 usage, file or
-configuration errors (an unusable ``--plot`` target included).
+configuration errors (an unusable ``--plot`` target included); 3 the program did not end: the check
+stopped at its cap (``--max-cycles``, or ``--max-iterations`` in a geometry check) and says so.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
 import sys
-import time
 from pathlib import Path
 from typing import Any, TextIO
 
 import click
 
 from hli_server.engine import Machine
-from hli_server.engine.alarms import Alarm, Severity
-from hli_server.engine.areas.monitor import AreaMonitor
-from hli_server.engine.batch import BatchGeometryCheck, unsupported
-from hli_server.engine.channel import Channel
-from hli_server.engine.geometry import ArcSegment, Segment
-from hli_server.engine.nc.parser import iter_blocks
-from hli_server.engine.planner import Marker, MarkerKind, Motion
+from hli_server.engine.program_check import (
+    DEFAULT_MAX_CYCLES,
+    DEFAULT_MAX_ITERATIONS,
+    CheckResult,
+    ProgramCheck,
+)
+from hli_server.engine.programs import ProgramFile
 from hli_server.scene import build_scene, round_mm, round_numbers
-from schemas.wire import ProgramState
 
-__all__ = ["CheckResult", "check", "check_program", "scene_of"]
+__all__ = ["EXIT_CAPPED", "CheckResult", "DirectoryLibrary", "check", "check_program", "scene_of"]
 
-DEFAULT_MAX_CYCLES = 50_000_000
-
-
-class CheckResult:
-    def __init__(self, machine: Machine, channel: int, mode: str) -> None:
-        self.machine = machine
-        self.channel = channel
-        self.mode = mode
-        self.completed = False
-        self.blocks = 0
-        self.alarms: list[Alarm] = []
-        self.final_position: dict[str, float] = {}
-        self.path: list[tuple[float, ...]] = []
-        self.stop_point: tuple[float, ...] | None = None
-        self.elapsed_s = 0.0
-
-    @property
-    def stopped_by_error(self) -> bool:
-        return any(a.severity == Severity.ERROR for a in self.alarms)
-
-    def to_json(self) -> dict[str, Any]:
-        """The JSON report; positions and the floats of alarm params rounded to 0.1 µm (1e-4 mm)."""
-        out: dict[str, Any] = {
-            "completed": self.completed,
-            "mode": self.mode,
-            "channel": self.channel,
-            "cycles": self.machine.cycle,
-            "simulated_time_s": round(self.machine.time, 6),
-            "blocks": self.blocks,
-            "alarms": [
-                {
-                    "id": a.number,
-                    "severity": str(a.severity),
-                    "line": a.line,
-                    "block": a.block,
-                    "message": a.message,
-                    "params": round_numbers(a.params),
-                    "cycle": a.cycle,
-                }
-                for a in self.alarms
-            ],
-            "final_position": {k: round_mm(v) for k, v in self.final_position.items()},
-            "elapsed_s": round(self.elapsed_s, 3),
-        }
-        areas = _areas_json(self.machine, self.channel)
-        if areas is not None:
-            out["areas"] = round_numbers(areas)
-        return out
-
-
-def _areas_json(machine: Machine, channel: int) -> list[dict[str, Any]] | None:
-    """The channel's area table, when the area monitor is installed (FCT-C14)."""
-    if not machine.has_monitor(AreaMonitor):
-        return None
-    return machine.monitor(AreaMonitor).areas_json(machine.channel(channel))
+EXIT_CAPPED = 3
+"""Exit code of a check that stopped at its cap: the program did not end."""
 
 
 class _Progress:
@@ -141,6 +92,49 @@ class _Progress:
             self._bar.close()
 
 
+class DirectoryLibrary:
+    """Global subroutines and cycles from program directories, searched in order (``check``'s own
+    :class:`~hli_server.engine.programs.ProgramLibrary`): a name matches a file exactly, else
+    case-insensitively; a name that leaves its directory (``..``, an absolute path) is not found."""
+
+    def __init__(self, directories: list[Path]) -> None:
+        self.directories = [d.resolve() for d in directories]
+
+    def find(self, name: str) -> ProgramFile | None:
+        for directory in self.directories:
+            path = self._lookup(directory, name)
+            if path is None:
+                continue
+            try:
+                text = path.read_text(encoding="utf-8", errors="strict")
+            except (OSError, UnicodeDecodeError):
+                continue
+            return ProgramFile(name, text, str(path))
+        return None
+
+    @staticmethod
+    def _lookup(directory: Path, name: str) -> Path | None:
+        relative = Path(name.replace("\\", "/"))
+        if relative.is_absolute() or ".." in relative.parts:
+            return None
+        candidate = (directory / relative).resolve()
+        if not candidate.is_relative_to(directory):
+            return None
+        if candidate.is_file():
+            return candidate
+        parent = candidate.parent
+        if not parent.is_dir():
+            return None
+        folded = candidate.name.casefold()
+        for entry in sorted(parent.iterdir()):
+            if entry.name.casefold() == folded and entry.is_file():
+                return entry
+        return None
+
+    def searched(self) -> tuple[str, ...]:
+        return tuple(str(d) for d in self.directories)
+
+
 def check_program(
     machine: Machine,
     text: str | TextIO,
@@ -148,62 +142,31 @@ def check_program(
     channel: int = 1,
     geometry_only: bool = False,
     max_cycles: int = DEFAULT_MAX_CYCLES,
+    max_iterations: int = DEFAULT_MAX_ITERATIONS,
     record_path: bool = False,
     progress: bool = False,
+    name: str = "check",
 ) -> CheckResult:
-    """Run (or decode) ``text`` on ``machine`` and collect the result.
+    """Run (or interpret and path-check) ``text`` on ``machine`` with the engine's
+    :class:`~hli_server.engine.program_check.ProgramCheck`; ``progress`` draws a bar on a terminal.
 
-    ``record_path``: keep the path for the picture (``--plot``): every 10th cycle's setpoints in a full
-    check, every block's end (arcs every few degrees) with ``geometry_only``.
-
-    ``text`` may be an open text file (``newline=""``): a geometry check then streams it line by line,
-    with flat memory however long the program (issue 16); a full check reads it whole."""
-    began = time.perf_counter()
-    result = CheckResult(machine, channel, "geometry" if geometry_only else "full")
-    ch = machine.channel(channel)
+    ``record_path``: keep the path for the picture (``--plot``). ``text`` may be an open text file
+    (``newline=""``): a geometry check then streams it with flat memory (issue 16)."""
     meter = _Progress(_count_lines(text) if progress else 0, progress)
-    history_start = len(machine.alarm_history)
-    if record_path:
-        result.path.append(tuple(ch.setpoints()))
-    if geometry_only:
-        _decode_only(machine, text, channel, result, meter, record_path)
-    else:
-        ch.load_program(text if isinstance(text, str) else text.read(), "check")
-        ch.request_start()
-        step = machine.step
-        running = (ProgramState.RUNNING, ProgramState.HELD)
-        step(1)
-        countdown = 0
-        while ch.state in running and machine.cycle < max_cycles:
-            step(1)
-            if record_path and machine.cycle % 10 == 0:
-                _record(result.path, tuple(ch.setpoints()))
-            countdown -= 1
-            if countdown <= 0:
-                countdown = 1000
-                if ch.current_block is not None:
-                    meter.update(ch.current_block.line, ch.decoder.blocks_decoded)
-        # let the axes come to rest after an abort
-        for _ in range(100_000):
-            if all(a.setpoint_step == 0.0 for a in ch.axes):
-                break
-            step(1)
-        result.completed = ch.state == ProgramState.FINISHED
-        result.blocks = ch.decoder.blocks_decoded
-        result.final_position = {a.name: a.setpoint for a in ch.axes}
-        if record_path:
-            _record(result.path, tuple(ch.setpoints()))
-        if ch.state in running:
-            result.completed = False
-    meter.done()
-    result.alarms = list(machine.alarm_history)[history_start:]
-    if result.stopped_by_error:
-        result.completed = False
-        result.stop_point = tuple(
-            result.final_position[n] for n in ch.axis_names if n in result.final_position
-        )
-    result.elapsed_s = time.perf_counter() - began
-    return result
+    try:
+        return ProgramCheck(
+            machine,
+            channel,
+            geometry_only=geometry_only,
+            max_cycles=max_cycles,
+            max_iterations=max_iterations,
+            record_path=record_path,
+            batch=os.environ.get(BATCH_ENV, "") != "0",
+            progress=meter.update,
+            name=name,
+        ).run(text)
+    finally:
+        meter.done()
 
 
 def _count_lines(text: str | TextIO) -> int:
@@ -223,29 +186,6 @@ def _count_lines(text: str | TextIO) -> int:
     return lines
 
 
-def _record(path: list[tuple[float, ...]], point: tuple[float, ...]) -> None:
-    """Append ``point`` unless the axes stand where the last one was (dwell, waiting at a marker)."""
-    if not path or path[-1] != point:
-        path.append(point)
-
-
-_ARC_CHORD_MM = 0.01
-"""Largest sagitta of the chords an arc is recorded with in a geometry check's path (a picture's
-precision), with at most :data:`_ARC_MAX_POINTS` points per arc."""
-_ARC_MAX_POINTS = 90
-
-
-def _segment_points(segment: Segment) -> list[tuple[float, ...]]:
-    """A block's path for the picture: the end of a line; an arc (helix) every few degrees, so the
-    picture does not draw its chord (the path check itself is exact, C14-15)."""
-    if not isinstance(segment, ArcSegment) or segment.radius <= _ARC_CHORD_MM:
-        return [segment.end]
-    step = 2.0 * math.acos(1.0 - _ARC_CHORD_MM / segment.radius)
-    n = min(_ARC_MAX_POINTS, max(2, math.ceil(abs(segment.sweep) / step)))
-    length = segment.length
-    return [segment.point_at(length * k / n) for k in range(1, n + 1)]
-
-
 BATCH_ENV = "HLI_BATCH_CHECK"
 """Set to 0 to decode a geometry check block by block (the exact path) although the batch could run."""
 
@@ -254,68 +194,30 @@ def batch_in_use(machine: Machine, channel: int, record_path: bool) -> bool:
     """Does a geometry check of this channel run as a batch (``hli_server/engine/batch.py``)? Not with
     ``record_path`` (``--plot`` draws every block's path), not with a path check the batch does not know
     (a user's monitor), not with ``HLI_BATCH_CHECK=0``."""
-    if record_path or os.environ.get(BATCH_ENV, "") == "0":
-        return False
-    return unsupported(machine.channel(channel)) is None
-
-
-def _decode_only(
-    machine: Machine,
-    text: str | TextIO,
-    channel: int,
-    result: CheckResult,
-    meter: _Progress,
-    record_path: bool,
-) -> None:
-    ch = machine.channel(channel)
-    decoder = ch.decoder
-    if batch_in_use(machine, channel, record_path):
-        batch = BatchGeometryCheck(ch)
-        for items in batch.items(text):
-            for item in items:
-                if isinstance(item, Marker):
-                    _handle_marker(ch, item, result)
-            meter.update(batch.line, decoder.blocks_decoded)
-    else:
-        decoder.start(iter_blocks(text, ch.axis_names), ch.setpoints())
-        motions = 0
-        next_update = 4096
-        line = 0
-        while not decoder.finished:
-            for item in decoder.next_items():
-                if isinstance(item, Motion):
-                    motions += 1
-                    line = item.block.line
-                    if record_path:
-                        result.path.extend(_segment_points(item.segment))
-                elif isinstance(item, Marker):
-                    if item.block is not None:
-                        line = item.block.line
-                    _handle_marker(ch, item, result)
-            if motions >= next_update:  # the decoder hands out items in batches: a threshold, not a modulo
-                next_update = motions + 4096
-                meter.update(line, decoder.blocks_decoded)
-    result.blocks = decoder.blocks_decoded
-    result.final_position = dict(zip(ch.axis_names, decoder.position, strict=True))
-
-
-def _handle_marker(ch: Channel, item: Marker, result: CheckResult) -> None:
-    if item.kind == MarkerKind.ACTION:
-        item.payload()
-    elif item.kind == MarkerKind.END:
-        ch.warn_missing_program_end(item)
-        result.completed = True
-    elif item.kind == MarkerKind.ERROR:
-        ch.raise_decode_error(item)
+    return ProgramCheck(
+        machine,
+        channel,
+        geometry_only=True,
+        record_path=record_path,
+        batch=os.environ.get(BATCH_ENV, "") != "0",
+    ).batch_in_use()
 
 
 def _text_report(result: CheckResult, program: str) -> str:
     """The report for people: positions and the floats of alarm params rounded to 0.1 µm."""
     lines = []
-    verdict = "OK: ran to the end" if result.completed else "STOPPED"
+    if result.capped is not None:
+        verdict = f"DID NOT END: stopped at the cap of {result.cap} {result.capped}"
+    else:
+        verdict = "OK: ran to the end" if result.completed else "STOPPED"
     lines.append(
         f"{program}: {verdict} ({result.mode} check, {result.blocks} blocks, {result.machine.cycle} cycles)"
     )
+    for m in result.messages:
+        where = f"line {m.line}" + (f", {m.block}" if m.block and m.block != f"line {m.line}" else "")
+        if m.program:
+            where = f"{m.program}, {where}"
+        lines.append(f"  message ({where}): {m.text}")
     for a in result.alarms:
         where = f"{a.place}: " if a.place else ""
         lines.append(f"  {a.severity} {a.number}: {where}{a.message}")
@@ -323,7 +225,7 @@ def _text_report(result: CheckResult, program: str) -> str:
             lines.append(f"      params: {json.dumps(round_numbers(a.params))}")
     pos = ", ".join(f"{k}={round_mm(v):.4f}" for k, v in result.final_position.items())
     lines.append(f"  final position (mm): {pos}")
-    areas = _areas_json(result.machine, result.channel)
+    areas = result.areas_json()
     if areas:
         lines.append("  areas:")
         for area in areas:
@@ -340,7 +242,7 @@ def scene_of(result: CheckResult) -> dict[str, Any]:
     and what the dashboard draws for the same channel."""
     ch = result.machine.channel(result.channel)
     return build_scene(
-        _areas_json(result.machine, result.channel) or [],
+        result.areas_json() or [],
         result.path,
         axis_names=ch.axis_names,
         main_axes=ch.config.main_axes,
@@ -364,7 +266,28 @@ def scene_of(result: CheckResult) -> dict[str, Any]:
 )
 @click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text", show_default=True)
 @click.option("--geometry-only", is_flag=True, help="decode and check every block's path without cycles")
-@click.option("--max-cycles", type=int, default=DEFAULT_MAX_CYCLES, show_default=True)
+@click.option(
+    "--max-cycles",
+    type=click.IntRange(min=1),
+    default=DEFAULT_MAX_CYCLES,
+    show_default=True,
+    help="a full check stops here (exit 3) if the program has not ended",
+)
+@click.option(
+    "--max-iterations",
+    type=click.IntRange(min=1),
+    default=DEFAULT_MAX_ITERATIONS,
+    show_default=True,
+    help="a geometry check stops after this many loop iterations and jumps back (exit 3)",
+)
+@click.option(
+    "--program-dir",
+    "program_dirs",
+    type=click.Path(file_okay=False, exists=True, path_type=Path),
+    multiple=True,
+    help="a directory of subroutines and cycles (L name, L CYCLE); several may be given, searched in order "
+    "after the program's own directory",
+)
 @click.option(
     "--plot",
     "plot_path",
@@ -381,9 +304,12 @@ def check(
     fmt: str,
     geometry_only: bool,
     max_cycles: int,
+    max_iterations: int,
+    program_dirs: tuple[Path, ...],
     plot_path: Path | None,
 ) -> None:
-    """Run PROGRAM on the machine and report alarms (exit 0 ok, 1 error alarm, 2 usage/config).
+    """Run PROGRAM on the machine and report alarms (exit 0 ok, 1 error alarm, 2 usage/config, 3 the
+    program did not end within the cap).
 
     The report goes to stdout (text or JSON); progress, ``plot written: PATH`` and errors to stderr."""
     from hli_server.configuration import ConfigError, load_machine
@@ -410,7 +336,8 @@ def check(
         except OSError as exc:
             click.echo(f"error: cannot read configuration: {exc}", err=True)
             sys.exit(2)
-        machine = Machine(config)
+        library = DirectoryLibrary([program.parent, *program_dirs])
+        machine = Machine(config, programs=library)
         try:
             machine.channel(channel)
         except KeyError:
@@ -423,8 +350,10 @@ def check(
                 channel=channel,
                 geometry_only=geometry_only,
                 max_cycles=max_cycles,
+                max_iterations=max_iterations,
                 record_path=plot_path is not None,
                 progress=True,
+                name=program.name,
             )
         except (OSError, UnicodeDecodeError) as exc:
             click.echo(f"error: cannot read {program}: {exc}", err=True)
@@ -439,7 +368,16 @@ def check(
         click.echo(_text_report(result, str(program)))
     if plot_path is not None:
         _plot(result, plot_path, str(program))
-    sys.exit(0 if result.completed and not result.stopped_by_error else 1)
+    if result.stopped_by_error:
+        sys.exit(1)
+    if result.capped is not None:
+        click.echo(
+            f"error: {program} did not end: the check stopped at its cap of {result.cap} {result.capped} "
+            f"(--max-{'cycles' if result.capped == 'cycles' else 'iterations'})",
+            err=True,
+        )
+        sys.exit(EXIT_CAPPED)
+    sys.exit(0 if result.completed else 1)
 
 
 def _check_plot_target(plot_path: Path) -> None:

@@ -25,6 +25,8 @@ from schemas.layout import (
     MODBUS_AXIS_BASE,
     MODBUS_BLOCK_STRIDE,
     MODBUS_CHANNEL_BASE,
+    MODBUS_EXTERNAL_BASE,
+    MODBUS_EXTERNAL_END,
     Layout,
     Signal,
 )
@@ -144,6 +146,13 @@ def _markdown(layout: Layout, rows: list[dict[str, str]]) -> str:
         "axis moves no other address.",
         "- **Access** is the PLC's: `read` fields are written by the CNC only; writes to them are "
         "refused on every door (H-02).",
+        "- **V.E. variables** (N-05): `gpVEGlob^NAME` (the global area) and `gpVECh[i]^NAME` (channel "
+        "`gpCh[i]`'s area), an array's elements `NAME[j]` / `NAME[j,k]`. NC programs and the PLC both "
+        "write them: the last writer wins (docs/process-image.md). Coils (BOOLEAN) and holding registers "
+        f"from {MODBUS_EXTERNAL_BASE} to {MODBUS_EXTERNAL_END - 1}; ADS group 0x{ADS_GROUP_PLC_TO_CNC:X} "
+        "after the axis blocks (their offsets follow the number of axes: use the symbols). A kernel "
+        "type narrower than its field (SGN08/16 in a DINT, UNS08/16 in a UDINT, REAL32 in an LREAL) "
+        "keeps its range: every door refuses a value outside it.",
         "",
     ]
     columns = [c for c in COLUMNS if c not in ("symbol", "reqs")]  # symbol = ST path; reqs in CSV/JSON

@@ -21,6 +21,8 @@ from __future__ import annotations
 import asyncio
 import ipaddress
 import logging
+import signal
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -28,9 +30,18 @@ from typing import Any
 import click
 
 from hli_server.adapters.host import AccessPolicy
-from hli_server.adapters.registry import CLI_ALIASES, AdapterError, options_model, plan_adapters
+from hli_server.adapters.registry import (
+    CLI_ALIASES,
+    AdapterError,
+    DoorGuard,
+    door_guards,
+    options_model,
+    plan_adapters,
+)
 from hli_server.configuration import ConfigError, ConfigFileError, load_machine, machine_summary
+from hli_server.recording.tap import RecordingOptions
 from hli_server.runtime import Clock, Runtime, precise_event_loop
+from hli_server.runtime.pacing import PRIORITIES, probed_default_loop
 
 __all__ = ["run"]
 
@@ -40,10 +51,13 @@ _EXIT_FAILED = 1
 _EXIT_START = 2
 
 
-def _banner(runtime: Runtime, event_loop: str) -> None:
+def _banner(runtime: Runtime, event_loop: str, guards: list[DoorGuard]) -> None:
     config = runtime.config
     click.echo(f"hli-server: {machine_summary(config)}")
-    click.echo(f"  clock: {runtime.clock} (T_A = {config.cycle_time_us} µs, event loop: {event_loop})")
+    clock = f"  clock: {runtime.clock} (T_A = {config.cycle_time_us} µs, event loop: {event_loop}"
+    if runtime.clock == "realtime":
+        clock += f", priority: {runtime.priority_granted}"
+    click.echo(clock + ")")
     image = runtime.image
     layout = runtime.layout
     click.echo(
@@ -53,13 +67,19 @@ def _banner(runtime: Runtime, event_loop: str) -> None:
     for adapter in runtime.adapters:
         for line in adapter.endpoints():
             click.echo(f"  {line}")
+    click.echo(f"  NC output directory (#MSG SAVE report files): {runtime.nc_files.directory}")
+    searched = runtime.programs.directories.searched()
+    if searched:
+        click.echo(f"  program directories (L name): {', '.join(searched)}")
     policy = runtime.policy
-    guards = [
-        "read-only" if policy.read_only else "",
-        "API token required for changes" if policy.api_token else "",
-    ]
-    if any(guards):
-        click.echo(f"  access: {', '.join(g for g in guards if g)}")
+    if not _is_loopback(runtime.bind) or policy.read_only or policy.read_only_doors or policy.api_token:
+        where = "loopback only" if _is_loopback(runtime.bind) else f"bound to {runtime.bind}"
+        click.echo(f"  access ({where}):")
+        for guard in guards:  # by door name: a script that reads the banner's door lines is not misled
+            click.echo(f"    door {guard.door}: {guard.how}")
+    status = runtime.session.status()
+    if status.recording:
+        click.echo(f"  recording to {status.file} from cycle {status.started_cycle}")
     if runtime.stop_after_cycles is not None:
         click.echo(f"  stops after {runtime.stop_after_cycles} cycles")
     click.echo("  stop with Ctrl+C or SIGTERM")
@@ -84,6 +104,41 @@ def _farewell(runtime: Runtime) -> None:
             f"max {lateness['max']:.0f} µs, {timing['slipped_cycles']} cycles dropped"
         )
     click.echo(text)
+    causes = timing.get("late_causes") or {}
+    late = sum(causes.values())
+    machine = causes.get("os", 0) + causes.get("preempted", 0)
+    if late >= 10 and machine > late / 2 and not runtime.priority_granted.startswith("realtime"):
+        click.echo(
+            f"hli-server: {machine} of the {late} cycles later than T_A waited for a CPU (other load on the "
+            "machine): the realtime priority (root or CAP_SYS_NICE, e.g. docker run --cap-add SYS_NICE) lets "
+            "the clock go first (docs/runtime.md)"
+        )
+
+
+class _EarlySignals:
+    """SIGINT/SIGTERM from the first line of the command until the runtime's own handlers take over
+    (``Runtime.serve`` installs them before its first step): a signal is noted, never raised in the
+    middle of a start-up step, and the runtime stops between two steps, undoing what it started.
+    :meth:`restore` puts the previous handlers back (the command run in-process, by a test)."""
+
+    def __init__(self) -> None:
+        self.runtime: Runtime | None = None
+        self.signalled = False
+        self._previous: dict[int, Any] = {}
+        if threading.current_thread() is threading.main_thread():  # else Python has no handlers to set
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                self._previous[sig] = signal.signal(sig, self._note)
+
+    def _note(self, signum: int, frame: object) -> None:
+        self.signalled = True
+        if self.runtime is not None:
+            self.runtime.stop_requested = True  # a plain flag: the event loop may be mid-step here
+
+    def restore(self) -> None:
+        for sig, handler in self._previous.items():
+            if handler is not None:
+                signal.signal(sig, handler)
+        self._previous.clear()
 
 
 def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
@@ -134,10 +189,14 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     envvar="HLI_API_TOKEN",
     default=None,
     metavar="TOKEN",
-    help="state-changing HTTP requests need 'Authorization: Bearer TOKEN' (or env HLI_API_TOKEN); "
-    "required with a --bind beyond loopback",
+    help="the HTTP door's changes and its event log need 'Authorization: Bearer TOKEN' (or env "
+    "HLI_API_TOKEN); it guards HTTP only: Modbus and ADS by their allow lists or --read-only-door",
 )
-@click.option("--insecure", is_flag=True, help="allow a --bind beyond loopback without --api-token")
+@click.option(
+    "--insecure",
+    is_flag=True,
+    help="allow a --bind beyond loopback with doors that accept writes from anyone (a warning says which)",
+)
 @click.option(
     "--doors-process/--no-doors-process",
     default=True,
@@ -146,6 +205,13 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     "load does not compete with the cycle (docs/reliability.md)",
 )
 @click.option("--read-only", is_flag=True, help="the network doors accept no writes (HTTP, Modbus, ADS)")
+@click.option(
+    "--read-only-door",
+    "read_only_doors",
+    multiple=True,
+    type=click.Choice(["http", "modbus", "ads"]),
+    help="this door accepts no writes, the others do (repeatable)",
+)
 @click.option(
     "--allow-host",
     "allow_hosts",
@@ -187,7 +253,67 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     show_default=True,
     help="select: microsecond timers (realtime lateness ~0.1 ms); default: asyncio's (epoll, whole ms)",
 )
+@click.option(
+    "--priority",
+    type=click.Choice(list(PRIORITIES)),
+    default="auto",
+    show_default=True,
+    help="the realtime clock's thread: realtime (SCHED_FIFO) or high (nice -10) where permitted (root or "
+    "CAP_SYS_NICE), so that other load on the machine delays the cycle less; auto: realtime if permitted, "
+    "else normal (docs/runtime.md)",
+)
 @click.option("--cycles", type=click.IntRange(min=0), default=None, help="stop after N cycles (for scripts)")
+@click.option(
+    "--record",
+    "record_file",
+    type=click.Path(path_type=Path, dir_okay=False),
+    default=None,
+    help="record the session from the first cycle into FILE (.jsonl.gz; docs/record-replay.md)",
+)
+@click.option(
+    "--record-dir",
+    type=click.Path(path_type=Path, file_okay=False),
+    default=None,
+    help="where recordings started through the HTTP API or the dashboard go [default: the --record "
+    "file's directory, else ./recordings]",
+)
+@click.option(
+    "--record-flush",
+    type=click.FloatRange(0.05, 60.0),
+    default=1.0,
+    show_default=True,
+    help="seconds between flushes of a recording (what a crash can lose at most)",
+)
+@click.option(
+    "--record-max-mb",
+    type=click.IntRange(1, 1_000_000),
+    default=2048,
+    show_default=True,
+    help="a recording is closed when it reaches this size",
+)
+@click.option(
+    "--journal-limit-mb",
+    type=click.IntRange(1, 100_000),
+    default=256,
+    show_default=True,
+    help="the input journal in memory (what makes a recording started later replayable) is dropped "
+    "beyond this",
+)
+@click.option(
+    "--program-dir",
+    "program_dirs",
+    multiple=True,
+    type=click.Path(exists=True, file_okay=False, path_type=Path),
+    help="a directory where `L name` finds global subprograms and cycles; searched before the machine "
+    "file's program_directories (repeatable, in order)",
+)
+@click.option(
+    "--nc-output-dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="where #MSG SAVE writes the programs' report files (never elsewhere); default: a new "
+    "temporary directory, named in the banner",
+)
 @click.pass_context
 def run(
     ctx: click.Context,
@@ -199,16 +325,27 @@ def run(
     insecure: bool,
     doors_process: bool,
     read_only: bool,
+    read_only_doors: tuple[str, ...],
     allow_hosts: tuple[str, ...],
     allow_origins: tuple[str, ...],
     image_name: str | None,
     adapter_specs: tuple[str, ...],
     max_catch_up: int,
     event_loop: str,
+    priority: str,
     cycles: int | None,
+    record_file: Path | None,
+    record_dir: Path | None,
+    record_flush: float,
+    record_max_mb: int,
+    journal_limit_mb: int,
+    program_dirs: tuple[Path, ...],
+    nc_output_dir: Path | None,
     **alias_values: Any,
 ) -> None:
     """Run the machine with its process image and adapters until stopped."""
+    early = _EarlySignals()
+    ctx.call_on_close(early.restore)
     try:
         config = load_machine(config_path)
     except ConfigFileError as exc:
@@ -221,19 +358,12 @@ def run(
         click.echo("the configuration is invalid: check it with `hli-server config validate FILE`", err=True)
         ctx.exit(_EXIT_START)
 
-    if not _is_loopback(bind) and not api_token and not insecure:
-        click.echo(
-            f"error: --bind {bind} lets other machines in: give an --api-token (or HLI_API_TOKEN) so that "
-            "only holders of the token can change the machine's state, or --insecure if this network is "
-            "yours alone",
-            err=True,
-        )
-        ctx.exit(_EXIT_START)
     policy = AccessPolicy(
         api_token=api_token or None,
         read_only=read_only,
         allowed_hosts=tuple(allow_hosts),
         allowed_origins=tuple(allow_origins),
+        read_only_doors=tuple(read_only_doors),
     )
     aliases = {
         alias.flag: alias_values.get("alias_" + alias.flag.removeprefix("--").replace("-", "_"))
@@ -241,6 +371,28 @@ def run(
     }
     try:
         adapters = plan_adapters([(a.name, dict(a.options)) for a in config.adapters], adapter_specs, aliases)
+    except (AdapterError, ValueError) as exc:
+        click.echo(f"error: {exc}", err=True)
+        ctx.exit(_EXIT_START)
+    guards = door_guards(adapters, policy)
+    open_doors = [g for g in guards if not g.guarded]
+    if not _is_loopback(bind) and open_doors:
+        if not insecure:
+            lines = [f"  {g.label} ({g.how}): {g.fix}" for g in open_doors]
+            click.echo(
+                f"error: --bind {bind} lets other machines in, and these doors would take their writes "
+                "unguarded (the API token guards the HTTP door only):\n"
+                + "\n".join(lines)
+                + "\nor give --insecure if this network is yours alone",
+                err=True,
+            )
+            ctx.exit(_EXIT_START)
+        click.echo(
+            f"warning: --insecure: on {bind}, anyone on the network can change the machine through "
+            + ", ".join(g.label for g in open_doors),
+            err=True,
+        )
+    try:
         runtime = Runtime(
             config,
             clock=clock,
@@ -251,15 +403,29 @@ def run(
             stop_after_cycles=cycles,
             policy=policy,
             doors_process=doors_process,
+            priority=priority,
+            recording=RecordingOptions(
+                file=record_file,
+                directory=record_dir or (None if record_file is not None else Path("recordings")),
+                flush_s=record_flush,
+                max_bytes=record_max_mb * 1024 * 1024,
+                journal_limit=journal_limit_mb * 1024 * 1024,
+            ),
+            program_dirs=program_dirs,
+            nc_output_dir=nc_output_dir,
         )
-    except (AdapterError, ValueError) as exc:
+    except (AdapterError, ValueError, OSError) as exc:  # OSError: --nc-output-dir cannot be made
         click.echo(f"error: {exc}", err=True)
         ctx.exit(_EXIT_START)
+    early.runtime = runtime
+    if early.signalled:
+        click.echo("hli-server: stopped before it started")
+        return
 
     try:
-        loop_factory = precise_event_loop if event_loop == "select" else None
+        loop_factory = precise_event_loop if event_loop == "select" else probed_default_loop
         with asyncio.Runner(loop_factory=loop_factory) as runner:
-            runner.run(runtime.serve(ready=lambda rt: _banner(rt, event_loop)))
+            runner.run(runtime.serve(ready=lambda rt: _banner(rt, event_loop, guards)))
     except KeyboardInterrupt:  # Ctrl+C before the signal handlers were installed
         pass
     except Exception as exc:
@@ -269,4 +435,7 @@ def run(
         logger.exception("the runtime failed")
         click.echo(f"error: the runtime failed at cycle {runtime.machine.cycle}: {exc!r}", err=True)
         ctx.exit(_EXIT_FAILED)
+    if runtime.stats.started_at is None:
+        click.echo("hli-server: stopped during start-up")
+        return
     _farewell(runtime)

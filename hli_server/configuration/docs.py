@@ -11,12 +11,15 @@ from pydantic.fields import FieldInfo
 from hli_server.configuration.fields import _range_text
 from hli_server.configuration.tables import _PARAMETERS_OF_MODEL
 from schemas.config import (
+    EXTERNAL_VARIABLE_PARAMETERS,
     AdapterEntry,
     AxisConfig,
     ChannelConfig,
     DriveModel,
+    ExternalVariableConfig,
     MachineConfig,
     ManualConfig,
+    ParameterInfo,
     ProgramEntry,
     ZeroOffset,
 )
@@ -51,9 +54,19 @@ _SECTIONS: tuple[tuple[str, type[BaseModel], frozenset[str]], ...] = (
     ("Programs `[[channels.programs]]` (project's own program table)", ProgramEntry, frozenset()),
     ("Manual mode `[manual]`", ManualConfig, frozenset()),
     ("Adapters `[[adapters]]` (project's own; `hli-server run`)", AdapterEntry, frozenset()),
+    ("V.E. variables `[[external_variables]]` (N-05)", ExternalVariableConfig, frozenset()),
 )
+_LIST_PATHS: dict[type[BaseModel], tuple[ParameterInfo, ...]] = {
+    ExternalVariableConfig: EXTERNAL_VARIABLE_PARAMETERS
+}
+"""Fields that come from a list of their own (not a parameter list of the table's kind)."""
 
 _RANGE_NOTES: dict[tuple[type[BaseModel], str], str] = {
+    (ExternalVariableConfig, "name"): "`[A-Za-z_][A-Za-z0-9_]{0,19}`, unique in its area (any case)",
+    (ExternalVariableConfig, "type"): "BOOLEAN, SGN08, UNS08, SGN16, UNS16, SGN32, UNS32, REAL32, REAL64",
+    (ExternalVariableConfig, "dims"): "at most 4 dimensions of 1..65535; all V.E. elements fit the Modbus "
+    "area 1200..1899",
+    (ExternalVariableConfig, "access_rights"): "READ_WRITE, READ_ONLY, WRITE_ONLY",
     (AxisConfig, "name"): "`[A-Z][A-Z0-9]{0,7}`, unique",
     (AxisConfig, "number"): "1 ≤ value ≤ MAX(UNS32), unique",
     (AxisConfig, "axis_type"): "T or R",
@@ -63,6 +76,11 @@ _RANGE_NOTES: dict[tuple[type[BaseModel], str], str] = {
     "both axes need bit 0x8000 in achs_mode",
     (AxisConfig, "coll_offset"): "0 (none) or 1 < value < MAX(UNS32)",
     (AxisConfig, "achs_mode"): "0x00000001 ≤ value ≤ 0x10000000; bit 0x8000: collision monitoring",
+    (AxisConfig, "a_emergency"): "0 (a_max applies) or 1 ≤ value ≤ 2*a_max",
+    (AxisConfig, "acs_limit_neg"): "swe_neg ≤ value ≤ swe_pos, less than acs_limit_pos; both 0: off",
+    (AxisConfig, "acs_limit_pos"): "swe_neg ≤ value ≤ swe_pos, greater than acs_limit_neg; both 0: off",
+    (AxisConfig, "vb_messen"): "1 ≤ value ≤ the axis' v_max (P-AXIS-00212)",
+    (ChannelConfig, "messtyp"): "1 ≤ value ≤ 7; G100 takes 1..4",
     (ChannelConfig, "axes"): "names of `[[axes]]`; each axis in one channel",
     (ChannelConfig, "main_axes"): "three different axes of the channel",
     (ChannelConfig, "interpolator_function"): "keywords FCT_IPO_DEFAULT, FCT_LOOK_AHEAD_STANDARD, "
@@ -111,35 +129,61 @@ def _meaning(info: FieldInfo) -> str:
     return text.strip() or "-"
 
 
+def _kernel_column(pinfo: ParameterInfo | None) -> str:
+    if pinfo is None or pinfo.pid is None:
+        return "-"
+    if pinfo.page.startswith("http"):
+        return f"[page]({pinfo.page})"
+    return pinfo.page or "-"
+
+
 def parameter_table_markdown() -> str:
-    """Every configuration parameter: key, P-ID, ISG path, unit, default, range (docs/configuration.md)."""
+    """Every configuration parameter: key, P-ID, ISG path, unit, default, range, the kernel's page
+    (docs/configuration.md). The default is the kernel's wherever the row has no note; the notes
+    below a section say where and why ours differs (issue 21)."""
     out: list[str] = []
     for title, model, skip in _SECTIONS:
-        paths = {info.field: info for info in _PARAMETERS_OF_MODEL.get(model, ())}
+        known = _PARAMETERS_OF_MODEL.get(model, ()) or _LIST_PATHS.get(model, ())
+        paths = {info.field: info for info in known}
         out += [
             f"### {title}",
             "",
-            "| TOML key | P-ID | ISG text-list path | unit | default | range | meaning |",
-            "|---|---|---|---|---|---|---|",
+            "| TOML key | P-ID | ISG text-list path | unit | default | range | kernel | meaning |",
+            "|---|---|---|---|---|---|---|---|",
         ]
+        notes: list[str] = []
         for name, info in model.model_fields.items():
             if name in skip:
                 continue
             pinfo = paths.get(name)
             pid = (pinfo.pid or "-") if pinfo else "project's own"
-            path = f"`{pinfo.path.replace('[0]', '[i]')}`" if pinfo else "-"
+            if pinfo is None:
+                path = "-"
+            elif pinfo.path is None:
+                path = "(none known)"
+            else:
+                path = f"`{pinfo.path.replace('[0]', '[i]')}`"
+            if pinfo and name == "channel" and model is ExternalVariableConfig:
+                path += " (CHANNEL: the list's channel; GLOBAL: none)"
             range_text = _RANGE_NOTES.get((model, name)) or _range_text(model, name) or "-"
             if info.annotation is bool:
                 range_text = "0/1"
+            default = _default_text(model, name, info)
+            if pinfo is not None and pinfo.note:
+                default += " (note)"
+                notes.append(f"* `{name}` ({pinfo.pid}): {pinfo.note}.")
             cells = (
                 f"`{name}`",
                 pid,
                 path,
                 _unit_of(model, name, info),
-                _default_text(model, name, info),
+                default,
                 range_text,
+                _kernel_column(pinfo),
                 _meaning(info),
             )
             out.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
         out.append("")
+        if notes:
+            out += ["Where this differs from the kernel's page:", "", *notes, ""]
     return "\n".join(out)

@@ -15,6 +15,7 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 
 from hli_server.configuration.errors import ConfigError, ConfigFileError, Origin
+from hli_server.configuration.external_lists import parse_external_list
 from hli_server.configuration.fields import _field_problem
 from hli_server.configuration.parameter_lists import _display_path, parse_parameter_list
 from hli_server.configuration.tables import _LIST_KEY, _PARAMETERS_OF_MODEL, _TABLES, ListKind, Loc
@@ -24,11 +25,16 @@ from schemas.config import (
     CHANNEL_PARAMETERS,
     MANUAL_PARAMETERS,
     AxisConfig,
+    ChannelConfig,
     MachineConfig,
     ParameterIssues,
 )
 
 logger = logging.getLogger(__name__)
+
+_EXTERNAL_LIST_KEY = "external_variables_list"
+"""Key of a ``[[channels]]`` table: the kernel's list of external variables (P-STUP-00146 ve_var[i])."""
+_MAX_LIST_BYTES = 1_000_000
 
 
 def demo_machine_path() -> Path:
@@ -72,6 +78,7 @@ class _Loader:
         self.toml = _TomlLines("")
         self.data: dict[str, Any] = {}
         self.files = [self.display]
+        self._global_from_list: dict[int, str] = {}
 
     def load(self) -> tuple[MachineConfig, list[str]]:
         try:
@@ -95,6 +102,7 @@ class _Loader:
         self.toml = _TomlLines(text)
         self._import_lists()
         self._resolve_program_paths()
+        self._resolve_program_directories()
         config: MachineConfig | None = None
         try:
             config = MachineConfig.model_validate(self.data)
@@ -132,6 +140,74 @@ class _Loader:
         manual = self.data.get("manual")
         if isinstance(manual, dict):
             self._import_list(manual, ("manual",), "manual")
+        channels = self.data.get("channels")
+        if isinstance(channels, list):
+            for index, entry in enumerate(channels):
+                if isinstance(entry, dict) and _EXTERNAL_LIST_KEY in entry:
+                    self._import_external_list(entry, index)
+
+    def _import_external_list(self, entry: dict[str, Any], index: int) -> None:
+        """``external_variables_list = "ch1_ve.lis"`` (P-STUP-00146 ve_var[i]): the kernel's list of
+        external variables, appended to ``external_variables`` (N-05)."""
+        name = entry.pop(_EXTERNAL_LIST_KEY)
+        where = self._origin(("channels", index, _EXTERNAL_LIST_KEY)).where()
+        if not isinstance(name, str) or not name:
+            self.errors.append(f"{where}: expected a file name (relative to the machine file)")
+            return
+        number = entry.get("number", 1)
+        if not isinstance(number, int):
+            return  # the channel's own error says why
+        list_path = self.path.parent / name
+        display = str(Path(self.display).parent / name)
+        try:
+            if list_path.stat().st_size > _MAX_LIST_BYTES:
+                self.errors.append(f"{where}: {display} is larger than {_MAX_LIST_BYTES} bytes")
+                return
+            text = list_path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            self.errors.append(f"{where}: list of external variables {display} not found")
+            return
+        except OSError as exc:
+            self.errors.append(
+                f"{where}: cannot read the list of external variables {display}: {exc.strerror}"
+            )
+            return
+        except UnicodeDecodeError as exc:
+            self.errors.append(f"{where}: {display} is not UTF-8 text ({exc.reason})")
+            return
+        self.files.append(display)
+        parsed = parse_external_list(text, source=display, channel=number)
+        self.errors.extend(parsed.errors)
+        self.warnings.extend(parsed.warnings)
+        variables = self.data.setdefault("external_variables", [])
+        if not isinstance(variables, list):
+            return  # the machine file's own error says why
+        for variable, origins in zip(parsed.variables, parsed.origins, strict=True):
+            if "channel" not in variable:  # GLOBAL: two channels' lists may both declare it
+                same = next(
+                    (
+                        v
+                        for v in variables
+                        if isinstance(v, dict)
+                        and v.get("channel") is None
+                        and str(v.get("name", "")).upper() == variable["name"].upper()
+                    ),
+                    None,
+                )
+                if same is not None and self._global_from_list.get(id(same)):
+                    if same != variable:
+                        self.errors.append(
+                            f"{origins['name'].where()}: global V.E.{variable['name']} is declared "
+                            f"differently in {self._global_from_list[id(same)]}"
+                        )
+                    continue
+            position = len(variables)
+            variables.append(variable)
+            if "channel" not in variable:
+                self._global_from_list[id(variable)] = origins["name"].where()
+            for field_name, origin in origins.items():
+                self.origins[("external_variables", position, field_name)] = origin
+            self.origins.setdefault(("external_variables", position), origins["name"])
 
     def _import_list(self, entry: dict[str, Any], loc: Loc, kind: ListKind) -> None:
         if _LIST_KEY not in entry:
@@ -184,6 +260,21 @@ class _Loader:
                     where = self._origin(("channels", c_index, "programs", p_index, "path")).where()
                     self.errors.append(f"{where}: program file {program_path} not found")
                 program["path"] = str(program_path.resolve())
+
+    def _resolve_program_directories(self) -> None:
+        """``program_directories`` are relative to the machine file; each must be a directory (N-02)."""
+        directories = self.data.get("program_directories")
+        if not isinstance(directories, list):
+            return
+        for index, entry in enumerate(directories):
+            if not isinstance(entry, str) or not entry:
+                continue  # the model's own error says why
+            path = (self.path.parent / entry).resolve()
+            if not path.is_dir():
+                where = self._origin(("program_directories", index)).where()
+                what = "is not a directory" if path.exists() else "not found"
+                self.errors.append(f"{where}: program directory {path} {what}")
+            directories[index] = str(path)
 
     # -- locations ---------------------------------------------------------------------------
 
@@ -362,7 +453,7 @@ _TOML_NAME_OF_PATH: dict[str, str] = {
     info.path.rsplit(".", 1)[-1]: info.field
     for table in (AXIS_PARAMETERS, CHANNEL_PARAMETERS, MANUAL_PARAMETERS)
     for info in table
-    if info.path.rsplit(".", 1)[-1] != info.field
+    if info.path is not None and info.path.rsplit(".", 1)[-1] != info.field
 }
 
 
@@ -371,9 +462,14 @@ def _unknown_key(model: type[BaseModel], key: str, *, list_allowed: bool) -> str
     candidates = list(model.model_fields)
     if list_allowed:
         candidates.append(_LIST_KEY)
+    if model is ChannelConfig:
+        candidates.append(_EXTERNAL_LIST_KEY)
     for table in _TABLES.values():
         for info in table[0]:
-            if key in {info.path, _display_path(info.path, 0).replace("[0]", "[i]")}:
+            if info.path is not None and key in {
+                info.path,
+                _display_path(info.path, 0).replace("[0]", "[i]"),
+            }:
                 return (
                     f"unknown key: {key} is an ISG text-list path; in the machine file write "
                     f"`{info.field} = ...`, or put the line in a parameter list"

@@ -14,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, TypeAdapter, ValidationError
 from hli_server.configuration.errors import Origin
 from hli_server.configuration.fields import _field_problem
 from hli_server.configuration.tables import _CHANNEL_KEY, _GEAR_KEY, _INTEGER, _KIND_NAMES, _TABLES, ListKind
+from schemas.config import AXIS_PARAMETER_ALIASES
 
 
 @dataclass
@@ -54,7 +55,7 @@ def parse_parameter_list(
     ``channel_index`` is given (channel number - 1).
     """
     table, model = _TABLES[kind]
-    by_path = {info.path: info for info in table}
+    by_path = {info.path: info for info in table if info.path is not None}
     result = ParameterList(source=source)
     seen: dict[str, int] = {}
     gear_values: dict[str, list[tuple[int, Any, Origin]]] = {}
@@ -76,6 +77,13 @@ def parse_parameter_list(
         if problem:
             result.errors.append(f"{origin.where()}: {problem}")
             continue
+        if kind == "axis" and canonical in AXIS_PARAMETER_ALIASES:
+            replacement = _display_path(AXIS_PARAMETER_ALIASES[canonical], gear)
+            result.warnings.append(
+                f"{origin.where()}: {key} is this project's old name; the kernel's path is {replacement} "
+                "(read as that; write it so, the old name will go)"
+            )
+            canonical = AXIS_PARAMETER_ALIASES[canonical]
         info = by_path.get(canonical)
         if info is None:
             result.errors.append(f"{origin.where()}: {_unknown_parameter(canonical, gear, kind)}")
@@ -152,10 +160,11 @@ def _display_path(path: str, gear: int | None = None) -> str:
 
 def _unknown_parameter(canonical: str, gear: int | None, kind: str) -> str:
     for other_kind, (table, _model) in _TABLES.items():
-        if other_kind != kind and any(info.path == canonical for info in table):
+        if other_kind != kind and any(info.path is not None and info.path == canonical for info in table):
             return f"unknown {kind} parameter: {_display_path(canonical, gear)} is {_KIND_NAMES[other_kind]}"
     table, _model = _TABLES[kind]
-    close = difflib.get_close_matches(canonical, [info.path for info in table], n=1, cutoff=0.6)
+    paths = [info.path for info in table if info.path is not None]
+    close = difflib.get_close_matches(canonical, paths, n=1, cutoff=0.6)
     hint = f" (did you mean {_display_path(close[0], gear)}?)" if close else ""
     return f"unknown parameter{hint}"
 

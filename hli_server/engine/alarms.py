@@ -1,8 +1,15 @@
-"""The one table of alarms: number, severity, reaction, text.
+"""The one table of alarms: number, severity, reaction, text, where the number comes from.
 
-Numbers the documents give are used as given (FCT-C14: 120484, 120486, 120499, 50961, 50962, 50706;
-FCT-C3: 70092, 70162; FCT-A3: 70082). The project's own numbers live in the 9xxxxx range, grouped
-by subject, and are listed in ``docs/alarms.md`` (generated from this table: ``hli-server alarms``).
+The kernel's own numbers are used wherever the kernel documents one (B-04, issue 21): the numbers the
+function descriptions give (FCT-C14: 120484, 120486, 120499, 50961, 50962, 50706; FCT-C3: 70092,
+70162; FCT-A3: 70082) and the IDs of the kernel's diagnosis pages (TF5200 / ISG kernel: software
+limit switches 120002/120003 and 70021/70022, the ``#CONTROL AREA`` errors 21286, 21288, 21292,
+21793, 21797, 50774, 50785, 50786, 120477, 120479, the G100 errors 20138, 50059, 50061, the NC
+language's control blocks, subroutines and cycles 20212 .. 21542, docs/nc-language.md). Each such
+row names its page (``page``). The project's own numbers live in the 9xxxxx range, grouped by
+subject, only where the kernel has none; ``docs/alarms.md`` (generated from this table:
+``hli-server alarms``) marks which is which and keeps the old project numbers that kernel IDs
+replaced.
 
 Reactions:
 
@@ -33,6 +40,15 @@ class Reaction(StrEnum):
     REPORT = "report"
 
 
+_DIAG = "https://infosys.beckhoff.com/content/1033/tf5200_diagnosis/"
+"""The kernel's diagnosis pages (TF5200, English); a row's ``page`` is one of them or another kernel page."""
+_SLS = "https://infosys.beckhoff.com/content/1033/swlimit/15311258251.html"
+"""The kernel's software limit switch description: "message [ID: 120002 or 120003]" for a programmed
+position, "(ID: 70021 or 70022)" for an actual position beyond the limit."""
+_C14 = "https://infosys.beckhoff.com/content/1033/tf5200_workspace_monitoring/291170571.html"
+"""FCT-C14 as the kernel's online help shows it (activating work and protection areas)."""
+
+
 @dataclass(frozen=True, slots=True)
 class AlarmDef:
     number: int
@@ -40,37 +56,294 @@ class AlarmDef:
     reaction: Reaction
     text: str
     source: str
-    """Where the number comes from: the document (``FCT-C14``) or ``project``."""
+    """Where the number comes from: the document (``FCT-C14``), the kernel's diagnosis (``kernel``),
+    or ``project`` (the project's own number: the kernel documents none for this case)."""
+    page: str = ""
+    """The kernel's page that documents the number (diagnosis page or function description)."""
+    replaces: tuple[int, ...] = ()
+    """Project numbers this kernel ID replaced (docs/alarms.md keeps them for users who matched on them)."""
+
+    @property
+    def kernel(self) -> bool:
+        """The kernel's own number (a document's or a diagnosis page's), not the project's."""
+        return not self.source.startswith("project")
 
 
-def _e(number: int, text: str, source: str, reaction: Reaction = Reaction.PROGRAM_ABORT) -> AlarmDef:
-    return AlarmDef(number, Severity.ERROR, reaction, text, source)
+def _e(
+    number: int,
+    text: str,
+    source: str,
+    reaction: Reaction = Reaction.PROGRAM_ABORT,
+    *,
+    page: str = "",
+    replaces: tuple[int, ...] = (),
+) -> AlarmDef:
+    return AlarmDef(number, Severity.ERROR, reaction, text, source, page, replaces)
 
 
-def _w(number: int, text: str, source: str) -> AlarmDef:
-    return AlarmDef(number, Severity.WARNING, Reaction.REPORT, text, source)
+def _w(number: int, text: str, source: str, *, page: str = "", replaces: tuple[int, ...] = ()) -> AlarmDef:
+    return AlarmDef(number, Severity.WARNING, Reaction.REPORT, text, source, page, replaces)
 
 
 _TABLE: tuple[AlarmDef, ...] = (
     # --- the documents' numbers -------------------------------------------------------------
-    _e(120484, "Point outside the work area", "FCT-C14"),
-    _e(120486, "Path leaves the work area", "FCT-C14"),
-    _w(120499, "Active work/protection area cannot be cleared", "FCT-C14"),
-    _e(50961, "Manual mode selected outside the work area", "FCT-C14 (P-CHAN-00442)"),
-    _e(50962, "Manual mode selected inside a protection area", "FCT-C14 (P-CHAN-00442)"),
-    _e(50706, "Measuring move reached the end of the travel range without a probe signal", "FCT-C14"),
+    _e(120484, "Point outside the work area", "FCT-C14", page=_DIAG + "264828811.html"),
+    _e(120486, "Path leaves the work area", "FCT-C14", page=_C14),
+    _w(120499, "Active work/protection area cannot be cleared", "FCT-C14", page=_C14),
+    _e(50961, "Manual mode selected outside the work area", "FCT-C14 (P-CHAN-00442)", page=_C14),
+    _e(50962, "Manual mode selected inside a protection area", "FCT-C14 (P-CHAN-00442)", page=_C14),
+    _e(
+        50706,
+        "Measuring move reached the end of the travel range without a probe signal",
+        "FCT-C14 (P-CHAN-00268)",
+        page="https://infosys.beckhoff.com/content/1033/tf5200_workspace_monitoring/291160331.html",
+    ),
     _e(
         70092,
         "Axis collision monitoring: minimum distance of the pair violated",
         "FCT-C3",
         Reaction.AXIS_STOP,
+        page="https://infosys.beckhoff.com/content/1033/tf5200_axis_collision_mon/286688651.html",
     ),
-    _w(70162, "Axis collision monitoring: the two coll_offset values differ, the larger applies", "FCT-C3"),
+    _w(
+        70162,
+        "Axis collision monitoring: the two coll_offset values differ, the larger applies",
+        "FCT-C3",
+        page=_DIAG + "260159115.html",
+    ),
     _e(
         70082,
         "Axis did not reach the exact-stop window within the settling time",
         "FCT-A3",
         Reaction.AXIS_STOP,
+        page="https://infosys.beckhoff.com/content/1033/tf5200_axis_position_monitoring/92801291.html",
+    ),
+    # --- the kernel's diagnosis pages: software limit switches (E-06) --------------------------
+    _e(
+        120002,
+        "Programmed position beyond the positive software limit switch",
+        "kernel",
+        page=_SLS,
+        replaces=(911011,),
+    ),
+    _e(
+        120003,
+        "Programmed position beyond the negative software limit switch",
+        "kernel",
+        page=_SLS,
+        replaces=(911010,),
+    ),
+    _e(
+        70021,
+        "Positive software limit switch actuated: actual position beyond it plus P-AXIS-00179",
+        "kernel",
+        Reaction.AXIS_STOP,
+        page="https://www.isg-stuttgart.de/fileadmin/kernel/kernel-html/en-GB/259906699.html",
+        replaces=(911012,),
+    ),
+    _e(
+        70022,
+        "Negative software limit switch actuated: actual position beyond it minus P-AXIS-00179",
+        "kernel",
+        Reaction.AXIS_STOP,
+        page=_SLS,
+        replaces=(911012,),
+    ),
+    # --- the kernel's diagnosis pages: #CONTROL AREA (FCT-C14) --------------------------------
+    _e(
+        21286,
+        "Control area ID is out of data format",
+        "kernel",
+        page=_DIAG + "254057611.html",
+        replaces=(912002,),
+    ),
+    _w(
+        21288,
+        "#CONTROL AREA END without a definition: the command has no effect",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1031/tf5200_diagnosis/254066315.html",
+        replaces=(912002,),
+    ),
+    _e(21292, "Invalid control area ID programmed (ID 0)", "kernel", page=_DIAG + "254083723.html"),
+    _e(
+        21793,
+        "G function not allowed during a control area definition",
+        "kernel",
+        page=_DIAG + "256046475.html",
+        replaces=(912002,),
+    ),
+    _e(
+        21797,
+        "Too many axes in the control area definition, at most two allowed",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1031/tf5200_diagnosis/256063883.html",
+        replaces=(912002,),
+    ),
+    _e(
+        50774,
+        "Area not saved: an active area cannot be overwritten",
+        "kernel",
+        page=_DIAG + "258831755.html",
+        replaces=(912002,),
+    ),
+    _e(
+        50785,
+        "Only linear motion blocks G00/G01 can define a polygonal control area",
+        "kernel",
+        page=_DIAG + "258879627.html",
+        replaces=(912002,),
+    ),
+    _e(
+        50786,
+        "Maximum number of points allowed for a polygonal control area exceeded",
+        "kernel",
+        page=_DIAG + "258883979.html",
+        replaces=(912002,),
+    ),
+    _e(
+        120477,
+        "Definition of the polygon is invalid: its lines intersect",
+        "kernel",
+        page=_DIAG + "264798347.html",
+        replaces=(912002,),
+    ),
+    _e(
+        120479,
+        "The first block of a circular area definition must be linear",
+        "kernel",
+        page=_DIAG + "264807051.html",
+        replaces=(912002,),
+    ),
+    # --- the kernel's diagnosis pages: G100 measuring moves (C14-23) --------------------------
+    _e(20138, "G100 is not allowed with the current measuring type", "kernel", page=_DIAG + "250906763.html"),
+    _e(
+        50059,
+        "Unable to measure with the axis: it is not a measuring axis (P-AXIS-00118)",
+        "kernel",
+        page=_DIAG + "257565323.html",
+        replaces=(912011,),
+    ),
+    _e(
+        50061,
+        "Number of programmed axes exceeds the range of the measuring type",
+        "kernel",
+        page=_DIAG + "257574027.html",
+        replaces=(912011,),
+    ),
+    _e(
+        50052,
+        "Probe already actuated when the measuring move starts",
+        "kernel",
+        page=_DIAG + "257543563.html",
+    ),
+    # --- the NC language: the kernel's IDs (TF5200 diagnosis pages; docs/nc-language.md) ----------------
+    _e(20212, "After 'IF' only the condition is permissible", "kernel", page=_DIAG + "251115659.html"),
+    _e(
+        20214,
+        "Unexpected ELSE: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251124363.html",
+    ),
+    _e(
+        20215,
+        "'ELSE' must be programmed exclusively in the NC block",
+        "kernel",
+        page=_DIAG + "251128715.html",
+    ),
+    _e(
+        20216,
+        "Unexpected ELSEIF: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251133067.html",
+    ),
+    _e(20217, "After 'ELSEIF' only the condition is permissible", "kernel", page=_DIAG + "251137419.html"),
+    _e(
+        20218,
+        "Unexpected ENDIF: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251141771.html",
+    ),
+    _e(
+        20219,
+        "'ENDIF' must be programmed exclusively in the NC block",
+        "kernel",
+        page=_DIAG + "251146123.html",
+    ),
+    _e(
+        20221,
+        "Unexpected CASE: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251154827.html",
+    ),
+    _e(
+        20223,
+        "Unexpected DEFAULT: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251163531.html",
+    ),
+    _e(
+        20224,
+        "'DEFAULT' must be programmed exclusively in the NC block",
+        "kernel",
+        page=_DIAG + "251167883.html",
+    ),
+    _e(
+        20225,
+        "Unexpected ENDSWITCH: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251172235.html",
+    ),
+    _e(
+        20232,
+        "Unexpected ENDFOR: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251202699.html",
+    ),
+    _e(20235, "After 'WHILE' only the condition is permissible", "kernel", page=_DIAG + "251215755.html"),
+    _e(
+        20237,
+        "Unexpected ENDWHILE: does not match the current control block",
+        "kernel",
+        page=_DIAG + "251224459.html",
+    ),
+    _e(
+        20238,
+        "'ENDWHILE' must be programmed exclusively in the NC block",
+        "kernel",
+        page=_DIAG + "251228811.html",
+    ),
+    _e(20239, "'DO' must be programmed exclusively in the NC block", "kernel", page=_DIAG + "251233163.html"),
+    _e(20241, "After 'ENDDO' only the condition is permissible", "kernel", page=_DIAG + "251241867.html"),
+    _e(20243, "Unexpected BREAK: no valid open control block", "kernel", page=_DIAG + "251250571.html"),
+    _e(20244, "Unexpected CONTINUE: no valid open control block", "kernel", page=_DIAG + "251254923.html"),
+    _e(20360, "Stack overflow of subroutines (call depth exceeded)", "kernel", page=_DIAG + "251402891.html"),
+    _w(20375, "Valid control blocks still open at program end", "kernel", page=_DIAG + "251459467.html"),
+    _e(
+        20593,
+        "Conditional interpretation (#IF/#ELSE/#ENDIF) has to be the first command in the block",
+        "kernel",
+        page=_DIAG + "251929483.html",
+    ),
+    _e(20839, "The character after $GOTO is not permitted", "kernel", page=_DIAG + "252734603.html"),
+    _e(21382, "Impermissible write/read access to cycle parameters", "kernel", page=_DIAG + "254440587.html"),
+    _e(
+        21500,
+        "Invalid control blocks pending at local subroutine end",
+        "kernel",
+        page=_DIAG + "254941067.html",
+    ),
+    _e(21501, "Invalid control blocks pending at main program end", "kernel", page=_DIAG + "254945419.html"),
+    _e(
+        21502,
+        "Invalid control blocks pending at global subroutine end",
+        "kernel",
+        page=_DIAG + "254949771.html",
+    ),
+    _e(
+        21542,
+        "No further NC commands allowed after a subroutine or cycle call",
+        "kernel",
+        page=_DIAG + "255123851.html",
     ),
     # --- project's own: NC program syntax (910xxx) ------------------------------------------
     _e(910100, "Unknown word in NC block", "project"),
@@ -91,15 +364,11 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(911002, "Circle: no centre programmed", "project"),
     _e(911003, "Axis not in the active plane or not a main axis", "project"),
     _w(911005, "Program ended without M30 / M02", "project"),
-    _e(911010, "Programmed position beyond the negative software limit", "project (E-06)"),
-    _e(911011, "Programmed position beyond the positive software limit", "project (E-06)"),
-    _e(
-        911012,
-        "Actual position beyond the software limit plus tolerance",
-        "project (E-06)",
-        Reaction.AXIS_STOP,
+    _w(
+        911013,
+        "Manual motion stopped at a software limit or a manual mode limit",
+        "project (E-06, P-MANU-00014)",
     ),
-    _w(911013, "Jog stopped at the software limit", "project (E-06)"),
     _w(911020, "Program start refused: axes not referenced (reference them first)", "project"),
     _w(911021, "Command not allowed in this mode or state", "project"),
     _w(911022, "Program start refused: the axes still brake (after a reset or a stop)", "project"),
@@ -114,8 +383,42 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(912011, "Measuring move (G100) invalid", "project (FCT-C14, C14-23)"),
     # --- project's own: axis collision and position monitoring (913xxx) ----------------------
     _e(913000, "Collision pair may only move apart after a collision stop", "project (FCT-C3, C3-02)"),
+    # --- project's own: the NC language where the kernel's ID is not public (914xxx) -----------
+    _e(914000, "Malformed expression or statement", "project (N-03)"),
+    _e(914001, "Division by zero", "project (N-03)"),
+    _e(914002, "Value outside the domain of the operation or the range of the type", "project (N-03)"),
+    _e(914003, "Variable not declared, or not given", "project (N-04)"),
+    _e(914004, "Variable is read-only", "project (N-04)"),
+    _e(914005, "Index or parameter number out of range", "project (N-04)"),
+    _e(914006, "A string where a number is needed, or the other way round", "project (N-03)"),
+    _e(914007, "P parameter read before it was written", "project (N-04)"),
+    _e(914008, "Malformed declaration (#VAR)", "project (N-04)"),
+    _e(914010, "Subroutine or cycle not found", "project (N-02)"),
+    _e(914013, "Jump label of $GOTO not found", "project (N-06)"),
+    _e(914014, "Control blocks nested too deeply", "project (N-06)"),
+    _e(914015, "Malformed control statement", "project (N-06)"),
+    _e(914016, "#COMMENT BEGIN without #COMMENT END", "project (N-01)"),
+    _e(
+        914017, "Unexpected ENDDO, UNTIL, #ELSE or #ENDIF: does not match the current block", "project (N-06)"
+    ),
+    _e(914020, "NC input over its bound (line, expression, string, message)", "project (issue 20)"),
+    _e(914021, "Counting loop with step 0", "project (N-06)"),
+    _w(914030, "M30/M02 in a subroutine ends the whole program", "project (N-01)"),
+    _e(914031, "Malformed #MSG text or values", "project (N-07)"),
+    _e(914032, "M17/M29 in the main program (it ends with M30 or M02)", "project (N-01)"),
+    _w(914050, "Check stopped at its cycle cap: the program did not end", "project (issue 20)"),
+    _w(
+        914051,
+        "Geometry check stopped at its cap of loop iterations: the program did not end",
+        "project (issue 20)",
+    ),
     # --- project's own: the simulator itself (919xxx) -----------------------------------------
     _e(919000, "Internal error: a cycle failed; the axes were stopped", "project", Reaction.AXIS_STOP),
+    _w(
+        919010,
+        "#MSG SAVE: report file not written (its name leaves the NC output directory, or it is full)",
+        "project (N-07)",
+    ),
 )
 
 ALARMS: dict[int, AlarmDef] = {a.number: a for a in _TABLE}

@@ -178,7 +178,8 @@ class Axis:
         self.channel = 0
         self.rotary = config.axis_type == AxisType.ROTARY
         self.a_max = config.a_max
-        self.a_emergency = config.a_emergency
+        self.a_emergency = config.emergency_deceleration
+        """P-AXIS-00003 in effect [mm/s²]: a_emergency, or a_max where it is 0"""
         self.v_max = mm_per_min_to_mm_per_s(config.v_max)
         self.v_rapid = min(mm_per_min_to_mm_per_s(config.v_rapid), self.v_max)
         self.jog_velocity = min(mm_per_min_to_mm_per_s(config.jog_velocity), self.v_max)
@@ -206,6 +207,29 @@ class Axis:
         self.stopping = False
         self.stop_velocity = 0.0
         self.stop_deceleration = 0.0
+
+    # --- software limits in effect (P-AXIS-00177/00178) ------------------------------------
+    def set_soft_limits(self, negative: float | None = None, positive: float | None = None) -> None:
+        """Software limits [mm] in effect until the next reset, mode change or axis exchange (what the
+        kernel's G98/G99 set): they are not the axis record's, which :meth:`reload_soft_limits` takes
+        back. ValueError when the two would not leave a range (negative < positive)."""
+        neg = self.swe_neg if negative is None else negative
+        pos = self.swe_pos if positive is None else positive
+        if not (math.isfinite(neg) and math.isfinite(pos)) or not neg < pos:
+            raise ValueError(
+                f"axis {self.name}: software limits {neg:g} .. {pos:g} mm: the negative must be less "
+                "than the positive"
+            )
+        self.swe_neg, self.swe_pos = neg, pos
+
+    def reload_soft_limits(self) -> None:
+        """P-AXIS-00177/00178 "Anmerkungen": "Der Wert des Parameters wird bei Reset,
+        Betriebsartenwechsel und Achstausch aus dem Achsdatensatz übernommen": the limits in effect
+        (and the tolerance P-AXIS-00179) become the axis record's again. Called at reset and mode
+        change; axis exchange is not simulated (this is its hook)."""
+        self.swe_neg = mm_from_increments(self.config.swe_neg)
+        self.swe_pos = mm_from_increments(self.config.swe_pos)
+        self.swe_tol = mm_from_increments(self.config.swe_toleranz)
 
     # --- setpoint side --------------------------------------------------------------------
     @property

@@ -5,22 +5,26 @@ update the modal state, build the segment, run every path check (soft limits, wo
 It stays the authority. This module gets the same result faster for the lines that make up nearly all
 of a CAM program:
 
-1. The text is read a megabyte at a time; :class:`~hli_server.engine.nc.plain.PlainTokenizer` classifies
-   every line with numpy - *plain* (words N, G0..G3, F, I/J/K and one-letter axes), *empty*, or *other* -
-   and reads the plain lines' numbers, bit for bit as the parser does.
-2. Every *other* line (comments, ``#CONTROL AREA``, M codes, G90/G91, G17.., G54.., G92, ``X2=..``,
-   anything unusual or wrong) goes to the parser (:class:`~hli_server.engine.nc.parser.BlockReader`) and
-   the decoder, one by one, in program order, exactly as before; so do plain lines while an area is being
-   defined and short stretches of plain lines (fewer than :data:`SMALL_RUN` plus
+1. The channel's interpreter (:mod:`hli_server.engine.nc.interpreter`) runs the program, one statement
+   at a time. Whenever it goes straight on in the main program (no subroutine, no open control block,
+   nothing being skipped), the lines ahead of it are read a window of about a megabyte at a time and
+   :class:`~hli_server.engine.nc.plain.PlainTokenizer` classifies them with numpy - *plain* (words N,
+   G0..G3, F, I/J/K and one-letter axes), *empty*, or *other* - and reads the plain lines' numbers, bit for
+   bit as the parser does.
+2. Every *other* line (comments, ``#`` commands, control statements, variables, calls, M codes, G90/G91,
+   ``X2=..``, anything unusual or wrong) goes to the interpreter and the decoder, exactly as in a run;
+   so do plain lines inside loops and subroutines (the interpreter runs them), plain lines while an area
+   is being defined, and short stretches of plain lines (fewer than :data:`SMALL_RUN` plus
    :data:`SMALL_RUN_PER_AREA` for each active area). A line with only a comment does not end a stretch.
-3. A stretch of plain lines between them is decoded at once: the modal motion and feed, the targets
-   (G90 with the zero offset, G91 summed in program order: the same floats), the segments' boxes; then
-   the blocks that might fail a check are picked, conservatively: a line shorter than 1 µm (the decoder may
-   drop it), a move without feed, an arc without centre, with radius below 1 µm or ends off the circle by
-   nearly the tolerance, a path within :data:`~hli_server.engine.areas.prefilter.MARGIN` of a soft limit,
-   a path the area prefilter (:mod:`hli_server.engine.areas.prefilter`) cannot clear. Those blocks - and
-   only those - are parsed and decoded exactly, in order, with the decoder's state set to what it is
-   before them; every other block only moves the position, which is committed at the stretch's end.
+3. A stretch of plain lines ahead of the interpreter is decoded at once: the modal motion and feed, the
+   targets (G90 with the zero offset, G91 summed in program order: the same floats), the segments' boxes;
+   then the blocks that might fail a check are picked, conservatively: a line shorter than 1 µm (the
+   decoder may drop it), a move without feed, an arc without centre, with radius below 1 µm or ends off
+   the circle by nearly the tolerance, a path within :data:`~hli_server.engine.areas.prefilter.MARGIN` of a
+   soft limit, a path the area prefilter (:mod:`hli_server.engine.areas.prefilter`) cannot clear. Those
+   blocks - and only those - are parsed and decoded exactly, in order, with the decoder's state set to
+   what it is before them; every other block only moves the position, which is committed at the
+   stretch's end. The interpreter then goes on after the stretch.
 
 An error stops at the same block with the same alarm, because the block that raises it is decoded
 exactly; a block the batch clears cannot fail a check. ``tests/unit/test_batch_check.py`` holds the
@@ -34,7 +38,6 @@ block by block (:func:`unsupported`).
 from __future__ import annotations
 
 import bisect
-import io
 import math
 from collections.abc import Iterator
 from typing import TextIO
@@ -49,15 +52,15 @@ from hli_server.engine.channel import Channel
 from hli_server.engine.decoder import Decoder, PathCheck
 from hli_server.engine.monitors.collision import MoveApartCheck
 from hli_server.engine.monitors.soft_limits import SoftLimitPathCheck
-from hli_server.engine.nc.blocks import Block, NcError
+from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.parser import BlockReader
 from hli_server.engine.nc.plain import COL_F, COL_G, COL_I, EMPTY, OTHER, PLAIN, PlainChunk, PlainTokenizer
+from hli_server.engine.nc.source import ProgramText
+from hli_server.engine.nc.syntax import strip_comments
 from hli_server.engine.planner import Marker, Motion
 
-__all__ = ["CHUNK_CHARS", "SMALL_RUN", "SMALL_RUN_PER_AREA", "BatchGeometryCheck", "unsupported"]
+__all__ = ["SMALL_RUN", "SMALL_RUN_PER_AREA", "BatchGeometryCheck", "unsupported"]
 
-CHUNK_CHARS = 1 << 20
-"""Characters read at a time (about 40,000 lines of a CAM program): memory stays flat."""
 SMALL_RUN = 26
 """Fewer plain lines than this between two other lines are decoded one by one: numpy's set-up per
 stretch would cost more than it saves (measured without areas, compiled: a stretch of 20 lines between
@@ -72,7 +75,6 @@ vectorized this was 12 (20 areas: 0.88x at 200 lines)."""
 _TAU = 2.0 * math.pi
 _PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}
 """As the decoder's: indices into the main axes of the plane's first and second axis."""
-_ADDRESS_LETTERS = frozenset("GMFNIJKSTDH")
 _NO_LINES: Iterator[str] = iter(())
 
 Floats = npt.NDArray[np.float64]
@@ -97,35 +99,35 @@ def _area_check(check: PathCheck) -> AreaPathCheck | None:
 
 
 class _Chunk:
-    """One chunk of whole lines: its bytes, its lines' kinds and words, and the next line to handle."""
+    """One window of whole lines: their kinds and words, the lines themselves, the *other* lines."""
 
-    __slots__ = ("cursor", "data", "first_line", "others", "plain")
+    __slots__ = ("first_line", "lines_text", "others", "plain")
 
-    def __init__(self, data: bytes, plain: PlainChunk, first_line: int) -> None:
-        self.data = data
+    def __init__(self, lines: list[str], plain: PlainChunk, first_line: int) -> None:
+        self.lines_text = lines
         self.plain = plain
         self.first_line = first_line
         """Line number of the chunk's first line."""
         self.others: list[int] = np.flatnonzero(plain.kind == OTHER).tolist()
-        self.cursor = 0
 
     @property
     def lines(self) -> int:
         return self.plain.lines
 
     def raw(self, k: int) -> str:
-        """Line ``k`` as the parser is given it (with its line end)."""
-        start = int(self.plain.starts[k])
-        end = int(self.plain.ends[k])
-        return self.data[start : end + 1].decode("utf-8")
+        """Line ``k`` as the parser is given it."""
+        return self.lines_text[k]
 
 
 class BatchGeometryCheck:
     """Decodes a program for ``check --geometry-only`` on ``channel`` (see the module's description).
 
-    :meth:`items` yields what the exact decoder would have yielded for the blocks it decodes exactly
-    (motions, markers, errors), in program order, and an empty list after each chunk (progress); the
-    caller handles them as it handles :meth:`Decoder.next_items`. :attr:`line` is the last line handled."""
+    The channel's interpreter runs the program, one statement at a time; while it goes straight on in
+    the main program (:attr:`Interpreter.at_main_level`), the plain lines ahead of it are decoded here,
+    many at a time. :meth:`items` yields what the exact decoder would have yielded (motions, markers,
+    errors), in program order, and an empty list now and then (progress); the caller handles them as it
+    handles :meth:`Decoder.next_items` (running action markers at once). :attr:`line` is the main
+    program's line reached."""
 
     def __init__(self, channel: Channel) -> None:
         why = unsupported(channel)
@@ -135,15 +137,11 @@ class BatchGeometryCheck:
         self.decoder: Decoder = channel.decoder
         decoder = self.decoder
         self._reader = BlockReader(channel.axis_names)
-        letters = [
-            name.upper()
-            for name in decoder.axes
-            if len(name) == 1 and name.upper() not in _ADDRESS_LETTERS and "A" <= name.upper() <= "Z"
-        ]
+        single = channel.compiler.single_letter_axes
+        letters = [name.upper() for name in decoder.axes if name.upper() in single]
         self._tokenizer = PlainTokenizer(letters)
         column = {letter: 6 + k for k, letter in enumerate(letters)}
         self._axis_column: list[int] = [column.get(name.upper(), -1) for name in decoder.axes]
-        self._chunks: Iterator[_Chunk] = iter(())
         self._chunk: _Chunk | None = None
         self.line = 0
         self.batched_blocks = 0
@@ -151,113 +149,74 @@ class BatchGeometryCheck:
         self.exact_blocks = 0
 
     # --- the program -----------------------------------------------------------------------------
-    def items(self, text: str | TextIO) -> Iterator[list[Item]]:
+    def items(
+        self, text: str | TextIO | ProgramText, *, iteration_cap: int | None = None
+    ) -> Iterator[list[Item]]:
         decoder = self.decoder
-        decoder.start(iter(()), self.channel.setpoints())
-        self._chunks = self._read(io.StringIO(text, newline="") if isinstance(text, str) else text)
+        interpreter = self.channel.interpreter
+        source = text if isinstance(text, ProgramText) else ProgramText(text, self.channel.program_name)
+        interpreter.start(source, source.name)
+        decoder.start(interpreter, self.channel.setpoints())
+        saved = (interpreter.budget, interpreter.iteration_cap)
+        interpreter.budget = 1  # one statement at a time: back here whenever it goes straight on
+        interpreter.iteration_cap = iteration_cap
         self._chunk = None
-        while (chunk := self._next_chunk()) is not None:
-            i = chunk.cursor
-            at = bisect.bisect_left(chunk.others, i)
-            o = chunk.others[at] if at < len(chunk.others) else chunk.lines
-            if o > i:
-                yield from self._plain_lines(chunk, i, o)
-                if decoder.finished:
-                    return
-                chunk.cursor = o
-            if o < chunk.lines:
-                chunk.cursor = o + 1
-                yield from self._other_line(chunk, o)
-                if decoder.finished:
-                    return
-            if chunk.cursor >= chunk.lines:
-                yield []
-        if not decoder.finished:
-            yield decoder.end_of_program()
+        try:
+            while not self._finished():
+                if interpreter.at_main_level:
+                    line = interpreter.main_line
+                    chunk = self._chunk_at(source, line)
+                    if chunk is not None:
+                        i = line - chunk.first_line
+                        at = bisect.bisect_left(chunk.others, i)
+                        o = chunk.others[at] if at < len(chunk.others) else chunk.lines
+                        if o > i:
+                            yield from self._plain_lines(chunk, i, o)
+                            if self._finished():
+                                return
+                            interpreter.advance_to(chunk.first_line + o)
+                            self.line = chunk.first_line + o
+                            if o >= chunk.lines:
+                                yield []
+                            continue
+                interpreter.refill()
+                if not decoder.waiting:
+                    self.exact_blocks += 1
+                yield decoder.next_items()
+                self.line = interpreter.main_line
+        finally:
+            interpreter.budget, interpreter.iteration_cap = saved
 
-    def _next_chunk(self) -> _Chunk | None:
-        """The current chunk, or the next one if it has no line left; None at the end of the text."""
+    def _finished(self) -> bool:
+        return self.decoder.finished
+
+    def _chunk_at(self, source: ProgramText, line: int) -> _Chunk | None:
+        """The chunk of lines holding ``line`` (None past the end of the text)."""
         chunk = self._chunk
-        while chunk is None or chunk.cursor >= chunk.lines:
-            chunk = next(self._chunks, None)
-            if chunk is None:
-                return None
-            self._chunk = chunk
+        if chunk is not None and chunk.first_line <= line < chunk.first_line + chunk.lines:
+            return chunk
+        window = source.window_of(line)
+        if window is None or not window.lines:
+            return None
+        lines = window.lines
+        data = (window.text or "\n".join(lines) + "\n").encode("utf-8", "surrogatepass")
+        plain = self._tokenizer.tokenize(data)
+        chunk = _Chunk(lines, plain, window.first)
+        self._comments_as_blank(chunk)
+        self._chunk = chunk
         return chunk
 
-    def _read(self, source: TextIO) -> Iterator[_Chunk]:
-        """Chunks of whole lines; ``\\r\\n`` and a lone ``\\r`` end a line as ``\\n`` does (as the parser's
-        file iteration with ``newline=""`` splits them)."""
-        pending = ""
-        first_line = 1
-        while True:
-            data = source.read(CHUNK_CHARS)
-            eof = not data
-            text = pending + data
-            if not eof and text.endswith("\r"):
-                text, pending = text[:-1], "\r"  # its "\n" may come with the next read
-            else:
-                pending = ""
-            if "\r" in text:
-                text = text.replace("\r\n", "\n").replace("\r", "\n")
-            if eof:
-                if not text:
-                    return
-                if not text.endswith("\n"):
-                    text += "\n"
-                cut = len(text)
-            else:
-                cut = text.rfind("\n") + 1
-            pending = text[cut:] + pending
-            if cut:
-                data_bytes = text[:cut].encode("utf-8")
-                plain = self._tokenizer.tokenize(data_bytes)
-                chunk = _Chunk(data_bytes, plain, first_line)
-                self._comments_as_blank(chunk)
-                yield chunk
-                first_line += plain.lines
-            if eof:
-                return
-
     def _comments_as_blank(self, chunk: _Chunk) -> None:
-        """A line with only a comment gives the parser no block: it does not end a stretch of plain
-        lines (a CAM program's comments would otherwise cut it into stretches too short to batch)."""
+        """A line with only a comment gives no block: it does not end a stretch of plain lines (a CAM
+        program's comments would otherwise cut it into stretches too short to batch)."""
         kept: list[int] = []
         for k in chunk.others:
             raw = chunk.raw(k)
-            if raw.lstrip()[:1] in ("(", ";"):
-                try:
-                    block, _ = self._reader.read(raw, chunk.first_line + k, _NO_LINES)
-                except NcError:
-                    kept.append(k)  # an unclosed comment: the parser raises it in its turn
-                    continue
-                if block is None:
-                    chunk.plain.kind[k] = EMPTY
-                    continue
+            if raw.lstrip()[:1] in ("(", ";") and not strip_comments(raw).strip():
+                chunk.plain.kind[k] = EMPTY
+                continue
             kept.append(k)
         chunk.others = kept
-
-    def _more_lines(self) -> Iterator[str]:
-        """The lines after the current one (a wrapped ``#CONTROL AREA`` continues on them)."""
-        while (chunk := self._next_chunk()) is not None:
-            k = chunk.cursor
-            chunk.cursor += 1
-            yield chunk.raw(k)
-
-    # --- other lines: the parser and the decoder ---------------------------------------------------
-    def _other_line(self, chunk: _Chunk, k: int) -> Iterator[list[Item]]:
-        decoder = self.decoder
-        line = chunk.first_line + k
-        self.line = line
-        try:
-            block, last = self._reader.read(chunk.raw(k), line, self._more_lines())
-        except NcError as exc:
-            yield decoder.syntax_error(exc)
-            return
-        self.line = last
-        if block is not None:
-            self.exact_blocks += 1
-            yield decoder.decode_block(block)
 
     def _exact(self, chunk: _Chunk, k: int) -> Block:
         block, _ = self._reader.read(chunk.raw(k), chunk.first_line + k, _NO_LINES)

@@ -13,24 +13,35 @@ accepted, the path reached M30, an error reaction, ...) and tells the table.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from typing import Protocol
 
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
 from hli_server.engine.decoder import DecodeError, Decoder
+from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import Point
 from hli_server.engine.hli import AxisHli, ChannelHli
 from hli_server.engine.nc.blocks import Block
-from hli_server.engine.nc.parser import iter_blocks
+from hli_server.engine.nc.interpreter import Interpreter
+from hli_server.engine.nc.syntax import Compiler
 from hli_server.engine.planner import Marker, MarkerKind, Planner
 from hli_server.engine.ports import MachinePort
+from hli_server.engine.programs import ProgramFile
 from schemas.config import ChannelConfig
-from schemas.events import Alarm, ControlUnitChanged, HoldChanged, ModeChanged, ProgramStateChanged
+from schemas.events import (
+    Alarm,
+    ControlUnitChanged,
+    HoldChanged,
+    ModeChanged,
+    NcFileWrite,
+    NcMessage,
+    ProgramStateChanged,
+)
 from schemas.units import mm_from_increments
 from schemas.wire import HoldSource, Mode, ProgramState
 
-__all__ = ["LOOKAHEAD_ITEMS", "Channel", "JogGuard"]
+__all__ = ["LOOKAHEAD_ITEMS", "Channel", "ChannelHost", "JogGuard"]
 
 LOOKAHEAD_ITEMS = 64
 """Motion blocks decoded ahead of the interpolator (the look-ahead buffer, P-STUP-00070's size)."""
@@ -47,6 +58,90 @@ class JogGuard(Protocol):
     ``stop_point`` in a forbidden place (C14-19, E-06)? ``path`` is (current, stop_point)."""
 
     def must_brake(self, channel: Channel, current: Point, stop_point: Point) -> bool: ...
+
+
+class ChannelHost:
+    """What the interpreter asks of its channel (:class:`~hli_server.engine.nc.interpreter.Host`):
+    programs, V.E. variables, messages, warnings, and the system variables it simulates (V.A., V.G.)."""
+
+    def __init__(self, channel: Channel) -> None:
+        self._channel = channel
+
+    @property
+    def channel_number(self) -> int:
+        return self._channel.number
+
+    @property
+    def external(self) -> ExternalVariables:
+        return self._channel.machine.external
+
+    def find_program(self, name: str) -> ProgramFile | None:
+        return self._channel.machine.programs.find(name)
+
+    def searched(self) -> tuple[str, ...]:
+        return self._channel.machine.programs.searched()
+
+    def message(self, text: str, save: bool, file: str, program: str, line: int, block: str) -> None:
+        ch = self._channel
+        m = ch.machine
+        m.emit(
+            NcMessage(
+                cycle=m.cycle,
+                time_s=m.cycle * ch.t_a,
+                channel=ch.number,
+                text=text,
+                save=save,
+                program=program,
+                line=line,
+                block=block,
+            )
+        )
+        if save:
+            m.emit(
+                NcFileWrite(cycle=m.cycle, time_s=m.cycle * ch.t_a, channel=ch.number, file=file, text=text)
+            )
+
+    def warn(self, alarm: int, message: str, line: int, block: str) -> None:
+        ch = self._channel
+        ch.machine.raise_alarm(alarm, ch, message, line=line, block=block)
+
+    def axis_name(self, index: int) -> str | None:
+        names = self._channel.axis_names
+        return names[index] if 0 <= index < len(names) else None
+
+    def axis_value(self, variable: str, axis: str) -> float | None:
+        """V.A.: ABS and PROG (the end of the last block, program coordinates), ACT_POS (the axis'
+        command position now, after the flush the read causes), the software limits."""
+        ch = self._channel
+        decoder = ch.decoder
+        k = decoder.index.get(axis)
+        if k is None:
+            return None
+        if variable in ("ABS", "PROG"):
+            return decoder.position[k] - decoder.modal.offset(axis)
+        if variable == "ACT_POS":
+            return ch.axes[k].setpoint - decoder.modal.offset(axis)
+        if variable in ("-SWE", "-SWE_MDS"):
+            return ch.axes[k].swe_neg
+        if variable in ("+SWE", "+SWE_MDS"):
+            return ch.axes[k].swe_pos
+        return None
+
+    def global_value(self, name: str) -> float | None:
+        """V.G.: BLOCK_NR, FEEDRATE, FEEDRATE_MODE, I, J, K (the last circle's), MASS_MM, MASS_360."""
+        decoder = self._channel.decoder
+        if name == "BLOCK_NR":
+            block = decoder.current_block
+            return float(block.number or 0) if block is not None else 0.0
+        if name == "FEEDRATE":
+            return decoder.modal.feed or 0.0
+        if name == "FEEDRATE_MODE":
+            return 94.0
+        if name in ("MASS_MM", "MASS_360"):
+            return 0.0
+        if name in ("I", "J", "K"):
+            return decoder.last_centre.get(name, 0.0)
+        return None
 
 
 class Channel:
@@ -82,6 +177,9 @@ class Channel:
             {a.name: (a.v_max, a.v_rapid, a.a_max) for a in axes},
             zero_offsets,
         )
+        self.compiler = Compiler(self.axis_names, config.main_axes)
+        self.interpreter = Interpreter(self.compiler, ChannelHost(self))
+        """Runs the NC programs of this channel ahead of the motion (N-01..N-08)."""
         self.planner = Planner(t_a=self.t_a, feedhold_decel=config.feedhold_deceleration)
         self.jog_guards: list[JogGuard] = []
         self.jog_velocity: list[float] = [0.0] * len(axes)
@@ -134,7 +232,7 @@ class Channel:
         m.emit(
             ProgramStateChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * self.t_a,
+                time_s=m.time,
                 channel=self.number,
                 state=new.label,
                 code=int(new),
@@ -149,7 +247,7 @@ class Channel:
         m.emit(
             ModeChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * self.t_a,
+                time_s=m.time,
                 channel=self.number,
                 mode=new.label,
                 previous=previous.label,
@@ -261,7 +359,7 @@ class Channel:
         m.emit(
             ControlUnitChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * self.t_a,
+                time_s=m.time,
                 channel=self.number,
                 unit=f"gpCh[{self.index}]^bahn_mc_control.{unit}",
                 state=state,
@@ -321,9 +419,9 @@ class Channel:
                 ALARM_STILL_BRAKING,
             )
             return
-        blocks: Iterator[Block] = iter_blocks(self.program_text, self.axis_names)
+        self.interpreter.start(self.program_text, self.program_name)
         self.planner.clear()
-        self.decoder.start(blocks, self.setpoints())
+        self.decoder.start(self.interpreter, self.setpoints())
         self.aborting = False
         self.current_block = None
         self._state.apply(Cause.START)
@@ -336,11 +434,14 @@ class Channel:
             axis.start_independent_stop(axis.a_max, self.t_a)
         self.planner.clear()
         self.decoder.reset_modal()
+        self.interpreter.reset()
         self.aborting = False
         self.jog_velocity = [0.0] * len(self.axes)
         self._jog_keys = [0] * len(self.axes)
         self.current_block = None
         self._state.apply(Cause.RESET)
+        for axis in self.axes:
+            axis.reload_soft_limits()  # P-AXIS-00177/00178: from the axis record at reset
         self.machine.channel_reset(self)
 
     def change_mode(self, mode: int) -> None:
@@ -357,6 +458,9 @@ class Channel:
             return
         if not self.machine.allow_mode_change(self, target):
             return
+        if target != self.mode:
+            for axis in self.axes:
+                axis.reload_soft_limits()  # P-AXIS-00177/00178: from the axis record at a mode change
         self._state.set_mode(target)
 
     def abort(self) -> None:
@@ -413,7 +517,7 @@ class Channel:
         m.emit(
             HoldChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * self.t_a,
+                time_s=m.time,
                 channel=self.number,
                 hold_source=int(holds),
                 sources=tuple(holds.labels),
@@ -421,9 +525,17 @@ class Channel:
         )
 
     def _fill(self) -> None:
-        while self.planner.motion_items < LOOKAHEAD_ITEMS and not self.decoder.finished:
-            for item in self.decoder.next_items():
-                self.planner.push(item)
+        """Decode ahead: up to the look-ahead's size, within the interpreter's budget for this cycle
+        (issue 20: a program that computes without moving goes on next cycle)."""
+        self.interpreter.refill()
+        decoder = self.decoder
+        planner = self.planner
+        while planner.motion_items < LOOKAHEAD_ITEMS and not decoder.finished:
+            items = decoder.next_items()
+            if not items:
+                break
+            for item in items:
+                planner.push(item)
 
     def _apply(self, point: Point | None) -> None:
         if point is None:
@@ -434,7 +546,7 @@ class Channel:
     def _marker(self, marker: Marker) -> None:
         if marker.block is not None:
             self.current_block = marker.block
-        if marker.kind == MarkerKind.ACTION:
+        if marker.kind in (MarkerKind.ACTION, MarkerKind.SYNC):
             marker.payload()
         elif marker.kind == MarkerKind.END:
             self.warn_missing_program_end(marker)
@@ -452,8 +564,11 @@ class Channel:
         block = marker.block
         line = block.line if block is not None else err.params.get("line")
         label = block.label if block is not None else err.params.get("block")
+        params = err.params
+        if block is not None and block.program and "program" not in params:
+            params = {**params, "program": block.program}
         self.machine.raise_alarm(
-            err.alarm, self, err.message, line=line, block=label, params=err.params, axis=err.axis
+            err.alarm, self, err.message, line=line, block=label, params=params, axis=err.axis
         )
 
     def warn_missing_program_end(self, marker: Marker) -> None:

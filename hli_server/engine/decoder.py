@@ -19,10 +19,12 @@ from typing import Any, Protocol
 
 from hli_server.engine.geometry import LineSegment, Point, Segment, arc_from_centre
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
+from hli_server.engine.nc.interpreter import PAUSE, Directive, FlushStop, FlushWait, MeasMode, SyncAction
 from hli_server.engine.planner import Marker, MarkerKind, Motion
 
 __all__ = [
     "AreaHandler",
+    "BlockFeed",
     "DecodeError",
     "Decoder",
     "MeasureHandler",
@@ -43,6 +45,28 @@ class DecodeError:
     message: str
     params: dict[str, Any] = field(default_factory=dict)
     axis: str | None = None
+
+
+class BlockFeed(Protocol):
+    """Where the decoder's blocks come from: the interpreter (:class:`~hli_server.engine.nc.interpreter.
+    Interpreter`), or blocks already parsed. ``next`` gives a block, a directive, or None at the end of
+    the program's text; it raises :class:`NcError` for a block that cannot run."""
+
+    def next(self) -> Block | Directive | None: ...
+
+
+class _Blocks:
+    """A feed of blocks already parsed (an iterator, as the parser's ``iter_blocks`` gives)."""
+
+    def __init__(self, blocks: Iterator[Block]) -> None:
+        self._blocks = blocks
+
+    def next(self) -> Block | Directive | None:
+        return next(self._blocks, None)
+
+
+def _nothing() -> None:
+    """The action of a ``#FLUSH`` marker: the path stops there, nothing else happens."""
 
 
 class PathCheck(Protocol):
@@ -73,6 +97,8 @@ class MeasuringMove:
     segment: LineSegment
     done: Callable[[], None]
     tag: Any = None
+    feed: float | None = None
+    """mm/min: the measuring feed when it is not the programmed F (measuring type 2: P-AXIS-00215)."""
 
 
 class MeasureHandler(Protocol):
@@ -96,6 +122,17 @@ class ModalState:
     """G54..G59 -> axis -> mm"""
     g92: dict[str, float] = field(default_factory=dict)
     in_area_definition: bool = False
+    accel_weight_feed: float = 1.0
+    """G131 (acceleration weighting of G01/G02/G03, a fraction; the manual's percent / 100)."""
+    accel_weight_rapid: float = 1.0
+    """G231 (acceleration weighting of G00)."""
+    axis_accel_weight_feed: dict[str, float] = field(default_factory=dict)
+    """G130 <axis><percent>: per axis, for G01/G02/G03."""
+    axis_accel_weight_rapid: dict[str, float] = field(default_factory=dict)
+    """G230 <axis><percent>: per axis, for G00."""
+    meas_type: int | None = None
+    """The measuring type of G100 selected in the program (the kernel's ``#MEAS MODE [n]``); None: the
+    channel's default P-CHAN-00057. ``#MEAS MODE`` sets it (the interpreter's ``MeasMode``)."""
 
     def offset(self, axis: str) -> float:
         base = self.zero_offsets.get(self.zero_offset, {}).get(axis, 0.0) if self.zero_offset else 0.0
@@ -125,20 +162,26 @@ class Decoder:
         """axis -> (v_max mm/s, v_rapid mm/s, a_max mm/s²)"""
         self.modal = ModalState(zero_offsets=zero_offsets)
         self.position: list[float] = [0.0] * len(axes)
-        self.blocks: Iterator[Block] | None = None
+        self.blocks: BlockFeed | None = None
         self.finished = False
+        self.waiting = False
+        """Decoding waits for the path (``#FLUSH WAIT``) until the marker's action is run."""
         self.path_checks: list[PathCheck] = []
         self.area_handler: AreaHandler | None = None
         self.measure_handler: MeasureHandler | None = None
         self.current_block: Block | None = None
         self._position_before_area: list[float] | None = None
         self.blocks_decoded = 0
+        self.last_centre: dict[str, float] = {}
+        """I, J, K of the last circle programmed (V.G.I, V.G.J, V.G.K)."""
 
     # --- program control -----------------------------------------------------------------
-    def start(self, blocks: Iterator[Block], position: list[float]) -> None:
-        self.blocks = blocks
+    def start(self, blocks: BlockFeed | Iterator[Block], position: list[float]) -> None:
+        """Decode from ``blocks`` (the interpreter, or parsed blocks) starting at ``position``."""
+        self.blocks = _Blocks(blocks) if isinstance(blocks, Iterator) else blocks
         self.position = list(position)
         self.finished = False
+        self.waiting = False
         self.blocks_decoded = 0
         self.modal.in_area_definition = False
 
@@ -152,21 +195,50 @@ class Decoder:
         self.modal = ModalState(zero_offsets=self.modal.zero_offsets)
         self.blocks = None
         self.finished = True
+        self.waiting = False
 
     def next_items(self) -> list[Motion | Marker]:
-        """Decode until at least one item is produced or the program ends."""
-        if self.finished or self.blocks is None:
+        """Decode until at least one item is produced, the program ends, or the feed pauses (its
+        budget for this cycle is spent, or it waits for the path): then the list is empty."""
+        if self.finished or self.waiting or self.blocks is None:
             return []
+        feed = self.blocks
         while True:
             try:
-                block = next(self.blocks)
-            except StopIteration:
-                return self.end_of_program()
+                out = feed.next()
             except NcError as exc:
                 return self.syntax_error(exc)
-            items = self.decode_block(block)
-            if items:
-                return items
+            if out is None:
+                return self.end_of_program()
+            if isinstance(out, Block):
+                items = self.decode_block(out)
+                if items:
+                    return items
+                continue
+            return self.directive(out)
+
+    def directive(self, out: Directive) -> list[Motion | Marker]:
+        """The planner's item for an interpreter's directive (see :mod:`hli_server.engine.nc.interpreter`)."""
+        if out is PAUSE:
+            return []
+        block = out.block
+        if block is not None:
+            self.current_block = block
+        if isinstance(out, SyncAction):
+            return [Marker(MarkerKind.SYNC, block, payload=out.action)]
+        if isinstance(out, FlushWait):
+            self.waiting = True
+            return [Marker(MarkerKind.ACTION, block, payload=self._end_wait)]
+        if isinstance(out, FlushStop):
+            return [Marker(MarkerKind.ACTION, block, payload=_nothing)]
+        if isinstance(out, MeasMode):
+            self.modal.meas_type = out.meas_type  # modal, decoded in order (the G100 blocks after it)
+            return []
+        return []  # pragma: no cover - every directive is handled above
+
+    def _end_wait(self) -> None:
+        """The path reached a ``#FLUSH WAIT``: decoding goes on."""
+        self.waiting = False
 
     # --- the steps of next_items, also driven one by one by the batch geometry check -------------
     def decode_block(self, block: Block) -> list[Motion | Marker]:
@@ -189,13 +261,10 @@ class Decoder:
     def syntax_error(self, exc: NcError) -> list[Motion | Marker]:
         """A line the parser could not read: the error marker with the place the parser named."""
         self.finished = True
-        return [
-            Marker(
-                MarkerKind.ERROR,
-                None,
-                payload=DecodeError(exc.alarm, exc.message, {"line": exc.line, "block": exc.block}),
-            )
-        ]
+        params: dict[str, Any] = {"line": exc.line, "block": exc.block, **exc.params}
+        if exc.program:
+            params["program"] = exc.program
+        return [Marker(MarkerKind.ERROR, None, payload=DecodeError(exc.alarm, exc.message, params))]
 
     # --- one block -------------------------------------------------------------------------
     def _error(self, block: Block, alarm: int, message: str, **params: Any) -> list[Motion | Marker]:
@@ -228,6 +297,8 @@ class Decoder:
                 m.zero_offset = None
             elif g == 100 and self.measure_handler is not None:
                 measuring = True
+            elif g in (130, 131, 230, 231, 132, 133, 134, 233, 333, 334, 338, 339):
+                self._weighting(g, block)
             elif g in (100, 200, 201, 202, 4):
                 return self._error(block, 910110, f"G{g} is not supported in this block context")
         if block.feed is not None:
@@ -254,6 +325,25 @@ class Decoder:
                 items.append(Marker(MarkerKind.END, block, payload=f"M{code:02d}"))
         return items
 
+    def _weighting(self, g: int, block: Block) -> None:
+        """G130/G131/G230/G231: acceleration weighting in percent of the axes' acceleration (manual
+        "Acceleration weighting", 206590731; above 100 % is taken as 100 %: the simulator knows one
+        acceleration per axis). G132..G339 (ramp times, feedhold): accepted, no effect (the simulator's
+        profile has no jerk): docs/nc-language.md."""
+        m = self.modal
+        if g in {131, 231}:
+            weight = min(max(block.extra.get(f"G{g}", 100.0), 0.0), 100.0) / 100.0
+            if g == 131:
+                m.accel_weight_feed = weight
+            else:
+                m.accel_weight_rapid = weight
+        elif g in {130, 230}:
+            weights = m.axis_accel_weight_feed if g == 130 else m.axis_accel_weight_rapid
+            weights.clear()  # "all axes not programmed are set to 100 %"
+            for key, value in block.extra.items():
+                if key.startswith("W:"):
+                    weights[key[2:]] = min(max(value, 0.0), 100.0) / 100.0
+
     def _target(self, block: Block) -> list[float]:
         m = self.modal
         target = list(self.position)
@@ -278,6 +368,7 @@ class Decoder:
             i, j = self.index[first], self.index[second]
             cw = m.motion == 2
             words = dict(block.centre)
+            self.last_centre = words
             wi, wj = _CENTRE_WORDS[plane[0]], _CENTRE_WORDS[plane[1]]
             if wi not in words and wj not in words:
                 return self._error(block, 911002, f"circle G0{m.motion} without centre ({wi}/{wj})")
@@ -331,9 +422,7 @@ class Decoder:
         if not block.axes:
             return self._error(block, 912011, "G100 measuring move without a target position")
         if self.modal.in_area_definition:
-            return self._error(block, 912011, "G100 is not allowed inside an area definition")
-        if self.modal.feed is None:
-            return self._error(block, 911000, "no feed (F word) programmed for the G100 measuring move")
+            return self._error(block, 21793, "G100 is not allowed inside a control area definition")
         segment = LineSegment(tuple(self.position), tuple(self._target(block)))
         if segment.length <= 1e-12:
             return self._error(block, 912011, "G100 measuring move: the target is the current position")
@@ -344,17 +433,18 @@ class Decoder:
             err = check(result.segment, block)
             if err is not None:
                 return [Marker(MarkerKind.ERROR, block, payload=err)]
-        v_max, accel = self._limits(result.segment, rapid=False)
+        v_max, accel = self._limits(result.segment, rapid=False, feed=result.feed)
         motion = Motion(
             segment=result.segment, block=block, v_max=v_max, accel=accel, exact_stop=True, tag=result.tag
         )
         self.finished = True  # until result.done resumes from where the move ended
         return [motion, Marker(MarkerKind.ACTION, block, payload=result.done)]
 
-    def _limits(self, segment: Segment, rapid: bool) -> tuple[float, float]:
-        """Path velocity and acceleration the axes allow along the segment (mm/s, mm/s²)."""
+    def _limits(self, segment: Segment, rapid: bool, feed: float | None = None) -> tuple[float, float]:
+        """Path velocity and acceleration the axes allow along the segment (mm/s, mm/s²); ``feed``
+        (mm/min) instead of the programmed F where given."""
         length = segment.length
-        v = math.inf if rapid else (self.modal.feed or 0.0) / 60.0
+        v = math.inf if rapid else (feed if feed is not None else self.modal.feed or 0.0) / 60.0
         a = math.inf
         if isinstance(segment, LineSegment):
             for k, name in enumerate(self.axes):
@@ -378,7 +468,19 @@ class Decoder:
             v = min(v, math.sqrt(a * segment.radius))
         if math.isinf(a):
             a = 1000.0
-        return v, a
+        return v, a * self._weight(segment, rapid)
+
+    def _weight(self, segment: Segment, rapid: bool) -> float:
+        """The acceleration weighting of G130/G131 (feed) or G230/G231 (rapid) for this segment."""
+        m = self.modal
+        weight = m.accel_weight_rapid if rapid else m.accel_weight_feed
+        per_axis = m.axis_accel_weight_rapid if rapid else m.axis_accel_weight_feed
+        if per_axis:
+            for k, name in enumerate(self.axes):
+                w = per_axis.get(name)
+                if w is not None and abs(segment.end[k] - segment.start[k]) > 1e-12:
+                    weight = min(weight, w)
+        return max(weight, 1e-3)
 
     def _area(self, block: Block, cmd: AreaCommand) -> list[Motion | Marker]:
         m = self.modal
@@ -390,9 +492,8 @@ class Decoder:
             m.in_area_definition = True
             # the contour blocks do not move the axes: END puts the position back
             self._position_before_area = list(self.position)
-        elif isinstance(cmd, AreaEnd):
-            if not m.in_area_definition:
-                return self._error(block, 912002, "#CONTROL AREA END without BEGIN")
+        elif isinstance(cmd, AreaEnd) and m.in_area_definition:
+            # (an END without BEGIN goes to the area handler: the kernel's warning 21288, no effect)
             m.in_area_definition = False
             if self._position_before_area is not None:
                 self.position = self._position_before_area

@@ -80,6 +80,9 @@ class ExternalVarSpec:
     synchronous: bool = False
     """Read by the interpolator rather than the decoder: reading it empties the channel first (the
     manual: "Reading a synchronous V.E. variable causes the NC channel to be flushed")."""
+    access_rights: str = "READ_WRITE"
+    """P-EXTV-00006: ``READ_WRITE``, ``READ_ONLY`` or ``WRITE_ONLY``, for NC programs only (the PLC may
+    always read and write; the kernel's 20097 for a read of a write-only variable)."""
 
     @property
     def size(self) -> int:

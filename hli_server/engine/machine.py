@@ -26,6 +26,8 @@ from collections import deque
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar
 
+from pydantic import ValidationError
+
 from hli_server.engine.alarms import ALARMS, Reaction, Severity
 from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis, AxisFaults, check_fault_value
@@ -39,7 +41,7 @@ from hli_server.engine.monitors.position import PositionMonitor
 from hli_server.engine.monitors.soft_limits import SoftLimits
 from hli_server.engine.ports import ChannelRef
 from hli_server.engine.programs import MemoryLibrary, ProgramLibrary
-from schemas.config import MachineConfig
+from schemas.config import AxisConfig, MachineConfig
 from schemas.events import (
     Alarm,
     AlarmRaised,
@@ -72,6 +74,9 @@ first (a block beyond them is refused before the areas look at it), then the are
 limits (they steer the path before interpolation), collision and position monitoring."""
 M = TypeVar("M", bound=Monitor)
 
+SOFT_LIMIT_RECORD_FIELDS: tuple[str, ...] = ("swe_neg", "swe_pos", "swe_toleranz")
+"""The axis record's fields :meth:`Machine.update_axis_record` changes (P-AXIS-00177/00178/00179)."""
+
 
 def _overrides(monitor: Monitor, hook: str) -> bool:
     return getattr(type(monitor), hook) is not getattr(Monitor, hook)
@@ -98,7 +103,9 @@ class Machine:
         self.programs: ProgramLibrary = MemoryLibrary() if programs is None else programs
         self.external = ExternalVariables(
             [
-                ExternalVarSpec(v.name, ExternalType(v.type), tuple(v.dims), v.channel, v.synchronous)
+                ExternalVarSpec(
+                    v.name, ExternalType(v.type), tuple(v.dims), v.channel, v.synchronous, v.access_rights
+                )
                 for v in config.external_variables
             ]
         )
@@ -183,6 +190,31 @@ class Machine:
     def channel_of(self, axis: Axis) -> Channel:
         return self.channels[axis.channel]
 
+    def update_axis_record(self, axis_name: str, **values: int) -> AxisConfig:
+        """Change the software limits in the axis record (a parameter download, 0.1 µm): they take
+        effect where the kernel takes them from the record, at the next reset, mode change or axis
+        exchange (P-AXIS-00177/00178 "Anmerkungen"); until then the limits in effect stay. ValueError
+        for an unknown field or a value the parameter refuses (then nothing changes)."""
+        axis = self.axes_by_name.get(axis_name)
+        if axis is None:
+            raise KeyError(f"no axis {axis_name!r} (axes: {', '.join(self.axes_by_name)})")
+        unknown = sorted(set(values) - set(SOFT_LIMIT_RECORD_FIELDS))
+        if unknown:
+            raise ValueError(
+                f"axis {axis_name}: {', '.join(unknown)} cannot be changed at run time; the software limit "
+                f"parameters can: {', '.join(SOFT_LIMIT_RECORD_FIELDS)}"
+            )
+        try:
+            record = AxisConfig.model_validate({**axis.config.model_dump(), **values})
+        except ValidationError as exc:
+            problems = "; ".join(str(e["msg"]) for e in exc.errors())
+            raise ValueError(f"axis {axis_name}: {problems}") from None
+        axis.config = record
+        self.config = self.config.model_copy(
+            update={"axes": [record if a.name == axis_name else a for a in self.config.axes]}
+        )
+        return record
+
     def inject_fault(self, axis_name: str, **fields: object) -> None:
         """Fault injection (A3-05): set fields of the axis' :class:`AxisFaults` (friction,
         gain_factor, encoder_drift, encoder_stuck, drive_error); effective from the next cycle.
@@ -215,8 +247,9 @@ class Machine:
 
     @property
     def time(self) -> float:
-        """Simulated time [s]."""
-        return self.cycle * self.t_a
+        """Simulated time [s], exact to the µs of the cycle (T_A is whole µs): 0.013, not
+        0.013000000000000001 (only reported, never computed with)."""
+        return self.cycle * self.config.cycle_time_us / 1_000_000
 
     # --- stepping ------------------------------------------------------------------------
     def step(self, cycles: int = 1) -> None:

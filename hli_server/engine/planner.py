@@ -48,7 +48,10 @@ class MarkerKind(StrEnum):
     ERROR = "error"
     """A refused block: its :class:`~hli_server.engine.decoder.DecodeError` is the payload."""
     ACTION = "action"
-    """A callable run in program order when the path reaches it."""
+    """A callable run in program order when the path reaches it (the path comes to rest there)."""
+    SYNC = "sync"
+    """A callable run in program order when the path passes it, without stopping there (a ``#MSG SYN``,
+    a synchronous ``V.E.`` write: issue 20)."""
 
 
 @dataclass(slots=True)
@@ -135,10 +138,13 @@ class Planner:
         self._dirty = True
 
     def _last_motion_before_end(self) -> Motion | None:
-        if not self.queue:
-            return None
-        last = self.queue[-1]
-        return last if isinstance(last, Motion) else None
+        """The last motion of the queue, if only SYNC markers follow it (they do not stop the path)."""
+        for item in reversed(self.queue):
+            if isinstance(item, Motion):
+                return item
+            if item.kind != MarkerKind.SYNC:
+                return None
+        return None
 
     @property
     def motion_items(self) -> int:
@@ -154,7 +160,8 @@ class Planner:
         v_next_entry = 0.0
         for item in reversed(self.queue):
             if isinstance(item, Marker):
-                v_next_entry = 0.0
+                if item.kind != MarkerKind.SYNC:
+                    v_next_entry = 0.0
                 continue
             v_exit = min(item.v_junction, v_next_entry)
             item.v_exit_max = v_exit
@@ -197,7 +204,7 @@ class Planner:
         for item in self.queue:
             if isinstance(item, Motion):
                 return item
-            if item.kind != MarkerKind.ACTION:
+            if item.kind not in (MarkerKind.ACTION, MarkerKind.SYNC):
                 return None
         return None
 
@@ -211,6 +218,8 @@ class Planner:
             if item.s_start > until:
                 return until
             if isinstance(item, Marker):
+                if item.kind == MarkerKind.SYNC:
+                    continue
                 return max(item.s_start, self.s_abs)
             if item.v_exit_max <= 1e-9:
                 return item.s_start + item.length
@@ -239,7 +248,7 @@ class Planner:
             marker = self.queue.popleft()
             assert isinstance(marker, Marker)
             reached.append(marker)
-            if marker.kind != MarkerKind.ACTION:
+            if marker.kind not in (MarkerKind.ACTION, MarkerKind.SYNC):
                 return None, reached
         if not self.queue:
             self.velocity = 0.0
@@ -287,6 +296,11 @@ class Planner:
             self.queue.popleft()
             self._motions -= 1
             self.position_in_item = 0.0
+            # SYNC markers are passed on the way (their actions run this cycle, in program order)
+            while self.queue and isinstance(self.queue[0], Marker) and self.queue[0].kind == MarkerKind.SYNC:
+                passed = self.queue.popleft()
+                assert isinstance(passed, Marker)
+                reached.append(passed)
             nxt = self.queue[0] if self.queue else None
             if not isinstance(nxt, Motion) or item.v_exit_max <= 1e-9:
                 self.velocity = 0.0  # standstill at the end of the item

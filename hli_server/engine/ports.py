@@ -35,6 +35,11 @@ class MachinePort(Protocol):
     def t_a(self) -> float: ...
 
     @property
+    def time(self) -> float:
+        """Simulated time [s] of this cycle, exact to the µs (what events report)."""
+        ...
+
+    @property
     def read_program(self) -> Callable[[str], str] | None: ...
 
     @property

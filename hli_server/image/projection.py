@@ -67,7 +67,7 @@ def compile_projection(layout: Layout) -> Projection:
     """Generate and compile the pack/unpack functions of both halves of ``layout``."""
     chunks: list[str] = []
     for d in Direction:
-        signals = layout.half(d)
+        signals = layout.hli_half(d)  # the V.E. area is the store's (hli_server/image/external.py)
         lines, _, fields = _parents(signals)
         prolog = ["    _ch = machine.channels", "    _ax = machine.axes", *lines]
         args = ",\n        ".join(fields) if fields else ""
@@ -125,7 +125,7 @@ def diagnose(layout: Layout, machine: MachineHli, direction: Direction, exc: Bas
             f"the engine has {counts[0]} channels and {counts[1]} axes, the image layout "
             f"{len(layout.channels)} and {len(layout.axes)}: build both from the same configuration"
         )
-    for s in layout.half(direction):
+    for s in layout.hli_half(direction):
         try:
             value = engine_value(machine, s)
         except AttributeError as err:

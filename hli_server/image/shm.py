@@ -50,7 +50,9 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Final
 
+from hli_server.engine.external import ExternalVariables
 from hli_server.engine.hli import MachineHli
+from hli_server.image.external import ExternalSync
 from hli_server.image.projection import Projection, compile_projection, diagnose
 from schemas import image_format as fmt
 from schemas.layout import Direction, Layout, Signal, SignalType, SignalValueError
@@ -175,7 +177,8 @@ class ProcessImage:
         self.layout = layout
         self.plan = plan
         self._projection: Projection = compile_projection(layout)
-        self._p2c_struct = layout.struct(_P2C)
+        self._p2c_struct = _field_struct(list(layout.hli_half(_P2C)))
+        self._external = ExternalSync(layout, plan.p2c_offset) if layout.external_signals else None
         self._c2p_struct = struct.Struct("<Q" + layout.struct_format(_C2P).removeprefix("<"))
         self._c2p_private = bytearray(self._c2p_struct.size)
         self._seq = [0, 0]
@@ -364,18 +367,29 @@ class ProcessImage:
         return f"ProcessImage({self.name!r}, {self.backing}, {self.plan.total_size} bytes, {state})"
 
     # --- the cycle ---------------------------------------------------------------------------
-    def latch_into(self, machine: MachineHli) -> None:
-        """Copy the PLC->CNC half (one memcpy) and assign it to the engine's ``_w`` fields."""
+    def latch_into(self, machine: MachineHli) -> bytes:
+        """Copy the PLC->CNC half (one memcpy) and assign it to the engine's ``_w`` fields; returns the
+        bytes latched (what the session recorder keeps, ``hli_server/recording``)."""
         off = self.plan.p2c_offset
         data = bytes(self._buf[off : off + self.plan.p2c_size])
-        values = self._p2c_struct.unpack(data)
+        values = self._p2c_struct.unpack_from(data)
         try:
             self._projection.unpack[_P2C](machine, values)
         except (IndexError, AttributeError) as exc:
             raise diagnose(self.layout, machine, _P2C, exc) from exc
+        if self._external is not None:
+            self._external.latch(data, self._buf)
+        return data
 
-    def publish_from(self, machine: MachineHli, cycle: int) -> None:
-        """Pack the engine's CNC->PLC fields and publish them as ``cycle`` (seqlock, one memcpy)."""
+    def publish_from(self, machine: MachineHli, cycle: int, *, commit: bool = True) -> bytearray:
+        """Pack the engine's CNC->PLC fields and publish them as ``cycle`` (seqlock, one memcpy); the
+        V.E. elements the NC changed go into their fields (``hli_server/image/external.py``).
+
+        Returns the packed buffer (the cycle as u64, then the half; valid until the next call).
+        ``commit=False`` packs without publishing: the readers keep the previous publish (a stalled
+        publish, issue 25's communication fault), and the NC's V.E. writes wait for the next publish."""
+        if commit and self._external is not None:
+            self._external.publish(self._buf)
         private = self._c2p_private
         try:
             self._projection.pack[_C2P](machine, self._c2p_struct.pack_into, private, 0, cycle)
@@ -383,7 +397,9 @@ class ProcessImage:
             if isinstance(exc, struct.error) and not 0 <= cycle < 2**64:
                 raise SignalValueError(f"cycle {cycle} does not fit the image's u64 cycle counter") from exc
             raise diagnose(self.layout, machine, _C2P, exc) from exc
-        self._commit(private, cycle)
+        if commit:
+            self._commit(private, cycle)
+        return private
 
     def publish_bytes(self, half: bytes | bytearray, cycle: int) -> None:
         """Publish a ready-made CNC->PLC half (replay, tests); same protocol as :meth:`publish_from`."""
@@ -412,8 +428,12 @@ class ProcessImage:
         self._buf[start : start + len(cycle_and_half)] = cycle_and_half
         self._end_publish(b, cycle)
 
-    def init_from(self, machine: MachineHli, cycle: int = 0) -> None:
-        """Start-up: the PLC->CNC half takes the engine's ``_w`` values, the CNC->PLC half is published."""
+    def init_from(
+        self, machine: MachineHli, cycle: int = 0, external: ExternalVariables | None = None
+    ) -> None:
+        """Start-up: the PLC->CNC half takes the engine's ``_w`` values, the CNC->PLC half is published.
+        ``external`` is the engine's store of V.E. variables (``machine.external``), which the image
+        keeps in step with its V.E. fields from now on; needed when the layout has any."""
         p2c = bytearray(self.plan.p2c_size)
         try:
             self._projection.pack[_P2C](machine, self._p2c_struct.pack_into, p2c, 0)
@@ -421,6 +441,13 @@ class ProcessImage:
             raise diagnose(self.layout, machine, _P2C, exc) from exc
         off = self.plan.p2c_offset
         self._buf[off : off + len(p2c)] = p2c
+        if self._external is not None:
+            if external is None:
+                raise ValueError(
+                    f"the image layout has {len(self.layout.external_signals)} V.E. elements: pass the "
+                    "engine's store (init_from(hli, cycle, external=machine.external))"
+                )
+            self._external.init(self._buf, external)
         self.publish_from(machine, cycle)
 
     @property
@@ -488,17 +515,37 @@ def _field_struct(signals: list[Signal], head: str = "") -> struct.Struct:
     return struct.Struct("".join(parts))
 
 
+_NUMPY_TYPE = {"?": "?", "i": "<i4", "I": "<u4", "d": "<f8", "Q": "<u8"}
+
+
 class SignalRecorder:
-    """Chosen signals of every publish, kept as rows (H-07: per-cycle traces).
+    """Chosen signals of every publish, kept packed (H-07: per-cycle traces).
 
     Cheap per cycle: :meth:`sample` is one ``unpack_from`` for the CNC->PLC signals (with the
-    publish's cycle) and one for the PLC->CNC signals, appended to a list; the columns are built
-    once, by :meth:`columns`. Sample on the writer's side, right after a publish (the runtime does):
-    the newest buffer is then not being written, so no seqlock retry is needed. PLC->CNC values are
-    those of the live half at that moment (what the cycle latched, unless a PLC wrote since).
+    publish's cycle) and one for the PLC->CNC signals, packed without gaps onto a ``bytearray``
+    (the signals' own widths: 2,000,000 cycles of one LREAL take 32 MB, not the 200 MB of Python
+    objects an earlier version kept, issue 27 finding 9); the columns are built once, as numpy arrays,
+    by :meth:`columns`. Sample on the writer's side, right after a publish (the runtime does): the newest
+    buffer is then not being written, so no seqlock retry is needed. PLC->CNC values are those of the
+    live half at that moment (what the cycle latched, unless a PLC wrote since).
     """
 
-    __slots__ = ("_c2p", "_c2p_rows", "_image", "_order", "_p2c", "_p2c_off", "_p2c_rows", "paths", "types")
+    __slots__ = (
+        "_c2p",
+        "_c2p_data",
+        "_c2p_pack",
+        "_c2p_types",
+        "_count",
+        "_image",
+        "_order",
+        "_p2c",
+        "_p2c_data",
+        "_p2c_off",
+        "_p2c_pack",
+        "_p2c_types",
+        "paths",
+        "types",
+    )
 
     def __init__(self, image: ProcessImage, st_paths: Iterable[str]) -> None:
         layout = image.layout
@@ -512,32 +559,45 @@ class SignalRecorder:
         c2p = sorted((s for s in signals if s.direction is _C2P), key=lambda s: s.offset)
         p2c = sorted((s for s in signals if s.direction is _P2C), key=lambda s: s.offset)
         self._c2p = _field_struct(c2p, "Q").unpack_from
+        self._c2p_types = "Q" + "".join(s.type.struct_char for s in c2p)
+        self._c2p_pack = struct.Struct("<" + self._c2p_types).pack
         self._p2c = _field_struct(p2c).unpack_from if p2c else None
+        self._p2c_types = "".join(s.type.struct_char for s in p2c)
+        self._p2c_pack = struct.Struct("<" + self._p2c_types).pack
         self._p2c_off = image.plan.p2c_offset
         recorded = [s.st_path for s in c2p] + [s.st_path for s in p2c]
         self._order = [recorded.index(p) for p in paths]
-        self._c2p_rows: list[tuple[Any, ...]] = []
-        self._p2c_rows: list[tuple[Any, ...]] = []
+        self._c2p_data = bytearray()
+        self._p2c_data = bytearray()
+        self._count = 0
 
     def sample(self) -> None:
         """Keep the signals of the newest publish (call right after it)."""
         image = self._image
         buf = image._buf
-        self._c2p_rows.append(self._c2p(buf, image._newest_half_offset()))
+        self._c2p_data += self._c2p_pack(*self._c2p(buf, image._newest_half_offset()))
         if self._p2c is not None:
-            self._p2c_rows.append(self._p2c(buf, self._p2c_off))
+            self._p2c_data += self._p2c_pack(*self._p2c(buf, self._p2c_off))
+        self._count += 1
 
     def __len__(self) -> int:
-        return len(self._c2p_rows)
+        return self._count
 
-    def columns(self) -> tuple[list[int], dict[str, list[Any]]]:
-        """``(cycles, {st_path: values})``: one value per sample, in the order sampled."""
-        rows = self._c2p_rows
-        if not rows:
-            return [], {p: [] for p in self.paths}
-        c2p_cols = list(zip(*rows, strict=True))
-        cycles = list(c2p_cols[0])
-        cols = c2p_cols[1:]
-        if self._p2c is not None:
-            cols += list(zip(*self._p2c_rows, strict=True))
-        return cycles, {p: list(cols[k]) for p, k in zip(self.paths, self._order, strict=True)}
+    def columns(self) -> tuple[Any, dict[str, Any]]:
+        """``(cycles, {st_path: values})`` as numpy arrays (``uint64``; ``bool``, ``int32``, ``uint32``,
+        ``float64`` after each signal's type): one value per sample, in the order sampled."""
+        import numpy as np
+
+        count = self._count
+        cols: list[Any] = []
+        for data, types in ((self._c2p_data, self._c2p_types), (self._p2c_data, self._p2c_types)):
+            if not types:
+                continue
+            dtype = np.dtype([(f"f{i}", _NUMPY_TYPE[c]) for i, c in enumerate(types)])
+            with memoryview(data) as view:  # no copy of the packed rows; released before the next sample
+                rows = np.frombuffer(view, dtype=dtype, count=count)
+                cols += [np.array(rows[f"f{i}"], copy=True) for i in range(len(types))]
+                del rows
+        cycles = cols[0]
+        values = cols[1:]
+        return cycles, {p: values[k] for p, k in zip(self.paths, self._order, strict=True)}

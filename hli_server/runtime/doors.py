@@ -1,17 +1,19 @@
-"""The PLC's network doors in a process of their own (``hli-server run --doors-process``, issue 12).
+"""The network doors in a process of their own (``run --doors-process``, the default; issues 12, 26).
 
-The Modbus and ADS doors serve the process image and nothing else (their adapter kinds say
-``image_only``). The image lives in shared memory, so they can serve it from another process than the
-one that steps the engine: then the work of 200 polling PLCs and a flooding client runs on another core
-and in another interpreter, and the cycle's timer competes with none of it. What changes for a client:
-nothing (the same ports, the same answers, the same image). What the doors process cannot do: the
-operator panel and the event feed belong to the engine's process (the HTTP API and MQTT stay there).
+The image lives in shared memory, so the doors that serve it (Modbus, ADS) attach it by name like a PLC
+does and answer from there; the doors that need the engine (the HTTP API with the dashboard's streams,
+MQTT) reach its operator panel, its events and its stepped clock over a socket (``runtime/remote.py``),
+served by the clock between cycles. Then the work of 200 polling PLCs, a flooding client, a read of ten
+thousand events or a dashboard that never reads runs in another interpreter, on another core if there is
+one, with its own garbage collector, and the cycle's timer competes with none of it. What changes for a
+client: nothing (the same ports, the same answers, the same image).
 
 * :class:`AttachedImage`: the :class:`~hli_server.adapters.host.ImagePort` of a process that attached the
   image by name (the same format code as the server's own image and as a PLC's ``ImageClient``);
-* :class:`DoorsHost`: the host of the doors (image, a small operator that knows the cycle and T_A, no
-  events, ``on_cycle`` driven by watching the image's publish counter);
-* :func:`doors_main`: the child process (spawned, so it shares nothing with the parent but the image);
+* :class:`DoorsHost`: the host of the doors (that image, the remote operator, the mirrored events, the
+  remote stepped clock, ``on_cycle`` driven by watching the image's publish counter);
+* :func:`doors_main`: the child process (spawned, so it shares nothing with the parent but the image and
+  the socket), at a lower priority than the clock's (``DOORS_NICE``);
 * :class:`DoorsProcess`: the parent's handle, an adapter of the runtime whose endpoints are the child's.
 """
 
@@ -19,39 +21,56 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import logging
 import multiprocessing
 import os
+import signal
+import socket
+import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict
+from dataclasses import dataclass
 from multiprocessing.connection import Connection
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any
 
+from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     AccessPolicy,
     AdapterHost,
-    ConflictError,
     EventFeed,
     ImagePort,
-    LoggedEvent,
     OperatorPort,
-    StepRefusedError,
+    Readiness,
+    RecorderPort,
     Trace,
     Value,
+    door_host,
 )
 from hli_server.adapters.registry import Adapter, create_adapter
+from hli_server.runtime.remote import (
+    EventMirror,
+    OperatorService,
+    RemoteFaults,
+    RemoteLink,
+    RemoteOperator,
+    RemoteRecorder,
+)
 from plc_clients.shm import ImageClient
 from schemas import image_format as fmt
-from schemas.events import Event
 from schemas.layout import Direction, Layout, Signal
 
-__all__ = ["AttachedImage", "DoorsHost", "DoorsProcess", "doors_main"]
+if TYPE_CHECKING:
+    from hli_server.runtime.core import Runtime
+
+__all__ = ["DOORS_NICE", "AttachedImage", "DoorsHost", "DoorsPlan", "DoorsProcess", "doors_main"]
 
 logger = logging.getLogger(__name__)
 
 START_TIMEOUT_S = 30.0
 """How long the parent waits for the doors process to report its ports."""
+DOORS_NICE = 5
+"""The doors process runs this much nicer than the clock's: where both want the CPU, the cycle wins."""
 
 
 class AttachedImage(ImagePort):
@@ -106,59 +125,36 @@ class AttachedImage(ImagePort):
         self._client.close()
 
 
-class _DoorsOperator:
-    """What the doors need of the operator: the cycle and T_A. Everything else is the engine's (it raises
-    :class:`ConflictError`), which is why :attr:`DoorsHost.operator` casts it to the port."""
-
-    def __init__(self, image: AttachedImage, t_a_us: int, machine_name: str) -> None:
-        self._image = image
-        self._t_a_us = t_a_us
-        self._name = machine_name
-
-    @property
-    def cycle(self) -> int:
-        return self._image.cycle
-
-    @property
-    def time_s(self) -> float:
-        return self._image.cycle * self._t_a_us * 1e-6
-
-    @property
-    def t_a_us(self) -> int:
-        return self._t_a_us
-
-    @property
-    def machine_name(self) -> str:
-        return self._name
-
-    def __getattr__(self, name: str) -> Any:
-        raise ConflictError(
-            f"{name}: the doors process serves the image only; use the HTTP API of the server"
-        )
-
-
-class _NoEvents(EventFeed):
-    def subscribe(self, listener: Callable[[Event], None]) -> Callable[[], None]:
-        return lambda: None
-
-    def since(self, seq: int = 0, limit: int = 1000) -> tuple[Sequence[LoggedEvent], int]:
-        return [], 0
-
-
 class DoorsHost(AdapterHost):
-    """The host of the doors process. ``on_cycle`` listeners are called when the image's publish
+    """The host of the doors process: the attached image, the engine's operator panel, events and stepped
+    clock over the link (``runtime/remote.py``). ``on_cycle`` listeners are called when the image's publish
     counter moves (it is watched every quarter cycle); several publishes between two looks are one call
     with the newest cycle."""
 
-    def __init__(self, image: AttachedImage, t_a_us: int, machine_name: str, bind: str, policy: AccessPolicy):
+    def __init__(
+        self,
+        image: AttachedImage,
+        link: RemoteLink,
+        events: EventMirror,
+        *,
+        t_a_us: int,
+        clock: str,
+        bind: str,
+        policy: AccessPolicy,
+    ):
         self._image = image
-        self._operator = _DoorsOperator(image, t_a_us, machine_name)
-        self._events = _NoEvents()
+        self._link = link
+        self._operator = RemoteOperator(link, image, t_a_us)
+        self._events = events
+        self._clock = clock
         self._bind = bind
         self._policy = policy
         self._listeners: list[Callable[[int], None]] = []
         self._watch: asyncio.Task[None] | None = None
         self._t_a_s = t_a_us * 1e-6
+        self._faults = RemoteFaults(link, lambda: image.cycle)
+        """A mirror of the server's communication faults (the engine's process owns them, issue 25)."""
+        self._recorder = RemoteRecorder(link)
 
     @property
     def image(self) -> ImagePort:
@@ -166,7 +162,7 @@ class DoorsHost(AdapterHost):
 
     @property
     def operator(self) -> OperatorPort:
-        return cast(OperatorPort, self._operator)
+        return self._operator
 
     @property
     def events(self) -> EventFeed:
@@ -174,7 +170,7 @@ class DoorsHost(AdapterHost):
 
     @property
     def clock(self) -> str:
-        return "realtime"
+        return self._clock
 
     @property
     def bind(self) -> str:
@@ -184,11 +180,19 @@ class DoorsHost(AdapterHost):
     def policy(self) -> AccessPolicy:
         return self._policy
 
+    @property
+    def recorder(self) -> RecorderPort:
+        return self._recorder
+
+    @property
+    def faults(self) -> CommFaults:
+        return self._faults
+
     async def step(self, cycles: int = 1) -> int:
-        raise StepRefusedError("the doors process does not step the clock")
+        return await self._operator.step(cycles)
 
     async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
-        raise StepRefusedError("the doors process does not step the clock")
+        return await self._operator.step_traced(cycles, signals)
 
     def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
         self._listeners.append(listener)
@@ -218,6 +222,12 @@ class DoorsHost(AdapterHost):
                 except Exception:
                     logger.exception("cycle listener %r failed at cycle %d", listener, cycle)
 
+    def readiness(self) -> Readiness:
+        """The server's readiness, the engine's process' to say (it knows the clock, and these doors once
+        this process reported them listening)."""
+        readiness: Readiness = self._link.call("readiness")
+        return readiness
+
     async def close(self) -> None:
         if self._watch is not None:
             self._watch.cancel()
@@ -225,116 +235,171 @@ class DoorsHost(AdapterHost):
                 await self._watch
 
 
-def doors_main(
-    image_name: str,
-    specs: list[tuple[str, dict[str, Any]]],
-    bind: str,
-    policy: dict[str, Any],
-    t_a_us: int,
-    machine_name: str,
-    conn: Connection,
-) -> None:
+@dataclass(frozen=True)
+class DoorsPlan:
+    """What the doors process is told at its start (pickled to it)."""
+
+    image_name: str
+    specs: list[tuple[str, dict[str, Any]]]
+    bind: str
+    policy: AccessPolicy
+    t_a_us: int
+    clock: str
+    nice: int = 0
+    """How much nicer than the clock's process the doors run (:data:`DOORS_NICE` unless the clock runs at
+    the realtime priority, which goes first anyway: then the doors need not give way to other work)."""
+
+
+def doors_main(plan: DoorsPlan, link: socket.socket, conn: Connection) -> None:
     """The doors process: attach the image, start the adapters, report their ports, serve until the
-    parent says stop, goes away, or closes the image."""
-    from hli_server.runtime.pacing import precise_event_loop
-
+    parent says stop, goes away, or closes the image, or SIGTERM. SIGINT is ignored (the parent spawns
+    it so, and it stays so): a Ctrl+C reaches the whole process group, and the parent stops the doors."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if plan.nice:
+        with contextlib.suppress(OSError):  # the clock's process wins the CPU from its doors (issue 26)
+            os.nice(plan.nice)
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s doors %(name)s: %(message)s")
-    with asyncio.Runner(loop_factory=precise_event_loop) as runner:
-        runner.run(_serve_doors(image_name, specs, bind, AccessPolicy(**policy), t_a_us, machine_name, conn))
+    # asyncio's own loop: the doors need no timer finer than a millisecond, and its one epoll_wait a turn
+    # costs less than the precise loop's select-then-epoll (Modbus: about a fifth less CPU per request)
+    with asyncio.Runner() as runner:
+        runner.run(_serve_doors(plan, link, conn))
 
 
-async def _serve_doors(
-    image_name: str,
-    specs: list[tuple[str, dict[str, Any]]],
-    bind: str,
-    policy: AccessPolicy,
-    t_a_us: int,
-    machine_name: str,
-    conn: Connection,
-) -> None:
+async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -> None:
     parent = os.getppid()
+    loop = asyncio.get_running_loop()
+    terminated = asyncio.Event()
+    with contextlib.suppress(NotImplementedError, RuntimeError):
+        loop.add_signal_handler(signal.SIGTERM, terminated.set)
     try:
-        image = AttachedImage(ImageClient.attach(image_name, timeout=5.0))
+        image = AttachedImage(ImageClient.attach(plan.image_name, timeout=5.0))
     except Exception as exc:
-        conn.send(("error", f"the doors process cannot attach the image {image_name!r}: {exc}"))
+        _tell(conn, ("error", f"the doors process cannot attach the image {plan.image_name!r}: {exc}"))
         return
-    host = DoorsHost(image, t_a_us, machine_name, bind, policy)
+    events = EventMirror()
+    events.start(loop)
+    link = RemoteLink(sock, events.take)
+    policy = plan.policy
+    host = DoorsHost(image, link, events, t_a_us=plan.t_a_us, clock=plan.clock, bind=plan.bind, policy=policy)
+    link.start(loop)  # the host's fault mirror takes the engine's table from the first message on
     started: list[Adapter] = []
     try:
-        for name, options in specs:
-            adapter = create_adapter(name, bind=bind, options=options)
-            await adapter.start(host)
+        for name, options in plan.specs:
+            adapter = create_adapter(name, bind=plan.bind, options=options)
+            try:
+                await adapter.start(door_host(host, name))
+            except Exception as exc:  # a port in use, ...: the parent says it (no traceback of ours)
+                _tell(conn, ("error", str(exc)))
+                return
             started.append(adapter)
-        conn.send(("ready", [(a.name, getattr(a, "port", None), a.endpoints()) for a in started]))
-        loop = asyncio.get_running_loop()
-        while True:  # until the parent says stop, goes away, or closes the image
-            if await loop.run_in_executor(None, conn.poll, 0.2):
-                break
-            if os.getppid() != parent or image.closed:
-                break
+        # the parent may have gone while the doors started (stopped during its start-up): then stop too
+        if _tell(
+            conn, ("ready", [(a.name, getattr(a, "port", None), a.endpoints(), _url(a)) for a in started])
+        ):
+            # what was built to serve lives as long as the process: out of the collector's full passes
+            gc.collect()
+            gc.freeze()
+            while not terminated.is_set():  # until the parent says stop, goes away, or closes the image
+                if await loop.run_in_executor(None, conn.poll, 0.2):
+                    break
+                if os.getppid() != parent or image.closed or link.closed:
+                    break
     except Exception as exc:
-        with contextlib.suppress(Exception):
-            conn.send(("error", f"the doors process failed: {exc}"))
+        _tell(conn, ("error", f"the doors process failed: {exc}"))
         raise
     finally:
         for adapter in reversed(started):
             with contextlib.suppress(Exception):
                 await adapter.stop()
         await host.close()
+        link.close()
         image.close()
 
 
+def _url(adapter: Adapter) -> str | None:
+    try:
+        url = getattr(adapter, "url", None)
+    except RuntimeError:
+        return None
+    return url if isinstance(url, str) else None
+
+
+def _tell(conn: Connection, message: tuple[str, object]) -> bool:
+    """Send ``message`` to the parent; False when the parent has gone (a broken pipe is no error here)."""
+    try:
+        conn.send(message)
+    except (OSError, EOFError):
+        return False
+    return True
+
+
 class DoorsProcess:
-    """The parent's side: an adapter of the runtime that runs the image-only doors in a child process."""
+    """The parent's side: an adapter of the runtime that runs the network doors in a child process and
+    serves them the engine's operator panel, events and stepped clock between cycles
+    (:class:`~hli_server.runtime.remote.OperatorService`)."""
 
     name = "doors-process"
 
-    def __init__(
-        self,
-        specs: list[tuple[str, dict[str, Any]]],
-        *,
-        bind: str,
-        policy: AccessPolicy,
-        t_a_us: int,
-        machine_name: str,
-    ) -> None:
+    def __init__(self, specs: list[tuple[str, dict[str, Any]]], *, runtime: Runtime) -> None:
         self.specs = specs
-        self.bind = bind
-        self.policy = policy
-        self.t_a_us = t_a_us
-        self.machine_name = machine_name
-        self.doors: dict[str, tuple[int | None, list[str]]] = {}
+        self.runtime = runtime
+        self.doors: dict[str, tuple[int | None, list[str], str | None]] = {}
         self._process: multiprocessing.process.BaseProcess | None = None
         self._conn: Connection | None = None
+        self._service: OperatorService | None = None
+        self._remove_service: Callable[[], None] | None = None
+
+    @property
+    def pid(self) -> int | None:
+        return self._process.pid if self._process is not None else None
 
     def endpoints(self) -> list[str]:
-        pid = self._process.pid if self._process is not None else "-"
-        return [f"{line}  [doors process, pid {pid}]" for _, lines in self.doors.values() for line in lines]
+        pid = self.pid if self.pid is not None else "-"
+        return [
+            f"{line}  [doors process, pid {pid}]" for _, lines, _ in self.doors.values() for line in lines
+        ]
 
     def port(self, name: str) -> int | None:
         return self.doors[name][0]
 
+    def door_url(self, name: str) -> str | None:
+        """The base URL of door ``name`` (the HTTP control API), None if it does not run here."""
+        door = self.doors.get(name)
+        return door[2] if door is not None else None
+
     async def start(self, host: AdapterHost) -> None:
+        rt = self.runtime
         ctx = multiprocessing.get_context("spawn")
         parent_conn, child_conn = ctx.Pipe()
         self._conn = parent_conn
-        self._process = ctx.Process(
-            target=doors_main,
-            args=(
-                host.image.name,
-                self.specs,
-                self.bind,
-                asdict(self.policy),
-                self.t_a_us,
-                self.machine_name,
-                child_conn,
-            ),
-            name="hli-doors",
-            daemon=True,
-        )
-        self._process.start()
-        child_conn.close()
+        ours, theirs = socket.socketpair()
         loop = asyncio.get_running_loop()
+        _, service = await loop.connect_accepted_socket(lambda: OperatorService(rt), ours)
+        self._service = service
+        self._remove_service = rt.add_service(service)
+        plan = DoorsPlan(
+            image_name=host.image.name,
+            specs=self.specs,
+            bind=rt.bind,
+            policy=rt.policy,
+            t_a_us=rt.config.cycle_time_us,
+            clock=str(rt.clock),
+            nice=0 if rt.priority_granted.startswith("realtime") else DOORS_NICE,
+        )
+        self._process = ctx.Process(
+            target=doors_main, args=(plan, theirs, child_conn), name="hli-doors", daemon=True
+        )
+        # the child starts with SIGINT ignored (inherited through exec): a Ctrl+C while it imports would
+        # otherwise print its traceback; the parent stops it
+        in_main = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if in_main else None
+        try:
+            self._process.start()
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGINT, previous)
+        child_conn.close()
+        theirs.close()
         began = time.monotonic()
         while not await loop.run_in_executor(None, parent_conn.poll, 0.2):
             if not self._process.is_alive():
@@ -346,7 +411,7 @@ class DoorsProcess:
         kind, payload = parent_conn.recv()
         if kind != "ready":
             raise RuntimeError(str(payload))
-        self.doors = {name: (port, lines) for name, port, lines in payload}
+        self.doors = {name: (port, lines, url) for name, port, lines, url in payload}
 
     async def stop(self) -> None:
         process, conn = self._process, self._conn
@@ -362,3 +427,9 @@ class DoorsProcess:
                 await loop.run_in_executor(None, process.join, 5.0)
         if conn is not None:
             conn.close()
+        if self._remove_service is not None:
+            self._remove_service()
+            self._remove_service = None
+        if self._service is not None:
+            self._service.close()
+            self._service = None

@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 import logging
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 from hli_server.adapters.host import LoggedEvent
 from schemas.events import Event
@@ -45,6 +45,25 @@ class EventLog:
                 listener(event)
             except Exception:  # a subscriber's bug must not stop the cycle or the other subscribers
                 logger.exception("event subscriber %r failed on %s", listener, event.kind)
+
+    def extend(self, logged: Iterable[tuple[int, Event]]) -> list[Event]:
+        """Take events numbered elsewhere (the engine's log, mirrored in the doors process:
+        ``runtime/remote.py``); returns them for the caller to hand to :meth:`deliver` when it suits."""
+        out = []
+        for seq, event in logged:
+            self._seq = max(self._seq, seq)
+            self._events.append(LoggedEvent(seq, event))
+            out.append(event)
+        return out
+
+    def deliver(self, events: Iterable[Event]) -> None:
+        """Hand ``events`` to the subscribers, in order (what :meth:`__call__` does for one)."""
+        for event in events:
+            for listener in self._listeners:
+                try:
+                    listener(event)
+                except Exception:  # a subscriber's bug must not stop the others
+                    logger.exception("event subscriber %r failed on %s", listener, event.kind)
 
     def subscribe(self, listener: Callable[[Event], None]) -> Callable[[], None]:
         self._listeners.append(listener)

@@ -8,9 +8,10 @@ engine rule.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
+from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     Accepted,
     AccessPolicy,
@@ -20,6 +21,8 @@ from hli_server.adapters.host import (
     InvalidRequestError,
     NotFoundError,
     OperatorPort,
+    Readiness,
+    RecorderPort,
     StepRefusedError,
     Trace,
 )
@@ -28,6 +31,8 @@ from hli_server.engine.axis import Axis
 from hli_server.engine.channel import Channel
 from hli_server.engine.machine import Machine
 from hli_server.runtime.live import TrailRecorder, collision_pairs, live_scene, program_table, scene_key
+from hli_server.runtime.programs import RuntimeLibrary
+from schemas.units import increments_from_mm, mm_from_increments
 from schemas.wire import Mode
 
 if TYPE_CHECKING:
@@ -39,8 +44,12 @@ __all__ = ["OperatorPanel", "RuntimeHost"]
 class OperatorPanel(OperatorPort):
     """:class:`~hli_server.adapters.host.OperatorPort` on a :class:`Machine`."""
 
-    def __init__(self, machine: Machine, timing: Callable[[], dict[str, Any]]) -> None:
+    def __init__(
+        self, machine: Machine, timing: Callable[[], dict[str, Any]], *, library: RuntimeLibrary | None = None
+    ) -> None:
         self._m = machine
+        self._library = library
+        """The runtime's program library, which takes the files uploaded with a program (N-02)."""
         self._timing = timing
         self.recorder = TrailRecorder(machine)
         """The trails and scene revisions; fed by the runtime host (a cycle listener, an event listener)."""
@@ -89,13 +98,32 @@ class OperatorPanel(OperatorPort):
         return Accepted(channel=ch.number, request=what, cycle=cycle, effective_cycle=cycle + 1)
 
     # --- programs -------------------------------------------------------------------------
-    def load_program(self, channel: int, text: str, name: str = "program") -> dict[str, Any]:
+    def load_program(
+        self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
+    ) -> dict[str, Any]:
         ch = self._channel(channel)
+        library = self._library
+        uploads: dict[str, str] = {}
+        if library is not None:
+            try:
+                uploads = library.check_uploads(files or {})
+            except ValueError as exc:
+                raise InvalidRequestError(f"channel {channel}: {exc}") from None
+        elif files:
+            raise InvalidRequestError("this machine takes no subprograms with a program (no program library)")
         refused = ch.load_program(text, name)
         if refused is not None:
             raise ConflictError(f"channel {channel}: {refused.message}; reset the channel first")
+        if library is not None:
+            library.set_uploads(channel, uploads)
         lines = text.count("\n") + (0 if text.endswith("\n") else 1)
-        return {"channel": channel, "program": name, "lines": lines, "cycle": self._m.cycle}
+        return {
+            "channel": channel,
+            "program": name,
+            "lines": lines,
+            "files": sorted(uploads),
+            "cycle": self._m.cycle,
+        }
 
     def select_program(self, channel: int, number: int) -> dict[str, Any]:
         ch = self._channel(channel)
@@ -183,9 +211,71 @@ class OperatorPanel(OperatorPort):
         self._m.inject_fault(ax.name)
         return self.faults(axis)
 
+    # --- software limits (E-06, P-AXIS-00177/00178/00179) ------------------------------------
+    def soft_limits(self, axis: str) -> dict[str, Any]:
+        ax = self._axis(axis)
+        rec = ax.config
+        return {
+            "axis": ax.name,
+            "in_effect": {
+                "swe_neg": increments_from_mm(ax.swe_neg),
+                "swe_pos": increments_from_mm(ax.swe_pos),
+                "swe_toleranz": increments_from_mm(ax.swe_tol),
+            },
+            "record": {"swe_neg": rec.swe_neg, "swe_pos": rec.swe_pos, "swe_toleranz": rec.swe_toleranz},
+        }
+
+    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+        ax = self._axis(axis)
+        unknown = sorted(set(values) - {"swe_neg", "swe_pos"})
+        if unknown or not values:
+            raise InvalidRequestError("give swe_neg and/or swe_pos [0.1 µm] (the limits in effect)")
+        try:
+            ax.set_soft_limits(
+                mm_from_increments(values["swe_neg"]) if "swe_neg" in values else None,
+                mm_from_increments(values["swe_pos"]) if "swe_pos" in values else None,
+            )
+        except ValueError as exc:
+            raise InvalidRequestError(str(exc)) from None
+        return self.soft_limits(axis)
+
+    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+        ax = self._axis(axis)
+        if not values:
+            raise InvalidRequestError("give swe_neg, swe_pos and/or swe_toleranz [0.1 µm]")
+        try:
+            self._m.update_axis_record(ax.name, **values)
+        except ValueError as exc:
+            raise InvalidRequestError(str(exc)) from None
+        return self.soft_limits(axis)
+
     # --- state ----------------------------------------------------------------------------
     def snapshot(self) -> dict[str, Any]:
-        return self._m.snapshot()
+        snap = self._m.snapshot()
+        snap["external"] = self.external_variables()
+        return snap
+
+    def external_variables(self) -> list[dict[str, Any]]:
+        """The V.E. variables and their values now (N-05): ``name`` (``V.E.MODE``), ``channel`` (None:
+        the global area), ``symbol`` (the image's ST path, ``gpVECh[0]^MODE``; an array's elements add
+        ``[i]``), ``type`` (the kernel's), ``dims``, ``value`` (a list, row-major, for an array)."""
+        m = self._m
+        index_of = {ch.number: i for i, ch in enumerate(m.channels)}
+        out: list[dict[str, Any]] = []
+        for spec in m.external:
+            values = m.external.values(spec)
+            head = "gpVEGlob^" if spec.channel is None else f"gpVECh[{index_of[spec.channel]}]^"
+            out.append(
+                {
+                    "name": spec.path,
+                    "channel": spec.channel,
+                    "symbol": head + spec.name,
+                    "type": spec.type.value,
+                    "dims": list(spec.dims),
+                    "value": list(values) if spec.dims else values[0],
+                }
+            )
+        return out
 
     def alarms(self, history: int = 200) -> dict[str, Any]:
         m = self._m
@@ -235,7 +325,15 @@ class RuntimeHost:
 
     @property
     def operator(self) -> OperatorPort:
-        return self._operator
+        return self._rt.operator  # the panel, with every request noted by the session recorder
+
+    @property
+    def recorder(self) -> RecorderPort:
+        return self._rt.recorder_port
+
+    @property
+    def faults(self) -> CommFaults:
+        return self._rt.comm_faults
 
     @property
     def events(self) -> EventFeed:
@@ -273,6 +371,9 @@ class RuntimeHost:
 
     def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
         return self._rt.on_cycle(listener)
+
+    def readiness(self) -> Readiness:
+        return self._rt.readiness()
 
     def __repr__(self) -> str:
         return f"RuntimeHost({self._rt!r})"

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Protocol
 from hli_server.adapters.host import ImagePort
 
 if TYPE_CHECKING:
+    from hli_server.engine.external import ExternalVariables
     from hli_server.engine.hli import MachineHli
     from hli_server.image import SignalRecorder
     from schemas.config import MachineConfig
@@ -25,12 +26,18 @@ class RuntimeImage(ImagePort, Protocol):
     """What the runtime needs of an image beyond the adapters' :class:`ImagePort`: the cycle's
     latch and publish, start-up and close."""
 
-    def latch_into(self, hli: MachineHli) -> None: ...
+    def latch_into(self, hli: MachineHli) -> bytes:
+        """The PLC->CNC half into the engine; returns the bytes latched."""
+        ...
 
-    def publish_from(self, hli: MachineHli, cycle: int) -> None: ...
+    def publish_from(self, hli: MachineHli, cycle: int, *, commit: bool = True) -> bytearray:
+        """The CNC->PLC half out (``commit=False``: packed, not published); returns the packed buffer
+        (the cycle as u64, then the half)."""
+        ...
 
-    def init_from(self, hli: MachineHli, cycle: int) -> None:
-        """Start-up: the PLC->CNC half takes the engine's ``_w`` values; the CNC->PLC half is published."""
+    def init_from(self, hli: MachineHli, cycle: int, external: ExternalVariables | None = None) -> None:
+        """Start-up: the PLC->CNC half takes the engine's ``_w`` values; the CNC->PLC half is published;
+        the V.E. fields take the store's values and are kept in step with it from now on (N-05)."""
         ...
 
     def close(self) -> None:

@@ -1,13 +1,61 @@
-"""Program files: the runtime reads them for the engine, which does no I/O itself."""
+"""Program files: the runtime reads them for the engine, which does no I/O itself (N-02).
+
+Two things live here:
+
+* :func:`read_program_file`: a program table entry given by path, read when the PLC or the operator
+  selects it;
+* :class:`ProgramDirectories` and :class:`RuntimeLibrary`: where the engine finds the global
+  subprograms and cycles a program calls (``L name``, ``L CYCLE [NAME=...]``; the engine's
+  :class:`~hli_server.engine.programs.ProgramLibrary` protocol). A running server searches, in order,
+  the files uploaded with the programs (``POST /api/channels/{n}/program`` with ``files``, the pytest
+  plugin's ``hli.load_program(..., files=...)``), then the program directories: those of
+  ``hli-server run --program-dir`` (in the order given), then the machine file's
+  ``program_directories``.
+
+What a name may be: a file name, or a path below a directory (``cycles/drill.nc``). A name that
+leaves its directory (``..``, an absolute path, a drive letter, a symbolic link that points out of it)
+is never read: :meth:`ProgramDirectories.find` answers None (the interpreter's alarm names every
+directory searched) and logs why. A file larger than :data:`MAX_PROGRAM_BYTES` is refused the same
+way. A name matches exactly, else without regard to case (the kernel's program directories are
+usually on Windows). Text is UTF-8; a file that is not (an old program with umlauts in its
+comments, in Windows-1252) is read as Latin-1, so that no byte is lost.
+
+Files are read when the interpreter asks and kept (by path, size and modification time) until they
+change, so a program that calls a cycle a thousand times reads it once.
+"""
 
 from __future__ import annotations
 
-from pathlib import Path
+import logging
+import os
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path, PurePosixPath, PureWindowsPath
+from typing import Final
 
-__all__ = ["MAX_PROGRAM_BYTES", "read_program_file"]
+from hli_server.engine.programs import ProgramFile
+
+__all__ = [
+    "MAX_PROGRAM_BYTES",
+    "MAX_UPLOADED_FILES",
+    "ProgramDirectories",
+    "ProgramNameError",
+    "RuntimeLibrary",
+    "check_program_name",
+    "read_program_file",
+]
+
+log = logging.getLogger(__name__)
 
 MAX_PROGRAM_BYTES = 64 * 1024 * 1024
-"""Largest program file selected through the program table (64 MiB); larger ones are refused."""
+"""Largest program file the server reads (64 MiB): a table entry, a subprogram, an uploaded file."""
+MAX_UPLOADED_FILES: Final = 256
+"""Most files uploaded with one program (the main program not counted)."""
+MAX_NAME_LENGTH: Final = 255
+_CACHE_FILES: Final = 256
+
+
+class ProgramNameError(ValueError):
+    """A program name that is no plain file name below a program directory (says what and why)."""
 
 
 def read_program_file(path: str) -> str:
@@ -18,3 +66,179 @@ def read_program_file(path: str) -> str:
     if size > MAX_PROGRAM_BYTES:
         raise OSError(f"{path}: {size} bytes, more than the {MAX_PROGRAM_BYTES} bytes a program may have")
     return file.read_text(encoding="utf-8")
+
+
+def check_program_name(name: str) -> PurePosixPath:
+    """``name`` as a relative path that stays below its directory, or :class:`ProgramNameError`.
+
+    Refused: empty or too long names, NUL and other control characters, absolute paths (``/x``,
+    ``\\x``, ``C:x``), ``..`` anywhere. ``\\`` separates like ``/`` (programs written on Windows)."""
+    if not name or len(name) > MAX_NAME_LENGTH:
+        raise ProgramNameError(f"program name {name[:40]!r}: 1 to {MAX_NAME_LENGTH} characters")
+    if any(ord(c) < 32 or c == "\x7f" for c in name):
+        raise ProgramNameError(f"program name {name!r} holds a control character")
+    windows = PureWindowsPath(name)
+    if windows.drive or windows.root or name.startswith(("/", "\\")):
+        raise ProgramNameError(f"program name {name!r} is absolute: name a file below a program directory")
+    parts = PurePosixPath(name.replace("\\", "/")).parts
+    if any(part == ".." for part in parts):
+        raise ProgramNameError(f"program name {name!r} leaves its directory ('..')")
+    clean = [part for part in parts if part != "."]
+    if not clean:
+        raise ProgramNameError(f"program name {name!r} names no file")
+    return PurePosixPath(*clean)
+
+
+def _decode(data: bytes, origin: str) -> str:
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        log.warning("%s is not UTF-8; read as Latin-1 (Windows-1252 programs keep every byte)", origin)
+        return data.decode("latin-1")
+
+
+class ProgramDirectories:
+    """Finds programs by name in directories, in order (the kernel's program paths)."""
+
+    def __init__(
+        self, directories: Iterable[str | os.PathLike[str]], *, max_bytes: int = MAX_PROGRAM_BYTES
+    ) -> None:
+        self.directories: tuple[Path, ...] = tuple(Path(d).resolve() for d in directories)
+        self.max_bytes = max_bytes
+        self._cache: dict[Path, tuple[int, int, str]] = {}
+
+    def searched(self) -> tuple[str, ...]:
+        return tuple(str(d) for d in self.directories)
+
+    def find(self, name: str) -> ProgramFile | None:
+        try:
+            relative = check_program_name(name)
+        except ProgramNameError as exc:
+            log.warning("%s; not searched", exc)
+            return None
+        for directory in self.directories:
+            path = self._match(directory, relative)
+            if path is None:
+                continue
+            text = self._read(directory, path, name)
+            if text is not None:
+                return ProgramFile(name, text, str(path))
+        return None
+
+    @staticmethod
+    def _match(directory: Path, relative: PurePosixPath) -> Path | None:
+        """The file of ``relative`` in ``directory``: exact, else each part without regard to case."""
+        exact = directory.joinpath(*relative.parts)
+        if exact.is_file():
+            return exact
+        here = directory
+        for part in relative.parts:
+            try:
+                with os.scandir(here) as entries:
+                    folded = part.casefold()
+                    found = next((Path(e.path) for e in entries if e.name.casefold() == folded), None)
+            except OSError:
+                return None
+            if found is None:
+                return None
+            here = found
+        return here if here.is_file() else None
+
+    def _read(self, directory: Path, path: Path, name: str) -> str | None:
+        try:
+            real = path.resolve(strict=True)
+        except OSError:
+            return None
+        if not real.is_relative_to(directory):
+            log.warning(
+                "program %r: %s points outside the program directory %s; not read", name, path, directory
+            )
+            return None
+        try:
+            stat = real.stat()
+            if stat.st_size > self.max_bytes:
+                log.warning(
+                    "program %r: %s has %d bytes, more than the %d a program may have; not read",
+                    name,
+                    real,
+                    stat.st_size,
+                    self.max_bytes,
+                )
+                return None
+            cached = self._cache.get(real)
+            if cached is not None and cached[:2] == (stat.st_size, stat.st_mtime_ns):
+                return cached[2]
+            with real.open("rb") as file:
+                data = file.read(self.max_bytes + 1)
+        except OSError as exc:
+            log.warning("program %r: cannot read %s: %s", name, real, exc.strerror or exc)
+            return None
+        if len(data) > self.max_bytes:  # grew since the stat
+            return None
+        text = _decode(data, str(real))
+        if len(self._cache) >= _CACHE_FILES:
+            self._cache.clear()
+        self._cache[real] = (stat.st_size, stat.st_mtime_ns, text)
+        return text
+
+
+class RuntimeLibrary:
+    """The server's :class:`~hli_server.engine.programs.ProgramLibrary`: the files uploaded with each
+    channel's program, newest upload first, then the program directories."""
+
+    def __init__(self, directories: Sequence[str | os.PathLike[str]] = ()) -> None:
+        self.directories = ProgramDirectories(directories)
+        self._uploads: dict[int, dict[str, str]] = {}
+        """channel -> file name -> text (the files of the channel's last upload)"""
+        self._order: list[int] = []
+        """channels, the newest upload last"""
+
+    def set_uploads(self, channel: int, files: Mapping[str, str]) -> None:
+        """The files uploaded with channel ``channel``'s program; they replace its previous ones.
+        Every name is checked (:class:`ProgramNameError`), at most :data:`MAX_UPLOADED_FILES`, each
+        at most :data:`MAX_PROGRAM_BYTES` bytes (ValueError saying which)."""
+        checked = self.check_uploads(files)
+        self._uploads[channel] = checked
+        if channel in self._order:
+            self._order.remove(channel)
+        self._order.append(channel)
+
+    @staticmethod
+    def check_uploads(files: Mapping[str, str]) -> dict[str, str]:
+        """The files as :meth:`set_uploads` keeps them (names normalised), or ValueError; changes nothing."""
+        if len(files) > MAX_UPLOADED_FILES:
+            raise ValueError(f"{len(files)} files: at most {MAX_UPLOADED_FILES} may come with one program")
+        checked: dict[str, str] = {}
+        for name, text in files.items():
+            key = str(check_program_name(name))
+            if len(text.encode("utf-8")) > MAX_PROGRAM_BYTES:
+                raise ValueError(f"file {name!r}: more than the {MAX_PROGRAM_BYTES} bytes a program may have")
+            if key.casefold() in {k.casefold() for k in checked}:
+                raise ValueError(f"file {name!r} is given twice (names are compared without regard to case)")
+            checked[key] = text
+        return checked
+
+    def uploads(self, channel: int) -> dict[str, str]:
+        return dict(self._uploads.get(channel, {}))
+
+    def find(self, name: str) -> ProgramFile | None:
+        if self._uploads:
+            try:
+                key = str(check_program_name(name))
+            except ProgramNameError:
+                key = ""
+            if key:
+                for channel in reversed(self._order):
+                    files = self._uploads[channel]
+                    text = files.get(key)
+                    found = key
+                    if text is None:
+                        found = next((k for k in files if k.casefold() == key.casefold()), "")
+                        text = files.get(found)
+                    if text is not None:
+                        return ProgramFile(name, text, f"upload:{found}")
+        return self.directories.find(name)
+
+    def searched(self) -> tuple[str, ...]:
+        uploaded = ("uploaded files",) if any(self._uploads.values()) else ()
+        return uploaded + self.directories.searched()

@@ -11,10 +11,13 @@ docs/testing.md shows a complete test.
 """
 
 from hli_server.testing.harness import (
+    CommFaultsView,
     ConditionNotMetError,
     Harness,
     HarnessError,
     ImageView,
+    ReplayFailedError,
+    SessionRecording,
     load_machine_spec,
 )
 from hli_server.testing.transports import (
@@ -28,10 +31,13 @@ from hli_server.testing.transports import (
 
 __all__ = [
     "TRANSPORTS",
+    "CommFaultsView",
     "ConditionNotMetError",
     "Harness",
     "HarnessError",
     "ImageView",
+    "ReplayFailedError",
+    "SessionRecording",
     "TransportKind",
     "load_machine_spec",
     "open_transport",

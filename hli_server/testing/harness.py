@@ -35,6 +35,7 @@ POSIX shared memory, for a PLC in another process.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import inspect
 import logging
@@ -42,7 +43,7 @@ import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable, Coroutine, Iterable, Sequence
+from collections.abc import Callable, Coroutine, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar, cast
 
@@ -56,7 +57,16 @@ if TYPE_CHECKING:
     from plc_clients.transports import Transport
     from schemas.config import MachineConfig
 
-__all__ = ["ConditionNotMetError", "Harness", "HarnessError", "ImageView", "load_machine_spec"]
+__all__ = [
+    "CommFaultsView",
+    "ConditionNotMetError",
+    "Harness",
+    "HarnessError",
+    "ImageView",
+    "ReplayFailedError",
+    "SessionRecording",
+    "load_machine_spec",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -86,6 +96,13 @@ def _demo_machine() -> MachineConfig:
     from hli_server.configuration import load_machine
 
     return load_machine(None)
+
+
+def _relative_to(path: Path, base: Path | None) -> Path:
+    """``path``, or ``base / path`` for a relative path that exists there (the test file's directory)."""
+    if not path.is_absolute() and base is not None and (base / path).exists():
+        return base / path
+    return path
 
 
 def load_machine_spec(machine: Any, base: Path | None = None) -> MachineConfig:
@@ -149,6 +166,75 @@ class ImageView:
         return f"ImageView({self._image.name!r})"
 
 
+class ReplayFailedError(AssertionError):
+    """:meth:`Harness.replay` found a difference, or cannot replay the recording: the message is the
+    replay's report (the first difference with its cycle, signal, expected and actual value)."""
+
+    def __init__(self, report: Any) -> None:
+        super().__init__(report.text())
+        self.report = report
+
+
+class SessionRecording:
+    """A recording of the harness' session (:meth:`Harness.record`); stopped by :meth:`stop` or at the
+    end of a ``with`` block (and when the harness stops)."""
+
+    def __init__(self, harness: Harness, path: Path) -> None:
+        self._harness = harness
+        self.path = path
+
+    def stop(self) -> Path:
+        runtime = self._harness.runtime
+        if runtime.session.recording:
+            self._harness._call_soon(runtime.session.stop)
+        return self.path
+
+    def __enter__(self) -> SessionRecording:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+class CommFaultsView:
+    """The communication faults of the harness' server (issue 25, ``hli.comm_faults``): each call is
+    handed to the server's loop. ``with hli.comm_faults.fault(kind="delay", door="modbus", delay_ms=50,
+    count=3): ...`` ends the fault at the end of the block."""
+
+    def __init__(self, harness: Harness) -> None:
+        self._harness = harness
+
+    def add(self, **spec: Any) -> dict[str, Any]:
+        """Set a fault (the fields of ``POST /api/comm/faults``); returns it with its ``id``."""
+        faults = self._harness.runtime.comm_faults
+        result: dict[str, Any] = self._harness._call_soon(lambda: faults.add(spec).to_json())
+        return result
+
+    def end(self, fault_id: int) -> None:
+        faults = self._harness.runtime.comm_faults
+        self._harness._call_soon(lambda: faults.end(fault_id, "api"))
+
+    def reset(self) -> int:
+        faults = self._harness.runtime.comm_faults
+        ended: int = self._harness._call_soon(lambda: faults.reset("reset"))
+        return ended
+
+    def table(self) -> list[dict[str, Any]]:
+        faults = self._harness.runtime.comm_faults
+        table: list[dict[str, Any]] = self._harness._call_soon(faults.table)
+        return table
+
+    @contextlib.contextmanager
+    def fault(self, **spec: Any) -> Iterator[dict[str, Any]]:
+        fault = self.add(**spec)
+        try:
+            yield fault
+        finally:
+            with contextlib.suppress(Exception):  # ended by itself already
+                if any(f["id"] == fault["id"] for f in self.table()):
+                    self.end(fault["id"])
+
+
 class _OperatorInLoop:
     """The operator panel with every call handed to the server's loop (a thin proxy)."""
 
@@ -191,15 +277,22 @@ class Harness:
         bind: str = "127.0.0.1",
         base: Path | None = None,
         timeout_s: float = 120.0,
+        program_dirs: Iterable[str | os.PathLike[str]] = (),
+        nc_output_dir: str | os.PathLike[str] | None = None,
     ) -> None:
         if image not in ("memory", "shm"):
             raise ValueError(f"image={image!r}: use 'memory' (a buffer of this process) or 'shm' (/dev/shm)")
         self.config = load_machine_spec(machine, base)
+        self._base = base
         self.image_kind = image
         self.image_name = image_name
         self.bind = bind
         self.timeout_s = timeout_s
         self._adapter_specs = [_with_free_port(spec) for spec in adapters]
+        self.program_dirs = [_relative_to(Path(os.fspath(d)), base) for d in program_dirs]
+        """Where ``L name`` finds global subprograms (N-02), before the machine file's directories."""
+        self.nc_output_dir = nc_output_dir
+        """Where ``#MSG SAVE`` writes (N-07); None: a temporary directory (``hli.nc_output_dir``)."""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._runtime: Runtime | None = None
@@ -248,6 +341,8 @@ class Harness:
             image_name=self.image_name,
             adapters=self._adapter_specs,
             image_factory=memory_image if self.image_kind == "memory" else shared_memory_image,
+            program_dirs=self.program_dirs,
+            nc_output_dir=self.nc_output_dir,
         )
         await runtime.start()
         return runtime
@@ -382,6 +477,74 @@ class Harness:
         ``stop()`` or the end of a ``with`` block; ``recording.trace()[path]`` is a numpy array."""
         self._loop_or_raise()
         return self._call_soon(lambda: self.runtime.record(signals))
+
+    # --- recording and replay (issue 25) -----------------------------------------------------------
+    def record(self, path: str | os.PathLike[str], *, overwrite: bool = True) -> SessionRecording:
+        """Record this session into ``path`` (gzip JSON Lines, docs/record-replay.md) from the next cycle
+        on, with every input since the first cycle; ``with hli.record(p): ...`` or ``.stop()``."""
+        self._loop_or_raise()
+        target = Path(os.fspath(path))
+        runtime = self.runtime
+        self._call_soon(lambda: runtime.session.start(target, origin="pytest", overwrite=overwrite))
+        return SessionRecording(self, target)
+
+    def replay(self, path: str | os.PathLike[str], **options: Any) -> Any:
+        """Replay a recording as a test: raises :class:`ReplayFailedError` (an AssertionError, with the
+        report: the first difference's cycle, signal, expected and actual value) unless it passes;
+        returns the :class:`~hli_server.recording.replay.ReplayReport`. Options: ``until``, ``signals``,
+        ``events``, ``all_differences``, ``config``, ``same_version`` (as ``hli-server replay``). The
+        replay runs on a machine of its own, built from the recording; this harness' machine is left
+        as it is."""
+        __tracebackhide__ = True
+        from hli_server.recording.replay import Verdict, replay
+
+        self._loop_or_raise()
+        report = self._call(replay(Path(os.fspath(path)), **options))
+        if report.verdict is not Verdict.PASS:
+            raise ReplayFailedError(report)
+        return report
+
+    @property
+    def comm_faults(self) -> CommFaultsView:
+        """Faults in the PLC's communication on demand (docs/record-replay.md)."""
+        return CommFaultsView(self)
+
+    # --- programs (N-02, N-07) -----------------------------------------------------------------
+    def load_program(
+        self,
+        channel: int,
+        program: str | os.PathLike[str],
+        *,
+        files: Mapping[str, str | os.PathLike[str]] | Iterable[str | os.PathLike[str]] = (),
+        name: str | None = None,
+    ) -> dict[str, Any]:
+        """Load a program into ``channel`` with the subprograms and cycles it calls.
+
+        ``program`` is NC text, or the path of a program file (a :class:`~pathlib.Path`, relative to
+        the test file's directory for the plugin's ``hli``). ``files`` are its subprograms: paths
+        (found by ``L`` under their file name), or ``{name: text or path}``. They are found before the
+        program directories, as files uploaded with the program (``POST /api/channels/{n}/program``).
+        Raises the operator's errors (a program runs: ConflictError; a name with ``..``:
+        InvalidRequestError)."""
+        if isinstance(program, os.PathLike):
+            path = _relative_to(Path(program), self._base)
+            text, name = path.read_text(encoding="utf-8"), name or path.name
+        else:
+            text, name = program, name or "program"
+        uploads: dict[str, str] = {}
+        items = files.items() if isinstance(files, Mapping) else ((None, f) for f in files)
+        for key, value in items:
+            if isinstance(value, os.PathLike) or key is None:
+                file = _relative_to(Path(os.fspath(value)), self._base)
+                uploads[key or file.name] = file.read_text(encoding="utf-8")
+            else:
+                uploads[key] = value
+        return self.operator.load_program(channel, text, name, uploads)
+
+    @property
+    def nc_files(self) -> Path:
+        """The directory where this server's ``#MSG SAVE`` writes its report files."""
+        return self.runtime.nc_files.directory
 
     # --- doors ------------------------------------------------------------------------------------
     def serve(self, adapter: str, **options: Any) -> Adapter:

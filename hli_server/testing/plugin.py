@@ -25,6 +25,7 @@ Nothing is shared between tests or between pytest-xdist workers: every ``hli`` h
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -38,9 +39,10 @@ if TYPE_CHECKING:
 __all__ = ["hli", "hli_machine", "plc_transport"]
 
 _MARKER = (
-    "hli(machine=None, image='memory', adapters=()): options of the `hli` fixture (hli-server's "
-    "pytest plugin, H-07): the machine file or configuration, 'memory' or 'shm' for the process image, "
-    "doors to open at start"
+    "hli(machine=None, image='memory', adapters=(), program_dirs=None, nc_output_dir=None): options of "
+    "the `hli` fixture (hli-server's pytest plugin, H-07): the machine file or configuration, 'memory' or "
+    "'shm' for the process image, doors to open at start, where `L name` finds subprograms (relative to "
+    "the test file), where #MSG SAVE writes"
 )
 _IMAGE_KINDS = ("memory", "shm")
 
@@ -50,6 +52,13 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         "hli_machine",
         "machine file of the `hli` fixture (hli-server), relative to the rootdir; default: the demo machine",
         default="",
+    )
+    parser.addini(
+        "hli_program_dirs",
+        "program directories of the `hli` fixture (hli-server): where `L name` finds subprograms, relative "
+        "to the rootdir, one per line",
+        type="linelist",
+        default=[],
     )
     parser.addini(
         "hli_image",
@@ -85,7 +94,7 @@ def _hli_marker(request: pytest.FixtureRequest) -> dict[str, Any]:
         raise pytest.UsageError(
             f"{request.node.nodeid}: write @pytest.mark.hli(machine=..., image=..., adapters=...) with names"
         )
-    known = {"machine", "image", "adapters"}
+    known = {"machine", "image", "adapters", "program_dirs", "nc_output_dir"}
     unknown = set(marker.kwargs) - known
     if unknown:
         raise pytest.UsageError(
@@ -118,11 +127,18 @@ def hli(request: pytest.FixtureRequest, hli_machine: Any) -> Iterator[Harness]:
     if image not in _IMAGE_KINDS:
         raise pytest.UsageError(f"hli image {image!r}: use one of {', '.join(_IMAGE_KINDS)}")
     base = Path(request.path).parent if request.path is not None else None
+    dirs = options.get("program_dirs")
+    if dirs is None:
+        dirs = [request.config.rootpath / d for d in request.config.getini("hli_program_dirs")]
+    elif isinstance(dirs, str | os.PathLike):
+        dirs = [dirs]
     harness = Harness(
         hli_machine,
         image=image,  # type: ignore[arg-type]
         adapters=options.get("adapters", ()),
         base=base,
+        program_dirs=dirs,
+        nc_output_dir=options.get("nc_output_dir"),
     )
     with harness:
         yield harness

@@ -16,12 +16,15 @@ name             document   what the PLC does
 ``c3-collision`` FCT-C3     the PLC reads the collision objects (``dyn_coll_mon``) of the gantry
                             pair X1/X2 and holds the approaching carriages with feedhold before
                             the CNC's own monitor would stop them with error 70092
+``ve-mode``      V.E.       the PLC selects ``V.E.MODE`` and releases the program with
+                            ``V.E.PLC_READY``; the NC program waits in a ``$WHILE`` loop,
+                            branches with ``$IF`` into a subprogram, counts ``V.E.PART_COUNT``
 ================ ========== ===============================================================
 
-The operator's part (loading the demo's NC program, :attr:`Demo.nc_program`, into
-:attr:`Demo.channel`) is done by whoever runs the demo (the PLC starts it with a rising edge of
-``start_w`` and writes ``program_select_w`` = 0, so that a selection an earlier PLC left in the image
-does not replace it): ``hli-plc`` over the HTTP API, a test
+The operator's part (loading the demo's NC program, :attr:`Demo.nc_program`, with the subprograms
+it calls, :attr:`Demo.nc_files`, into :attr:`Demo.channel`) is done by whoever runs the demo (the
+PLC starts it with a rising edge of ``start_w`` and writes ``program_select_w`` = 0, so that a
+selection an earlier PLC left in the image does not replace it): ``hli-plc`` over the HTTP API, a test
 through the harness' operator panel. Everything else goes through the PLC's door only, so a demo
 behaves the same over shared memory, Modbus and ADS: its decisions depend on the CNC cycle of its
 input image (``io.cycle``), never on the wall clock.
@@ -55,6 +58,8 @@ class Demo:
     channel: ClassVar[int] = 1
     """The channel (number, 1-based) the operator loads :attr:`nc_program` into."""
     nc_program: ClassVar[str]
+    nc_files: ClassVar[dict[str, str]] = {}
+    """The subprograms and cycles :attr:`nc_program` calls (``L name``): uploaded with it."""
     watch: tuple[str, ...] = ()
 
     def __init__(self, printer: Callable[[str], object] | None = None) -> None:
@@ -88,11 +93,12 @@ def _registry() -> dict[str, type[Demo]]:
     from plc_clients.demos.c3_collision import CollisionDemo
     from plc_clients.demos.c14_manual_mode import ManualModeDemo
     from plc_clients.demos.c43_obstacle import ObstacleDemo
+    from plc_clients.demos.ve_mode import VeModeDemo
 
-    return {cls.name: cls for cls in (ObstacleDemo, ManualModeDemo, CollisionDemo)}
+    return {cls.name: cls for cls in (ObstacleDemo, ManualModeDemo, CollisionDemo, VeModeDemo)}
 
 
-DEMOS: tuple[str, ...] = ("c43-obstacle", "c14-manual", "c3-collision")
+DEMOS: tuple[str, ...] = ("c43-obstacle", "c14-manual", "c3-collision", "ve-mode")
 """The demos' names, in the order of the documents' examples."""
 
 

@@ -122,9 +122,9 @@ class ObstacleDemo(Demo):
             )
             return
         where = f"{self.axis_name} = {_mm(int(io.read(self.position)))}"
-        if block.State == DynPosLimitState.ACTIVE_BRAKE and not self.held:
+        if block.MonitoringState == DynPosLimitState.ACTIVE_BRAKE and not self.held:
             self.held = True
-            self.say(io, f"{self.axis_name} stopped at the limit: {where}")
+            self.say(io, f"{self.axis_name} stopped at the limit in effect, {_mm(int(block.State))}: {where}")
         if state == ProgramState.FINISHED:
             self.finish(io, f"program finished: {where}")
         elif state == ProgramState.ABORTED:

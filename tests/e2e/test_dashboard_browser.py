@@ -20,6 +20,7 @@ from typing import Any
 
 import pytest
 
+from hli_server.recording.format import read_records
 from tests.integration.servers import hli_server_cmd, read_banner, stop_server
 from tests.spec_examples import CIRC_PROT_OLD
 
@@ -151,7 +152,11 @@ def test_an_operator_starts_the_demo_program_sees_a_violation_and_resets(server:
     legend = p.locator("#ch1-legend")
     expect(legend).to_contain_text("refused block N70")
     expect(legend).to_contain_text("violation at X100.0000 Y0.0000 Z0.0000, area 4 (alarm 912001)")
-    expect(legend).to_contain_text("ID4 PROT active, Z -70..70: path goes through it")
+    # what happened (issue 23): the block was refused before it entered the cylinder
+    expect(legend).to_contain_text(
+        "ID4 PROT active, Z -70..70: the refused block N70 would enter it; the axes stopped before it"
+    )
+    expect(legend).not_to_contain_text("path goes through it")
     expect(p.locator("#events")).to_contain_text("area_violation")
     p.screenshot(path=str(ARTIFACTS / "dashboard-area-violation.png"), full_page=True)
 
@@ -239,3 +244,108 @@ def test_with_an_api_token_the_page_asks_for_it_once(browser: Any, tmp_path: Pat
         context.close()
     finally:
         stop_server(proc)
+
+
+def test_a_plain_headless_chromium_sees_the_state_and_the_events_of_before(server: str) -> None:
+    """Issue 23: the page is whole at its load event, drawn from what it was served with, before the
+    stream says anything: ``chromium --headless --dump-dom`` (which, like ``--screenshot``, takes the
+    page at its load event) shows the mode, the program, the axes with their positions, and the event
+    of a program loaded before the page was opened. The screenshot is kept as an artifact."""
+    import urllib.request
+
+    request = urllib.request.Request(
+        f"{server}/api/channels/1/program?name=before-the-page",
+        data=b"N10 G01 X5 F6000\nN20 M30\n",
+        method="POST",
+        headers={"content-type": "text/plain"},
+    )
+    with urllib.request.urlopen(request, timeout=10) as answer:
+        assert answer.status in (200, 202)
+    dom = subprocess.run(
+        [CHROMIUM, *CHROMIUM_FLAGS, "--dump-dom", server + "/"],
+        capture_output=True,
+        text=True,
+        timeout=90,
+        check=False,
+    ).stdout
+    assert 'id="ch1-mode">automatic<' in dom, dom[:3000]
+    assert 'id="ch1-progname">before-the-page<' in dom
+    for axis in "XYZ":
+        row = re.search(rf'<tr id="axis-{axis}">.*?</tr>', dom)
+        assert row is not None, f"no row of axis {axis}"
+        assert re.search(r'<td class="command">-?\d+\.\d{3}</td>', row.group(0)), row.group(0)
+        assert "referenced" in row.group(0)
+    assert re.search(r'<li class="event program_state">.*?cause=load program=before-the-page', dom)
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    shot = ARTIFACTS / "dashboard-plain-screenshot.png"
+    subprocess.run(
+        [CHROMIUM, *CHROMIUM_FLAGS, f"--screenshot={shot}", "--window-size=1400,1000", server + "/"],
+        capture_output=True,
+        timeout=90,
+        check=False,
+    )
+    assert shot.is_file()
+    assert shot.stat().st_size > 10_000  # a drawn page, not a blank one
+
+
+@pytest.mark.req("B-02")
+def test_the_record_button_records_the_session_into_the_recording_directory(
+    browser: Any, tmp_path: Path
+) -> None:
+    proc, url = _start("--record-dir", str(tmp_path), log=tmp_path / "server.log")
+    try:
+        context = browser.new_context()
+        p = context.new_page()
+        p.set_default_timeout(WAIT_MS)
+        _open(p, url)
+        button = p.locator("#record")
+        expect(button).to_have_text("● Record")
+        expect(p.locator("#record-status")).to_have_text("not recording")
+        button.click()
+        expect(button).to_have_text("■ Stop recording")
+        expect(p.locator("#record-status")).to_contain_text("recording session-")
+        p.click("#ch1-select")
+        p.click("#ch1-start")
+        expect(p.locator("#ch1-state")).to_have_text("running")
+        button.click()
+        expect(button).to_have_text("● Record")
+        expect(p.locator("#message")).to_contain_text("hli-server replay FILE replays it")
+        context.close()
+    finally:
+        stop_server(proc)
+    files = list(tmp_path.glob("session-*.jsonl.gz"))
+    assert len(files) == 1
+    ops = [r["op"] for r in read_records(files[0]) if "op" in r]
+    assert ops == ["select_program", "start"]
+
+
+@pytest.mark.req("N-05")
+def test_the_v_e_variables_show_what_the_plc_wrote(server: str, page: Any) -> None:
+    """The demo machine's V.E. variables in their table; a PLC's write (over HTTP, as an image write)
+    shows on the page within a few state messages."""
+    p = page
+    _open(p, server)
+    row = p.locator("#external tr[data-variable='V.E.MODE']")
+    expect(row).to_contain_text("global")
+    expect(row).to_contain_text("SGN32")
+    expect(row).to_contain_text("gpVEGlob^MODE")
+    expect(p.locator("#external tr[data-variable='V.E.PLC_READY']")).to_contain_text("global")
+    answer = p.request.put(f"{server}/api/image/gpVEGlob.MODE", data={"value": 2})
+    assert answer.ok, answer.text()
+    expect(row.locator("td.value")).to_have_text("2")
+    answer = p.request.put(f"{server}/api/image/gpVEGlob.MODE", data={"value": 0})
+    assert answer.ok, answer.text()
+    expect(row.locator("td.value")).to_have_text("0")
+
+
+@pytest.mark.req("N-07")
+def test_an_nc_message_shows_on_the_page(server: str, page: Any) -> None:
+    p = page
+    _open(p, server)
+    p.click("#ch1-reset")
+    p.click("#ch1-card details.load summary")
+    p.fill("#ch1-text", '%msg\nN10 #MSG["hello from the NC"]\nN20 M30\n')
+    p.click("#ch1-load")
+    expect(p.locator("#message")).to_contain_text("load program: done")
+    p.click("#ch1-start")
+    expect(p.locator("#nc-messages li").first).to_contain_text("hello from the NC", timeout=5_000)

@@ -38,6 +38,7 @@ class Observed:
     x: int = 0
     moving: bool = True
     program_state: int = 0
+    limit: int = 0
 
     def state_path(self) -> list[int]:
         """The states in the order seen, without repeats."""
@@ -58,8 +59,8 @@ def test_dyn_pos_limit_high_stops_x_at_the_limit_and_lifting_it_lets_the_program
 
     def program(io: IoImage) -> None:
         limit(Axis=x_axis, Enable=enable[0], Position=LIMIT)
-        seen.states.append(int(limit.State))
-        seen.valid, seen.state = limit.Valid, int(limit.State)
+        seen.states.append(int(limit.MonitoringState))
+        seen.valid, seen.state, seen.limit = limit.Valid, int(limit.MonitoringState), int(limit.State)
         seen.x = int(io.read(X_POS))
         seen.moving = bool(io.read(X_MOVING))
         seen.program_state = int(io.read(PROGRAM_STATE))
@@ -69,7 +70,8 @@ def test_dyn_pos_limit_high_stops_x_at_the_limit_and_lifting_it_lets_the_program
     # 1. the block sets the limit; the CNC reports it in effect
     hli.run_until(lambda: seen.valid, max_cycles=20, plc=task)
     assert not limit.Error, limit.ErrorText
-    assert seen.state == 2  # HLI_DYNPL_STATE_ACTIVE
+    assert seen.state == 2  # MonitoringState: HLI_DYNPL_STATE_ACTIVE
+    assert seen.limit == LIMIT  # State: "Aktueller Positionsgrenzwert" (FCT-C43 3.2)
     unit = hli.runtime.machine.hli.axes[0].ipo_mc_control.dyn_pos_limit_high
     assert (unit.enable_w, unit.command_w) == (True, LIMIT)
 
@@ -97,7 +99,13 @@ def test_dyn_pos_limit_high_stops_x_at_the_limit_and_lifting_it_lets_the_program
     hli.run_until(
         lambda: seen.program_state == ProgramState.FINISHED and seen.x == TARGET, max_cycles=3000, plc=task
     )
-    assert (limit.Valid, limit.State, limit.Error, limit.ErrorID) == (False, 0, False, 0)
+    assert (limit.Valid, limit.State, limit.MonitoringState, limit.Error, limit.ErrorID) == (
+        False,
+        0,
+        0,
+        False,
+        0,
+    )
     assert unit.enable_w is False
     assert unit.state_r == 0
     assert task.stats.input_faults == task.stats.output_faults == 0

@@ -33,7 +33,7 @@ def test_the_complete_example_runs_against_hli_server_run(
 ) -> None:
     server = hli_server_process
     script = tmp_path / "plc_demo.py"
-    script.write_text(marked_block(DOC, "plc_demo.py:"), encoding="utf-8")
+    script.write_text(marked_block(DOC, "doc-run: session=quick file=plc_demo.py"), encoding="utf-8")
     where = server["image"] if transport == "shm" else server["modbus"]
     args = [sys.executable, str(script), transport, where, "--hold", "0.3", "--layout", server["http"]]
     done = subprocess.run(args, capture_output=True, text=True, timeout=60, cwd=tmp_path, check=False)

@@ -12,7 +12,7 @@ import httpx
 
 __all__ = ["DOORS", "door_port", "hli_server_cmd", "http_step", "read_banner", "start_server", "stop_server"]
 
-DOORS = ("HTTP control API", "Modbus TCP", "ADS (AMS/TCP)", "MQTT")
+DOORS = ("HTTP control API", "Modbus TCP", "ADS (AMS/TCP)", "ADS (UDP)", "MQTT")
 """The doors' names as the banner starts their lines."""
 
 
@@ -50,6 +50,7 @@ def read_banner(proc: subprocess.Popen[str], timeout: float = 20.0) -> dict[str,
             if line.strip().startswith(door + ":"):
                 found[door] = line.strip()
         if "stop with" in line:
+            found["text"] = "".join(lines)
             return found
     stderr = proc.stderr.read() if proc.stderr and proc.poll() is not None else ""
     raise AssertionError(f"no banner from hli-server run: {''.join(lines)} {stderr}")

@@ -25,7 +25,7 @@ from typing import Any, TypeVar
 import pyads
 import pytest
 
-from hli_server.adapters.ads import AdsAdapter
+from hli_server.adapters.ads import VIEW_GROUP, AdsAdapter
 from hli_server.codecs.ads import (
     AmsAddress,
     AmsPacket,
@@ -312,12 +312,18 @@ async def test_symbol_info_and_upload(runtime: Runtime) -> None:
         assert (symbol.index_group, symbol.index_offset, symbol.symbol_type) == (F020, s.offset, "UDINT")
         assert "distance between the axes" in symbol.comment
         assert await c(symbol.read) == 200_000
-        everything = await c.get_all_symbols()
-        assert [x.name for x in everything] == [s.st_path for s in layout.signals]
-        by_name = {x.name: x for x in everything}
+        everything = await c.get_all_symbols()  # the top level, as TwinCAT's upload
+        assert [(x.name, x.symbol_type) for x in everything] == [
+            ("gpCh", f"ARRAY [0..{len(layout.channels) - 1}] OF HLI_CH"),
+            ("gpAx", f"ARRAY [0..{len(layout.axes) - 1}] OF HLI_AX"),
+            ("gpVEGlob", "HLI_VEGLOB"),  # the demo machine's global V.E. variables (N-05)
+        ]
+        cmd_low = await c(c.conn.get_symbol, CMD_LOW)
         cmd = layout.signal(CMD_LOW)
-        assert (by_name[CMD_LOW].index_group, by_name[CMD_LOW].index_offset) == (F030, cmd.offset)
-        assert by_name["gpAx[0]^ipo_state.referenced_r"].symbol_type == "BOOL"
+        assert (cmd_low.index_group, cmd_low.index_offset) == (F030, cmd.offset)
+        assert (await c(c.conn.get_symbol, "gpAx[0]^ipo_state.referenced_r")).symbol_type == "BOOL"
+        unit = await c(c.conn.get_symbol, "gpAx[0]^ipo_mc_control.dyn_pos_limit_low")
+        assert (unit.symbol_type, unit.index_group) == ("MC_CONTROL_SGN32_UNIT", VIEW_GROUP)
         # every entry fits pyads' 798-byte symbol info read
         for name in [layout.signals[0].st_path, layout.signals[-1].st_path]:
             info = await c(pyads.pyads_ex.adsGetSymbolInfo, c.conn._port, c.conn._adr, name)
@@ -327,8 +333,8 @@ async def test_symbol_info_and_upload(runtime: Runtime) -> None:
 async def test_device_info_state_and_write_control(runtime: Runtime) -> None:
     async with plc(runtime) as c, plc(runtime, 551) as geo:
         name, version = await c.read_device_info()
-        assert name == "HLI-Server"
-        assert (version.version, version.revision) == (0, 1)
+        assert name == "Plc30 App"  # what a TwinCAT 3 PLC runtime calls itself
+        assert (version.version, version.revision, version.build) == (3, 1, 4024)
         assert await c.read_state() == (pyads.ADSSTATE_RUN, 0)
         assert (await geo.read_device_info())[0] == "HLI-Server GEO"
         assert await geo.read_state() == (pyads.ADSSTATE_RUN, 0)
@@ -426,6 +432,7 @@ async def test_a_notification_reaches_a_separate_process(runtime: Runtime) -> No
     assert ads(runtime).connection_count == 0
 
 
+@pytest.mark.req("B-01")
 async def test_notifications_on_change_and_cyclic_with_distinct_handles(runtime: Runtime) -> None:
     received: queue.Queue[tuple[str, int, Any]] = queue.Queue()
     async with plc(runtime) as c, plc(runtime, 551) as geo:
@@ -651,7 +658,7 @@ async def test_256_clients_at_once() -> None:
 
 
 async def test_idle_clients_are_closed_and_never_lock_out_a_new_one() -> None:
-    rt = await start_runtime(max_connections=4, idle_timeout_s=0.4, evict_idle_after_s=0.1)
+    rt = await start_runtime(max_connections=4, idle_timeout_s=0.4)
     try:
         port = ads(rt).port or 0
         idle = [await RawClient.connect(port) for _ in range(4)]
@@ -685,16 +692,22 @@ async def test_a_client_that_only_watches_notifications_is_not_idle() -> None:
         await rt.stop()
 
 
-async def test_a_full_server_refuses_when_nobody_is_idle() -> None:
-    rt = await start_runtime(max_connections=2, evict_idle_after_s=60)
+@pytest.mark.req("H-04")
+async def test_a_full_house_of_busy_clients_makes_room_for_a_newcomer() -> None:
+    """Issue 27, finding 3: a newcomer is never refused; the connection whose last request is oldest goes."""
+    rt = await start_runtime(max_connections=3)
     try:
         port = ads(rt).port or 0
-        busy = [await RawClient.connect(port) for _ in range(2)]
-        for c in busy:
+        busy = [await RawClient.connect(port) for _ in range(3)]
+        for c in busy:  # busy[0] asked first, so its last request is the oldest
             assert result_of(await c.request(CommandId.READ_STATE, b"")) == 0
+            await asyncio.sleep(0.02)
         late = await RawClient.connect(port)
-        assert await late.closed()
-        assert ads(rt).stats.refused_full == 1
+        assert result_of(await late.request(CommandId.READ_STATE, b"")) == 0
+        assert await busy[0].closed(2.0)
+        assert ads(rt).stats.evicted == 1
+        for c in busy[1:]:
+            assert result_of(await c.request(CommandId.READ_STATE, b"")) == 0
         for c in [*busy, late]:
             c.close()
     finally:
@@ -772,6 +785,8 @@ async def test_fuzz_random_and_mutated_frames_never_crash_and_refusals_change_no
     port = ads(runtime).port or 0
     proto = RawClient(None, None)  # type: ignore[arg-type]
     cmd, en = layout.signal(CMD_LOW), layout.signal(EN_LOW)
+    unit = ads(runtime).device.symbols.find(HIGH)
+    assert unit is not None
     valid = [
         proto.frame(CommandId.READ, ReadRequest(F020, 0, 16).encode()),
         proto.frame(CommandId.READ, ReadRequest(0x120300, (5 << 16) | 0x0246, 4).encode(), port=551),
@@ -789,6 +804,25 @@ async def test_fuzz_random_and_mutated_frames_never_crash_and_refusals_change_no
         ),
         proto.frame(CommandId.READ_STATE, b""),
         encode_router_frame(0x1000, b"\x00\x00"),
+        # issue 22: structures, the system service, types
+        proto.frame(CommandId.READ, ReadRequest(VIEW_GROUP, unit.index_offset, unit.size).encode()),
+        proto.frame(
+            CommandId.WRITE,
+            WriteRequest(VIEW_GROUP, unit.index_offset, struct.pack("<i?ii", 1, True, 9, 1)).encode(),
+        ),
+        proto.frame(CommandId.READ, ReadRequest(0xF0, 0, 16).encode(), port=10000),
+        proto.frame(CommandId.READ_DEVICE_INFO, b"", port=10000),
+        proto.frame(
+            CommandId.READ_WRITE,
+            struct.pack("<IIII", 0xF009, 0, 0xFFFF, len(unit.name) + 1) + unit.name.encode() + b"\0",
+        ),
+        proto.frame(
+            CommandId.READ_WRITE, struct.pack("<IIII", 0xF011, 0, 0xFFFF, 22) + b"MC_CONTROL_SGN32_UNIT\0"
+        ),
+        proto.frame(
+            CommandId.ADD_DEVICE_NOTIFICATION,
+            struct.pack("<IIIIII16s", VIEW_GROUP, unit.index_offset, unit.size, 3, 10_000, 10_000, bytes(16)),
+        ),
     ]
     expected = runtime.image.read_half(Direction.PLC_TO_CNC)
     closed_by_server = 0
@@ -869,8 +903,71 @@ def test_layout_names_every_symbol_once() -> None:
 
     layout = build_layout(load_machine(None))
     table = SymbolTable(layout)
-    assert len(table) == len(layout.signals)
+    assert table.leaf_count == len(layout.signals)
     for s in layout.signals:
         found = table.find(s.st_path.replace("]^", "]."))
         assert found is not None
         assert found.signal is s
+
+
+async def test_the_ads_transport_checks_its_layout_against_the_server(runtime: Runtime) -> None:
+    """plc_clients.AdsTransport asks the symbol info of every signal (0xF082 of 0xF009) on connect."""
+    from dataclasses import replace
+
+    from plc_clients.ads import AdsTransport
+    from schemas.layout import Layout, LayoutError, SignalType
+
+    layout = runtime.layout
+    port = ads(runtime).port or 0
+    transport = await asyncio.to_thread(AdsTransport.connect, "127.0.0.1", port, layout=layout)
+    await asyncio.to_thread(transport.close)
+    sizes = {d: layout.size(d) for d in Direction}
+    renamed = {layout.signals[0].st_path: {"st_path": "gpCh[0]^bahn_state.bogus_r"}}
+    retyped = {X_POS: {"type": SignalType.UDINT}}
+    for changes, message in (
+        (renamed, r"no symbol gpCh\[0\]\^bahn_state.bogus_r"),
+        (retyped, r"the layout is not the server's: here \('gpAx\[0\]\^ipo_state.cmd_pos_r', .*'UDINT'\)"),
+    ):
+        signals = [replace(s, **changes.get(s.st_path, {})) for s in layout.signals]
+        other = Layout(
+            machine="other", channels=layout.channels, axes=layout.axes, signals=signals, sizes=sizes
+        )
+        with pytest.raises(LayoutError, match=message):
+            await asyncio.to_thread(AdsTransport.connect, "127.0.0.1", port, layout=other)
+
+
+UNIT_DEF = (
+    ("request_r", pyads.PLCTYPE_DINT, 1),
+    ("enable_w", pyads.PLCTYPE_BOOL, 1),
+    ("command_w", pyads.PLCTYPE_DINT, 1),
+    ("state_r", pyads.PLCTYPE_DINT, 1),
+)
+"""MC_CONTROL_SGN32_UNIT as pyads' structure definition: the kernel's members in the kernel's order."""
+
+
+@pytest.mark.req("B-01")
+async def test_pyads_reads_and_writes_a_control_unit_as_a_structure(runtime: Runtime) -> None:
+    """Issue 22: read_structure_by_name works; a whole-structure write sets the _w members and leaves
+    the _r members to the CNC (docs/ads.md, Structures)."""
+    low = "gpAx[0]^ipo_mc_control.dyn_pos_limit_low"
+    async with plc(runtime) as c:
+        assert await c.read_structure_by_name(low, UNIT_DEF) == {
+            "request_r": 0,
+            "enable_w": False,
+            "command_w": 0,
+            "state_r": 0,
+        }
+        value = {"request_r": 7, "enable_w": True, "command_w": -100_000, "state_r": 99}
+        await c.write_structure_by_name(low, value, UNIT_DEF)
+        await runtime.step(2)
+        unit = await c.read_structure_by_name(low.replace("]^", "]."), UNIT_DEF)
+        assert (unit["enable_w"], unit["command_w"]) == (True, -100_000)
+        assert unit["request_r"] == 0  # not supported by the kernel: always 0, whatever was written
+        assert unit["state_r"] == runtime.image.read(STATE_LOW) != 99  # the CNC's monitoring state
+        # a whole axis as one structure: the array element, with every unit inside
+        size = ads(runtime).device.symbols.find("gpAx[0]").size  # type: ignore[union-attr]
+        axis = await c.read_by_name("gpAx[0]", pyads.PLCTYPE_BYTE * size)
+        assert len(axis) == size
+        with pytest.raises(pyads.ADSError) as info:  # the size of the structure, or 0x705
+            await c.read_structure_by_name(low, UNIT_DEF[:3])
+        assert info.value.err_code == 0x705

@@ -64,9 +64,56 @@ async def test_the_page_is_served_at_the_root_with_its_script_and_style(runtime:
         assert "frame-ancestors 'none'" in csp
         script = await c.get("/dashboard.js")
         assert script.headers["content-type"].startswith("text/javascript")
-        assert 'new EventSource("/api/live")' in script.text
+        assert "new EventSource(liveUrl())" in script.text
+        assert '"/api/live?access_token="' in script.text  # the token reaches the stream (RFC 6750)
         style = await c.get("/dashboard.css")
         assert style.headers["content-type"].startswith("text/css")
+
+
+def _initial(page: str) -> Any:
+    head = '<script type="application/json" id="initial">'
+    start = page.index(head) + len(head)
+    return json.loads(page[start : page.index("</script>", start)])
+
+
+async def test_the_page_is_served_with_the_machine_as_it_is_and_the_recent_events(runtime: Runtime) -> None:
+    """Issue 23: the page carries what the stream would say first (hello, state, scenes) and the newest
+    events of the log, so it is whole before the stream says anything and shows what happened before
+    it was opened. Text of a client (a program name) cannot end the data block."""
+    name = "before</script><script>alert(1)</script>"
+    async with httpx.AsyncClient(base_url=runtime.http_url, timeout=10) as c:
+        loaded = await c.post(
+            "/api/channels/1/program", params={"name": name}, content="N10 G01 X20 F6000\nN20 M30\n"
+        )
+        assert loaded.status_code in (200, 202), loaded.text
+        await runtime.step(5)
+        page = (await c.get("/")).text
+        state = (await c.get("/api/state")).json()
+    assert page.count("<script") == 2  # the data block and the script: the name ended neither
+    initial = _initial(page)
+    assert initial["hello"]["machine"] == "demo"
+    assert [ch["number"] for ch in initial["hello"]["channels"]] == [1, 2]
+    assert initial["state"]["cycle"] == state["cycle"] == 5
+    assert initial["state"]["channels"][0]["program"] == name
+    assert {a["name"] for a in initial["state"]["axes"]} == set(state["axes"])
+    assert [scene["channel"] for scene in initial["scenes"]] == [1, 2]
+    loads = [e for e in initial["events"] if e["kind"] == "program_state" and e["data"]["cause"] == "load"]
+    assert loads
+    assert loads[0]["data"]["program"] == name
+
+
+async def test_the_page_shows_the_newest_events_only(runtime: Runtime) -> None:
+    from hli_server.adapters.http.routers.page import EVENTS_SHOWN
+
+    async with httpx.AsyncClient(base_url=runtime.http_url, timeout=10) as c:
+        for i in range(EVENTS_SHOWN + 5):  # an event a load: more than the page shows
+            await c.post("/api/channels/1/program", params={"name": f"p{i}"}, content="N10 M30\n")
+            await runtime.step(1)
+        events = _initial((await c.get("/")).text)["events"]
+        latest = (await c.get("/api/events", params={"since": 0, "limit": 1})).json()["latest"]
+    assert len(events) == EVENTS_SHOWN
+    assert events[-1]["seq"] == latest
+    assert [e["seq"] for e in events] == list(range(latest - EVENTS_SHOWN + 1, latest + 1))
 
 
 async def test_the_stream_says_hello_then_scenes_states_and_events(runtime: Runtime) -> None:

@@ -87,6 +87,7 @@ def _body(rng: random.Random) -> tuple[str, dict[str, str]]:
         "name",
     ]
     fields += ["friction", "gain_factor", "encoder_drift", "encoder_stuck", "drive_error", "extra"]
+    fields += ["swe_neg", "swe_pos", "swe_toleranz"]
     obj = {rng.choice(fields): _value(rng) for _ in range(rng.randrange(4))}
     text = json.dumps(obj, allow_nan=True)
     return text, headers
@@ -109,6 +110,9 @@ def _request(rng: random.Random) -> tuple[str, str]:
             ("POST", f"/api/axes/{axis}/faults"),
             ("DELETE", f"/api/axes/{axis}/faults"),
             ("POST", f"/api/axes/{axis}/reference"),
+            ("GET", f"/api/axes/{axis}/soft-limits"),
+            ("PUT", f"/api/axes/{axis}/soft-limits"),
+            ("PUT", f"/api/axes/{axis}/record"),
             ("POST", "/api/step"),
             ("GET", "/api/state"),
             ("GET", f"/api/events?since={rng.choice(['0', '-1', 'x', '99999999999999999999999'])}"),
@@ -120,13 +124,18 @@ def _request(rng: random.Random) -> tuple[str, str]:
     )
 
 
-def _state(rt: Runtime) -> tuple[bytes, str | None, list[dict[str, Any]]]:
-    """What a refused request must not change: the PLC->CNC half, the programs, the faults."""
+def _state(rt: Runtime) -> tuple[bytes, str | None, list[dict[str, Any]], list[tuple[float, ...]]]:
+    """What a refused request must not change: the PLC->CNC half, the programs, the faults, the
+    software limits (in effect and in the axis record)."""
     m = rt.machine
     return (
         rt.image.read_half(Direction.PLC_TO_CNC),
         m.channel(1).program_text,
         [a.faults.as_dict() for a in m.axes],
+        [
+            (a.swe_neg, a.swe_pos, a.swe_tol, a.config.swe_neg, a.config.swe_pos, a.config.swe_toleranz)
+            for a in m.axes
+        ],
     )
 
 

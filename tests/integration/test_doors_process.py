@@ -96,3 +96,34 @@ def test_no_doors_process_serves_modbus_in_the_engines_process() -> None:
         assert "doors process" not in line
     finally:
         stop_server(proc)
+
+
+@pytest.mark.req("H-01", "E-01")
+def test_the_http_api_runs_in_the_doors_process_and_reaches_the_engine() -> None:
+    """Issue 26: the HTTP API and the dashboard's streams are served off the clock's loop, by the doors
+    process, which reaches the engine's operator panel and events over its link (``runtime/remote.py``)."""
+    proc = start_server("--http-port", "0", "--modbus-port", "0")
+    try:
+        banner = read_banner(proc)
+        url = banner["url"]
+        doors = _pid_of(banner["HTTP control API"])
+        assert doors == _pid_of(banner["Modbus TCP"]) != proc.pid
+        r = httpx.post(url + "/api/channels/1/program", content="N10 G01 X20 F6000\nN20 M30\n", timeout=10)
+        assert r.status_code == 200
+        assert httpx.post(url + "/api/channels/1/start", timeout=10).status_code == 202
+        deadline = time.monotonic() + 20
+        kinds: list[str] = []
+        while "finished" not in kinds and time.monotonic() < deadline:
+            time.sleep(0.1)
+            events = httpx.get(url + "/api/events?since=0", timeout=10).json()["events"]
+            kinds = [e["data"].get("state", "") for e in events if e["kind"] == "program_state"]
+        assert kinds[:3] == ["idle", "running", "finished"]  # load, start, end: the engine's events, in order
+        state = httpx.get(url + "/api/state", timeout=10).json()
+        assert state["channels"][0]["program_state_name"] == "finished"
+        timing = httpx.get(url + "/api/timing", timeout=10).json()
+        assert timing["clock"] == "realtime"
+        assert timing["cycles"] > 200
+        assert {"p50", "p99", "p999", "max"} <= set(timing["lateness_us"])
+    finally:
+        stop_server(proc)
+    assert proc.returncode == 0

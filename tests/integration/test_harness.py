@@ -114,7 +114,7 @@ def test_the_report_lists_the_active_alarms(hli) -> None:
     lines = str(failure.value).splitlines()
     alarms = lines[lines.index("active alarms:") + 1 :]
     assert len(alarms) == 1
-    assert alarms[0].startswith("  911011 (error, channel 1, axis X): axis X: programmed path reaches 700")
+    assert alarms[0].startswith("  120002 (error, channel 1, axis X): axis X: programmed path reaches 700")
     assert any(line.strip().startswith(PROGRAM_STATE) and line.endswith("aborted") for line in lines)
 
 

@@ -15,6 +15,7 @@ import pytest
 
 from hli_server.configuration import load_machine
 from hli_server.runtime import Runtime
+from hli_server.runtime.pacing import CAUSES
 from hli_server.testing import Harness
 from schemas.config import MachineConfig, ProgramEntry
 from schemas.wire import HoldSource, ProgramState
@@ -74,6 +75,27 @@ async def test_load_program_start_step_and_see_positions_change(client: httpx.As
     await step(client, 100)
     later = (await client.get("/api/state")).json()["axes"]["X"]["setpoint_mm"]
     assert later > x
+
+
+async def test_time_is_the_cycle_exact_to_the_microsecond(client: httpx.AsyncClient) -> None:
+    """Issue 23: ``/api/step`` answered ``"time_s": 0.013000000000000001``; the time of a cycle is
+    cycle x T_A, shown as the decimal it is (T_A is whole µs), in the answers and the events."""
+    r = await client.post("/api/step", json={"cycles": 13})
+    assert r.text.endswith('"time_s":0.013}'), r.text
+    for cycles in (1, 2, 3, 7, 11, 29, 97, 1001):
+        answer = await client.post("/api/step", json={"cycles": cycles})
+        body = answer.json()
+        assert body["time_s"] == round(body["cycle"] / 1000, 6)
+        assert len(repr(body["time_s"]).split(".")[1]) <= 6, body
+    await client.post(
+        "/api/channels/1/program", content="N10 G01 X1 F6000\n", headers={"content-type": "text/plain"}
+    )
+    await client.post("/api/channels/1/start")
+    await step(client, 3)
+    events = (await client.get("/api/events")).json()["events"]
+    assert events
+    for event in events:
+        assert event["time_s"] == round(event["cycle"] / 1000, 6)
 
 
 async def test_program_as_json_and_refused_while_running(client: httpx.AsyncClient) -> None:
@@ -197,7 +219,9 @@ async def test_step_outside_the_stepped_clock_is_409() -> None:
         assert "stepped clock" in r.json()["detail"]
         timing = (await c.get("/api/timing")).json()
         assert timing["clock"] == "realtime"
-        assert set(timing["lateness_us"] or {}) <= {"p50", "p99", "max"}
+        assert set(timing["lateness_us"] or {}) <= {"p50", "p99", "p999", "max"}
+        assert len(timing["worst"]) <= 5
+        assert all(w["cause"] in CAUSES for w in timing["worst"])
 
 
 # --------------------------------------------------------------------------------------------
@@ -289,6 +313,32 @@ async def test_fault_injection(hli: Harness, client: httpx.AsyncClient) -> None:
     r = await client.post("/api/axes/Q/faults", json={"friction": 1})
     assert r.status_code == 404
     assert "X, Y, Z, X1, X2, Z1" in r.json()["detail"]
+
+
+@pytest.mark.req("E-06", "B-04")
+async def test_soft_limits_in_effect_and_in_the_axis_record(hli: Harness, client: httpx.AsyncClient) -> None:
+    """P-AXIS-00177/00178 "Anmerkungen": the limits are taken from the axis record at reset and mode
+    change (FCT-C14 6.2); in between the limits in effect may differ (the kernel's G98/G99)."""
+    r = await client.get("/api/axes/X/soft-limits")
+    demo = {"swe_neg": -6_000_000, "swe_pos": 6_000_000, "swe_toleranz": 1_000}
+    assert r.json() == {"axis": "X", "in_effect": demo, "record": demo}
+    r = await client.put("/api/axes/X/soft-limits", json={"swe_pos": 1_000_000})
+    assert r.status_code == 200
+    assert r.json()["in_effect"]["swe_pos"] == 1_000_000
+    assert r.json()["record"]["swe_pos"] == 6_000_000
+    r = await client.put("/api/axes/X/record", json={"swe_neg": -2_000_000})
+    assert (r.json()["in_effect"]["swe_neg"], r.json()["record"]["swe_neg"]) == (-6_000_000, -2_000_000)
+    await client.post("/api/channels/1/reset")
+    await step(client, 2)
+    r = await client.get("/api/axes/X/soft-limits")
+    assert r.json()["in_effect"] == {"swe_neg": -2_000_000, "swe_pos": 6_000_000, "swe_toleranz": 1_000}
+    assert hli.runtime.machine.axis("X").swe_pos == 600.0
+    assert (await client.put("/api/axes/X/soft-limits", json={"swe_neg": 7_000_000})).status_code == 422
+    r = await client.put("/api/axes/X/record", json={"swe_pos": -3_000_000})
+    assert r.status_code == 422
+    assert "swe_neg" in r.json()["detail"]
+    assert (await client.put("/api/axes/X/record", json={"a_max": 5})).status_code == 422
+    assert (await client.put("/api/axes/Q/record", json={"swe_pos": 5})).status_code == 404
 
 
 async def test_faults_take_effect_in_the_position_loop(client: httpx.AsyncClient) -> None:
@@ -444,7 +494,7 @@ async def test_an_error_abort_reads_aborted_until_reset_and_a_new_program_loads(
     await client.post("/api/channels/1/start")
     await step(client, 3000)
     assert await image_value(client, PROGRAM_STATE) == ProgramState.ABORTED
-    assert await image_value(client, "gpCh[0]^bahn_state.error_id_r") == 911011
+    assert await image_value(client, "gpCh[0]^bahn_state.error_id_r") == 120002
     state = await channel_state(client)
     assert (state["program_state"], state["program_state_name"]) == (3, "aborted")
     r = await client.post("/api/channels/1/program", content="N10 G01 X5 F6000\nN20 M30\n")

@@ -605,15 +605,23 @@ async def test_a_client_that_does_not_read_does_not_block_the_others(
         await polite.close()
 
 
-async def test_connections_beyond_the_limit_are_refused(image: ProcessImage, layout: Layout) -> None:
+async def test_a_full_house_closes_the_connection_served_longest_ago(
+    image: ProcessImage, layout: Layout
+) -> None:
+    """Issue 27, finding 3: at max_connections the newcomer is admitted and the connection whose last
+    request was answered longest ago makes room (never the newcomer refused)."""
     adapter = await serve(image, max_connections=2)
-    clients = [await Raw.connect(adapter.port or 0) for _ in range(3)]
+    clients = [await Raw.connect(adapter.port or 0) for _ in range(2)]
     try:
         good = read_pdu(3, addr(layout, HOLDING_DINT), 2)
         assert (await clients[0].ask(1, good))[:2] == b"\x03\x04"
+        await asyncio.sleep(0.01)
         assert (await clients[1].ask(2, good))[:2] == b"\x03\x04"
-        with pytest.raises((asyncio.IncompleteReadError, ConnectionError)):
-            await clients[2].ask(3, good)
+        clients.append(await Raw.connect(adapter.port or 0))
+        assert (await clients[2].ask(3, good))[:2] == b"\x03\x04"  # the newcomer is served
+        assert await clients[0].closed_by_server()  # served longest ago: it made room
+        assert (await clients[1].ask(4, good))[:2] == b"\x03\x04"
+        assert adapter.server.stats.evicted == 1
     finally:
         for c in clients:
             await c.close()

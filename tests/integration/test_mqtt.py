@@ -52,6 +52,8 @@ from schemas.events import (
     HoldChanged,
     Measurement,
     ModeChanged,
+    NcFileWrite,
+    NcMessage,
     PositionError,
     ProgramStateChanged,
     ReferenceChanged,
@@ -188,10 +190,10 @@ def sample_events() -> list[Event]:
             time_s=0.01,
             channel=1,
             alarm=Alarm(
-                911011, "error", 10, 1, "beyond the limit", line=3, block="N30", axis="X", params={"a": 1}
+                120002, "error", 10, 1, "beyond the limit", line=3, block="N30", axis="X", params={"a": 1}
             ),
         ),
-        AlarmsCleared(cycle=11, time_s=0.011, channel=1, numbers=(911011, 912000)),
+        AlarmsCleared(cycle=11, time_s=0.011, channel=1, numbers=(120002, 912000)),
         ProgramStateChanged(
             cycle=12,
             time_s=0.012,
@@ -264,6 +266,27 @@ def sample_events() -> list[Event]:
             cycle=22, time_s=0.022, channel=1, block="N40", line=4, position={"X": 1.5}, setpoint={"X": 1.25}
         ),
         ReferenceChanged(cycle=23, time_s=0.023, channel=1, axis="X", state="referenced"),
+        NcMessage(
+            cycle=24,
+            time_s=0.024,
+            channel=1,
+            text="part 7 done",
+            save=True,
+            program="main.nc",
+            line=9,
+            block="N90",
+        ),
+        NcFileWrite(
+            cycle=25,
+            time_s=0.025,
+            channel=1,
+            file="prog_flow.txt",
+            text="part 7 done",
+            mode="line",
+            program="main.nc",
+            line=9,
+            block="N90",
+        ),
     ]
 
 
@@ -313,7 +336,7 @@ async def test_every_kind_of_event_arrives_on_its_topic_with_its_payload(
     assert "hli/demo/ax/Y/dyn_pos_limit" in topics
     assert "hli/demo/ax/X2/collision" in topics
     alarm = received[0][1]["data"]["alarm"]
-    assert (alarm["id"], alarm["line"], alarm["block"], alarm["axis"]) == (911011, 3, "N30", "X")
+    assert (alarm["id"], alarm["line"], alarm["block"], alarm["axis"]) == (120002, 3, "N30", "X")
     violation = next(m for _, m in received if m["kind"] == "area_violation")["data"]
     assert violation["point"] == [3000, 10, 0]
     assert violation["area_kind"] == "PROT"

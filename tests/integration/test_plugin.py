@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def doc_test_source() -> str:
-    return marked_block(DOCS / "testing.md", "test_my_plc.py:")
+    return marked_block(DOCS / "testing.md", "doc-run: session=plugin file=test_my_plc.py")
 
 
 def doors() -> tuple[int, int]:

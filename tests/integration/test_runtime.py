@@ -25,6 +25,7 @@ import pytest
 from hli_server.adapters.registry import AdapterError, create_adapter
 from hli_server.configuration import load_machine
 from hli_server.runtime import Clock, ClockError, Runtime, RuntimeStateError
+from hli_server.runtime.pacing import ThreadClock
 from schemas.config import MachineConfig
 from schemas.wire import ProgramState
 from tests.integration.servers import hli_server_cmd, read_banner, start_server
@@ -142,6 +143,75 @@ async def test_realtime_catches_up_after_a_late_wakeup(demo: MachineConfig) -> N
         assert timing["catch_up_wakeups"] >= 1
         assert timing["slipped_cycles"] == 0
         assert timing["lateness_us"]["max"] >= 25_000
+
+
+def _held(hold: Callable[[], None]) -> tuple[float, float]:
+    """Run ``hold`` on the loop; (its wall time, the part of it this thread waited for a CPU)."""
+    thread = ThreadClock()
+    try:
+        began, at_began = time.monotonic(), thread.read()
+        hold()
+        return time.monotonic() - began, thread.read()[1] - at_began[1]
+    finally:
+        thread.close()
+
+
+@pytest.mark.req("E-01")
+@pytest.mark.parametrize("holds", ["computing", "blocked"])
+async def test_a_callback_that_holds_the_clocks_loop_is_named_the_cause(
+    demo: MachineConfig, holds: str
+) -> None:
+    """Issue 26: ``GET /api/timing`` names why its worst cycles were late. A callback on the clock's loop
+    that computes, or blocks in a system call, for 40 ms is the loop's doing; only the part of it in which
+    the thread waited for a CPU (a loaded machine) is the operating system's."""
+
+    def hold() -> None:
+        end = time.monotonic() + 0.04
+        if holds == "blocked":
+            time.sleep(0.04)
+        while time.monotonic() < end:
+            pass
+
+    async with Runtime(demo, clock="realtime", http_port=None, max_catch_up=1000) as rt:
+        await asyncio.sleep(0.05)
+        wall, waited = _held(hold)
+        await asyncio.sleep(0.02)
+        timing = rt.timing()
+    worst = timing["worst"][0]
+    assert worst["lateness_us"] >= 35_000
+    loop = worst["parts_us"].get("loop", 0.0)
+    assert loop >= (wall - waited) * 1e6 - 5_000, (wall, waited, worst)  # every moment it ran or blocked
+    if waited < wall / 2:  # the machine gave it the CPU most of the time: the loop is the cause
+        assert worst["cause"] == "loop", worst
+        assert "event loop" in worst["detail"]
+    assert timing["lateness_us"]["p999"] <= timing["lateness_us"]["max"]
+
+
+@pytest.mark.req("E-01")
+async def test_a_garbage_collection_on_the_clocks_loop_is_named_the_cause(demo: MachineConfig) -> None:
+    import gc
+
+    async with Runtime(demo, clock="realtime", http_port=None, max_catch_up=1000) as rt:
+        gc.disable()
+        try:
+            junk = []
+            for _ in range(300_000):  # cyclic garbage: only the collector frees it
+                node: list[object] = []
+                node.append(node)
+                junk.append(node)
+            del junk, node
+            await asyncio.sleep(0.02)
+            wall, waited = _held(gc.collect)
+        finally:
+            gc.enable()
+        await asyncio.sleep(0.02)
+        timing = rt.timing()
+    worst = timing["worst"][0]
+    assert timing["gc_collections"][2] >= 1
+    assert worst["parts_us"].get("gc", 0.0) >= (wall - waited) * 1e6 - 5_000, (wall, waited, worst)
+    if waited < wall / 2:
+        assert worst["cause"] == "gc", worst
+        assert "garbage collection of generation 2" in worst["detail"]
 
 
 @pytest.mark.req("E-01")
@@ -466,7 +536,11 @@ def test_run_with_cycles_stops_by_itself(clock: str, event_loop: str) -> None:
         check=False,
     )
     assert result.returncode == 0, result.stderr
-    assert f"clock: {clock} (T_A = 1000 µs, event loop: {event_loop})" in result.stdout
+    assert f"clock: {clock} (T_A = 1000 µs, event loop: {event_loop}" in result.stdout
+    if clock == "realtime":
+        assert "priority: realtime (SCHED_FIFO 10)" in result.stdout or "priority: normal (realtime not" in (
+            result.stdout
+        )  # --priority auto: what the operating system granted
     assert "stopped at cycle 300 " in result.stdout
     if clock == "realtime":
         assert "lateness p50" in result.stdout

@@ -1,9 +1,11 @@
-"""Interoperability with a second, independent ADS client: Node's ``ads-client`` (H-04).
+"""Interoperability with a second, independent ADS client: Node's ``ads-client`` (H-04, issue 22).
 
-ads-client 2.x (npm, pinned by ``tests/interop/node/package-lock.json``, installed by ``.ci/run``
-with ``npm ci``) in raw mode reads and writes by index group/offset and subscribes, against the
-real server (realtime clock, the demo machine). Skipped, with the reason, where Node or the package
-is missing: ``cd tests/interop/node && npm ci`` installs it.
+ads-client 2.x (npm, pinned by ``tests/interop/node/package-lock.json``, installed by ``make test``
+and ``make test-fast`` with ``npm ci``) against the real server (realtime clock, the demo machine):
+with its default settings, as a user connects it to a TwinCAT (``defaults.js``: system service,
+structures, writes, subscriptions, symbols), and in raw mode by index group/offset (``interop.js``).
+Skipped, with the reason, where Node or the package is missing: ``cd tests/interop/node && npm ci``
+installs it.
 """
 
 from __future__ import annotations
@@ -57,12 +59,14 @@ async def runtime() -> AsyncIterator[Runtime]:
         yield rt
 
 
-async def node(rt: Runtime, job: dict[str, Any]) -> dict[str, Any]:
+async def node(
+    rt: Runtime, job: dict[str, Any] | list[dict[str, Any]], script: str = "interop.js"
+) -> dict[str, Any]:
     assert NODE is not None
     port = getattr(rt.adapter("ads"), "port")  # noqa: B009 - the ADS adapter's attribute
     proc = await asyncio.create_subprocess_exec(
         NODE,
-        "interop.js",
+        script,
         str(port),
         json.dumps(job),
         cwd=NODE_DIR,
@@ -106,8 +110,75 @@ async def test_ads_client_without_a_local_net_id_gets_one_from_the_server_and_su
     cycles = [struct.unpack("<I", bytes.fromhex(s["hex"]))[0] for s in result["samples"]]
     assert len(cycles) == 4
     assert all(b > a for a, b in itertools.pairwise(cycles)), cycles
-    for _ in range(100):  # ads-client unsubscribed and disconnected: nothing is left behind
+    for _ in range(250):  # ads-client unsubscribed and disconnected: nothing is left behind
         if getattr(runtime.adapter("ads"), "connection_count") == 0:  # noqa: B009
             break
         await asyncio.sleep(0.02)
     assert getattr(runtime.adapter("ads"), "device").notification_count == 0  # noqa: B009
+
+
+UNIT = "gpAx[0]^ipo_mc_control.dyn_pos_limit_low"
+
+
+@pytest.mark.req("B-01")
+async def test_ads_client_with_its_default_settings_connects_as_to_a_twincat(runtime: Runtime) -> None:
+    """Issue 22: ads-client's defaults (no rawClient, no local NetId) connect; readValue of a control unit
+    gives the structure, writeValue of it sets the _w members and leaves the _r members to the CNC,
+    subscribeValue and getSymbol work by ST path, and nothing is left after disconnect."""
+    image = runtime.image
+    cycle = runtime.layout.signal(CYCLE)
+    result = await node(
+        runtime,
+        [
+            {"op": "readValue", "path": UNIT},
+            {
+                "op": "writeValue",
+                "path": UNIT,
+                "value": {"request_r": 7, "enable_w": True, "command_w": -1234, "state_r": 99},
+            },
+            {"op": "readValue", "path": UNIT.replace("]^", "].")},
+            {"op": "writeValue", "path": f"{UNIT}.command_w", "value": 555},
+            {"op": "getSymbol", "path": CYCLE},
+            {"op": "getDataType", "name": "MC_CONTROL_SGN32_UNIT"},
+            {"op": "subscribeValue", "path": CYCLE, "samples": 3, "cycleTime": 10, "sendOnChange": False},
+            {"op": "readValue", "path": "gpAx"},
+            {"op": "writeValue", "path": f"{UNIT}.state_r", "value": 1},
+        ],
+        script="defaults.js",
+    )
+    conn = result["connection"]
+    assert conn["tcSystemState"]["adsState"] == 5  # RUN, read on port 10000
+    assert (conn["tcSystemState"]["version"], conn["tcSystemState"]["build"]) == (3, 4024)
+    assert conn["plcRuntimeState"]["adsState"] == 5
+    assert conn["deviceInfo"]["deviceName"] == "Plc30 App"
+    assert (conn["uploadInfo"]["symbolCount"], conn["symbolVersion"]) == (3, 1)  # gpCh, gpAx, gpVEGlob
+    read, written, reread, leaf, symbol, unit_type, subscribed, axes, refused = result["results"]
+    assert (read["type"], read["size"]) == ("MC_CONTROL_SGN32_UNIT", 13)
+    assert list(read["value"]) == ["request_r", "enable_w", "command_w", "state_r"]  # the kernel's order
+    assert "error" not in written, written
+    assert reread["value"]["command_w"] == -1234
+    assert reread["value"]["enable_w"] is True
+    assert reread["value"]["request_r"] == 0  # the CNC's, not the 7 written
+    assert reread["value"]["state_r"] != 99
+    assert image.read(f"{UNIT}.command_w") == 555
+    assert "error" not in leaf, leaf
+    assert (symbol["type"], symbol["indexGroup"], symbol["indexOffset"]) == ("UDINT", 0xF020, cycle.offset)
+    assert "ReadOnly" in symbol["flags"]
+    assert unit_type["subItems"] == [
+        ["request_r", "DINT", 0, 4],
+        ["enable_w", "BOOL", 4, 1],
+        ["command_w", "DINT", 5, 4],
+        ["state_r", "DINT", 9, 4],
+    ]
+    values = [s["value"] for s in subscribed["samples"]]
+    assert len(values) == 3
+    assert all(b > a for a, b in itertools.pairwise(values)), values
+    assert len(axes["value"]) == len(runtime.layout.axes)
+    assert axes["value"][0]["ipo_mc_control"]["dyn_pos_limit_low"]["command_w"] == 555
+    assert refused["adsError"] == 0x704  # a _r field by name: only the CNC writes it
+    adapter: Any = runtime.adapter("ads")
+    for _ in range(250):  # ads-client unsubscribed everything and disconnected
+        if adapter.connection_count == 0:
+            break
+        await asyncio.sleep(0.02)
+    assert (adapter.connection_count, adapter.device.notification_count) == (0, 0)

@@ -92,6 +92,7 @@ from hli_server.codecs.ads import (
     encode_port_connect_reply,
     encode_request,
     encode_response,
+    encode_router_frame,
     encode_sum_read_reply,
     encode_sum_read_write_reply,
     encode_sum_write_reply,
@@ -101,6 +102,7 @@ from hli_server.codecs.ads import (
     port_of_port_request,
     unix_ns_to_filetime,
 )
+from tests.fuzz import count, seed_for
 
 pytestmark = pytest.mark.req("H-04")
 
@@ -945,3 +947,165 @@ def test_mutated_golden_frames_never_raise_anything_else() -> None:
         cut = rng.randrange(len(mutated) + 1)
         decoded += _survive([mutated[:cut], mutated[cut:], rng.choice(raws)])
     assert decoded > 1000  # many mutants still frame: their payloads went through every decoder
+
+
+# ================================================================================================
+# ADS over UDP (issue 22): the bytes pyads sends, decoded
+# ================================================================================================
+
+
+def _pyads_datagram(monkeypatch: pytest.MonkeyPatch, call: Callable[[], Any], reply: bytes) -> bytes:
+    """The datagram pyads' own code builds (its socket replaced by a recorder answering ``reply``)."""
+    import pyads
+
+    sent: list[bytes] = []
+
+    def record(ip_address: str, message: bytes, expected_return_length: int) -> tuple[bytes, tuple[str, int]]:
+        sent.append(message)
+        return reply[:expected_return_length], (ip_address, 48899)
+
+    monkeypatch.setattr(pyads.pyads_ex, "send_raw_udp_message", record)
+    call()
+    (datagram,) = sent
+    return datagram
+
+
+@pytest.mark.req("B-01")
+def test_udp_add_route_as_pyads_sends_it_and_our_answers_as_pyads_reads_them(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import pyads
+
+    from hli_server.codecs.ads.udp import AddRouteRequest, UdpService, decode_udp, encode_add_route_reply
+
+    server = NetId.parse("192.168.7.8.1.1")
+    ok = encode_add_route_reply(decode_udp(_add_route_bytes()), server, 0)
+    refused = encode_add_route_reply(decode_udp(_add_route_bytes()), server, 0x704)
+    assert len(ok) == 32  # pyads reads 32 bytes
+    results: list[bool] = []
+    datagram = _pyads_datagram(
+        monkeypatch,
+        lambda: results.append(
+            pyads.pyads_ex.adsAddRouteToPLC(
+                "10.1.2.3.1.1", "10.1.2.3", "192.168.7.8", "Administrator", "1", "route-a"
+            )
+        ),
+        ok,
+    )
+    assert results == [True]
+    message = decode_udp(datagram)
+    assert (message.service, str(message.net_id), message.port) == (
+        UdpService.ADD_ROUTE,
+        "10.1.2.3.1.1",
+        10000,
+    )
+    route = AddRouteRequest.from_message(message)
+    assert (route.route_name, str(route.net_id), route.address, route.user, route.password) == (
+        "route-a",
+        "10.1.2.3.1.1",
+        "10.1.2.3",
+        "Administrator",
+        "1",
+    )
+    # AdsLib's AddRemoteRoute reads the status tag: 0x704 is what TwinCAT answers wrong credentials
+    assert struct.unpack_from("<HHI", refused, 24) == (1, 4, 0x704)
+
+
+def _add_route_bytes() -> bytes:
+    from hli_server.codecs.ads.udp import UdpMessage, UdpService, UdpTag, encode_udp
+
+    tags = ((UdpTag.NET_ID, bytes(NetId.parse("10.1.2.3.1.1"))), (UdpTag.COMPUTER_NAME, b"10.1.2.3\0"))
+    return encode_udp(UdpMessage(0, UdpService.ADD_ROUTE, NetId.parse("10.1.2.3.1.1"), 10000, tags))
+
+
+@pytest.mark.req("B-01")
+def test_udp_discovery_as_pyads_sends_it_and_reads_our_answer(monkeypatch: pytest.MonkeyPatch) -> None:
+    import pyads
+
+    from hli_server.codecs.ads.udp import (
+        UdpService,
+        UdpTag,
+        decode_udp,
+        encode_discovery_reply,
+        os_version_tag,
+    )
+
+    server = NetId.parse("5.6.7.8.1.1")
+    probe = decode_udp(_discovery_bytes())
+    reply = encode_discovery_reply(probe, server, "cnc-sim", (3, 1, 4024), os_version_tag(0, 0, 0, 0, "x"))
+    found: list[str] = []
+    datagram = _pyads_datagram(
+        monkeypatch, lambda: found.append(pyads.pyads_ex.adsGetNetIdForPLC("10.0.0.9")), reply
+    )
+    assert found == ["5.6.7.8.1.1"]
+    message = decode_udp(datagram)
+    assert (message.service, message.tags, message.port) == (UdpService.SERVER_INFO, (), 10000)
+    answer = decode_udp(reply)
+    assert answer.tag(UdpTag.COMPUTER_NAME) == b"cnc-sim\0"
+    assert answer.tag(UdpTag.TC_VERSION) == bytes([3, 1]) + (4024).to_bytes(2, "little")
+
+
+def _discovery_bytes() -> bytes:
+    from hli_server.codecs.ads.udp import UdpMessage, UdpService, encode_udp
+
+    return encode_udp(UdpMessage(0, UdpService.SERVER_INFO, NetId(b"\x01" * 6), 10000))
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        (b"\x03\x66\x14\x71", "header alone"),
+        (b"\x00" * 24, "cookie"),
+        (struct.pack("<III6sHI", 0x71146603, 0, 1, bytes(6), 10000, 65), "65 tags"),
+        (struct.pack("<III6sHI", 0x71146603, 0, 1, bytes(6), 10000, 1) + b"\x05\x00", "its header runs past"),
+        (
+            struct.pack("<III6sHIHH", 0x71146603, 0, 1, bytes(6), 10000, 1, 5, 9) + b"abc",
+            "runs past the datagram",
+        ),
+    ],
+)
+def test_udp_datagrams_that_do_not_parse_say_why(data: bytes, message: str) -> None:
+    from hli_server.codecs.ads.udp import decode_udp
+
+    with pytest.raises(AdsCodecError, match=message):
+        decode_udp(data)
+
+
+@pytest.mark.fuzz
+def test_fuzz_udp_decoding_raises_only_its_own_error() -> None:
+    from hli_server.codecs.ads.udp import AddRouteRequest, decode_udp
+
+    rng = random.Random(seed_for("ads_udp_codec"))
+    valid = [_add_route_bytes(), _discovery_bytes()]
+    for _ in range(count(20_000)):
+        data = bytearray(rng.choice(valid))
+        for _ in range(rng.randint(0, 4)):
+            if data:
+                data[rng.randrange(len(data))] = rng.randrange(256)
+        if rng.random() < 0.3:
+            data = data[: rng.randrange(len(data) + 1)]
+        with contextlib.suppress(AdsCodecError):
+            message = decode_udp(bytes(data))
+            with contextlib.suppress(AdsCodecError):
+                AddRouteRequest.from_message(message)
+
+
+def test_single_frame_is_the_decoders_shortcut_for_one_request_in_flight() -> None:
+    """What ``next_frame`` gives for a read that is exactly one AMS frame, and None for anything else."""
+    target, source = (
+        AmsAddress(NetId.parse("127.0.0.1.1.1"), 851),
+        AmsAddress(NetId.parse("10.1.2.3.1.1"), 30000),
+    )
+    frame = encode_request(target, source, 2, 7, ReadRequest(0xF020, 4, 4).encode())
+    decoder = AmsStreamDecoder()
+    packet = decoder.single_frame(frame)
+    assert packet == next(AmsStreamDecoder().feed(frame))
+    assert decoder.pending == 0
+    for other in (frame * 2, frame[:-1], frame + b"\0", encode_router_frame(0x1000, b"\0\0")):
+        assert AmsStreamDecoder().single_frame(other) is None
+    bad_length = bytearray(frame)
+    bad_length[26] ^= 1  # the AMS header's data length disagrees: left to next_frame, which breaks
+    assert AmsStreamDecoder().single_frame(bytes(bad_length)) is None
+    busy = AmsStreamDecoder()
+    busy.receive_data(frame[:10])  # something is buffered: the frame must go through the buffer
+    assert busy.single_frame(frame) is None

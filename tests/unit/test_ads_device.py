@@ -15,7 +15,15 @@ from typing import Any
 
 import pytest
 
-from hli_server.adapters.ads import AdsDevice, AdsOptions, DeviceLimits, Session, SymbolTable, normalize_name
+from hli_server.adapters.ads import (
+    VIEW_GROUP,
+    AdsDevice,
+    AdsOptions,
+    DeviceLimits,
+    Session,
+    SymbolTable,
+    normalize_name,
+)
 from hli_server.adapters.ads.symbols import MAX_SYMBOL_INFO
 from hli_server.adapters.registry import AdapterError, plan_adapters
 from hli_server.codecs.ads import (
@@ -31,6 +39,7 @@ from hli_server.codecs.ads import (
     ReadWriteRequest,
     SumRead,
     SumReadItem,
+    SymbolEntry,
     WriteRequest,
     decode_response,
     decode_symbol_upload,
@@ -132,14 +141,29 @@ def test_names_that_are_no_symbol(layout: Layout) -> None:
     assert normalize_name("MAIN.counter") == "main.counter"  # only the gpCh/gpAx dereference is rewritten
 
 
-def test_symbol_upload_is_the_layout_and_every_entry_fits_pyads_read(layout: Layout) -> None:
+def test_symbol_upload_lists_the_top_level_and_every_entry_fits_pyads_read(layout: Layout) -> None:
+    """As TwinCAT's: the upload holds the top-level symbols; their members are in the types (0xF00E)."""
     table = SymbolTable(layout)
     entries = decode_symbol_upload(table.upload)
-    assert [(e.name, e.index_group, e.index_offset, e.size, e.type_name) for e in entries] == [
-        (s.st_path, s.image_ads_group, s.offset, s.size, s.type.value) for s in layout.signals
+    n_ch, n_ax = len(layout.channels), len(layout.axes)
+    assert [(e.name, e.index_group, e.type_name) for e in entries] == [
+        ("gpCh", VIEW_GROUP, f"ARRAY [0..{n_ch - 1}] OF HLI_CH"),
+        ("gpAx", VIEW_GROUP, f"ARRAY [0..{n_ax - 1}] OF HLI_AX"),
+        ("gpVEGlob", VIEW_GROUP, "HLI_VEGLOB"),  # the demo machine's global V.E. variables (N-05)
     ]
-    assert max(len(table.find(s.st_path).entry) for s in layout.signals) <= MAX_SYMBOL_INFO  # type: ignore[union-attr]
-    assert struct.unpack("<II", table.upload_info) == (len(layout.signals), len(table.upload))
+    for s in layout.signals:  # every leaf by name, at its place in the image
+        symbol = table.find(s.st_path)
+        assert symbol is not None
+        info = SymbolEntry.decode(symbol.entry)[0]
+        assert (info.name, info.index_group, info.index_offset, info.size, info.type_name) == (
+            s.st_path,
+            s.image_ads_group,
+            s.offset,
+            s.size,
+            s.type.value,
+        )
+    assert max(len(symbol.entry) for symbol in table.all_symbols()) <= MAX_SYMBOL_INFO
+    assert struct.unpack("<II", table.upload_info) == (len(entries), len(table.upload))
 
 
 # ================================================================================================
@@ -277,7 +301,9 @@ def test_the_cycle_takes_one_copy_per_cycle_and_only_when_something_is_due(
     image: ProcessImage, layout: Layout
 ) -> None:
     counting = CountingImage(image)
-    device = make_device(counting, max_notifications=600, max_notifications_total=600)
+    device = make_device(
+        counting, max_notifications=600, max_notifications_per_net_id=600, max_notifications_total=600
+    )
     x = layout.signal(X_POS)
     for cycle in range(1, 4):
         device.on_cycle(cycle)
@@ -385,9 +411,12 @@ def test_upload_infos_data_types_and_symbol_version(image: ProcessImage, layout:
     info64 = answer(device, session, CommandId.READ, ReadRequest(0xF00F, 0, 64).encode())
     assert (len(info24.data), len(info64.data)) == (24, 64)  # ads-client asks 64, older clients 24
     info = UploadInfo2.decode(info64.data)
-    assert info.symbol_count == len(layout.signals)
+    assert info.symbol_count == 3  # gpCh, gpAx, gpVEGlob (the demo machine's V.E. variables)
     types = answer(device, session, CommandId.READ, ReadRequest(0xF00E, 0, info.data_type_length).encode())
-    assert [t.name for t in decode_data_type_upload(types.data)] == ["BOOL", "DINT", "UDINT", "LREAL"]
+    names = [t.name for t in decode_data_type_upload(types.data)]
+    assert names[:4] == ["BOOL", "DINT", "UDINT", "LREAL"]
+    assert {"MC_CONTROL_BOOL_UNIT", "MC_CONTROL_SGN32_UNIT", "HLI_AX", "HLI_CH"} <= set(names)
+    assert len(names) == info.data_type_count
     dint = answer(
         device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF011, 0, 0xFFFF, b"dint\0").encode()
     )
@@ -398,3 +427,341 @@ def test_upload_infos_data_types_and_symbol_version(image: ProcessImage, layout:
     assert version.data == b"\x01"
     short = answer(device, session, CommandId.READ, ReadRequest(0xF00C, 0, 4).encode())
     assert short.result == 0x705  # the 8-byte upload info does not fit a 4-byte read
+
+
+# ================================================================================================
+# Structures and arrays (issue 22)
+# ================================================================================================
+
+UNIT_LOW = "gpAx[0]^ipo_mc_control.dyn_pos_limit_low"
+STATE_LOW = f"{UNIT_LOW}.state_r"
+
+
+@pytest.mark.req("B-01")
+def test_control_units_are_their_kernel_structures(layout: Layout) -> None:
+    """FCT-C43 3.1.1: dyn_pos_limit_low is an MC_CONTROL_SGN32_UNIT, members in the kernel's order."""
+    from hli_server.codecs.ads import DataTypeEntry
+
+    table = SymbolTable(layout)
+    unit = table.find(UNIT_LOW)
+    assert unit is not None
+    assert (unit.type_name, unit.size, unit.index_group, unit.signal) == (
+        "MC_CONTROL_SGN32_UNIT",
+        13,
+        VIEW_GROUP,
+        None,
+    )
+    entry = table.data_type("mc_control_sgn32_unit")
+    assert entry is not None
+    decoded, _ = DataTypeEntry.decode(entry)
+    assert [(i.name, i.type_name, i.offset, i.size) for i in decoded.sub_items] == [
+        ("request_r", "DINT", 0, 4),
+        ("enable_w", "BOOL", 4, 1),
+        ("command_w", "DINT", 5, 4),
+        ("state_r", "DINT", 9, 4),
+    ]
+    feedhold = table.find("gpCh[0]^bahn_mc_control.feedhold")
+    assert feedhold is not None
+    assert (feedhold.type_name, feedhold.size) == ("MC_CONTROL_BOOL_UNIT", 4)
+    axes = table.find("gpAx")
+    assert axes is not None
+    assert axes.type_name == f"ARRAY [0..{len(layout.axes) - 1}] OF HLI_AX"
+    array = table.data_type("ARRAY [0..5]  OF  hli_ax")  # spaces and case as a client may send them
+    assert array is not None
+    decoded, _ = DataTypeEntry.decode(array)
+    assert (decoded.type_name, decoded.array_dims[0].lower_bound, decoded.array_dims[0].elements) == (
+        "HLI_AX",
+        0,
+        6,
+    )
+    assert table.find("gpAx[0]") is table.find("gpAx[0]^")  # the pointer and what it points to
+
+
+@pytest.mark.req("B-01")
+def test_a_structure_is_read_from_both_halves(image: ProcessImage, layout: Layout) -> None:
+    device, session = make_device(image), Session()
+    image.write(CMD_LOW, -1234)
+    image.write(EN_LOW, True)
+    publish(image, 3, **{STATE_LOW: 2})
+    unit = device.symbols.find(UNIT_LOW)
+    assert unit is not None
+    raw = answer(device, session, CommandId.READ, ReadRequest(VIEW_GROUP, unit.index_offset, 13).encode())
+    assert raw.result == 0
+    assert struct.unpack("<i?ii", raw.data) == (0, True, -1234, 2)  # pack mode 1, as pyads reads it
+    by_name = answer(
+        device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF004, 0, 13, UNIT_LOW.encode()).encode()
+    )
+    assert by_name.data == raw.data
+
+
+@pytest.mark.req("B-01")
+def test_a_whole_structure_write_sets_the_w_members_and_leaves_the_r_members_to_the_cnc(
+    image: ProcessImage, layout: Layout
+) -> None:
+    device, session = make_device(image), Session()
+    publish(image, 3, **{STATE_LOW: 2})
+    unit = device.symbols.find(UNIT_LOW)
+    assert unit is not None
+    write = WriteRequest(VIEW_GROUP, unit.index_offset, struct.pack("<i?ii", 77, True, 300_000, 99)).encode()
+    assert answer(device, session, CommandId.WRITE, write).result == 0
+    assert (image.read(CMD_LOW), image.read(EN_LOW)) == (300_000, True)
+    assert image.read(STATE_LOW) == 2  # the CNC's value: the written 99 is ignored
+    # by handle, as pyads' write_structure_by_name does
+    handle = answer(
+        device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF003, 0, 4, UNIT_LOW.encode()).encode()
+    )
+    h = struct.unpack("<I", handle.data)[0]
+    by_handle = WriteRequest(0xF005, h, struct.pack("<i?ii", 0, False, -5, 0)).encode()
+    assert answer(device, session, CommandId.WRITE, by_handle).result == 0
+    assert (image.read(CMD_LOW), image.read(EN_LOW)) == (-5, False)
+
+
+@pytest.mark.req("B-01")
+def test_structure_writes_that_cannot_be_taken_change_nothing(image: ProcessImage, layout: Layout) -> None:
+    device, session = make_device(image), Session()
+    unit = device.symbols.find(UNIT_LOW)
+    state = device.symbols.find("gpAx[0]^ipo_state")
+    assert unit is not None
+    assert state is not None
+    before = image.read_half(Direction.PLC_TO_CNC)
+    cases = [
+        (
+            unit.index_offset,
+            struct.pack("<i?ii", 0, True, 1, 0)[:12],
+            ErrorCode.SIZE_WRONG,
+        ),  # ends in a field
+        (unit.index_offset + 1, bytes(4), ErrorCode.INVALID_INDEX_OFFSET),  # starts inside request_r
+        (unit.index_offset, struct.pack("<iBii", 0, 2, 1, 0), ErrorCode.INVALID_VALUE),  # a BOOL byte of 2
+        (state.index_offset, bytes(state.size), ErrorCode.READ_WRITE_NOT_PERMITTED),  # only _r members
+    ]
+    for offset, data, code in cases:
+        reply = answer(device, session, CommandId.WRITE, WriteRequest(VIEW_GROUP, offset, data).encode())
+        assert reply.result == code, (offset, data)
+    assert image.read_half(Direction.PLC_TO_CNC) == before
+    read_only = AdsDevice(image, SERVER, read_only=True)
+    write = WriteRequest(VIEW_GROUP, unit.index_offset, struct.pack("<i?ii", 0, True, 1, 0)).encode()
+    assert answer(read_only, session, CommandId.WRITE, write).result == ErrorCode.READ_WRITE_NOT_PERMITTED
+    assert image.read_half(Direction.PLC_TO_CNC) == before
+
+
+@pytest.mark.req("B-01")
+def test_a_notification_on_a_structure_sends_the_whole_structure(image: ProcessImage, layout: Layout) -> None:
+    device, session = make_device(image), Session()
+    unit = device.symbols.find(UNIT_LOW)
+    assert unit is not None
+    reply = add(device, session, AddDeviceNotificationRequest(VIEW_GROUP, unit.index_offset, 13, 4, 0, 0))
+    assert reply.result == 0
+    session.flush()
+    samples(session)
+    publish(image, 1, **{STATE_LOW: 3})  # a _r member changes: the structure changed
+    device.on_cycle(1)
+    session.flush()
+    ((_, notification),) = samples(session)
+    assert struct.unpack("<i?ii", notification.stamps[0].samples[0].data) == (0, False, 0, 3)
+
+
+def _extended_layout(base: Layout) -> Layout:
+    """The demo layout and signals a later layout may add (V.E. variables): a global table of four DINTs
+    and a flag, and a variable only channel 1 has."""
+    from dataclasses import replace
+
+    from schemas.layout import Layout as LayoutClass
+
+    p2c, c2p = Direction.PLC_TO_CNC, Direction.CNC_TO_PLC
+    dint_w = base.signal(CMD_LOW)
+    dint_r = base.signal(X_POS)
+    sizes = {p2c: base.size(p2c), c2p: base.size(c2p)}
+    extra = []
+    address = 60_000
+    for path, template in [
+        *((f"gVE.table[{i}]", dint_w) for i in range(4)),
+        ("gVE.flag", base.signal(EN_LOW)),
+        ("gpCh[0]^v_e.counter", dint_r),
+    ]:
+        d = template.direction
+        offset = -(-sizes[d] // template.size) * template.size
+        sizes[d] = offset + template.size
+        extra.append(
+            replace(
+                template, name=path, st_path=path, offset=offset, modbus_address=address, ads_offset=offset
+            )
+        )
+        address += 4
+    return LayoutClass(
+        machine="extended",
+        channels=base.channels,
+        axes=base.axes,
+        signals=[*base.signals, *extra],
+        sizes=sizes,
+    )
+
+
+@pytest.mark.req("B-01")
+def test_signals_a_later_layout_adds_become_symbols_and_members_without_a_change(
+    image: ProcessImage, layout: Layout
+) -> None:
+    """The tree is read off the ST paths: V.E. variables (another issue) appear as every other signal."""
+    from hli_server.codecs.ads import DataTypeEntry
+
+    table = SymbolTable(_extended_layout(layout))
+    names = [(s.name, s.type_name) for s in table.symbols]
+    # channel 1 has a member channel 2 lacks: they are no array any more, each is a symbol of its own
+    assert ("gpCh[0]", "HLI_CH") in names
+    assert ("gpCh[1]", "HLI_CH_2") in names
+    assert ("gVE", "HLI_VE") in names
+    ve_table = table.find("gve.TABLE")
+    assert ve_table is not None
+    assert (ve_table.type_name, ve_table.size) == ("ARRAY [0..3] OF DINT", 16)
+    element = table.find("gVE.table[2]")
+    assert element is not None
+    assert element.signal is not None
+    assert element.signal.st_path == "gVE.table[2]"
+    entry = table.data_type("HLI_VE")
+    assert entry is not None
+    assert [i.name for i in DataTypeEntry.decode(entry)[0].sub_items] == ["table", "flag"]
+    counter = table.find("gpCh[0]^v_e.counter")
+    assert counter is not None
+    assert counter.index_group == 0xF020
+
+
+@pytest.mark.req("B-01")
+def test_port_10000_answers_as_the_twincat_system_service(image: ProcessImage) -> None:
+    """What Node ads-client reads first with its defaults (extended state, 0xF0) and what TwinCAT asks."""
+    device, session = make_device(image), Session()
+    state = answer(device, session, CommandId.READ_STATE, b"", port=10000)
+    assert (state.result, state.ads_state, state.device_state) == (0, 5, 0)
+    info = answer(device, session, CommandId.READ_DEVICE_INFO, b"", port=10000)
+    assert (info.name, info.major, info.minor, info.build) == ("TwinCAT System", 3, 1, 4024)
+    extended = answer(device, session, CommandId.READ, ReadRequest(0xF0, 0, 16).encode(), port=10000)
+    ads_state, _dev, restart, major, minor, build = struct.unpack_from("<HHHBBH", extended.data)
+    assert (extended.result, len(extended.data), ads_state, major, minor, build) == (0, 16, 5, 3, 1, 4024)
+    assert restart == device.system.restart_index
+    unknown = answer(device, session, CommandId.READ, ReadRequest(0xF020, 0, 4).encode(), port=10000)
+    assert unknown.result == ErrorCode.INVALID_INDEX_GROUP
+    assert answer(device, session, CommandId.READ_STATE, b"", port=852) == ErrorCode.TARGET_PORT_NOT_FOUND
+
+
+def test_the_dispatch_tables_answer_every_command_and_refuse_from_the_tables(image: ProcessImage) -> None:
+    from hli_server.adapters.ads.device import COMMANDS
+
+    device, session = make_device(image), Session()
+    assert set(COMMANDS) == {1, 2, 3, 4, 5, 6, 7, 9}
+    assert all(callable(getattr(device, method)) for method in COMMANDS.values())
+    for command in (0, 8, 10, 0xFFFF):  # no request: 0x701
+        reply = device.handle(session, request(command, b""))
+        assert reply is not None
+        assert struct.unpack_from("<I", reply, 38)[0] == 0x701
+    # a group the port serves with another command: 0x701; one it does not know: 0x702
+    assert answer(device, session, CommandId.READ, ReadRequest(0xF003, 0, 4).encode()).result == 0x701
+    assert answer(device, session, CommandId.WRITE, WriteRequest(0xF009, 0, b"x").encode()).result == 0x701
+    assert (
+        answer(device, session, CommandId.READ_WRITE, ReadWriteRequest(0xF020, 0, 4, b"").encode()).result
+        == 0x701
+    )
+    assert answer(device, session, CommandId.READ, ReadRequest(0x1234, 0, 4).encode()).result == 0x702
+    assert (
+        answer(device, session, CommandId.WRITE, WriteRequest(0x120300, 0, b"x").encode(), port=551).result
+        == 0x704
+    )
+
+
+@pytest.mark.req("B-01")
+def test_max_delay_batches_samples_of_several_cycles_in_one_frame(
+    image: ProcessImage, layout: Layout
+) -> None:
+    """TwinCAT's nMaxDelay: samples of several cycles go out in one DeviceNotification, a stamp each."""
+    timers: list[tuple[float, Any]] = []
+    device = AdsDevice(image, SERVER, call_later=lambda delay, fn: timers.append((delay, fn)))
+    session = Session()
+    x = layout.signal(X_POS)
+    # cyclic every cycle, max delay 5 ms (in 100 ns)
+    add(device, session, AddDeviceNotificationRequest(0xF020, x.offset, 4, 3, 50_000, 0))
+    delay, first = timers.pop(0)  # the first sample follows the add response
+    first()
+    session.flush()
+    samples(session)
+    for cycle in range(1, 4):
+        publish(image, cycle, **{X_POS: cycle})
+        device.on_cycle(cycle)
+    assert session.pending_samples == 3
+    assert session.sent == []  # held
+    ((delay, send),) = timers
+    assert delay == pytest.approx(0.005)
+    send()
+    session.flush()
+    ((_, notification),) = samples(session)
+    assert [struct.unpack("<i", s.samples[0].data)[0] for s in notification.stamps] == [1, 2, 3]
+
+
+def test_a_deleted_notification_sends_nothing_more_and_per_host_budgets(
+    image: ProcessImage, layout: Layout
+) -> None:
+    device = make_device(image, max_notifications_per_host=2)
+    x = layout.signal(X_POS)
+    remote, local = Session(remote_host="192.0.2.7"), Session()
+    watch = AddDeviceNotificationRequest(0xF020, x.offset, 4, 3, 0, 0)
+    handles = [add(device, remote, watch).handle for _ in range(2)]
+    assert add(device, remote, watch).result == 0x716  # max_notifications_per_host
+    assert [add(device, local, watch).result for _ in range(3)] == [0, 0, 0]  # loopback: not per host
+    remote.flush()
+    samples(remote)
+    device.on_cycle(1)  # both queued
+    answer(device, remote, CommandId.DELETE_DEVICE_NOTIFICATION, struct.pack("<I", handles[0]))
+    remote.flush()
+    ((_, notification),) = samples(remote)
+    assert [s.handle for st in notification.stamps for s in st.samples] == [handles[1]]
+
+
+@pytest.mark.req("B-01")
+def test_routes_admit_their_net_id_from_their_address_and_survive_in_their_file(tmp_path: Any) -> None:
+    from hli_server.adapters.ads import Routes
+
+    file = tmp_path / "sub" / "routes.json"
+    allow = AdsOptions(allow="loopback 192.168.1.50.1.1").allowlist()
+    routes = Routes(allow, bytes(SERVER), str(file), max_routes=2)
+    remote = NetId.parse("10.1.1.1.1.1")
+    assert not routes.admits_ip("192.0.2.10")
+    routes.add("pc", remote, "pc.example", frozenset({"192.0.2.10"}))
+    assert routes.admits_ip("192.0.2.10")
+    assert routes.admits(bytes(remote), "::ffff:192.0.2.10")
+    assert not routes.admits(bytes(remote), "192.0.2.11")  # its NetId from elsewhere
+    assert not routes.admits(bytes(NetId.parse("10.1.1.2.1.1")), "192.0.2.10")  # another NetId from there
+    assert routes.admits(bytes(NetId.parse("192.168.1.50.1.1")), "127.0.0.1")  # the allowlist still counts
+    routes.add("pc2", remote, "192.0.2.20", frozenset({"192.0.2.20"}))  # the same NetId: replaced
+    assert len(routes) == 1
+    assert not routes.admits_ip("192.0.2.10")
+    routes.add("b", NetId.parse("10.2.2.2.1.1"), "192.0.2.30", frozenset({"192.0.2.30"}))
+    with pytest.raises(ValueError, match="max_routes"):
+        routes.add("c", NetId.parse("10.3.3.3.1.1"), "192.0.2.40", frozenset({"192.0.2.40"}))
+    again = Routes(allow, bytes(SERVER), str(file))
+    assert [(r.name, str(r.net_id), sorted(r.ips)) for r in again.routes] == [
+        ("pc2", "10.1.1.1.1.1", ["192.0.2.20"]),
+        ("b", "10.2.2.2.1.1", ["192.0.2.30"]),
+    ]
+    # router messages: answered unless the allowlist names NetIds and not the server's
+    assert not routes.answers_router_messages("127.0.0.1")
+    assert Routes(AdsOptions(allow="loopback").allowlist(), bytes(SERVER)).answers_router_messages(
+        "127.0.0.1"
+    )
+    assert Routes(AdsOptions(allow=[str(SERVER)]).allowlist(), bytes(SERVER)).answers_router_messages(
+        "127.0.0.1"
+    )
+
+
+def test_the_kernels_type_names_are_served_as_their_iec_names() -> None:
+    """A V.E. variable of the kernel's type SGN16 is an INT symbol for ADS clients (and pyads' types)."""
+    from hli_server.adapters.ads.symbols import ads_data_type
+    from hli_server.codecs.ads import AdsDataType, ads_type_name
+
+    assert [ads_type_name(n) for n in ("BOOLEAN", "SGN08", "UNS16", "SGN32", "REAL64", "dint")] == [
+        "BOOL",
+        "SINT",
+        "UINT",
+        "DINT",
+        "LREAL",
+        "DINT",
+    ]
+    assert ads_data_type("SGN16") == (AdsDataType.INT16, 2)
+    assert ads_data_type("REAL32") == (AdsDataType.REAL32, 4)
+    with pytest.raises(ValueError, match="no IEC base type"):
+        ads_data_type("STRING(80)")

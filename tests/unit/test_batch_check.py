@@ -35,6 +35,7 @@ from hli_server.engine.batch import BatchGeometryCheck
 from hli_server.engine.geometry import ArcSegment, LineSegment, Segment, arc_from_centre
 from hli_server.engine.monitors.base import ChannelHooks, Monitor
 from hli_server.engine.nc import NcError, parse_line
+from hli_server.engine.nc import source as source_module
 from hli_server.engine.nc.plain import EMPTY, PLAIN, PlainTokenizer
 from schemas.config import MachineConfig, ZeroOffset
 
@@ -54,13 +55,13 @@ def config() -> MachineConfig:
 def _batch_settings(exact: bool, chunk: int | None = None, small: int | None = None) -> Iterator[None]:
     saved = (
         os.environ.get(BATCH_ENV),
-        batch_module.CHUNK_CHARS,
+        source_module.CHUNK_CHARS,
         batch_module.SMALL_RUN,
         batch_module.SMALL_RUN_PER_AREA,
     )
     os.environ[BATCH_ENV] = "0" if exact else "1"
     if chunk is not None:
-        batch_module.CHUNK_CHARS = chunk
+        source_module.CHUNK_CHARS = chunk
     if small is not None:
         batch_module.SMALL_RUN = small
         batch_module.SMALL_RUN_PER_AREA = 0
@@ -71,7 +72,7 @@ def _batch_settings(exact: bool, chunk: int | None = None, small: int | None = N
             os.environ.pop(BATCH_ENV, None)
         else:
             os.environ[BATCH_ENV] = saved[0]
-        batch_module.CHUNK_CHARS, batch_module.SMALL_RUN, batch_module.SMALL_RUN_PER_AREA = saved[1:]
+        source_module.CHUNK_CHARS, batch_module.SMALL_RUN, batch_module.SMALL_RUN_PER_AREA = saved[1:]
 
 
 def run(
@@ -550,10 +551,10 @@ def test_a_program_without_m30_ends_with_the_last_blocks_warning(config: Machine
 def test_soft_limits_mid_chunk(config: MachineConfig) -> None:
     for move, alarm in (
         ("G01 X600 Y0", None),
-        ("G01 X600.0001 Y0", 911011),
+        ("G01 X600.0001 Y0", 120002),
         ("G02 X0 Y0 I0 J-300", None),  # a whole circle down to the limit
-        ("G02 X0 Y0 I0 J-300.0001", 911010),
-        ("G03 X0 Y0 I300.0001 J0", 911011),
+        ("G02 X0 Y0 I0 J-300.0001", 120003),
+        ("G03 X0 Y0 I300.0001 J0", 120002),
     ):
         text = "G90 G01 X0 Y0 F6000\n" + "\n".join([*_zigzag(100), "G01 X0 Y0", move, *_zigzag(100), "M30"])
         result = assert_same(config, text)

@@ -51,7 +51,7 @@ def test_soft_limit_violation_stops_with_line_and_block(tmp_path, mode):
     report = json.loads(result.output)
     assert report["completed"] is False
     (alarm,) = report["alarms"]
-    assert alarm["id"] == 911011
+    assert alarm["id"] == 120002
     assert alarm["severity"] == "error"
     assert (alarm["line"], alarm["block"]) == (2, "N20")
     assert alarm["params"]["axis"] == "Y"

@@ -23,6 +23,8 @@ from schemas.wire import Mode, ProgramState
 
 RUNNING = (ProgramState.RUNNING, ProgramState.HELD)
 PAIR = 0x8001
+A_MAX = 2000.0
+"""P-AXIS-00008 of the pair in these tests (the kernel's default is 1000; the numbers below are for 2000)."""
 
 
 def one_channel(
@@ -35,7 +37,13 @@ def one_channel(
 ) -> Machine:
     """X1 (A_ID 1) and X2 (A_ID 2, master) on one rail in one channel, with the lift Z1."""
     axes = [
-        AxisConfig(number=1, name="X1", achs_mode=PAIR, start_position=round(x1 * 1e4), **(partner or {})),  # type: ignore[arg-type]
+        AxisConfig(
+            number=1,
+            name="X1",
+            achs_mode=PAIR,
+            start_position=round(x1 * 1e4),
+            **{"a_max": A_MAX, **(partner or {})},  # type: ignore[arg-type]
+        ),
         AxisConfig(
             number=2,
             name="X2",
@@ -43,7 +51,7 @@ def one_channel(
             coll_check_ax_nr=1,
             coll_offset=offset,
             start_position=round(x2 * 1e4),
-            **(master or {}),  # type: ignore[arg-type]
+            **{"a_max": A_MAX, **(master or {})},  # type: ignore[arg-type]
         ),
         AxisConfig(number=3, name="Z1"),
     ]
@@ -54,7 +62,7 @@ def one_channel(
 def two_channels(*, x1: float = 0.0, x2: float = 0.0, **master: object) -> Machine:
     """FCT-C3 Abb. 5: X1 (A_ID 1) in channel 1, X2 (A_ID 6, master) in channel 2."""
     axes = [
-        AxisConfig(number=1, name="X1", achs_mode=PAIR, start_position=round(x1 * 1e4)),
+        AxisConfig(number=1, name="X1", achs_mode=PAIR, start_position=round(x1 * 1e4), a_max=A_MAX),
         AxisConfig(number=2, name="Y1"),
         AxisConfig(number=3, name="Z1"),
         AxisConfig(
@@ -64,7 +72,7 @@ def two_channels(*, x1: float = 0.0, x2: float = 0.0, **master: object) -> Machi
             coll_check_ax_nr=1,
             coll_offset=200_000,
             start_position=round(x2 * 1e4),
-            **master,  # type: ignore[arg-type]
+            **{"a_max": A_MAX, **master},  # type: ignore[arg-type]
         ),
         AxisConfig(number=7, name="Y2"),
         AxisConfig(number=8, name="Z2"),
@@ -154,9 +162,13 @@ def test_pair_stops_when_distance_less_braking_distance_falls_below_the_minimum(
 
 @pytest.mark.req("C3-01", "C3-07", "C3-10")
 def test_each_axis_brakes_with_its_own_deceleration_and_leaves_the_contour():
-    m = one_channel(master={"coll_use_a_emergency": True, "a_emergency": 8000.0}, partner={"a_max": 1000.0})
+    m = one_channel(
+        master={"coll_use_a_emergency": True, "a_max": 4000.0, "a_emergency": 8000.0},
+        partner={"a_max": 1000.0},
+    )
     assert obj(m, 2, DECEL) == 8000.0  # P-AXIS-00267 on the master: both axes use a_emergency
-    assert obj(m, 1, DECEL) == 5000.0
+    # the partner's a_emergency is the kernel's default 0: P-AXIS-00003 is then a_max (its page)
+    assert obj(m, 1, DECEL) == 1000.0
     start(m, "N10 G01 X1=60 X2=70 F12000\nN20 M30\n")  # both towards each other, 2:1
     x1, x2 = m.axis("X1"), m.axis("X2")
     while not m.active_alarms:
@@ -168,7 +180,7 @@ def test_each_axis_brakes_with_its_own_deceleration_and_leaves_the_contour():
         v2.append(x2.setpoint_step / m.t_a)
     d1 = {round((a - b) / m.t_a) for a, b in pairwise(v1) if abs(b) > 0}
     d2 = {round((b - a) / m.t_a) for a, b in pairwise(v2) if abs(b) > 0}
-    assert d1 == {5000}
+    assert d1 == {1000}
     assert d2 == {8000}
     travelled_1, travelled_2 = x1.setpoint, 100.0 - x2.setpoint
     assert travelled_1 / travelled_2 != pytest.approx(2.0, rel=0.01)  # off the programmed line
@@ -197,6 +209,30 @@ def test_cnc_objects_by_index_group_and_offset():
     assert obj(m, 3, 0x0234) is False  # Z1: no pair
     for address in ((551, 0x120301, 0x00010234), (551, 0x120300, 0x00010235), (551, 0x120300, 0x00090234)):
         assert address not in layout.ads_index()
+
+
+@pytest.mark.req("C3-10", "B-04")
+def test_the_coll_offset_object_is_the_minimum_distance_in_effect_not_the_current_distance():
+    """FCT-C3 4.3 names object 0x..0246 "dyn_coll_mon coll_offset - Distanz zwischen Kollisionsachsen",
+    UNS32, 0.1 µm (the kernel's page: https://infosys.beckhoff.com/content/1033/tf5200_axis_collision_mon/
+    1223993099.html). Decided (issue 21, docs/monitors.md): it is the minimum distance in effect, the
+    parameter P-AXIS-00045 coll_offset ("Minimale Distanz zwischen zwei Kollisionsachsen"), not the
+    distance the axes have now: it has the parameter's name, type and unit; a distance of setpoints is
+    signed (the axes can pass each other with P-AXIS-00262/00263) and would be a REAL64 like velocity
+    and brake_dist; and #COLL MON ON, the NC command of the same dynamic collision monitoring, sets it
+    as DIST "analog zu P-AXIS-00045"."""
+    m = one_channel(x1=0.0, x2=100.0)
+    m.step(1)
+    assert (obj(m, 1, 0x0246), obj(m, 2, 0x0246)) == (200_000, 200_000)  # both axes of the pair
+    start(m, "N10 G01 X1=50 F6000\nN20 M30\n")
+    run_until_stopped(m)
+    assert distance(m) == pytest.approx(50.0)
+    assert (obj(m, 1, 0x0246), obj(m, 2, 0x0246)) == (200_000, 200_000)  # not 500000: not the distance
+    # the older two-sided form with two values: the larger applies (70162) and is the object's value
+    two_sided = one_channel(offset=200_000, partner={"coll_check_ax_nr": 2, "coll_offset": 250_000})
+    two_sided.step(1)
+    assert (obj(two_sided, 1, 0x0246), obj(two_sided, 2, 0x0246)) == (250_000, 250_000)
+    assert obj(two_sided, 3, 0x0246) == 0  # Z1: no pair
 
 
 @pytest.mark.req("C3-06")

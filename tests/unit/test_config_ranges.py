@@ -113,14 +113,14 @@ def test_the_loader_names_file_line_and_key_for_inf_nan_and_out_of_range(tmp_pat
     assert errors_of(path) == [
         f"{path}:4: axes[0].v_max: axis X: inf is not a finite number: v_max allows 0 < value ≤ 6000000",
         f"{path}:5: axes[0].a_max: axis X: 2000000.0 is out of range: P-AXIS-00008 allows "
-        "0 < value ≤ 1000000",
+        "1 ≤ value ≤ 1000000",
         f"{path}:6: axes[0].jog_velocity: axis X: nan is not a finite number: jog_velocity allows "
         "0 < value ≤ 6000000",
         f"{path}:9: axes[0].drive.kv: axis X: -inf is not a finite number: kv allows 0 < value ≤ 10000",
         f"{path}:18: channels[0].feedhold_deceleration: channel 1: inf is not a finite number: "
         "feedhold_deceleration allows 0 < value ≤ 1000000",
         f"{tmp_path / 'y.lis'}:2: getriebe[0].dynamik.a_max: nan is not a finite number: P-AXIS-00008 allows "
-        "0 < value ≤ 1000000",
+        "1 ≤ value ≤ 1000000",
         f"{tmp_path / 'y.lis'}:3: getriebe[0].dynamik.a_emergency: 1e9 is out of range: P-AXIS-00003 allows "
-        "0 < value ≤ 1000000",
+        "0 ≤ value ≤ 1000000",
     ]

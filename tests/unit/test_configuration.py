@@ -30,8 +30,11 @@ from schemas.config import (
     AXIS_PARAMETERS,
     CHANNEL_PARAMETERS,
     MANUAL_PARAMETERS,
+    AxisConfig,
+    ChannelConfig,
     InterpolatorFunction,
     MachineConfig,
+    ManualConfig,
 )
 from schemas.units import increments_from_mm, mm_per_min_to_mm_per_s, s_from_us
 from tests.unit.config_helpers import errors_of, write
@@ -803,10 +806,14 @@ def test_docs_parameter_table_is_current_and_complete() -> None:
         "between the GENERATED markers"
     )
     for info in (*AXIS_PARAMETERS, *CHANNEL_PARAMETERS, *MANUAL_PARAMETERS):
-        assert f"`{info.path.replace('[0]', '[i]')}`" in doc
+        if info.path is not None:
+            assert f"`{info.path.replace('[0]', '[i]')}`" in doc
         assert f"`{info.field}`" in doc
         if info.pid:
             assert info.pid in doc
+            # issue 21: every kernel parameter names the page (or document section) it comes from
+            assert info.page, f"{info.pid} has no kernel page"
+            assert (f"[page]({info.page})" if info.page.startswith("https://") else info.page) in doc
     runner = CliRunner()
     printed = runner.invoke(config_command, ["parameters"])
     assert printed.exit_code == 0
@@ -851,3 +858,86 @@ def test_machine_wide_checks_follow_once_single_values_are_fixed(tmp_path: Path)
     assert "demo_x1.lis" in message
     assert "0x8000" in message
     assert second.value.notes == []
+
+
+# The kernel's defaults, as its parameter pages give them (issue 21, B-04). Each line was read on the
+# page that ParameterInfo.page links (docs/configuration.md, column "kernel"); the function
+# descriptions' parameter sections (FCT-C3 4.2, FCT-C14 6.2, FCT-C43 3, FCT-A3 3.2) say the same.
+KERNEL_DEFAULTS: dict[str, object] = {
+    "P-AXIS-00003": 0,  # a_emergency; 0: a_max is used
+    "P-AXIS-00008": 1000,
+    "P-AXIS-00015": 0x00000001,
+    "P-AXIS-00043": 0,
+    "P-AXIS-00044": 0,
+    "P-AXIS-00045": 0,
+    "P-AXIS-00114": 0,
+    "P-AXIS-00118": 0,
+    "P-AXIS-00137": -1_000_000,
+    "P-AXIS-00138": 1_000_000,
+    "P-AXIS-00151": 1_000_000,
+    "P-AXIS-00177": -100_000_000,
+    "P-AXIS-00178": 100_000_000,
+    "P-AXIS-00179": 1000,
+    "P-AXIS-00215": 16666,
+    "P-AXIS-00236": 500,
+    "P-AXIS-00262": 0,
+    "P-AXIS-00263": 0,
+    "P-AXIS-00267": 0,
+    "P-AXIS-00492": 0,
+    "P-AXIS-00493": 0,
+    "P-AXIS-00532": -1,
+    "P-CHAN-00114": 0,
+    "P-CHAN-00120": 0,
+    "P-CHAN-00176": 0,
+    "P-CHAN-00268": 0,
+    "P-CHAN-00442": 0,
+    "P-CHAN-00751": 0,
+    "P-CHAN-00874": 0,
+    "P-STUP-00070": ["FCT_IPO_DEFAULT"],
+    "P-MANU-00014": 0,
+}
+
+
+@pytest.mark.req("E-07", "B-04")
+def test_every_parameter_default_is_the_kernels_or_says_why_not() -> None:
+    """Each parameter with a P-ID defaults to the value its kernel page gives; where it does not (or the
+    page gives none), its ParameterInfo.note says why, and docs/configuration.md shows the note."""
+    models = (
+        (AXIS_PARAMETERS, AxisConfig),
+        (CHANNEL_PARAMETERS, ChannelConfig),
+        (MANUAL_PARAMETERS, ManualConfig),
+    )
+    seen = set()
+    for table, model in models:
+        for info in table:
+            if info.pid is None:
+                continue
+            seen.add(info.pid)
+            ours = model.model_fields[info.field].get_default(call_default_factory=True)
+            if info.pid not in KERNEL_DEFAULTS:
+                assert info.note, f"{info.pid}: no kernel default known and no note why ours is {ours!r}"
+                continue
+            expected = KERNEL_DEFAULTS[info.pid]
+            if isinstance(ours, list):
+                ours = [str(v.value) if hasattr(v, "value") else v for v in ours]
+            assert ours == expected, f"{info.pid} {info.field}: default {ours!r}, the kernel's {expected!r}"
+    assert set(KERNEL_DEFAULTS) <= seen
+
+
+@pytest.mark.req("E-07", "B-04")
+def test_p_axis_00151_has_the_kernels_path_and_the_old_one_still_reads() -> None:
+    """P-AXIS-00151's path is ``getriebe[i].pos_einschw_zeit`` (its page, https://infosys.beckhoff.com/
+    content/1033/tf5200_axis_parameter/117751051.html); this project once read it as
+    ``getriebe[i].settling_time``: a list that still says so is read, with a warning."""
+    from hli_server.configuration.parameter_lists import parse_parameter_list
+
+    new = parse_parameter_list("getriebe[0].pos_einschw_zeit 250000\n", "axis", source="x.lis")
+    assert (new.values, new.warnings, new.errors) == ({"settling_time_legacy_us": 250_000}, [], [])
+    old = parse_parameter_list("getriebe[2].settling_time 250000\n", "axis", source="x.lis")
+    assert old.values == {"settling_time_legacy_us": 250_000}
+    assert old.errors == []
+    assert any(
+        "getriebe[2].settling_time is this project's old name; "
+        "the kernel's path is getriebe[2].pos_einschw_zeit" in w
+        for w in old.warnings
+    )

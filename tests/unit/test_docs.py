@@ -32,11 +32,19 @@ def test_the_requirement_list_has_every_id_once_in_order() -> None:
         + [f"C43-{i:02d}" for i in range(1, 11)]
         + [f"C3-{i:02d}" for i in range(1, 11)]
         + [f"A3-{i:02d}" for i in range(1, 6)]
-        + [f"H-{i:02d}" for i in range(1, 10)]
+        + [f"H-{i:02d}" for i in range(1, 12)]
         + [f"N-{i:02d}" for i in range(1, 10)]
         + [f"B-{i:02d}" for i in range(1, 5)]
     )
     assert ids == expected
+
+
+def test_ads_doc_describes_every_option() -> None:
+    from hli_server.adapters.ads import AdsOptions
+
+    doc = (ROOT / "docs" / "ads.md").read_text(encoding="utf-8")
+    missing = [name for name in AdsOptions.model_fields if f"`{name}`" not in doc]
+    assert not missing, f"docs/ads.md does not describe the ADS options {missing}"
 
 
 def test_mqtt_doc_lists_every_topic_and_option() -> None:
@@ -47,3 +55,13 @@ def test_mqtt_doc_lists_every_topic_and_option() -> None:
     assert mqtt_markdown() in doc, "docs/mqtt.md is stale: paste `hli-server events --mqtt` in its markers"
     missing = [name for name in MqttOptions.model_fields if f"`{name}`" not in doc]
     assert not missing, f"docs/mqtt.md does not describe the MQTT options {missing}"
+
+
+def test_the_readme_tour_shows_the_program_the_example_runs() -> None:
+    """The README's program with a loop, a subprogram and V.E. variables is the one
+    examples/test_ve_mode.py runs through every door (N-05)."""
+    from plc_clients.demos.ve_mode import POCKET, PROGRAM
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert f"```\n{PROGRAM}```" in readme, "README.md's tour program differs from demos/ve_mode.py"
+    assert f"```\n{POCKET}```" in readme, "README.md's pocket.nc differs from plc_clients/demos/ve_mode.py"

@@ -291,7 +291,7 @@ def test_programmed_position_beyond_soft_limit_is_refused_before_the_block():
     m = mill()
     run(m, "N10 G01 X100 F6000\nN20 X600\nN30 M30\n")
     (alarm,) = m.active_alarms
-    assert alarm.number == 911011
+    assert alarm.number == 120002  # the kernel's ID (software limit switch description)
     assert alarm.block == "N20"
     assert m.axis("X").setpoint == pytest.approx(100.0)
 
@@ -301,7 +301,7 @@ def test_arc_whose_bulge_passes_the_soft_limit_is_refused():
     m = mill()
     # end points inside +-500 mm, but counter-clockwise the half circle reaches Y = -450 - 100 = -550
     run(m, "N10 G01 X0 Y-450 F6000\nN20 G03 X200 Y-450 I100 J0\nN30 M30\n")
-    assert [a.number for a in m.active_alarms] == [911010]
+    assert [a.number for a in m.active_alarms] == [120003]
     m2 = mill()
     run(m2, "N10 G01 X0 Y-450 F6000\nN20 G02 X200 Y-450 I100 J0\nN30 M30\n")
     assert not m2.active_alarms  # the other way round the bulge stays inside
@@ -317,7 +317,7 @@ def test_actual_position_checked_against_limit_plus_tolerance():
     x.actual = 500.2
     x.measured = 500.2
     m.step(1)
-    assert [a.number for a in m.active_alarms] == [911012]
+    assert [a.number for a in m.active_alarms] == [70021]
 
 
 @pytest.mark.req("E-06", "E-05")

@@ -19,11 +19,12 @@ from schemas.config import AxisConfig, ChannelConfig, DriveModel, MachineConfig
 
 
 def machine(kv: float = 60.0, time_constant_us: int = 2_000) -> Machine:
-    """X/Y/Z, v_max 30 m/min (500 mm/s), position monitoring with 100 ms settling time."""
+    """X/Y/Z, v_max 30 m/min (500 mm/s), a_max 2000 mm/s², position monitoring with 100 ms settling time."""
     axes = [
         AxisConfig(
             number=i + 1,
             name=n,
+            a_max=2000.0,  # the unstable loops below were tuned with it (the kernel's default is 1000)
             position_settling_time_us=100_000,
             drive=DriveModel(kv=kv, time_constant_us=time_constant_us),
         )

@@ -84,7 +84,9 @@ class Rig:
         for _ in range(count):
             self.task.run_cycle()
             b = self.block
-            self.trace.append((self.task.image.cycle, b.State, b.Valid, b.Error, int(b.ErrorID)))
+            # the CNC's state: MonitoringState of a dyn_pos_limit block, State of a control-unit block
+            state = b.MonitoringState if hasattr(b, "MonitoringState") else b.State
+            self.trace.append((self.task.image.cycle, state, b.Valid, b.Error, int(b.ErrorID)))
             if cnc:
                 self.image.step()
 
@@ -135,7 +137,7 @@ def test_enable_writes_command_before_enable_and_goes_valid_once_the_cnc_is_acti
     r.cycle()
     assert r.writes() == [("command_w", 500_000), ("enable_w", True)]  # H-02: command first
     r.cycle(4)
-    # (CNC cycle of the inputs, State, Valid, Error, ErrorID), one row per task cycle:
+    # (CNC cycle of the inputs, MonitoringState, Valid, Error, ErrorID), one row per task cycle:
     # the write is delivered after cycle 0's inputs; the inputs of cycle 1 date it, so state_r counts
     # from CNC cycle 1 + LATCH_MARGIN = 3 on (a state left over from an earlier enable cannot count)
     assert r.trace == [
@@ -149,7 +151,7 @@ def test_enable_writes_command_before_enable_and_goes_valid_once_the_cnc_is_acti
     assert r.block.phase is Phase.VALID
 
 
-def test_state_follows_the_monitoring_states_and_valid_holds_while_braking(layout: Layout) -> None:
+def test_monitoring_state_follows_the_cnc_and_valid_holds_while_braking(layout: Layout) -> None:
     r = rig(layout, Axis=X, Enable=True, Position=500_000)
     r.cycle(4)
     seen = []
@@ -157,8 +159,35 @@ def test_state_follows_the_monitoring_states_and_valid_holds_while_braking(layou
         r.image.set(f"{HIGH}.state_r", cnc_state)
         r.image.step()
         r.cycle(cnc=False)
-        seen.append((r.block.State, r.block.Valid))
-    assert seen == [(3, True), (3, True), (4, True), (4, True), (2, True)]
+        seen.append((r.block.MonitoringState, r.block.State, r.block.Valid))
+    assert seen == [
+        (3, 500_000, True),
+        (3, 500_000, True),
+        (4, 500_000, True),
+        (4, 500_000, True),
+        (2, 500_000, True),
+    ]
+
+
+@pytest.mark.req("C43-10")
+def test_state_is_the_position_limit_in_effect(layout: Layout) -> None:
+    """FCT-C43 3.2.1/3.2.2: ``State : DINT`` "Aktueller Positionsgrenzwert" (the position limit now in
+    effect; the kernel's page of the block says the same, https://infosys.beckhoff.com/content/1033/
+    tf5200_dynposlimit/192559627487822603.html): the Position the CNC took over, 0 while none is."""
+    r = rig(layout, Axis=X, Enable=True, Position=500_000)
+    states = []
+    for _ in range(4):
+        r.cycle()
+        states.append((r.block.State, r.block.Valid))
+    assert states == [(0, False), (0, False), (0, False), (500_000, True)]
+    r.block.Position = 450_000  # C43-07: the PLC moves the limit
+    r.cycle()
+    assert r.block.State == 500_000  # the CNC has not latched the new one yet: the old one is in effect
+    r.cycle(3)
+    assert (r.block.State, r.block.Valid) == (450_000, True)
+    r.block.Enable = False
+    r.cycle()
+    assert (r.block.State, r.block.MonitoringState, r.block.Valid) == (0, 0, False)
 
 
 def test_enable_false_clears_enable_w_and_the_outputs_at_once(layout: Layout) -> None:
@@ -301,7 +330,8 @@ def test_a_bad_position_while_valid_keeps_the_limit_and_latches_until_enable_fal
     r.block.Position = 2**40
     r.cycle(3)
     assert (r.block.Valid, r.block.Error, r.block.ErrorID) == (False, True, ErrorID.POSITION_OUT_OF_RANGE)
-    assert r.block.State == ACTIVE  # State still shows the CNC's state
+    assert r.block.MonitoringState == ACTIVE  # the CNC's state is still shown
+    assert r.block.State == 500_000  # and the limit, which stays in effect
     assert r.writes() == []  # the active limit stays: an error does not lift it
     assert r.image.outputs[f"{HIGH}.enable_w"] is True
     r.block.Position = 500_000  # a good value alone does not clear the latched error
@@ -363,7 +393,12 @@ def test_no_activation_within_the_timeout_is_an_error_naming_fct_dyn_pos_limit(l
     r.cycle(10)
     assert not r.block.Error  # inputs of CNC cycles 0..9: the deadline is cycle 0 + 10
     r.cycle()
-    assert (r.block.Error, r.block.ErrorID, r.block.State) == (True, ErrorID.ACTIVATION_TIMEOUT, INACTIVE)
+    assert (r.block.Error, r.block.ErrorID, r.block.MonitoringState) == (
+        True,
+        ErrorID.ACTIVATION_TIMEOUT,
+        INACTIVE,
+    )
+    assert r.block.State == 0  # no limit in effect
     assert "FCT_DYN_POS_LIMIT" in r.block.ErrorText
     assert "P-STUP-00070" in r.block.ErrorText
     assert r.image.outputs[f"{HIGH}.enable_w"] is True  # left as it is until Enable FALSE
@@ -387,7 +422,12 @@ def test_the_cnc_dropping_the_limit_while_enabled_is_an_error_after_the_timeout(
     other_door = MemoryTransport(r.image)
     other_door.write(f"{HIGH}.enable_w", False)  # someone else clears enable_w
     r.cycle(2)
-    assert (r.block.Valid, r.block.Error, r.block.State) == (False, False, INACTIVE)  # waiting, grace
+    assert (r.block.Valid, r.block.Error, r.block.MonitoringState) == (
+        False,
+        False,
+        INACTIVE,
+    )  # waiting, grace
+    assert r.block.State == 0
     r.cycle(5)
     assert (r.block.Error, r.block.ErrorID) == (True, ErrorID.LIMIT_LOST)
     assert "another PLC door" in r.block.ErrorText
@@ -401,10 +441,10 @@ async def test_an_input_that_an_asyncio_transport_has_not_read_yet_is_no_input(l
     fb.set_inputs(Axis=X, Enable=True, Position=500_000)
     task = PlcTask(AsyncMemoryTransport(image), 0.001, fb)
     await task.run_cycle_async()
-    assert (fb.State, fb.Valid, fb.Error) == (0, False, False)  # not in the input image yet
+    assert (fb.MonitoringState, fb.Valid, fb.Error) == (0, False, False)  # not in the input image yet
     assert f"{HIGH}.state_r" in task.image.watch  # ... from the next cycle on
     await task.run_cycle_async()
-    assert fb.State == ACTIVE
+    assert fb.MonitoringState == ACTIVE
     assert image.outputs[f"{HIGH}.enable_w"] is True
 
 

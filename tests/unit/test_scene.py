@@ -81,6 +81,7 @@ def test_a_path_through_an_inactive_cylinder_crosses_it(geometry_only: bool) -> 
     cylinder = area(scene_for(THROUGH_INACTIVE, geometry_only=geometry_only), 4)
     assert cylinder["state"] == "defined"
     assert cylinder["relation"] == "crosses"
+    assert cylinder["relation_text"] == "path goes through it"  # not active: nothing stopped it
     (span,) = cylinder["spans"]
     assert span["from"] == pytest.approx(100.0)
     assert span["to"] == pytest.approx(200.0)
@@ -92,6 +93,8 @@ def test_the_refused_block_through_an_active_cylinder_crosses_it(geometry_only: 
     scene = scene_for(THROUGH_ACTIVE, geometry_only=geometry_only)
     cylinder = area(scene, 4)
     assert cylinder["relation"] == "crosses"
+    # the legend says what happened (issue 23): not "the path goes through it"
+    assert cylinder["relation_text"] == "the refused block N60 would enter it; the axes stopped before it"
     (span,) = cylinder["spans"]
     assert span["refused"] is True
     refused = scene["refused"]
@@ -115,6 +118,7 @@ def test_a_tangent_touch_is_a_span_of_no_length() -> None:
 def test_a_path_that_never_comes_over_an_area_is_apart() -> None:
     cylinder = area(scene_for(APART, geometry_only=True), 4)
     assert (cylinder["relation"], cylinder["spans"]) == ("apart", [])
+    assert cylinder["relation_text"] == "path never over it"
 
 
 @pytest.mark.req("C14-15")
@@ -274,3 +278,18 @@ def test_the_scene_module_imports_only_the_standard_library_and_schemas() -> Non
         elif isinstance(node, ast.ImportFrom) and node.module:
             imported.add(node.module.split(".")[0])
     assert imported - {"__future__", "schemas"} <= set(sys.stdlib_module_names), imported
+
+
+@pytest.mark.req("C14-15")
+def test_the_legend_says_what_happened_at_the_area_that_refused_a_block(tmp_path: Path) -> None:
+    """Issue 23: ``check --plot``'s legend said a protection area is one the "path goes through" when the
+    machine stopped before it. It says what happened: the refused block would enter the protection area,
+    would leave the work area; the axes stopped before."""
+    from hli_server.plot import plot_scene
+
+    through = scene_for(THROUGH_ACTIVE)
+    svg = plot_scene(through, tmp_path / "through.svg").read_text(encoding="utf-8")
+    assert "the refused block N60 would enter it; the axes stopped before it" in svg
+    assert "path goes through it" not in svg
+    work = area(scene_for(U_LINE), 3)
+    assert work["relation_text"] == "the refused block N170 would leave it; the axes stopped inside"

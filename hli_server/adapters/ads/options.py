@@ -9,14 +9,26 @@ farm of a few hundred clients.
 from __future__ import annotations
 
 import ipaddress
+import logging
 from typing import Final
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-__all__ = ["DEFAULT_NET_ID", "DEFAULT_PORT", "AdsOptions", "RouteAllowlist"]
+__all__ = [
+    "DEFAULT_NET_ID",
+    "DEFAULT_PORT",
+    "DEFAULT_UDP_PORT",
+    "AdsOptions",
+    "RouteAllowlist",
+    "canonical_ip",
+]
+
+logger = logging.getLogger(__name__)
 
 DEFAULT_PORT: Final = 48898
 """The AMS/TCP port of a TwinCAT router; ``--ads-port 0`` binds a free one (printed in the banner)."""
+DEFAULT_UDP_PORT: Final = 48899
+"""The UDP port of TwinCAT's route discovery and AddRoute (pyads and AdsLib send there, always)."""
 DEFAULT_NET_ID: Final = "127.0.0.1.1.1"
 """The server's AMS NetId: the clients' target (``pyads.Connection("127.0.0.1.1.1", 851, ...)``)."""
 
@@ -26,6 +38,29 @@ def _net_id_octets(text: str) -> tuple[int, ...] | None:
     if len(parts) == 6 and all(p.isdecimal() and int(p) <= 255 for p in parts):
         return tuple(int(p) for p in parts)
     return None
+
+
+def _address(host: str | None) -> ipaddress.IPv4Address | ipaddress.IPv6Address | None:
+    if host is None:
+        return None
+    try:
+        address = ipaddress.ip_address(host.split("%", 1)[0])
+    except ValueError:
+        return None
+    if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
+        return address.ipv4_mapped
+    return address
+
+
+def canonical_ip(host: str | None) -> str | None:
+    """An IP address as one spelling (IPv4-mapped IPv6 as IPv4, no zone), or None when it is none."""
+    address = _address(host)
+    return None if address is None else str(address)
+
+
+def is_loopback(host: str | None) -> bool:
+    address = _address(host)
+    return address is not None and address.is_loopback
 
 
 class RouteAllowlist:
@@ -56,14 +91,9 @@ class RouteAllowlist:
     def allows_ip(self, host: str | None) -> bool:
         if not self.checks_ip:
             return True
-        if host is None:
+        address = _address(host)
+        if address is None:
             return False
-        try:
-            address = ipaddress.ip_address(host.split("%", 1)[0])
-        except ValueError:
-            return False
-        if isinstance(address, ipaddress.IPv6Address) and address.ipv4_mapped is not None:
-            address = address.ipv4_mapped
         if self.loopback and address.is_loopback:
             return True
         return any(address in network for network in self.networks)
@@ -86,6 +116,39 @@ class AdsOptions(BaseModel):
         description="route allowlist: IPs/networks and/or AMS NetIds, 'loopback' = 127.0.0.0/8 and ::1; "
         "empty = everybody (docs/ads.md)",
     )
+    udp: bool = Field(
+        default=True,
+        description="answer ADS over UDP where the TCP door listens: the discovery answer (TwinCAT's "
+        "Broadcast Search, pyads' NetId discovery) and AddRoute (docs/ads.md)",
+    )
+    udp_port: int | None = Field(
+        default=None,
+        ge=0,
+        le=65535,
+        description="UDP port (default: 48899 when `port` is 48898, as TwinCAT's, else any free port; "
+        "0: any free)",
+    )
+    route_user: str | None = Field(
+        default=None,
+        max_length=256,
+        description="user name AddRoute must carry (pyads.add_route_to_plc's username); unset: every "
+        "AddRoute is refused with 0x704 as TwinCAT refuses wrong credentials",
+    )
+    route_password: str | None = Field(
+        default=None, max_length=256, description="password AddRoute must carry, with `route_user`"
+    )
+    routes_file: str | None = Field(
+        default=None,
+        description="JSON file the routes added by AddRoute are kept in (read at start, written on each "
+        "AddRoute); unset: they last as long as the server",
+    )
+    max_routes: int = Field(default=128, ge=1, le=10_000, description="routes AddRoute may add")
+    udp_rate: float = Field(
+        default=20.0, gt=0, le=100_000, description="datagrams per second answered per sender (burst: twice)"
+    )
+    udp_rate_total: float = Field(
+        default=200.0, gt=0, le=1_000_000, description="datagrams per second answered in all (burst: twice)"
+    )
     max_connections: int = Field(default=512, ge=1, le=900, description="connections served at once")
     idle_timeout_s: float = Field(
         default=120.0,
@@ -93,11 +156,18 @@ class AdsOptions(BaseModel):
         le=86_400,
         description="close a connection that sent nothing for this long and has no notification it reads",
     )
-    evict_idle_after_s: float = Field(
-        default=5.0,
+    evict_idle_after_s: float | None = Field(
+        default=None,
         ge=0,
-        description="when every slot is taken, a new client replaces the longest-idle one if it has "
-        "been idle this long",
+        description="no effect since issue 27 (a full house always makes room by closing its least useful "
+        "connection); accepted so that machine files that set it still load",
+    )
+    frame_timeout_s: float = Field(
+        default=5.0,
+        gt=0,
+        le=3600,
+        description="a frame begun must be complete within this long, or the connection is closed (a client "
+        "trickling a byte at a time does not hold a slot)",
     )
     max_queued_output: int = Field(
         default=256 * 1024,
@@ -122,6 +192,19 @@ class AdsOptions(BaseModel):
     max_handles: int = Field(default=2048, ge=1, le=1_000_000, description="symbol handles per connection")
     max_notifications: int = Field(
         default=256, ge=1, le=100_000, description="device notifications per connection"
+    )
+    max_notifications_per_net_id: int = Field(
+        default=512,
+        ge=1,
+        le=1_000_000,
+        description="device notifications of one client NetId, all its connections",
+    )
+    max_notifications_per_host: int = Field(
+        default=1024,
+        ge=1,
+        le=1_000_000,
+        description="device notifications of one remote host, all its NetIds (loopback peers are not "
+        "counted so)",
     )
     max_notifications_total: int = Field(
         default=2048, ge=1, le=1_000_000, description="device notifications of all connections together"
@@ -164,6 +247,33 @@ class AdsOptions(BaseModel):
                             "address or network (10.0.0.0/8), nor 'loopback'"
                         ) from None
         return value
+
+    @field_validator("route_user", "route_password", mode="before")
+    @classmethod
+    def _text(cls, value: object) -> object:
+        if isinstance(value, int) and not isinstance(value, bool):  # --adapter ads:route_password=1
+            return str(value)
+        return value
+
+    @model_validator(mode="after")
+    def _credentials(self) -> AdsOptions:
+        if (self.route_user is None) != (self.route_password is None):
+            raise ValueError(
+                "route_user and route_password go together: AddRoute is accepted with both, refused without"
+            )
+        if self.evict_idle_after_s is not None:
+            logger.warning(
+                "ADS option evict_idle_after_s has no effect any more: a full house closes its least useful "
+                "connection for a newcomer (docs/ads.md, Limits)"
+            )
+        return self
+
+    @property
+    def udp_port_to_bind(self) -> int:
+        """The UDP port: ``udp_port``, or 48899 beside TwinCAT's 48898, else any free one (0)."""
+        if self.udp_port is not None:
+            return self.udp_port
+        return DEFAULT_UDP_PORT if self.port == DEFAULT_PORT else 0
 
     def allowlist(self) -> RouteAllowlist:
         return RouteAllowlist(self.allow)

@@ -19,10 +19,19 @@ from hli_server.adapters.host import (
     NotFoundError,
     OperatorError,
     StepRefusedError,
+    UnavailableError,
 )
 from hli_server.adapters.http.models import AcceptedBody
 
-__all__ = ["HostDep", "SafeJSONResponse", "accepted", "get_host", "install_error_handlers", "json_bytes"]
+__all__ = [
+    "ECHO_LIMIT",
+    "HostDep",
+    "SafeJSONResponse",
+    "accepted",
+    "get_host",
+    "install_error_handlers",
+    "json_bytes",
+]
 
 
 def _json_safe(value: Any) -> Any:
@@ -52,6 +61,28 @@ class SafeJSONResponse(JSONResponse):
         return json_bytes(content)
 
 
+ECHO_LIMIT = 200
+"""Characters of a refused input that a 422 quotes back (issue 27, finding 9: a list of 100,000 trace
+names was sent back whole, 3.9 MB); beyond, the answer says what it was and how large."""
+
+
+def _brief(value: Any) -> Any:
+    """``value`` if its JSON is short, else a description of it (type and size)."""
+    try:
+        text = json.dumps(_json_safe(value), ensure_ascii=True, default=str)
+    except (TypeError, ValueError, RecursionError):
+        text = repr(value)
+    if len(text) <= ECHO_LIMIT:
+        return value
+    if isinstance(value, list | tuple):
+        return f"(a list of {len(value):,} items, {len(text):,} characters: not quoted)"
+    if isinstance(value, dict):
+        return f"(an object of {len(value):,} keys, {len(text):,} characters: not quoted)"
+    if isinstance(value, str | bytes):
+        return f"{value[:80]!r}... ({len(value):,} characters: not quoted whole)"
+    return f"(a {type(value).__name__} of {len(text):,} characters: not quoted)"
+
+
 def get_host(request: Request) -> AdapterHost:
     host: AdapterHost = request.app.state.host
     return host
@@ -74,6 +105,7 @@ _STATUS: tuple[tuple[type[OperatorError], int], ...] = (
     (ConflictError, 409),
     (StepRefusedError, 409),
     (InvalidRequestError, 422),
+    (UnavailableError, 503),
 )
 
 
@@ -86,7 +118,8 @@ def install_error_handlers(app: FastAPI) -> None:
 
     async def validation_error(_request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, RequestValidationError)
-        return SafeJSONResponse({"detail": jsonable_encoder(exc.errors())}, status_code=422)
+        errors = [{**e, "input": _brief(e["input"])} if "input" in e else e for e in exc.errors()]
+        return SafeJSONResponse({"detail": jsonable_encoder(errors)}, status_code=422)
 
     async def http_error(_request: Request, exc: Exception) -> JSONResponse:
         assert isinstance(exc, HTTPException)

@@ -8,9 +8,14 @@ A plain ASGI middleware (no per-request task, no streaming of its own):
 * **Origin** (cross-site requests): a state-changing request (POST, PUT, PATCH, DELETE) that carries
   an ``Origin`` is refused (403) unless that origin is this server's own (same host and port) or in
   ``allowed_origins``. Browsers send ``Origin`` with every cross-site POST, so a web page in the user's
-  browser cannot load or start a program here.
+  browser cannot load or start a program here. ``Origin: null`` (a sandboxed frame, a ``data:`` or
+  ``file:`` page) is such a foreign origin too (issue 27, finding 7).
 * **Token**: with ``api_token`` set, a state-changing request needs ``Authorization: Bearer <token>``
-  (401 with ``WWW-Authenticate`` otherwise). Reading stays open.
+  (401 with ``WWW-Authenticate`` otherwise), and so do the reads of the event log (``GET /api/events``;
+  issue 27, finding 8). A ``GET`` may carry the token as ``?access_token=`` instead (RFC 6750, 2.3: a
+  browser's ``EventSource`` cannot send headers). The other reads stay open; the dashboard's stream
+  (``/api/live``) carries the events only to a holder of the token: whether the request had it is
+  ``scope["state"]["hli_token"]`` for the routes.
 * **Read-only**: with ``read_only`` set, every state-changing request is refused (403).
 * **Body size**: a body above ``max_body_bytes`` is refused with 413 and never reaches the application
   (nor memory: past the bound it is read and discarded, so that the client sees the answer rather than a
@@ -25,10 +30,11 @@ import ipaddress
 import json
 from collections.abc import Awaitable, Callable, MutableMapping
 from typing import Any
+from urllib.parse import parse_qs
 
 from hli_server.adapters.host import LOOPBACK_NAMES, AccessPolicy
 
-__all__ = ["Guard"]
+__all__ = ["TOKEN_READS", "Guard"]
 
 Scope = MutableMapping[str, Any]
 Message = MutableMapping[str, Any]
@@ -37,6 +43,8 @@ Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 _STATE_CHANGING = frozenset({"POST", "PUT", "PATCH", "DELETE"})
+TOKEN_READS = ("/api/events",)
+"""Reads that need the token when one is set (the event log: what was done on the machine, by whom)."""
 _DRAIN_FACTOR = 4
 """A body above the bound is read to its end and discarded (so that the client sees the 413 instead of a
 reset connection), unless it is more than this many times the bound: then the answer comes at once."""
@@ -73,7 +81,9 @@ class Guard:
             return
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
         method = str(scope.get("method", "GET")).upper()
-        refusal = self._refusal(method, headers)
+        authorized = self._token_given(method, headers, scope)
+        scope.setdefault("state", {})["hli_token"] = authorized
+        refusal = self._refusal(method, headers, str(scope.get("path", "")), authorized)
         if refusal is not None:
             status, detail, extra = refusal
             await _answer(send, status, detail, extra)
@@ -113,8 +123,25 @@ class Guard:
 
         await self.app(scope, buffered, send)
 
+    def _token_given(self, method: str, headers: dict[str, str], scope: Scope) -> bool:
+        """Whether the request carries the token (always True when the server has none)."""
+        token = self.policy.api_token
+        if token is None:
+            return True
+        scheme, _, value = headers.get("authorization", "").partition(" ")
+        if scheme.lower() == "bearer" and hmac.compare_digest(value.strip().encode(), token.encode()):
+            return True
+        if method == "GET":
+            query = scope.get("query_string", b"")
+            for given in parse_qs(query.decode("latin-1") if isinstance(query, bytes) else str(query)).get(
+                "access_token", []
+            ):
+                if hmac.compare_digest(given.encode(), token.encode()):
+                    return True
+        return False
+
     def _refusal(
-        self, method: str, headers: dict[str, str]
+        self, method: str, headers: dict[str, str], path: str, authorized: bool
     ) -> tuple[int, str, list[tuple[bytes, bytes]]] | None:
         host = _host_name(headers.get("host", "")).lower()
         if host and host not in self._hosts and not _is_ip(host):
@@ -125,9 +152,16 @@ class Guard:
                 [],
             )
         if method not in _STATE_CHANGING:
+            if not authorized and path.rstrip("/") in TOKEN_READS:
+                return (
+                    401,
+                    "the event log is read with the token only: send 'Authorization: Bearer <token>' (the "
+                    "server's --api-token / HLI_API_TOKEN)",
+                    [(b"www-authenticate", b'Bearer realm="hli-server"')],
+                )
             return None
         origin = headers.get("origin")
-        if origin is not None and origin.lower() != "null":
+        if origin is not None:
             own = f"{headers.get('x-forwarded-proto', 'http')}://{headers.get('host', '')}".lower()
             if origin.rstrip("/").lower() not in ({own} | self._origins):
                 return (
@@ -138,17 +172,13 @@ class Guard:
                 )
         if self.policy.read_only:
             return 403, "the server runs --read-only: the network doors accept no writes", []
-        token = self.policy.api_token
-        if token is not None:
-            given = headers.get("authorization", "")
-            scheme, _, value = given.partition(" ")
-            if scheme.lower() != "bearer" or not hmac.compare_digest(value.strip().encode(), token.encode()):
-                return (
-                    401,
-                    "this request changes the machine's state: send 'Authorization: Bearer <token>' "
-                    "(the server's --api-token / HLI_API_TOKEN)",
-                    [(b"www-authenticate", b'Bearer realm="hli-server"')],
-                )
+        if not authorized:
+            return (
+                401,
+                "this request changes the machine's state: send 'Authorization: Bearer <token>' "
+                "(the server's --api-token / HLI_API_TOKEN)",
+                [(b"www-authenticate", b'Bearer realm="hli-server"')],
+            )
         return None
 
     async def _too_large(self, send: Send, size: int) -> None:

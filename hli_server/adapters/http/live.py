@@ -21,9 +21,16 @@ between cycles, once per tick for all streams, from one consistent copy of the i
 operator's snapshot; a stream keeps only the newest state (states are not queued). Encoding to JSON
 happens in the streams' own tasks. Without an open stream nothing runs: no listener, no task.
 
-Bounds: at most :attr:`LiveFeed.max_streams` streams at once (16 by default; more: 503). An open stream
-counts as a request in progress, so the door's idle timeout does not close it; at shutdown
+Bounds: at most :attr:`LiveFeed.max_streams` streams at once (16 by default). A page that does not read
+what it is sent holds nothing for long (issue 27, finding 4): when every slot is taken, a newcomer takes
+the slot of the stream that has waited longest (at least :data:`STALL_EVICT_S`) for its page to take a
+message; and the door drops a connection whose client leaves an answer unread for ``write_timeout``
+seconds (``protocol.py``). Only when every open page reads is a newcomer refused (503). At shutdown
 :meth:`LiveFeed.close` ends every stream, so none holds the server's graceful shutdown.
+
+With ``--api-token`` a stream carries the ``event`` messages (the event log, live) only to a holder of
+the token (``?access_token=`` on the URL: an ``EventSource`` sends no headers); its ``hello`` says whether
+it does (``events``).
 """
 
 from __future__ import annotations
@@ -60,6 +67,8 @@ SCENE_PERIOD_S = 1.0
 """How often a channel's scene is looked at without an event of its channel (its trail grows, its path
 ahead moves on). A scene of a moving channel costs a few milliseconds (``docs/performance.md``); between
 two scenes the page moves the TCP and draws its newest trail from the states."""
+STALL_EVICT_S = 1.0
+"""A stream whose page has not taken a message for this long may give its slot to a newcomer."""
 QUEUE_SIZE = 1000
 """Events one stream may have waiting; beyond, new events are dropped for it and counted."""
 
@@ -82,6 +91,10 @@ class Stream:
     dropped_told: int = 0
     wake: asyncio.Event = field(default_factory=asyncio.Event)
     closed: bool = False
+    events_allowed: bool = True
+    """Whether this page gets the ``event`` messages (with a token set: only a holder of it)."""
+    sending_since: float | None = None
+    """When the message being sent was handed to the door (None: the page took it)."""
 
     async def next_chunk(self) -> bytes | None:
         """Everything waiting, as SSE text (events first, then scenes, then the state); ``None`` once the
@@ -179,6 +192,8 @@ class LiveFeed:
         self.streams: list[Stream] = []
         self.dropped = 0
         """Events dropped over all streams (slow pages)."""
+        self.evicted = 0
+        """Streams that gave their slot to a newcomer because their page did not read."""
         self.ticks = 0
         self._unsubscribe: Any = None
         self._task: asyncio.Task[None] | None = None
@@ -191,17 +206,18 @@ class LiveFeed:
         self._channel_signals: list[tuple[int, Signal, Signal]] | None = None
 
     # --- streams ------------------------------------------------------------------------------
-    def open(self) -> Stream:
-        """A new stream (its first chunk is ``hello``); :class:`TooManyStreamsError` when all slots are
-        taken, :class:`RuntimeError` after :meth:`close`."""
+    def open(self, *, events: bool = True) -> Stream:
+        """A new stream (its first chunk is ``hello``; ``events``: whether it gets the events); when all
+        slots are taken, the stream stalled longest gives its slot up (:data:`STALL_EVICT_S`), else
+        :class:`TooManyStreamsError`; :class:`RuntimeError` after :meth:`close`."""
         if self._closed:
             raise RuntimeError("the server is stopping")
-        if len(self.streams) >= self.max_streams:
+        if len(self.streams) >= self.max_streams and not self._evict_stalled():
             raise TooManyStreamsError(
-                f"{self.max_streams} live streams are open (the most this server serves); close a "
+                f"{self.max_streams} live streams are open and read (the most this server serves); close a "
                 "dashboard tab, or start the server with --adapter http:max_streams=N"
             )
-        stream = Stream()
+        stream = Stream(events_allowed=events)
         stream.scenes = {n: _scene_bytes(s) for n, s in self._current_scenes().items()}
         stream.state = _sse(b"state", json_bytes(self.state()))
         self.streams.append(stream)
@@ -211,13 +227,36 @@ class LiveFeed:
             self._task = asyncio.create_task(self._run(), name="hli-http-live")
         return stream
 
-    def hello(self) -> bytes:
+    def _evict_stalled(self) -> bool:
+        """Release the stream whose page has not taken a message the longest, if that is at least
+        :data:`STALL_EVICT_S`; its connection is dropped by the door's ``write_timeout``."""
+        now = asyncio.get_running_loop().time()
+        stalled = [
+            s for s in self.streams if s.sending_since is not None and now - s.sending_since >= STALL_EVICT_S
+        ]
+        if not stalled:
+            return False
+        victim = min(stalled, key=lambda s: s.sending_since or now)
+        self.evicted += 1
+        logger.info(
+            "live feed: a page has not read for %.1f s: its slot goes to a newcomer",
+            now - (victim.sending_since or now),
+        )
+        self.release(victim)
+        return True
+
+    def hello(self, *, events: bool = True) -> bytes:
+        return b"retry: 2000\n\n" + _sse(b"hello", json_bytes(self.hello_body(events=events)))
+
+    def hello_body(self, *, events: bool = True) -> dict[str, Any]:
+        """The ``hello`` message (also what the page carries when it is served); ``events``: whether the
+        stream carries the events (with a token set: only to a holder of it)."""
         op = self.host.operator
         policy = self.host.policy
         channels = [
             {"number": n, "axes": op.axis_names(n), "programs": op.programs(n)} for n in op.channel_numbers()
         ]
-        body = {
+        return {
             "machine": op.machine_name,
             "clock": self.host.clock,
             "t_a_us": op.t_a_us,
@@ -225,9 +264,9 @@ class LiveFeed:
             "axes": op.axis_names(),
             "token": policy.api_token is not None,
             "read_only": policy.read_only,
+            "events": events,
             "rate_hz": round(1.0 / self.period, 3),
         }
-        return b"retry: 2000\n\n" + _sse(b"hello", json_bytes(body))
 
     def release(self, stream: Stream) -> None:
         """The stream's page went away (or the stream ended)."""
@@ -262,6 +301,8 @@ class LiveFeed:
         if event.channel is not None:
             self._dirty.add(event.channel)
         for stream in self.streams:
+            if not stream.events_allowed:
+                continue
             if len(stream.events) >= self.queue_size:
                 stream.dropped += 1
                 self.dropped += 1
@@ -406,6 +447,7 @@ class LiveFeed:
             "axes": axes,
             "pairs": op.collision_pairs(),
             "alarms": snap["alarms"],
+            "external": snap.get("external", []),
             "streams": len(self.streams),
             "dropped": self.dropped,
         }

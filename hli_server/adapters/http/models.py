@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, model_validator
 
 __all__ = [
+    "MAX_PROGRAM_FILES",
     "MAX_STEP",
     "MAX_TRACE_SIGNALS",
     "MAX_TRACE_VALUES",
@@ -23,8 +24,10 @@ __all__ = [
     "StepBody",
 ]
 
-MAX_STEP = 10_000_000
-"""Most cycles one ``POST /api/step`` may ask for (10 000 s of simulated time at 1 ms)."""
+MAX_STEP = 1_000_000
+"""Most cycles one ``POST /api/step`` may ask for (1 000 s of simulated time at 1 ms; about ten seconds of
+the compiled engine's CPU, a minute or two of the pure-Python one). Longer runs go in parts: one step runs
+at a time, and closing its connection cancels it (issue 27, finding 6)."""
 MAX_TRACE_SIGNALS = 64
 """Most signals one ``POST /api/step`` may trace."""
 MAX_TRACE_VALUES = 2_000_000
@@ -35,9 +38,19 @@ class _Body(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
+MAX_PROGRAM_FILES = 256
+"""Most subprogram files one program load may bring (``ProgramBody.files``)."""
+
+
 class ProgramBody(_Body):
     text: str = Field(min_length=1, description="the NC program (DIN 66025 blocks, one per line)")
     name: str = Field(default="program", min_length=1, max_length=200, description="shown in the state")
+    files: dict[Annotated[str, Field(min_length=1, max_length=255)], str] = Field(
+        default_factory=dict,
+        max_length=MAX_PROGRAM_FILES,
+        description="its subprograms and cycles, file name -> NC text: `L name` finds them before the "
+        "program directories (a name below a directory, e.g. cycles/drill.nc; no '..', not absolute)",
+    )
 
 
 class SelectBody(_Body):
@@ -95,6 +108,23 @@ class FaultsBody(_Body):
     encoder_stuck: StrictBool | None = Field(default=None, description="the encoder stops counting")
     encoder_drift: float | None = Field(default=None, description="encoder drift [mm/s]")
     drive_error: StrictBool | None = Field(default=None, description="the drive reports an error")
+
+
+class SoftLimitsBody(_Body):
+    """The software limits in effect (E-06), 0.1 µm: they hold until the next reset or mode change, when
+    the axis record's come back (P-AXIS-00177/00178), as the kernel's G98/G99 do."""
+
+    swe_neg: StrictInt | None = Field(default=None, description="negative software limit [0.1 µm]")
+    swe_pos: StrictInt | None = Field(default=None, description="positive software limit [0.1 µm]")
+
+
+class AxisRecordBody(_Body):
+    """The axis record's software limit parameters, 0.1 µm: a parameter download, taken over at the
+    next reset or mode change (P-AXIS-00177/00178 "Anmerkungen"); ranges as in the machine file."""
+
+    swe_neg: StrictInt | None = Field(default=None, description="P-AXIS-00177 [0.1 µm]")
+    swe_pos: StrictInt | None = Field(default=None, description="P-AXIS-00178 [0.1 µm]")
+    swe_toleranz: StrictInt | None = Field(default=None, description="P-AXIS-00179 [0.1 µm]")
 
 
 class ImageWriteBody(_Body):

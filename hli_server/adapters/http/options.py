@@ -28,6 +28,18 @@ class HttpOptions(BaseModel):
     idle_timeout: float = Field(
         default=30.0, ge=0.0, le=3600.0, description="seconds a connection may stay silent (0: no limit)"
     )
+    request_timeout: float = Field(
+        default=10.0,
+        ge=0.0,
+        le=3600.0,
+        description="seconds from a request's first byte to the end of its body (408 after; 0: no limit)",
+    )
+    write_timeout: float = Field(
+        default=10.0,
+        ge=0.0,
+        le=3600.0,
+        description="seconds a client may leave an answer unread (then it is dropped; 0: no limit)",
+    )
     keep_alive: int = Field(
         default=5, ge=1, le=300, description="seconds an idle keep-alive connection stays open"
     )

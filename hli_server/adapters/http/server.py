@@ -19,7 +19,7 @@ from hli_server.adapters.host import AdapterHost
 from hli_server.adapters.http.app import create_app
 from hli_server.adapters.http.live import LiveFeed
 from hli_server.adapters.http.options import HttpOptions
-from hli_server.adapters.http.protocol import bounded_protocol
+from hli_server.adapters.http.protocol import abort_stalled, bounded_protocol
 
 __all__ = ["HttpApiAdapter"]
 
@@ -80,7 +80,9 @@ class HttpApiAdapter:
             access_log=False,
             lifespan="off",
             ws="none",
-            http=bounded_protocol(options.max_connections, options.idle_timeout),
+            http=bounded_protocol(
+                options.max_connections, options.idle_timeout, options.request_timeout, options.write_timeout
+            ),
             timeout_keep_alive=options.keep_alive,
             timeout_graceful_shutdown=self.graceful_timeout,
         )
@@ -97,9 +99,12 @@ class HttpApiAdapter:
         server, task = self._server, self._task
         self._server = self._task = None
         if self._live is not None:
-            # end the dashboards' event streams first: an open stream would hold the graceful shutdown
+            # end the dashboards' event streams first: an open stream would hold the graceful shutdown;
+            # a client that does not read what it was sent would hold it too: it is dropped
             await self._live.close()
             self._live = None
+        if server is not None:
+            abort_stalled(server.server_state.connections)
         if server is not None and task is not None:
             server.should_exit = True
             try:

@@ -63,6 +63,7 @@ from hli_server.codecs.ads.commands import (
 )
 from hli_server.codecs.ads.constants import (
     AMS_TCP_PORT,
+    BASE_TYPES,
     REQUEST_FLAGS,
     RESPONSE_FLAGS,
     AdsDataType,
@@ -76,6 +77,7 @@ from hli_server.codecs.ads.constants import (
     SymbolFlag,
     TransmissionMode,
     UploadInfoFlag,
+    ads_type_name,
 )
 from hli_server.codecs.ads.errors import AdsCodecError, AdsError, AmsStreamError
 from hli_server.codecs.ads.frames import (
@@ -135,6 +137,7 @@ __all__ = [
     "AMS_HEADER_SIZE",
     "AMS_TCP_HEADER_SIZE",
     "AMS_TCP_PORT",
+    "BASE_TYPES",
     "FILETIME_UNIX_EPOCH",
     "MAX_ADS_PAYLOAD",
     "MAX_AMS_LENGTH",
@@ -197,6 +200,7 @@ __all__ = [
     "WriteControlResponse",
     "WriteRequest",
     "WriteResponse",
+    "ads_type_name",
     "datetime_to_filetime",
     "decode_data_type_upload",
     "decode_name",

@@ -13,6 +13,7 @@ from typing import Final
 
 __all__ = [
     "AMS_TCP_PORT",
+    "BASE_TYPES",
     "REQUEST_FLAGS",
     "RESPONSE_FLAGS",
     "AdsDataType",
@@ -26,6 +27,7 @@ __all__ = [
     "SymbolFlag",
     "TransmissionMode",
     "UploadInfoFlag",
+    "ads_type_name",
 ]
 
 AMS_TCP_PORT: Final = 48898
@@ -287,3 +289,42 @@ class UploadInfoFlag(IntFlag):
     IS_64_BIT_PLATFORM = 0x1
     INCLUDES_BASE_TYPES = 0x2
     UTF8_ENCODED_STRING_DATA = 0x4
+
+
+BASE_TYPES: Final[dict[str, tuple[AdsDataType, int]]] = {
+    "BOOL": (AdsDataType.BIT, 1),
+    "BYTE": (AdsDataType.UINT8, 1),
+    "USINT": (AdsDataType.UINT8, 1),
+    "SINT": (AdsDataType.INT8, 1),
+    "WORD": (AdsDataType.UINT16, 2),
+    "UINT": (AdsDataType.UINT16, 2),
+    "INT": (AdsDataType.INT16, 2),
+    "DWORD": (AdsDataType.UINT32, 4),
+    "UDINT": (AdsDataType.UINT32, 4),
+    "DINT": (AdsDataType.INT32, 4),
+    "LWORD": (AdsDataType.UINT64, 8),
+    "ULINT": (AdsDataType.UINT64, 8),
+    "LINT": (AdsDataType.INT64, 8),
+    "REAL": (AdsDataType.REAL32, 4),
+    "LREAL": (AdsDataType.REAL64, 8),
+}
+"""IEC 61131-3 elementary types (the names TwinCAT's symbols carry) and their ADS data type ids and sizes."""
+
+_KERNEL_TYPE_NAMES: Final = {
+    "BOOLEAN": "BOOL",
+    "SGN08": "SINT",
+    "UNS08": "USINT",
+    "SGN16": "INT",
+    "UNS16": "UINT",
+    "SGN32": "DINT",
+    "UNS32": "UDINT",
+    "REAL32": "REAL",
+    "REAL64": "LREAL",
+}
+"""The kernel's type names (V.E. variables, P-CHAN lists) and the IEC names a TwinCAT symbol has for them."""
+
+
+def ads_type_name(name: str) -> str:
+    """The IEC name an ADS symbol carries for a type name of the layout (``SGN32`` -> ``DINT``)."""
+    upper = name.upper()
+    return _KERNEL_TYPE_NAMES.get(upper, upper)

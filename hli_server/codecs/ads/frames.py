@@ -280,6 +280,37 @@ class AmsStreamDecoder:
                 return
             yield frame
 
+    def single_frame(self, data: bytes) -> AmsPacket | None:
+        """A shortcut for the common case of a client with one request in flight: when nothing is
+        buffered and ``data`` (one read of the socket) is exactly one well-formed AMS frame, its packet,
+        taken without copying ``data`` into the buffer. None otherwise: then ``receive_data(data)`` and
+        ``next_frame()`` as always (they find every problem this shortcut leaves to them)."""
+        if self._pos != len(self._buffer) or len(data) < 38 or self.broken is not None:
+            return None
+        reserved, length, tn, tp, sn, sp, cmd, flags, data_length, error, invoke = _FRAME_HEAD.unpack_from(
+            data
+        )
+        if (
+            reserved != 0
+            or length + AMS_TCP_HEADER_SIZE != len(data)
+            or length > self._max_ams_length
+            or data_length != length - AMS_HEADER_SIZE
+        ):
+            return None
+        nets = _NET_IDS
+        header = AmsHeader(
+            nets.get(tn) or _net_id(tn),
+            tp,
+            nets.get(sn) or _net_id(sn),
+            sp,
+            cmd,
+            flags,
+            data_length,
+            error,
+            invoke,
+        )
+        return AmsPacket(header, data[38:])
+
     def next_frame(self) -> Frame | Literal[NeedData.NEED_DATA]:
         """The next complete frame, or :data:`NEED_DATA`; raises :class:`AmsStreamError` (see module doc)."""
         if self.broken is not None:
@@ -318,7 +349,18 @@ class AmsStreamDecoder:
                     f"AMS header at stream byte {pos} announces {data_length} data bytes, its AMS/TCP "
                     f"length {length} leaves {length - AMS_HEADER_SIZE}: the frame cannot be delimited"
                 )
-            header = AmsHeader(_net_id(tn), tp, _net_id(sn), sp, cmd, flags, data_length, error, invoke)
+            nets = _NET_IDS
+            header = AmsHeader(
+                nets.get(tn) or _net_id(tn),
+                tp,
+                nets.get(sn) or _net_id(sn),
+                sp,
+                cmd,
+                flags,
+                data_length,
+                error,
+                invoke,
+            )
             frame = AmsPacket(header, bytes(buf[pos + 38 : stop]))
         else:
             frame = AmsTcpFrame(reserved, bytes(buf[pos + AMS_TCP_HEADER_SIZE : stop]))
@@ -326,8 +368,12 @@ class AmsStreamDecoder:
         return frame
 
     def _need_data(self) -> Literal[NeedData.NEED_DATA]:
-        if self._pos:
-            del self._buffer[: self._pos]
+        pos = self._pos
+        if pos:
+            if pos == len(self._buffer):
+                self._buffer.clear()
+            else:
+                del self._buffer[:pos]
             self._pos = 0
         return NEED_DATA
 

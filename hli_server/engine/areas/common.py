@@ -26,8 +26,14 @@ if TYPE_CHECKING:
 
 __all__ = [
     "ALARM_ACTIVE_CLEAR",
+    "ALARM_ACTIVE_OVERWRITE",
+    "ALARM_CIRC_FIRST_NOT_LINEAR",
     "ALARM_COMMAND",
     "ALARM_DEFINITION",
+    "ALARM_END_WITHOUT_BEGIN",
+    "ALARM_G_IN_DEFINITION",
+    "ALARM_ID_RANGE",
+    "ALARM_ID_ZERO",
     "ALARM_MANUAL_IN_PROTECTION",
     "ALARM_MANUAL_OUTSIDE_WORK",
     "ALARM_MANUAL_STOP",
@@ -38,6 +44,11 @@ __all__ = [
     "ALARM_PATH_LEAVES_WORK",
     "ALARM_POINT_IN_PROTECTION",
     "ALARM_POINT_OUTSIDE_WORK",
+    "ALARM_POLY_INTERSECTS",
+    "ALARM_POLY_NOT_LINEAR",
+    "ALARM_POLY_TOO_MANY",
+    "ALARM_TOO_MANY_AXES",
+    "AREA_ID_MAX",
     "CLOSE_TOLERANCE",
     "COORDINATE_LIMIT",
     "MAX_CONTOUR_BLOCKS",
@@ -80,6 +91,29 @@ boundary tolerance (:data:`~hli_server.engine.areas.geometry.EPS`, 1e-9 mm) woul
 floats' resolution; refused as 912002 (issue 12 finding 1)."""
 ALARM_COMMAND = 912003
 ALARM_MANUAL_STOP = 912004
+# the kernel's IDs of #CONTROL AREA errors (its diagnosis pages; docs/alarms.md)
+ALARM_ID_RANGE = 21286
+"""Control area ID is out of data format (BEGIN)."""
+ALARM_END_WITHOUT_BEGIN = 21288
+"""Warning: ``#CONTROL AREA END`` without a definition, the command has no effect."""
+ALARM_ID_ZERO = 21292
+"""Invalid control area ID: the ID in BEGIN is zero."""
+ALARM_G_IN_DEFINITION = 21793
+"""G function during control area definition not allowed."""
+ALARM_TOO_MANY_AXES = 21797
+"""Too many axes in the control area definition, at most two."""
+ALARM_ACTIVE_OVERWRITE = 50774
+"""Area not saved: an active area cannot be overwritten."""
+ALARM_POLY_NOT_LINEAR = 50785
+"""Only linear motion blocks G00/G01 can define a polygonal control area."""
+ALARM_POLY_TOO_MANY = 50786
+"""Maximum number of points of a polygonal area exceeded."""
+ALARM_POLY_INTERSECTS = 120477
+"""Definition of the polygon is invalid: overlapping (its lines intersect)."""
+ALARM_CIRC_FIRST_NOT_LINEAR = 120479
+"""The first block of a circular area definition must be linear."""
+AREA_ID_MAX = 999_999_999
+"""Largest area ID (21286's page gives no figure: the NC parser's bound; docs/alarms.md)."""
 ALARM_NO_PROBE = 912010
 ALARM_NOT_SUPPORTED = 910110
 
@@ -188,7 +222,7 @@ class ChannelAreaTables:
         m.emit(
             AreasChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * m.t_a,
+                time_s=m.time,
                 channel=self.channel.number,
                 areas=tuple(self.effective.to_json()),
             )

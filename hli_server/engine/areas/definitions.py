@@ -13,11 +13,22 @@ from typing import TYPE_CHECKING
 
 from hli_server.engine.areas.common import (
     ALARM_ACTIVE_CLEAR,
+    ALARM_ACTIVE_OVERWRITE,
+    ALARM_CIRC_FIRST_NOT_LINEAR,
     ALARM_COMMAND,
     ALARM_DEFINITION,
+    ALARM_END_WITHOUT_BEGIN,
+    ALARM_G_IN_DEFINITION,
+    ALARM_ID_RANGE,
+    ALARM_ID_ZERO,
     ALARM_NOT_SUPPORTED,
     ALARM_POINT_IN_PROTECTION,
     ALARM_POINT_OUTSIDE_WORK,
+    ALARM_POLY_INTERSECTS,
+    ALARM_POLY_NOT_LINEAR,
+    ALARM_POLY_TOO_MANY,
+    ALARM_TOO_MANY_AXES,
+    AREA_ID_MAX,
     CLOSE_TOLERANCE,
     MAX_CONTOUR_BLOCKS,
     PLANE_AXES,
@@ -84,6 +95,18 @@ class AreaDefinitions(AreaRole):
     def _begin(self, cmd: AreaBegin, block: Block, modal: ModalState) -> DecodeError | None:
         self.pending = None
         head = f"#CONTROL AREA BEGIN [ID={cmd.area_id}]"
+        if cmd.area_id == 0:
+            return DecodeError(
+                ALARM_ID_ZERO,
+                f"{head}: invalid control area ID 0; an area ID is a whole number 1..{AREA_ID_MAX}",
+                {"id": 0},
+            )
+        if not 1 <= cmd.area_id <= AREA_ID_MAX:
+            return DecodeError(
+                ALARM_ID_RANGE,
+                f"{head}: the control area ID is out of range 1..{AREA_ID_MAX}",
+                {"id": cmd.area_id, "lower": 1, "upper": AREA_ID_MAX},
+            )
         if cmd.monitor_lvl.upper() != "MCS":
             return DecodeError(
                 ALARM_NOT_SUPPORTED,
@@ -117,9 +140,10 @@ class AreaDefinitions(AreaRole):
         state = self.planned.state(cmd.area_id)
         if state is not None and isinstance(self.planned.next_state(cmd.area_id, AreaEvent.DEFINE), Refusal):
             return DecodeError(
-                ALARM_DEFINITION,
-                f"{head}: area {cmd.area_id} is active and cannot be redefined; deactivate it first "
-                f"(#CONTROL AREA OFF [ID={cmd.area_id}])",
+                ALARM_ACTIVE_OVERWRITE,
+                f"{head}: area {cmd.area_id} is active and cannot be overwritten, the area is not saved; "
+                f"deactivate it first (#CONTROL AREA OFF [ID={cmd.area_id}])",
+                {"id": cmd.area_id},
             )
         if state is None and self.planned.full:
             return DecodeError(
@@ -142,6 +166,13 @@ class AreaDefinitions(AreaRole):
                 f"{area}: no feed (F word) active in the contour block; program F before the contour "
                 "(C14-03)",
             )
+        if 91 in block.g_codes:
+            return DecodeError(
+                ALARM_G_IN_DEFINITION,
+                f"{area}: G91 is not allowed in a control area definition ({block.label}): contour "
+                "positions are absolute (G90)",
+                {"id": p.begin.area_id, "g": 91},
+            )
         if not modal.absolute:
             return DecodeError(
                 ALARM_DEFINITION,
@@ -149,25 +180,28 @@ class AreaDefinitions(AreaRole):
             )
         if len(p.contour) >= MAX_CONTOUR_BLOCKS:
             return DecodeError(
-                ALARM_DEFINITION,
+                ALARM_POLY_TOO_MANY if p.begin.shape == AreaShape.POLY else ALARM_DEFINITION,
                 f"{area}: more than {MAX_CONTOUR_BLOCKS} motion blocks in the definition "
                 f"({block.label} is block {len(p.contour) + 1})",
+                {"id": p.begin.area_id, "limit": MAX_CONTOUR_BLOCKS, "count": len(p.contour) + 1},
             )
         k = len(p.contour)
         is_arc = isinstance(segment, ArcSegment)
         gname = f"G0{modal.motion}"
         if p.begin.shape == AreaShape.POLY:
-            if is_arc or modal.motion != 1:
+            if is_arc or modal.motion not in (0, 1):
                 return DecodeError(
-                    ALARM_DEFINITION,
-                    f"{area}: a POLY contour is made of G01 blocks, {block.label} is {gname}",
+                    ALARM_POLY_NOT_LINEAR,
+                    f"{area}: a POLY contour is made of linear blocks (G00/G01), {block.label} is {gname}",
+                    {"id": p.begin.area_id, "motion": modal.motion},
                 )
         elif k == 0:
-            if is_arc or modal.motion != 1:
+            if is_arc or modal.motion not in (0, 1):
                 return DecodeError(
-                    ALARM_DEFINITION,
-                    f"{area}: a CIRC area starts with a G01 block to the start point of the circle, "
-                    f"{block.label} is {gname}",
+                    ALARM_CIRC_FIRST_NOT_LINEAR,
+                    f"{area}: a CIRC area starts with a linear block (G01) to the start point of the "
+                    f"circle, {block.label} is {gname}",
+                    {"id": p.begin.area_id, "motion": modal.motion},
                 )
         elif k == 1:
             if not is_arc:
@@ -190,7 +224,18 @@ class AreaDefinitions(AreaRole):
         p = self.pending
         self.pending = None
         if p is None:
-            return DecodeError(ALARM_DEFINITION, "#CONTROL AREA END without a definition in progress")
+            # ID 21288: "no definition of a control area belongs to it, the command has no effect"
+            def ignored() -> None:
+                self.machine.raise_alarm(
+                    ALARM_END_WITHOUT_BEGIN,
+                    self.channel,
+                    f"#CONTROL AREA END ({block.label}) without #CONTROL AREA BEGIN: the command has no "
+                    "effect; a definition begins with #CONTROL AREA BEGIN [...] and ends with END",
+                    line=block.line,
+                    block=block.label,
+                )
+
+            return ignored
         result = self._build(p, block, modal)
         if isinstance(result, DecodeError):
             return result
@@ -214,6 +259,13 @@ class AreaDefinitions(AreaRole):
             for name, _ in c.block.axes:
                 if name not in used:
                     used.append(name)
+        if len(used) > 2:
+            return DecodeError(
+                ALARM_TOO_MANY_AXES,
+                f"{area}: the contour names {len(used)} axes ({', '.join(used)}); a control area is "
+                "defined with at most two (its base plane), the height is set by MIN_EXCUR/MAX_EXCUR",
+                {"id": p.begin.area_id, "axes": list(used), "limit": 2},
+            )
         if all(n in main for n in used):
             wrong = [n for n in used if n not in base]
             if wrong:
@@ -383,9 +435,10 @@ class AreaDefinitions(AreaRole):
                 return f"{labels[e]}->{labels[(e + 1) % n]} {fpair(corners[e])}-{fpair(corners[(e + 1) % n])}"
 
             return DecodeError(
-                ALARM_DEFINITION,
+                ALARM_POLY_INTERSECTS,
                 f"{area}: the polygon intersects itself: edge {edge(k)} meets edge {edge(m)} "
                 f"at {fpair(meet)}",
+                {"id": begin.area_id, "intersection": list(meet)},
             )
         twice_area = sum(
             corners[k][0] * corners[(k + 1) % len(corners)][1]

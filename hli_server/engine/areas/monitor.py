@@ -197,7 +197,7 @@ class AreaMonitor(Monitor):
         m.emit(
             AreaViolation(
                 cycle=m.cycle,
-                time_s=m.cycle * m.t_a,
+                time_s=m.time,
                 channel=alarm.channel,
                 alarm=alarm.number,
                 area=p.get("area"),

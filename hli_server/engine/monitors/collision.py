@@ -43,6 +43,8 @@ P-AXIS-00044 ``coll_decelerate_chan`` (C3-05): when the axes of a pair are in di
 and one reports a drive error, the other channel is stopped too (911030 there).
 
 The CNC objects of FCT-C3 4.3 (C3-10) are kept in ``machine.hli.axes[i].dyn_coll_mon`` every cycle;
+``coll_offset`` (0x..0246, "Distanz zwischen Kollisionsachsen") is the minimum distance in effect, the
+pair's P-AXIS-00045, not the current distance (the decision and its reasons: docs/monitors.md);
 the layout table (``schemas/layout.py``, ``dyn_coll_mon.*``) is the one list of them with their ADS
 addresses (port 551, index group 0x120300, offset ``(A_ID << 16) | element``), and the ADS adapter
 serves them from the process image like every other signal.
@@ -263,7 +265,7 @@ class CollisionMonitor(Monitor):
         machine.emit(
             CollisionStop(
                 cycle=machine.cycle,
-                time_s=machine.cycle * t,
+                time_s=machine.time,
                 channel=machine.channels[pair.master.channel].number,
                 master=pair.master.name,
                 partner=pair.partner.name,

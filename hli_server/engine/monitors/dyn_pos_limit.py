@@ -31,7 +31,8 @@ Each cycle, before the path is interpolated (FCT-C43 section 2, "Einschränkunge
 
 A limit change is adopted only every P-CHAN-00874 ``dpl_input_cycles`` cycles and only when it
 differs from the adopted value by at least P-CHAN-00751 ``dpl_tol_limit_change`` (0.1 µm; 0: any
-change). The defaults (1, 0) adopt every change at once.
+change). The kernel's defaults (0, 0; its pages) adopt every change at once: 0 and 1 cycles both
+mean every cycle.
 
 Documented limitations, reproduced (C43-08, C43-09; see docs/monitors.md):
 
@@ -213,7 +214,7 @@ class DynPosLimits(Monitor):
         ]
         # P-CHAN-00874 / P-CHAN-00751 per channel, read once (the cycle reads no pydantic model)
         self._adoption = {
-            ch.index: (ch.config.dpl_input_cycles, max(1, ch.config.dpl_tol_limit_change))
+            ch.index: (max(1, ch.config.dpl_input_cycles), max(1, ch.config.dpl_tol_limit_change))
             for ch in machine.channels
         }
 
@@ -343,7 +344,7 @@ class DynPosLimits(Monitor):
         m.emit(
             DynPosLimitChanged(
                 cycle=m.cycle,
-                time_s=m.cycle * m.t_a,
+                time_s=m.time,
                 channel=lim.channel.number,
                 axis=lim.axis.name,
                 side="high" if lim.side > 0 else "low",

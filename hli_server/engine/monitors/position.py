@@ -147,7 +147,7 @@ class PositionMonitor(Monitor):
         machine.emit(
             PositionError(
                 cycle=machine.cycle,
-                time_s=machine.cycle * t,
+                time_s=machine.time,
                 channel=ch.number,
                 axis=axis.name,
                 deviation=increments_from_mm(error),

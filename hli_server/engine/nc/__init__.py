@@ -1,4 +1,5 @@
-"""NC programs: parser (syntax) and blocks (E-04)."""
+"""NC programs: the language's front end (source, syntax, expressions, interpreter; N-01..N-08), the
+word parser of constant blocks and the blocks the decoder takes (E-04)."""
 
 from hli_server.engine.nc.blocks import (
     AreaBegin,
@@ -12,10 +13,14 @@ from hli_server.engine.nc.blocks import (
     Block,
     NcError,
 )
+from hli_server.engine.nc.interpreter import STATEMENTS_PER_CYCLE, Interpreter, IterationCapError
 from hli_server.engine.nc.parser import KNOWN_G_CODES, iter_blocks, parse_line, parse_program
+from hli_server.engine.nc.source import ProgramText
+from hli_server.engine.nc.syntax import Compiler
 
 __all__ = [
     "KNOWN_G_CODES",
+    "STATEMENTS_PER_CYCLE",
     "AreaBegin",
     "AreaClear",
     "AreaCommand",
@@ -25,7 +30,11 @@ __all__ = [
     "AreaOn",
     "AreaShape",
     "Block",
+    "Compiler",
+    "Interpreter",
+    "IterationCapError",
     "NcError",
+    "ProgramText",
     "iter_blocks",
     "parse_line",
     "parse_program",

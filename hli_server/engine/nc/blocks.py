@@ -102,6 +102,8 @@ class Block:
     area: AreaCommand | None = None
     two_path: tuple[Block, ...] = ()
     extra: dict[str, float] = field(default_factory=dict)
+    program: str = ""
+    """The subroutine or cycle the block belongs to (``sub.nc``); empty in the main program."""
 
     @property
     def label(self) -> str:
@@ -123,14 +125,30 @@ class Block:
 
 
 class NcError(Exception):
-    """A numbered program error with its place: ``line 14, N130: polygon not closed ...``."""
+    """A numbered program error with its place: ``line 14, N130: polygon not closed ...``.
 
-    def __init__(self, alarm: int, line: int, block: str, message: str) -> None:
+    ``program`` names the subroutine or cycle the line belongs to (empty in the main program);
+    ``params`` are the alarm's parameters where the kernel's diagnosis page lists some."""
+
+    def __init__(
+        self,
+        alarm: int,
+        line: int,
+        block: str,
+        message: str,
+        params: dict[str, object] | None = None,
+        program: str = "",
+    ) -> None:
         super().__init__(alarm, line, block, message)
         self.alarm = alarm
         self.line = line
         self.block = block
         self.message = message
+        self.params: dict[str, object] = params or {}
+        self.program = program
 
     def __str__(self) -> str:
-        return f"{place(self.line, self.block)}: {self.message} [{self.alarm}]"
+        where = place(self.line, self.block)
+        if self.program:
+            where = f"{self.program}, {where}"
+        return f"{where}: {self.message} [{self.alarm}]"

@@ -279,6 +279,7 @@ _BLOCK_FIELDS = (
     "area",
     "two_path",
     "extra",
+    "program",
 )
 
 
@@ -308,10 +309,10 @@ def _block_maker() -> Callable[
     slotted = all(isinstance(getattr(Block, n, None), types.MemberDescriptorType) for n in _BLOCK_FIELDS)
     if not (fields_match and slotted) or hasattr(Block, "__post_init__"):
         return lambda line, number, text, g, m, axes, centre, feed, extra: Block(  # pragma: no cover
-            line, number, text, g, m, axes, centre, feed, None, (), extra
+            line, number, text, g, m, axes, centre, feed, None, (), extra, ""
         )
     new = object.__new__
-    s_line, s_number, s_text, s_g, s_m, s_axes, s_centre, s_feed, s_area, s_two, s_extra = (
+    s_line, s_number, s_text, s_g, s_m, s_axes, s_centre, s_feed, s_area, s_two, s_extra, s_program = (
         getattr(Block, name).__set__ for name in _BLOCK_FIELDS
     )
 
@@ -338,6 +339,7 @@ def _block_maker() -> Callable[
         s_area(block, None)
         s_two(block, ())
         s_extra(block, extra)
+        s_program(block, "")
         return block
 
     return make

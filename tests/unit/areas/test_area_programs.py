@@ -298,9 +298,12 @@ def test_overwrite_only_while_not_active() -> None:
     assert entry["state"] == "defined"
     ch = run(m, "#CONTROL AREA ON [ID1]\nN50 " + square(1, -9, -9, 9, 9) + "M30\n")
     assert ch.state == ProgramState.ABORTED
-    alarm = only_alarm(m, 912002)
+    # ID 50774 "Area not saved / active area cannot be overwritten", the kernel's page's own example
+    # (https://infosys.beckhoff.com/content/1033/tf5200_diagnosis/258831755.html)
+    alarm = only_alarm(m, 50774)
     assert alarm.block == "N50"
-    assert "area 1 is active and cannot be redefined" in alarm.message
+    assert "area 1 is active and cannot be overwritten, the area is not saved" in alarm.message
+    assert alarm.params == {"id": 1}
     assert areas(m).to_json()["areas"][0]["points"][0] == [-5.0, -5.0]
 
 

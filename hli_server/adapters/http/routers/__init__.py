@@ -1,6 +1,6 @@
 """The control API's routers, one per concern; ``app.py`` includes them all."""
 
-from hli_server.adapters.http.routers import axes, channels, clock, events, image, live, page, state
+from hli_server.adapters.http.routers import axes, channels, clock, events, image, live, page, record, state
 
 ROUTERS = (
     page.router,
@@ -11,6 +11,7 @@ ROUTERS = (
     events.router,
     image.router,
     live.router,
+    record.router,
 )
 
 __all__ = ["ROUTERS"]

@@ -1,4 +1,4 @@
-"""``/api/axes/{name}/...``: fault injection (A3-05) and referencing."""
+"""``/api/axes/{name}/...``: fault injection (A3-05), referencing, software limits (E-06)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from typing import Any
 from fastapi import APIRouter
 
 from hli_server.adapters.http.deps import HostDep, accepted
-from hli_server.adapters.http.models import AcceptedBody, FaultsBody
+from hli_server.adapters.http.models import AcceptedBody, AxisRecordBody, FaultsBody, SoftLimitsBody
 
 __all__ = ["router"]
 
@@ -36,3 +36,26 @@ async def delete_faults(host: HostDep, name: str) -> dict[str, Any]:
 )
 async def post_reference(host: HostDep, name: str) -> AcceptedBody:
     return accepted(host.operator.reference(name))
+
+
+@router.get(
+    "/api/axes/{name}/soft-limits", summary="Software limits in effect and in the axis record [0.1 µm]"
+)
+async def get_soft_limits(host: HostDep, name: str) -> dict[str, Any]:
+    return host.operator.soft_limits(name)
+
+
+@router.put(
+    "/api/axes/{name}/soft-limits",
+    summary="Set the software limits in effect until the next reset or mode change (as G98/G99)",
+)
+async def put_soft_limits(host: HostDep, name: str, body: SoftLimitsBody) -> dict[str, Any]:
+    return host.operator.set_soft_limits(name, **body.model_dump(exclude_none=True))
+
+
+@router.put(
+    "/api/axes/{name}/record",
+    summary="Change the axis record's software limits: taken over at the next reset or mode change",
+)
+async def put_record(host: HostDep, name: str, body: AxisRecordBody) -> dict[str, Any]:
+    return host.operator.update_axis_record(name, **body.model_dump(exclude_none=True))

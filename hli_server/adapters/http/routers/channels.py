@@ -38,7 +38,7 @@ _PROGRAM_BODY_DOC = {
 
 @router.post(
     "/api/channels/{number}/program",
-    summary="Load an NC program (text/plain body, or JSON {text, name})",
+    summary="Load an NC program (text/plain body, or JSON {text, name, files} with its subprograms)",
     openapi_extra=_PROGRAM_BODY_DOC,
     responses={409: {"description": "a program is running"}, 422: {"description": "no text"}},
 )
@@ -55,8 +55,9 @@ async def post_program(
             body = ProgramBody.model_validate_json(raw)
         except ValidationError as exc:
             raise RequestValidationError(exc.errors(include_url=False)) from None
-        text, prog_name = body.text, body.name
+        text, prog_name, files = body.text, body.name, body.files
     else:
+        files = {}
         try:
             text = raw.decode("utf-8")
         except UnicodeDecodeError as exc:
@@ -64,7 +65,7 @@ async def post_program(
         prog_name = name
         if not text.strip():
             raise HTTPException(422, "empty program: send the NC text as the body (text/plain)")
-    return host.operator.load_program(number, text, prog_name)
+    return host.operator.load_program(number, text, prog_name, files)
 
 
 @router.post("/api/channels/{number}/select", summary="Select a program of the table")

@@ -1,12 +1,24 @@
-"""``/api/step``: the stepped clock."""
+"""``/api/step``: the stepped clock.
+
+One step at a time per server: a second ``POST /api/step`` while one runs is refused (409) rather than
+queued behind it, and a step whose client goes away (closes its connection) is cancelled between two
+slices of cycles (issue 27, finding 6). A traced step's answer is written a slice at a time from the
+trace's arrays (``Trace.json_chunks``), so that a long trace is never all of it Python objects or one
+string (finding 9).
+"""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
+import time
+from collections.abc import AsyncIterator
 from typing import Any
 
-from fastapi import APIRouter, HTTPException
+from fastapi import APIRouter, HTTPException, Request
+from fastapi.responses import Response, StreamingResponse
 
-from hli_server.adapters.http.deps import HostDep
+from hli_server.adapters.http.deps import HostDep, json_bytes
 from hli_server.adapters.http.models import StepBody
 from hli_server.adapters.http.routers.image import normalize_st_path
 from schemas.layout import UnknownSignalError
@@ -16,30 +28,69 @@ __all__ = ["router"]
 router = APIRouter(tags=["clock"])
 
 
+async def _client_gone(request: Request) -> None:
+    """Returns when the client closes its connection (the body was read already)."""
+    while True:
+        message = await request.receive()
+        if message["type"] == "http.disconnect":
+            return
+
+
 @router.post(
     "/api/step",
     summary="Run N cycles (stepped clock only), optionally with a per-cycle trace of chosen signals",
     responses={
         404: {"description": "a traced ST path is not in the layout"},
-        409: {"description": "the runtime does not run the stepped clock"},
+        409: {"description": "the runtime does not run the stepped clock, or another step runs"},
     },
 )
-async def post_step(host: HostDep, body: StepBody | None = None) -> dict[str, Any]:
+async def post_step(host: HostDep, request: Request, body: StepBody | None = None) -> Response:
     """Runs the cycles now. With ``trace``, the answer carries every traced signal in every one of
     these cycles (H-07): ``{"trace": {"signals": [...], "cycles": [c1, ..., cN], "values": {path:
     [v1, ..., vN]}}}``, so that a scenario is cycle-exact in one request instead of a state request
-    and image reads per cycle."""
+    and image reads per cycle. One step runs at a time (409 while another runs); closing the connection
+    cancels the step."""
     cycles = body.cycles if body is not None else 1
-    if body is None or not body.trace:
-        cycle = await host.step(cycles)
-        return {"cycles": cycles, "cycle": cycle, "time_s": host.operator.time_s}
+    traced = [normalize_st_path(p) for p in body.trace] if body is not None and body.trace else None
+    state = request.app.state
+    running = getattr(state, "step_running", None)
+    if running is not None:
+        raise HTTPException(
+            409,
+            f"a step of {running[0]} cycles runs (for {time.monotonic() - running[1]:.1f} s): one step at a "
+            "time; wait for its answer, or close its connection to cancel it",
+        )
+    state.step_running = (cycles, time.monotonic())
     try:
-        trace = await host.step_traced(cycles, [normalize_st_path(p) for p in body.trace])
-    except UnknownSignalError as exc:
-        raise HTTPException(404, str(exc)) from None
-    return {
-        "cycles": cycles,
-        "cycle": host.operator.cycle,
-        "time_s": host.operator.time_s,
-        "trace": trace.to_json(),
-    }
+        work: asyncio.Future[Any] = asyncio.ensure_future(
+            host.step(cycles) if traced is None else host.step_traced(cycles, traced)
+        )
+        gone = asyncio.ensure_future(_client_gone(request))
+        try:
+            await asyncio.wait({work, gone}, return_when=asyncio.FIRST_COMPLETED)
+        finally:
+            gone.cancel()
+            if not work.done():  # the client went away (or this request was cancelled): stop stepping
+                work.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await work
+        if work.cancelled():
+            return Response(status_code=499)  # nobody reads it: the client is gone
+        try:
+            result = work.result()
+        except UnknownSignalError as exc:
+            raise HTTPException(404, str(exc)) from None
+    finally:
+        state.step_running = None
+    head = {"cycles": cycles, "cycle": host.operator.cycle, "time_s": host.operator.time_s}
+    if traced is None:
+        return Response(json_bytes({**head, "cycle": result}), media_type="application/json")
+    trace = result
+
+    async def chunks() -> AsyncIterator[bytes]:
+        yield json_bytes(head)[:-1] + b',"trace":'
+        for chunk in trace.json_chunks():
+            yield chunk
+        yield b"}"
+
+    return StreamingResponse(chunks(), media_type="application/json")

@@ -60,12 +60,15 @@ async def put_image(host: HostDep, st_path: str, body: ImageWriteBody) -> dict[s
 
 def normalize_st_path(path: str) -> str:
     """Accept ``gpAx[0].ipo_state.act_pos_r`` for ``gpAx[0]^ipo_state.act_pos_r`` (``^`` is awkward
-    in URLs: it must be sent as ``%5E``)."""
+    in URLs: it must be sent as ``%5E``), and so ``gpVECh[0].MODE`` and ``gpVEGlob.MODE`` for the V.E.
+    variables (N-05)."""
     path = path.strip("/")
-    if "^" not in path and path.startswith(("gpCh[", "gpAx[")):
+    if "^" not in path and path.startswith(("gpCh[", "gpAx[", "gpVECh[")):
         head, dot, rest = path.partition("].")
         if dot:
             return f"{head}]^{rest}"
+    if "^" not in path and path.startswith("gpVEGlob."):
+        return "gpVEGlob^" + path.removeprefix("gpVEGlob.")
     return path
 
 

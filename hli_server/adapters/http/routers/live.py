@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 from collections.abc import AsyncIterator
 from typing import Any
 
@@ -32,21 +33,27 @@ def _feed(request: Request) -> LiveFeed:
 )
 async def get_live(request: Request) -> StreamingResponse:
     feed = _feed(request)
+    # with --api-token the events (the event log, live) go to holders of the token only (guard.py)
+    events = bool(getattr(request.state, "hli_token", True))
     try:
-        stream = feed.open()
+        stream = feed.open(events=events)
     except TooManyStreamsError as exc:
         raise HTTPException(503, str(exc)) from None
     except RuntimeError as exc:
         raise HTTPException(503, str(exc)) from None
-    hello = feed.hello()
+    hello = feed.hello(events=events)
+    loop = asyncio.get_running_loop()
 
     async def chunks() -> AsyncIterator[bytes]:
         try:
+            stream.sending_since = loop.time()
             yield hello
             while True:
+                stream.sending_since = None  # the page took the last message
                 chunk = await stream.next_chunk()
                 if chunk is None:
                     return
+                stream.sending_since = loop.time()
                 yield chunk
         finally:
             feed.release(stream)

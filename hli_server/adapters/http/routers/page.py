@@ -5,15 +5,27 @@ script: no build step, nothing fetched from elsewhere), read once and served fro
 that keep the page to itself: a Content-Security-Policy that allows only this server's own scripts,
 styles and connections and forbids framing (another site cannot put the operator panel in a frame and
 trick clicks onto it), ``nosniff``, and ``no-cache`` so that a new version is picked up at once.
+
+The page is served with the machine as it is at that moment (issue 23): the ``hello``, ``state`` and
+``scene`` messages of the live stream and the newest events of the event log, as JSON in a data block
+(``<script type="application/json" id="initial">``, which runs nothing and so passes the policy). The
+script draws them before the page's load event, so the page is whole at once (a screenshot, a slow
+stream) and shows what happened before it was opened; the stream then carries it on.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import cache
 from importlib import resources
+from typing import Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
 from fastapi.responses import Response
+
+from hli_server.adapters.host import LoggedEvent
+from hli_server.adapters.http.deps import json_bytes
+from hli_server.adapters.http.live import LiveFeed
 
 __all__ = ["PAGE_FILES", "router"]
 
@@ -46,9 +58,43 @@ def _file(name: str) -> Response:
     return Response(_read(name), media_type=PAGE_FILES[name], headers=_HEADERS)
 
 
+EVENTS_SHOWN = 200
+"""The newest events the page is served with (its list keeps as many)."""
+
+_INITIAL_MARK = b"<!-- initial state -->"
+
+
+def _initial(feed: LiveFeed, events_allowed: bool = True) -> dict[str, Any]:
+    """``events_allowed``: whether the request may read the event log (with a token set: only a holder of
+    it, issue 27 finding 8; the page then asks for the token and its stream brings the events)."""
+    host = feed.host
+    scenes = []
+    for number in host.operator.channel_numbers():
+        try:
+            scenes.append(host.operator.scene(number))
+        except Exception:  # the stream says so (once); the page goes without this picture
+            continue
+    events: Sequence[LoggedEvent] = []
+    if events_allowed:
+        _, latest = host.events.since(0, 1)
+        events, _ = host.events.since(max(0, latest - EVENTS_SHOWN), EVENTS_SHOWN)
+    return {
+        "hello": feed.hello_body(events=events_allowed),
+        "state": feed.state(),
+        "scenes": scenes,
+        "events": [event.to_json() for event in events],
+    }
+
+
 @router.get("/", include_in_schema=False)
-async def index() -> Response:
-    return _file("index.html")
+async def index(request: Request) -> Response:
+    feed: LiveFeed = request.app.state.live
+    # JSON inside HTML: "<" escaped, so that no text of an event can end the data block
+    events_allowed = bool(getattr(request.state, "hli_token", True))
+    data = json_bytes(_initial(feed, events_allowed)).replace(b"<", b"\\u003c")
+    block = b'<script type="application/json" id="initial">' + data + b"</script>"
+    page = _read("index.html").replace(_INITIAL_MARK, block, 1)
+    return Response(page, media_type=PAGE_FILES["index.html"], headers=_HEADERS)
 
 
 @router.get("/dashboard.js", include_in_schema=False)

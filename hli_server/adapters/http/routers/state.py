@@ -1,11 +1,12 @@
-"""What the machine shows: ``/api/state``, ``/api/timing``, ``/api/alarms``, areas (the page ``/`` is
-``page.py``)."""
+"""What the machine shows: ``/api/state``, ``/api/timing``, ``/api/ready``, ``/api/alarms``, areas (the
+page ``/`` is ``page.py``)."""
 
 from __future__ import annotations
 
 from typing import Any
 
 from fastapi import APIRouter
+from fastapi.responses import JSONResponse
 
 from hli_server.adapters.http.deps import HostDep
 
@@ -26,6 +27,20 @@ async def get_state(host: HostDep) -> dict[str, Any]:
 @router.get("/api/timing", summary="Pacing statistics of the clock (lateness in µs)")
 async def get_timing(host: HostDep) -> dict[str, Any]:
     return host.operator.timing()
+
+
+@router.get(
+    "/api/ready",
+    summary="Readiness: 200 when the clock runs and every door asked for listens, else 503",
+    responses={503: {"description": "starting (a door does not listen yet) or stopping"}},
+)
+async def get_ready(host: HostDep) -> JSONResponse:
+    """The health checks of the image and the compose bench ask this, and an orchestrator's readiness
+    probe should: the HTTP API answers a moment before the Modbus and ADS doors (their own process)
+    listen, and goes on answering while the server stops. ``{"ready": true, "state": "running",
+    "doors": {"http": true, "modbus": true, ...}, "waiting_for": []}``."""
+    readiness = host.readiness()
+    return JSONResponse(readiness.to_json(), status_code=200 if readiness.ready else 503)
 
 
 @router.get("/api/alarms", summary="Active alarms and the newest of the history")

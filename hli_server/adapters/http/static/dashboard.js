@@ -1,13 +1,17 @@
 // The hli-server dashboard (docs/dashboard.md): one script, no build step, no library.
 //
-// It listens to the server's event stream /api/live (hello once, state at 20 Hz, every typed event,
-// a channel's scene when it changed) and acts through the control API (docs/api.md). The pictures are
+// It draws the machine as it was when the page was served (the data block #initial: hello, state,
+// scenes and the newest events, put in by the server) before the page's load event, then listens to the
+// server's event stream /api/live (hello once, state at 20 Hz, every typed event, a channel's scene
+// when it changed) and acts through the control API (docs/api.md). The pictures are
 // the scenes the server computes with hli_server/scene.py, the same function `check --plot` draws:
 // this script only draws them (SVG). Between two scenes it moves the TCP and draws its newest trail
 // from the 20 Hz states.
 //
 // With --api-token the server refuses state changes without `Authorization: Bearer <token>`: the page
-// asks for the token once (kept in this tab's sessionStorage) and sends it with every POST.
+// asks for the token once (kept in this tab's sessionStorage) and sends it with every POST. The events
+// (the event log, live) come on the stream only with the token: an EventSource sends no headers, so the
+// page puts it on the stream's URL (`?access_token=`, RFC 6750) and reconnects once it has it.
 "use strict";
 
 const SVG = "http://www.w3.org/2000/svg";
@@ -29,10 +33,14 @@ const state = {
   channels: new Map(), // number -> {el, scene, tail, ...}
   axisRows: new Map(),
   token: sessionStorage.getItem("hli-token") || "",
+  source: null,
   pending: null,
   lastAlarms: "",
   lastPairs: "",
+  lastExternal: "",
 };
+const EXTERNAL_ELEMENTS_SHOWN = 32;
+const MESSAGES_SHOWN = 200;
 
 // --- small helpers -----------------------------------------------------------------------------
 function el(tag, attrs = {}, ...children) {
@@ -143,6 +151,7 @@ function setUpToken() {
     state.token = document.getElementById("token").value.trim();
     sessionStorage.setItem("hli-token", state.token);
     form.hidden = true;
+    if (state.hello && state.hello.events === false) connect();  // again, with the events
     const retry = state.pending;
     state.pending = null;
     if (retry) retry();
@@ -321,7 +330,8 @@ function drawScene(c) {
   const areas = svg("g", { class: "areas" }, c.top);
   for (const area of scene.areas) {
     const band = `${area.height_axis} ${area.min}..${area.max}`;
-    const how = RELATION_TEXT[`${area.relation} ${area.kind}`] || RELATION_TEXT[area.relation] || area.relation;
+    // the scene says what happened (hli_server/scene.py, relation_text); the table is for older scenes
+    const how = area.relation_text || RELATION_TEXT[`${area.relation} ${area.kind}`] || RELATION_TEXT[area.relation] || area.relation;
     const label = `ID${area.id} ${area.kind} ${area.state}, ${band}: ${how}`;
     const li = el("li", { class: `area ${area.kind} ${area.state}`, "data-area": area.id, "data-relation": area.relation, text: label });
     if (!area.in_view) li.append(` (plane ${area.axes.join("/")}, not drawn)`);
@@ -473,7 +483,7 @@ function onHello(hello) {
     }
   }
   if (hello.read_only) say("the server runs --read-only: actions are refused", "error");
-  else if (hello.token && !state.token) askToken("this server needs its API token for actions");
+  else if (hello.token && !state.token) askToken("this server needs its API token for actions and its events");
 }
 
 function onScene(scene) {
@@ -546,6 +556,40 @@ function showNumbers(s) {
   axisTable(s.axes);
   pairTable(s.pairs);
   alarmList(s.alarms);
+  externalTable(s.external || []);
+}
+
+// the V.E. variables (N-05): one row each, the value as the engine's store holds it
+function externalTable(variables) {
+  const text = JSON.stringify(variables);
+  if (text === state.lastExternal) return;
+  state.lastExternal = text;
+  const body = document.querySelector("#external tbody");
+  body.replaceChildren();
+  if (!variables.length) body.append(el("tr", {}, el("td", { colspan: 5, text: "no V.E. variables configured" })));
+  for (const v of variables) {
+    let value = v.value;
+    if (Array.isArray(value)) {
+      const shown = value.slice(0, EXTERNAL_ELEMENTS_SHOWN).map((x) => String(x)).join(", ");
+      value = `[${shown}${value.length > EXTERNAL_ELEMENTS_SHOWN ? `, … (${value.length})` : ""}]`;
+    }
+    const dims = v.dims.length ? `[${v.dims.join(",")}]` : "";
+    body.append(el("tr", { "data-variable": v.name },
+      el("th", { text: v.name }), el("td", { text: v.channel === null ? "global" : `channel ${v.channel}` }),
+      el("td", { text: `${v.type}${dims}` }), el("td", { class: "value", text: String(value) }),
+      el("td", { text: v.symbol })));
+  }
+}
+
+// #MSG of the NC programs (N-07)
+function ncMessage(ev) {
+  const list = document.getElementById("nc-messages");
+  const where = [ev.channel ? `channel ${ev.channel}` : "", ev.data.program, ev.data.line ? `line ${ev.data.line}` : "", ev.data.block || ""]
+    .filter(Boolean).join(", ");
+  list.prepend(el("li", { class: "nc-message" },
+    el("span", { class: "when", text: `${num(ev.time_s, 3)} s` }), " ",
+    el("span", { class: "text", text: ev.data.text }), where ? ` (${where})` : "", ev.data.save ? " [saved]" : ""));
+  while (list.children.length > MESSAGES_SHOWN) list.lastChild.remove();
 }
 
 function axisTable(axes) {
@@ -633,7 +677,9 @@ function alarmList(alarms) {
   for (const a of alarms) list.append(alarmItem(a));
 }
 
-function onEvent(ev) {
+// `live`: from the stream (an alarm goes to the history too); else one of the events the page was
+// served with (the history comes from /api/alarms)
+function onEvent(ev, live = true) {
   const list = document.getElementById("events");
   const data = Object.entries(ev.data || {}).filter(([k]) => k !== "alarm").map(([k, v]) => `${k}=${typeof v === "object" ? JSON.stringify(v) : v}`).join(" ");
   const text = ev.kind === "alarm" ? `${ev.data.alarm.severity} ${ev.data.alarm.id}: ${ev.data.alarm.message}` : data;
@@ -641,7 +687,8 @@ function onEvent(ev) {
     el("span", { class: "when", text: `${num(ev.time_s, 3)} s` }), " ",
     el("span", { class: "kind", text: ev.kind }), ev.channel ? ` ch${ev.channel} ` : " ", text));
   while (list.children.length > EVENTS_SHOWN) list.lastChild.remove();
-  if (ev.kind === "alarm") {
+  if (ev.kind === "nc_message") ncMessage(ev);
+  if (ev.kind === "alarm" && live) {
     const history = document.getElementById("alarm-history");
     history.prepend(alarmItem(ev.data.alarm));
     while (history.children.length > HISTORY_SHOWN) history.lastChild.remove();
@@ -657,9 +704,15 @@ async function loadHistory() {
   } catch (_) { /* the stream will tell */ }
 }
 
+function liveUrl() {
+  return state.token ? "/api/live?access_token=" + encodeURIComponent(state.token) : "/api/live";
+}
+
 function connect() {
   const conn = document.getElementById("conn");
-  const source = new EventSource("/api/live");
+  if (state.source) state.source.close();
+  const source = new EventSource(liveUrl());
+  state.source = source;
   const parse = (handler) => (msg) => {
     try { handler(JSON.parse(msg.data)); } catch (err) { console.error(err); }
   };
@@ -680,6 +733,60 @@ function connect() {
   source.addEventListener("dropped", parse((d) => say(`this page lost ${d.dropped} events (it read too slowly)`, "error")));
 }
 
+// the machine as it was when the page was served: drawn at once, before the stream says anything
+function drawInitial() {
+  const block = document.getElementById("initial");
+  if (!block) return;
+  let data;
+  try { data = JSON.parse(block.textContent); } catch (err) { console.error(err); return; }
+  onHello(data.hello);
+  for (const scene of data.scenes) onScene(scene);
+  onState(data.state);
+  showNumbers(data.state);
+  for (const ev of data.events) onEvent(ev, false);
+}
+
+// --- recording the session (docs/record-replay.md) -----------------------------------------------
+function showRecording(st) {
+  const button = document.getElementById("record");
+  const status = document.getElementById("record-status");
+  state.recording = !!(st && st.recording);
+  button.textContent = state.recording ? "■ Stop recording" : "● Record";
+  button.classList.toggle("on", state.recording);
+  if (!st) return;
+  if (st.recording) {
+    const kb = (st.bytes_written / 1024).toFixed(0);
+    status.textContent = `recording ${st.name}: ${st.cycles} cycles since cycle ${st.started_cycle}, ${kb} KiB`;
+  } else {
+    status.textContent = st.error ? `not recording (${st.error})` : "not recording";
+  }
+}
+
+async function pollRecording() {
+  try {
+    const answer = await fetch("/api/recording");
+    if (answer.ok) showRecording(await answer.json());
+  } catch (_) { /* the stream will tell */ }
+}
+
+function setUpRecorder() {
+  document.getElementById("record").addEventListener("click", async () => {
+    const data = state.recording
+      ? await api("POST", "/api/recording/stop", undefined, "stop recording")
+      : await api("POST", "/api/recording/start", {}, "record");
+    if (data) {
+      showRecording(data);
+      if (!data.recording && data.name) {
+        say(`recorded ${data.name}: download it from /api/recordings/${data.name}; hli-server replay FILE replays it`);
+      }
+    }
+  });
+  pollRecording();
+  setInterval(pollRecording, 1000);
+}
+
 setUpToken();
+setUpRecorder();
+drawInitial();
 loadHistory();
 connect();

@@ -1,0 +1,214 @@
+"""The lines of one NC program text, by number, a window at a time (N-01, issue 16's flat memory).
+
+The interpreter reads a program line by line, and jumps: a loop goes back to its head, ``$GOTO`` goes
+to a label before or after, ``LL name`` to a local subroutine anywhere in the file. A text held in
+memory allows that trivially; ``check --geometry-only`` streams a file of millions of lines and keeps
+its memory flat. :class:`ProgramText` serves both the same way: it reads the text in windows of about
+a megabyte of whole lines, keeps a few of them, and remembers where each window began (a position the
+stream can seek back to), so any line can be read again without the whole text in memory.
+
+``\\n``, ``\\r\\n`` and a lone ``\\r`` all end a line, as the parser's file iteration with
+``newline=""`` splits them. A line longer than :data:`MAX_LINE_CHARS` is refused (an NC block of that
+size is not a program, and a bounded line bounds everything downstream).
+"""
+
+from __future__ import annotations
+
+import bisect
+from typing import TextIO
+
+__all__ = ["CHUNK_CHARS", "MAX_LINE_CHARS", "LineTooLongError", "ProgramText"]
+
+CHUNK_CHARS = 1 << 20
+"""Characters read at a time (about 40,000 lines of a CAM program)."""
+MAX_LINE_CHARS = 1 << 16
+"""The longest line read (65,536 characters); a longer one is :class:`LineTooLongError`."""
+_KEPT_WINDOWS = 4
+"""Windows kept in memory: the current one, and a few a loop or a local subroutine may return to."""
+
+
+class LineTooLongError(ValueError):
+    """A line of more than :data:`MAX_LINE_CHARS` characters (its number in ``line``)."""
+
+    def __init__(self, line: int, length: int) -> None:
+        super().__init__(f"line {line} has more than {MAX_LINE_CHARS} characters ({length} or more)")
+        self.line = line
+        self.length = length
+
+
+class _StringStream:
+    """A string read like a text stream, without copying it (``io.StringIO`` copies the whole text:
+    150 ms for a program of 16 MB, in the cycle the program starts)."""
+
+    def __init__(self, text: str) -> None:
+        self._text = text
+        self._pos = 0
+
+    def read(self, size: int = -1) -> str:
+        start = self._pos
+        end = len(self._text) if size < 0 else min(start + size, len(self._text))
+        self._pos = end
+        return self._text[start:end]
+
+    def tell(self) -> int:
+        return self._pos
+
+    def seek(self, position: int, whence: int = 0) -> int:
+        self._pos = max(0, min(position, len(self._text)))
+        return self._pos
+
+    def seekable(self) -> bool:
+        return True
+
+
+class _Window:
+    """Whole lines ``first .. first + len(lines) - 1`` and where they begin in the stream."""
+
+    __slots__ = ("first", "lines", "long_lines", "text")
+
+    def __init__(self, first: int, lines: list[str], long_lines: dict[int, int], text: str = "") -> None:
+        self.first = first
+        self.lines = lines
+        self.long_lines = long_lines
+        """Line number -> length of the lines over the limit (kept as empty strings in ``lines``)."""
+        self.text = text
+        """The lines joined, each ending in ``\\n`` (the batch check tokenizes it); empty where a line is
+        over the limit."""
+
+
+class ProgramText:
+    """Random access to the lines of one program text (a ``str``, or a seekable text stream).
+
+    ``name`` is how alarms and messages name the program. Line numbers start at 1; :meth:`line`
+    returns None past the last line. A stream that cannot seek is read whole into memory first."""
+
+    def __init__(self, text: str | TextIO, name: str = "program") -> None:
+        self.name = name
+        stream: TextIO | _StringStream
+        if isinstance(text, str):
+            stream = _StringStream(text)
+        elif text.seekable():
+            stream = text
+        else:
+            stream = _StringStream(text.read())
+        self._stream = stream
+        base = stream.tell()
+        # per window: (stream position to seek to, characters to skip after it, first line)
+        self._starts: list[tuple[int, int, int]] = [(base, 0, 1)]
+        self._firsts: list[int] = [1]
+        self._windows: dict[int, _Window] = {}
+        self._order: list[int] = []
+        self._last_line: int | None = None
+        """The number of the last line, once the end of the text was read."""
+        self._current: _Window | None = None
+        """The window read last (a program is mostly read line after line)."""
+
+    @property
+    def last_line(self) -> int | None:
+        """The number of lines, once the end of the text has been read (None before)."""
+        return self._last_line
+
+    def line(self, number: int) -> str | None:
+        """Line ``number`` without its line end, or None past the end of the text."""
+        window = self._current
+        if window is not None:
+            k = number - window.first
+            if 0 <= k < len(window.lines) and not window.long_lines:
+                return window.lines[k]
+        window = self.window_of(number)
+        if window is None:
+            return None
+        if window.long_lines and number in window.long_lines:
+            raise LineTooLongError(number, window.long_lines[number])
+        return window.lines[number - window.first]
+
+    def window_of(self, number: int) -> _Window | None:
+        """The window holding line ``number`` (None past the end of the text)."""
+        if number < 1:
+            return None
+        last = self._last_line
+        if last is not None and number > last:
+            return None
+        k = bisect.bisect_right(self._firsts, number) - 1
+        while True:
+            window = self._load(k)
+            if number < window.first + len(window.lines):
+                self._current = window
+                return window
+            if self._last_line is not None and k + 1 >= len(self._starts):
+                return None
+            k += 1
+
+    # --- reading ---------------------------------------------------------------------------------
+    def _load(self, k: int) -> _Window:
+        cached = self._windows.get(k)
+        if cached is not None:
+            return cached
+        position, skip, first = self._starts[k]
+        stream = self._stream
+        stream.seek(position)
+        if skip:
+            stream.read(skip)
+        base = stream.tell()
+        chunk = CHUNK_CHARS
+        data = stream.read(chunk)
+        at_end = len(data) < chunk
+        cut = len(data)
+        while not at_end:
+            # a line end "\r" may be the first half of "\r\n": look one character further
+            more = stream.read(1)
+            if not more:
+                at_end = True
+                cut = len(data)
+                break
+            probe = data + more
+            cut = max(probe.rfind("\n", 0, len(data)), probe.rfind("\r", 0, len(data) - 1)) + 1
+            if cut > 0:
+                break
+            # no line end in the whole piece: a long line; read on (up to a bound)
+            data = probe
+            if len(data) > 2 * MAX_LINE_CHARS:
+                # far over the limit: served as the last line (reading it raises LineTooLongError);
+                # nothing after it can run anyway
+                window = _Window(first, [""], {first: len(data)})
+                if k + 1 == len(self._starts):
+                    self._last_line = first
+                self._keep(k, window)
+                return window
+            piece = stream.read(chunk)
+            at_end = len(piece) < chunk
+            data += piece
+            if at_end:
+                cut = len(data)
+        text = data[:cut]
+        if "\r" in text:
+            text = text.replace("\r\n", "\n").replace("\r", "\n")
+        lines = text.split("\n")
+        if lines and lines[-1] == "":
+            lines.pop()
+        long_lines: dict[int, int] = {}
+        if lines and max(map(len, lines)) > MAX_LINE_CHARS:  # rare: look line by line only then
+            for i, line in enumerate(lines):
+                if len(line) > MAX_LINE_CHARS:
+                    long_lines[first + i] = len(line)
+                    lines[i] = ""
+        joined = text if text.endswith("\n") else text + "\n"
+        if long_lines or not lines:
+            joined = ""
+        window = _Window(first, lines, long_lines, joined)
+        if k + 1 == len(self._starts):
+            if at_end:
+                self._last_line = first + len(lines) - 1
+            else:
+                self._starts.append((base, cut, first + len(lines)))
+                self._firsts.append(first + len(lines))
+        self._keep(k, window)
+        return window
+
+    def _keep(self, k: int, window: _Window) -> None:
+        self._windows[k] = window
+        self._order.append(k)
+        while len(self._order) > _KEPT_WINDOWS:
+            old = self._order.pop(0)
+            if old != k and old not in self._order:
+                self._windows.pop(old, None)

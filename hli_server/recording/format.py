@@ -1,0 +1,333 @@
+"""The recording file: gzip-compressed JSON Lines, written while the server runs (issue 25, B-02).
+
+Why this format (docs/record-replay.md says it for users):
+
+* **Open without us.** ``zcat session.jsonl.gz | jq .`` reads it; so does any language with gzip and
+  JSON. Arrow would be faster to scan, but it needs pyarrow (or another Arrow library) to read at all,
+  and a recording is a sparse list of changes of different kinds, not a table.
+* **Readable after a crash up to the last flush.** Every flush writes one complete gzip member (RFC
+  1952 allows a file of several members; gzip, zcat and Python's ``gzip`` read them as one stream).
+  A server killed mid-write leaves at most one incomplete member at the end; :func:`read_records`
+  stops before it and says so. Nothing already flushed is ever rewritten.
+* **Small.** Only changes are stored, as ``[index, value, ...]`` into the signal lists of the header;
+  gzip takes out the repetition.
+
+One JSON object per line. The first is the header (``"record": "header"``); then, in the order they
+happened::
+
+    {"c": 1204, "i": [3, true, 7, 150000]}          PLC->CNC signals latched in cycle 1204 (changes)
+    {"c": 1204, "o": [0, 1204, 12, 503311], "e": [...]}  CNC->PLC published in cycle 1204, its events
+    {"c": 1205, "op": "start", "args": {"channel": 1}, "error": null}   operator request before 1205
+    {"c": 1205, "file": "/abs/part.nc", "text": "%part\\n..."}          a program file the engine read
+    {"c": 1205, "program_file": "UP1.NC", "found": "UP1.NC", "text": "...", "origin": "..."}  a subprogram
+    {"c": 1300, "fault": "set", "id": 2, "spec": {...}}                 a communication fault began
+    {"c": 1350, "fault": "end", "id": 2, "reason": "count"}             ... and ended
+    {"c": 2000, "end": "stopped"}                                       the last line of a clean stop
+
+``c`` is the cycle: the interpolation cycle that latched the input or published the output (the first
+cycle of a machine is 1; time = c * T_A). An operator request is stamped with the cycle that latches
+it. The first ``i`` and the first ``o`` line hold every signal; later ones what changed. Outputs are
+recorded from the header's ``window_start`` on; inputs always from cycle 1 (a recording started in a
+running server carries the server's input journal from its start, so that a replay can reach the same
+state). BOOL values are ``true``/``false``, DINT/UDINT integers, LREAL numbers (``"NaN"``,
+``"Infinity"``, ``"-Infinity"`` for the values JSON has no number for). The outputs the header lists in
+``follow_cycle`` (the ``cycle_r`` counters) equal the cycle mod 2**31 unless a line lists them.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import zlib
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any, Final
+
+__all__ = [
+    "FORMAT",
+    "FORMAT_VERSION",
+    "SUFFIX",
+    "RecordingError",
+    "RecordingFullError",
+    "RecordingWriter",
+    "Records",
+    "decode_value",
+    "encode_value",
+    "gzip_member",
+    "read_header",
+    "read_records",
+    "signal_pattern",
+]
+
+FORMAT: Final = "hli-recording"
+FORMAT_VERSION: Final = 1
+"""Raised when a reader of this version could not read the new files; readers refuse newer versions."""
+SUFFIX: Final = ".jsonl.gz"
+COMPRESS_LEVEL: Final = 1
+"""zlib level of the members: the fastest (140 MB/s here against 76 at level 3 and 24 at level 6, for
+9 % and 22 % more bytes; docs/record-replay.md)."""
+MAX_LINE_BYTES: Final = 256 * 1024 * 1024
+"""A line longer than this is refused by the reader (a program text may be up to 64 MiB, escaped)."""
+_READ_CHUNK: Final = 1 << 20
+
+
+class RecordingError(ValueError):
+    """A file that is no recording, or one this version cannot read; the message says which."""
+
+
+class RecordingFullError(OSError):
+    """The recording reached its size limit; it was closed with what it had."""
+
+
+def encode_value(value: bool | int | float) -> bool | int | float | str:
+    """A signal value for JSON: non-finite floats by name."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
+    return value
+
+
+_NON_FINITE: Final = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
+
+
+def decode_value(value: Any) -> Any:
+    """The inverse of :func:`encode_value` (a string a number has no other meaning in a recording)."""
+    if isinstance(value, str):
+        try:
+            return _NON_FINITE[value]
+        except KeyError:
+            raise RecordingError(f"a signal value {value!r} is neither a number nor a boolean") from None
+    return value
+
+
+def signal_pattern(patterns: Sequence[str]) -> Callable[[str], bool]:
+    """A matcher of ST paths: ``*`` any text, ``?`` one character, everything else literal (the
+    brackets of ``gpAx[0]`` too); no patterns match everything."""
+    if not patterns:
+        return lambda _path: True
+    parts = [re.escape(p).replace(r"\*", ".*").replace(r"\?", ".") for p in patterns]
+    regex = re.compile("^(?:" + "|".join(parts) + ")$")
+    return lambda path: regex.match(path) is not None
+
+
+_ENCODER: Final = json.JSONEncoder(separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+encode_json: Final = _ENCODER.encode
+"""Compact ASCII JSON, non-finite numbers refused (ValueError): one encoder for every line."""
+
+
+def dumps(record: dict[str, Any]) -> str:
+    """One line (compact, ASCII, a newline at the end)."""
+    return encode_json(record) + "\n"
+
+
+def gzip_member(text: str, level: int = COMPRESS_LEVEL) -> bytes:
+    """``text`` as one complete gzip member (header, deflate stream, CRC and size)."""
+    compressor = zlib.compressobj(level, zlib.DEFLATED, 31)
+    return compressor.compress(text.encode("ascii")) + compressor.flush()
+
+
+class RecordingWriter:
+    """Appends lines to a recording file, one gzip member per :meth:`flush` (crash-safe up to it).
+
+    Compressing and writing run in a thread of the writer's own (zlib and file writes release the GIL),
+    in order, so that the event loop and the cycle do not wait for them. An error there (the size limit,
+    a full disk) is raised by the next :meth:`flush`. ``max_bytes`` bounds the file: the member that would
+    pass it is not written; :meth:`close` then ends the file with an ``"end": "full"`` line."""
+
+    def __init__(
+        self, path: Path, *, max_bytes: int, overwrite: bool = False, level: int = COMPRESS_LEVEL
+    ) -> None:
+        self.path = path
+        self.max_bytes = max_bytes
+        self.level = level
+        mode = "wb" if overwrite else "xb"
+        self._file: IO[bytes] | None = open(path, mode)  # noqa: SIM115 - closed by close()
+        self._lines: list[str] = []
+        self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hli-record-writer")
+        self._error: OSError | None = None
+        self.bytes_written = 0
+        self.flushes = 0
+
+    @property
+    def closed(self) -> bool:
+        return self._file is None
+
+    def write_line(self, line: str) -> None:
+        self._lines.append(line)
+
+    def write_lines(self, lines: Sequence[str]) -> None:
+        self._lines.extend(lines)
+
+    def write_member(self, member: bytes) -> None:
+        """A ready gzip member (the input journal's), after what is buffered."""
+        self.flush()
+        self._executor.submit(self._write, member)
+
+    def flush(self) -> None:
+        """Hand what is buffered to the writer thread; raises what went wrong there before."""
+        if self._error is not None:
+            raise self._error
+        if not self._lines or self._file is None:
+            return
+        text = "".join(self._lines)
+        self._lines.clear()
+        self._executor.submit(self._compress_and_write, text)
+
+    def wait(self) -> None:
+        """Until everything handed over is written (tests, benchmarks)."""
+        self._executor.submit(lambda: None).result()
+        if self._error is not None:
+            raise self._error
+
+    def _compress_and_write(self, text: str) -> None:
+        if self._error is None:
+            self._write(gzip_member(text, self.level))
+
+    def _write(self, member: bytes) -> None:
+        file = self._file
+        if file is None or self._error is not None:
+            return
+        if self.bytes_written + len(member) > self.max_bytes:
+            self._error = RecordingFullError(
+                f"{self.path}: the recording reached its limit of {self.max_bytes / 1e6:.1f} MB "
+                "(--record-max-mb); it was closed there"
+            )
+            return
+        try:
+            file.write(member)
+            file.flush()
+        except OSError as exc:
+            self._error = exc
+            return
+        self.bytes_written += len(member)
+        self.flushes += 1
+
+    def close(self, end: dict[str, Any] | None = None) -> None:
+        """Write what is buffered, ``end`` as the last line (a member of its own, written whatever the
+        bound: a reader sees why the file ends), and close."""
+        file = self._file
+        if file is None:
+            return
+        try:
+            if self._lines and self._error is None:
+                text = "".join(self._lines)
+                self._lines.clear()
+                self._executor.submit(self._compress_and_write, text)
+            self._executor.shutdown(wait=True)
+            if isinstance(self._error, RecordingFullError):
+                end = {**(end or {}), "end": "full"}
+            if end is not None and not (
+                self._error is not None and not isinstance(self._error, RecordingFullError)
+            ):
+                member = gzip_member(dumps(end))
+                file.write(member)
+                self.bytes_written += len(member)
+            file.flush()
+            os.fsync(file.fileno())
+        finally:
+            self._file = None
+            file.close()
+
+
+@dataclass(slots=True)
+class Records:
+    """What :func:`read_records` found besides the records: where and why it stopped."""
+
+    truncated: str | None = None
+    """Why reading stopped before the end of the file (a crash mid-write), or None."""
+    lines: int = 0
+    members: int = 0
+    compressed_bytes: int = 0
+    notes: list[str] = field(default_factory=list)
+
+
+def _members(path: Path, info: Records) -> Iterator[bytes]:
+    """The decompressed text of each complete gzip member of ``path``."""
+    with open(path, "rb") as file:
+        decompressor = zlib.decompressobj(31)
+        parts: list[bytes] = []
+        pending = b""
+        while True:
+            chunk = pending or file.read(_READ_CHUNK)
+            pending = b""
+            if not chunk:
+                break
+            info.compressed_bytes += len(chunk)
+            try:
+                parts.append(decompressor.decompress(chunk))
+            except zlib.error as exc:
+                info.truncated = f"a damaged gzip member after {info.members} complete ones ({exc})"
+                return
+            if decompressor.eof:
+                info.members += 1
+                yield b"".join(parts)
+                parts = []
+                pending = decompressor.unused_data
+                info.compressed_bytes -= len(pending)
+                decompressor = zlib.decompressobj(31)
+        if parts or decompressor.unconsumed_tail:
+            info.truncated = (
+                f"the last gzip member is incomplete (the writer stopped mid-write after {info.members} "
+                "complete members: a crash?); read up to the last complete flush"
+            )
+
+
+def read_records(path: Path | str, info: Records | None = None) -> Iterator[dict[str, Any]]:
+    """Every line of the recording as a dict, header first; stops before an incomplete last member
+    (``info.truncated`` says so). Raises :class:`RecordingError` for a file that is no recording."""
+    path = Path(path)
+    info = info if info is not None else Records()
+    first = True
+    rest = b""
+    try:
+        for text in _members(path, info):
+            data = rest + text
+            lines = data.split(b"\n")
+            rest = lines.pop()
+            if len(rest) > MAX_LINE_BYTES:
+                raise RecordingError(f"{path}: a line longer than {MAX_LINE_BYTES} bytes")
+            for raw in lines:
+                if not raw:
+                    continue
+                try:
+                    record = json.loads(raw)
+                except ValueError as exc:
+                    raise RecordingError(f"{path}: line {info.lines + 1} is not JSON: {exc}") from None
+                if not isinstance(record, dict):
+                    raise RecordingError(f"{path}: line {info.lines + 1} is not a JSON object")
+                info.lines += 1
+                if first:
+                    _check_header(path, record)
+                    first = False
+                yield record
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if first:
+        if info.truncated is not None:
+            raise RecordingError(f"{path}: no complete header ({info.truncated})")
+        raise RecordingError(f"{path}: empty: no recording header")
+    if rest:
+        info.notes.append(f"an unterminated last line ({len(rest)} bytes) was left out")
+
+
+def read_header(path: Path | str) -> dict[str, Any]:
+    """The header line alone."""
+    for record in read_records(path):
+        return record
+    raise RecordingError(f"{path}: no recording header")  # pragma: no cover - read_records raises first
+
+
+def _check_header(path: Path, record: dict[str, Any]) -> None:
+    if record.get("record") != "header" or record.get("format") != FORMAT:
+        raise RecordingError(f"{path}: not an hli-server recording (its first line is no {FORMAT} header)")
+    version = record.get("format_version")
+    if not isinstance(version, int) or version < 1:
+        raise RecordingError(f"{path}: the header has no valid format_version ({version!r})")
+    if version > FORMAT_VERSION:
+        raise RecordingError(
+            f"{path}: recording format version {version} is newer than this hli-server reads "
+            f"({FORMAT_VERSION}); replay it with the hli-server that made it ({record.get('server')})"
+        )

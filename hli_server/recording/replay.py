@@ -1,0 +1,707 @@
+"""Replay a recording as a regression test (issue 25, B-02): ``hli-server replay FILE``, ``hli.replay(path)``.
+
+The replay builds the recorded machine from the recorded configuration and runs it on the stepped clock
+(a :class:`~hli_server.runtime.Runtime` with its image in memory and no doors). Its tap slot holds a
+:class:`Feeder` instead of the recorder: before each cycle it writes the PLC->CNC half recorded for that
+cycle into the image and repeats the operator's requests stamped with it (program texts and the files
+the engine read come from the recording); after the cycle it compares the CNC->PLC half the engine
+packed, and the events, with the recorded ones. The first difference ends the replay (``all_differences``:
+every difference is counted, the first ``max_differences`` kept).
+
+Verdicts and exit statuses: ``pass`` 0, ``differ`` 1, ``cannot replay`` 3 (2 is a usage error): a file that
+is no recording or of a newer format, a recording whose start state cannot be rebuilt (started in a
+running server after its input journal was dropped), a configuration that this version refuses or that
+differs from the one given, signals this version's image no longer has, or another hli-server version
+when ``same_version`` is asked for. Without ``same_version`` another version replays (what a regression
+test is for) and the report names both versions.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import functools
+import json
+import math
+import struct
+import time
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Final
+
+from hli_server.adapters.host import OperatorError
+from hli_server.recording.format import RecordingError, Records, decode_value, read_records, signal_pattern
+from hli_server.recording.tap import CYCLE_MODULUS, OPERATOR_REQUESTS, _finite, server_info
+from schemas.layout import Direction, Signal, SignalType
+from schemas.wire import Mode
+
+if TYPE_CHECKING:
+    from hli_server.engine.machine import Machine
+    from hli_server.engine.programs import ProgramFile
+    from hli_server.runtime import Runtime
+    from schemas.config import MachineConfig
+    from schemas.events import Event
+
+__all__ = [
+    "EXIT_STATUS",
+    "CannotReplayError",
+    "Difference",
+    "ReplayReport",
+    "Verdict",
+    "replay",
+    "replay_sync",
+]
+
+CHUNK: Final = 5000
+"""Cycles run per step of the stepped clock (the feeder reads that far ahead)."""
+_P2C, _C2P = Direction.PLC_TO_CNC, Direction.CNC_TO_PLC
+
+
+class Verdict(StrEnum):
+    PASS = "pass"
+    DIFFER = "differ"
+    CANNOT = "cannot replay"
+
+
+EXIT_STATUS: Final = {Verdict.PASS: 0, Verdict.DIFFER: 1, Verdict.CANNOT: 3}
+
+
+class CannotReplayError(Exception):
+    """The recording cannot be replayed here; the message says why (version, configuration, ...)."""
+
+
+class _StopReplayError(Exception):
+    """The feeder found what ends the replay (the first difference)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Difference:
+    """One output that differs: in ``cycle``, ``signal`` (an ST path, ``events`` or ``operator ...``)."""
+
+    cycle: int
+    signal: str
+    expected: Any
+    actual: Any
+    t_a_us: int = 1000
+
+    def __str__(self) -> str:
+        return (
+            f"cycle {self.cycle} ({self.cycle * self.t_a_us / 1e6:.3f} s): {self.signal}: "
+            f"expected {_show(self.expected)}, got {_show(self.actual)}"
+        )
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "cycle": self.cycle,
+            "time_s": self.cycle * self.t_a_us / 1e6,
+            "signal": self.signal,
+            "expected": _finite(self.expected),
+            "actual": _finite(self.actual),
+        }
+
+
+def _show(value: Any) -> str:
+    text = json.dumps(_finite(value), ensure_ascii=False) if not isinstance(value, str) else value
+    return text if len(text) <= 300 else text[:297] + "..."
+
+
+@dataclass(slots=True)
+class ReplayReport:
+    """The outcome: verdict, where, what differs, and what the reader should know."""
+
+    path: str
+    verdict: Verdict = Verdict.PASS
+    reason: str | None = None
+    differences: list[Difference] = field(default_factory=list)
+    counts: dict[str, list[int]] = field(default_factory=dict)
+    """signal -> [differences, first cycle, last cycle] (all of them, also beyond max_differences)."""
+    first_cycle: int = 1
+    window_start: int = 1
+    last_cycle: int = 0
+    t_a_us: int = 1000
+    wall_s: float = 0.0
+    recorded_with: dict[str, Any] = field(default_factory=dict)
+    replayed_with: dict[str, Any] = field(default_factory=server_info)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def exit_status(self) -> int:
+        return EXIT_STATUS[self.verdict]
+
+    @property
+    def first(self) -> Difference | None:
+        return self.differences[0] if self.differences else None
+
+    @property
+    def cycles(self) -> int:
+        return max(0, self.last_cycle - self.first_cycle + 1)
+
+    def text(self, *, limit: int = 20) -> str:
+        lines: list[str] = []
+        if self.verdict is Verdict.CANNOT:
+            lines.append(f"replay of {self.path}: CANNOT REPLAY: {self.reason}")
+        else:
+            rate = self.last_cycle / self.wall_s if self.wall_s > 0 else 0.0
+            compared = max(0, self.last_cycle - self.window_start + 1)
+            head = (
+                f"replay of {self.path}: {'PASS' if self.verdict is Verdict.PASS else 'DIFFER'}: "
+                f"{compared:,} cycles compared (cycles {self.window_start:,}..{self.last_cycle:,}, "
+                f"{compared * self.t_a_us / 1e6:.3f} s of machine time) in {self.wall_s:.2f} s "
+                f"({rate:,.0f} cycles/s)"
+            )
+            lines.append(head)
+            first = self.first
+            if first is not None:
+                lines.append(f"first difference: {first}")
+                total = sum(c[0] for c in self.counts.values())
+                if len(self.counts) > 1 or total > 1:
+                    lines.append(f"{total:,} differences in {len(self.counts)} signals:")
+                    shown = sorted(self.counts.items(), key=lambda kv: (kv[1][1], kv[0]))
+                    for signal, (count, first_cycle, last_cycle) in shown[:limit]:
+                        lines.append(f"  {signal}: {count:,} cycles, {first_cycle:,}..{last_cycle:,}")
+                    if len(shown) > limit:
+                        lines.append(f"  ... and {len(shown) - limit} more signals")
+        versions = (self.recorded_with.get("version"), self.replayed_with.get("version"))
+        if self.recorded_with:
+            same = versions[0] == versions[1]
+            lines.append(
+                f"recorded with hli-server {versions[0]} ({self.recorded_with.get('engine')} engine), "
+                f"replayed with {versions[1]} ({self.replayed_with.get('engine')} engine)"
+                + ("" if same else ": versions differ")
+            )
+        lines.extend(f"note: {note}" for note in self.notes)
+        return "\n".join(lines)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "path": self.path,
+            "verdict": str(self.verdict),
+            "exit_status": self.exit_status,
+            "reason": self.reason,
+            "window_start": self.window_start,
+            "last_cycle": self.last_cycle,
+            "t_a_us": self.t_a_us,
+            "wall_s": round(self.wall_s, 3),
+            "first": self.first.to_json() if self.first else None,
+            "differences": [d.to_json() for d in self.differences],
+            "counts": {k: {"count": v[0], "first": v[1], "last": v[2]} for k, v in self.counts.items()},
+            "recorded_with": self.recorded_with,
+            "replayed_with": self.replayed_with,
+            "notes": self.notes,
+        }
+
+
+# --------------------------------------------------------------------------------------------
+# checks before any cycle runs
+# --------------------------------------------------------------------------------------------
+
+
+def _config_differences(a: Any, b: Any, where: str = "") -> list[str]:
+    if isinstance(a, dict) and isinstance(b, dict):
+        out: list[str] = []
+        for key in sorted(set(a) | set(b)):
+            sub = f"{where}.{key}" if where else str(key)
+            if key not in a or key not in b:
+                out.append(sub)
+            else:
+                out.extend(_config_differences(a[key], b[key], sub))
+        return out
+    if isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        out = []
+        for k, (x, y) in enumerate(zip(a, b, strict=True)):
+            out.extend(_config_differences(x, y, f"{where}[{k}]"))
+        return out
+    return [] if a == b else [where or "(the whole configuration)"]
+
+
+def _recorded_config(header: dict[str, Any], given: MachineConfig | None) -> MachineConfig:
+    from pydantic import ValidationError
+
+    from schemas.config import MachineConfig
+
+    recorded = header.get("config")
+    if not isinstance(recorded, dict):
+        raise CannotReplayError("the recording's header holds no machine configuration")
+    try:
+        config = MachineConfig.model_validate(recorded)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        raise CannotReplayError(
+            f"configuration mismatch: this hli-server ({server_info()['version']}) refuses the recorded "
+            f"configuration: {'.'.join(str(p) for p in first['loc'])}: {first['msg']}"
+        ) from None
+    if given is not None:
+        diffs = _config_differences(config.model_dump(mode="json"), given.model_dump(mode="json"))
+        if diffs:
+            shown = ", ".join(diffs[:8]) + (f" and {len(diffs) - 8} more" if len(diffs) > 8 else "")
+            raise CannotReplayError(
+                f"configuration mismatch: the machine given differs from the recorded one in {shown}"
+            )
+    return config
+
+
+# --------------------------------------------------------------------------------------------
+# the feeder: the replay's tap
+# --------------------------------------------------------------------------------------------
+
+
+class Feeder:
+    """Feeds the recorded inputs and compares the outputs, cycle by cycle (module docstring)."""
+
+    def __init__(
+        self,
+        header: dict[str, Any],
+        records: Iterator[dict[str, Any]],
+        info: Records,
+        report: ReplayReport,
+        *,
+        signals: Sequence[str] | None,
+        events: bool,
+        all_differences: bool,
+        max_differences: int,
+        until: int | None,
+    ) -> None:
+        self.header = header
+        self._records = records
+        self.info = info
+        self.report = report
+        self.signal_patterns = tuple(signals or ())
+        self._matches = signal_pattern(self.signal_patterns)
+        self.compare_events = events
+        self.all_differences = all_differences
+        self.max_differences = max_differences
+        self.until = until
+        self.window = int(header.get("window_start", 1))
+        self.t_a_us = int(header.get("t_a_us", 1000))
+        self._buffer: deque[dict[str, Any]] = deque()
+        self._exhausted = False
+        self.end_cycle: int | None = None
+        self.last_record_cycle = 0
+        self.files: dict[str, deque[str]] = {}
+        self.library_finds: dict[str, deque[dict[str, Any]]] = {}
+        self._searched: tuple[str, ...] = ()
+        self._last_file: dict[str, str] = {}
+        self.runtime: Runtime | None = None
+        self._fault_ids: dict[int, int] = {}
+        self._events: list[Event] = []
+        self._expected_events: list[Any] = []
+
+    # --- set-up ----------------------------------------------------------------------------------
+    def bind(self, runtime: Runtime) -> None:
+        """Map the recorded signals onto this version's image (CannotReplayError for what is gone)."""
+        self.runtime = runtime
+        layout = runtime.image.layout
+        self.image: Any = (
+            runtime.image
+        )  # the replay's own ProcessImage in memory (image_factory=memory_image)
+        self.inputs = self._map(layout, self.header.get("inputs"), _P2C, "input")
+        self.p2c_size = layout.size(_P2C)
+        self.expected_in = bytearray(runtime.image.read_half(_P2C))
+        c2p = sorted(layout.half(_C2P), key=lambda s: s.offset)
+        self.c2p_signals = c2p
+        self.c2p_struct = layout.struct(_C2P)
+        position = {s.st_path: k for k, s in enumerate(layout.half(_C2P))}
+        recorded = self._map(layout, self.header.get("outputs"), _C2P, "output")
+        selected = [s for s in recorded if s is not None and self._selected(s.st_path)]
+        if self.signal_patterns and not selected:
+            raise CannotReplayError(
+                f"--signals {', '.join(self.signal_patterns)}: no recorded output matches (see `hli-server "
+                "record show --signals`)"
+            )
+        self.outputs = recorded
+        self.out_position = [position[s.st_path] if s is not None else -1 for s in recorded]
+        self.compared = sorted({position[s.st_path] for s in selected})
+        self.names = [s.st_path for s in layout.half(_C2P)]
+        self.types = [s.type for s in layout.half(_C2P)]
+        self.expected_out: list[Any] = [None] * len(self.names)
+        same_layout = self.header.get("layout", {}).get("hash") == layout.hash
+        self.fast = same_layout and not self.signal_patterns
+        if not same_layout:
+            self.report.notes.append(
+                "the image's layout changed since the recording (another version or configuration): the "
+                "recorded signals are compared by name"
+            )
+        self.expected_bytes = bytearray(layout.size(_C2P))
+        self.out_structs = [struct_for(s) for s in layout.half(_C2P)]
+        self.offsets = [s.offset for s in layout.half(_C2P)]
+        follow = self.header.get("follow_cycle") or []
+        self.follow = [
+            self.out_position[k] for k in follow if 0 <= k < len(recorded) and self.out_position[k] >= 0
+        ]
+        runtime.machine.event_listeners.append(self._events.append)
+
+    def _map(self, layout: Any, listed: Any, direction: Direction, what: str) -> list[Signal | None]:
+        if not isinstance(listed, list):
+            raise CannotReplayError(f"the recording's header has no list of {what}s")
+        out: list[Signal | None] = []
+        missing: list[str] = []
+        for entry in listed:
+            path, kind = entry[0], entry[1]
+            if path not in layout:
+                if what == "output" and self.signal_patterns and not self._selected(path):
+                    out.append(None)
+                    continue
+                missing.append(path)
+                out.append(None)
+                continue
+            signal = layout.signal(path)
+            if signal.direction is not direction or signal.type.value != kind:
+                missing.append(f"{path} (was {kind}, is {signal.type.value})")
+                out.append(None)
+                continue
+            out.append(signal)
+        if missing:
+            shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
+            hint = "" if what == "input" else "; compare the others with --signals"
+            raise CannotReplayError(f"this version's image has no recorded {what} {shown}{hint}")
+        return out
+
+    def _selected(self, path: str) -> bool:
+        return self._matches(path)
+
+    # --- reading ahead -----------------------------------------------------------------------------
+    def _fill(self, upto: int) -> None:
+        while not self._exhausted and (not self._buffer or self._buffer[-1].get("c", 0) <= upto):
+            try:
+                record = next(self._records)
+            except StopIteration:
+                self._exhausted = True
+                break
+            cycle = record.get("c")
+            if not isinstance(cycle, int):
+                raise RecordingError(f"a record without its cycle: {str(record)[:200]}")
+            if "end" in record:
+                self.end_cycle = cycle
+                self._exhausted = True
+                break
+            self.last_record_cycle = max(self.last_record_cycle, cycle)
+            self._buffer.append(record)
+
+    def horizon(self, cycle: int) -> int:
+        """The last cycle the replay may run to now (``cycle`` is the machine's; 0 steps: done)."""
+        self._fill(cycle + CHUNK)
+        end = cycle + CHUNK
+        if self._exhausted:
+            last = self.end_cycle if self.end_cycle is not None else self.last_record_cycle
+            end = min(end, last)
+        if self.until is not None:
+            end = min(end, self.until)
+        return end
+
+    # --- the tap interface (the runtime calls these) -------------------------------------------------
+    def attach(self, image: Any) -> None:
+        pass
+
+    async def close(self) -> None:
+        pass
+
+    def note_fault(self, change: dict[str, Any]) -> None:
+        pass
+
+    def before_cycle(self, cycle: int) -> None:
+        buffer = self._buffer
+        changed = False
+        while buffer and buffer[0]["c"] <= cycle and "o" not in buffer[0] and "e" not in buffer[0]:
+            record = buffer.popleft()
+            if "i" in record:
+                self._apply_inputs(record["i"])
+                changed = True
+            elif "op" in record:
+                self._apply_op(cycle, record)
+            elif "program_file" in record:
+                self.library_finds.setdefault(str(record["program_file"]), deque()).append(record)
+            elif "file" in record:
+                text = record.get("text")
+                if isinstance(text, str):
+                    self.files.setdefault(str(record["file"]), deque()).append(text)
+            elif "fault" in record:
+                self._apply_fault(record)
+        if changed:  # the half as the recorded cycle latched it, byte for byte (no door checks it again)
+            offset = self.image.plan.p2c_offset
+            self.image.buffer[offset : offset + self.p2c_size] = self.expected_in
+
+    def _apply_inputs(self, flat: list[Any]) -> None:
+        inputs = self.inputs
+        buf = self.expected_in
+        for k in range(0, len(flat) - 1, 2):
+            signal = inputs[flat[k]]
+            if signal is None:
+                continue
+            value = decode_value(flat[k + 1])
+            kind = signal.type
+            plain = (
+                bool(value)
+                if kind is SignalType.BOOL
+                else float(value)
+                if kind is SignalType.LREAL
+                else int(value)
+            )
+            struct_for(signal).pack_into(buf, signal.offset, plain)
+
+    def _apply_op(self, cycle: int, record: dict[str, Any]) -> None:
+        name = record.get("op")
+        args = dict(record.get("args") or {})
+        if name not in OPERATOR_REQUESTS:
+            raise CannotReplayError(
+                f"cycle {cycle}: an operator request this version does not know: {name!r}"
+            )
+        if name == "mode" and "mode" in args:
+            args["mode"] = Mode(args["mode"])
+        assert self.runtime is not None
+        panel = self.runtime.panel
+        outcome: str | None = None
+        try:
+            getattr(panel, str(name))(**args)
+        except OperatorError as exc:
+            outcome = f"{type(exc).__name__}: {exc}"
+        except TypeError as exc:
+            raise CannotReplayError(f"cycle {cycle}: operator request {name} {args}: {exc}") from None
+        recorded = record.get("error")
+        if (recorded is None) != (outcome is None) or (
+            recorded is not None and outcome is not None and recorded.split(":")[0] != outcome.split(":")[0]
+        ):
+            what = f"operator {name} " + ", ".join(f"{k}={v}" for k, v in args.items() if k != "text")
+            expected = "accepted" if recorded is None else f"refused ({recorded})"
+            actual = "accepted" if outcome is None else f"refused ({outcome})"
+            if cycle >= self.window:
+                self._differ(cycle, what, expected, actual)
+            else:
+                self.report.notes.append(
+                    f"before the recording's window, cycle {cycle}: {what}: {expected}, {actual}"
+                )
+
+    def _apply_fault(self, record: dict[str, Any]) -> None:
+        """A stall is repeated (it acts on the publish); the doors' faults acted on what the PLC sent,
+        which the recorded inputs hold."""
+        assert self.runtime is not None
+        faults = self.runtime.comm_faults
+        if record.get("fault") == "set":
+            spec = record.get("spec") or {}
+            if spec.get("kind") == "stall":
+                fault = faults.add(spec)
+                self._fault_ids[int(record["id"])] = fault.id
+        elif record.get("fault") == "end" and record.get("reason") in ("api", "reset"):
+            own = self._fault_ids.pop(int(record.get("id", -1)), None)
+            if own is not None and faults.get(own) is not None:
+                faults.end(own, str(record.get("reason")))
+
+    def read_file(self, path: str) -> str:
+        """The engine's ``read_program``: the files in the recording, in the order they were read."""
+        queue = self.files.get(path)
+        if queue:
+            text = queue.popleft()
+            self._last_file[path] = text
+            return text
+        if path in self._last_file:
+            return self._last_file[path]
+        raise OSError(f"{path} is not in the recording (the recorded session did not read it)")
+
+    def find(self, name: str) -> ProgramFile | None:
+        """The machine's program library: what the recorded session's library found, find by find."""
+        from hli_server.engine.programs import ProgramFile
+
+        queue = self.library_finds.get(name)
+        if not queue:
+            return None
+        record = queue.popleft()
+        if record.get("found") is None:
+            self._searched = tuple(str(s) for s in record.get("searched") or ())
+            return None
+        return ProgramFile(str(record["found"]), str(record.get("text", "")), str(record.get("origin", "")))
+
+    def searched(self) -> tuple[str, ...]:
+        return self._searched
+
+    def after_cycle(self, cycle: int, latched: bytes, packed: bytearray | None) -> None:
+        events, self._events[:] = list(self._events), []
+        if self.follow and cycle > self.window:
+            own = cycle % CYCLE_MODULUS
+            for at in self.follow:
+                self.expected_out[at] = own
+                if self.fast:
+                    self.out_structs[at].pack_into(self.expected_bytes, self.offsets[at], own)
+        buffer = self._buffer
+        if buffer and buffer[0]["c"] == cycle and ("o" in buffer[0] or "e" in buffer[0]):
+            record = buffer.popleft()
+            flat = record.get("o")
+            if flat:
+                self._expect(flat)
+            self._expected_events = record.get("e") or []
+        else:
+            self._expected_events = []
+        self.report.last_cycle = cycle
+        if cycle < self.window or packed is None:
+            return
+        if self.fast:
+            if packed[8:] != self.expected_bytes:
+                self._compare_values(cycle, packed)
+        else:
+            self._compare_values(cycle, packed)
+        if self.compare_events and (events or self._expected_events):
+            actual = [json.loads(json.dumps(_finite(e.to_json()))) for e in events]
+            if actual != self._expected_events:
+                self._differ(cycle, "events", _event_summary(self._expected_events), _event_summary(actual))
+
+    def _expect(self, flat: list[Any]) -> None:
+        positions = self.out_position
+        expected = self.expected_out
+        buf = self.expected_bytes
+        fast = self.fast
+        for k in range(0, len(flat) - 1, 2):
+            at = positions[flat[k]]
+            if at < 0:
+                continue
+            value = decode_value(flat[k + 1])
+            expected[at] = value
+            if fast:
+                self.out_structs[at].pack_into(buf, self.offsets[at], value)
+
+    def _compare_values(self, cycle: int, packed: bytearray) -> None:
+        actual = self.c2p_struct.unpack_from(packed, 8)
+        expected = self.expected_out
+        for at in self.compared:
+            want, got = expected[at], actual[at]
+            if want is None or want == got:
+                continue
+            if isinstance(want, float) and isinstance(got, float) and math.isnan(want) and math.isnan(got):
+                continue
+            if self.types[at] is SignalType.BOOL and bool(want) == bool(got):
+                continue
+            self._differ(cycle, self.names[at], want, got)
+
+    def _differ(self, cycle: int, signal: str, expected: Any, actual: Any) -> None:
+        report = self.report
+        report.verdict = Verdict.DIFFER
+        count = report.counts.get(signal)
+        if count is None:
+            report.counts[signal] = [1, cycle, cycle]
+        else:
+            count[0] += 1
+            count[2] = cycle
+        if len(report.differences) < self.max_differences:
+            report.differences.append(Difference(cycle, signal, expected, actual, self.t_a_us))
+        if not self.all_differences:
+            raise _StopReplayError
+
+
+def struct_for(signal: Signal) -> struct.Struct:
+    return _struct("<" + signal.type.struct_char)
+
+
+@functools.lru_cache(maxsize=16)
+def _struct(fmt: str) -> struct.Struct:
+    return struct.Struct(fmt)
+
+
+def _event_summary(events: list[Any]) -> list[str]:
+    out = []
+    for e in events:
+        data = e.get("data") or {}
+        alarm = data.get("alarm") if isinstance(data, dict) else None
+        if isinstance(alarm, dict):
+            out.append(f"{e.get('kind')} {alarm.get('id')}: {alarm.get('message')}")
+        else:
+            out.append(f"{e.get('kind')} {json.dumps(data, sort_keys=True)[:160]}")
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# the replay
+# --------------------------------------------------------------------------------------------
+
+
+async def replay(
+    path: Path | str,
+    *,
+    config: MachineConfig | None = None,
+    until: int | None = None,
+    signals: Sequence[str] | None = None,
+    events: bool = True,
+    all_differences: bool = False,
+    max_differences: int = 1000,
+    same_version: bool = False,
+    prepare: Callable[[Machine], None] | None = None,
+) -> ReplayReport:
+    """Replay ``path`` (module docstring); never raises for what a recording holds: the report says.
+
+    ``prepare(machine)`` is called once the machine is built, before its first cycle: a test can change
+    the engine there (a drive parameter, a monitor) and see whether the recording notices."""
+    from hli_server.runtime import Runtime, memory_image
+
+    path = Path(path)
+    report = ReplayReport(path=str(path))
+    began = time.perf_counter()
+    info = Records()
+    try:
+        records = read_records(path, info)
+        header = next(records)
+        report.recorded_with = dict(header.get("server") or {})
+        report.t_a_us = int(header.get("t_a_us", 1000))
+        report.window_start = int(header.get("window_start", 1))
+        journal = header.get("journal") or {}
+        if not journal.get("complete", True):
+            raise CannotReplayError(
+                f"the recording began at cycle {report.window_start} in a running server whose input journal "
+                f"had been dropped at cycle {journal.get('lost_at')} (--journal-limit-mb): the state at its "
+                "start cannot be rebuilt; record from the start (hli-server run --record FILE)"
+            )
+        if same_version and report.recorded_with.get("version") != report.replayed_with.get("version"):
+            raise CannotReplayError(
+                f"version mismatch: recorded with hli-server {report.recorded_with.get('version')}, this is "
+                f"{report.replayed_with.get('version')} (--same-version)"
+            )
+        machine_config = _recorded_config(header, config)
+        feeder = Feeder(
+            header,
+            records,
+            info,
+            report,
+            signals=signals,
+            events=events,
+            all_differences=all_differences,
+            max_differences=max_differences,
+            until=until,
+        )
+        runtime = Runtime(
+            machine_config,
+            clock="stepped",
+            http_port=None,
+            adapters=[],
+            image_factory=memory_image,
+            read_program=feeder.read_file,
+        )
+        runtime.session = feeder  # type: ignore[assignment]  # the replay's tap: feeds and compares
+        runtime.machine.programs = feeder  # the subprograms the recorded session found
+        if prepare is not None:
+            prepare(runtime.machine)
+        async with runtime:
+            feeder.bind(runtime)
+            with contextlib.suppress(_StopReplayError):
+                while True:
+                    cycle = runtime.machine.cycle
+                    end = feeder.horizon(cycle)
+                    if end <= cycle:
+                        break
+                    await runtime.step(end - cycle)
+    except CannotReplayError as exc:
+        report.verdict = Verdict.CANNOT
+        report.reason = str(exc)
+    except RecordingError as exc:
+        report.verdict = Verdict.CANNOT
+        report.reason = str(exc)
+    report.wall_s = time.perf_counter() - began
+    if info.truncated is not None and report.verdict is not Verdict.CANNOT:
+        report.notes.append(f"{info.truncated}: replayed up to cycle {report.last_cycle}")
+    elif report.verdict is Verdict.PASS and report.last_cycle == 0 and until != 0:
+        report.notes.append("the recording holds no cycle")
+    report.notes.extend(info.notes)
+    return report
+
+
+def replay_sync(path: Path | str, **options: Any) -> ReplayReport:
+    """:func:`replay` in an event loop of its own (the command line)."""
+    report: ReplayReport = asyncio.run(replay(path, **options))
+    return report

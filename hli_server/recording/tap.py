@@ -1,0 +1,943 @@
+"""The session recorder: the runtime's tap at the latch boundary (issue 25, B-02).
+
+Every cycle the runtime hands :meth:`SessionTap.after_cycle` the PLC->CNC half it latched and the
+CNC->PLC half it packed. The tap keeps, in the cycle, only what changed, as raw bytes (a slice, a
+comparison, sometimes an append: about a microsecond); a task of the event loop turns them into lines
+(numpy finds the changed fields of many cycles at once) and writes them out, off the cycle.
+
+Two sinks:
+
+* **the input journal**, always, from the server's first cycle: every input the CNC takes (the latched
+  PLC->CNC changes, the operator's requests with their program texts, the program files the engine
+  read, the communication faults), compressed in memory and bounded (``journal_limit``). It is what
+  makes a recording started in a running server replayable: the replay runs the same inputs from cycle
+  1 and compares the outputs from the recording's window on;
+* **the recording file**, between :meth:`SessionTap.start` and :meth:`SessionTap.stop`: the header, the
+  journal so far, then inputs and outputs (the CNC->PLC half and the events) of every cycle that
+  changed something (:mod:`hli_server.recording.format`).
+
+The operator's requests reach the tap through :class:`JournaledOperator`, the runtime's operator panel
+wrapped; program files through :meth:`SessionTap.wrap_reader`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import datetime
+import importlib.metadata
+import logging
+import platform
+import re
+import struct
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Final
+
+import numpy as np
+
+from hli_server.adapters.host import (
+    Accepted,
+    ConflictError,
+    InvalidRequestError,
+    NotFoundError,
+    OperatorError,
+    OperatorPort,
+)
+from hli_server.recording.format import (
+    FORMAT,
+    FORMAT_VERSION,
+    SUFFIX,
+    RecordingError,
+    RecordingFullError,
+    RecordingWriter,
+    dumps,
+    encode_json,
+    encode_value,
+    gzip_member,
+)
+from schemas.layout import Direction, Signal, SignalType
+from schemas.wire import Mode
+
+if TYPE_CHECKING:
+    from hli_server.engine.machine import Machine
+    from hli_server.engine.programs import ProgramFile, ProgramLibrary
+    from hli_server.image.shm import ProcessImage
+    from schemas.config import MachineConfig
+    from schemas.events import Event
+    from schemas.layout import Layout
+
+__all__ = [
+    "DEFAULT_FLUSH_S",
+    "DEFAULT_JOURNAL_LIMIT",
+    "DEFAULT_MAX_BYTES",
+    "OPERATOR_REQUESTS",
+    "HalfCodec",
+    "JournaledOperator",
+    "RecordingOptions",
+    "RecordingStatus",
+    "SessionRecorderPort",
+    "SessionTap",
+    "server_info",
+]
+
+logger = logging.getLogger(__name__)
+
+DEFAULT_FLUSH_S: Final = 1.0
+"""Seconds between two flushes of a recording (what a crash can lose at most)."""
+DEFAULT_MAX_BYTES: Final = 2 * 1024**3
+"""A recording file is closed when it reaches this size (2 GiB; ``--record-max-mb``)."""
+DEFAULT_JOURNAL_LIMIT: Final = 256 * 1024**2
+"""The input journal in memory (compressed) is dropped beyond this (256 MiB); a recording started
+later then cannot be replayed from the server's first cycle, and says so."""
+TICK_S: Final = 0.05
+"""How often the encoder task looks for work."""
+ENCODE_SLICE: Final = 2000
+"""Cycles encoded before the encoder yields to the event loop (the clock's timer)."""
+MAX_PENDING: Final = 20_000
+"""Cycles of raw changes held in memory; beyond, the cycle itself encodes (the loop was starved)."""
+JOURNAL_MEMBER_BYTES: Final = 256 * 1024
+"""Journal text compressed into a member once it is this long."""
+FOLLOW_CYCLE_SUFFIXES: Final = ("bahn_state.cycle_r",)
+"""Outputs that count the cycles (``cycle_r`` = cycle mod 2**31): a recording lists them only when they
+do not (the header's ``follow_cycle``), so that an idle machine writes nothing."""
+CYCLE_MODULUS: Final = 2**31
+NAME_RE: Final = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,99}$")
+
+_P2C, _C2P = Direction.PLC_TO_CNC, Direction.CNC_TO_PLC
+_IN, _OUT, _MISC = 0, 1, 2
+
+
+def server_info() -> dict[str, Any]:
+    """What made a recording: hli-server's version, the engine (compiled or pure), Python."""
+    try:
+        version = importlib.metadata.version("hli-server")
+    except importlib.metadata.PackageNotFoundError:  # pragma: no cover - a source tree not installed
+        version = "unknown"
+    from hli_server import _compiled
+
+    return {
+        "name": "hli-server",
+        "version": version,
+        "engine": "compiled" if _compiled.ENGINE_COMPILED else "pure",
+        "python": platform.python_version(),
+    }
+
+
+class HalfCodec:
+    """One half of the image as the recording sees it: its signals in offset order (the indices of
+    the header's lists), one ``Struct`` for all of them, and the byte ranges numpy compares."""
+
+    def __init__(self, layout: Layout, direction: Direction) -> None:
+        self.signals: tuple[Signal, ...] = tuple(sorted(layout.half(direction), key=lambda s: s.offset))
+        self.size = layout.size(direction)
+        parts = ["<"]
+        cursor = 0
+        for s in self.signals:
+            if s.offset > cursor:
+                parts.append(f"{s.offset - cursor}x")
+            parts.append(s.type.struct_char)
+            cursor = s.offset + s.size
+        if self.size > cursor:
+            parts.append(f"{self.size - cursor}x")
+        self.struct = struct.Struct("".join(parts))
+        self.unpack = self.struct.unpack
+        self.starts = np.array([s.offset for s in self.signals], dtype=np.intp)
+        self.floats = frozenset(k for k, s in enumerate(self.signals) if s.type is SignalType.LREAL)
+        self.index = {s.st_path: k for k, s in enumerate(self.signals)}
+        self.follow = [
+            k
+            for k, s in enumerate(self.signals)
+            if direction is _C2P
+            and s.st_path.endswith(FOLLOW_CYCLE_SUFFIXES)
+            and s.type is not SignalType.LREAL
+        ]
+
+    def header(self) -> list[list[str]]:
+        return [[s.st_path, s.type.value] for s in self.signals]
+
+    def changes(
+        self, rows: Sequence[bytes], previous: bytes | None, cycles: Sequence[int] = ()
+    ) -> list[list[Any]]:
+        """For each row, ``[index, value, ...]`` of the fields that differ from the row before
+        (``previous`` before the first; None: every field). With ``cycles`` (one per row), the
+        :attr:`follow` fields are listed only where they are not the cycle mod 2**31."""
+        n = len(rows)
+        data = np.frombuffer(b"".join(rows), dtype=np.uint8).reshape(n, self.size)
+        before = np.empty_like(data)
+        if previous is None:
+            before[0] = ~data[0]  # every byte differs: every field is listed
+        else:
+            before[0] = np.frombuffer(previous, dtype=np.uint8)
+        before[1:] = data[:-1]
+        changed = np.logical_or.reduceat(data != before, self.starts, axis=1) if len(self.starts) else None
+        out: list[list[Any]] = []
+        if changed is None:
+            return [[] for _ in rows]
+        follow = self.follow if cycles else []
+        if follow:
+            changed[:, follow] = False
+            if previous is None:
+                changed[0, follow] = True
+        counts = changed.sum(axis=1).tolist()
+        fields = np.nonzero(changed)[1].tolist()
+        at = 0
+        unpack = self.unpack
+        # non-finite LREALs stay floats here: the line's encoder names them (_dumps_values)
+        for n, (row, count) in enumerate(zip(rows, counts, strict=True)):
+            values = None
+            flat: list[Any] = []
+            if count:
+                values = unpack(row)
+                flat = [x for k in fields[at : at + count] for x in (k, values[k])]
+                at += count
+            if follow and not (n == 0 and previous is None):
+                own = cycles[n] % CYCLE_MODULUS
+                if values is None:
+                    values = unpack(row)
+                for k in follow:
+                    if values[k] != own:
+                        flat.append(k)
+                        flat.append(values[k])
+            out.append(flat)
+        return out
+
+
+@dataclass(frozen=True, slots=True)
+class RecordingStatus:
+    """What ``GET /api/recording`` shows."""
+
+    recording: bool
+    file: str | None = None
+    name: str | None = None
+    started_cycle: int | None = None
+    cycles: int = 0
+    bytes_written: int = 0
+    last_flush_s_ago: float | None = None
+    journal_bytes: int = 0
+    journal_complete: bool = True
+    error: str | None = None
+    directory: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "recording": self.recording,
+            "file": self.file,
+            "name": self.name,
+            "started_cycle": self.started_cycle,
+            "cycles": self.cycles,
+            "bytes_written": self.bytes_written,
+            "last_flush_s_ago": self.last_flush_s_ago,
+            "journal_bytes": self.journal_bytes,
+            "journal_complete": self.journal_complete,
+            "error": self.error,
+            "directory": self.directory,
+        }
+
+
+@dataclass(frozen=True, slots=True)
+class RecordingOptions:
+    """How the server records (``hli-server run --record FILE --record-dir DIR ...``)."""
+
+    file: Path | None = None
+    """Record from the first cycle into this file (``--record``)."""
+    directory: Path | None = None
+    """Where recordings started by name (HTTP API, dashboard) go (``--record-dir``); None: the
+    directory of ``file``, else none (the API then refuses to start one)."""
+    flush_s: float = DEFAULT_FLUSH_S
+    max_bytes: int = DEFAULT_MAX_BYTES
+    journal_limit: int = DEFAULT_JOURNAL_LIMIT
+    overwrite: bool = False
+
+
+class SessionTap:
+    """The runtime's recording tap (module docstring). One per runtime; the runtime calls
+    :meth:`bind` with its machine, :meth:`attach` at start, :meth:`before_cycle` / :meth:`after_cycle`
+    around every cycle and :meth:`close` at stop."""
+
+    def __init__(self, config: MachineConfig, options: RecordingOptions | None = None) -> None:
+        options = options or RecordingOptions()
+        self.options = options
+        self.config = config
+        self.directory = options.directory or (options.file.parent if options.file is not None else None)
+        self.flush_s = options.flush_s
+        self.max_bytes = options.max_bytes
+        self.journal_limit = options.journal_limit
+        self.machine: Machine | Any = None
+        self.layout: Layout | None = None
+        self.inputs: HalfCodec | None = None
+        self.outputs: HalfCodec | None = None
+        self._in_cycle: int | None = None
+        self._last_in: bytes = b""
+        self._last_out: bytearray | None = None
+        self._pending: list[tuple[int, int, Any]] = []
+        self._events: list[Event] = []
+        # encoder state (off the cycle)
+        self._enc_in: bytes | None = None
+        self._enc_out: bytes | None = None
+        self._journal: list[bytes] = []
+        self._journal_text: list[str] = []
+        self._journal_text_len = 0
+        self.journal_bytes = 0
+        self.journal_lost_at: int | None = None
+        # the recording
+        self._writer: RecordingWriter | None = None
+        self._window_start: int | None = None
+        self._recording_out = False
+        self._last_flush = 0.0
+        self._last_cycle = 0
+        self.error: str | None = None
+        self._task: asyncio.Task[None] | None = None
+        self._closed = False
+        self._listening = False
+
+    # --- life cycle (the runtime) ------------------------------------------------------------
+    def bind(self, machine: Machine) -> None:
+        self.machine = machine
+
+    def attach(self, image: ProcessImage | Any) -> None:
+        """The image exists: the halves' codecs; the encoder task starts in the running loop; with
+        ``RecordingOptions.file`` the recording starts (before the first cycle)."""
+        self.layout = image.layout
+        self.inputs = HalfCodec(image.layout, _P2C)
+        self.outputs = HalfCodec(image.layout, _C2P)
+        with contextlib.suppress(RuntimeError):  # no running loop: encoded by close() / the bound
+            self._task = asyncio.get_running_loop().create_task(self._encoder(), name="hli-record")
+        if self.options.file is not None:
+            self.start(self.options.file, origin="run --record", overwrite=self.options.overwrite)
+
+    async def close(self) -> None:
+        """Stop the encoder, end a running recording cleanly (its end line). Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        task, self._task = self._task, None
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+        if self._writer is not None:
+            self.stop(reason="server stopped")
+        self._stop_listening()
+
+    # --- the cycle ---------------------------------------------------------------------------
+    def before_cycle(self, cycle: int) -> None:
+        """``cycle`` is about to latch (what the replay's feeder uses; here it marks notes made inside
+        the cycle, such as a program file the engine reads, with this cycle)."""
+        self._in_cycle = cycle
+
+    def after_cycle(self, cycle: int, latched: bytes, packed: bytearray | None) -> None:
+        """The cycle latched ``latched`` and packed ``packed`` (the cycle word, then the half)."""
+        self._in_cycle = None
+        self._last_cycle = cycle
+        pending = self._pending
+        if latched and latched != self._last_in:
+            pending.append((_IN, cycle, latched))
+            self._last_in = latched
+        if self._recording_out and packed is not None:
+            half = packed[8:]
+            if half != self._last_out:
+                pending.append((_OUT, cycle, (bytes(half), self._take_events())))
+                self._last_out = half
+            elif self._events:
+                pending.append((_OUT, cycle, (None, self._take_events())))
+        if len(pending) > MAX_PENDING:
+            self._encode(len(pending))
+
+    def _take_events(self) -> list[Event]:
+        events, self._events = self._events, []
+        return events
+
+    def _on_event(self, event: Event) -> None:
+        self._events.append(event)
+
+    def stamp(self) -> int:
+        """The cycle a note belongs to: the running cycle inside one, else the next (that latches it)."""
+        return self._in_cycle if self._in_cycle is not None else self.machine.cycle + 1
+
+    # --- notes: inputs that are no image field ---------------------------------------------------
+    def note(self, record: dict[str, Any]) -> None:
+        """An input record (``op``, ``file``, ``fault``); ``c`` is added."""
+        self._pending.append((_MISC, self.stamp(), record))
+
+    def note_op(self, name: str, args: dict[str, Any], error: BaseException | None) -> None:
+        text = None if error is None else f"{type(error).__name__}: {error}"
+        self.note({"op": name, "args": args, "error": text})
+
+    def note_fault(self, change: dict[str, Any]) -> None:
+        """A communication fault set or ended (``CommFaults.subscribe``)."""
+        self.note(dict(change))
+
+    def wrap_library(self, library: ProgramLibrary) -> ProgramLibrary:
+        """The machine's program library (global subprograms, N-02), with every lookup noted: the
+        program's name, text and origin, or that it was not found and where it was looked for."""
+        return _NotedLibrary(library, self)
+
+    def wrap_reader(self, read: Callable[[str], str] | None) -> Callable[[str], str] | None:
+        """``read_program`` of the engine, with every file it reads noted (path and text)."""
+        if read is None:
+            return None
+
+        def read_and_note(path: str) -> str:
+            text = read(path)
+            self.note({"file": path, "text": text})
+            return text
+
+        return read_and_note
+
+    # --- recording ---------------------------------------------------------------------------
+    @property
+    def recording(self) -> bool:
+        return self._writer is not None
+
+    def resolve(self, name: str | None) -> Path:
+        """The file of a recording started by name (HTTP, dashboard): inside :attr:`directory`, a
+        plain name (no path), ``.jsonl.gz`` added; None: a name from the date and time."""
+        if self.directory is None:
+            raise RecordingError(
+                "this server has no recording directory: start it with --record-dir DIR (or --record FILE)"
+            )
+        if name is None or name == "":
+            stamp = datetime.datetime.now(datetime.UTC).strftime("%Y%m%d-%H%M%S")
+            name = f"session-{stamp}"
+        if not NAME_RE.match(name):
+            raise RecordingError(
+                f"recording name {name!r}: use up to 100 characters of A-Z a-z 0-9 _ . - (no path), starting "
+                "with a letter or digit"
+            )
+        if not name.endswith(SUFFIX):
+            name += SUFFIX
+        return self.directory / name
+
+    def start(self, path: Path, *, origin: str = "api", overwrite: bool = False) -> RecordingStatus:
+        """Start recording into ``path`` (a new file, unless ``overwrite``): the header, the input
+        journal so far, then every cycle's changes. RecordingError when one runs already."""
+        if self.layout is None or self.inputs is None or self.outputs is None:
+            raise RecordingError("the server is not running yet")
+        if self._writer is not None:
+            raise RecordingError(f"a recording runs already: {self._writer.path}; stop it first")
+        self._encode(len(self._pending))
+        self._flush_journal_text()
+        window = self.machine.cycle + 1
+        try:
+            writer = RecordingWriter(path, max_bytes=self.max_bytes, overwrite=overwrite)
+        except FileExistsError:
+            raise RecordingError(f"{path} exists already; choose another name") from None
+        except OSError as exc:
+            raise RecordingError(f"cannot create {path}: {exc.strerror or exc}") from None
+        header = {
+            "record": "header",
+            "format": FORMAT,
+            "format_version": FORMAT_VERSION,
+            "server": server_info(),
+            "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="milliseconds"),
+            "origin": origin,
+            "machine": self.config.name,
+            "t_a_us": self.config.cycle_time_us,
+            "config": self.config.model_dump(mode="json"),
+            "layout": {"version": self.layout.version, "hash": self.layout.hash},
+            "inputs": self.inputs.header(),
+            "outputs": self.outputs.header(),
+            "follow_cycle": self.outputs.follow,
+            "window_start": window,
+            "journal": {
+                "from_cycle": 1,
+                "complete": self.journal_lost_at is None,
+                "lost_at": self.journal_lost_at,
+            },
+        }
+        try:
+            writer.write_line(dumps(header))
+            writer.flush()
+            for member in self._journal:
+                writer.write_member(member)
+        except OSError as exc:
+            writer.close()
+            raise RecordingError(f"cannot write {path}: {exc}") from None
+        self._writer = writer
+        self._window_start = window
+        self._recording_out = True
+        self._last_out = None
+        self._enc_out = None
+        self._events = []
+        self._last_flush = time.monotonic()
+        self.error = None
+        if not self._listening:
+            self.machine.event_listeners.append(self._on_event)
+            self._listening = True
+        logger.info("recording to %s from cycle %d", path, window)
+        return self.status()
+
+    def stop(self, reason: str = "stopped") -> RecordingStatus:
+        """End the recording: everything encoded and flushed, the end line, the file closed."""
+        writer = self._writer
+        if writer is None:
+            raise RecordingError("no recording runs")
+        self._recording_out = False
+        self._stop_listening()
+        self._encode(len(self._pending))
+        status = self.status()
+        self._writer = None
+        last = self._last_cycle
+        try:
+            writer.close({"c": last, "end": reason})
+        except OSError as exc:
+            self.error = f"closing {writer.path}: {exc}"
+            logger.error("recording %s: %s", writer.path, self.error)
+        logger.info(
+            "recording %s ended at cycle %d (%s): %d bytes", writer.path, last, reason, writer.bytes_written
+        )
+        return RecordingStatus(
+            **{**status.to_json(), "recording": False, "bytes_written": writer.bytes_written}
+        )
+
+    def _stop_listening(self) -> None:
+        if self._listening:
+            with contextlib.suppress(ValueError):
+                self.machine.event_listeners.remove(self._on_event)
+            self._listening = False
+
+    def status(self) -> RecordingStatus:
+        writer = self._writer
+        directory = str(self.directory) if self.directory is not None else None
+        if writer is None:
+            return RecordingStatus(
+                recording=False,
+                journal_bytes=self.journal_bytes,
+                journal_complete=self.journal_lost_at is None,
+                error=self.error,
+                directory=directory,
+            )
+        start = self._window_start or 0
+        return RecordingStatus(
+            recording=True,
+            file=str(writer.path),
+            name=writer.path.name,
+            started_cycle=start,
+            cycles=max(0, self.machine.cycle - start + 1),
+            bytes_written=writer.bytes_written,
+            last_flush_s_ago=round(time.monotonic() - self._last_flush, 3),
+            journal_bytes=self.journal_bytes,
+            journal_complete=self.journal_lost_at is None,
+            error=self.error,
+            directory=directory,
+        )
+
+    def flush(self) -> None:
+        """Everything so far encoded and, when recording, written out now (waits for the writer)."""
+        self._encode(len(self._pending))
+        self._flush_file()
+        writer = self._writer
+        if writer is not None:
+            try:
+                writer.wait()
+            except OSError as exc:
+                self._fail(str(exc), reason="full" if isinstance(exc, RecordingFullError) else "write error")
+
+    # --- the encoder (off the cycle) -----------------------------------------------------------
+    async def _encoder(self) -> None:
+        while True:
+            await asyncio.sleep(TICK_S)
+            try:
+                while self._pending:
+                    self._encode(ENCODE_SLICE)
+                    if self._pending:
+                        await asyncio.sleep(0)
+                if self._writer is not None and time.monotonic() - self._last_flush >= self.flush_s:
+                    self._flush_file()
+            except asyncio.CancelledError:
+                raise
+            except Exception:  # the recorder must never take the server down
+                logger.exception("the session recorder failed; the recording is stopped")
+                self._fail("the recorder failed (see the server log)")
+
+    def _flush_file(self) -> None:
+        writer = self._writer
+        if writer is None:
+            return
+        self._last_flush = time.monotonic()
+        try:
+            writer.flush()
+        except RecordingFullError as exc:
+            self._fail(str(exc), reason="full")
+        except OSError as exc:
+            self._fail(f"writing {writer.path}: {exc.strerror or exc}", reason="write error")
+
+    def _fail(self, message: str, reason: str = "error") -> None:
+        self.error = message
+        logger.error("recording: %s", message)
+        if self._writer is not None:
+            with contextlib.suppress(Exception):
+                self.stop(reason=reason)
+            self.error = message
+
+    def _encode(self, limit: int) -> None:
+        """Turn up to ``limit`` pending items into lines for the journal and the recording."""
+        if not self._pending or self.inputs is None or self.outputs is None:
+            return
+        items, self._pending = self._pending[:limit], self._pending[limit:]
+        in_rows = [raw for kind, _, raw in items if kind == _IN]
+        out_items = [(cycle, raw[0]) for kind, cycle, raw in items if kind == _OUT and raw[0] is not None]
+        out_rows = [raw for _, raw in out_items]
+        in_changes = iter(self.inputs.changes(in_rows, self._enc_in) if in_rows else [])
+        out_changes = iter(
+            self.outputs.changes(out_rows, self._enc_out, [c for c, _ in out_items]) if out_rows else []
+        )
+        if in_rows:
+            self._enc_in = in_rows[-1]
+        if out_rows:
+            self._enc_out = out_rows[-1]
+        journal: list[str] = []
+        file: list[str] = []
+        writer = self._writer
+        for kind, cycle, raw in items:
+            if kind == _IN:
+                flat = next(in_changes)
+                if flat:
+                    line = _dumps_values({"c": cycle, "i": flat})
+                    journal.append(line)
+            elif kind == _OUT:
+                half, events = raw
+                flat = next(out_changes) if half is not None else []
+                if events:
+                    record: dict[str, Any] = {"c": cycle}
+                    if flat:
+                        record["o"] = flat
+                    record["e"] = [_event_json(e) for e in events]
+                    file.append(_dumps_values(record))
+                elif flat:
+                    try:
+                        file.append(f'{{"c":{cycle},"o":{encode_json(flat)}}}\n')
+                    except ValueError:
+                        file.append(_dumps_values({"c": cycle, "o": flat}))
+                continue
+            else:
+                line = _dumps_values({"c": cycle, **raw})
+                journal.append(line)
+            if writer is not None:
+                file.append(line)
+        if journal:
+            self._journal_add(journal)
+        if file and writer is not None:
+            writer.write_lines(file)
+
+    def _journal_add(self, lines: list[str]) -> None:
+        if self.journal_lost_at is not None:
+            return
+        self._journal_text.extend(lines)
+        self._journal_text_len += sum(len(line) for line in lines)
+        if self._journal_text_len >= JOURNAL_MEMBER_BYTES:
+            self._flush_journal_text()
+
+    def _flush_journal_text(self) -> None:
+        if not self._journal_text or self.journal_lost_at is not None:
+            return
+        member = gzip_member("".join(self._journal_text))
+        self._journal_text.clear()
+        self._journal_text_len = 0
+        self._journal.append(member)
+        self.journal_bytes += len(member)
+        if self.journal_bytes > self.journal_limit:
+            self.journal_lost_at = self.machine.cycle
+            self._journal.clear()
+            logger.warning(
+                "the input journal passed its limit of %d MB at cycle %d and was dropped: a recording "
+                "started from now on cannot be replayed from the first cycle (record from the start with "
+                "`hli-server run --record FILE`, or raise --journal-limit-mb)",
+                self.journal_limit // 1024**2,
+                self.journal_lost_at,
+            )
+
+
+class _NotedLibrary:
+    """A :class:`ProgramLibrary` whose finds are inputs of the recording (``SessionTap.wrap_library``)."""
+
+    def __init__(self, inner: ProgramLibrary, tap: SessionTap) -> None:
+        self.inner = inner
+        self._tap = tap
+
+    def find(self, name: str) -> ProgramFile | None:
+        found = self.inner.find(name)
+        if found is None:
+            self._tap.note({"program_file": name, "found": None, "searched": list(self.inner.searched())})
+        else:
+            self._tap.note(
+                {"program_file": name, "found": found.name, "text": found.text, "origin": found.origin}
+            )
+        return found
+
+    def searched(self) -> tuple[str, ...]:
+        return self.inner.searched()
+
+    def __getattr__(self, name: str) -> Any:  # what else the runtime's library offers (uploads)
+        return getattr(self.inner, name)
+
+
+def _event_json(event: Event) -> dict[str, Any]:
+    return event.to_json()
+
+
+def _dumps_values(record: dict[str, Any]) -> str:
+    """:func:`dumps`, with non-finite numbers anywhere (event payloads) by name."""
+    try:
+        return dumps(record)
+    except ValueError:
+        return dumps(_finite(record))
+
+
+def _finite(value: Any) -> Any:
+    if isinstance(value, float):
+        return encode_value(value)
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v) for v in value]
+    return value
+
+
+class JournaledOperator(OperatorPort):
+    """The operator panel with every request noted in the session tap (an input of the recording),
+    refused ones too (a replay must refuse them alike). What only reads goes straight through."""
+
+    def __init__(self, panel: OperatorPort, tap: SessionTap) -> None:
+        self.panel = panel
+        self._tap = tap
+
+    def _do(self, name: str, args: dict[str, Any], call: Callable[[], Any]) -> Any:
+        try:
+            result = call()
+        except OperatorError as exc:
+            self._tap.note_op(name, args, exc)
+            raise
+        self._tap.note_op(name, args, None)
+        return result
+
+    # --- what is noted ---------------------------------------------------------------------------
+    def load_program(
+        self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
+    ) -> dict[str, Any]:
+        args: dict[str, Any] = {"channel": channel, "text": text, "name": name}
+        if files:  # the subprograms uploaded with it (N-02): the replay uploads them again
+            args["files"] = dict(files)
+        result: dict[str, Any] = self._do(
+            "load_program", args, lambda: self.panel.load_program(channel, text, name, files)
+        )
+        return result
+
+    def select_program(self, channel: int, number: int) -> dict[str, Any]:
+        result: dict[str, Any] = self._do(
+            "select_program",
+            {"channel": channel, "number": number},
+            lambda: self.panel.select_program(channel, number),
+        )
+        return result
+
+    def start(self, channel: int) -> Accepted:
+        result: Accepted = self._do("start", {"channel": channel}, lambda: self.panel.start(channel))
+        return result
+
+    def reset(self, channel: int) -> Accepted:
+        result: Accepted = self._do("reset", {"channel": channel}, lambda: self.panel.reset(channel))
+        return result
+
+    def feedhold(self, channel: int, on: bool) -> Accepted:
+        result: Accepted = self._do(
+            "feedhold", {"channel": channel, "on": on}, lambda: self.panel.feedhold(channel, on)
+        )
+        return result
+
+    def mode(self, channel: int, mode: Mode) -> Accepted:
+        result: Accepted = self._do(
+            "mode", {"channel": channel, "mode": int(mode)}, lambda: self.panel.mode(channel, mode)
+        )
+        return result
+
+    def override(self, channel: int, permille: int) -> Accepted:
+        result: Accepted = self._do(
+            "override",
+            {"channel": channel, "permille": permille},
+            lambda: self.panel.override(channel, permille),
+        )
+        return result
+
+    def jog(self, channel: int, axis: str, direction: int) -> Accepted:
+        result: Accepted = self._do(
+            "jog",
+            {"channel": channel, "axis": axis, "direction": direction},
+            lambda: self.panel.jog(channel, axis, direction),
+        )
+        return result
+
+    def probe(self, channel: int, on: bool) -> Accepted:
+        result: Accepted = self._do(
+            "probe", {"channel": channel, "on": on}, lambda: self.panel.probe(channel, on)
+        )
+        return result
+
+    def reference(self, axis: str) -> Accepted:
+        result: Accepted = self._do("reference", {"axis": axis}, lambda: self.panel.reference(axis))
+        return result
+
+    def inject_faults(self, axis: str, **fields: float | bool) -> dict[str, Any]:
+        result: dict[str, Any] = self._do(
+            "inject_faults", {"axis": axis, **fields}, lambda: self.panel.inject_faults(axis, **fields)
+        )
+        return result
+
+    def clear_faults(self, axis: str) -> dict[str, Any]:
+        result: dict[str, Any] = self._do(
+            "clear_faults", {"axis": axis}, lambda: self.panel.clear_faults(axis)
+        )
+        return result
+
+    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+        result: dict[str, Any] = self._do(
+            "set_soft_limits", {"axis": axis, **values}, lambda: self.panel.set_soft_limits(axis, **values)
+        )
+        return result
+
+    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+        result: dict[str, Any] = self._do(
+            "update_axis_record",
+            {"axis": axis, **values},
+            lambda: self.panel.update_axis_record(axis, **values),
+        )
+        return result
+
+    # --- what only reads -------------------------------------------------------------------------
+    @property
+    def cycle(self) -> int:
+        return self.panel.cycle
+
+    @property
+    def time_s(self) -> float:
+        return self.panel.time_s
+
+    @property
+    def t_a_us(self) -> int:
+        return self.panel.t_a_us
+
+    @property
+    def machine_name(self) -> str:
+        return self.panel.machine_name
+
+    def channel_numbers(self) -> list[int]:
+        return self.panel.channel_numbers()
+
+    def axis_names(self, channel: int | None = None) -> list[str]:
+        return self.panel.axis_names(channel)
+
+    def faults(self, axis: str) -> dict[str, Any]:
+        return self.panel.faults(axis)
+
+    def soft_limits(self, axis: str) -> dict[str, Any]:
+        return self.panel.soft_limits(axis)
+
+    def snapshot(self) -> dict[str, Any]:
+        return self.panel.snapshot()
+
+    def alarms(self, history: int = 200) -> dict[str, Any]:
+        return self.panel.alarms(history)
+
+    def areas(self, channel: int) -> dict[str, Any]:
+        return self.panel.areas(channel)
+
+    def timing(self) -> dict[str, Any]:
+        return self.panel.timing()
+
+    def scene(self, channel: int) -> dict[str, Any]:
+        return self.panel.scene(channel)
+
+    def programs(self, channel: int) -> list[dict[str, Any]]:
+        return self.panel.programs(channel)
+
+    def collision_pairs(self) -> list[dict[str, Any]]:
+        return self.panel.collision_pairs()
+
+
+OPERATOR_REQUESTS: Final = (
+    "load_program",
+    "select_program",
+    "start",
+    "reset",
+    "feedhold",
+    "mode",
+    "override",
+    "jog",
+    "probe",
+    "reference",
+    "inject_faults",
+    "clear_faults",
+    "set_soft_limits",
+    "update_axis_record",
+)
+"""The operator requests a recording holds (and a replay repeats), by :class:`OperatorPort` name."""
+
+
+class SessionRecorderPort:
+    """The :class:`~hli_server.adapters.host.RecorderPort` of a runtime's tap: recordings by name in
+    the recording directory, errors as the operator's (409 / 404 / 422 in the HTTP API)."""
+
+    def __init__(self, tap: SessionTap) -> None:
+        self._tap = tap
+
+    def status(self) -> dict[str, Any]:
+        return self._tap.status().to_json()
+
+    def start(self, name: str | None = None) -> dict[str, Any]:
+        tap = self._tap
+        try:
+            path = tap.resolve(name)
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise RecordingError(f"cannot create the recording directory {path.parent}: {exc}") from None
+            return tap.start(path, origin="api").to_json()
+        except RecordingError as exc:
+            raise _operator_error(exc) from None
+
+    def stop(self) -> dict[str, Any]:
+        try:
+            return self._tap.stop().to_json()
+        except RecordingError as exc:
+            raise ConflictError(str(exc)) from None
+
+    def files(self) -> list[dict[str, Any]]:
+        directory = self._tap.directory
+        if directory is None or not directory.is_dir():
+            return []
+        running = self._tap.status().file
+        out = []
+        for path in sorted(directory.glob(f"*{SUFFIX}")):
+            with contextlib.suppress(OSError):
+                stat = path.stat()
+                out.append(
+                    {
+                        "name": path.name,
+                        "bytes": stat.st_size,
+                        "modified": datetime.datetime.fromtimestamp(stat.st_mtime, datetime.UTC).isoformat(
+                            timespec="seconds"
+                        ),
+                        "recording": str(path) == running,
+                    }
+                )
+        return out
+
+    def file(self, name: str) -> Path:
+        """The path of recording ``name`` in the directory (NotFoundError when there is none)."""
+        directory = self._tap.directory
+        if directory is None or not NAME_RE.match(name) or not name.endswith(SUFFIX):
+            raise NotFoundError(f"no recording {name!r}")
+        path = directory / name
+        if not path.is_file():
+            raise NotFoundError(f"no recording {name!r} in {directory}")
+        return path
+
+
+def _operator_error(exc: RecordingError) -> OperatorError:
+    text = str(exc)
+    if "recording name" in text:
+        return InvalidRequestError(text)
+    return ConflictError(text)

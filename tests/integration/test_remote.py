@@ -1,0 +1,127 @@
+"""The doors process' link to the engine (``runtime/remote.py``, issue 26), over a real socket pair.
+
+The engine's end (``OperatorService``) runs on a stepped runtime in this process; the doors' end
+(``RemoteLink``, ``RemoteOperator``, ``EventMirror``) uses the other end of the pair, as the doors process
+does: operator requests, the event log mirrored with the engine's numbers, steps with traces, a step
+cancelled by its client, and requests that are not the operator's refused.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import threading
+
+import pytest
+
+from hli_server.adapters.host import ConflictError, NotFoundError, OperatorError
+from hli_server.configuration import load_machine
+from hli_server.runtime import Runtime
+from hli_server.runtime.remote import (
+    EventMirror,
+    FrameReader,
+    OperatorService,
+    RemoteLink,
+    RemoteOperator,
+    frame,
+)
+
+PROGRAM = "N10 G01 X200 F600\nN20 M30\n"  # 20 s: it still runs when the test is done
+
+
+def test_frames_arrive_whole_however_the_bytes_are_split() -> None:
+    messages = [("call", 1, "snapshot", (), {}), ("events", [(1, "x")]), ("ok", 2, b"\x00" * 70_000)]
+    data = b"".join(frame(m) for m in messages)
+    for size in (1, 3, 4096, len(data)):
+        reader = FrameReader()
+        out = []
+        for i in range(0, len(data), size):
+            out += reader.feed(data[i : i + size])
+        assert out == messages
+
+
+class Engine:
+    """A stepped runtime and its ``OperatorService`` on a loop of their own (a thread): the engine's process
+    of ``hli-server run``, so that the doors' side may block in this test's loop as it does in its own."""
+
+    def __init__(self) -> None:
+        self.ours, self.theirs = socket.socketpair()
+        self.ready = threading.Event()
+        self.rt: Runtime | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stop: asyncio.Event | None = None
+        self._thread = threading.Thread(target=lambda: asyncio.run(self._main()), daemon=True)
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop = asyncio.Event()
+        async with Runtime(load_machine(None), clock="stepped", http_port=None) as rt:
+            self.rt = rt
+            _, service = await self._loop.connect_accepted_socket(lambda: OperatorService(rt), self.ours)
+            remove = rt.add_service(service)
+            self.ready.set()
+            await self._stop.wait()
+            remove()
+            service.close()
+
+    def __enter__(self) -> Engine:
+        self._thread.start()
+        assert self.ready.wait(30)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        assert self._loop is not None
+        assert self._stop is not None
+        self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(30)
+
+
+@pytest.mark.req("H-01", "H-07")
+async def test_operator_requests_events_and_steps_cross_the_link() -> None:
+    with Engine() as engine:
+        rt = engine.rt
+        assert rt is not None
+        loop = asyncio.get_running_loop()
+        mirror = EventMirror()
+        mirror.start(loop)
+        seen: list[str] = []
+        mirror.subscribe(lambda e: seen.append(e.kind))
+        link = RemoteLink(engine.theirs, mirror.take)
+        link.start(loop)
+        op = RemoteOperator(link, rt.image, rt.config.cycle_time_us)
+        try:
+            assert op.machine_name == "demo"
+            assert op.channel_numbers() == [1, 2]
+            assert op.load_program(1, PROGRAM, "p")["lines"] == 2
+            assert op.start(1).effective_cycle == 1
+            with pytest.raises(NotFoundError, match="no channel 9"):
+                op.start(9)
+            assert await op.step(300) == 300
+            trace = await op.step_traced(5, ["gpAx[0]^ipo_state.cmd_pos_r"])
+            assert trace.cycles == [301, 302, 303, 304, 305]
+            assert op.cycle == 305  # from the image
+            events, latest = mirror.since(0)
+            assert latest == rt.event_log.latest >= 2  # the engine's numbers, the engine's events
+            assert [e.seq for e in events] == [e.seq for e in rt.events_since(0)[0]]
+            await asyncio.sleep(0)  # the subscribers are called from the loop
+            assert "program_state" in seen
+            with pytest.raises(ConflictError):
+                op.load_program(1, PROGRAM, "again")  # a program runs: the channel's own refusal
+            with pytest.raises(OperatorError, match="not an operator request"):
+                link.call("call", "_channel", (1,), {})
+            timing = op.timing()
+            assert timing["clock"] == "stepped"
+            assert timing["cycles"] == 305
+
+            step = asyncio.create_task(op.step(1_000_000))  # a long step, then its client goes away
+            await asyncio.sleep(0.3)
+            step.cancel()
+            with pytest.raises(asyncio.CancelledError):
+                await step
+            await asyncio.sleep(0.3)
+            stopped_at = rt.machine.cycle
+            await asyncio.sleep(0.3)
+            assert rt.machine.cycle == stopped_at < 1_000_305  # cancelled in the engine too
+            assert await op.step(1) == stopped_at + 1  # the next step runs
+        finally:
+            link.close()
