@@ -388,21 +388,29 @@ def _pairs(
     a, b = _axis(st, 0, prism), _axis(st, 1, prism)
     # segments in the prism's base plane: lines, arcs whose plane has none of the prism's axes (a line
     # from start to end for it), arcs it sees at an angle (projected)
-    sx, sy, ex, ey = _at(p.start, a, path), _at(p.start, b, path), _at(p.end, a, path), _at(p.end, b, path)
     segment = ~arcs | rel.linear[prism]
-    if plane is not None:
-        mixed = arcs & rel.mixed[prism]
-        if mixed.any():
-            a_in, b_in = rel.a_in[prism] & mixed, rel.b_in[prism] & mixed
-            sx = np.where(a_in, _at(p.lo, a, path), sx)
-            ex = np.where(a_in, _at(p.hi, a, path), ex)
-            sy = np.where(b_in, _at(p.lo, b, path), sy)
-            ey = np.where(b_in, _at(p.hi, b, path), ey)
-            segment |= mixed & ((a_in & (sy == ey)) | (b_in & (sx == ex)) | (~a_in & ~b_in))
-    k = np.flatnonzero(segment)
+    mixed = arcs & rel.mixed[prism] if plane is not None else None
+    candidates = segment if mixed is None or not mixed.any() else segment | mixed
+    k = np.flatnonzero(candidates)
     if k.shape[0]:
-        pk = prism[k]
-        result[k] = _segments(st, pk, st.circle[pk], sx[k], sy[k], ex[k], ey[k], protection)
+        # gathered for the candidate pairs only (arcs in the prism's base plane are tested as arcs)
+        pk, qk = prism[k], path[k]
+        ak, bk = _sub(a, k), _sub(b, k)
+        sx, sy, ex, ey = _at(p.start, ak, qk), _at(p.start, bk, qk), _at(p.end, ak, qk), _at(p.end, bk, qk)
+        chosen = segment[k]
+        if mixed is not None and candidates is not segment:
+            mk = mixed[k]
+            a_in, b_in = rel.a_in[pk] & mk, rel.b_in[pk] & mk
+            sx = np.where(a_in, _at(p.lo, ak, qk), sx)
+            ex = np.where(a_in, _at(p.hi, ak, qk), ex)
+            sy = np.where(b_in, _at(p.lo, bk, qk), sy)
+            ey = np.where(b_in, _at(p.hi, bk, qk), ey)
+            chosen = chosen | (mk & ((a_in & (sy == ey)) | (b_in & (sx == ex)) | (~a_in & ~b_in)))
+        if not chosen.all():
+            c = np.flatnonzero(chosen)
+            k, pk, sx, sy, ex, ey = k[c], pk[c], sx[c], sy[c], ex[c], ey[c]
+        if k.shape[0]:
+            result[k] = _segments(st, pk, st.circle[pk], sx, sy, ex, ey, protection)
     if plane is not None and not chords:
         as_arc = arcs & rel.circle[prism]
         if as_arc.any():
