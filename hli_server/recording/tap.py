@@ -433,11 +433,16 @@ class SessionTap:
             name += SUFFIX
         return self.directory / name
 
-    def start(self, path: Path, *, origin: str = "api", overwrite: bool = False) -> RecordingStatus:
+    def start(
+        self, path: Path, *, origin: str = "api", overwrite: bool = False, outputs_every: int | None = None
+    ) -> RecordingStatus:
         """Start recording into ``path`` (a new file, unless ``overwrite``): the header, the input
-        journal so far, then every cycle's changes. RecordingError when one runs already."""
+        journal so far, then every cycle's changes (the outputs every ``outputs_every`` cycles; None: the
+        server's setting). RecordingError when one runs already."""
         if self.layout is None or self.inputs is None or self.outputs is None:
             raise RecordingError("the server is not running yet")
+        if outputs_every is not None and outputs_every < 1:
+            raise RecordingError(f"outputs_every must be at least 1 cycle, not {outputs_every}")
         if self._writer is not None:
             raise RecordingError(f"a recording runs already: {self._writer.path}; stop it first")
         self._encode(len(self._pending))
@@ -463,7 +468,7 @@ class SessionTap:
             "inputs": self.inputs.header(),
             "outputs": self.outputs.header(),
             "follow_cycle": self.outputs.follow,
-            "outputs_every": self.outputs_every,
+            "outputs_every": outputs_every or self.options.outputs_every,
             "window_start": window,
             "journal": {
                 "from_cycle": 1,
@@ -480,6 +485,7 @@ class SessionTap:
             writer.close()
             raise RecordingError(f"cannot write {path}: {exc}") from None
         self._writer = writer
+        self.outputs_every = outputs_every or self.options.outputs_every
         self._window_start = window
         self._recording_out = True
         self._next_out = window
