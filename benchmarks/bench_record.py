@@ -138,7 +138,7 @@ def main() -> None:
         "--outputs-every",
         type=int,
         default=100,
-        help="the recording samples the outputs every N cycles (run's --record-outputs-every; 1: every cycle)",
+        help="the recording samples the outputs every N cycles (--record-outputs-every; 1: every cycle)",
     )
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
@@ -188,7 +188,8 @@ def main() -> None:
     hours = cycles * t_a_us / 1e6 / 3600
     per_engine = alone / cycles * 1e6
     print(
-        f"engine: {engine}; {cycles:,} cycles = {cycles / 60_000:.1f} min of machine time; wall {wall:.0f} s; "
+        f"engine: {engine}; {cycles:,} cycles = {cycles / 60_000:.1f} min of machine time; "
+        f"wall {wall:.0f} s; "
         f"outputs sampled every {args.outputs_every} cycles"
     )
     print(

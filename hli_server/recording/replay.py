@@ -6,8 +6,9 @@ The replay builds the recorded machine from the recorded configuration and runs 
 cycle into the image and repeats the operator's requests stamped with it (program texts and the files
 the engine read come from the recording); after the cycle it compares the CNC->PLC half the engine
 packed with the recorded one at every recorded sample of the outputs (every cycle in format version 1;
-every ``outputs_every`` cycles from the window's first in version 2), and the events at every cycle. The first difference ends the replay (``all_differences``:
-every difference is counted, the first ``max_differences`` kept).
+every ``outputs_every`` cycles from the window's first in version 2), and the events at every cycle.
+The first difference ends the replay (``all_differences``: every difference is counted, the first
+``max_differences`` kept).
 
 Verdicts and exit statuses: ``pass`` 0, ``differ`` 1, ``cannot replay`` 3 (2 is a usage error): a file that
 is no recording or of a newer format, a recording whose start state cannot be rebuilt (started in a

@@ -74,8 +74,8 @@ if TYPE_CHECKING:
 __all__ = [
     "DEFAULT_FLUSH_S",
     "DEFAULT_JOURNAL_LIMIT",
-    "DEFAULT_OUTPUTS_EVERY",
     "DEFAULT_MAX_BYTES",
+    "DEFAULT_OUTPUTS_EVERY",
     "OPERATOR_REQUESTS",
     "HalfCodec",
     "JournaledOperator",
@@ -506,9 +506,13 @@ class SessionTap:
         if writer is None:
             raise RecordingError("no recording runs")
         packed, last = self._packed, self._last_cycle
-        if packed is not None and self._next_out - self.outputs_every < last:  # the last cycle is a sample too
+        if (
+            packed is not None and self._next_out - self.outputs_every < last
+        ):  # the last cycle is a sample too
             half = packed[8:]
-            self._pending.append((_OUT, last, (bytes(half) if half != self._last_out else None, self._take_events())))
+            self._pending.append(
+                (_OUT, last, (bytes(half) if half != self._last_out else None, self._take_events()))
+            )
         self._recording_out = False
         self._packed = None
         self._stop_listening()

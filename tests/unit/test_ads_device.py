@@ -790,7 +790,9 @@ def _fast_cases(layout: Layout) -> list[bytes]:
     out += [encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.WRITE, 8, f) for f in frames[4:6]]
     out += [encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ_WRITE, 9, f) for f in frames[6:]]
     out.append(encode_request(AmsAddress(SERVER, 9999), CLIENT, CommandId.READ, 1, frames[0]))  # no port
-    out.append(encode_request(AmsAddress(NetId.parse("1.2.3.4.5.6"), 851), CLIENT, CommandId.READ, 1, frames[0]))
+    out.append(
+        encode_request(AmsAddress(NetId.parse("1.2.3.4.5.6"), 851), CLIENT, CommandId.READ, 1, frames[0])
+    )
     out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ_STATE, 1, b""))  # not fast
     out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ, 1, frames[0][:8]))  # short
     return out
@@ -838,8 +840,10 @@ def test_the_fast_path_answers_exactly_as_handle_or_leaves_the_frame_to_it(image
                     slow.handle(slow_session, packet)
             continue
         answered += 1
-        assert len(packets) == 1 and isinstance(packets[0], AmsPacket), frame.hex()
+        assert len(packets) == 1, frame.hex()
+        assert isinstance(packets[0], AmsPacket), frame.hex()
         assert reply == slow.handle(slow_session, packets[0]), frame.hex()
-    assert answered >= 8 and left >= 4
+    assert answered >= 8
+    assert left >= 4
     assert fast.stats.requests == slow.stats.requests
     assert fast_session.handles.keys() == slow_session.handles.keys()

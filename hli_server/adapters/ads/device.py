@@ -459,7 +459,9 @@ class AdsDevice:
             logger.exception("ADS: request %d to port %d from %s failed", cmd, tp, session.name)
             payload = error_reply_payload(cmd, ErrorCode.GENERAL_DEVICE_ERROR)
         return (
-            _FRAME_HEAD.pack(0, 32 + len(payload), sn, sp, tn, tp, cmd, _RESPONSE_FLAGS, len(payload), 0, invoke)
+            _FRAME_HEAD.pack(
+                0, 32 + len(payload), sn, sp, tn, tp, cmd, _RESPONSE_FLAGS, len(payload), 0, invoke
+            )
             + payload
         )
 
