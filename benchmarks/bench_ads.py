@@ -522,6 +522,12 @@ def main() -> None:
             f"hli-server / thread floor {to_thread:.2f}, asyncio floor / thread floor "
             f"{floor.rate / thread.rate if thread.rate else 0:.2f}"
         )
+        print(  # the median round trip: what a shared machine's stalls (the p99s) disturb least
+            f"{mode}: median round trip hli-server {ours.percentile(50):.1f} us, pyads.testserver "
+            f"{ref.percentile(50):.1f} us, asyncio floor {floor.percentile(50):.1f} us, thread floor "
+            f"{thread.percentile(50):.1f} us: hli-server - asyncio floor "
+            f"{ours.percentile(50) - floor.percentile(50):+.1f} us"
+        )
     print_lateness(timing)
 
 
