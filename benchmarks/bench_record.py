@@ -57,6 +57,27 @@ async def main():
         rt.image.write(unit + "low.enable_w", True)
         rt.image.write(unit + "high.enable_w", True)
     await rt.step(2)
+    # the tap's own time, measured where it is spent (both workers: the plain one keeps the input journal)
+    tap = rt.session
+    spent = {"cycle_ns": 0, "encode_ns": 0}
+    ns = time.perf_counter_ns
+    after_cycle, encode = tap.after_cycle, tap._encode
+    def timed_after_cycle(cycle, latched, packed):
+        t = ns()
+        after_cycle(cycle, latched, packed)
+        spent["cycle_ns"] += ns() - t
+    def timed_encode(limit):
+        t = ns()
+        encode(limit)
+        spent["encode_ns"] += ns() - t
+    tap.after_cycle, tap._encode = timed_after_cycle, timed_encode
+    import threading
+    def writer_cpu():
+        total = 0.0
+        for th in threading.enumerate():
+            if th.name.startswith("hli-record-writer") and th.ident is not None:
+                total += time.clock_gettime(time.pthread_getcpuclockid(th.ident))
+        return total
     import gc
     gc.collect()
     gc.freeze()  # as `hli-server run` does once it is up (Runtime.serve)
@@ -67,8 +88,11 @@ async def main():
         cmd = line.split()
         if cmd[0] == "stop":
             t0, m0 = time.process_time(), time.thread_time()
+            writer = writer_cpu()
             await rt.stop()
             print(json.dumps({"cpu": time.process_time() - t0, "main": time.thread_time() - m0,
+                              "cycle_s": spent["cycle_ns"] / 1e9, "encode_s": spent["encode_ns"] / 1e9,
+                              "writer_s": writer,
                               "restarts": restarts,
                               "alarms": len(rt.machine.active_alarms)}), flush=True)
             return
@@ -212,6 +236,15 @@ def main() -> None:
         f"of it on the event loop's thread (the cycle, the encoder; not the writer thread's compression): "
         f"{overhead_main:.2f} µs/cycle = {overhead_main / t_a_us * 100:.2f} % of T_A, "
         f"{overhead_main / per_plain * 100:.1f} % of the runtime's time per cycle"
+    )
+    tap = {k: (end_record[k] - end_plain[k]) / cycles * 1e6 for k in ("cycle_s", "encode_s")}
+    writer_us = end_record["writer_s"] / cycles * 1e6
+    direct = tap["cycle_s"] + tap["encode_s"] + writer_us
+    print(
+        f"measured in the tap (recording - journal only, wall time of the calls): in the cycle "
+        f"{tap['cycle_s']:.3f} µs/cycle, encoder {tap['encode_s']:.3f} µs/cycle, writer thread CPU "
+        f"{writer_us:.3f} µs/cycle: {direct:.2f} µs/cycle = {direct / per_engine * 100:.1f} % of the "
+        f"engine's cycle; the cycle's own share: {tap['cycle_s'] / per_engine * 100:.1f} %"
     )
     print(
         f"replay: {report.verdict} in {replay_cpu:.1f} s CPU = {cycles / replay_cpu:,.0f} cycles/s; "
