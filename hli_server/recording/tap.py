@@ -280,8 +280,9 @@ class SessionTap:
             raise ValueError(f"outputs_every must be at least 1 cycle, not {options.outputs_every}")
         self.outputs_every = options.outputs_every
         self._next_out = 0
-        self._packed: bytearray | None = None
         """the next cycle whose outputs are sampled (while recording)"""
+        self._packed: bytearray | None = None
+        """the runtime's packing buffer, for the sample of the recording's last cycle"""
         self.machine: Machine | Any = None
         self.layout: Layout | None = None
         self.inputs: HalfCodec | None = None
