@@ -480,13 +480,21 @@ class Harness:
         return self._call_soon(lambda: self.runtime.record(signals))
 
     # --- recording and replay (issue 25) -----------------------------------------------------------
-    def record(self, path: str | os.PathLike[str], *, overwrite: bool = True) -> SessionRecording:
+    def record(
+        self, path: str | os.PathLike[str], *, overwrite: bool = True, outputs_every: int | None = None
+    ) -> SessionRecording:
         """Record this session into ``path`` (gzip JSON Lines, docs/record-replay.md) from the next cycle
-        on, with every input since the first cycle; ``with hli.record(p): ...`` or ``.stop()``."""
+        on, with every input since the first cycle; ``with hli.record(p): ...`` or ``.stop()``. The
+        outputs are sampled every ``outputs_every`` cycles (None: the server's setting, 100 by default;
+        1: every cycle, for a replay that names the exact cycle of a difference)."""
         self._loop_or_raise()
         target = Path(os.fspath(path))
         runtime = self.runtime
-        self._call_soon(lambda: runtime.session.start(target, origin="pytest", overwrite=overwrite))
+        self._call_soon(
+            lambda: runtime.session.start(
+                target, origin="pytest", overwrite=overwrite, outputs_every=outputs_every
+            )
+        )
         return SessionRecording(self, target)
 
     def replay(self, path: str | os.PathLike[str], **options: Any) -> Any:
