@@ -19,7 +19,15 @@ from typing import Any, Protocol
 
 from hli_server.engine.geometry import LineSegment, Point, Segment, arc_from_centre
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
-from hli_server.engine.nc.interpreter import PAUSE, Directive, FlushStop, FlushWait, MeasMode, SyncAction
+from hli_server.engine.nc.interpreter import (
+    PAUSE,
+    Directive,
+    FlushStop,
+    FlushWait,
+    MeasMode,
+    Slope,
+    SyncAction,
+)
 from hli_server.engine.planner import Marker, MarkerKind, Motion
 
 __all__ = [
@@ -172,6 +180,8 @@ class Decoder:
         self.current_block: Block | None = None
         self._position_before_area: list[float] | None = None
         self.blocks_decoded = 0
+        self.slope_handler: Callable[[int | None], None] | None = None
+        """Switches the acceleration profile (``#SLOPE``: 0..3 as P-CHAN-00071, None: the default)."""
         self.last_centre: dict[str, float] = {}
         """I, J, K of the last circle programmed (V.G.I, V.G.J, V.G.K)."""
 
@@ -231,6 +241,14 @@ class Decoder:
             return [Marker(MarkerKind.ACTION, block, payload=self._end_wait)]
         if isinstance(out, FlushStop):
             return [Marker(MarkerKind.ACTION, block, payload=_nothing)]
+        if isinstance(out, Slope):
+            # #SLOPE (M-02): the path comes to rest here and the axes with it, then the profile
+            # changes (the filter of the new profile starts at rest; docs/nc-language.md)
+            handler = self.slope_handler
+            if handler is None:
+                return []
+            profile = out.profile
+            return [Marker(MarkerKind.ACTION, block, payload=lambda: handler(profile))]
         if isinstance(out, MeasMode):
             self.modal.meas_type = out.meas_type  # modal, decoded in order (the G100 blocks after it)
             return []

@@ -318,8 +318,9 @@ class Planner:
         return None
 
     def _step_planned(self) -> tuple[Point | None, list[Marker]]:
-        """Advance the planned (step-profile) path one cycle. Returns the new path point (None if nothing moved) and the markers
-        reached in this cycle, in order. A marker is reached only at standstill."""
+        """Advance the planned (step-profile) path one cycle. Returns the new path point (None if
+        nothing moved) and the markers reached in this cycle, in order. A marker is reached only at
+        standstill."""
         if self._dirty:
             self._backward_pass()
         reached: list[Marker] = []

@@ -276,7 +276,7 @@ class DynPosLimits(Monitor):
                     lim.stop_s = None
                     lim.generation = planner.generation
                     self._fire(lim, DplEvent.RELEASE)
-                elif lim.state == _BRAKING and planner.velocity == 0.0 and planner.s_abs >= lim.stop_s - _EPS:
+                elif lim.state == _BRAKING and planner.at_rest and planner.s_abs >= lim.stop_s - _EPS:
                     self._fire(lim, DplEvent.STANDSTILL)
 
     # --- pieces --------------------------------------------------------------------------

@@ -318,8 +318,9 @@ KERNEL_HASH_COMMANDS: Final = frozenset(
 """``#`` commands of the kernel (the programming manual's command overview, as ISG's editor lists them);
 any of them that the simulator does not model is refused by name with alarm 910110, any other ``#``
 word with 910109."""
+SLOPE_TYPES: Final = ("STEP", "TRAPEZ", "SIN2", "HSC")
+"""``#SLOPE [TYPE=<ident>]``'s profiles (P-CHAN-00071's 0..3)."""
 MOTION_FUNCTIONS: Final[dict[str, str]] = {
-    "SLOPE": "acceleration profiles (#SLOPE)",
     "CS": "coordinate systems (#CS)",
     "ACS": "clamping coordinate systems (#ACS)",
     "ROTATION": "contour rotation (#ROTATION)",
@@ -1537,6 +1538,8 @@ class _BlockParser:
             return Hash(raw, self.number, "FLUSH", options, [])
         if name == "MEAS" and self.keyword("MODE"):
             return self.meas_mode()
+        if name == "SLOPE":
+            return self.slope()
         if name == "ENDVAR":
             self.fail(A_DECLARATION, "#ENDVAR without #VAR")
         if name == "VAR":
@@ -1637,6 +1640,57 @@ class _BlockParser:
                 f"{self.word_at(self.pos)!r} after #MEAS MODE: #MEAS MODE [<type>] stands alone in its block",
             )
         return Hash(self.raw, self.number, "MEAS MODE", [], args)
+
+    def slope(self) -> Stmt:
+        """``#SLOPE [TYPE=<ident> [NO_OPT=..]]`` and ``#SLOPE DEFAULT`` (207190411): the acceleration
+        profile of the path from here on. ``options`` holds ``TYPE=<ident>`` (STEP, TRAPEZ, SIN2,
+        HSC), ``NO_OPT=<0|1>`` or ``DEFAULT``."""
+        options: list[str] = []
+        if self.keyword("DEFAULT"):
+            options.append("DEFAULT")
+        else:
+            self.expect("[", "after #SLOPE: #SLOPE [TYPE=STEP|TRAPEZ|SIN2|HSC] or #SLOPE DEFAULT")
+            self.depth += 1
+            while True:
+                self.blanks()
+                if self.peek() == "]":
+                    self.pos += 1
+                    self.depth -= 1
+                    break
+                if self.peek() == ",":
+                    self.pos += 1
+                    continue
+                if self.keyword("TYPE"):
+                    self.expect("=", "after #SLOPE [TYPE")
+                    self.blanks()
+                    start = self.pos
+                    while self.pos < self.n and self.u[self.pos] in _NAME_CHARS:
+                        self.pos += 1
+                    ident = self.u[start : self.pos]
+                    if ident not in SLOPE_TYPES:
+                        self.fail(
+                            A_CONTROL_SYNTAX,
+                            f"#SLOPE [TYPE={ident}]: the profiles are {', '.join(SLOPE_TYPES)}",
+                        )
+                    options.append(f"TYPE={ident}")
+                elif self.keyword("NO_OPT"):
+                    self.expect("=", "after #SLOPE [.. NO_OPT")
+                    self.blanks()
+                    if self.peek() not in ("0", "1") or (self.peek(1) not in ("", " ", "\t", "]", ",")):
+                        self.fail(A_CONTROL_SYNTAX, "#SLOPE [.. NO_OPT=<0|1>]: 0 or 1")
+                    options.append(f"NO_OPT={self.peek()}")
+                    self.pos += 1
+                else:
+                    got = self.word_at(self.pos) if self.pos < self.n else "the end of the block"
+                    self.fail(A_CONTROL_SYNTAX, f"#SLOPE [..]: unexpected {got!r} (TYPE=.., NO_OPT=..)")
+            if not any(o.startswith("TYPE=") for o in options):
+                self.fail(A_CONTROL_SYNTAX, "#SLOPE [..] without TYPE=STEP|TRAPEZ|SIN2|HSC")
+        if not self.at_end():
+            self.fail(
+                A_CONTROL_SYNTAX,
+                f"{self.word_at(self.pos)!r} after #SLOPE: #SLOPE [..] stands alone in its block",
+            )
+        return Hash(self.raw, self.number, "SLOPE", options, [])
 
     def file_name(self, named: bool = False) -> Stmt:
         """``#FILE NAME [MSG="report.txt"]`` (207504523; older ``#FILENAME``): the file ``#MSG SAVE``
