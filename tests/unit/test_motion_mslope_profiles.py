@@ -3,6 +3,8 @@ stepped cycle by cycle: the axes' setpoints are what a drive would get."""
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -50,9 +52,9 @@ def trace(m: Machine, program: str, axis: str = "X") -> list[float]:
 
 
 def derivatives(xs: list[float]) -> tuple[list[float], list[float], list[float]]:
-    v = [(b - a) / T_A for a, b in zip(xs, xs[1:], strict=False)]
-    acc = [(b - a) / T_A for a, b in zip(v, v[1:], strict=False)]
-    jerk = [(b - a) / T_A for a, b in zip(acc, acc[1:], strict=False)]
+    v = [(b - a) / T_A for a, b in pairwise(xs)]
+    acc = [(b - a) / T_A for a, b in pairwise(v)]
+    jerk = [(b - a) / T_A for a, b in pairwise(acc)]
     return v, acc, jerk
 
 
@@ -222,7 +224,9 @@ def test_property_a_jerk_limited_brake_stops_within_its_profiles_distance(
     taps=st.integers(min_value=1, max_value=60),
     sin2=st.booleans(),
 )
-def test_property_the_filtered_path_never_passes_the_planned_one(steps: list[float], taps: int, sin2: bool) -> None:
+def test_property_the_filtered_path_never_passes_the_planned_one(
+    steps: list[float], taps: int, sin2: bool
+) -> None:
     profile = SlopeProfile(SlopeType.SIN2 if sin2 else SlopeType.TRAPEZ, taps * T_A)
     f = PathFilter(profile.kernel(T_A))
     s = 0.0
@@ -236,3 +240,87 @@ def test_property_the_filtered_path_never_passes_the_planned_one(steps: list[flo
         out = f.push(s)
     assert out == pytest.approx(s)
     assert f.settled
+
+
+# --- the monitors with a profile ---------------------------------------------------------------------
+FCT = "FCT_LOOK_AHEAD_STANDARD | FCT_DYN_POS_LIMIT"
+
+
+def _set_limit(m: Machine, mm: float) -> None:
+    unit = m.hli.axes[m.axis("X").index].ipo_mc_control.dyn_pos_limit_high
+    unit.command_w = round(mm * 10_000)
+    unit.enable_w = True
+
+
+@pytest.mark.req("M-04", "C43-06")
+@pytest.mark.parametrize("profile", [0, 1, 2])
+@pytest.mark.parametrize("feed", [3000, 6000, 18000])
+def test_dynamic_limit_brakes_with_the_profile_and_stops_within_one_cycle(profile: int, feed: int) -> None:
+    """FCT-C43 with #SLOPE active: the axes come to rest on the limit, within one cycle's travel
+    (the documents' tolerance), and the state is ACTIVE_BRAKE only when they are at rest."""
+    m = machine(profile=profile, fct=FCT, feedhold=800.0)
+    _set_limit(m, 30.0)
+    m.step(2)
+    x = m.axis("X")
+    start(m, f"N10 G01 X100 F{feed}\nN20 M30\n")
+    v_max = 0.0
+    unit = m.hli.axes[x.index].ipo_mc_control.dyn_pos_limit_high
+    for _ in range(20_000):
+        m.step(1)
+        v_max = max(v_max, abs(x.setpoint_step) / T_A)
+        assert x.setpoint <= 30.0 + v_max * T_A + 1e-9
+        if unit.state_r == 4:  # ACTIVE_BRAKE
+            break
+    assert unit.state_r == 4
+    assert m.channel(1).planner.at_rest
+    assert abs(x.setpoint - 30.0) <= v_max * T_A + 1e-9
+
+
+@pytest.mark.req("M-04")
+def test_dynamic_limit_with_sin2_has_a_jerk_limited_brake() -> None:
+    m = machine(profile=2, fct=FCT, feedhold=800.0)
+    _set_limit(m, 30.0)
+    m.step(2)
+    xs = trace_until_rest(m, "N10 G01 X100 F6000\nN20 M30\n")
+    _, acc, jerk = derivatives(xs)
+    assert min(acc) >= -1.13 * 1000.0
+    assert max(abs(j) for j in jerk) <= 1.13 * 3.1416 / 2 * 1000.0 / 0.05
+    assert xs[-1] == pytest.approx(30.0, abs=0.1)
+
+
+def trace_until_rest(m: Machine, program: str) -> list[float]:
+    ch = m.channel(1)
+    x = m.axis("X")
+    start(m, program)
+    xs = [x.setpoint]
+    for _ in range(20_000):
+        m.step(1)
+        xs.append(x.setpoint)
+        if ch.planner.at_rest and len(xs) > 10:
+            break
+    return xs
+
+
+@pytest.mark.req("M-05")
+@pytest.mark.parametrize("ramp_us", [0, 50_000, 150_000])
+def test_independent_stop_runs_within_the_braking_distance_fct_c3_counts(ramp_us: int) -> None:
+    """FCT-C3 subtracts the braking distance of the active profile: a stop that builds its
+    deceleration up over the ramp time runs at most v²/(2a) + v t_r / 2, and that is what is counted."""
+    m = machine(profile=1, ramp_us=ramp_us)
+    x = m.axis("X")
+    start(m, "N10 G01 X2000 F6000\nN20 M30\n")
+    m.step(400)
+    v = x.setpoint_step / T_A
+    assert v == pytest.approx(100.0)
+    assert x.slope_ramp == pytest.approx(ramp_us / 1e6)
+    counted = x.stop_distance(v, 1000.0)
+    x0 = x.setpoint
+    x.start_independent_stop(1000.0, T_A)
+    for _ in range(5000):
+        x.begin_cycle()
+        x.advance_independent_stop(T_A)
+        if x.stop_velocity == 0.0:
+            break
+    travelled = x.setpoint - x0
+    assert travelled <= counted + 1e-9
+    assert travelled >= counted - v * T_A - 1000.0 * (ramp_us / 1e6) ** 2 / 24 - 1e-9
