@@ -198,6 +198,7 @@ class Channel:
         )
         """The ramp time of the jerk-limited profiles [s]: the longest of the axes' P-AXIS-00195..00198."""
         self.decoder.slope_handler = self.set_slope
+        self.decoder.rotary_axes = frozenset(a.name for a in axes if a.rotary)
         self.jog_guards: list[JogGuard] = []
         self.jog_velocity: list[float] = [0.0] * len(axes)
         self.current_block: Block | None = None

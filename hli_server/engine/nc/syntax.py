@@ -336,8 +336,6 @@ MOTION_G_CODES: Final[dict[int, str]] = {
     42: "tool radius compensation right (G42)",
     61: "contouring, exact stop (G61)",
     64: "contouring (G64)",
-    70: "inch dimensions (G70)",
-    71: "metric dimensions (G71)",
     260: "contouring mode (G260)",
     261: "contouring mode (G261)",
 }
@@ -348,7 +346,10 @@ AXIS_VALUE_G_CODES: Final = frozenset((130, 230, 132, 333, 338))
 """G functions whose axis words are weightings, ``G130 X70`` (not motion)."""
 EXTRA_G_CODES: Final = VALUE_G_CODES | AXIS_VALUE_G_CODES
 """The weighting G codes the interpreter accepts beyond the word parser's (docs/nc-language.md)."""
-KNOWN_G: Final = word_parser.KNOWN_G_CODES | EXTRA_G_CODES
+UNIT_G_CODES: Final = frozenset((8, 9, 70, 71, 94, 95, 900, 901))
+"""Units and words of issue 24 item 5 (M-06..M-09): G70/G71 inch/metric, G94/G95 feed per minute /
+per revolution, G08/G09/G900/G901 acceleration at block start / deceleration at block end."""
+KNOWN_G: Final = word_parser.KNOWN_G_CODES | EXTRA_G_CODES | UNIT_G_CODES
 
 _CONSTANT: Final = ConstantEnv()
 _UPPER: Final = str.maketrans("abcdefghijklmnopqrstuvwxyz", "ABCDEFGHIJKLMNOPQRSTUVWXYZ")
@@ -1164,12 +1165,9 @@ class _BlockParser:
             self.pos += 1
         if letter in "GMH":
             return self.function_word(start, letter)
-        if letter == "R":
-            self.fail(
-                A_NOT_SIMULATED,
-                f"{self.word_at(start)}: circles by radius (R) are not simulated yet (issue 24, N-09); "
-                "program the centre with I/J/K: see docs/nc-language.md",
-            )
+        if letter == "R" and "R" not in self.c._single_axes:
+            # the circle's radius (G02/G03 X.. Y.. R.., M-08)
+            return Word(self.word_at(start), "R", "R", self.word_value(start))
         if letter == "E":
             self.fail(
                 A_NOT_SIMULATED,
@@ -2344,6 +2342,14 @@ def build_block(
                     A_RANGE, line, number, f"F{_shown(value)} is out of range: {word_parser._FEED_RANGE}"
                 )
             feed = value
+        elif letter == "R":
+            if "R" in extra:
+                word_parser._twice("circle radius", "R", extra["R"], _shown(value), line, number)
+            if not -word_parser._CENTRE_MAX <= value <= word_parser._CENTRE_MAX:
+                word_parser._fail(
+                    A_RANGE, line, number, f"R{_shown(value)} is out of range: {word_parser._CENTRE_RANGE}"
+                )
+            extra["R"] = value
         elif letter in ("I", "J", "K"):
             if letter in centre:
                 word_parser._twice(
