@@ -128,6 +128,13 @@ def test_malformed_slope_is_refused_with_the_line(line: str) -> None:
     err = error(f"%p\nN10 G01 X1 F100\n{line}\nN30 M30\n")
     assert err.line == 3
     assert "#SLOPE" in err.message
+    assert err.alarm in (914015, 914000)
+
+
+@pytest.mark.req("M-01")
+def test_the_older_set_slope_profil_is_refused_by_name() -> None:
+    err = error("%p\n#SET SLOPE PROFIL[1]\nN30 M30\n")
+    assert err.alarm == 910110
 
 
 @pytest.mark.req("M-02")
