@@ -449,9 +449,9 @@ class Channel:
         """The acceleration profile from now on (``#SLOPE``, M-01..M-03): 0 STEP, 1 TRAPEZ, 2 SIN2,
         3 HSC (simulated as TRAPEZ); None: P-CHAN-00071's, as at program start (``#SLOPE DEFAULT``)."""
         value = self.config.slope_profile if profile is None else profile
-        profile = SlopeProfile(SlopeType(value), self.slope_ramp_time)
-        self.planner.set_profile(profile)
-        ramp = 0.0 if profile.type == SlopeType.STEP else self.slope_ramp_time
+        active = SlopeProfile(SlopeType(value), self.slope_ramp_time)
+        self.planner.set_profile(active)
+        ramp = 0.0 if active.type == SlopeType.STEP else self.slope_ramp_time
         for axis in self.axes:
             axis.slope_ramp = ramp  # independent stops (reset, collision) in the profile too (M-05)
 

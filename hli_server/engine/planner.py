@@ -290,11 +290,12 @@ class Planner:
             self.s_out = self.s_abs
             self.v_out = (self.s_abs - before) / self.t_a if self.s_abs >= before else 0.0
             return point, reached
+        held: list[Marker] = []
         if self.velocity <= 0.0 and not f.settled:
             # where the planned path comes to rest (a marker, a reversal, G00/G60 block end, a
             # stop point), the axes come to rest too before it goes on: a corner with velocity
             # 0 stays one, and a marker runs with the axes at rest
-            reached: list[Marker] = []
+            reached = held
         else:
             _, reached = self._step_planned()
         before = self.s_out
@@ -309,9 +310,9 @@ class Planner:
         return self._point_out(s_f), reached
 
     def _point_out(self, s: float) -> Point | None:
-        for item in self._trail:
-            if item.s_start - 1e-9 <= s <= item.s_start + item.length + 1e-9:
-                return item.segment.point_at(min(max(s - item.s_start, 0.0), item.length))
+        for passed in self._trail:
+            if passed.s_start - 1e-9 <= s <= passed.s_start + passed.length + 1e-9:
+                return passed.segment.point_at(min(max(s - passed.s_start, 0.0), passed.length))
         for item in self.queue:
             if isinstance(item, Motion) and item.s_start - 1e-9 <= s <= item.s_start + item.length + 1e-9:
                 return item.segment.point_at(min(max(s - item.s_start, 0.0), item.length))
