@@ -331,3 +331,42 @@ def test_independent_stop_runs_within_the_braking_distance_fct_c3_counts(ramp_us
     travelled = x.setpoint - x0
     assert travelled <= counted + 1e-9
     assert travelled >= counted - v * T_A - 1000.0 * (ramp_us / 1e6) ** 2 / 24 - 1e-9
+
+
+@pytest.mark.req("M-05", "C3-01")
+@pytest.mark.parametrize("profile", [0, 1, 2])
+def test_collision_pair_rests_no_closer_than_coll_offset_in_every_profile(profile: int) -> None:
+    """FCT-C3 with #SLOPE: X1 runs at X2; the pair trips earlier by the profile's v t_r / 2, its stop
+    builds the deceleration up over t_r, and it comes to rest no closer than coll_offset (20 mm)."""
+    pair = 0x8001
+    axes = [
+        AxisConfig(number=1, name="X1", achs_mode=pair, a_max=2000.0),
+        AxisConfig(
+            number=2,
+            name="X2",
+            achs_mode=pair,
+            coll_check_ax_nr=1,
+            coll_offset=200_000,
+            start_position=1_000_000,
+            a_max=2000.0,
+        ),
+        AxisConfig(number=3, name="Z1"),
+    ]
+    ch = ChannelConfig(axes=["X1", "X2", "Z1"], main_axes=("X1", "X2", "Z1"), slope_profile=profile)
+    m = Machine(MachineConfig(axes=axes, channels=[ch]))
+    x1, x2 = m.axis("X1"), m.axis("X2")
+    start(m, "N10 G01 X1=90 F12000\nN20 M30\n")
+    tripped_at = None
+    for _ in range(5000):
+        m.step(1)
+        if tripped_at is None and m.active_alarms:
+            tripped_at = x2.setpoint - x1.setpoint
+        if tripped_at is not None and not x1.stopping or (x1.stopping and x1.stop_velocity == 0.0):
+            break
+    assert [a.number for a in m.active_alarms] == [70092]
+    assert x1.slope_ramp == (0.0 if profile == 0 else pytest.approx(0.05))
+    assert x2.setpoint - x1.setpoint >= 20.0 - 1e-9
+    assert tripped_at is not None
+    # the trip came while the counted braking distance still fitted: with a ramp, earlier
+    expected_brake = 200.0**2 / (2 * 2000.0) + (0.0 if profile == 0 else 200.0 * 0.05 / 2)
+    assert tripped_at >= 20.0 + expected_brake - 200.0 * T_A - 1e-6
