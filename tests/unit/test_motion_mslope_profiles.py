@@ -361,7 +361,7 @@ def test_collision_pair_rests_no_closer_than_coll_offset_in_every_profile(profil
         m.step(1)
         if tripped_at is None and m.active_alarms:
             tripped_at = x2.setpoint - x1.setpoint
-        if tripped_at is not None and not x1.stopping or (x1.stopping and x1.stop_velocity == 0.0):
+        if (tripped_at is not None and not x1.stopping) or (x1.stopping and x1.stop_velocity == 0.0):
             break
     assert [a.number for a in m.active_alarms] == [70092]
     assert x1.slope_ramp == (0.0 if profile == 0 else pytest.approx(0.05))
