@@ -28,7 +28,7 @@ from hli_server.engine.nc.interpreter import (
     Slope,
     SyncAction,
 )
-from hli_server.engine.planner import Marker, MarkerKind, Motion
+from hli_server.engine.planner import Dwell, Marker, MarkerKind, Motion
 
 __all__ = [
     "AreaHandler",
@@ -308,6 +308,8 @@ class Decoder:
             m.inch = True  # the new unit applies to this block already (M-06)
         elif 71 in block.g_codes:
             m.inch = False
+        if 4 in block.g_codes:
+            return self._dwell(block)  # before G70's scaling: the time is in seconds
         if m.inch:
             block = _block_in_mm(block, self.rotary_axes)
         if 95 in block.g_codes:
@@ -347,7 +349,7 @@ class Decoder:
                 measuring = True
             elif g in (130, 131, 230, 231, 132, 133, 134, 233, 333, 334, 338, 339):
                 self._weighting(g, block)
-            elif g in (100, 200, 201, 202, 4):
+            elif g in (100, 200, 201, 202):
                 return self._error(block, 910110, f"G{g} is not supported in this block context")
         if block.feed is not None:
             if block.feed <= 0:
@@ -375,6 +377,31 @@ class Decoder:
             if code in (2, 30):
                 items.append(Marker(MarkerKind.END, block, payload=f"M{code:02d}"))
         return items
+
+    def _dwell(self, block: Block) -> list[Motion | Marker]:
+        """``G04 <first main axis><s>`` (M-09, PM 206132747): the path rests for the time, then goes on
+        (the axes at rest first). The time by the first main axis only; another axis in the block is the
+        kernel's 20685 (refused here, where the kernel warns and goes on); the bare-number form
+        ``G04 2.5``, ``G04 P1`` and the spindle form ``G04 S10`` are not simulated (910110)."""
+        first = self.main[0]
+        others = [name for name, _ in block.axes if name != first]
+        if others:
+            return self._error(
+                block,
+                20685,
+                f"G04 with the axes {', '.join(others)}: the dwell time takes the first main axis only",
+            )
+        seconds = dict(block.axes).get(first)
+        if seconds is None:
+            return self._error(
+                block,
+                910110,
+                f"G04 without {first}<seconds>: only G04 {first}<s> is simulated "
+                "(not G04 <s>, G04 P.., G04 S..)",
+            )
+        if seconds < 0.0:
+            return self._error(block, 911000, f"G04 {first}{seconds:g}: a dwell time is not negative")
+        return [Marker(MarkerKind.ACTION, block, payload=Dwell(seconds))]
 
     def _weighting(self, g: int, block: Block) -> None:
         """G130/G131/G230/G231: acceleration weighting in percent of the axes' acceleration (manual

@@ -46,7 +46,7 @@ from hli_server.engine.geometry import Point, Segment
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.path.profiles import PathFilter, SlopeProfile
 
-__all__ = ["JUNCTION_DEVIATION", "ExactStopGate", "Marker", "MarkerKind", "Motion", "Planner"]
+__all__ = ["JUNCTION_DEVIATION", "Dwell", "ExactStopGate", "Marker", "MarkerKind", "Motion", "Planner"]
 
 JUNCTION_DEVIATION = 0.02
 """mm: how far a corner may be cut in thought to bound the corner velocity (project's own)."""
@@ -94,6 +94,19 @@ class Marker:
 
 Item = Motion | Marker
 
+
+class Dwell:
+    """The payload of a G04 action marker: the path rests ``seconds`` there (whole cycles)."""
+
+    __slots__ = ("seconds",)
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+
+    def __call__(self) -> None:
+        """Run by the channel like any action: the planner has started the rest already."""
+
+
 ExactStopGate = Callable[[Motion], bool]
 """Asked at standstill after a G60 block: may the next item start? (FCT-A3: axes in their window)"""
 
@@ -121,6 +134,8 @@ class Planner:
     """Path coordinate of the point handed to the axes (the filtered one; ``s_abs`` under STEP)."""
     v_out: float = 0.0
     """Velocity of the point handed to the axes [mm/s] (the filtered path's)."""
+    dwell_remaining: float = 0.0
+    """Seconds the path still rests (G04)."""
     _filter: PathFilter | None = None
     _trail: deque[Motion] = field(default_factory=deque)
     """Motions the planned path has left but the filtered one has not (yet)."""
@@ -142,10 +157,15 @@ class Planner:
         self._dirty = True
         self._motions = 0
         self._trail.clear()
+        self.dwell_remaining = 0.0
         self.s_out = 0.0
         self.v_out = 0.0
         if self._filter is not None:
             self._filter.reset(0.0)
+
+    def start_dwell(self, seconds: float) -> None:
+        """G04: the path rests ``seconds`` (whole cycles, rounded) from the next cycle on."""
+        self.dwell_remaining = round(seconds / self.t_a) * self.t_a
 
     def set_profile(self, profile: SlopeProfile) -> None:
         """Make ``profile`` the active acceleration profile. Called at rest (program start, a
@@ -325,6 +345,12 @@ class Planner:
         if self._dirty:
             self._backward_pass()
         reached: list[Marker] = []
+        if self.dwell_remaining > 0.0:
+            self.dwell_remaining = max(0.0, self.dwell_remaining - self.t_a)
+            if self.dwell_remaining < 0.5 * self.t_a:
+                self.dwell_remaining = 0.0
+            self.velocity = 0.0
+            return None, reached
         pending = self._exact_stop_pending
         if pending is not None:
             # G60: hold at the block end until the axes are in their exact-stop window
@@ -338,6 +364,9 @@ class Planner:
             assert isinstance(marker, Marker)
             reached.append(marker)
             if marker.kind not in (MarkerKind.ACTION, MarkerKind.SYNC):
+                return None, reached
+            if isinstance(marker.payload, Dwell):
+                self.start_dwell(marker.payload.seconds)  # G04: rest from the next cycle on
                 return None, reached
         if not self.queue:
             self.velocity = 0.0

@@ -186,3 +186,43 @@ def test_g08_g09_g900_g901_are_accepted_with_the_documented_approximation() -> N
     run(m2, program.replace("G08 ", "").replace("G901 ", "").replace("G09 ", "").replace("G900 ", ""))
     assert m2.cycle == m.cycle  # the same motion, cycle for cycle
     assert error("N10 G900 G901 X1\nM30\n").alarm == 910106
+
+
+# --- G04 dwell ---------------------------------------------------------------------------------------
+@pytest.mark.req("M-09")
+def test_g04_example_of_the_manual_waits_its_seconds() -> None:
+    """PM 206132747's example without its spindle lines: 4.5 + 3.0 + 2.0 + 3.5 s."""
+    m = mill()
+    start(m, "N10 G04 X4.5\nN20 G04 3.0\nN30 P1=2\nN40 G04 P1\nN50 V.L.TIME=3.5\nN60 G04 V.L.TIME\nN90 M30\n")
+    first = m.cycle
+    for _ in cycles_until_done(m):
+        pass
+    assert not alarms(m)
+    assert (m.cycle - first) * m.t_a == pytest.approx(13.0, abs=0.01)
+
+
+@pytest.mark.req("M-09")
+def test_g04_rests_between_moves_and_is_seconds_under_g70() -> None:
+    def duration(program: str) -> int:
+        m = mill()
+        run(m, program)
+        assert not alarms(m)
+        return m.cycle
+
+    plain = duration("N10 G01 X10 F6000\nN30 G01 X20\nM30\n")
+    dwell = duration("N10 G01 X10 F6000\nN20 G04 X0.5\nN30 G01 X20\nM30\n")
+    inch = duration("N5 G70\nN10 G01 X0.3937 F236.22\nN20 G04 X0.5\nN30 G01 X0.7874\nM30\n")
+    assert dwell - plain >= 500  # the rest, plus the stop at N10's end
+    assert inch == pytest.approx(dwell, abs=3)
+
+
+@pytest.mark.req("M-09")
+@pytest.mark.parametrize(
+    ("block", "alarm"),
+    [("G04 X1 Y2", 20685), ("G04 S10", 910110), ("G04", 910110), ("G04 X-1", 911000)],
+)
+def test_g04_forms_not_simulated_or_wrong_are_refused(block: str, alarm: int) -> None:
+    m = mill()
+    run(m, f"N10 G01 X1 F6000\nN20 {block}\nN30 X2\nM30\n")
+    assert alarm in alarms(m)
+    assert positions(m)["X"] == pytest.approx(1.0)

@@ -346,6 +346,8 @@ AXIS_VALUE_G_CODES: Final = frozenset((130, 230, 132, 333, 338))
 """G functions whose axis words are weightings, ``G130 X70`` (not motion)."""
 EXTRA_G_CODES: Final = VALUE_G_CODES | AXIS_VALUE_G_CODES
 """The weighting G codes the interpreter accepts beyond the word parser's (docs/nc-language.md)."""
+_DWELL: Final = re.compile(r"G0*4(?![0-9.])", re.IGNORECASE)
+"""A G04 block: its time may follow G04 directly (``G04 2.5``), which the word parser does not read."""
 UNIT_G_CODES: Final = frozenset((8, 9, 70, 71, 94, 95, 900, 901))
 """Units and words of issue 24 item 5 (M-06..M-09): G70/G71 inch/metric, G94/G95 feed per minute /
 per revolution, G08/G09/G900/G901 acceleration at block start / deceleration at block end."""
@@ -815,7 +817,7 @@ class Compiler:
             try:
                 block = self._fast(raw.text, code.translate(_UPPER), 0, _TO_END, raw.first, None, True)
             except NcError as exc:
-                if exc.alarm != A_UNKNOWN_G:
+                if exc.alarm != A_UNKNOWN_G and not _DWELL.search(code):
                     return Refused(raw, _leading_number(code), exc)
             else:
                 if program:
@@ -872,7 +874,7 @@ class Compiler:
             except NcError as exc:
                 # a G code the word parser does not know may be one the interpreter takes (G130, G131
                 # ...) or refuses by name (G41, issue 24): its own parser decides
-                if exc.alarm != A_UNKNOWN_G or _CONTROL_HEAD.match(code):
+                if (exc.alarm != A_UNKNOWN_G and not _DWELL.search(code)) or _CONTROL_HEAD.match(code):
                     raise
                 return self._parsed(raw, code)
             if block is None:
@@ -1086,6 +1088,15 @@ class _BlockParser:
             if isinstance(item, Call):
                 seen_call = item
             items.append(item)
+            if (
+                isinstance(item, Word)
+                and item.letter == "G"
+                and isinstance(item.value, Const)
+                and item.value.value == 4.0
+            ):
+                dwell = self.dwell_time()
+                if dwell is not None:
+                    items.append(dwell)
             if isinstance(item, Goto) and not self.at_end():
                 self.fail(
                     A_GOTO_CHAR,
@@ -1093,6 +1104,19 @@ class _BlockParser:
                     "of its block",
                 )
         return items
+
+    def dwell_time(self) -> Word | None:
+        """``G04 2.5``, ``G04 P1``, ``G04 V.L.TIME`` (PM 206132747): the time written directly after G04,
+        read as the first main axis' word (``G04 X2.5``), as the kernel treats both (M-09)."""
+        self.blanks()
+        if self.at_end():
+            return None
+        c, d = self.peek(), self.peek(1)
+        if c in "0123456789." or (c == "P" and (d in _DIGITS or d in "P[")) or (c == "V" and d == "."):
+            start = self.pos
+            expr = self.expression(stop_at_blank=True)
+            return Word(self.u[start : self.pos], "AXIS", self.c.main_axes[0], expr)
+        return None
 
     def item(self) -> Item:
         u = self.u
