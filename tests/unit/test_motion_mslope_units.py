@@ -226,3 +226,28 @@ def test_g04_forms_not_simulated_or_wrong_are_refused(block: str, alarm: int) ->
     run(m, f"N10 G01 X1 F6000\nN20 {block}\nN30 X2\nM30\n")
     assert alarm in alarms(m)
     assert positions(m)["X"] == pytest.approx(1.0)
+
+
+# --- the batch geometry check ------------------------------------------------------------------------
+@pytest.mark.req("M-06", "M-07")
+def test_batch_geometry_check_agrees_under_g70_and_g95() -> None:
+    """``check --geometry-only`` decodes plain lines in batches; under G70 and G95 it leaves them to the
+    exact decoder, so that inch values are scaled and a G95 move with the spindle stopped is refused."""
+    from schemas.config import MachineConfig
+    from tests.unit.test_batch_check import assert_same
+    from tests.unit.test_batch_check import run as run_check
+
+    config: MachineConfig = MachineConfig.model_validate(
+        {
+            "axes": [{"number": i + 1, "name": n} for i, n in enumerate("XYZ")],
+            "channels": [{"axes": ["X", "Y", "Z"]}],
+        }
+    )
+    lines = [f"G01 X{(k % 5) * 0.1:.1f} Y{(k % 3) * 0.2:.1f}" for k in range(200)]
+    inch = "G70 G01 X0 Y0 Z0 F60\n" + "\n".join(lines) + "\nG01 X1\nM30\n"
+    result = assert_same(config, inch)
+    assert result.final_position["X"] == pytest.approx(25.4)
+    stopped = "G01 X0 Y0 F600\nG95 F0.5\n" + "\n".join(lines) + "\nM30\n"
+    result = assert_same(config, stopped)
+    assert [a.number for a in result.alarms][:1] == [60131]
+    assert run_check(config, stopped, exact=True).alarms[0].number == 60131
