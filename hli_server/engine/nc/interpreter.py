@@ -111,6 +111,7 @@ __all__ = [
     "Host",
     "Interpreter",
     "IterationCapError",
+    "Slope",
     "SyncAction",
 ]
 
@@ -249,6 +250,15 @@ class MeasMode(Directive):
     def __init__(self, block: Block, meas_type: int | None) -> None:
         super().__init__(block)
         self.meas_type = meas_type
+
+
+class Slope(Directive):
+    """``#SLOPE [TYPE=..]`` / ``#SLOPE DEFAULT``: the acceleration profile from here on (``profile``:
+    0 STEP, 1 TRAPEZ, 2 SIN2, 3 HSC as P-CHAN-00071; None: the channel's default, P-CHAN-00071)."""
+
+    def __init__(self, block: Block, profile: int | None) -> None:
+        super().__init__(block)
+        self.profile = profile
 
 
 class IterationCapError(Exception):
@@ -1104,6 +1114,13 @@ class Interpreter(Env):
                     )
                 meas_type = int(value)
             self._pending.append(MeasMode(self._place_block(frame, stmt), meas_type))
+            return
+        if command == "SLOPE":
+            profile: int | None = None
+            for option in stmt.options:
+                if option.startswith("TYPE="):
+                    profile = ("STEP", "TRAPEZ", "SIN2", "HSC").index(option[5:])
+            self._pending.append(Slope(self._place_block(frame, stmt), profile))
             return
         if command == "FILE NAME":
             self._message_file = stmt.files.get("MSG", self._message_file)
