@@ -233,7 +233,11 @@ class BatchGeometryCheck:
         decoder = self.decoder
         groups, all_exact = self._checks()
         areas = sum(len(g.works) + len(g.prots) for g in groups)
-        if decoder.modal.in_area_definition or count < SMALL_RUN + SMALL_RUN_PER_AREA * areas:
+        if (
+            decoder.modal.in_area_definition
+            or decoder.transforms_active
+            or count < SMALL_RUN + SMALL_RUN_PER_AREA * areas
+        ):
             for k in idx.tolist():
                 self.line = chunk.first_line + k
                 self.exact_blocks += 1

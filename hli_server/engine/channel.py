@@ -18,6 +18,7 @@ from typing import Protocol
 
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
+from hli_server.engine.path.tools import ToolData
 from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import Point
@@ -118,8 +119,11 @@ class ChannelHost:
         if k is None:
             return None
         if variable in ("ABS", "PROG"):
-            return decoder.position[k] - decoder.modal.offset(axis)
+            return decoder.program_position()[k]
         if variable == "ACT_POS":
+            if decoder.transforms_active:
+                setpoints = [a.setpoint for a in ch.axes]
+                return decoder.to_program(setpoints, decoder.tools.applied_length)[k]
             return ch.axes[k].setpoint - decoder.modal.offset(axis)
         if variable in ("-SWE", "-SWE_MDS"):
             return ch.axes[k].swe_neg
@@ -176,6 +180,10 @@ class Channel:
             config.main_axes,
             {a.name: (a.v_max, a.v_rapid, a.a_max) for a in axes},
             zero_offsets,
+            {
+                t.number: ToolData(t.number, mm_from_increments(t.length), mm_from_increments(t.radius), t.tool)
+                for t in config.tools
+            },
         )
         self.compiler = Compiler(self.axis_names, config.main_axes)
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))

@@ -104,6 +104,7 @@ from hli_server.engine.programs import ProgramFile
 __all__ = [
     "MAX_CALL_DEPTH",
     "PAUSE",
+    "CoordinateCommand",
     "STATEMENTS_PER_CYCLE",
     "Directive",
     "FlushStop",
@@ -232,6 +233,34 @@ class MeasMode(Directive):
     def __init__(self, block: Block, meas_type: int | None) -> None:
         super().__init__(block)
         self.meas_type = meas_type
+
+
+class CoordinateCommand(Directive):
+    """``#CS``, ``#ACS``, ``#ROTATION`` (issue 24): the decoder changes its frames in program order.
+
+    ``kind`` CS, ACS or ROTATION; ``op`` DEF, ON, OFF, ADD, SET, DEL; ``ident`` the (A)CS ID where
+    programmed; ``name`` a #CS ADD/SET/DEL name; ``values`` the components [v1, v2, v3, φ1, φ2, φ3];
+    ``options`` the #ROTATION values by keyword."""
+
+    def __init__(
+        self,
+        block: Block,
+        kind: str,
+        op: str,
+        ident: int | None = None,
+        name: str | None = None,
+        values: tuple[float, ...] = (),
+        options: dict[str, float] | None = None,
+        all_: bool = False,
+    ) -> None:
+        super().__init__(block)
+        self.kind = kind
+        self.op = op
+        self.ident = ident
+        self.name = name
+        self.values = values
+        self.options = options or {}
+        self.all_ = all_
 
 
 class IterationCapError(Exception):
@@ -1087,6 +1116,36 @@ class Interpreter(Env):
                     )
                 meas_type = int(value)
             self._pending.append(MeasMode(self._place_block(frame, stmt), meas_type))
+            return
+        if command.startswith(("CS ", "ACS ", "ROTATION ")):
+            kind, op = command.split(" ", 1)
+            numbers = [self._number(stmt, a, f"a value of #{command}") for a in stmt.args]
+            ident: int | None = None
+            name: str | None = None
+            rotation: dict[str, float] = {}
+            if kind == "ROTATION":
+                rotation = dict(zip(stmt.options, numbers, strict=True))
+                numbers = []
+            elif "ID" in stmt.options:
+                value = numbers.pop(0)
+                if value != int(value) or value < 1:
+                    raise stmt.error(A_INDEX, f"#{command} [{format_value(value)}]: the ID is a whole number >= 1")
+                ident = int(value)
+            for option in stmt.options:
+                if option.startswith("NAME:"):
+                    name = option[5:]
+            self._pending.append(
+                CoordinateCommand(
+                    self._place_block(frame, stmt),
+                    kind,
+                    op,
+                    ident,
+                    name,
+                    tuple(numbers),
+                    rotation,
+                    all_="ALL" in stmt.options,
+                )
+            )
             return
         if command == "FILE NAME":
             self._message_file = stmt.files.get("MSG", self._message_file)

@@ -1,0 +1,173 @@
+"""Coordinate systems and tools in the decoder (issue 24 items 2 and 4): #CS, #ACS, #ROTATION, D/T,
+tool length, G40/G41/G42."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import pytest
+
+from hli_server.engine.geometry import ArcSegment, LineSegment
+from hli_server.engine.machine import Machine
+from hli_server.engine.planner import Marker, MarkerKind, Motion
+from schemas.config import AxisConfig, ChannelConfig, MachineConfig
+from tests.unit.areas.helpers import alarm_ids, run
+
+
+def machine(**channel: Any) -> Machine:
+    names = ["X", "Y", "Z"]
+    axes = [
+        AxisConfig(number=i + 1, name=n, swe_neg=-10_000_000, swe_pos=10_000_000) for i, n in enumerate(names)
+    ]
+    return Machine(MachineConfig(axes=axes, channels=[ChannelConfig(axes=names, **channel)]))
+
+
+def decode(program: str, **channel: Any) -> tuple[list[Motion], Marker | None]:
+    """Decode the whole program; the motions and the error marker (if any)."""
+    m = machine(**channel)
+    ch = m.channel(1)
+    ch.interpreter.start(program, "t")
+    ch.decoder.start(ch.interpreter, ch.setpoints())
+    motions: list[Motion] = []
+    for _ in range(10_000):
+        items = ch.decoder.next_items()
+        for item in items:
+            if isinstance(item, Motion):
+                motions.append(item)
+            elif item.kind is MarkerKind.ERROR:
+                return motions, item
+        if ch.decoder.finished:
+            break
+    return motions, None
+
+
+def ends(motions: list[Motion]) -> list[tuple[float, ...]]:
+    return [tuple(round(v, 6) for v in mo.segment.end) for mo in motions]
+
+
+TOOLS = [{"number": 1, "length": 1_000_000, "radius": 50_000}, {"number": 2, "length": 0, "radius": 20_000}]
+
+
+@pytest.mark.req("M-10")
+def test_cs_on_translates_and_rotates() -> None:
+    motions, err = decode("%t\nN10 #CS ON [10, 20, 0, 0, 0, 90]\nN20 G01 X10 Y0 F1000\nN30 #CS OFF\nN40 X10 Y0\nM30\n")
+    assert err is None
+    # in the CS rotated by 90° about Z and shifted by (10, 20): program (10, 0) is machine (10, 30)
+    assert ends(motions)[0] == pytest.approx((10.0, 30.0, 0.0))
+    assert ends(motions)[1] == pytest.approx((10.0, 0.0, 0.0))
+
+
+@pytest.mark.req("M-10")
+def test_cs_def_then_on_by_id_and_undefined_id() -> None:
+    motions, err = decode("%t\n#CS DEF [2] [5, 0, 0]\n#CS ON [2]\nG01 X1 F100\n#CS OFF ALL\nX1\nM30\n")
+    assert err is None
+    assert [e[0] for e in ends(motions)] == pytest.approx([6.0, 1.0])
+    _, err = decode("%t\n#CS ON [3]\nG01 X1 F100\nM30\n")
+    assert err is not None and err.payload.alarm == 20821
+
+
+@pytest.mark.req("M-11")
+def test_acs_below_zero_offset_and_cs_on_top() -> None:
+    # ACS rotated 90°: the zero offset acts in the ACS' axes; the CS shifts in the workpiece system
+    motions, err = decode(
+        "%t\n#ACS ON [0, 0, 0, 0, 0, 90]\nG54\n#CS ON [1, 0, 0]\nG01 X1 Y0 F100\nM30\n",
+        zero_offsets=[{"code": "G54", "offsets": {"X": 100_000}}],
+    )
+    assert err is None
+    # program (1,0) -> CS (2,0) -> + G54 10 mm -> (12, 0) -> ACS 90° -> machine (0, 12)
+    assert ends(motions)[0] == pytest.approx((0.0, 12.0, 0.0))
+
+
+@pytest.mark.req("M-12")
+def test_rotation_about_centre_and_plane_change_deselects() -> None:
+    motions, err = decode(
+        "%t\n#ROTATION ON [ANGLE=90 CENTER1=10 CENTER2=0]\nG01 X20 Y0 F100\nG18\nG17\nX20 Y0\nM30\n"
+    )
+    assert err is None
+    assert ends(motions)[0] == pytest.approx((10.0, 10.0, 0.0))
+    assert ends(motions)[1] == pytest.approx((20.0, 0.0, 0.0))
+
+
+@pytest.mark.req("M-13")
+def test_cs_add_stack_example() -> None:
+    # the manual's #CS ADD example (1037259147): three CS linked; the top is PCS
+    motions, err = decode(
+        "%t\nN10 #CS ADD [ICS] [10,10,0,0,0,45]\nN20 #CS ADD [WCS] [15,20,0,0,0,0]\n"
+        "N30 #CS ADD [PCS] [10,15,0,0,0,5]\nG01 X0 Y0 F100\nM30\n"
+    )
+    assert err is None
+    c, s = math.cos(math.radians(45)), math.sin(math.radians(45))
+    # PCS origin in WCS (10,15) -> ICS (25, 35) -> rotated 45° + (10, 10)
+    x, y = 25.0, 35.0
+    assert ends(motions)[0][:2] == pytest.approx((10 + c * x - s * y, 10 + s * x + c * y))
+
+
+@pytest.mark.req("M-10")
+def test_arc_under_rotated_cs_stays_an_arc() -> None:
+    motions, err = decode("%t\n#CS ON [0, 0, 0, 0, 0, 90]\nG01 X10 Y0 F100\nG03 X0 Y10 I-10 J0\nM30\n")
+    assert err is None
+    arc = motions[1].segment
+    assert isinstance(arc, ArcSegment)
+    assert arc.centre == pytest.approx((0.0, 0.0))
+    assert arc.end[:2] == pytest.approx((-10.0, 0.0))
+    assert arc.sweep > 0
+
+
+@pytest.mark.req("M-14")
+def test_tool_length_applied_at_next_absolute_tool_axis_move() -> None:
+    motions, err = decode("%t\nG01 X0 Y0 Z0 F100\nD1\nX10\nZ5\nD0\nZ5\nM30\n", tools=TOOLS)
+    assert err is None
+    # D1 alone does not move Z (P-CHAN-00100 = 0); Z5 with D1: the axis goes to 5 + 100
+    assert ends(motions) == [(10.0, 0.0, 0.0), (10.0, 0.0, 105.0), (10.0, 0.0, 5.0)]
+
+
+@pytest.mark.req("M-14")
+def test_unknown_d_is_an_error() -> None:
+    _, err = decode("%t\nD7\nM30\n", tools=TOOLS)
+    assert err is not None and err.payload.alarm == 912031
+
+
+@pytest.mark.req("M-16")
+def test_g41_square_outer_corners_g25() -> None:
+    prog = (
+        "%t\nG01 X-10 Y0 F1000\nD2 G41\nX0 Y0\nX10\nY10\nX0\nY0\nG40 X-10\nM30\n"
+    )  # a square run counter-clockwise, tool left = outside? no: ccw with tool left is inside
+    motions, err = decode(prog, tools=TOOLS)
+    assert err is None
+    # ccw square, tool on the left = inside: inner corners at (2, 2) (8, 2) (8, 8) (2, 8)
+    pts = ends(motions)
+    for corner in [(8.0, 2.0), (8.0, 8.0), (2.0, 8.0)]:
+        assert any(p[:2] == pytest.approx(corner) for p in pts), pts
+    assert pts[-1][:2] == pytest.approx((-10.0, 0.0))
+
+
+@pytest.mark.req("M-17")
+def test_g42_outer_corners_with_g26_arcs() -> None:
+    prog = "%t\nG01 X-10 Y0 F1000\nD2 G42 G26\nX0 Y0\nX10\nY10\nX0\nY0\nG40 X-10\nM30\n"
+    motions, err = decode(prog, tools=TOOLS)
+    assert err is None
+    arcs = [mo.segment for mo in motions if isinstance(mo.segment, ArcSegment)]
+    assert len(arcs) >= 3
+    assert all(a.radius == pytest.approx(2.0) for a in arcs)
+
+
+@pytest.mark.req("M-18")
+def test_radius_too_large_for_inside_arc_is_90017() -> None:
+    prog = "%t\nG01 X0 Y-5 F1000\nD2 G41\nX0 Y0\nG03 X0 Y2 I0 J1\nM30\n"  # radius 1, tool left of ccw arc
+    _, err = decode(prog, tools=TOOLS)
+    assert err is not None and err.payload.alarm == 90017
+
+
+@pytest.mark.req("M-18")
+def test_selection_in_a_circle_is_90008() -> None:
+    _, err = decode("%t\nG01 X0 Y0 F1000\nD2 G41\nG02 X10 Y0 I5 J0\nM30\n", tools=TOOLS)
+    assert err is not None and err.payload.alarm == 90008
+
+
+@pytest.mark.req("M-18")
+def test_slot_narrower_than_tool_is_a_contour_violation() -> None:
+    # a 1 mm step inward with a 2 mm tool: the compensated middle block would run backwards
+    prog = "%t\nG01 X0 Y0 F1000\nD2 G41\nX10 Y0\nY1\nX11\nY10\nG40 X20\nM30\n"
+    _, err = decode(prog, tools=TOOLS)
+    assert err is not None and err.payload.alarm == 912030
