@@ -354,7 +354,9 @@ class ToolEntry(_Strict):
     """One tool compensation data block of the tool table (issue 24): selected by ``D<number>``."""
 
     number: int = Field(ge=1, le=32767, description="the D number that selects this data block")
-    tool: int | None = Field(default=None, ge=0, description="the tool number T this block belongs to (informative)")
+    tool: int | None = Field(
+        default=None, ge=0, description="the tool number T this block belongs to (informative)"
+    )
     length: Dint = Field(default=0, description="tool length, in the third main axis of the plane [0.1 µm]")
     radius: Dint = Field(default=0, description="tool radius for G41/G42 [0.1 µm]")
 

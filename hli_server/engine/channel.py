@@ -18,7 +18,6 @@ from typing import Protocol
 
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
-from hli_server.engine.path.tools import ToolData
 from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import Point
@@ -26,6 +25,7 @@ from hli_server.engine.hli import AxisHli, ChannelHli
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.interpreter import Interpreter
 from hli_server.engine.nc.syntax import Compiler
+from hli_server.engine.path.tools import ToolData
 from hli_server.engine.planner import Marker, MarkerKind, Planner
 from hli_server.engine.ports import MachinePort
 from hli_server.engine.programs import ProgramFile
@@ -181,7 +181,9 @@ class Channel:
             {a.name: (a.v_max, a.v_rapid, a.a_max) for a in axes},
             zero_offsets,
             {
-                t.number: ToolData(t.number, mm_from_increments(t.length), mm_from_increments(t.radius), t.tool)
+                t.number: ToolData(
+                    t.number, mm_from_increments(t.length), mm_from_increments(t.radius), t.tool
+                )
                 for t in config.tools
             },
         )

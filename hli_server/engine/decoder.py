@@ -190,7 +190,7 @@ class Decoder:
         self.frames = FrameStack()
         """#ROTATION, #CS, #CS ADD, #ACS (:mod:`hli_server.engine.path.frames`)."""
         self.tools = ToolState(dict(tools or {}))
-        """The tool table, D/T and the tool length in the axis positions (:mod:`~hli_server.engine.path.tools`)."""
+        """Tool table, D/T, the tool length in the axis positions (:mod:`hli_server.engine.path.tools`)."""
         self.trc = RadiusCompensation()
         """G40/G41/G42 (:mod:`hli_server.engine.path.radius`)."""
         self._main_index = tuple(self.index[a] for a in main_axes)
@@ -390,7 +390,9 @@ class Decoder:
             self._trc_prog = None
             if items and isinstance(items[-1], Marker):
                 return items
-        ends = [Marker(MarkerKind.END, block, payload=f"M{code:02d}") for code in block.m_codes if code in (2, 30)]
+        ends = [
+            Marker(MarkerKind.END, block, payload=f"M{code:02d}") for code in block.m_codes if code in (2, 30)
+        ]
         if block.m_codes:
             held = self._trc_flush()  # an M function empties the held block (it is not a contour block)
             if held and isinstance(held[-1], Marker):
@@ -553,7 +555,9 @@ class Decoder:
         d = block.extra.get("D")
         if d is not None:
             if d != int(d) or d < 0:
-                return self._error(block, 912031, f"D{d:g}: the D word takes a tool data block number 0, 1, 2, ...")
+                return self._error(
+                    block, 912031, f"D{d:g}: the D word takes a tool data block number 0, 1, 2, ..."
+                )
             err = self.tools.select(int(d))
             if err is not None:
                 return self._error(block, 912031, err, d=int(d))
@@ -564,7 +568,7 @@ class Decoder:
             if self.modal.in_area_definition:
                 return self._error(block, 21793, "G41/G42 are not allowed inside a control area definition")
             side = 1 if sides[0] == 41 else -1
-            if self.trc.side != 0 and self.trc.side != side:
+            if self.trc.side not in (0, side):
                 # a contour change is a deselection and a selection (programming manual)
                 self.trc.side = side if self.tools.radius >= 0 else -side
             else:
@@ -668,7 +672,9 @@ class Decoder:
             if wi not in words and wj not in words:
                 return self._error(block, 911002, f"circle G0{m.motion} without centre ({wi}/{wj})")
             ci_val, cj_val = words.get(wi, 0.0), words.get(wj, 0.0)
-            centre = (ci_val, cj_val) if m.centre_absolute else (prog_start[i] + ci_val, prog_start[j] + cj_val)
+            centre = (
+                (ci_val, cj_val) if m.centre_absolute else (prog_start[i] + ci_val, prog_start[j] + cj_val)
+            )
             arc, mismatch = arc_from_centre(tuple(prog_start), tuple(prog_end), (i, j), centre, cw)
             if arc.radius <= 1e-9:
                 return self._error(block, 911001, "circle with radius 0")
@@ -743,8 +749,14 @@ class Decoder:
             v_max, accel = self._limits(segment, e.rapid)
             self.position = list(end)
             items.append(
-                Motion(segment=segment, block=block, v_max=v_max, accel=accel, rapid=e.rapid,
-                       exact_stop=60 in block.g_codes)
+                Motion(
+                    segment=segment,
+                    block=block,
+                    v_max=v_max,
+                    accel=accel,
+                    rapid=e.rapid,
+                    exact_stop=60 in block.g_codes,
+                )
             )
         return items
 
@@ -839,7 +851,6 @@ class Decoder:
         return max(weight, 1e-3)
 
     def _area(self, block: Block, cmd: AreaCommand) -> list[Motion | Marker]:
-        m = self.modal
         held = self._trc_flush()
         if held:
             return held + self._area_command(block, cmd)

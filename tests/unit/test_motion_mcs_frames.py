@@ -8,11 +8,10 @@ from typing import Any
 
 import pytest
 
-from hli_server.engine.geometry import ArcSegment, LineSegment
+from hli_server.engine.geometry import ArcSegment
 from hli_server.engine.machine import Machine
 from hli_server.engine.planner import Marker, MarkerKind, Motion
 from schemas.config import AxisConfig, ChannelConfig, MachineConfig
-from tests.unit.areas.helpers import alarm_ids, run
 
 
 def machine(**channel: Any) -> Machine:
@@ -51,7 +50,9 @@ TOOLS = [{"number": 1, "length": 1_000_000, "radius": 50_000}, {"number": 2, "le
 
 @pytest.mark.req("M-10")
 def test_cs_on_translates_and_rotates() -> None:
-    motions, err = decode("%t\nN10 #CS ON [10, 20, 0, 0, 0, 90]\nN20 G01 X10 Y0 F1000\nN30 #CS OFF\nN40 X10 Y0\nM30\n")
+    motions, err = decode(
+        "%t\nN10 #CS ON [10, 20, 0, 0, 0, 90]\nN20 G01 X10 Y0 F1000\nN30 #CS OFF\nN40 X10 Y0\nM30\n"
+    )
     assert err is None
     # in the CS rotated by 90° about Z and shifted by (10, 20): program (10, 0) is machine (10, 30)
     assert ends(motions)[0] == pytest.approx((10.0, 30.0, 0.0))
@@ -64,7 +65,8 @@ def test_cs_def_then_on_by_id_and_undefined_id() -> None:
     assert err is None
     assert [e[0] for e in ends(motions)] == pytest.approx([6.0, 1.0])
     _, err = decode("%t\n#CS ON [3]\nG01 X1 F100\nM30\n")
-    assert err is not None and err.payload.alarm == 20821
+    assert err is not None
+    assert err.payload.alarm == 20821
 
 
 @pytest.mark.req("M-11")
@@ -125,14 +127,13 @@ def test_tool_length_applied_at_next_absolute_tool_axis_move() -> None:
 @pytest.mark.req("M-14")
 def test_unknown_d_is_an_error() -> None:
     _, err = decode("%t\nD7\nM30\n", tools=TOOLS)
-    assert err is not None and err.payload.alarm == 912031
+    assert err is not None
+    assert err.payload.alarm == 912031
 
 
 @pytest.mark.req("M-16")
 def test_g41_square_outer_corners_g25() -> None:
-    prog = (
-        "%t\nG01 X-10 Y0 F1000\nD2 G41\nX0 Y0\nX10\nY10\nX0\nY0\nG40 X-10\nM30\n"
-    )  # a square run counter-clockwise, tool left = outside? no: ccw with tool left is inside
+    prog = "%t\nG01 X-10 Y0 F1000\nD2 G41\nX0 Y0\nX10\nY10\nX0\nY0\nG40 X-10\nM30\n"
     motions, err = decode(prog, tools=TOOLS)
     assert err is None
     # ccw square, tool on the left = inside: inner corners at (2, 2) (8, 2) (8, 8) (2, 8)
@@ -156,13 +157,15 @@ def test_g42_outer_corners_with_g26_arcs() -> None:
 def test_radius_too_large_for_inside_arc_is_90017() -> None:
     prog = "%t\nG01 X0 Y-5 F1000\nD2 G41\nX0 Y0\nG03 X0 Y2 I0 J1\nM30\n"  # radius 1, tool left of ccw arc
     _, err = decode(prog, tools=TOOLS)
-    assert err is not None and err.payload.alarm == 90017
+    assert err is not None
+    assert err.payload.alarm == 90017
 
 
 @pytest.mark.req("M-18")
 def test_selection_in_a_circle_is_90008() -> None:
     _, err = decode("%t\nG01 X0 Y0 F1000\nD2 G41\nG02 X10 Y0 I5 J0\nM30\n", tools=TOOLS)
-    assert err is not None and err.payload.alarm == 90008
+    assert err is not None
+    assert err.payload.alarm == 90008
 
 
 @pytest.mark.req("M-18")
@@ -170,4 +173,5 @@ def test_slot_narrower_than_tool_is_a_contour_violation() -> None:
     # a 1 mm step inward with a 2 mm tool: the compensated middle block would run backwards
     prog = "%t\nG01 X0 Y0 F1000\nD2 G41\nX10 Y0\nY1\nX11\nY10\nG40 X20\nM30\n"
     _, err = decode(prog, tools=TOOLS)
-    assert err is not None and err.payload.alarm == 912030
+    assert err is not None
+    assert err.payload.alarm == 912030

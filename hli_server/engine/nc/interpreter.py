@@ -104,8 +104,8 @@ from hli_server.engine.programs import ProgramFile
 __all__ = [
     "MAX_CALL_DEPTH",
     "PAUSE",
-    "CoordinateCommand",
     "STATEMENTS_PER_CYCLE",
+    "CoordinateCommand",
     "Directive",
     "FlushStop",
     "FlushWait",
@@ -1129,7 +1129,9 @@ class Interpreter(Env):
             elif "ID" in stmt.options:
                 value = numbers.pop(0)
                 if value != int(value) or value < 1:
-                    raise stmt.error(A_INDEX, f"#{command} [{format_value(value)}]: the ID is a whole number >= 1")
+                    raise stmt.error(
+                        A_INDEX, f"#{command} [{format_value(value)}]: the ID is a whole number >= 1"
+                    )
                 ident = int(value)
             for option in stmt.options:
                 if option.startswith("NAME:"):

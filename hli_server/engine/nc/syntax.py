@@ -1620,8 +1620,10 @@ class _BlockParser:
         (programming manual 208480907, 208491403, 1037259147, 1048407819, 207442315). The Hash's command is
         ``"CS ON"`` etc.; ``options`` holds ``ALL``, ``ID`` (the first bracket is the ID), a ``#CS ADD`` name,
         or the #ROTATION keywords in the order of ``args``."""
-        ops = ("ON", "OFF") if name == "ROTATION" else ("DEF", "ON", "OFF", "ADD", "SET", "DEL")
-        if name == "ACS":
+        ops: tuple[str, ...] = ("DEF", "ON", "OFF", "ADD", "SET", "DEL")
+        if name == "ROTATION":
+            ops = ("ON", "OFF")
+        elif name == "ACS":
             ops = ("DEF", "ON", "OFF")
         op = next((o for o in ops if self.keyword(o)), None)
         if op is None:
@@ -1645,8 +1647,8 @@ class _BlockParser:
                     if key not in ("ANGLE", "CENTER1", "CENTER2") or key in options:
                         self.fail(
                             A_CONTROL_SYNTAX,
-                            f"#ROTATION ON [..]: {key or self.word_at(self.pos)!r}: ANGLE=, CENTER1=, CENTER2= "
-                            "(each once)",
+                            f"#ROTATION ON [..]: {key or self.word_at(self.pos)!r}: "
+                            "ANGLE=, CENTER1=, CENTER2= (each once)",
                         )
                     self.blanks()
                     if self.peek() == "=":
@@ -1687,7 +1689,8 @@ class _BlockParser:
                     args = first
         if not self.at_end():
             self.fail(
-                A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{name} {op}: the command stands alone in its block"
+                A_CONTROL_SYNTAX,
+                f"{self.word_at(self.pos)!r} after #{name} {op}: the command stands alone in its block",
             )
         return Hash(self.raw, self.number, f"{name} {op}", options, args)
 
@@ -1710,7 +1713,9 @@ class _BlockParser:
             break
         self.depth -= 1
         if len(out) > 6:
-            self.fail(A_CONTROL_SYNTAX, f"{what} [..]: at most 6 values (v1, v2, v3, φ1, φ2, φ3), got {len(out)}")
+            self.fail(
+                A_CONTROL_SYNTAX, f"{what} [..]: at most 6 values (v1, v2, v3, φ1, φ2, φ3), got {len(out)}"
+            )
         return out
 
     def meas_mode(self) -> Stmt:

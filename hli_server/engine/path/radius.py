@@ -156,7 +156,8 @@ class RadiusCompensation:
         if new_r <= 1e-6:
             raise TrcError(
                 A_RADIUS_TOO_LARGE,
-                f"tool radius {self.radius:g} mm is greater than or equal to the circle's radius {big_r:g} mm "
+                f"tool radius {self.radius:g} mm is greater than or equal to the circle's radius {big_r:g} mm"
+                " "
                 "on the inside of the contour",
                 e.block,
             )
@@ -195,7 +196,8 @@ class RadiusCompensation:
         return min(cands, key=lambda x: math.hypot(*_sub(x, near)))
 
     def _circles(self, a: Element, b: Element, near: V2) -> V2 | None:
-        assert a.centre is not None and b.centre is not None
+        assert a.centre is not None
+        assert b.centre is not None
         c1, c2 = a.centre, b.centre
         r1 = math.hypot(*_sub(self._p(a.end), c1))
         r2 = math.hypot(*_sub(self._p(b.start), c2))
@@ -217,7 +219,8 @@ class RadiusCompensation:
         if _dot(_sub(self._p(comp.end), self._p(comp.start)), t) < -1e-9:
             raise TrcError(
                 A_CONTOUR_VIOLATION,
-                f"tool radius compensation: with radius {self.radius:g} mm the compensated path of this block "
+                f"tool radius compensation: with radius {self.radius:g} mm the compensated path of this "
+                "block "
                 "runs against its programmed direction (the tool path crosses itself: contour violation)",
                 prog.block,
             )
@@ -242,7 +245,8 @@ class RadiusCompensation:
                     )
                 raise TrcError(
                     A_CONTOUR_VIOLATION,
-                    f"tool radius {self.radius:g} mm: the compensated blocks do not intersect (contour violation)",
+                    f"tool radius {self.radius:g} mm: the compensated blocks do not intersect "
+                    "(contour violation)",
                     b.block,
                 )
             a2 = replace(a, end=self._with(a.end, p))
@@ -258,7 +262,12 @@ class RadiusCompensation:
         mid = a.end
         if self.transition == 26:
             arc = Element(
-                start=mid, end=b.start, block=b.block, rapid=b.rapid, centre=corner, cw=self.side > 0,
+                start=mid,
+                end=b.start,
+                block=b.block,
+                rapid=b.rapid,
+                centre=corner,
+                cw=self.side > 0,
                 kind="transition",
             )
             return [a, arc, b]
@@ -294,7 +303,8 @@ class RadiusCompensation:
 
     def _check_arc(self, prog: Element, comp: Element, at_end: bool) -> None:
         """A trimmed circle must keep its sense (the intersection lies on the compensated arc)."""
-        assert prog.centre is not None and comp.centre is not None
+        assert prog.centre is not None
+        assert comp.centre is not None
         c = comp.centre
         a0 = math.atan2(*reversed(_sub(self._p(prog.start), c)))
         a1 = math.atan2(*reversed(_sub(self._p(prog.end), c)))
@@ -341,7 +351,8 @@ class RadiusCompensation:
             if e.centre is not None:
                 raise TrcError(
                     A_SELECT_IN_CIRCLE,
-                    "selection of tool radius compensation (G41/G42): the first block after it must be a line",
+                    "selection of tool radius compensation (G41/G42): the first block after it must be a "
+                    "line",
                     e.block,
                 )
             self._selecting = False

@@ -60,7 +60,9 @@ class ToolState:
         """``D<n>``: an error text when the block is not in the table."""
         if d != 0 and d not in self.table:
             known = ", ".join(f"D{n}" for n in sorted(self.table)) or "none"
-            return f"D{d}: no tool compensation data block {d} in the machine file's tool table (known: {known})"
+            return (
+                f"D{d}: no tool compensation data block {d} in the machine file's tool table (known: {known})"
+            )
         self.d = d
         return None
 
