@@ -196,6 +196,8 @@ class Decoder:
         self._main_index = tuple(self.index[a] for a in main_axes)
         self._trc_prog: list[float] | None = None
         self._redo: Directive | None = None
+        self._length_before = 0.0
+        """The tool length included in :attr:`position` before the block being emitted."""
         """The programmed end point (program coordinates) while the radius compensation holds a block."""
 
     # --- program control -----------------------------------------------------------------
@@ -556,11 +558,11 @@ class Decoder:
         if d is not None:
             if d != int(d) or d < 0:
                 return self._error(
-                    block, 912031, f"D{d:g}: the D word takes a tool data block number 0, 1, 2, ..."
+                    block, 916001, f"D{d:g}: the D word takes a tool data block number 0, 1, 2, ..."
                 )
             err = self.tools.select(int(d))
             if err is not None:
-                return self._error(block, 912031, err, d=int(d))
+                return self._error(block, 916001, err, d=int(d))
             if self.trc.side != 0:
                 self.trc.radius = abs(self.tools.radius)
         sides = [g for g in block.g_codes if g in (41, 42)]
@@ -622,7 +624,7 @@ class Decoder:
             if op in ("DEF", "ON") and cmd.values:
                 ident = systems.define(cmd.ident, cmd.values)
                 if isinstance(ident, str):
-                    return DecodeError(912032, ident)
+                    return DecodeError(916002, ident)
                 if op == "ON":
                     err = systems.activate(ident)
             elif op == "ON":
@@ -633,12 +635,13 @@ class Decoder:
                 err = f"#{kind} DEF without its components [v1, v2, v3, φ1, φ2, φ3]"
             elif op == "OFF":
                 systems.deactivate(all_=cmd.all_)
-        return DecodeError(912032, err) if err is not None else None
+        return DecodeError(916002, err) if err is not None else None
 
     def _trc_flush(self) -> list[Motion | Marker]:
         """Empty the radius compensation's held block (before a marker, a directive, the end)."""
         if not self.trc.active:
             return []
+        self._length_before = self.tools.applied_length
         elements = self.trc.flush()
         if self.trc.side == 0:
             self._trc_prog = None
@@ -700,6 +703,7 @@ class Decoder:
             self._trc_prog = prog_end if self.trc.active else None
         else:
             elements = [element]
+        self._length_before = self.tools.applied_length
         self.tools.applied_length = length
         items = self._emit(elements)
         if not elements and not self.trc.active:
@@ -742,12 +746,13 @@ class Decoder:
             if segment.length <= 1e-12:
                 self.position = list(end)
                 continue
-            err = self._check(segment, block)
+            err = self._check(segment, block, self._length_before)
             if err is not None:
                 items.append(Marker(MarkerKind.ERROR, block, payload=err))
                 return items
             v_max, accel = self._limits(segment, e.rapid)
             self.position = list(end)
+            self._length_before = length
             items.append(
                 Motion(
                     segment=segment,
@@ -760,23 +765,27 @@ class Decoder:
             )
         return items
 
-    def tip_segment(self, segment: Segment) -> Segment:
-        """The path of the tool tip (the monitored tool centre point): the segment less the tool length."""
+    def tip_segment(self, segment: Segment, length_at_start: float | None = None) -> Segment:
+        """The path of the tool tip (the monitored tool centre point): the segment less the tool length
+        (``length_at_start``: the length in the start point's axis position when it changes on the way)."""
         length = self.tools.applied_length
-        if length == 0.0:
+        l0 = length if length_at_start is None else length_at_start
+        if length == 0.0 and l0 == 0.0:
             return segment
         k = self._main_index[self._tool_axis()]
 
-        def shift(p: Point) -> Point:
+        def shift(p: Point, by: float) -> Point:
             q = list(p)
-            q[k] -= length
+            q[k] -= by
             return tuple(q)
 
-        return dataclasses.replace(segment, start=shift(segment.start), end=shift(segment.end))
+        if isinstance(segment, LineSegment):
+            return LineSegment(shift(segment.start, l0), shift(segment.end, length))
+        return dataclasses.replace(segment, start=shift(segment.start, l0), end=shift(segment.end, length))
 
-    def _check(self, segment: Segment, block: Block) -> DecodeError | None:
+    def _check(self, segment: Segment, block: Block, length_at_start: float | None = None) -> DecodeError | None:
         """Every path check; the area checks see the tool tip (``monitors_tcp``)."""
-        tip = self.tip_segment(segment)
+        tip = self.tip_segment(segment, length_at_start)
         for check in self.path_checks:
             tcp = getattr(getattr(check, "__self__", check), "monitors_tcp", False)
             err = check(tip if tcp else segment, block)

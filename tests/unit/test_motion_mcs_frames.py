@@ -128,7 +128,7 @@ def test_tool_length_applied_at_next_absolute_tool_axis_move() -> None:
 def test_unknown_d_is_an_error() -> None:
     _, err = decode("%t\nD7\nM30\n", tools=TOOLS)
     assert err is not None
-    assert err.payload.alarm == 912031
+    assert err.payload.alarm == 916001
 
 
 @pytest.mark.req("M-16")
@@ -174,4 +174,4 @@ def test_slot_narrower_than_tool_is_a_contour_violation() -> None:
     prog = "%t\nG01 X0 Y0 F1000\nD2 G41\nX10 Y0\nY1\nX11\nY10\nG40 X20\nM30\n"
     _, err = decode(prog, tools=TOOLS)
     assert err is not None
-    assert err.payload.alarm == 912030
+    assert err.payload.alarm == 916000

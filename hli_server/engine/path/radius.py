@@ -20,7 +20,7 @@ What is modelled:
   stays at exactly r).
 - Errors: a circle whose equidistant radius would be zero or negative (tool radius >= contour radius on the
   inside): ID 90017; two circles whose equidistants do not meet: ID 90031; a compensated block that would
-  run against its programmed direction (the tool path crosses itself, a contour violation): 912030.
+  run against its programmed direction (the tool path crosses itself, a contour violation): 916000.
 - The stage holds one block back (the corner needs the next block). A block that must empty it (M function,
   #FLUSH, a # command, an area command, the program's end) ends the held block perpendicular to its end
   point; the next block then starts with a line to its compensated start.
@@ -45,7 +45,7 @@ __all__ = [
 A_SELECT_IN_CIRCLE = 90008
 A_RADIUS_TOO_LARGE = 90017
 A_RADIUS_CIRCLE_CIRCLE = 90031
-A_CONTOUR_VIOLATION = 912030
+A_CONTOUR_VIOLATION = 916000
 _EPS = 1e-9
 
 V2 = tuple[float, float]

@@ -1,0 +1,83 @@
+"""The area monitors (FCT-C14) with coordinate systems and tools active (issue 24, M-15, M-19)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from hli_server.engine.machine import Machine
+from schemas.config import AxisConfig, ChannelConfig, MachineConfig
+from tests.unit.areas.helpers import alarm_ids, run
+
+TOOLS = [{"number": 1, "length": 1_000_000, "radius": 50_000}]
+
+SQUARE = """\
+N10 #CONTROL AREA BEGIN [ID1 WORK POLY MIN_EXCUR=-50 MAX_EXCUR=50]
+N20 G01 F1000 X0 Y0
+N30 X100
+N40 Y100
+N50 X0
+N60 Y0
+N70 #CONTROL AREA END
+"""
+"""A 100 x 100 mm work area in machine coordinates, Z from -50 to 50."""
+
+
+def machine(**channel: Any) -> Machine:
+    names = ["X", "Y", "Z"]
+    axes = [
+        AxisConfig(number=i + 1, name=n, swe_neg=-10_000_000, swe_pos=10_000_000) for i, n in enumerate(names)
+    ]
+    return Machine(MachineConfig(axes=axes, channels=[ChannelConfig(axes=names, tools=TOOLS, **channel)]))
+
+
+def go(program: str) -> tuple[Machine, list[float]]:
+    m = machine()
+    ch = run(m, "%t\n" + program + "M30\n")
+    return m, ch.setpoints()
+
+
+@pytest.mark.req("M-19")
+def test_path_check_under_rotated_cs() -> None:
+    head = SQUARE + "G01 X10 Y10 F5000\n#CONTROL AREA ON [ID1]\n"
+    # (80, 10) is inside the square in machine coordinates ...
+    m, pos = go(head + "X80 Y10\n")
+    assert 120486 not in alarm_ids(m)
+    assert pos[:2] == pytest.approx([80.0, 10.0])
+    # ... but in the CS turned by 45° about (50, 50) it is machine (99.5, 113.6): the path leaves the area
+    m, pos = go(head + "#CS ON [50, 50, 0, 0, 0, 45]\nX70 Y0\nX80 Y10\n")
+    assert 120486 in alarm_ids(m)
+    assert pos[:2] == pytest.approx([99.497, 99.497], abs=1e-3)  # stopped at the start of the failing block
+
+
+@pytest.mark.req("M-19")
+def test_area_defined_under_cs_stays_in_machine_coordinates() -> None:
+    # defined while a rotated CS is active: the contour is taken as written (machine coordinates)
+    m, pos = go("G01 X10 Y10 F5000\n#CS ON [50, 50, 0, 0, 0, 45]\n" + SQUARE + "#CS OFF\n#CONTROL AREA ON [ID1]\nX95 Y5\n")
+    assert 120486 not in alarm_ids(m)
+    assert pos[:2] == pytest.approx([95.0, 5.0])
+
+
+@pytest.mark.req("M-19")
+def test_tool_radius_makes_the_path_leave_the_work_area() -> None:
+    head = SQUARE + "G01 X10 Y10 F5000\n#CONTROL AREA ON [ID1]\n"
+    # along y = 3 the programmed path is inside; with G42 and a 5 mm tool the tool runs at y = -2
+    m, _ = go(head + "X10 Y3\nX90\nX90 Y10\n")
+    assert 120486 not in alarm_ids(m)
+    m, pos = go(head + "D1 G41\nX10 Y3\nX90\nG40 X90 Y10\n")  # tool left of +x: y = 8, inside
+    assert 120486 not in alarm_ids(m)
+    m, pos = go(head + "D1 G42\nX10 Y3\nX90\nG40 X90 Y10\n")
+    assert 120486 in alarm_ids(m)
+
+
+@pytest.mark.req("M-15")
+def test_areas_monitor_the_tool_tip() -> None:
+    head = SQUARE + "G01 X10 Y10 Z0 F5000\n#CONTROL AREA ON [ID1]\n"
+    # with a 100 mm tool the Z axis stands at 100 while the tip is at 0: inside the excursion -50..50
+    m, pos = go(head + "D1\nZ0\nX20\n")
+    assert 120486 not in alarm_ids(m)
+    assert pos == pytest.approx([20.0, 10.0, 100.0])
+    m, pos = go(head + "D1\nZ0\nZ60\n")  # the tip at 60 leaves the excursion
+    assert 120486 in alarm_ids(m)
+    assert pos[2] == pytest.approx(100.0)
