@@ -7,6 +7,8 @@ import math
 from typing import Any
 
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from hli_server.engine.geometry import ArcSegment
 from hli_server.engine.machine import Machine
@@ -175,3 +177,47 @@ def test_slot_narrower_than_tool_is_a_contour_violation() -> None:
     _, err = decode(prog, tools=TOOLS)
     assert err is not None
     assert err.payload.alarm == 916000
+
+
+def _distance_to_polyline(p: tuple[float, float], pts: list[tuple[float, float]]) -> float:
+    best = math.inf
+    for (ax, ay), (bx, by) in zip(pts, pts[1:], strict=False):
+        dx, dy = bx - ax, by - ay
+        n2 = dx * dx + dy * dy
+        t = 0.0 if n2 == 0 else max(0.0, min(1.0, ((p[0] - ax) * dx + (p[1] - ay) * dy) / n2))
+        best = min(best, math.hypot(p[0] - ax - t * dx, p[1] - ay - t * dy))
+    return best
+
+
+@pytest.mark.req("M-17")
+@settings(max_examples=60, deadline=None)
+@given(
+    turns=st.lists(st.floats(-150.0, 150.0), min_size=2, max_size=7),
+    lengths=st.lists(st.floats(12.0, 40.0), min_size=8, max_size=8),
+    side=st.sampled_from([41, 42]),
+    transition=st.sampled_from([25, 26]),
+)
+def test_compensated_path_stays_within_the_radius(
+    turns: list[float], lengths: list[float], side: int, transition: int
+) -> None:
+    """Property: every point of the compensated path is at most r (G26) or r·√2 (G25) from the programmed
+    path; a program the compensation refuses (a contour violation) is skipped."""
+    heading = 0.0
+    pts = [(0.0, 0.0)]
+    for k, turn in enumerate([0.0, *turns]):
+        heading += math.radians(turn)
+        x, y = pts[-1]
+        pts.append((x + lengths[k] * math.cos(heading), y + lengths[k] * math.sin(heading)))
+    lines = "".join(f"X{x:.4f} Y{y:.4f}\n" for x, y in pts[1:-1])
+    last = pts[-1]
+    prog = f"%t\nG01 X0 Y0 F1000\nD2 G{side} G{transition}\n{lines}G40 X{last[0]:.4f} Y{last[1]:.4f}\nM30\n"
+    motions, err = decode(prog, tools=TOOLS)
+    assume(err is None)
+    r = 2.0
+    bound = r if transition == 26 else r * math.sqrt(2.0)
+    programmed = [(round(x, 4), round(y, 4)) for x, y in pts]
+    for mo in motions:
+        seg = mo.segment
+        for k in range(11):
+            q = seg.point_at(seg.length * k / 10)
+            assert _distance_to_polyline((q[0], q[1]), programmed) <= bound + 1e-6
