@@ -383,6 +383,7 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(912011, "Measuring move (G100) invalid", "project (FCT-C14, C14-23)"),
     # --- the kernel's IDs: coordinate systems and tool radius compensation (issue 24) ----------
     _e(20821, "(A)CS not defined", "kernel", page=_DIAG + "252664971.html"),
+    _e(20676, "Invalid angle", "kernel", page=_DIAG + "252190603.html"),
     _e(
         90008,
         "Selection of tool radius compensation within circular motion block",

@@ -612,6 +612,13 @@ class Decoder:
             else:
                 f.rotation = None
             return None
+        bad = [v for v in cmd.values[3:6] if not -360.0 <= v <= 360.0]
+        if bad:
+            return DecodeError(
+                20676,
+                f"#{kind} {op}: rotation angle {bad[0]:g}° outside -360° .. 360°",
+                {"value": bad[0], "lower": -360, "upper": 360},
+            )
         if op == "ADD":
             err = f.add(cmd.name or "", cmd.values)
         elif op == "SET":
@@ -783,7 +790,9 @@ class Decoder:
             return LineSegment(shift(segment.start, l0), shift(segment.end, length))
         return dataclasses.replace(segment, start=shift(segment.start, l0), end=shift(segment.end, length))
 
-    def _check(self, segment: Segment, block: Block, length_at_start: float | None = None) -> DecodeError | None:
+    def _check(
+        self, segment: Segment, block: Block, length_at_start: float | None = None
+    ) -> DecodeError | None:
         """Every path check; the area checks see the tool tip (``monitors_tcp``)."""
         tip = self.tip_segment(segment, length_at_start)
         for check in self.path_checks:

@@ -221,3 +221,49 @@ def test_compensated_path_stays_within_the_radius(
         for k in range(11):
             q = seg.point_at(seg.length * k / 10)
             assert _distance_to_polyline((q[0], q[1]), programmed) <= bound + 1e-6
+
+
+@pytest.mark.req("M-10")
+@pytest.mark.parametrize(
+    ("components", "expected"),
+    [
+        # the manual's examples (208480907): gaps are 0, shortened lists are allowed
+        ("[,,10,,,45]", (0.0, math.sqrt(2.0), 10.0)),
+        ("[0,0,10,0,0,45]", (0.0, math.sqrt(2.0), 10.0)),
+        ("[0,0,10]", (1.0, 1.0, 10.0)),
+        ("[0,0,10,0,30]", (1.0 * math.cos(math.radians(30)), 1.0, 10.0 - math.sin(math.radians(30)))),
+    ],
+)
+def test_cs_component_forms_of_the_manual(components: str, expected: tuple[float, float, float]) -> None:
+    motions, err = decode(f"%t\n#CS ON {components}\nG01 X1 Y1 Z0 F100\nM30\n")
+    assert err is None
+    assert motions[0].segment.end == pytest.approx(expected)
+
+
+@pytest.mark.req("M-10")
+def test_cs_angle_out_of_range_is_20676() -> None:
+    # the diagnosis page's own example: #CS ON [10,20,0,45,0,450]
+    _, err = decode("%t\n#CS ON [10,20,0,45,0,450]\nG01 X1 F100\nM30\n")
+    assert err is not None
+    assert err.payload.alarm == 20676
+
+
+@pytest.mark.req("M-10")
+@pytest.mark.parametrize(
+    "line",
+    [
+        "#CS",
+        "#CS ON [1,2",
+        "#CS ON [1,2,3,4,5,6,7]",
+        "#CS MODE ON",
+        "#ROTATION ON [FOO=1]",
+        "#CS ADD [TOOLONGNAME] [1]",
+        "#CS ON [1] X10",
+        "#ACS ADD [A] [1]",
+    ],
+)
+def test_malformed_coordinate_commands_are_precise_errors(line: str) -> None:
+    _, err = decode(f"%t\n{line}\nM30\n")
+    assert err is not None
+    assert err.payload.alarm in {910110, 914000, 914015, 910105}, err.payload
+    assert err.payload.params.get("line") == 2
