@@ -54,7 +54,8 @@ def test_path_check_under_rotated_cs() -> None:
 @pytest.mark.req("M-19")
 def test_area_defined_under_cs_stays_in_machine_coordinates() -> None:
     # defined while a rotated CS is active: the contour is taken as written (machine coordinates)
-    m, pos = go("G01 X10 Y10 F5000\n#CS ON [50, 50, 0, 0, 0, 45]\n" + SQUARE + "#CS OFF\n#CONTROL AREA ON [ID1]\nX95 Y5\n")
+    program = "G01 X10 Y10 F5000\n#CS ON [50, 50, 0, 0, 0, 45]\n" + SQUARE
+    m, pos = go(program + "#CS OFF\n#CONTROL AREA ON [ID1]\nX95 Y5\n")
     assert 120486 not in alarm_ids(m)
     assert pos[:2] == pytest.approx([95.0, 5.0])
 
@@ -65,9 +66,9 @@ def test_tool_radius_makes_the_path_leave_the_work_area() -> None:
     # along y = 3 the programmed path is inside; with G42 and a 5 mm tool the tool runs at y = -2
     m, _ = go(head + "X10 Y3\nX90\nX90 Y10\n")
     assert 120486 not in alarm_ids(m)
-    m, pos = go(head + "D1 G41\nX10 Y3\nX90\nG40 X90 Y10\n")  # tool left of +x: y = 8, inside
+    m, _ = go(head + "D1 G41\nX10 Y3\nX90\nG40 X90 Y10\n")  # tool left of +x: y = 8, inside
     assert 120486 not in alarm_ids(m)
-    m, pos = go(head + "D1 G42\nX10 Y3\nX90\nG40 X90 Y10\n")
+    m, _ = go(head + "D1 G42\nX10 Y3\nX90\nG40 X90 Y10\n")
     assert 120486 in alarm_ids(m)
 
 

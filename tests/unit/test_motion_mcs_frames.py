@@ -3,6 +3,7 @@ tool length, G40/G41/G42."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Any
 
@@ -181,7 +182,7 @@ def test_slot_narrower_than_tool_is_a_contour_violation() -> None:
 
 def _distance_to_polyline(p: tuple[float, float], pts: list[tuple[float, float]]) -> float:
     best = math.inf
-    for (ax, ay), (bx, by) in zip(pts, pts[1:], strict=False):
+    for (ax, ay), (bx, by) in itertools.pairwise(pts):
         dx, dy = bx - ax, by - ay
         n2 = dx * dx + dy * dy
         t = 0.0 if n2 == 0 else max(0.0, min(1.0, ((p[0] - ax) * dx + (p[1] - ay) * dy) / n2))
