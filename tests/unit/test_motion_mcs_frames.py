@@ -268,3 +268,62 @@ def test_malformed_coordinate_commands_are_precise_errors(line: str) -> None:
     assert err is not None
     assert err.payload.alarm in {910110, 914000, 914015, 910105}, err.payload
     assert err.payload.params.get("line") == 2
+
+
+@pytest.mark.req("M-16")
+def test_line_arc_line_with_g41_outside_of_a_convex_arc() -> None:
+    # a 10 mm half circle bulging to -y, run clockwise from (0,0) to (20,0); tool left = outside, radius 2
+    prog = "%t\nG01 X-10 Y0 F1000\nD2 G41\nX0 Y0\nG02 X20 Y0 I10 J0\nG01 X30\nG40 X40\nM30\n"
+    motions, err = decode(prog, tools=TOOLS)
+    assert err is None
+    arcs = [mo.segment for mo in motions if isinstance(mo.segment, ArcSegment)]
+    assert len(arcs) == 1
+    assert arcs[0].radius == pytest.approx(12.0)
+    assert arcs[0].centre == pytest.approx((10.0, 0.0))
+    assert motions[-1].segment.end[:2] == pytest.approx((40.0, 0.0))
+    # the tool path is continuous
+    for a, b in itertools.pairwise(motions):
+        assert a.segment.end == pytest.approx(b.segment.start)
+
+
+@pytest.mark.req("M-16")
+def test_arc_inside_shrinks_by_the_radius_and_corners_meet() -> None:
+    # counter-clockwise quarter circle radius 10 with the tool left (inside): radius 8
+    prog = "%t\nG01 X10 Y-10 F1000\nD2 G41\nX10 Y0\nG03 X0 Y10 I-10 J0\nG01 X-10\nG40 X-10 Y20\nM30\n"
+    motions, err = decode(prog, tools=TOOLS)
+    assert err is None
+    arcs = [mo.segment for mo in motions if isinstance(mo.segment, ArcSegment)]
+    assert len(arcs) == 1
+    assert arcs[0].radius == pytest.approx(8.0)
+    for a, b in itertools.pairwise(motions):
+        assert a.segment.end == pytest.approx(b.segment.start)
+
+
+@pytest.mark.req("M-17")
+def test_g25_inserts_lines_next_to_a_circle_at_an_outer_corner() -> None:
+    # line +x then a ccw arc turning away to the right of the tool (G41: outer corner of 90°)
+    prog = "%t\nG01 X-10 Y0 F1000\nD2 G41 G25\nX0 Y0\nX10\nG02 X20 Y-10 I0 J-10\nG01 G40 X30 Y-10\nM30\n"
+    motions, err = decode(prog, tools=TOOLS)
+    assert err is None
+    kinds = ["arc" if isinstance(mo.segment, ArcSegment) else "line" for mo in motions]
+    assert kinds.count("arc") == 1
+    for a, b in itertools.pairwise(motions):
+        assert a.segment.end == pytest.approx(b.segment.start)
+
+
+@pytest.mark.req("M-18")
+def test_two_circles_whose_equidistants_do_not_meet_are_90031() -> None:
+    # found by a seeded search: with a 9 mm tool on the right the two compensated circles have no common point
+    tools = [{"number": 9, "radius": 90_000}]
+    prog = (
+        "%t\nG01 X-10 Y0 F1000\nD9 G42\nX0 Y0\n"
+        "G02 X8.659952 Y18.967213 I15.454018 J4.404649\n"
+        "G03 X16.440994 Y4.067401 I17.836257 J-0.167105\n"
+        "G01 G40 X26.441 Y4.0674\nM30\n"
+    )
+    _, err = decode(prog, tools=tools)
+    assert err is not None
+    assert err.payload.alarm == 90031
+    # a smaller tool passes
+    _, err = decode(prog, tools=[{"number": 9, "radius": 10_000}])
+    assert err is None
