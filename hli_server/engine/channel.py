@@ -145,7 +145,26 @@ class ChannelHost:
             return 0.0
         if name in ("I", "J", "K"):
             return decoder.last_centre.get(name, 0.0)
-        return None
+        return _tool_and_frame_value(decoder, name)
+
+
+def _tool_and_frame_value(decoder: Decoder, name: str) -> float | None:
+    """V.G. of issue 24: the active tool's data (WZ_AKT.R/.L/.NR, WZR, WZL) and #ROTATION's (ROT_ACTIVE,
+    ROT_ANGLE, ROT_CENTER1, ROT_CENTER2), as the decoder has them at the block being decoded."""
+    tools = decoder.tools
+    rotation = decoder.frames.rotation
+    values: dict[str, float] = {
+        "WZ_AKT.R": tools.radius,
+        "WZR": tools.radius,
+        "WZ_AKT.L": tools.length,
+        "WZL": tools.length,
+        "WZ_AKT.NR": float(tools.d),
+        "ROT_ACTIVE": 1.0 if rotation is not None else 0.0,
+        "ROT_ANGLE": rotation[0] if rotation is not None else 0.0,
+        "ROT_CENTER1": rotation[1] if rotation is not None else 0.0,
+        "ROT_CENTER2": rotation[2] if rotation is not None else 0.0,
+    }
+    return values.get(name)
 
 
 class Channel:

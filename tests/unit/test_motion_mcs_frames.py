@@ -327,3 +327,17 @@ def test_two_circles_whose_equidistants_do_not_meet_are_90031() -> None:
     # a smaller tool passes
     _, err = decode(prog, tools=[{"number": 9, "radius": 10_000}])
     assert err is None
+
+
+@pytest.mark.req("M-14")
+def test_tool_and_rotation_variables_read_in_program_order() -> None:
+    prog = (
+        "%t\nD2\n#ROTATION ON [ANGLE=30 CENTER1=1]\n"
+        "$IF V.G.WZ_AKT.R == 2 && V.G.WZR == 2 && V.G.WZ_AKT.NR == 2 && V.G.ROT_ACTIVE == 1\n"
+        "$IF V.G.ROT_ANGLE == 30 && V.G.ROT_CENTER1 == 1 && V.G.WZ_AKT.L == 0\nG01 X7 F100\n$ENDIF\n$ENDIF\n"
+        "#ROTATION OFF\nD0\n$IF V.G.WZ_AKT.R == 0 && V.G.ROT_ACTIVE == 0\nG01 X9 Y0\n$ENDIF\nM30\n"
+    )
+    motions, err = decode(prog, tools=TOOLS)
+    assert err is None
+    assert len(motions) == 2
+    assert motions[1].segment.end[:2] == pytest.approx((9.0, 0.0))
