@@ -34,6 +34,8 @@ def decode(program: str, **channel: Any) -> tuple[list[Motion], Marker | None]:
     motions: list[Motion] = []
     for _ in range(10_000):
         items = ch.decoder.next_items()
+        if not items:
+            ch.interpreter.refill()
         for item in items:
             if isinstance(item, Motion):
                 motions.append(item)
