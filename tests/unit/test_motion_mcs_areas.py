@@ -8,6 +8,7 @@ import pytest
 
 from hli_server.engine.machine import Machine
 from schemas.config import AxisConfig, ChannelConfig, MachineConfig
+from schemas.wire import Mode, ProgramState
 from tests.unit.areas.helpers import alarm_ids, run
 
 TOOLS = [{"number": 1, "length": 1_000_000, "radius": 50_000}]
@@ -82,3 +83,44 @@ def test_areas_monitor_the_tool_tip() -> None:
     m, pos = go(head + "D1\nZ0\nZ60\n")  # the tip at 60 leaves the excursion
     assert 120486 in alarm_ids(m)
     assert pos[2] == pytest.approx(100.0)
+
+
+@pytest.mark.req("M-19")
+def test_manual_mode_guard_under_an_active_cs() -> None:
+    """The program leaves a turned CS active; in manual mode the guard holds the axes at the machine
+    coordinates' boundary (X 100), not at a boundary the CS would give."""
+    names = ["X", "Y", "Z"]
+    axes = [
+        AxisConfig(
+            number=i + 1,
+            name=n,
+            swe_neg=-10_000_000,
+            swe_pos=10_000_000,
+            jog_velocity=3000.0,
+            jog_acceleration=1000.0,
+        )
+        for i, n in enumerate(names)
+    ]
+    m = Machine(MachineConfig(axes=axes, channels=[ChannelConfig(axes=names, tools=TOOLS)]))
+    ch = run(
+        m,
+        "%t\n"
+        + SQUARE
+        + "G01 X10 Y10 F5000\n#CONTROL AREA ON [ID1]\n#CS ON [50, 50, 0, 0, 0, 45]\nX20 Y-40\nM30\n",
+    )
+    assert ch.state == ProgramState.FINISHED, [a.message for a in m.alarm_history]
+    assert ch.setpoints()[:2] == pytest.approx(
+        [50 + 20 * 0.7071068 + 40 * 0.7071068, 50 + 20 * 0.7071068 - 40 * 0.7071068], abs=1e-4
+    )
+    ch.request_mode(Mode.MANUAL)
+    m.step(1)
+    ch.request_jog("X", +1)
+    previous = None
+    for _ in range(20_000):
+        m.step(1)
+        x = ch.setpoints()[0]
+        assert x <= 100.0
+        if x == previous:
+            break
+        previous = x
+    assert 99.0 <= ch.setpoints()[0] <= 100.0

@@ -343,3 +343,16 @@ def test_tool_and_rotation_variables_read_in_program_order() -> None:
     assert err is None
     assert len(motions) == 2
     assert motions[1].segment.end[:2] == pytest.approx((9.0, 0.0))
+
+
+@pytest.mark.req("M-19")
+def test_program_coordinates_read_back_through_the_frames() -> None:
+    prog = (
+        "%t\n#CS ON [10, 0, 0, 0, 0, 90]\nG01 X5 Y0 F100\n"
+        "$IF ABS[V.A.PROG.X - 5] < 0.0001 && ABS[V.A.PROG.Y] < 0.0001\nG01 X5 Y3\n$ENDIF\nM30\n"
+    )
+    motions, err = decode(prog)
+    assert err is None
+    assert len(motions) == 2
+    # the axes: program (5, 3) in the CS turned 90° and shifted 10 in X is machine (7, 5)
+    assert motions[1].segment.end[:2] == pytest.approx((7.0, 5.0))
