@@ -356,3 +356,24 @@ def test_program_coordinates_read_back_through_the_frames() -> None:
     assert len(motions) == 2
     # the axes: program (5, 3) in the CS turned 90° and shifted 10 in X is machine (7, 5)
     assert motions[1].segment.end[:2] == pytest.approx((7.0, 5.0))
+
+
+@pytest.mark.req("M-16")
+def test_a_z_move_between_compensated_blocks_keeps_the_offset() -> None:
+    prog = "%t\nG01 X-10 Y0 Z5 F1000\nD2 G41\nX0 Y0\nX10\nZ-1\nX20\nG40 X30 Y10\nM30\n"
+    motions, err = decode(prog, tools=TOOLS)
+    assert err is None
+    z_moves = [mo.segment for mo in motions[1:] if mo.segment.start[2] != mo.segment.end[2]]
+    assert len(z_moves) == 1
+    assert z_moves[0].start[:2] == pytest.approx((10.0, 2.0))  # perpendicular at the end of X10
+    assert z_moves[0].end == pytest.approx((10.0, 2.0, -1.0))
+    for a, b in itertools.pairwise(motions):
+        assert a.segment.end == pytest.approx(b.segment.start)
+    assert motions[-1].segment.end == pytest.approx((30.0, 10.0, -1.0))
+
+
+@pytest.mark.req("M-10")
+def test_circle_in_a_tilted_cs_is_refused() -> None:
+    _, err = decode("%t\n#CS ON [0, 0, 0, 30, 0, 0]\nG01 X10 Y0 F100\nG03 X0 Y10 I-10 J0\nM30\n")
+    assert err is not None
+    assert err.payload.alarm == 910110

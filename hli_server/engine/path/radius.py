@@ -327,8 +327,23 @@ class RadiusCompensation:
     def push(self, e: Element, deselect: bool = False) -> list[Element]:
         """A programmed element while TRC is active (or the block that deselects it with G40)."""
         out: list[Element] = []
+        flat = e.centre is None and math.hypot(*_sub(self._p(e.end), self._p(e.start))) < 1e-9
+        if flat and self.side != 0 and not deselect:
+            # no motion in the plane (a Z feed, a zero move): not relevant for the compensation; the held
+            # block ends perpendicular and this one moves from there (the other axes only)
+            out = self.flush()
+            if self._last_out is None:
+                return [e]
+            end = self._with(e.end, self._p(self._last_out))
+            out.append(Element(self._last_out, end, e.block, e.rapid))
+            self._last_out = end
+            return out
         if deselect or self.side == 0:
             if self._held is None:
+                if self._last_out is not None and e.centre is None:
+                    # deselection right after a non-relevant block: from where the tool is
+                    start, self._last_out = self._last_out, None
+                    return [replace(e, start=start, kind="departure")]
                 return [e]
             if e.centre is not None:
                 raise TrcError(
