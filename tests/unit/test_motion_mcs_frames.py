@@ -377,3 +377,19 @@ def test_circle_in_a_tilted_cs_is_refused() -> None:
     _, err = decode("%t\n#CS ON [0, 0, 0, 30, 0, 0]\nG01 X10 Y0 F100\nG03 X0 Y10 I-10 J0\nM30\n")
     assert err is not None
     assert err.payload.alarm == 910110
+
+
+@pytest.mark.req("M-14")
+def test_without_a_tool_table_d_words_select_zero_data() -> None:
+    motions, err = decode("%t\nT1 D1 M6\nG01 X10 Z5 F100\nM30\n")
+    assert err is None
+    assert motions[0].segment.end == pytest.approx((10.0, 0.0, 5.0))
+
+
+@pytest.mark.req("M-10")
+def test_g92_under_a_cs_keeps_the_cs() -> None:
+    motions, err = decode("%t\n#CS ON [10, 0, 0, 0, 0, 90]\nG01 X5 Y0 F100\nG92 X0\nX1\nM30\n")
+    assert err is None
+    # X5 in the CS: machine (10, 5); G92 X0 there; X1 is 1 mm further along the CS' X (machine +Y)
+    assert ends(motions)[0] == pytest.approx((10.0, 5.0, 0.0))
+    assert ends(motions)[1] == pytest.approx((10.0, 6.0, 0.0))

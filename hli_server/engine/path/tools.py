@@ -5,7 +5,9 @@ The machine file's channel lists ``tools``: compensation data blocks with a numb
 them), optionally the tool number T, a length and a radius (programming manual, "Tool geometry
 compensation", https://infosys.beckhoff.com/content/1033/tccncprogramming/15557086347.html). ``D<n>``
 selects block n, ``D0`` deselects (length and radius 0). A ``T`` word is accepted and recorded (the tool
-change is the PLC's technology function); it does not select geometry data (``D`` does).
+change is the PLC's technology function); it does not select geometry data (``D`` does). Where the machine
+file has no tool table at all, every D selects zero data (programs written for a real machine run as before
+issue 24); with a table, a D it does not hold is alarm 916001.
 
 Tool length compensation: the length acts in the third main axis of the active plane in + direction
 (``#TLAX`` default: G17 Z, G18 Y, G19 X; https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/
@@ -57,8 +59,9 @@ class ToolState:
         return self.data.radius if self.d else 0.0
 
     def select(self, d: int) -> str | None:
-        """``D<n>``: an error text when the block is not in the table."""
-        if d != 0 and d not in self.table:
+        """``D<n>``: an error text when the block is not in the table. A machine file without a tool table
+        selects zero data (length and radius 0): CAM programs with ``T1 D1 M6`` run unchanged there."""
+        if d != 0 and self.table and d not in self.table:
             known = ", ".join(f"D{n}" for n in sorted(self.table)) or "none"
             return (
                 f"D{d}: no tool compensation data block {d} in the machine file's tool table (known: {known})"
