@@ -892,7 +892,11 @@ class Decoder:
                 self._position_before_area = None
         if self.area_handler is None:
             return self._error(block, 910110, "#CONTROL AREA: work and protection areas are not configured")
-        result = self.area_handler.command(cmd, block, tuple(self.position), m)
+        # the areas see the tool tip (the ON check tests where the tool is: C14-11)
+        point = tuple(self.position)
+        if self.tools.applied_length != 0.0:
+            point = self.tip_segment(LineSegment(point, point)).start
+        result = self.area_handler.command(cmd, block, point, m)
         if isinstance(result, DecodeError):
             return [Marker(MarkerKind.ERROR, block, payload=result)]
         if result is not None:

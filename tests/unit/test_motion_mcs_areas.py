@@ -124,3 +124,10 @@ def test_manual_mode_guard_under_an_active_cs() -> None:
             break
         previous = x
     assert 99.0 <= ch.setpoints()[0] <= 100.0
+
+
+@pytest.mark.req("M-15")
+def test_area_on_checks_the_tool_tip() -> None:
+    # the Z axis at 100 with a 100 mm tool: the tip at 0 is inside the excursion, so ON is allowed
+    m, _ = go(SQUARE + "G01 X10 Y10 Z0 F5000\nD1\nZ0\n#CONTROL AREA ON [ID1]\nX20\n")
+    assert [a.number for a in m.alarm_history if a.severity == "error"] == []
