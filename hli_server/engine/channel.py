@@ -20,7 +20,7 @@ from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
 from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
-from hli_server.engine.geometry import Point
+from hli_server.engine.geometry import LineSegment, Point
 from hli_server.engine.hli import AxisHli, ChannelHli
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.interpreter import Interpreter
@@ -323,6 +323,14 @@ class Channel:
     # --- positions -----------------------------------------------------------------------
     def setpoints(self) -> list[float]:
         return [a.setpoint for a in self.axes]
+
+    def tool_tip(self, point: Sequence[float]) -> Point:
+        """The tool tip (the TCP the areas monitor) for the axis positions ``point``: less the tool length
+        the decoder has put into the tool axis (issue 24, M-15)."""
+        decoder = self.decoder
+        if decoder.tools.applied_length == 0.0:
+            return tuple(point)
+        return decoder.tip_segment(LineSegment(tuple(point), tuple(point))).start
 
     def axis(self, name: str) -> Axis:
         return self.axes[self.axis_names.index(name)]

@@ -131,3 +131,15 @@ def test_area_on_checks_the_tool_tip() -> None:
     # the Z axis at 100 with a 100 mm tool: the tip at 0 is inside the excursion, so ON is allowed
     m, _ = go(SQUARE + "G01 X10 Y10 Z0 F5000\nD1\nZ0\n#CONTROL AREA ON [ID1]\nX20\n")
     assert [a.number for a in m.alarm_history if a.severity == "error"] == []
+
+
+@pytest.mark.req("M-15")
+def test_manual_mode_after_a_program_with_a_tool_length_sees_the_tip() -> None:
+    # the program ends with the Z axis at 100 (tip at 0): entering manual mode is allowed (P-CHAN-00442 = 0)
+    m = machine()
+    ch = run(m, "%t\n" + SQUARE + "G01 X10 Y10 Z0 F5000\n#CONTROL AREA ON [ID1]\nD1\nZ0\nM30\n")
+    assert ch.setpoints()[2] == pytest.approx(100.0)
+    ch.request_mode(Mode.MANUAL)
+    m.step(1)
+    assert ch.mode == Mode.MANUAL
+    assert 50961 not in alarm_ids(m)
