@@ -893,8 +893,8 @@ class Interpreter(Env):
                 raise EvalError(
                     A_NOT_SIMULATED,
                     f"V.G.{ref.name} is not simulated (V.G.BLOCK_NR, FEEDRATE, FEEDRATE_MODE, I, J, K, "
-                    "MASS_MM, MASS_360, WZ_AKT.R/.L/.NR, WZR, WZL, ROT_ACTIVE, ROT_ANGLE, ROT_CENTER1/2 are): "
-                    "see docs/nc-language.md",
+                    "MASS_MM, MASS_360, WZ_AKT.R/.L/.NR, WZR, WZL, ROT_ACTIVE, ROT_ANGLE, ROT_CENTER1/2 "
+                    "are): see docs/nc-language.md",
                 )
             return value
         raise EvalError(ALARM_EXPRESSION, f"{ref.text} cannot be read")
