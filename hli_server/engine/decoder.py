@@ -28,6 +28,7 @@ from hli_server.engine.nc.interpreter import (
     FlushWait,
     MeasMode,
     SyncAction,
+    ToolWrite,
 )
 from hli_server.engine.path.frames import FrameStack
 from hli_server.engine.path.radius import Element, RadiusCompensation, TrcError
@@ -262,6 +263,14 @@ class Decoder:
             self.current_block = block
         held = self._trc_flush()
         if held and isinstance(held[-1], Marker):
+            return held
+        if isinstance(out, ToolWrite):
+            if out.what == "radius":
+                self.tools.radius_written = out.value
+                if self.trc.side != 0:
+                    self.trc.radius = abs(out.value)
+            else:
+                self.tools.length_written = out.value
             return held
         if isinstance(out, CoordinateCommand):
             error = self._coordinates(out)
@@ -500,6 +509,7 @@ class Decoder:
             self.frames.active
             or self.tools.d != 0
             or self.tools.applied_length != 0.0
+            or self.tools.length_written is not None
             or self.trc.active
             or self._trc_prog is not None
         )
@@ -570,11 +580,7 @@ class Decoder:
             if self.modal.in_area_definition:
                 return self._error(block, 21793, "G41/G42 are not allowed inside a control area definition")
             side = 1 if sides[0] == 41 else -1
-            if self.trc.side not in (0, side):
-                # a contour change is a deselection and a selection (programming manual)
-                self.trc.side = side if self.tools.radius >= 0 else -side
-            else:
-                self.trc.select(side, self.tools.radius, _PLANE_AXES[self.modal.plane])
+            self.trc.select(side, self.tools.radius, _PLANE_AXES[self.modal.plane])
             if self._trc_prog is None:
                 self._trc_prog = self.program_position()
         return None

@@ -393,3 +393,29 @@ def test_g92_under_a_cs_keeps_the_cs() -> None:
     # X5 in the CS: machine (10, 5); G92 X0 there; X1 is 1 mm further along the CS' X (machine +Y)
     assert ends(motions)[0] == pytest.approx((10.0, 5.0, 0.0))
     assert ends(motions)[1] == pytest.approx((10.0, 6.0, 0.0))
+
+
+@pytest.mark.req("M-16")
+def test_manual_example_reaction_on_contour_change() -> None:
+    """The programming manual's example "Reaction on contour change" (207823755), run as written:
+    V.G.WZR sets the radius, G41 -> G42 without G40 is a deselection and a selection."""
+    prog = (
+        "%t\nN05 G01 Y10 F100 G41 V.G.WZR=2\nN10 X20 Y25\nN20 X40 G42\nN30 X60 Y10\nN40 X0 Y0 G40\nN50 M30\n"
+    )
+    motions, err = decode(prog)
+    assert err is None
+    for a, b in itertools.pairwise(motions):
+        assert a.segment.end == pytest.approx(b.segment.start)
+    programmed = [(0.0, 0.0), (0.0, 10.0), (20.0, 25.0), (40.0, 25.0), (60.0, 10.0), (0.0, 0.0)]
+    for mo in motions[1:-1]:
+        for k in range(11):
+            q = mo.segment.point_at(mo.segment.length * k / 10)
+            assert _distance_to_polyline((q[0], q[1]), programmed) <= 2.0 * math.sqrt(2.0) + 1e-6
+    # N10 runs left of its direction (+x, +y): the tool is above the programmed line
+    n10 = next(mo for mo in motions if mo.block.number == 10)
+    assert n10.segment.end[1] > 25.0
+    # N30 runs right of its direction (+x, -y): the tool is below-left of the programmed line
+    n30 = [mo for mo in motions if mo.block.number == 30]
+    mid = n30[0].segment.point_at(n30[0].segment.length / 2)
+    assert mid[1] < 25.0 - 15.0 * (mid[0] - 40.0) / 20.0 - 1.9
+    assert motions[-1].segment.end[:2] == pytest.approx((0.0, 0.0))

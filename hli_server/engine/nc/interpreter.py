@@ -113,6 +113,7 @@ __all__ = [
     "Interpreter",
     "IterationCapError",
     "SyncAction",
+    "ToolWrite",
 ]
 
 STATEMENTS_PER_CYCLE: Final = 128
@@ -261,6 +262,19 @@ class CoordinateCommand(Directive):
         self.values = values
         self.options = options or {}
         self.all_ = all_
+
+
+TOOL_WRITES: Final = {"WZR": "radius", "WZ_AKT.R": "radius", "WZL": "length", "WZ_AKT.L": "length"}
+"""V.G. variables a program may write: the active tool's radius and length (issue 24)."""
+
+
+class ToolWrite(Directive):
+    """``V.G.WZR = 2`` / ``V.G.WZ_AKT.R``/``.L``: the active tool's radius or length from here on."""
+
+    def __init__(self, block: Block, what: str, value: float) -> None:
+        super().__init__(block)
+        self.what = what
+        self.value = value
 
 
 class IterationCapError(Exception):
@@ -1021,6 +1035,10 @@ class Interpreter(Env):
                 assert ref.number is not None
                 index = int(as_number(ref.number.evaluate(self), ref.text))
                 frame.params[index] = as_number(value, ref.text)
+                return None
+            if kind == KIND_VG and not ref.indices and ref.name in TOOL_WRITES:
+                number = as_number(value, ref.text)
+                self._pending.append(ToolWrite(self._place_block(frame, stmt), TOOL_WRITES[ref.name], number))
                 return None
             raise EvalError(A_READ_ONLY, f"{ref.text} is read-only")
         except EvalError as exc:

@@ -104,6 +104,8 @@ class RadiusCompensation:
         self._held_prog: Element | None = None
         self._last_out: tuple[float, ...] | None = None
         self._selecting = False
+        self._change = 0
+        """A contour change G41 <-> G42 waiting for its block (a deselection and a selection)."""
 
     @property
     def active(self) -> bool:
@@ -113,13 +115,17 @@ class RadiusCompensation:
         self.__init__()  # type: ignore[misc]
 
     def select(self, side: int, radius: float, plane: tuple[int, int]) -> None:
+        if radius < 0:  # a negative radius changes the side (programming manual, TRC)
+            side = -side
+        self.radius = abs(radius)
+        self.plane = plane
+        if self.side not in (0, side):
+            # contour change: the held block ends as on deselection, the next one is an approach
+            self._change = side
+            return
         if side != self.side:
             self._selecting = side != 0 and self.side == 0
         self.side = side
-        self.radius = abs(radius)
-        if radius < 0:  # a negative radius changes the side (programming manual, TRC)
-            self.side = -side
-        self.plane = plane
 
     # --- geometry in the plane ----------------------------------------------------------------------------
     def _p(self, point: tuple[float, ...]) -> V2:
@@ -327,6 +333,10 @@ class RadiusCompensation:
     def push(self, e: Element, deselect: bool = False) -> list[Element]:
         """A programmed element while TRC is active (or the block that deselects it with G40)."""
         out: list[Element] = []
+        if self._change and not deselect:
+            out += self.flush()
+            self.side, self._change = self._change, 0
+            self._selecting = True
         flat = e.centre is None and math.hypot(*_sub(self._p(e.end), self._p(e.start))) < 1e-9
         if flat and self.side != 0 and not deselect:
             # no motion in the plane (a Z feed, a zero move): not relevant for the compensation; the held
@@ -372,7 +382,8 @@ class RadiusCompensation:
                 )
             self._selecting = False
             off = self._offset(e)
-            self._held = replace(off, start=e.start, kind="approach")
+            start = self._last_out if self._last_out is not None else e.start
+            self._held = replace(off, start=start, kind="approach")
             self._held_prog = e
             return out
         off = self._offset(e)

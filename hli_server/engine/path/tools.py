@@ -45,6 +45,10 @@ class ToolState:
     t: int | None = None
     applied_length: float = 0.0
     """The length included in the tool axis' position now (mm)."""
+    radius_written: float | None = None
+    length_written: float | None = None
+    """``V.G.WZR`` / ``V.G.WZ_AKT.L`` written by the program: they replace the D block's value until the
+    next D word."""
 
     @property
     def data(self) -> ToolData:
@@ -52,10 +56,14 @@ class ToolState:
 
     @property
     def length(self) -> float:
+        if self.length_written is not None:
+            return self.length_written
         return self.data.length if self.d else 0.0
 
     @property
     def radius(self) -> float:
+        if self.radius_written is not None:
+            return self.radius_written
         return self.data.radius if self.d else 0.0
 
     def select(self, d: int) -> str | None:
@@ -67,9 +75,11 @@ class ToolState:
                 f"D{d}: no tool compensation data block {d} in the machine file's tool table (known: {known})"
             )
         self.d = d
+        self.radius_written = self.length_written = None
         return None
 
     def reset(self) -> None:
         self.d = 0
         self.t = None
         self.applied_length = 0.0
+        self.radius_written = self.length_written = None
