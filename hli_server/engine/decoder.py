@@ -815,16 +815,27 @@ class Decoder:
             return self._error(block, 912011, "G100 measuring move without a target position")
         if self.modal.in_area_definition:
             return self._error(block, 21793, "G100 is not allowed inside a control area definition")
-        segment = LineSegment(tuple(self.position), tuple(self._target(block)))
+        if self.trc.active:
+            return self._error(
+                block, 910110, "G100 with tool radius compensation active is not simulated: program G40 first"
+            )
+        target = self._target(block)
+        if self.transforms_active:
+            prog = self.program_position()
+            length = self.tools.applied_length
+            for name, value in block.axes:
+                i = self.index[name]
+                prog[i] = value if self.modal.absolute else prog[i] + value
+            target = self.to_machine(prog, length)
+        segment = LineSegment(tuple(self.position), tuple(target))
         if segment.length <= 1e-12:
             return self._error(block, 912011, "G100 measuring move: the target is the current position")
         result = self.measure_handler.measuring_move(segment, block, self.modal)
         if isinstance(result, DecodeError):
             return [Marker(MarkerKind.ERROR, block, payload=result)]
-        for check in self.path_checks:
-            err = check(result.segment, block)
-            if err is not None:
-                return [Marker(MarkerKind.ERROR, block, payload=err)]
+        err = self._check(result.segment, block)
+        if err is not None:
+            return [Marker(MarkerKind.ERROR, block, payload=err)]
         v_max, accel = self._limits(result.segment, rapid=False, feed=result.feed)
         motion = Motion(
             segment=result.segment, block=block, v_max=v_max, accel=accel, exact_stop=True, tag=result.tag
