@@ -151,7 +151,7 @@ def test_g100_measuring_move_under_a_cs_targets_the_framed_point() -> None:
     from tests.unit.areas.test_area_measuring import run_with_probe_at
 
     m = measuring_machine()
-    # in the CS shifted by 10 in X, "G100 X50" ends at machine X 60 (no probe signal: type 1 goes to the target)
+    # in the CS shifted by 10 in X, "G100 X50" ends at machine X 60 (no probe: type 1 goes to the target)
     run_with_probe_at(m, "N05 #CS ON [10, 0, 0]\nN10 G100 X50 F6000\nN20 G01 Y20\nM30\n", None)
     assert m.channel(1).state == ProgramState.FINISHED, [a.message for a in m.alarm_history]
     assert m.channel(1).setpoints()[:2] == pytest.approx([60.0, 20.0])
