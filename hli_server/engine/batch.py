@@ -233,8 +233,8 @@ class BatchGeometryCheck:
         decoder = self.decoder
         groups, all_exact = self._checks()
         areas = sum(len(g.works) + len(g.prots) for g in groups)
-        short = count < SMALL_RUN + SMALL_RUN_PER_AREA * areas and not self._chords(chunk, idx, groups)
-        if decoder.modal.in_area_definition or decoder.transforms_active or short:
+        exact = decoder.modal.in_area_definition or decoder.transforms_active
+        if exact or (count < SMALL_RUN + SMALL_RUN_PER_AREA * areas and not self._chords(chunk, idx, groups)):
             for k in idx.tolist():
                 self.line = chunk.first_line + k
                 self.exact_blocks += 1

@@ -155,3 +155,23 @@ def test_g100_measuring_move_under_a_cs_targets_the_framed_point() -> None:
     run_with_probe_at(m, "N05 #CS ON [10, 0, 0]\nN10 G100 X50 F6000\nN20 G01 Y20\nM30\n", None)
     assert m.channel(1).state == ProgramState.FINISHED, [a.message for a in m.alarm_history]
     assert m.channel(1).setpoints()[:2] == pytest.approx([60.0, 20.0])
+
+
+@pytest.mark.req("M-19")
+def test_check_geometry_only_batch_agrees_with_the_exact_path_under_a_cs() -> None:
+    from tests.unit.test_batch_check import AREAS, _count_batched, _zigzag, assert_same, config
+
+    cfg = config.__wrapped__()  # the fixture's function (the demo machine with G54)
+    body = _zigzag(400)
+    # a turned CS active over a long stretch of plain lines: decoded block by block, same result
+    text = (
+        AREAS
+        + "#CS ON [5, -5, 0, 0, 0, 20]\n"
+        + "\n".join([*body, "#CS OFF", *body, "G01 X0 Y-300", "M30"])
+        + "\n"
+    )
+    result = assert_same(cfg, text)
+    assert [a.number for a in result.alarms] == [120486]
+    batched, exact = _count_batched(cfg, text, small=None)
+    assert exact >= 400  # the stretch under the CS
+    assert batched >= 350  # the stretch after #CS OFF is batched again
