@@ -112,7 +112,14 @@ class RadiusCompensation:
         return self.side != 0 or self._held is not None
 
     def reset(self) -> None:
-        self.__init__()  # type: ignore[misc]
+        """Reset and program start: G40, G25, nothing held."""
+        self.side = 0
+        self.radius = 0.0
+        self.transition = 25
+        self._held = self._held_prog = None
+        self._last_out = None
+        self._selecting = False
+        self._change = 0
 
     def select(self, side: int, radius: float, plane: tuple[int, int]) -> None:
         if radius < 0:  # a negative radius changes the side (programming manual, TRC)
