@@ -362,6 +362,17 @@ class ZeroOffset(_Strict):
     offsets: dict[str, Dint] = Field(default_factory=dict, description="offset per axis name [0.1 µm]")
 
 
+class ToolEntry(_Strict):
+    """One tool compensation data block of the tool table (issue 24): selected by ``D<number>``."""
+
+    number: int = Field(ge=1, le=32767, description="the D number that selects this data block")
+    tool: int | None = Field(
+        default=None, ge=0, description="the tool number T this block belongs to (informative)"
+    )
+    length: Dint = Field(default=0, description="tool length, in the third main axis of the plane [0.1 µm]")
+    radius: Dint = Field(default=0, description="tool radius for G41/G42 [0.1 µm]")
+
+
 class ProgramEntry(_Strict):
     """A program the PLC can select by number (project's own program table)."""
 
@@ -442,6 +453,9 @@ class ChannelConfig(_Strict):
         description="path deceleration of feedhold [mm/s²] (project's own)",
     )
     zero_offsets: list[ZeroOffset] = Field(default_factory=list)
+    tools: list[ToolEntry] = Field(
+        default_factory=list, description="tool table: D blocks with length and radius (issue 24)"
+    )
     programs: list[ProgramEntry] = Field(default_factory=list)
 
     @property
@@ -501,6 +515,14 @@ class ChannelConfig(_Strict):
                 ParameterIssue(
                     f"channel {self.number}: each zero offset G54..G59 may be given once, got {codes}",
                     field="zero_offsets",
+                )
+            )
+        tool_numbers = [t.number for t in self.tools]
+        if len(set(tool_numbers)) != len(tool_numbers):
+            issues.append(
+                ParameterIssue(
+                    f"channel {self.number}: tool data numbers (D) must be unique, got {tool_numbers}",
+                    field="tools",
                 )
             )
         for z in self.zero_offsets:

@@ -21,6 +21,7 @@ from schemas.config import (
     ManualConfig,
     ParameterInfo,
     ProgramEntry,
+    ToolEntry,
     ZeroOffset,
 )
 from schemas.units import mm_from_increments
@@ -49,8 +50,9 @@ _SECTIONS: tuple[tuple[str, type[BaseModel], frozenset[str]], ...] = (
     ("Machine (top level)", MachineConfig, frozenset({"axes", "channels", "manual", "adapters"})),
     ("Axis `[[axes]]`", AxisConfig, frozenset({"drive"})),
     ("Drive model `[axes.drive]` (project's own, E-02)", DriveModel, frozenset()),
-    ("Channel `[[channels]]`", ChannelConfig, frozenset({"zero_offsets", "programs"})),
+    ("Channel `[[channels]]`", ChannelConfig, frozenset({"zero_offsets", "tools", "programs"})),
     ("Zero offsets `[[channels.zero_offsets]]`", ZeroOffset, frozenset()),
+    ("Tool table `[[channels.tools]]` (D blocks, issue 24)", ToolEntry, frozenset()),
     ("Programs `[[channels.programs]]` (project's own program table)", ProgramEntry, frozenset()),
     ("Manual mode `[manual]`", ManualConfig, frozenset()),
     ("Adapters `[[adapters]]` (project's own; `hli-server run`)", AdapterEntry, frozenset()),

@@ -393,6 +393,28 @@ _TABLE: tuple[AlarmDef, ...] = (
     _w(912004, "Manual motion stopped at a work/protection area boundary", "project (FCT-C14, P-MANU-00014)"),
     _e(912010, "Measuring move (G100) ended without a probe signal", "project (FCT-C14, C14-23)"),
     _e(912011, "Measuring move (G100) invalid", "project (FCT-C14, C14-23)"),
+    # --- the kernel's IDs: coordinate systems and tool radius compensation (issue 24) ----------
+    _e(20821, "(A)CS not defined", "kernel", page=_DIAG + "252664971.html"),
+    _e(20676, "Invalid angle", "kernel", page=_DIAG + "252190603.html"),
+    _e(
+        90008,
+        "Selection of tool radius compensation within circular motion block",
+        "kernel",
+        page=_DIAG + "261625739.html",
+    ),
+    _e(90017, "Tool radius greater or equal to contour radius", "kernel", page=_DIAG + "261660555.html"),
+    _e(
+        90031,
+        "Tool radius exceeds range at channel block sequence circle-circle",
+        "kernel",
+        page=_DIAG + "261686667.html",
+    ),
+    # --- project's own: coordinate systems and tools (916xxx) ----------------------------------
+    _e(
+        916000, "Tool radius compensation: contour violation (the tool path crosses itself)", "project (M-18)"
+    ),
+    _e(916001, "Tool compensation data (D) not in the tool table", "project (M-14)"),
+    _e(916002, "Coordinate system command invalid (#CS, #ACS, #CS ADD/SET/DEL)", "project (M-10)"),
     # --- project's own: axis collision and position monitoring (913xxx) ----------------------
     _e(913000, "Collision pair may only move apart after a collision stop", "project (FCT-C3, C3-02)"),
     # --- project's own: the NC language where the kernel's ID is not public (914xxx) -----------

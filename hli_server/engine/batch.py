@@ -236,8 +236,9 @@ class BatchGeometryCheck:
         areas = sum(len(g.works) + len(g.prots) for g in groups)
         short = count < SMALL_RUN + SMALL_RUN_PER_AREA * areas and not self._chords(chunk, idx, groups)
         modal = decoder.modal
-        # G70 (inch) and G95 (feed per revolution, M-06/M-07): the exact decoder scales and checks them
-        if modal.in_area_definition or short or modal.inch or modal.feed_per_rev:
+        # G70 (inch) and G95 (feed per revolution, M-06/M-07), and #CS/#ROTATION/tool compensation
+        # (transforms_active): the exact decoder scales, transforms and checks them
+        if modal.in_area_definition or short or modal.inch or modal.feed_per_rev or decoder.transforms_active:
             for k in idx.tolist():
                 self.line = chunk.first_line + k
                 self.exact_blocks += 1

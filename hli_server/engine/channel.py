@@ -20,12 +20,13 @@ from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
 from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
-from hli_server.engine.geometry import Point
+from hli_server.engine.geometry import LineSegment, Point
 from hli_server.engine.hli import AxisHli, ChannelHli
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.interpreter import Interpreter
 from hli_server.engine.nc.syntax import Compiler
 from hli_server.engine.path.profiles import SlopeProfile, SlopeType
+from hli_server.engine.path.tools import ToolData
 from hli_server.engine.planner import Marker, MarkerKind, Planner
 from hli_server.engine.ports import MachinePort
 from hli_server.engine.programs import ProgramFile
@@ -119,8 +120,11 @@ class ChannelHost:
         if k is None:
             return None
         if variable in ("ABS", "PROG"):
-            return decoder.position[k] - decoder.modal.offset(axis)
+            return decoder.program_position()[k]
         if variable == "ACT_POS":
+            if decoder.transforms_active:
+                setpoints = [a.setpoint for a in ch.axes]
+                return decoder.to_program(setpoints, decoder.tools.applied_length)[k]
             return ch.axes[k].setpoint - decoder.modal.offset(axis)
         if variable in ("-SWE", "-SWE_MDS"):
             return ch.axes[k].swe_neg
@@ -142,7 +146,26 @@ class ChannelHost:
             return 0.0
         if name in ("I", "J", "K"):
             return decoder.last_centre.get(name, 0.0)
-        return None
+        return _tool_and_frame_value(decoder, name)
+
+
+def _tool_and_frame_value(decoder: Decoder, name: str) -> float | None:
+    """V.G. of issue 24: the active tool's data (WZ_AKT.R/.L/.NR, WZR, WZL) and #ROTATION's (ROT_ACTIVE,
+    ROT_ANGLE, ROT_CENTER1, ROT_CENTER2), as the decoder has them at the block being decoded."""
+    tools = decoder.tools
+    rotation = decoder.frames.rotation
+    values: dict[str, float] = {
+        "WZ_AKT.R": tools.radius,
+        "WZR": tools.radius,
+        "WZ_AKT.L": tools.length,
+        "WZL": tools.length,
+        "WZ_AKT.NR": float(tools.d),
+        "ROT_ACTIVE": 1.0 if rotation is not None else 0.0,
+        "ROT_ANGLE": rotation[0] if rotation is not None else 0.0,
+        "ROT_CENTER1": rotation[1] if rotation is not None else 0.0,
+        "ROT_CENTER2": rotation[2] if rotation is not None else 0.0,
+    }
+    return values.get(name)
 
 
 class Channel:
@@ -177,6 +200,12 @@ class Channel:
             config.main_axes,
             {a.name: (a.v_max, a.v_rapid, a.a_max) for a in axes},
             zero_offsets,
+            {
+                t.number: ToolData(
+                    t.number, mm_from_increments(t.length), mm_from_increments(t.radius), t.tool
+                )
+                for t in config.tools
+            },
         )
         self.compiler = Compiler(self.axis_names, config.main_axes)
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))
@@ -312,6 +341,14 @@ class Channel:
     # --- positions -----------------------------------------------------------------------
     def setpoints(self) -> list[float]:
         return [a.setpoint for a in self.axes]
+
+    def tool_tip(self, point: Sequence[float]) -> Point:
+        """The tool tip (the TCP the areas monitor) for the axis positions ``point``: less the tool length
+        the decoder has put into the tool axis (issue 24, M-15)."""
+        decoder = self.decoder
+        if decoder.tools.applied_length == 0.0:
+            return tuple(point)
+        return decoder.tip_segment(LineSegment(tuple(point), tuple(point))).start
 
     def axis(self, name: str) -> Axis:
         return self.axes[self.axis_names.index(name)]

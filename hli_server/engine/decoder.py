@@ -12,6 +12,7 @@ and do not move the axes.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
@@ -21,13 +22,18 @@ from hli_server.engine.geometry import LineSegment, Point, Segment, arc_from_cen
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
 from hli_server.engine.nc.interpreter import (
     PAUSE,
+    CoordinateCommand,
     Directive,
     FlushStop,
     FlushWait,
     MeasMode,
     Slope,
     SyncAction,
+    ToolWrite,
 )
+from hli_server.engine.path.frames import FrameStack
+from hli_server.engine.path.radius import Element, RadiusCompensation, TrcError
+from hli_server.engine.path.tools import ToolData, ToolState
 from hli_server.engine.planner import Dwell, Marker, MarkerKind, Motion
 
 __all__ = [
@@ -172,6 +178,7 @@ class Decoder:
         main_axes: tuple[str, str, str],
         axis_limits: dict[str, tuple[float, float, float]],
         zero_offsets: dict[str, dict[str, float]],
+        tools: dict[int, ToolData] | None = None,
     ) -> None:
         self.axes = axes
         self.index = {a: i for i, a in enumerate(axes)}
@@ -196,6 +203,18 @@ class Decoder:
         """Switches the acceleration profile (``#SLOPE``: 0..3 as P-CHAN-00071, None: the default)."""
         self.last_centre: dict[str, float] = {}
         """I, J, K of the last circle programmed (V.G.I, V.G.J, V.G.K)."""
+        self.frames = FrameStack()
+        """#ROTATION, #CS, #CS ADD, #ACS (:mod:`hli_server.engine.path.frames`)."""
+        self.tools = ToolState(dict(tools or {}))
+        """Tool table, D/T, the tool length in the axis positions (:mod:`hli_server.engine.path.tools`)."""
+        self.trc = RadiusCompensation()
+        """G40/G41/G42 (:mod:`hli_server.engine.path.radius`)."""
+        self._main_index = tuple(self.index[a] for a in main_axes)
+        self._trc_prog: list[float] | None = None
+        self._redo: Directive | None = None
+        self._length_before = 0.0
+        """The tool length included in :attr:`position` before the block being emitted."""
+        """The programmed end point (program coordinates) while the radius compensation holds a block."""
 
     # --- program control -----------------------------------------------------------------
     def start(self, blocks: BlockFeed | Iterator[Block], position: list[float]) -> None:
@@ -206,6 +225,11 @@ class Decoder:
         self.waiting = False
         self.blocks_decoded = 0
         self.modal.in_area_definition = False
+        self.frames.reset()
+        self.frames.plane = _PLANE_AXES[self.modal.plane]
+        self.tools.reset()
+        self.trc.reset()
+        self._trc_prog = None
 
     def resume(self, position: list[float]) -> None:
         """Continue decoding from ``position`` (after a measuring move stopped where the probe fired)."""
@@ -215,6 +239,9 @@ class Decoder:
     def reset_modal(self) -> None:
         """Reset: modal state back to its defaults, G92 cleared (zero offset table kept)."""
         self.modal = ModalState(zero_offsets=self.modal.zero_offsets)
+        self.frames.reset()
+        self.tools.reset()
+        self.trc.reset()
         self.blocks = None
         self.finished = True
         self.waiting = False
@@ -226,6 +253,9 @@ class Decoder:
             return []
         feed = self.blocks
         while True:
+            if self._redo is not None:
+                redo, self._redo = self._redo, None
+                return self.directive(redo)
             try:
                 out = feed.next()
             except NcError as exc:
@@ -246,6 +276,26 @@ class Decoder:
         block = out.block
         if block is not None:
             self.current_block = block
+        held = self._trc_flush()
+        if held and isinstance(held[-1], Marker):
+            return held
+        if isinstance(out, ToolWrite):
+            if out.what == "radius":
+                self.tools.radius_written = out.value
+                if self.trc.side != 0:
+                    self.trc.radius = abs(out.value)
+            else:
+                self.tools.length_written = out.value
+            return held
+        if isinstance(out, CoordinateCommand):
+            error = self._coordinates(out)
+            if error is not None:
+                return [*held, Marker(MarkerKind.ERROR, block, payload=error)]
+            return held
+        if held:
+            # the held block goes first; the directive comes again next time (the feed re-delivers it)
+            self._redo = out
+            return held
         if isinstance(out, SyncAction):
             return [Marker(MarkerKind.SYNC, block, payload=out.action)]
         if isinstance(out, FlushWait):
@@ -285,8 +335,11 @@ class Decoder:
 
     def end_of_program(self) -> list[Motion | Marker]:
         """The text ended (without M30/M02 when decoding gets here): the end marker of the last block."""
+        held = self._trc_flush()
         self.finished = True
-        return [Marker(MarkerKind.END, self.current_block, payload="eof")]
+        if held and isinstance(held[-1], Marker):
+            return held
+        return [*held, Marker(MarkerKind.END, self.current_block, payload="eof")]
 
     def syntax_error(self, exc: NcError) -> list[Motion | Marker]:
         """A line the parser could not read: the error marker with the place the parser named."""
@@ -336,7 +389,12 @@ class Decoder:
             elif g == 91:
                 m.absolute = False
             elif g in (17, 18, 19):
+                if g != m.plane and self.frames.rotation is not None:
+                    self.frames.rotation = None  # a plane change deselects #ROTATION (programming manual)
                 m.plane = g
+                self.frames.plane = _PLANE_AXES[g]
+            elif g in (25, 26):
+                self.trc.transition = g
             elif g == 161:
                 m.centre_absolute = True
             elif g == 162:
@@ -351,6 +409,9 @@ class Decoder:
                 self._weighting(g, block)
             elif g in (100, 200, 201, 202):
                 return self._error(block, 910110, f"G{g} is not supported in this block context")
+        tool_error = self._tool_words(block)
+        if tool_error is not None:
+            return tool_error
         if block.feed is not None:
             if block.feed <= 0:
                 return self._error(block, 911000, f"feed F{block.feed:g} must be positive")
@@ -358,6 +419,9 @@ class Decoder:
                 m.feed_rev = block.feed
             else:
                 m.feed = block.feed
+        if 92 in block.g_codes and self.transforms_active:
+            self._g92_framed(block)
+            return items
         if 92 in block.g_codes:
             # G92: the current position gets the programmed program coordinates
             for name, value in block.axes:
@@ -368,15 +432,30 @@ class Decoder:
         if measuring:
             return self._measuring_move(block)
         moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre))
-        if moves:
+        if moves and (self.transforms_active or 40 in block.g_codes) and not m.in_area_definition:
+            items = self._motion_framed(block)
+            if items and isinstance(items[-1], Marker):
+                return items
+        elif moves:
             result = self._motion(block)
             if isinstance(result, list):
                 return result
             items.append(result)
-        for code in block.m_codes:
-            if code in (2, 30):
-                items.append(Marker(MarkerKind.END, block, payload=f"M{code:02d}"))
-        return items
+        elif 40 in block.g_codes and self.trc.active:
+            items = self._trc_flush()
+            self.trc.side = 0
+            self._trc_prog = None
+            if items and isinstance(items[-1], Marker):
+                return items
+        ends = [
+            Marker(MarkerKind.END, block, payload=f"M{code:02d}") for code in block.m_codes if code in (2, 30)
+        ]
+        if block.m_codes:
+            held = self._trc_flush()  # an M function empties the held block (it is not a contour block)
+            if held and isinstance(held[-1], Marker):
+                return [*items, *held]
+            items += held
+        return items + ends
 
     def _dwell(self, block: Block) -> list[Motion | Marker]:
         """``G04 <first main axis><s>`` (M-09, PM 206132747): the path rests for the time, then goes on
@@ -502,10 +581,9 @@ class Decoder:
                     )
             elif m.feed is None:
                 return self._error(block, 911000, "no feed (F word) programmed for a feed move")
-        for check in self.path_checks:
-            err = check(segment, block)
-            if err is not None:
-                return [Marker(MarkerKind.ERROR, block, payload=err)]
+        err = self._check(segment, block)
+        if err is not None:
+            return [Marker(MarkerKind.ERROR, block, payload=err)]
         v_max, accel = self._limits(segment, rapid)
         self.position = target
         return Motion(
@@ -517,6 +595,313 @@ class Decoder:
             exact_stop=60 in block.g_codes,
         )
 
+    # --- frames, tools, radius compensation (issue 24; hli_server/engine/path) -------------------------
+    @property
+    def transforms_active(self) -> bool:
+        """A frame, a tool or the radius compensation is active: blocks take the framed path."""
+        return (
+            self.frames.active
+            or self.tools.d != 0
+            or self.tools.applied_length != 0.0
+            or self.tools.length_written is not None
+            or self.trc.active
+            or self._trc_prog is not None
+        )
+
+    def _tool_axis(self) -> int:
+        """Index into the main axes of the tool axis: the plane's third main axis (#TLAX default)."""
+        return {17: 2, 18: 1, 19: 0}[self.modal.plane]
+
+    def to_machine(self, prog: list[float] | tuple[float, ...], length: float) -> list[float]:
+        """Program coordinates -> axis positions: #ROTATION, #CS, zero offsets, #ACS, tool length."""
+        m = self.modal
+        out = list(prog)
+        mi = self._main_index
+        for k, name in enumerate(self.axes):
+            if k not in mi:
+                out[k] = prog[k] + m.offset(name)
+        w = self.frames.to_workpiece((prog[mi[0]], prog[mi[1]], prog[mi[2]]))
+        z = (w[0] + m.offset(self.main[0]), w[1] + m.offset(self.main[1]), w[2] + m.offset(self.main[2]))
+        mach = self.frames.fixture_to_machine(z)
+        for a in range(3):
+            out[mi[a]] = mach[a]
+        out[mi[self._tool_axis()]] += length
+        return out
+
+    def to_program(self, pos: list[float] | tuple[float, ...], length: float) -> list[float]:
+        """Axis positions -> program coordinates (the inverse of :meth:`to_machine`)."""
+        m = self.modal
+        out = list(pos)
+        mi = self._main_index
+        for k, name in enumerate(self.axes):
+            if k not in mi:
+                out[k] = pos[k] - m.offset(name)
+        q = [pos[mi[0]], pos[mi[1]], pos[mi[2]]]
+        q[self._tool_axis()] -= length
+        z = self.frames.machine_to_fixture((q[0], q[1], q[2]))
+        w = (z[0] - m.offset(self.main[0]), z[1] - m.offset(self.main[1]), z[2] - m.offset(self.main[2]))
+        p = self.frames.from_workpiece(w)
+        for a in range(3):
+            out[mi[a]] = p[a]
+        return out
+
+    def program_position(self) -> list[float]:
+        """The programmed end point of the last block in program coordinates (V.A.PROG / V.A.ABS)."""
+        if self._trc_prog is not None:
+            return list(self._trc_prog)
+        if not self.transforms_active:
+            return [p - self.modal.offset(a) for p, a in zip(self.position, self.axes, strict=True)]
+        return self.to_program(self.position, self.tools.applied_length)
+
+    def _tool_words(self, block: Block) -> list[Motion | Marker] | None:
+        """D, T, G40/G41/G42 of a block (before its motion)."""
+        t = block.extra.get("T")
+        if t is not None:
+            self.tools.t = int(t)
+        d = block.extra.get("D")
+        if d is not None:
+            if d != int(d) or d < 0:
+                return self._error(
+                    block, 916001, f"D{d:g}: the D word takes a tool data block number 0, 1, 2, ..."
+                )
+            err = self.tools.select(int(d))
+            if err is not None:
+                return self._error(block, 916001, err, d=int(d))
+            if self.trc.side != 0:
+                self.trc.radius = abs(self.tools.radius)
+        sides = [g for g in block.g_codes if g in (41, 42)]
+        if sides:
+            if self.modal.in_area_definition:
+                return self._error(block, 21793, "G41/G42 are not allowed inside a control area definition")
+            side = 1 if sides[0] == 41 else -1
+            self.trc.select(side, self.tools.radius, _PLANE_AXES[self.modal.plane])
+            if self._trc_prog is None:
+                self._trc_prog = self.program_position()
+        return None
+
+    def _g92_framed(self, block: Block) -> None:
+        """G92 with frames active: the current point gets the programmed coordinates (all frames kept)."""
+        m = self.modal
+        length = self.tools.applied_length
+        prog = self.to_program(self.position, length)
+        for name, value in block.axes:
+            prog[self.index[name]] = value
+        mi = self._main_index
+        q = [self.position[mi[0]], self.position[mi[1]], self.position[mi[2]]]
+        q[self._tool_axis()] -= length
+        fixture = self.frames.machine_to_fixture((q[0], q[1], q[2]))
+        w = self.frames.to_workpiece((prog[mi[0]], prog[mi[1]], prog[mi[2]]))
+        for a in range(3):
+            name = self.main[a]
+            base = m.zero_offsets.get(m.zero_offset, {}).get(name, 0.0) if m.zero_offset else 0.0
+            m.g92[name] = fixture[a] - w[a] - base
+        for name, value in block.axes:
+            k = self.index[name]
+            if k not in mi:
+                base = m.zero_offsets.get(m.zero_offset, {}).get(name, 0.0) if m.zero_offset else 0.0
+                m.g92[name] = self.position[k] - base - value
+
+    def _coordinates(self, cmd: CoordinateCommand) -> DecodeError | None:
+        """#CS / #ACS / #CS ADD|SET|DEL / #ROTATION: the frames change; the axes do not move."""
+        f = self.frames
+        kind, op = cmd.kind, cmd.op
+        if kind == "ROTATION":
+            if op == "ON":
+                o = cmd.options
+                f.rotation = (o.get("ANGLE", 0.0), o.get("CENTER1", 0.0), o.get("CENTER2", 0.0))
+            else:
+                f.rotation = None
+            return None
+        bad = [v for v in cmd.values[3:6] if not -360.0 <= v <= 360.0]
+        if bad:
+            return DecodeError(
+                20676,
+                f"#{kind} {op}: rotation angle {bad[0]:g}° outside -360° .. 360°",
+                {"value": bad[0], "lower": -360, "upper": 360},
+            )
+        if op == "ADD":
+            err = f.add(cmd.name or "", cmd.values)
+        elif op == "SET":
+            err = f.set_added(cmd.name or "", cmd.values)
+        elif op == "DEL":
+            err = f.remove_added(cmd.name)
+        else:
+            systems = f.cs if kind == "CS" else f.acs
+            err = None
+            if op in ("DEF", "ON") and cmd.values:
+                ident = systems.define(cmd.ident, cmd.values)
+                if isinstance(ident, str):
+                    return DecodeError(916002, ident)
+                if op == "ON":
+                    err = systems.activate(ident)
+            elif op == "ON":
+                err = systems.activate(cmd.ident)
+                if err is not None:
+                    return DecodeError(20821, err, {"value": cmd.ident or 0})
+            elif op == "DEF":
+                err = f"#{kind} DEF without its components [v1, v2, v3, φ1, φ2, φ3]"
+            elif op == "OFF":
+                systems.deactivate(all_=cmd.all_)
+        return DecodeError(916002, err) if err is not None else None
+
+    def _trc_flush(self) -> list[Motion | Marker]:
+        """Empty the radius compensation's held block (before a marker, a directive, the end)."""
+        if not self.trc.active:
+            return []
+        self._length_before = self.tools.applied_length
+        elements = self.trc.flush()
+        if self.trc.side == 0:
+            self._trc_prog = None
+        return self._emit(elements)
+
+    def _motion_framed(self, block: Block) -> list[Motion | Marker]:
+        """A motion block with frames, tools or radius compensation active (program coordinates ->
+        radius compensation -> frames -> checks)."""
+        m = self.modal
+        prog_start = self.program_position()
+        prog_end = list(prog_start)
+        length = self.tools.applied_length
+        tool_axis = self._main_index[self._tool_axis()]
+        for name, value in block.axes:
+            i = self.index[name]
+            if m.absolute:
+                prog_end[i] = value
+                if i == tool_axis:
+                    length = self.tools.length
+            else:
+                prog_end[i] += value
+        centre: tuple[float, float] | None = None
+        cw = m.motion == 2
+        if m.motion in (2, 3):
+            plane = _PLANE_AXES[m.plane]
+            first, second = self.main[plane[0]], self.main[plane[1]]
+            i, j = self.index[first], self.index[second]
+            words = dict(block.centre)
+            self.last_centre = words
+            wi, wj = _CENTRE_WORDS[plane[0]], _CENTRE_WORDS[plane[1]]
+            if wi not in words and wj not in words:
+                return self._error(block, 911002, f"circle G0{m.motion} without centre ({wi}/{wj})")
+            ci_val, cj_val = words.get(wi, 0.0), words.get(wj, 0.0)
+            centre = (
+                (ci_val, cj_val) if m.centre_absolute else (prog_start[i] + ci_val, prog_start[j] + cj_val)
+            )
+            arc, mismatch = arc_from_centre(tuple(prog_start), tuple(prog_end), (i, j), centre, cw)
+            if arc.radius <= 1e-9:
+                return self._error(block, 911001, "circle with radius 0")
+            if mismatch > ARC_RADIUS_TOLERANCE:
+                return self._error(
+                    block,
+                    911001,
+                    f"circle end point not on the circle: start radius {arc.radius:.4f} mm, "
+                    f"end radius differs by {mismatch:.4f} mm",
+                )
+        rapid = m.motion == 0
+        if not rapid and m.feed is None:
+            return self._error(block, 911000, "no feed (F word) programmed for a feed move")
+        element = Element(tuple(prog_start), tuple(prog_end), block, rapid, centre, cw)
+        deselect = 40 in block.g_codes
+        if self.trc.active or deselect:
+            plane_idx = _PLANE_AXES[m.plane]
+            self.trc.plane = (self.index[self.main[plane_idx[0]]], self.index[self.main[plane_idx[1]]])
+            try:
+                elements = self.trc.push(element, deselect=deselect)
+            except TrcError as exc:
+                return self._error(block, exc.alarm, exc.message)
+            self._trc_prog = prog_end if self.trc.active else None
+        else:
+            elements = [element]
+        self._length_before = self.tools.applied_length
+        self.tools.applied_length = length
+        items = self._emit(elements)
+        if not elements and not self.trc.active:
+            self.position = self.to_machine(prog_end, length)
+        return items
+
+    def _emit(self, elements: list[Element]) -> list[Motion | Marker]:
+        """Compensated elements (program coordinates) -> machine segments, checked, as motions."""
+        items: list[Motion | Marker] = []
+        length = self.tools.applied_length
+        for e in elements:
+            block = e.block
+            start = tuple(self.position)
+            end = tuple(self.to_machine(e.end, length))
+            segment: Segment
+            if e.centre is None:
+                segment = LineSegment(start, end)
+            else:
+                plane = _PLANE_AXES[self.modal.plane]
+                i, j = self.index[self.main[plane[0]]], self.index[self.main[plane[1]]]
+                sense = self.frames.keeps_plane(plane)
+                if sense == 0:
+                    items.append(
+                        Marker(
+                            MarkerKind.ERROR,
+                            block,
+                            payload=DecodeError(
+                                910110,
+                                "a circle in a coordinate system tilted against the plane is not simulated "
+                                "(docs/nc-language.md)",
+                            ),
+                        )
+                    )
+                    return items
+                c_prog = list(e.start)
+                c_prog[i], c_prog[j] = e.centre
+                c_m = self.to_machine(c_prog, length)
+                cw = e.cw if sense > 0 else not e.cw
+                segment, _ = arc_from_centre(start, end, (i, j), (c_m[i], c_m[j]), cw)
+            if segment.length <= 1e-12:
+                self.position = list(end)
+                continue
+            err = self._check(segment, block, self._length_before)
+            if err is not None:
+                items.append(Marker(MarkerKind.ERROR, block, payload=err))
+                return items
+            v_max, accel = self._limits(segment, e.rapid)
+            self.position = list(end)
+            self._length_before = length
+            items.append(
+                Motion(
+                    segment=segment,
+                    block=block,
+                    v_max=v_max,
+                    accel=accel,
+                    rapid=e.rapid,
+                    exact_stop=60 in block.g_codes,
+                )
+            )
+        return items
+
+    def tip_segment(self, segment: Segment, length_at_start: float | None = None) -> Segment:
+        """The path of the tool tip (the monitored tool centre point): the segment less the tool length
+        (``length_at_start``: the length in the start point's axis position when it changes on the way)."""
+        length = self.tools.applied_length
+        l0 = length if length_at_start is None else length_at_start
+        if length == 0.0 and l0 == 0.0:
+            return segment
+        k = self._main_index[self._tool_axis()]
+
+        def shift(p: Point, by: float) -> Point:
+            q = list(p)
+            q[k] -= by
+            return tuple(q)
+
+        if isinstance(segment, LineSegment):
+            return LineSegment(shift(segment.start, l0), shift(segment.end, length))
+        return dataclasses.replace(segment, start=shift(segment.start, l0), end=shift(segment.end, length))
+
+    def _check(
+        self, segment: Segment, block: Block, length_at_start: float | None = None
+    ) -> DecodeError | None:
+        """Every path check; the area checks see the tool tip (``monitors_tcp``)."""
+        tip = self.tip_segment(segment, length_at_start)
+        for check in self.path_checks:
+            tcp = getattr(getattr(check, "__self__", check), "monitors_tcp", False)
+            err = check(tip if tcp else segment, block)
+            if err is not None:
+                return err
+        return None
+
     def _measuring_move(self, block: Block) -> list[Motion | Marker]:
         """G100 (C14-23): a linear feed move toward the target, then decoding waits for its end."""
         assert self.measure_handler is not None
@@ -524,16 +909,27 @@ class Decoder:
             return self._error(block, 912011, "G100 measuring move without a target position")
         if self.modal.in_area_definition:
             return self._error(block, 21793, "G100 is not allowed inside a control area definition")
-        segment = LineSegment(tuple(self.position), tuple(self._target(block)))
+        if self.trc.active:
+            return self._error(
+                block, 910110, "G100 with tool radius compensation active is not simulated: program G40 first"
+            )
+        target = self._target(block)
+        if self.transforms_active:
+            prog = self.program_position()
+            length = self.tools.applied_length
+            for name, value in block.axes:
+                i = self.index[name]
+                prog[i] = value if self.modal.absolute else prog[i] + value
+            target = self.to_machine(prog, length)
+        segment = LineSegment(tuple(self.position), tuple(target))
         if segment.length <= 1e-12:
             return self._error(block, 912011, "G100 measuring move: the target is the current position")
         result = self.measure_handler.measuring_move(segment, block, self.modal)
         if isinstance(result, DecodeError):
             return [Marker(MarkerKind.ERROR, block, payload=result)]
-        for check in self.path_checks:
-            err = check(result.segment, block)
-            if err is not None:
-                return [Marker(MarkerKind.ERROR, block, payload=err)]
+        err = self._check(result.segment, block)
+        if err is not None:
+            return [Marker(MarkerKind.ERROR, block, payload=err)]
         v_max, accel = self._limits(result.segment, rapid=False, feed=result.feed)
         motion = Motion(
             segment=result.segment, block=block, v_max=v_max, accel=accel, exact_stop=True, tag=result.tag
@@ -592,6 +988,12 @@ class Decoder:
         return max(weight, 1e-3)
 
     def _area(self, block: Block, cmd: AreaCommand) -> list[Motion | Marker]:
+        held = self._trc_flush()
+        if held:
+            return held + self._area_command(block, cmd)
+        return self._area_command(block, cmd)
+
+    def _area_command(self, block: Block, cmd: AreaCommand) -> list[Motion | Marker]:
         m = self.modal
         if isinstance(cmd, AreaBegin):
             if m.in_area_definition:
@@ -609,7 +1011,11 @@ class Decoder:
                 self._position_before_area = None
         if self.area_handler is None:
             return self._error(block, 910110, "#CONTROL AREA: work and protection areas are not configured")
-        result = self.area_handler.command(cmd, block, tuple(self.position), m)
+        # the areas see the tool tip (the ON check tests where the tool is: C14-11)
+        point = tuple(self.position)
+        if self.tools.applied_length != 0.0:
+            point = self.tip_segment(LineSegment(point, point)).start
+        result = self.area_handler.command(cmd, block, point, m)
         if isinstance(result, DecodeError):
             return [Marker(MarkerKind.ERROR, block, payload=result)]
         if result is not None:

@@ -779,13 +779,12 @@ def test_flush_stops_the_path_flush_wait_waits_flush_continue_neither():
 @pytest.mark.parametrize(
     ("program", "alarm", "words"),
     [
-        ("#CS ON [0,0,0,0,0,0]", 910110, "#CS"),
-        ("#ACS ON", 910110, "#ACS"),
-        ("#ROTATION ON [ANGLE=30]", 910110, "#ROTATION"),
+        ("#CS MODE ON", 910110, "#CS"),
+        ("#CS SELECT [A]", 910110, "#CS"),
         ("#CONTOUR MODE [DEV]", 910110, "#CONTOUR"),
         ("#HSC ON", 910110, "#HSC"),
         ("#SPLINE ON", 910110, "#SPLINE"),
-        ("G41 X10", 910110, "G41"),
+        ("#TLAX [Z+]", 910110, "#TLAX"),
         ("G61", 910110, "G61"),
         ("G260", 910110, "G260"),
         ("G01 X10 E100", 910110, "E"),

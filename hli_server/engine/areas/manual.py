@@ -75,6 +75,7 @@ class ManualGuard(AreaRole):
         if not groups:
             self._release_manual()
             return False
+        current, stop_point = channel.tool_tip(current), channel.tool_tip(stop_point)
         direction = tuple(b - a for a, b in zip(current, stop_point, strict=True))
         blocked = self._blocked_direction
         if blocked is not None and sum(x * y for x, y in zip(direction, blocked, strict=True)) > 0.0:
@@ -103,7 +104,7 @@ class ManualGuard(AreaRole):
         """Entering manual mode (C14-20, P-CHAN-00442 = 0): the TCP must be in the allowed space."""
         if self._manual_mode_setting != 0 or not self.manual_monitoring():
             return True
-        position = tuple(self.channel.setpoints())
+        position = self.channel.tool_tip(self.channel.setpoints())
         for group in self.effective.groups():
             prism = group.verdict(position)
             if prism is None:

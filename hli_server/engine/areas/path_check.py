@@ -34,6 +34,9 @@ class AreaPathCheck(AreaRole):
     """The path check of one channel: the first violation on the block's path, as an alarm with the block's
     start and end point and the exact intersection point."""
 
+    monitors_tcp = True
+    """The areas monitor the tool centre point (the tool tip, less the tool length): issue 24, M-15."""
+
     # --- path check (C14-15) ---------------------------------------------------------------
     def path_check(self, segment: Segment, block: Block) -> DecodeError | None:
         """The decoder's path check (a bound method: the batch geometry check recognises it by its

@@ -105,6 +105,7 @@ __all__ = [
     "MAX_CALL_DEPTH",
     "PAUSE",
     "STATEMENTS_PER_CYCLE",
+    "CoordinateCommand",
     "Directive",
     "FlushStop",
     "FlushWait",
@@ -113,6 +114,7 @@ __all__ = [
     "IterationCapError",
     "Slope",
     "SyncAction",
+    "ToolWrite",
 ]
 
 STATEMENTS_PER_CYCLE: Final = 128
@@ -259,6 +261,47 @@ class Slope(Directive):
     def __init__(self, block: Block, profile: int | None) -> None:
         super().__init__(block)
         self.profile = profile
+
+
+class CoordinateCommand(Directive):
+    """``#CS``, ``#ACS``, ``#ROTATION`` (issue 24): the decoder changes its frames in program order.
+
+    ``kind`` CS, ACS or ROTATION; ``op`` DEF, ON, OFF, ADD, SET, DEL; ``ident`` the (A)CS ID where
+    programmed; ``name`` a #CS ADD/SET/DEL name; ``values`` the components [v1, v2, v3, φ1, φ2, φ3];
+    ``options`` the #ROTATION values by keyword."""
+
+    def __init__(
+        self,
+        block: Block,
+        kind: str,
+        op: str,
+        ident: int | None = None,
+        name: str | None = None,
+        values: tuple[float, ...] = (),
+        options: dict[str, float] | None = None,
+        all_: bool = False,
+    ) -> None:
+        super().__init__(block)
+        self.kind = kind
+        self.op = op
+        self.ident = ident
+        self.name = name
+        self.values = values
+        self.options = options or {}
+        self.all_ = all_
+
+
+TOOL_WRITES: Final = {"WZR": "radius", "WZ_AKT.R": "radius", "WZL": "length", "WZ_AKT.L": "length"}
+"""V.G. variables a program may write: the active tool's radius and length (issue 24)."""
+
+
+class ToolWrite(Directive):
+    """``V.G.WZR = 2`` / ``V.G.WZ_AKT.R``/``.L``: the active tool's radius or length from here on."""
+
+    def __init__(self, block: Block, what: str, value: float) -> None:
+        super().__init__(block)
+        self.what = what
+        self.value = value
 
 
 class IterationCapError(Exception):
@@ -891,7 +934,8 @@ class Interpreter(Env):
                 raise EvalError(
                     A_NOT_SIMULATED,
                     f"V.G.{ref.name} is not simulated (V.G.BLOCK_NR, FEEDRATE, FEEDRATE_MODE, I, J, K, "
-                    "MASS_MM, MASS_360 are): see docs/nc-language.md",
+                    "MASS_MM, MASS_360, WZ_AKT.R/.L/.NR, WZR, WZL, ROT_ACTIVE, ROT_ANGLE, ROT_CENTER1/2 "
+                    "are): see docs/nc-language.md",
                 )
             return value
         raise EvalError(ALARM_EXPRESSION, f"{ref.text} cannot be read")
@@ -1019,6 +1063,10 @@ class Interpreter(Env):
                 index = int(as_number(ref.number.evaluate(self), ref.text))
                 frame.params[index] = as_number(value, ref.text)
                 return None
+            if kind == KIND_VG and not ref.indices and ref.name in TOOL_WRITES:
+                number = as_number(value, ref.text)
+                self._pending.append(ToolWrite(self._place_block(frame, stmt), TOOL_WRITES[ref.name], number))
+                return None
             raise EvalError(A_READ_ONLY, f"{ref.text} is read-only")
         except EvalError as exc:
             raise stmt.error(exc.alarm, exc.message) from None
@@ -1121,6 +1169,38 @@ class Interpreter(Env):
                 if option.startswith("TYPE="):
                     profile = ("STEP", "TRAPEZ", "SIN2", "HSC").index(option[5:])
             self._pending.append(Slope(self._place_block(frame, stmt), profile))
+            return
+        if command.startswith(("CS ", "ACS ", "ROTATION ")):
+            kind, op = command.split(" ", 1)
+            numbers = [self._number(stmt, a, f"a value of #{command}") for a in stmt.args]
+            ident: int | None = None
+            name: str | None = None
+            rotation: dict[str, float] = {}
+            if kind == "ROTATION":
+                rotation = dict(zip(stmt.options, numbers, strict=True))
+                numbers = []
+            elif "ID" in stmt.options:
+                value = numbers.pop(0)
+                if value != int(value) or value < 1:
+                    raise stmt.error(
+                        A_INDEX, f"#{command} [{format_value(value)}]: the ID is a whole number >= 1"
+                    )
+                ident = int(value)
+            for option in stmt.options:
+                if option.startswith("NAME:"):
+                    name = option[5:]
+            self._pending.append(
+                CoordinateCommand(
+                    self._place_block(frame, stmt),
+                    kind,
+                    op,
+                    ident,
+                    name,
+                    tuple(numbers),
+                    rotation,
+                    all_="ALL" in stmt.options,
+                )
+            )
             return
         if command == "FILE NAME":
             self._message_file = stmt.files.get("MSG", self._message_file)

@@ -98,7 +98,38 @@ _ID_RANGE = (0, 999_999_999)
 _AXNR_RANGE = (1, 999_999_999)
 
 KNOWN_G_CODES: frozenset[int] = frozenset(
-    (0, 1, 2, 3, 4, 17, 18, 19, 53, 54, 55, 56, 57, 58, 59, 60, 90, 91, 92, 100, 161, 162, 200, 201, 202)
+    (
+        0,
+        1,
+        2,
+        3,
+        4,
+        17,
+        18,
+        19,
+        25,
+        26,
+        40,
+        41,
+        42,
+        53,
+        54,
+        55,
+        56,
+        57,
+        58,
+        59,
+        60,
+        90,
+        91,
+        92,
+        100,
+        161,
+        162,
+        200,
+        201,
+        202,
+    )
 )
 """The G codes the parser accepts (E-04); any other is alarm 910102."""
 
@@ -113,6 +144,8 @@ _G_GROUP: dict[int, str] = {
     **dict.fromkeys((70, 71), "units (G70/G71)"),
     **dict.fromkeys((94, 95), "feed (G94/G95)"),
     **dict.fromkeys((900, 901), "deceleration (G900/G901)"),
+    **dict.fromkeys((40, 41, 42), "tool radius compensation (G40/G41/G42)"),
+    **dict.fromkeys((25, 26), "radius compensation transition (G25/G26)"),
 }
 
 # "1", "01", "001" -> 1: the common spellings of the known codes without int() per word.

@@ -321,9 +321,6 @@ word with 910109."""
 SLOPE_TYPES: Final = ("STEP", "TRAPEZ", "SIN2", "HSC")
 """``#SLOPE [TYPE=<ident>]``'s profiles (P-CHAN-00071's 0..3)."""
 MOTION_FUNCTIONS: Final[dict[str, str]] = {
-    "CS": "coordinate systems (#CS)",
-    "ACS": "clamping coordinate systems (#ACS)",
-    "ROTATION": "contour rotation (#ROTATION)",
     "CONTOUR": "contouring (#CONTOUR MODE)",
     "HSC": "HSC contouring (#HSC)",
     "SPLINE": "spline interpolation (#SPLINE)",
@@ -331,9 +328,6 @@ MOTION_FUNCTIONS: Final[dict[str, str]] = {
 }
 """The motion functions issue 24 adds (N-09): refused by name until then."""
 MOTION_G_CODES: Final[dict[int, str]] = {
-    40: "tool radius compensation off (G40)",
-    41: "tool radius compensation left (G41)",
-    42: "tool radius compensation right (G42)",
     61: "contouring, exact stop (G61)",
     64: "contouring (G64)",
     260: "contouring mode (G260)",
@@ -1590,6 +1584,8 @@ class _BlockParser:
                 if self.keyword("END")
                 else "#COMMENT: BEGIN or END expected",
             )
+        if name in ("CS", "ACS", "ROTATION"):
+            return self.coordinates(name)
         if name in MOTION_FUNCTIONS:
             self.fail(
                 A_NOT_SIMULATED,
@@ -1657,6 +1653,110 @@ class _BlockParser:
                 f"{self.word_at(self.pos)!r} after #MSG [..]: a message stands alone in its block",
             )
         return Hash(self.raw, self.number, "MSG", options, args)
+
+    def coordinates(self, name: str) -> Stmt:
+        """``#CS|#ACS DEF|ON [[<id>]] [[v1,v2,v3,φ1,φ2,φ3]]``, ``#CS|#ACS OFF [ALL]``, ``#CS ADD|SET [<name>]
+        [..]``, ``#CS DEL [<name>]|ALL``, ``#ROTATION ON [[ANGLE= CENTER1= CENTER2=]]``, ``#ROTATION OFF``
+        (programming manual 208480907, 208491403, 1037259147, 1048407819, 207442315). The Hash's command is
+        ``"CS ON"`` etc.; ``options`` holds ``ALL``, ``ID`` (the first bracket is the ID), a ``#CS ADD`` name,
+        or the #ROTATION keywords in the order of ``args``."""
+        ops: tuple[str, ...] = ("DEF", "ON", "OFF", "ADD", "SET", "DEL")
+        if name == "ROTATION":
+            ops = ("ON", "OFF")
+        elif name == "ACS":
+            ops = ("DEF", "ON", "OFF")
+        op = next((o for o in ops if self.keyword(o)), None)
+        if op is None:
+            rest = self.word_at(self.pos) if self.pos < self.n else "nothing"
+            self.fail(
+                A_NOT_SIMULATED,
+                f"#{name} {rest}: simulated are #{name} " + "/".join(ops) + " (docs/nc-language.md)",
+            )
+        options: list[str] = []
+        args: list[Expr] = []
+        if name == "ROTATION":
+            if op == "ON" and not self.at_end():
+                self.expect("[", "after #ROTATION ON")
+                self.depth += 1
+                while True:
+                    self.blanks()
+                    if self.peek() == "]":
+                        self.pos += 1
+                        break
+                    key = self.name()
+                    if key not in ("ANGLE", "CENTER1", "CENTER2") or key in options:
+                        self.fail(
+                            A_CONTROL_SYNTAX,
+                            f"#ROTATION ON [..]: {key or self.word_at(self.pos)!r}: "
+                            "ANGLE=, CENTER1=, CENTER2= (each once)",
+                        )
+                    self.blanks()
+                    if self.peek() == "=":
+                        self.pos += 1
+                    options.append(key)
+                    args.append(self.expression(stop_at_blank=True))
+                self.depth -= 1
+        elif op == "OFF":
+            if self.keyword("ALL"):
+                options.append("ALL")
+        elif op in ("ADD", "SET", "DEL"):
+            if op == "DEL" and self.keyword("ALL"):
+                options.append("ALL")
+            else:
+                self.expect("[", f"after #CS {op}")
+                self.blanks()
+                cs_name = self.name()
+                if not cs_name or len(cs_name) > 8:
+                    self.fail(A_CONTROL_SYNTAX, f"#CS {op} [<name>]: a name of 1 to 8 characters")
+                self.expect("]", f"after #CS {op} [<name>")
+                options.append("NAME:" + cs_name)
+                if op != "DEL":
+                    args = self.components(f"#CS {op}")
+        else:
+            self.blanks()
+            if self.peek() == "[":
+                first = self.components(f"#{name} {op}")
+                self.blanks()
+                if self.peek() == "[":
+                    if len(first) != 1:
+                        self.fail(A_CONTROL_SYNTAX, f"#{name} {op} [<id>] [..]: the ID is one value")
+                    options.append("ID")
+                    args = first + self.components(f"#{name} {op}")
+                elif len(first) == 1:
+                    options.append("ID")
+                    args = first
+                else:
+                    args = first
+        if not self.at_end():
+            self.fail(
+                A_CONTROL_SYNTAX,
+                f"{self.word_at(self.pos)!r} after #{name} {op}: the command stands alone in its block",
+            )
+        return Hash(self.raw, self.number, f"{name} {op}", options, args)
+
+    def components(self, what: str) -> list[Expr]:
+        """``[a, , c]``: up to six values, a gap is 0."""
+        self.expect("[", f"after {what}")
+        self.depth += 1
+        out: list[Expr] = []
+        while True:
+            self.blanks()
+            if self.peek() in (",", "]"):
+                out.append(Const(0.0))
+            else:
+                out.append(self.expression(stop_at_blank=False))
+            self.blanks()
+            if self.peek() == ",":
+                self.pos += 1
+                continue
+            self.expect("]", f"after the values of {what}")
+            break
+        self.depth -= 1
+        if len(out) > 6:
+            self.fail(
+                A_CONTROL_SYNTAX, f"{what} [..]: at most 6 values (v1, v2, v3, φ1, φ2, φ3), got {len(out)}"
+            )
+        return out
 
     def meas_mode(self) -> Stmt:
         """``#MEAS MODE [ [<meas_type>] ]`` (207084683): the measuring type of G100 from here to the
