@@ -14,12 +14,21 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 from hli_server.engine.geometry import LineSegment, Point, Segment, arc_from_centre
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
-from hli_server.engine.nc.interpreter import PAUSE, Directive, FlushStop, FlushWait, MeasMode, SyncAction
+from hli_server.engine.nc.interpreter import (
+    PAUSE,
+    ContourDirective,
+    Directive,
+    FlushStop,
+    FlushWait,
+    MeasMode,
+    SyncAction,
+)
+from hli_server.engine.path.contour import HSC_DEFAULT, SPLINE_DEFAULT, Contour, ContourSettings, Piece
 from hli_server.engine.planner import Marker, MarkerKind, Motion
 
 __all__ = [
@@ -32,6 +41,10 @@ __all__ = [
     "ModalState",
     "PathCheck",
 ]
+
+ALARM_SIMULATED_AS_DEV = 911040
+"""Warning: a contouring type, ``#HSC`` or a spline the simulator does not model is simulated as
+contouring with corner deviation (M-23; the project's own number: the kernel has none)."""
 
 ARC_RADIUS_TOLERANCE = 0.01
 """mm: allowed difference of start and end radius of a programmed circle (project's own)."""
@@ -133,6 +146,26 @@ class ModalState:
     meas_type: int | None = None
     """The measuring type of G100 selected in the program (the kernel's ``#MEAS MODE [n]``); None: the
     channel's default P-CHAN-00057. ``#MEAS MODE`` sets it (the interpreter's ``MeasMode``)."""
+    contour: ContourSettings = field(default_factory=ContourSettings)
+    """The parameters of ``#CONTOUR MODE [...]`` (polynomial contouring, M-20)."""
+    contouring: bool = False
+    """G261 / ``#CONTOUR MODE ON`` / G64: every corner is contoured (G260 / ``OFF``: not)."""
+    hsc: bool = False
+    """``#HSC ON``: every corner is contoured with ``hsc_settings`` (M-22)."""
+    hsc_settings: ContourSettings = field(default_factory=lambda: HSC_DEFAULT)
+    spline: bool = False
+    """``#SPLINE ON`` / G151: simulated as contouring with ``spline_settings`` (M-23)."""
+    spline_settings: ContourSettings = field(default_factory=lambda: SPLINE_DEFAULT)
+
+    def blend(self, g_codes: tuple[int, ...]) -> ContourSettings | None:
+        """The contouring at the end of a block with these G codes (None: an exact corner)."""
+        if self.spline:
+            return self.spline_settings
+        if self.hsc:
+            return self.hsc_settings
+        if self.contouring or 61 in g_codes:
+            return self.contour
+        return None
 
     def offset(self, axis: str) -> float:
         base = self.zero_offsets.get(self.zero_offset, {}).get(axis, 0.0) if self.zero_offset else 0.0
@@ -174,6 +207,10 @@ class Decoder:
         self.blocks_decoded = 0
         self.last_centre: dict[str, float] = {}
         """I, J, K of the last circle programmed (V.G.I, V.G.J, V.G.K)."""
+        self.contour = Contour()
+        """Polynomial contouring (M-20): may hold the last motion back to blend it with the next."""
+        self.warn: Callable[[int, str, int, str], None] | None = None
+        """Raises a warning of the table (alarm, message, line, block): the channel sets it."""
 
     # --- program control -----------------------------------------------------------------
     def start(self, blocks: BlockFeed | Iterator[Block], position: list[float]) -> None:
@@ -184,6 +221,7 @@ class Decoder:
         self.waiting = False
         self.blocks_decoded = 0
         self.modal.in_area_definition = False
+        self.contour.reset()
 
     def resume(self, position: list[float]) -> None:
         """Continue decoding from ``position`` (after a measuring move stopped where the probe fired)."""
@@ -193,6 +231,7 @@ class Decoder:
     def reset_modal(self) -> None:
         """Reset: modal state back to its defaults, G92 cleared (zero offset table kept)."""
         self.modal = ModalState(zero_offsets=self.modal.zero_offsets)
+        self.contour.reset()
         self.blocks = None
         self.finished = True
         self.waiting = False
@@ -225,14 +264,19 @@ class Decoder:
         if block is not None:
             self.current_block = block
         if isinstance(out, SyncAction):
-            return [Marker(MarkerKind.SYNC, block, payload=out.action)]
+            return self._flushed([Marker(MarkerKind.SYNC, block, payload=out.action)])
         if isinstance(out, FlushWait):
-            self.waiting = True
-            return [Marker(MarkerKind.ACTION, block, payload=self._end_wait)]
+            items = self._flushed([Marker(MarkerKind.ACTION, block, payload=self._end_wait)])
+            if not self.finished:
+                self.waiting = True
+            return items
         if isinstance(out, FlushStop):
-            return [Marker(MarkerKind.ACTION, block, payload=_nothing)]
+            return self._flushed([Marker(MarkerKind.ACTION, block, payload=_nothing)])
         if isinstance(out, MeasMode):
             self.modal.meas_type = out.meas_type  # modal, decoded in order (the G100 blocks after it)
+            return []
+        if isinstance(out, ContourDirective):
+            self._contour_directive(out)
             return []
         return []  # pragma: no cover - every directive is handled above
 
@@ -255,25 +299,105 @@ class Decoder:
 
     def end_of_program(self) -> list[Motion | Marker]:
         """The text ended (without M30/M02 when decoding gets here): the end marker of the last block."""
+        items = self._flushed([Marker(MarkerKind.END, self.current_block, payload="eof")])
         self.finished = True
-        return [Marker(MarkerKind.END, self.current_block, payload="eof")]
+        return items
 
     def syntax_error(self, exc: NcError) -> list[Motion | Marker]:
         """A line the parser could not read: the error marker with the place the parser named."""
-        self.finished = True
         params: dict[str, Any] = {"line": exc.line, "block": exc.block, **exc.params}
         if exc.program:
             params["program"] = exc.program
-        return [Marker(MarkerKind.ERROR, None, payload=DecodeError(exc.alarm, exc.message, params))]
+        items = self._flushed([Marker(MarkerKind.ERROR, None, payload=DecodeError(exc.alarm, exc.message, params))])
+        self.finished = True
+        return items
 
     # --- one block -------------------------------------------------------------------------
     def _error(self, block: Block, alarm: int, message: str, **params: Any) -> list[Motion | Marker]:
         return [Marker(MarkerKind.ERROR, block, payload=DecodeError(alarm, message, params))]
 
     def _decode(self, block: Block) -> list[Motion | Marker]:
+        items = self._decode_block(block)
+        if items and self.contour.holding and isinstance(items[-1], Marker):
+            # a marker of this block (an error, an area command, the program's end, a G100 move) comes
+            # after the held motion: the corner before it is not contoured
+            first = next(k for k, item in enumerate(items) if isinstance(item, Marker))
+            if not any(isinstance(item, Motion) for item in items[first:]):
+                return items[:first] + self._flushed(items[first:])
+        return items
+
+    def _flushed(self, items: list[Motion | Marker]) -> list[Motion | Marker]:
+        """The held-back motion of the contouring stage (if any), then ``items``; if the held motion fails
+        its path check, its error marker replaces ``items``."""
+        if not self.contour.holding:
+            return items
+        out = self._emit(self.contour.flush())
+        if out and isinstance(out[-1], Marker) and out[-1].kind is MarkerKind.ERROR:
+            self.finished = True
+            return out
+        return out + items
+
+    def _contour_directive(self, out: ContourDirective) -> None:
+        """``#CONTOUR MODE``, ``#HSC``, ``#SPLINE`` (M-20, M-22, M-23): modal, in program order. A type the
+        simulator does not model is simulated as DEV, and said so by warning 911040 (never silently)."""
+        m = self.modal
+        v = out.values
+        if out.function == "CONTOUR":
+            mode = out.mode or m.contour.mode
+            m.contour = replace(
+                m.contour,
+                mode=mode,
+                path_dev=v.get("PATH_DEV", m.contour.path_dev),
+                pre_dist=v.get("PRE_DIST", m.contour.pre_dist),
+                post_dist=v.get("POST_DIST", m.contour.post_dist),
+                simulated_as=None if mode in ("DEV", "DIST") else f"#CONTOUR MODE [{mode}]",
+            )
+            if out.on is not None:
+                m.contouring = out.on
+            settings = m.contour
+            announce = out.mode is not None and settings.simulated_as is not None
+        elif out.function == "HSC":
+            deviation = v.get("PATH_DEV" if out.mode == "BSPLINE" else "CONTERROR")
+            mode = out.mode or m.hsc_settings.simulated_as or "#HSC"
+            m.hsc_settings = replace(
+                m.hsc_settings,
+                path_dev=m.hsc_settings.path_dev if deviation is None else deviation,
+                simulated_as=f"#HSC [{out.mode}]" if out.mode else m.hsc_settings.simulated_as,
+            )
+            if out.on is not None:
+                m.hsc = out.on
+            settings = m.hsc_settings
+            announce = bool(out.on)
+        else:
+            if out.mode is not None:
+                m.spline_settings = replace(m.spline_settings, simulated_as=f"#SPLINE TYPE {out.mode}")
+            if out.on is not None:
+                m.spline = out.on
+            settings = m.spline_settings
+            announce = bool(out.on)
+        if announce and out.block is not None:
+            self._announce(settings, out.block)
+
+    def _announce(self, settings: ContourSettings, block: Block) -> None:
+        """Warning 911040: ``settings.simulated_as`` is simulated as contouring with corner deviation."""
+        if self.warn is not None:
+            self.warn(
+                ALARM_SIMULATED_AS_DEV,
+                f"{settings.simulated_as} is simulated as polynomial contouring with corner deviation "
+                f"PATH_DEV={settings.path_dev:g} mm (docs/nc-language.md, Contouring)",
+                block.line,
+                f"N{block.number}" if block.number is not None else f"line {block.line}",
+            )
+
+    def _decode_block(self, block: Block) -> list[Motion | Marker]:
         m = self.modal
         if block.two_path:
-            return self._error(block, 910110, "two-path programming (': G0 ... : G0 ...') is not supported")
+            return self._error(
+                block,
+                910110,
+                "two-path programming (': G0 ... : G0 ...') is not supported: docs/nc-language.md says what "
+                "simulating it would take",
+            )
         items: list[Motion | Marker] = []
         if block.area is not None:
             return self._area(block, block.area)
@@ -299,6 +423,15 @@ class Decoder:
                 measuring = True
             elif g in (130, 131, 230, 231, 132, 133, 134, 233, 333, 334, 338, 339):
                 self._weighting(g, block)
+            elif g in (261, 64):
+                m.contouring = True
+            elif g == 260:
+                m.contouring = False
+            elif g == 151:
+                m.spline = True
+                self._announce(m.spline_settings, block)
+            elif g == 150:
+                m.spline = False
             elif g in (100, 200, 201, 202, 4):
                 return self._error(block, 910110, f"G{g} is not supported in this block context")
         if block.feed is not None:
@@ -316,10 +449,9 @@ class Decoder:
             return self._measuring_move(block)
         moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre))
         if moves:
-            result = self._motion(block)
-            if isinstance(result, list):
-                return result
-            items.append(result)
+            items.extend(self._motion(block))
+            if items and isinstance(items[-1], Marker) and items[-1].kind is MarkerKind.ERROR:
+                return items
         for code in block.m_codes:
             if code in (2, 30):
                 items.append(Marker(MarkerKind.END, block, payload=f"M{code:02d}"))
@@ -355,7 +487,7 @@ class Decoder:
                 target[i] += value
         return target
 
-    def _motion(self, block: Block) -> Motion | list[Motion | Marker]:
+    def _motion(self, block: Block) -> list[Motion | Marker]:
         m = self.modal
         start = tuple(self.position)
         target = self._target(block)
@@ -401,20 +533,42 @@ class Decoder:
         rapid = m.motion == 0
         if not rapid and m.feed is None:
             return self._error(block, 911000, "no feed (F word) programmed for a feed move")
-        for check in self.path_checks:
-            err = check(segment, block)
-            if err is not None:
-                return [Marker(MarkerKind.ERROR, block, payload=err)]
-        v_max, accel = self._limits(segment, rapid)
-        self.position = target
-        return Motion(
+        piece = Piece(
             segment=segment,
             block=block,
-            v_max=v_max,
-            accel=accel,
             rapid=rapid,
             exact_stop=60 in block.g_codes,
+            feed=m.feed,
+            blend=None if rapid else m.blend(block.g_codes),
         )
+        items = self._emit(self.contour.push(piece))
+        if not (items and isinstance(items[-1], Marker)):
+            self.position = target
+        return items
+
+    def _emit(self, pieces: list[Piece]) -> list[Motion | Marker]:
+        """The path checks and the planner's items for the pieces the contouring stage gives out; the
+        first piece that fails a check is replaced by its error marker and the rest dropped."""
+        items: list[Motion | Marker] = []
+        for piece in pieces:
+            for check in self.path_checks:
+                err = check(piece.segment, piece.block)
+                if err is not None:
+                    self.contour.reset()
+                    items.append(Marker(MarkerKind.ERROR, piece.block, payload=err))
+                    return items
+            v_max, accel = self._limits(piece.segment, piece.rapid, feed=piece.feed)
+            items.append(
+                Motion(
+                    segment=piece.segment,
+                    block=piece.block,
+                    v_max=v_max,
+                    accel=accel,
+                    rapid=piece.rapid,
+                    exact_stop=piece.exact_stop,
+                )
+            )
+        return items
 
     def _measuring_move(self, block: Block) -> list[Motion | Marker]:
         """G100 (C14-23): a linear feed move toward the target, then decoding waits for its end."""
