@@ -1694,7 +1694,7 @@ class _BlockParser:
                 if nxt == "=":
                     self.pos += 1
                     self.blanks()
-                if self.at_end():
+                if self.at_end() or self.peek() in ("]", ","):
                     self.fail(A_CONTROL_SYNTAX, f"#{command}: {key}= without a value")
                 saved = self.depth
                 self.depth = 0

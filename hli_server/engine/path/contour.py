@@ -18,7 +18,7 @@ two new end points. The simulator's curve (docs/nc-language.md, "Contouring"):
   chosen so that the *corner deviation* (the distance of the curve's interim point ``t = 1/2`` from
   ``C``, the manual's definition, tf5200_programming_manual/475073291.html) is ``PATH_DEV`` less the
   chord tolerance; for two lines with the turning angle ``theta`` that is
-  ``d = 8 * dev / (3 * 2 sin(theta/2))``; both distances are limited symmetrically to half the block
+  ``d = 8 * dev / (3 sin(theta/2))`` (the interim point is ``C + 3 d (t_B - t_A) / 16``); both distances are limited symmetrically to half the block
   length (tf5200_programming_manual/475164939.html). Then the whole curve is measured against the
   programmed path (its distance from the pre-block's tail and the post-block's head) and ``d`` is
   reduced until no point departs by more than ``PATH_DEV``: the bound holds for arcs too;
@@ -263,7 +263,7 @@ class Contour:
                 return None
             chord_tol = min(CHORD_TOLERANCE, dev / 20.0)
             target = dev - chord_tol
-            d = 8.0 * target / (3.0 * 2.0 * math.sin(turn / 2.0))
+            d = 8.0 * target / (3.0 * math.sin(turn / 2.0))
             d = min(d, half_pre, half_post)
             chords = []
             for _ in range(60):
