@@ -308,7 +308,9 @@ class Decoder:
         params: dict[str, Any] = {"line": exc.line, "block": exc.block, **exc.params}
         if exc.program:
             params["program"] = exc.program
-        items = self._flushed([Marker(MarkerKind.ERROR, None, payload=DecodeError(exc.alarm, exc.message, params))])
+        items = self._flushed(
+            [Marker(MarkerKind.ERROR, None, payload=DecodeError(exc.alarm, exc.message, params))]
+        )
         self.finished = True
         return items
 

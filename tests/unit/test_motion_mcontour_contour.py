@@ -4,6 +4,7 @@ errors of #CONTOUR MODE / #HSC / #SPLINE."""
 
 from __future__ import annotations
 
+import itertools
 import math
 import random
 
@@ -46,7 +47,7 @@ def _samples(pieces: list[Piece], per: int = 8) -> list[tuple[float, ...]]:
 
 def _continuous(pieces: list[Piece], start: tuple[float, ...], end: tuple[float, ...]) -> None:
     assert math.dist(pieces[0].segment.start, start) < 1e-9
-    for a, b in zip(pieces, pieces[1:], strict=False):
+    for a, b in itertools.pairwise(pieces):
         assert math.dist(a.segment.end, b.segment.start) < 1e-9
     assert math.dist(pieces[-1].segment.end, end) < 1e-9
 
@@ -54,11 +55,16 @@ def _continuous(pieces: list[Piece], start: tuple[float, ...], end: tuple[float,
 # --- the transition model -------------------------------------------------------------------------------
 @pytest.mark.req("M-20")
 def test_line_line_corner_deviation_is_path_dev_and_the_blocks_are_shortened_symmetrically() -> None:
-    segs = [LineSegment((0.0, 0.0, 0.0), (100.0, 0.0, 0.0)), LineSegment((100.0, 0.0, 0.0), (100.0, 100.0, 0.0))]
+    segs = [
+        LineSegment((0.0, 0.0, 0.0), (100.0, 0.0, 0.0)),
+        LineSegment((100.0, 0.0, 0.0), (100.0, 100.0, 0.0)),
+    ]
     out = _emit(segs)
     _continuous(out, (0.0, 0.0, 0.0), (100.0, 100.0, 0.0))
     head, *chords, tail = out
-    assert all(p.transition for p in chords) and not head.transition and not tail.transition
+    assert all(p.transition for p in chords)
+    assert not head.transition
+    assert not tail.transition
     d_pre = 100.0 - head.segment.end[0]
     d_post = tail.segment.start[1]
     assert d_pre == pytest.approx(d_post, rel=1e-9)
@@ -68,7 +74,7 @@ def test_line_line_corner_deviation_is_path_dev_and_the_blocks_are_shortened_sym
     interim = chords[len(chords) // 2].segment.start
     assert math.dist(interim, (100.0, 0.0, 0.0)) == pytest.approx(1.0 - CHORD_TOLERANCE, abs=1e-6)
     # smooth: the direction changes by a few degrees at most between neighbouring pieces
-    for a, b in zip(out, out[1:], strict=False):
+    for a, b in itertools.pairwise(out):
         ta, tb = a.segment.direction_at(a.segment.length), b.segment.direction_at(0.0)
         assert math.degrees(math.acos(min(1.0, sum(x * y for x, y in zip(ta, tb, strict=True))))) < 15.0
 
@@ -118,9 +124,7 @@ _coord = st.floats(min_value=-200.0, max_value=200.0, allow_nan=False)
 def test_property_a_blended_polyline_never_departs_by_more_than_path_dev(
     points: list[tuple[float, float, float]], dev: float
 ) -> None:
-    segs: list[Segment] = [
-        LineSegment(a, b) for a, b in zip(points, points[1:], strict=False) if math.dist(a, b) > 1e-3
-    ]
+    segs: list[Segment] = [LineSegment(a, b) for a, b in itertools.pairwise(points) if math.dist(a, b) > 1e-3]
     if len(segs) < 2:
         return
     segs = [s for k, s in enumerate(segs) if k == 0 or math.dist(segs[k - 1].end, s.start) < 1e-12]
@@ -176,7 +180,7 @@ def _trace(program: str, **kw: object) -> tuple[list[tuple[float, float, float]]
 
 
 def _polyline(points: list[tuple[float, float]]) -> list[Segment]:
-    return [LineSegment((*a, 0.0), (*b, 0.0)) for a, b in zip(points, points[1:], strict=False)]
+    return [LineSegment((*a, 0.0), (*b, 0.0)) for a, b in itertools.pairwise(points)]
 
 
 POLY_POINTS = [(0, 0), (20, 100), (40, 100), (60, 20), (80, 20), (100, 100), (120, 100), (140, 20), (160, 20)]
@@ -215,7 +219,8 @@ the same contour, corners contoured at the ends of N30..N60."""
 def test_manual_example_g61_and_g261_give_the_identical_contour() -> None:
     p61, m61 = _trace(POLY_G61)
     p261, m261 = _trace(POLY_G261_1)
-    assert errors(m61) == [] and errors(m261) == []
+    assert errors(m61) == []
+    assert errors(m261) == []
     assert p61 == p261  # bit for bit, cycle for cycle
     path = _polyline([(float(x), float(y)) for x, y in POLY_POINTS])
     worst = max(distance_to_path(p, path) for p in p61)
@@ -285,7 +290,9 @@ M30
     ],
     ids=["hsc-opmode1", "hsc-on-params", "hsc-default", "hsc-bspline", "spline", "set-spline", "g151"],
 )
-def test_hsc_and_splines_are_simulated_as_contouring_and_say_so(switch_on: str, switch_off: str, dev: float) -> None:
+def test_hsc_and_splines_are_simulated_as_contouring_and_say_so(
+    switch_on: str, switch_off: str, dev: float
+) -> None:
     program = f"G01 X0 Y0 F6000\n{switch_on}\nX50\nY50\n{switch_off}\nX0\nY0\nM30\n"
     pts, m = _trace(program)
     assert errors(m) == []
@@ -312,7 +319,8 @@ def test_an_unmodelled_contouring_type_is_simulated_as_dev_with_a_warning() -> N
 def test_dist_mode_in_a_program() -> None:
     program = "G01 X0 Y0 F6000\n#CONTOUR MODE [DIST PRE_DIST=4 POST_DIST=4]\nG61 X50\nY50\nM30\n"
     pts, m = _trace(program)
-    assert errors(m) == [] and alarm_ids(m) == []
+    assert errors(m) == []
+    assert alarm_ids(m) == []
     # leaves the X line 4 mm before the corner, joins the Y line 4 mm after it
     on_x = [p for p in pts if abs(p[1]) < 1e-9 and p[0] > 40]
     assert max(p[0] for p in on_x) == pytest.approx(46.0, abs=1e-6)
@@ -328,7 +336,7 @@ def test_contouring_is_deterministic_and_the_velocity_stays_up_through_the_corne
     ref, _ = _trace(exact)
     assert len(pts) < len(ref)  # the blended corners are not stops: the program ends sooner
     # the slowest speed near the first corner is well above a standstill
-    speeds = [math.dist(a, b) * 1000.0 * 60.0 for a, b in zip(pts, pts[1:], strict=False)]
+    speeds = [math.dist(a, b) * 1000.0 * 60.0 for a, b in itertools.pairwise(pts)]
     corner = [v for p, v in zip(pts, speeds, strict=False) if math.dist(p[:2], (100.0, 0.0)) < 3.0]
     assert min(corner) > 1000.0  # mm/min, of F6000
 
@@ -355,13 +363,15 @@ def test_protection_area_missed_by_the_programmed_corner_is_hit_by_the_blended_o
     # a small area inside the corner around the transition's interim point (96.46, 3.54)
     area = _prot(95.5, 97.5, 2.5, 4.5)
     pts, m = _trace(area + _with(False))
-    assert errors(m) == [] and pts[-1][:2] == pytest.approx((100.0, 100.0))
+    assert errors(m) == []
+    assert pts[-1][:2] == pytest.approx((100.0, 100.0))
     pts, m = _trace(area + _with(True))
     (err,) = errors(m)
     assert m.channel(1).state == ProgramState.ABORTED
     # refused before the axes enter it: the path stops at the start of the failing chord
     assert all(not (95.5 <= p[0] <= 97.5 and 2.5 <= p[1] <= 4.5) for p in pts)
-    assert 90.0 < pts[-1][0] < 97.5 and pts[-1][1] < 2.5
+    assert 90.0 < pts[-1][0] < 97.5
+    assert pts[-1][1] < 2.5
     assert "N20" in str(err.params.get("block", "")) or err.line in (12, 13)
 
 
@@ -370,7 +380,8 @@ def test_protection_area_hit_by_the_programmed_corner_is_missed_by_the_blended_o
     area = _prot(99.5, 101.0, -1.0, 0.5)
     pts, m = _trace(area + _with(False))
     assert len(errors(m)) == 1
-    assert pts[-1][0] < 99.5 + 1e-9 and pts[-1][1] == pytest.approx(0.0)
+    assert pts[-1][0] < 99.5 + 1e-9
+    assert pts[-1][1] == pytest.approx(0.0)
     pts, m = _trace(area + _with(True))
     assert errors(m) == []
     assert pts[-1][:2] == pytest.approx((100.0, 100.0))
@@ -382,7 +393,8 @@ def test_work_area_left_only_by_the_blended_path_is_accepted_and_one_left_by_it_
     (it cuts the corner towards the inside); a work area ending inside the corner's cut is left."""
     work = (
         "N1 #CONTROL AREA BEGIN [ID8 WORK POLY MIN_EXCUR=-50 MAX_EXCUR=50]\n"
-        "N2 G01 X-1 Y-1 F6000\nN3 X101\nN4 Y101\nN5 X-1\nN6 Y-1\nN7 #CONTROL AREA END\nN8 #CONTROL AREA ON [ID8]\n"
+        "N2 G01 X-1 Y-1 F6000\nN3 X101\nN4 Y101\nN5 X-1\nN6 Y-1\n"
+        "N7 #CONTROL AREA END\nN8 #CONTROL AREA ON [ID8]\n"
     )
     pts, m = _trace(work + _with(True))
     assert errors(m) == []
@@ -417,7 +429,9 @@ def test_work_area_left_only_by_the_blended_path_is_accepted_and_one_left_by_it_
         ("#CONTOUR MODE [DIST PRE_DIST=-2]", 910111, "PRE_DIST"),
     ],
 )
-def test_malformed_contouring_commands_are_refused_with_line_and_block(line: str, alarm: int, text: str) -> None:
+def test_malformed_contouring_commands_are_refused_with_line_and_block(
+    line: str, alarm: int, text: str
+) -> None:
     m = make_machine(("X", "Y", "Z"))
     ch = m.channel(1)
     ch.load_program(f"N10 G01 X10 F1000\nN20 {line}\nN30 X20\nM30\n", "test")
@@ -437,7 +451,7 @@ def test_malformed_contouring_commands_are_refused_with_line_and_block(line: str
         ("#TRAFO ON", "kinematic transformations (#TRAFO)"),
         ("N50 : G0 X200 Y0 : G0 X10 Y0", "two-path programming"),
         (
-            "#CONTROL AREA BEGIN [ID1 PROT POLY MIN_EXCUR=0 MAX_EXCUR=1 MONITOR_LVL=\"IMCS\"]",
+            '#CONTROL AREA BEGIN [ID1 PROT POLY MIN_EXCUR=0 MAX_EXCUR=1 MONITOR_LVL="IMCS"]',
             'MONITOR_LVL="IMCS"',
         ),
     ],
@@ -459,8 +473,33 @@ def test_what_stays_refused_is_refused_with_a_clear_alarm(line: str, text: str) 
 @pytest.mark.fuzz
 def test_fuzzed_contouring_commands_never_crash_and_never_corrupt_the_next_program() -> None:
     rnd = random.Random(20261126)
-    words = ["ON", "OFF", "DEV", "DIST", "PATH_DEV=", "PRE_DIST=", "POST_DIST=", "[", "]", ",", "OPMODE", "1", "-3",
-             "CONTERROR", "1e400", "P1", "BSPLINE", "TYPE", "AKIMA", "=", "(x", ";", "9" * 40, "\x00", "#"]
+    words = [
+        "ON",
+        "OFF",
+        "DEV",
+        "DIST",
+        "PATH_DEV=",
+        "PRE_DIST=",
+        "POST_DIST=",
+        "[",
+        "]",
+        ",",
+        "OPMODE",
+        "1",
+        "-3",
+        "CONTERROR",
+        "1e400",
+        "P1",
+        "BSPLINE",
+        "TYPE",
+        "AKIMA",
+        "=",
+        "(x",
+        ";",
+        "9" * 40,
+        "\x00",
+        "#",
+    ]
     heads = ["#CONTOUR MODE", "#HSC", "#SPLINE", "#SET SPLINE", "#SET SPLINETYPE", "G61", "G261", "G151"]
     m = make_machine(("X", "Y", "Z"))
     ch = m.channel(1)

@@ -1159,7 +1159,9 @@ class Interpreter(Env):
         if name == "CONTOUR":
             types = [w for w in stmt.options if w in CONTOUR_TYPES]
             if len(types) > 1:
-                raise stmt.error(A_CONTROL_SYNTAX, f"#{command}: two contouring types {types[0]} and {types[1]}")
+                raise stmt.error(
+                    A_CONTROL_SYNTAX, f"#{command}: two contouring types {types[0]} and {types[1]}"
+                )
             mode = types[0] if types else None
         elif name == "HSC":
             if "BSPLINE" in stmt.options:
@@ -1167,7 +1169,9 @@ class Interpreter(Env):
             elif "OPMODE" in values:
                 opmode = values["OPMODE"]
                 if opmode not in (1.0, 2.0):
-                    raise stmt.error(A_RANGE, f"#HSC: OPMODE {format_value(opmode)}: the operation modes are 1, 2")
+                    raise stmt.error(
+                        A_RANGE, f"#HSC: OPMODE {format_value(opmode)}: the operation modes are 1, 2"
+                    )
                 mode = f"OPMODE {int(opmode)}"
         else:
             for word in ("AKIMA", "BSPLINE"):

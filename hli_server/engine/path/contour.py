@@ -18,7 +18,8 @@ two new end points. The simulator's curve (docs/nc-language.md, "Contouring"):
   chosen so that the *corner deviation* (the distance of the curve's interim point ``t = 1/2`` from
   ``C``, the manual's definition, tf5200_programming_manual/475073291.html) is ``PATH_DEV`` less the
   chord tolerance; for two lines with the turning angle ``theta`` that is
-  ``d = 8 * dev / (3 sin(theta/2))`` (the interim point is ``C + 3 d (t_B - t_A) / 16``); both distances are limited symmetrically to half the block
+  ``d = 8 * dev / (3 sin(theta/2))`` (the interim point is ``C + 3 d (t_B - t_A) / 16``); both
+  distances are limited symmetrically to half the block
   length (tf5200_programming_manual/475164939.html). Then the whole curve is measured against the
   programmed path (its distance from the pre-block's tail and the post-block's head) and ``d`` is
   reduced until no point departs by more than ``PATH_DEV``: the bound holds for arcs too;
@@ -48,6 +49,7 @@ drops it.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, replace
 from typing import Final
@@ -175,7 +177,7 @@ def distance_to_path(p: Point, path: list[Segment]) -> float:
     best = math.inf
     for segment in path:
         pts = _polyline(segment)
-        for a, b in zip(pts, pts[1:], strict=False):
+        for a, b in itertools.pairwise(pts):
             best = min(best, _point_line_distance(p, a, b))
     return best
 
@@ -235,7 +237,9 @@ class Contour:
         return out
 
     # --- one corner ------------------------------------------------------------------------------------
-    def _blend(self, pre: Piece, post: Piece, settings: ContourSettings) -> tuple[Piece, list[Piece], Piece] | None:
+    def _blend(
+        self, pre: Piece, post: Piece, settings: ContourSettings
+    ) -> tuple[Piece, list[Piece], Piece] | None:
         s_pre, s_post = pre.segment, post.segment
         l_pre, l_post = s_pre.length, s_post.length
         if l_pre <= 1e-9 or l_post <= 1e-9:
@@ -272,7 +276,7 @@ class Contour:
                 # interim point (t = 1/2, the middle support point) against the corner
                 probes = chords + [
                     tuple(0.5 * (x + y) for x, y in zip(p, q, strict=True))
-                    for p, q in zip(chords, chords[1:], strict=False)
+                    for p, q in itertools.pairwise(chords)
                 ]
                 programmed = [sub_segment(s_pre, l_pre - d, l_pre), sub_segment(s_post, 0.0, d)]
                 worst = max(
@@ -295,7 +299,7 @@ class Contour:
                 full_length=math.dist(a, b),
                 transition=True,
             )
-            for a, b in zip(chords, chords[1:], strict=False)
+            for a, b in itertools.pairwise(chords)
             if math.dist(a, b) > 1e-12
         ]
         return head, pieces, tail
@@ -320,7 +324,9 @@ class Contour:
         # chord count from the curvature bound of the control polygon: sagitta ~ k h^2 / 8
         tol = min(CHORD_TOLERANCE, max(dev, 1e-6) / 20.0)
         second = max(
-            math.dist(tuple(p0 - 2 * p1 + p2 for p0, p1, p2 in zip(*triple, strict=True)), tuple(0.0 for _ in a))
+            math.dist(
+                tuple(p0 - 2 * p1 + p2 for p0, p1, p2 in zip(*triple, strict=True)), tuple(0.0 for _ in a)
+            )
             for triple in (ctrl[0:3], ctrl[1:4], ctrl[2:5])
         )
         # |B''| <= 12 * max second difference; a chord over dt sags at most |B''| dt^2 / 8
