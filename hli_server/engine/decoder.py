@@ -557,6 +557,7 @@ class Decoder:
                 err = check(piece.segment, piece.block)
                 if err is not None:
                     self.contour.reset()
+                    self.position = list(piece.segment.start)  # the path stops where the piece starts
                     items.append(Marker(MarkerKind.ERROR, piece.block, payload=err))
                     return items
             v_max, accel = self._limits(piece.segment, piece.rapid, feed=piece.feed)

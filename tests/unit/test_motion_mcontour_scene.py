@@ -3,6 +3,7 @@ live scene (trail and path ahead) draw the contoured corner, not the programmed 
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import AsyncIterator
 
@@ -23,7 +24,7 @@ CORNER = (100.0, 0.0)
 def _cut(points: list[list[float]]) -> float:
     """How close the drawn polyline comes to the programmed corner (distance to its segments)."""
     best = math.inf
-    for p, q in zip(points, points[1:], strict=False):
+    for p, q in itertools.pairwise(points):
         (ax, ay), (bx, by) = p[:2], q[:2]
         dx, dy = bx - ax, by - ay
         den = dx * dx + dy * dy
