@@ -28,7 +28,14 @@ from hli_server.engine.nc.interpreter import (
     MeasMode,
     SyncAction,
 )
-from hli_server.engine.path.contour import HSC_DEFAULT, SPLINE_DEFAULT, Contour, ContourSettings, Piece
+from hli_server.engine.path.contour import (
+    BSPLINE_PATH_DEV,
+    HSC_DEFAULT,
+    SPLINE_DEFAULT,
+    Contour,
+    ContourSettings,
+    Piece,
+)
 from hli_server.engine.planner import Marker, MarkerKind, Motion
 
 __all__ = [
@@ -360,6 +367,8 @@ class Decoder:
             announce = out.mode is not None and settings.simulated_as is not None
         elif out.function == "HSC":
             deviation = v.get("PATH_DEV" if out.mode == "BSPLINE" else "CONTERROR")
+            if deviation is None and out.mode == "BSPLINE":
+                deviation = BSPLINE_PATH_DEV
             mode = out.mode or m.hsc_settings.simulated_as or "#HSC"
             m.hsc_settings = replace(
                 m.hsc_settings,

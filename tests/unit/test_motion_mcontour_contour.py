@@ -284,11 +284,21 @@ M30
         ("N10 #HSC ON [OPMODE 1 CONTERROR 1]", "N2000 #HSC OFF", 1.0),
         ("#HSC ON", "#HSC OFF", 0.1),
         ("#HSC ON [BSPLINE PATH_DEV=0.3]", "#HSC OFF", 0.3),
+        ("#HSC ON [BSPLINE]", "#HSC OFF", 0.2),
         ("#SPLINE ON", "#SPLINE OFF", 0.2),
         ("#SET SPLINE ON", "#SET SPLINE OFF", 0.2),
         ("N5 G151", "G150", 0.2),
     ],
-    ids=["hsc-opmode1", "hsc-on-params", "hsc-default", "hsc-bspline", "spline", "set-spline", "g151"],
+    ids=[
+        "hsc-opmode1",
+        "hsc-on-params",
+        "hsc-default",
+        "hsc-bspline",
+        "hsc-bspline-default",
+        "spline",
+        "set-spline",
+        "g151",
+    ],
 )
 def test_hsc_and_splines_are_simulated_as_contouring_and_say_so(
     switch_on: str, switch_off: str, dev: float
@@ -466,6 +476,7 @@ def test_what_stays_refused_is_refused_with_a_clear_alarm(line: str, text: str) 
     (err,) = errors(m)
     assert err.number in (910110, 21797, 120479, 50785), err
     assert text in err.message
+    assert "docs/nc-language.md" in err.message
     assert ch.state == ProgramState.ABORTED
 
 

@@ -58,6 +58,7 @@ from hli_server.engine.geometry import ArcSegment, LineSegment, Point, Segment
 from hli_server.engine.nc.blocks import Block
 
 __all__ = [
+    "BSPLINE_PATH_DEV",
     "CHORD_TOLERANCE",
     "DEFAULT_SETTINGS",
     "HSC_DEFAULT",
@@ -103,7 +104,11 @@ class ContourSettings:
 DEFAULT_SETTINGS: Final = ContourSettings()
 HSC_DEFAULT: Final = ContourSettings(path_dev=0.1, simulated_as="#HSC")
 """``#HSC ON`` without parameters: OPMODE 1, CONTERROR 0.1 mm (tf5200_programming_manual/207278475.html)."""
-SPLINE_DEFAULT: Final = ContourSettings(path_dev=0.2, simulated_as="spline interpolation (#SPLINE)")
+BSPLINE_PATH_DEV: Final = 0.2
+"""mm: PATH_DEV of ``#HSC [BSPLINE]`` and of the simulated splines: P-CHAN-00122's default 2000 x 0.1 µm."""
+SPLINE_DEFAULT: Final = ContourSettings(
+    path_dev=BSPLINE_PATH_DEV, simulated_as="spline interpolation (#SPLINE)"
+)
 """``#SPLINE ON``: simulated as DEV with the B spline's default deviation 0.2 mm (P-CHAN-00122: 2000 x
 0.1 µm)."""
 
