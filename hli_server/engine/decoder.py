@@ -562,6 +562,8 @@ class Decoder:
         first piece that fails a check is replaced by its error marker and the rest dropped."""
         items: list[Motion | Marker] = []
         for piece in pieces:
+            if piece.segment.length <= 1e-12:
+                continue
             for check in self.path_checks:
                 err = check(piece.segment, piece.block)
                 if err is not None:

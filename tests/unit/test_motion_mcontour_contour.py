@@ -88,6 +88,19 @@ def test_corner_distance_is_limited_to_half_the_block_length() -> None:
 
 
 @pytest.mark.req("M-20")
+def test_short_equal_blocks_are_each_contoured_at_both_ends() -> None:
+    """A CAM polyline of equal 1 mm blocks: each is shortened by half at both ends, and still every
+    corner gets its transition (none is left sharp because a block was used up)."""
+    pts = [(float(k), float(k % 2)) for k in range(12)]
+    segs: list[Segment] = [LineSegment(a, b) for a, b in zip(pts, pts[1:], strict=False)]
+    out = _emit(segs, ContourSettings(path_dev=5.0))
+    _continuous(out, pts[0], pts[-1])
+    drawn = _samples(out, per=16)
+    for corner in pts[1:-1]:
+        assert min(math.dist(p, corner) for p in drawn) > 0.05, corner
+
+
+@pytest.mark.req("M-20")
 def test_dist_mode_uses_the_programmed_corner_distances() -> None:
     segs = [LineSegment((0.0, 0.0), (50.0, 0.0)), LineSegment((50.0, 0.0), (50.0, 50.0))]
     head, *_, tail = _emit(segs, ContourSettings(mode="DIST", pre_dist=3.0, post_dist=5.0))
@@ -530,3 +543,28 @@ def test_fuzzed_contouring_commands_never_crash_and_never_corrupt_the_next_progr
     m.step(20_000)
     assert ch.state == ProgramState.FINISHED
     assert ch.setpoints()[:2] == pytest.approx([100.0, 100.0])
+
+
+# --- check --geometry-only's batch ------------------------------------------------------------------------
+@pytest.mark.req("M-24", "C14-15")
+def test_the_geometry_batch_checks_the_blended_path_while_contouring_is_on() -> None:
+    """The batch clears plain lines by their programmed boxes; with contouring on every line goes through
+    the contouring stage instead, so a protection area only the transition enters is refused there too,
+    with the same alarm, line, block and point as the exact decoder."""
+    from tests.unit.test_batch_check import AREAS, _count_batched, _zigzag, assert_same
+    from tests.unit.test_batch_check import config as config_fixture
+
+    config = config_fixture.__wrapped__()  # type: ignore[attr-defined]
+    zigzag = _zigzag(400)
+    plain = AREAS + "\n".join([*zigzag, "M30"]) + "\n"
+    contoured = AREAS + "\n".join(["#CONTOUR MODE [DEV PATH_DEV=0.5]", "G261", *zigzag, "G260", "M30"]) + "\n"
+    assert assert_same(config, plain).completed
+    assert _count_batched(config, plain, small=None)[0] > 300  # without contouring: batched
+    assert assert_same(config, contoured).completed
+    assert _count_batched(config, contoured, small=None)[0] == 0  # with contouring: block by block
+    area = _prot(95.5, 97.5, 2.5, 4.5)
+    hit = area + "\n".join(["N9 #CONTOUR MODE [DEV PATH_DEV=5]", "N10 G01 X0 Y0 F6000", "N11 G261"])
+    hit += "\n" + "\n".join(f"G01 X{k % 2 * 10} Y{20 + k % 3}" for k in range(100))
+    hit += "\nG01 X0 Y0\nN20 X100\nN30 Y100\nN40 M30\n"
+    result = assert_same(config, hit)
+    assert [a.number for a in result.alarms if a.severity == "error"] == [912001]

@@ -79,6 +79,8 @@ MAX_SUPPORT_POINTS: Final = 32
 _MIN_SUPPORT_POINTS: Final = 4
 _TANGENTIAL: Final = 1e-6
 """rad: a turn smaller than this is a tangential transition (no contouring)."""
+_KEEP: Final = 1e-6
+"""mm: what a shortened block keeps at least (its direction stays defined for the next corner)."""
 _SAMPLES: Final = 32
 """Samples of the curve (and of a programmed arc) when the departure is measured."""
 
@@ -255,8 +257,12 @@ class Contour:
         turn = math.acos(cos_turn)
         if turn < _TANGENTIAL or turn > math.pi - _TANGENTIAL:
             return None  # tangential, or a reversal: the kernel does not contour (475086859)
-        half_pre = min(0.5 * pre.full_length, l_pre)
-        half_post = min(0.5 * post.full_length, l_post)
+        # half the block, less a nanometre: a block shortened at both ends keeps a remainder (and its
+        # direction) for the next corner
+        half_pre = min(0.5 * pre.full_length, l_pre) - _KEEP
+        half_post = min(0.5 * post.full_length, l_post) - _KEEP
+        if half_pre <= 0.0 or half_post <= 0.0:
+            return None
         if settings.mode == "DIST":
             d_pre, d_post = settings.pre_dist, settings.post_dist
             if d_pre <= 0.0 or d_post <= 0.0:
