@@ -8,6 +8,7 @@ import itertools
 import math
 import random
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -22,6 +23,7 @@ from hli_server.engine.path.contour import (
     distance_to_path,
 )
 from schemas.wire import ProgramState
+from tests.fuzz import count, seed_for
 from tests.unit.areas.helpers import alarm_ids, errors, make_machine, only_alarm
 
 BLOCK = Block(1, 10, "N10")
@@ -43,6 +45,25 @@ def _samples(pieces: list[Piece], per: int = 8) -> list[tuple[float, ...]]:
         for k in range(per + 1):
             pts.append(p.segment.point_at(p.segment.length * k / per))
     return pts
+
+
+def _independent_departure(points: list[tuple[float, ...]], path: list[Segment]) -> float:
+    """The largest distance of ``points`` from ``path``, measured independently of the stage's own
+    measure: the path sampled densely (arcs by 2000 chords, sagitta below 3e-5 mm here), numpy."""
+    dense: list[tuple[float, ...]] = [path[0].start]
+    for seg in path:
+        n = 1 if isinstance(seg, LineSegment) else 2000
+        dense += [seg.point_at(seg.length * k / n) for k in range(1, n + 1)]
+    a, b = np.array(dense[:-1]), np.array(dense[1:])
+    ab = b - a
+    den = np.maximum((ab * ab).sum(axis=1), 1e-300)
+    worst = 0.0
+    for p in points:
+        q = np.array(p)
+        t = np.clip(((q - a) * ab).sum(axis=1) / den, 0.0, 1.0)
+        d = np.sqrt((((a + t[:, None] * ab) - q) ** 2).sum(axis=1)).min()
+        worst = max(worst, float(d))
+    return worst
 
 
 def _continuous(pieces: list[Piece], start: tuple[float, ...], end: tuple[float, ...]) -> None:
@@ -92,7 +113,7 @@ def test_short_equal_blocks_are_each_contoured_at_both_ends() -> None:
     """A CAM polyline of equal 1 mm blocks: each is shortened by half at both ends, and still every
     corner gets its transition (none is left sharp because a block was used up)."""
     pts = [(float(k), float(k % 2)) for k in range(12)]
-    segs: list[Segment] = [LineSegment(a, b) for a, b in zip(pts, pts[1:], strict=False)]
+    segs: list[Segment] = [LineSegment(a, b) for a, b in itertools.pairwise(pts)]
     out = _emit(segs, ContourSettings(path_dev=5.0))
     _continuous(out, pts[0], pts[-1])
     drawn = _samples(out, per=16)
@@ -143,11 +164,11 @@ def test_property_a_blended_polyline_never_departs_by_more_than_path_dev(
     segs = [s for k, s in enumerate(segs) if k == 0 or math.dist(segs[k - 1].end, s.start) < 1e-12]
     out = _emit(segs, ContourSettings(path_dev=dev))
     _continuous(out, segs[0].start, segs[-1].end)
-    for p in _samples(out):
-        assert distance_to_path(p, segs) <= dev * (1 + 1e-6) + 1e-9
+    assert _independent_departure(_samples(out), segs) <= dev * (1 + 1e-6) + 3e-5
 
 
 @pytest.mark.req("M-21")
+@pytest.mark.slow
 @settings(max_examples=40, deadline=None)
 @given(
     radius=st.floats(min_value=2.0, max_value=80.0),
@@ -172,8 +193,7 @@ def test_property_line_arc_line_never_departs_by_more_than_path_dev(
     segs: list[Segment] = [LineSegment(a0, corner), arc, LineSegment(end, out_pt)]
     out = _emit(segs, ContourSettings(path_dev=dev))
     _continuous(out, a0, out_pt)
-    for p in _samples(out):
-        assert distance_to_path(p, segs) <= dev * (1 + 1e-6) + 1e-9
+    assert _independent_departure(_samples(out), segs) <= dev * (1 + 1e-6) + 3e-5
     assert any(isinstance(p.segment, ArcSegment) for p in out)  # the arc's middle is kept as an arc
 
 
@@ -229,6 +249,7 @@ the same contour, corners contoured at the ends of N30..N60."""
 
 
 @pytest.mark.req("M-22", "M-20")
+@pytest.mark.slow
 def test_manual_example_g61_and_g261_give_the_identical_contour() -> None:
     p61, m61 = _trace(POLY_G61)
     p261, m261 = _trace(POLY_G261_1)
@@ -495,8 +516,9 @@ def test_what_stays_refused_is_refused_with_a_clear_alarm(line: str, text: str) 
 
 @pytest.mark.req("M-25")
 @pytest.mark.fuzz
+@pytest.mark.slow
 def test_fuzzed_contouring_commands_never_crash_and_never_corrupt_the_next_program() -> None:
-    rnd = random.Random(20261126)
+    rnd = random.Random(seed_for("contouring commands"))
     words = [
         "ON",
         "OFF",
@@ -527,13 +549,13 @@ def test_fuzzed_contouring_commands_never_crash_and_never_corrupt_the_next_progr
     heads = ["#CONTOUR MODE", "#HSC", "#SPLINE", "#SET SPLINE", "#SET SPLINETYPE", "G61", "G261", "G151"]
     m = make_machine(("X", "Y", "Z"))
     ch = m.channel(1)
-    for _ in range(150):
+    for _ in range(count(80)):
         line = rnd.choice(heads) + " " + " ".join(rnd.choice(words) for _ in range(rnd.randint(0, 6)))
         ch.request_reset()
         m.step(5)
         ch.load_program(f"N10 G01 X0 Y0 F30000\n{line}\nN30 X5\nN40 Y5\nM30\n", "fuzz")
         ch.request_start()
-        m.step(3000)
+        m.step(1500)
         assert ch.state in (ProgramState.FINISHED, ProgramState.ABORTED), (line, ch.state)
     # the machine still runs a clean program exactly as before
     ch.request_reset()
@@ -547,6 +569,7 @@ def test_fuzzed_contouring_commands_never_crash_and_never_corrupt_the_next_progr
 
 # --- check --geometry-only's batch ------------------------------------------------------------------------
 @pytest.mark.req("M-24", "C14-15")
+@pytest.mark.slow
 def test_the_geometry_batch_checks_the_blended_path_while_contouring_is_on() -> None:
     """The batch clears plain lines by their programmed boxes; with contouring on every line goes through
     the contouring stage instead, so a protection area only the transition enters is refused there too,

@@ -179,14 +179,32 @@ def _polyline(segment: Segment) -> list[Point]:
 
 
 def distance_to_path(p: Point, path: list[Segment]) -> float:
-    """Distance of ``p`` from the programmed ``path`` (arcs by 64 chords: their sagitta is below
-    r * 1.2e-3 * sweep², negligible at the deviations contouring uses)."""
-    best = math.inf
-    for segment in path:
-        pts = _polyline(segment)
-        for a, b in itertools.pairwise(pts):
-            best = min(best, _point_line_distance(p, a, b))
-    return best
+    """Distance of ``p`` from the programmed ``path``: exact for lines and arcs in their plane, helices
+    by 64 chords (their sagitta is below r * 1.2e-3 * sweep², negligible at contouring's deviations)."""
+    return min(_segment_distance(p, segment) for segment in path)
+
+
+def _segment_distance(p: Point, segment: Segment) -> float:
+    if isinstance(segment, LineSegment):
+        return _point_line_distance(p, segment.start, segment.end)
+    i, j = segment.plane
+    rest = [k for k in range(len(p)) if k not in (i, j)]
+    if any(abs(segment.end[k] - segment.start[k]) > 1e-12 for k in rest):  # a helix
+        return min(_point_line_distance(p, a, b) for a, b in itertools.pairwise(_polyline(segment)))
+    dx, dy = p[i] - segment.centre[0], p[j] - segment.centre[1]
+    if _on_sweep(math.atan2(dy, dx), segment.start_angle, segment.sweep):
+        flat = abs(math.hypot(dx, dy) - segment.radius)
+        return math.hypot(flat, *(p[k] - segment.start[k] for k in rest))
+    return min(math.dist(p, segment.start), math.dist(p, segment.end))
+
+
+def _on_sweep(angle: float, start: float, sweep: float) -> bool:
+    tau = 2.0 * math.pi
+    if abs(sweep) >= tau - 1e-12:
+        return True
+    if sweep >= 0:
+        return (angle - start) % tau <= sweep
+    return (start - angle) % tau <= -sweep
 
 
 def corner_departure(curve: list[Point], path: list[Segment]) -> float:
