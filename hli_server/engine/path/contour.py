@@ -164,11 +164,18 @@ def _bezier(ctrl: list[Point], t: float) -> Point:
 
 
 def _point_line_distance(p: Point, a: Point, b: Point) -> float:
-    ab = [y - x for x, y in zip(a, b, strict=True)]
-    ap = [y - x for x, y in zip(a, p, strict=True)]
-    den = sum(v * v for v in ab)
-    t = 0.0 if den <= 0.0 else min(max(sum(x * y for x, y in zip(ap, ab, strict=True)) / den, 0.0), 1.0)
-    return math.dist(p, tuple(x + t * v for x, v in zip(a, ab, strict=True)))
+    den = 0.0
+    dot = 0.0
+    for pk, ak, bk in zip(p, a, b, strict=True):
+        d = bk - ak
+        den += d * d
+        dot += (pk - ak) * d
+    t = 0.0 if den <= 0.0 else min(max(dot / den, 0.0), 1.0)
+    total = 0.0
+    for pk, ak, bk in zip(p, a, b, strict=True):
+        e = pk - (ak + t * (bk - ak))
+        total += e * e
+    return math.sqrt(total)
 
 
 def _polyline(segment: Segment) -> list[Point]:
@@ -299,8 +306,13 @@ class Contour:
             d = 8.0 * target / (3.0 * math.sin(turn / 2.0))
             d = min(d, half_pre, half_post)
             chords = []
+            both_lines = isinstance(s_pre, LineSegment) and isinstance(s_post, LineSegment)
             for _ in range(60):
                 chords = self._curve(s_pre, s_post, d, d, dev)
+                if both_lines:
+                    # exact by construction: the interim point is the curve's farthest point from the
+                    # corner (symmetric, convex), at ``target``; the chords sag by less than the margin
+                    break
                 # the support points and the chords' middles against the programmed path, and the
                 # interim point (t = 1/2, the middle support point) against the corner
                 probes = chords + [
