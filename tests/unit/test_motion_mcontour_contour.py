@@ -310,6 +310,29 @@ M30
     assert 4.9 < min(math.dist(p[:2], (100.0, 0.0)) for p in pts) <= 5.0 * 1.01
 
 
+@pytest.mark.req("M-22")
+def test_manual_example_poly_const_speed() -> None:
+    """%poly_const_speed (PM 475135755) without its ``#SLOPE[TYPE=TRAPEZ]`` line (acceleration profiles
+    are issue 24 item 1): CONST_VEL is accepted without effect; N6/N7 and N9/N10 are contoured with
+    the default PATH_DEV 1 mm."""
+    program = """\
+%poly_const_speed
+N0004 G1 X0 Y0 Z0 F8000
+N0005 #CONTOUR MODE [CONST_VEL=0]
+N0006 X100 G61
+N0007 Y100
+N0008 #CONTOUR MODE [CONST_VEL=1]
+N0009 X0 G61
+N0010 Y0
+N0020 M30
+"""
+    pts, m = _trace(program)
+    assert errors(m) == [] and alarm_ids(m) == []
+    for corner, cut in [((100.0, 0.0), True), ((100.0, 100.0), False), ((0.0, 100.0), True)]:
+        near = min(math.dist(p[:2], corner) for p in pts)
+        assert (0.9 < near <= 1.01) if cut else near < 0.02, (corner, near)
+
+
 @pytest.mark.req("M-23")
 @pytest.mark.parametrize(
     ("switch_on", "switch_off", "dev"),
