@@ -457,7 +457,11 @@ class Decoder:
                 m.g92[name] = self.position[i] - base - value
             return items
         if measuring:
-            return self._measuring_move(block)
+            # a corner held for contouring is not contoured into a measuring move: it goes first
+            before = self._flushed([])
+            if self.finished:
+                return before
+            return before + self._measuring_move(block)
         moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre))
         if moves:
             items.extend(self._motion(block))

@@ -327,7 +327,8 @@ N0010 Y0
 N0020 M30
 """
     pts, m = _trace(program)
-    assert errors(m) == [] and alarm_ids(m) == []
+    assert errors(m) == []
+    assert alarm_ids(m) == []
     for corner, cut in [((100.0, 0.0), True), ((100.0, 100.0), False), ((0.0, 100.0), True)]:
         near = min(math.dist(p[:2], corner) for p in pts)
         assert (0.9 < near <= 1.01) if cut else near < 0.02, (corner, near)
@@ -614,3 +615,31 @@ def test_the_geometry_batch_checks_the_blended_path_while_contouring_is_on() -> 
     hit += "\nG01 X0 Y0\nN20 X100\nN30 Y100\nN40 M30\n"
     result = assert_same(config, hit)
     assert [a.number for a in result.alarms if a.severity == "error"] == [912001]
+
+
+@pytest.mark.req("M-20", "C14-23")
+def test_a_measuring_move_after_a_contoured_block_comes_after_it_uncontoured() -> None:
+    """G100 with contouring on: the held block runs first, to its programmed end (no transition into a
+    measuring move), then the measuring move; M30 in a contoured block ends at its end point."""
+    from tests.unit.areas.test_area_measuring import make_machine as measuring_machine
+    from tests.unit.areas.test_area_measuring import run_with_probe_at
+
+    m = measuring_machine()
+    seen: list[tuple[float, float]] = []
+    ch = m.channel(1)
+    program = "N10 G01 X0 Y0 F6000\nN15 G261\nN20 Y10\nN30 G100 X50\nN40 G01 Y20\nN50 G260 M30\n"
+    step = m.step
+
+    def stepped(cycles: int = 1) -> None:
+        step(cycles)
+        seen.append((ch.axis("X").setpoint, ch.axis("Y").setpoint))
+
+    m.step = stepped  # type: ignore[method-assign]
+    run_with_probe_at(m, program, 30.0)
+    assert min(math.dist(p, (0.0, 10.0)) for p in seen) < 0.02  # the corner before G100: exact
+    assert all(abs(p[0]) < 1e-9 for p in seen if p[1] < 9.99)  # N20 ran first, along X0
+    assert errors(m) == []
+    assert ch.state == ProgramState.FINISHED
+    x, y = ch.axis("X").setpoint, ch.axis("Y").setpoint
+    assert y == pytest.approx(20.0)
+    assert 30.0 <= x < 50.0
