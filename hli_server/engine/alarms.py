@@ -201,6 +201,12 @@ _TABLE: tuple[AlarmDef, ...] = (
         replaces=(912002,),
     ),
     _e(
+        120129,
+        "Corner deviation of polynomial contouring smaller than permissible minimum value",
+        "kernel",
+        page=_DIAG + "264341387.html",
+    ),
+    _e(
         120477,
         "Definition of the polygon is invalid: its lines intersect",
         "kernel",
@@ -385,6 +391,11 @@ _TABLE: tuple[AlarmDef, ...] = (
     _w(911021, "Command not allowed in this mode or state", "project"),
     _w(911022, "Program start refused: the axes still brake (after a reset or a stop)", "project"),
     _e(911030, "Drive error", "project", Reaction.AXIS_STOP),
+    _w(
+        911040,
+        "Contouring, #HSC or spline type simulated as contouring with corner deviation",
+        "project (M-23)",
+    ),
     # --- project's own: work and protection areas (912xxx) ----------------------------------
     _e(912000, "Point inside a protection area", "project (FCT-C14)"),
     _e(912001, "Path enters a protection area", "project (FCT-C14)"),

@@ -25,7 +25,9 @@ of a CAM program:
    soft limit, a path the area prefilter (:mod:`hli_server.engine.areas.prefilter`) cannot clear. Those
    blocks - and only those - are parsed and decoded exactly, in order, with the decoder's state set to
    what it is before them; every other block only moves the position, which is committed at the
-   stretch's end. The interpreter then goes on after the stretch.
+   stretch's end. The interpreter then goes on after the stretch. While contouring is on (issue 24,
+   docs/nc-language.md "Contouring") every line is decoded exactly: the transitions are segments of
+   their own.
 
 An error stops at the same block with the same alarm, because the block that raises it is decoded
 exactly; a block the batch clears cannot fail a check. ``tests/unit/test_batch_check.py`` holds the
@@ -234,11 +236,22 @@ class BatchGeometryCheck:
         decoder = self.decoder
         groups, all_exact = self._checks()
         areas = sum(len(g.works) + len(g.prots) for g in groups)
+        # with contouring on (or a corner held for it) every block goes through the contouring stage: the
+        # transitions are new segments the batch does not know (a plain line cannot switch it: G61,
+        # G260, G261, #CONTOUR MODE ... are not plain)
+        contouring = decoder.contour.holding or decoder.modal.blend(()) is not None
         short = count < SMALL_RUN + SMALL_RUN_PER_AREA * areas and not self._chords(chunk, idx, groups)
         modal = decoder.modal
         # G70 (inch) and G95 (feed per revolution, M-06/M-07), and #CS/#ROTATION/tool compensation
         # (transforms_active): the exact decoder scales, transforms and checks them
-        if modal.in_area_definition or short or modal.inch or modal.feed_per_rev or decoder.transforms_active:
+        if (
+            contouring
+            or modal.in_area_definition
+            or short
+            or modal.inch
+            or modal.feed_per_rev
+            or decoder.transforms_active
+        ):
             for k in idx.tolist():
                 self.line = chunk.first_line + k
                 self.exact_blocks += 1

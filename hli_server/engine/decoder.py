@@ -22,6 +22,7 @@ from hli_server.engine.geometry import LineSegment, Point, Segment, arc_from_cen
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
 from hli_server.engine.nc.interpreter import (
     PAUSE,
+    ContourDirective,
     CoordinateCommand,
     Directive,
     FlushStop,
@@ -30,6 +31,14 @@ from hli_server.engine.nc.interpreter import (
     Slope,
     SyncAction,
     ToolWrite,
+)
+from hli_server.engine.path.contour import (
+    BSPLINE_PATH_DEV,
+    HSC_DEFAULT,
+    SPLINE_DEFAULT,
+    Contour,
+    ContourSettings,
+    Piece,
 )
 from hli_server.engine.path.frames import FrameStack
 from hli_server.engine.path.radius import Element, RadiusCompensation, TrcError
@@ -46,6 +55,10 @@ __all__ = [
     "ModalState",
     "PathCheck",
 ]
+
+ALARM_SIMULATED_AS_DEV = 911040
+"""Warning: a contouring type, ``#HSC`` or a spline the simulator does not model is simulated as
+contouring with corner deviation (M-23; the project's own number: the kernel has none)."""
 
 ARC_RADIUS_TOLERANCE = 0.01
 """mm: allowed difference of start and end radius of a programmed circle (project's own)."""
@@ -157,6 +170,26 @@ class ModalState:
     meas_type: int | None = None
     """The measuring type of G100 selected in the program (the kernel's ``#MEAS MODE [n]``); None: the
     channel's default P-CHAN-00057. ``#MEAS MODE`` sets it (the interpreter's ``MeasMode``)."""
+    contour: ContourSettings = field(default_factory=ContourSettings)
+    """The parameters of ``#CONTOUR MODE [...]`` (polynomial contouring, M-20)."""
+    contouring: bool = False
+    """G261 / ``#CONTOUR MODE ON`` / G64: every corner is contoured (G260 / ``OFF``: not)."""
+    hsc: bool = False
+    """``#HSC ON``: every corner is contoured with ``hsc_settings`` (M-22)."""
+    hsc_settings: ContourSettings = field(default_factory=lambda: HSC_DEFAULT)
+    spline: bool = False
+    """``#SPLINE ON`` / G151: simulated as contouring with ``spline_settings`` (M-23)."""
+    spline_settings: ContourSettings = field(default_factory=lambda: SPLINE_DEFAULT)
+
+    def blend(self, g_codes: tuple[int, ...]) -> ContourSettings | None:
+        """The contouring at the end of a block with these G codes (None: an exact corner)."""
+        if self.spline:
+            return self.spline_settings
+        if self.hsc:
+            return self.hsc_settings
+        if self.contouring or 61 in g_codes:
+            return self.contour
+        return None
 
     def offset(self, axis: str) -> float:
         base = self.zero_offsets.get(self.zero_offset, {}).get(axis, 0.0) if self.zero_offset else 0.0
@@ -215,6 +248,10 @@ class Decoder:
         self._length_before = 0.0
         """The tool length included in :attr:`position` before the block being emitted."""
         """The programmed end point (program coordinates) while the radius compensation holds a block."""
+        self.contour = Contour()
+        """Polynomial contouring (M-20): may hold the last motion back to blend it with the next."""
+        self.warn: Callable[[int, str, int, str], None] | None = None
+        """Raises a warning of the table (alarm, message, line, block): the channel sets it."""
 
     # --- program control -----------------------------------------------------------------
     def start(self, blocks: BlockFeed | Iterator[Block], position: list[float]) -> None:
@@ -230,6 +267,7 @@ class Decoder:
         self.tools.reset()
         self.trc.reset()
         self._trc_prog = None
+        self.contour.reset()
 
     def resume(self, position: list[float]) -> None:
         """Continue decoding from ``position`` (after a measuring move stopped where the probe fired)."""
@@ -242,6 +280,7 @@ class Decoder:
         self.frames.reset()
         self.tools.reset()
         self.trc.reset()
+        self.contour.reset()
         self.blocks = None
         self.finished = True
         self.waiting = False
@@ -286,33 +325,38 @@ class Decoder:
                     self.trc.radius = abs(out.value)
             else:
                 self.tools.length_written = out.value
-            return held
+            return self._flushed(held)
         if isinstance(out, CoordinateCommand):
             error = self._coordinates(out)
             if error is not None:
-                return [*held, Marker(MarkerKind.ERROR, block, payload=error)]
-            return held
+                return self._flushed([*held, Marker(MarkerKind.ERROR, block, payload=error)])
+            return self._flushed(held)
         if held:
             # the held block goes first; the directive comes again next time (the feed re-delivers it)
             self._redo = out
             return held
         if isinstance(out, SyncAction):
-            return [Marker(MarkerKind.SYNC, block, payload=out.action)]
+            return self._flushed([Marker(MarkerKind.SYNC, block, payload=out.action)])
         if isinstance(out, FlushWait):
-            self.waiting = True
-            return [Marker(MarkerKind.ACTION, block, payload=self._end_wait)]
+            items = self._flushed([Marker(MarkerKind.ACTION, block, payload=self._end_wait)])
+            if not self.finished:
+                self.waiting = True
+            return items
         if isinstance(out, FlushStop):
-            return [Marker(MarkerKind.ACTION, block, payload=_nothing)]
+            return self._flushed([Marker(MarkerKind.ACTION, block, payload=_nothing)])
         if isinstance(out, Slope):
             # #SLOPE (M-02): the path comes to rest here and the axes with it, then the profile
             # changes (the filter of the new profile starts at rest; docs/nc-language.md)
             handler = self.slope_handler
             if handler is None:
-                return []
+                return self._flushed([])
             profile = out.profile
-            return [Marker(MarkerKind.ACTION, block, payload=lambda: handler(profile))]
+            return self._flushed([Marker(MarkerKind.ACTION, block, payload=lambda: handler(profile))])
         if isinstance(out, MeasMode):
             self.modal.meas_type = out.meas_type  # modal, decoded in order (the G100 blocks after it)
+            return []
+        if isinstance(out, ContourDirective):
+            self._contour_directive(out)
             return []
         return []  # pragma: no cover - every directive is handled above
 
@@ -336,27 +380,112 @@ class Decoder:
     def end_of_program(self) -> list[Motion | Marker]:
         """The text ended (without M30/M02 when decoding gets here): the end marker of the last block."""
         held = self._trc_flush()
-        self.finished = True
         if held and isinstance(held[-1], Marker):
+            self.finished = True
             return held
-        return [*held, Marker(MarkerKind.END, self.current_block, payload="eof")]
+        items = self._flushed([*held, Marker(MarkerKind.END, self.current_block, payload="eof")])
+        self.finished = True
+        return items
 
     def syntax_error(self, exc: NcError) -> list[Motion | Marker]:
         """A line the parser could not read: the error marker with the place the parser named."""
-        self.finished = True
         params: dict[str, Any] = {"line": exc.line, "block": exc.block, **exc.params}
         if exc.program:
             params["program"] = exc.program
-        return [Marker(MarkerKind.ERROR, None, payload=DecodeError(exc.alarm, exc.message, params))]
+        items = self._flushed(
+            [Marker(MarkerKind.ERROR, None, payload=DecodeError(exc.alarm, exc.message, params))]
+        )
+        self.finished = True
+        return items
 
     # --- one block -------------------------------------------------------------------------
     def _error(self, block: Block, alarm: int, message: str, **params: Any) -> list[Motion | Marker]:
         return [Marker(MarkerKind.ERROR, block, payload=DecodeError(alarm, message, params))]
 
     def _decode(self, block: Block) -> list[Motion | Marker]:
+        items = self._decode_block(block)
+        if items and self.contour.holding and isinstance(items[-1], Marker):
+            # a marker of this block (an error, an area command, the program's end, a G100 move) comes
+            # after the held motion: the corner before it is not contoured
+            first = next(k for k, item in enumerate(items) if isinstance(item, Marker))
+            if not any(isinstance(item, Motion) for item in items[first:]):
+                return items[:first] + self._flushed(items[first:])
+        return items
+
+    def _flushed(self, items: list[Motion | Marker]) -> list[Motion | Marker]:
+        """The held-back motion of the contouring stage (if any), then ``items``; if the held motion fails
+        its path check, its error marker replaces ``items``."""
+        if not self.contour.holding:
+            return items
+        out = self._emit_pieces(self.contour.flush())
+        if out and isinstance(out[-1], Marker) and out[-1].kind is MarkerKind.ERROR:
+            self.finished = True
+            return out
+        return out + items
+
+    def _contour_directive(self, out: ContourDirective) -> None:
+        """``#CONTOUR MODE``, ``#HSC``, ``#SPLINE`` (M-20, M-22, M-23): modal, in program order. A type the
+        simulator does not model is simulated as DEV, and said so by warning 911040 (never silently)."""
+        m = self.modal
+        v = out.values
+        if out.function == "CONTOUR":
+            mode = out.mode or m.contour.mode
+            m.contour = replace(
+                m.contour,
+                mode=mode,
+                path_dev=v.get("PATH_DEV", m.contour.path_dev),
+                pre_dist=v.get("PRE_DIST", m.contour.pre_dist),
+                post_dist=v.get("POST_DIST", m.contour.post_dist),
+                simulated_as=None if mode in ("DEV", "DIST") else f"#CONTOUR MODE [{mode}]",
+            )
+            if out.on is not None:
+                m.contouring = out.on
+            settings = m.contour
+            announce = out.mode is not None and settings.simulated_as is not None
+        elif out.function == "HSC":
+            deviation = v.get("PATH_DEV" if out.mode == "BSPLINE" else "CONTERROR")
+            if deviation is None and out.mode == "BSPLINE":
+                deviation = BSPLINE_PATH_DEV
+            mode = out.mode or m.hsc_settings.simulated_as or "#HSC"
+            m.hsc_settings = replace(
+                m.hsc_settings,
+                path_dev=m.hsc_settings.path_dev if deviation is None else deviation,
+                simulated_as=f"#HSC [{out.mode}]" if out.mode else m.hsc_settings.simulated_as,
+            )
+            if out.on is not None:
+                m.hsc = out.on
+            settings = m.hsc_settings
+            announce = bool(out.on)
+        else:
+            if out.mode is not None:
+                m.spline_settings = replace(m.spline_settings, simulated_as=f"#SPLINE TYPE {out.mode}")
+            if out.on is not None:
+                m.spline = out.on
+            settings = m.spline_settings
+            announce = bool(out.on)
+        if announce and out.block is not None:
+            self._announce(settings, out.block)
+
+    def _announce(self, settings: ContourSettings, block: Block) -> None:
+        """Warning 911040: ``settings.simulated_as`` is simulated as contouring with corner deviation."""
+        if self.warn is not None:
+            self.warn(
+                ALARM_SIMULATED_AS_DEV,
+                f"{settings.simulated_as} is simulated as polynomial contouring with corner deviation "
+                f"PATH_DEV={settings.path_dev:g} mm (docs/nc-language.md, Contouring)",
+                block.line,
+                f"N{block.number}" if block.number is not None else f"line {block.line}",
+            )
+
+    def _decode_block(self, block: Block) -> list[Motion | Marker]:
         m = self.modal
         if block.two_path:
-            return self._error(block, 910110, "two-path programming (': G0 ... : G0 ...') is not supported")
+            return self._error(
+                block,
+                910110,
+                "two-path programming (': G0 ... : G0 ...') is not supported: docs/nc-language.md says what "
+                "simulating it would take",
+            )
         if 70 in block.g_codes:
             m.inch = True  # the new unit applies to this block already (M-06)
         elif 71 in block.g_codes:
@@ -407,6 +536,15 @@ class Decoder:
                 measuring = True
             elif g in (130, 131, 230, 231, 132, 133, 134, 233, 333, 334, 338, 339):
                 self._weighting(g, block)
+            elif g in (261, 64):
+                m.contouring = True
+            elif g == 260:
+                m.contouring = False
+            elif g == 151:
+                m.spline = True
+                self._announce(m.spline_settings, block)
+            elif g == 150:
+                m.spline = False
             elif g in (100, 200, 201, 202):
                 return self._error(block, 910110, f"G{g} is not supported in this block context")
         tool_error = self._tool_words(block)
@@ -430,17 +568,27 @@ class Decoder:
                 m.g92[name] = self.position[i] - base - value
             return items
         if measuring:
-            return self._measuring_move(block)
+            # a corner held for contouring is not contoured into a measuring move: it goes first
+            before = self._flushed([])
+            if self.finished:
+                return before
+            return before + self._measuring_move(block)
         moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre))
         if moves and (self.transforms_active or 40 in block.g_codes) and not m.in_area_definition:
-            items = self._motion_framed(block)
+            if m.blend(block.g_codes) is not None:
+                return self._error(
+                    block,
+                    910110,
+                    "contouring (G261/G64/#HSC/#SPLINE) together with a coordinate system, a tool or tool "
+                    "radius compensation is not simulated (docs/nc-language.md)",
+                )
+            items = self._flushed(self._motion_framed(block))
             if items and isinstance(items[-1], Marker):
                 return items
         elif moves:
-            result = self._motion(block)
-            if isinstance(result, list):
-                return result
-            items.append(result)
+            items.extend(self._motion(block))
+            if items and isinstance(items[-1], Marker) and items[-1].kind is MarkerKind.ERROR:
+                return items
         elif 40 in block.g_codes and self.trc.active:
             items = self._trc_flush()
             self.trc.side = 0
@@ -512,7 +660,7 @@ class Decoder:
                 target[i] += value
         return target
 
-    def _motion(self, block: Block) -> Motion | list[Motion | Marker]:
+    def _motion(self, block: Block) -> list[Motion | Marker]:
         m = self.modal
         start = tuple(self.position)
         target = self._target(block)
@@ -581,19 +729,45 @@ class Decoder:
                     )
             elif m.feed is None:
                 return self._error(block, 911000, "no feed (F word) programmed for a feed move")
-        err = self._check(segment, block)
-        if err is not None:
-            return [Marker(MarkerKind.ERROR, block, payload=err)]
-        v_max, accel = self._limits(segment, rapid)
-        self.position = target
-        return Motion(
+        piece = Piece(
             segment=segment,
             block=block,
-            v_max=v_max,
-            accel=accel,
             rapid=rapid,
             exact_stop=60 in block.g_codes,
+            feed=None if rapid else self.path_feed(),
+            blend=None if rapid else m.blend(block.g_codes),
         )
+        items = self._emit_pieces(self.contour.push(piece))
+        if not (items and isinstance(items[-1], Marker)):
+            self.position = target
+        return items
+
+    def _emit_pieces(self, pieces: list[Piece]) -> list[Motion | Marker]:
+        """The path checks and the planner's items for the pieces the contouring stage gives out; the
+        first piece that fails a check is replaced by its error marker and the rest dropped."""
+        items: list[Motion | Marker] = []
+        for piece in pieces:
+            if piece.segment.length <= 1e-12:
+                continue
+            for check in self.path_checks:
+                err = check(piece.segment, piece.block)
+                if err is not None:
+                    self.contour.reset()
+                    self.position = list(piece.segment.start)  # the path stops where the piece starts
+                    items.append(Marker(MarkerKind.ERROR, piece.block, payload=err))
+                    return items
+            v_max, accel = self._limits(piece.segment, piece.rapid, feed=piece.feed)
+            items.append(
+                Motion(
+                    segment=piece.segment,
+                    block=piece.block,
+                    v_max=v_max,
+                    accel=accel,
+                    rapid=piece.rapid,
+                    exact_stop=piece.exact_stop,
+                )
+            )
+        return items
 
     # --- frames, tools, radius compensation (issue 24; hli_server/engine/path) -------------------------
     @property

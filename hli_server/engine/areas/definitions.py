@@ -111,7 +111,8 @@ class AreaDefinitions(AreaRole):
             return DecodeError(
                 ALARM_NOT_SUPPORTED,
                 f'{head}: MONITOR_LVL="{cmd.monitor_lvl}" is not supported by the simulator '
-                '(no multi-stage transformations); use MONITOR_LVL="MCS" or leave it out',
+                '(no multi-stage transformations); use MONITOR_LVL="MCS" or leave it out '
+                '(docs/nc-language.md, "What stays refused")',
             )
         if cmd.min_excur >= cmd.max_excur:
             return DecodeError(

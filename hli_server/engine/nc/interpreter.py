@@ -58,7 +58,9 @@ from hli_server.engine.nc.expr import (
 )
 from hli_server.engine.nc.source import LineTooLongError, ProgramText
 from hli_server.engine.nc.syntax import (
+    A_CONTROL_SYNTAX,
     A_NOT_SIMULATED,
+    A_RANGE,
     C_BREAK,
     C_CASE,
     C_CONTINUE,
@@ -105,6 +107,7 @@ __all__ = [
     "MAX_CALL_DEPTH",
     "PAUSE",
     "STATEMENTS_PER_CYCLE",
+    "ContourDirective",
     "CoordinateCommand",
     "Directive",
     "FlushStop",
@@ -302,6 +305,69 @@ class ToolWrite(Directive):
         super().__init__(block)
         self.what = what
         self.value = value
+
+
+class ContourDirective(Directive):
+    """``#CONTOUR MODE``, ``#HSC``, ``#SPLINE`` / ``#SET SPLINE`` (issue 24, M-20..M-23): ``function`` is
+    ``"CONTOUR"``, ``"HSC"`` or ``"SPLINE"``; ``on`` True (ON), False (OFF) or None (parameters only);
+    ``mode`` the contouring type (``DEV``, ``DIST``, ...), the HSC variant (``OPMODE 1``, ``BSPLINE``) or
+    the spline type, None where not programmed; ``values`` the numeric parameters (mm)."""
+
+    def __init__(
+        self, block: Block, function: str, on: bool | None, mode: str | None, values: dict[str, float]
+    ) -> None:
+        super().__init__(block)
+        self.function = function
+        self.on = on
+        self.mode = mode
+        self.values = values
+
+
+CONTOUR_TYPES: Final = ("DEV", "DIST", "AUTO_DEV", "AUTO_VEL", "DIST_SOFT", "DIST_MASTER", "POS", "PTP")
+"""The contouring types of ``#CONTOUR MODE`` (tf5200_programming_manual/475147915.html)."""
+_CONTOUR_KEYS: Final = frozenset(
+    (
+        "PATH_DEV",
+        "TRACK_DEV",
+        "PRE_DIST",
+        "POST_DIST",
+        "VEL",
+        "RELEVANT_PATH",
+        "RELEVANT_TRACK",
+        "REMAIN_PART",
+        "CHECK_JERK",
+        "MAX_ANGLE",
+        "SYM_DIST",
+        "ACC_MAX",
+        "ACC_MIN",
+        "RAMP_TIME",
+        "CONST_VEL",
+        "TRACK_DIST",
+        "MASTER_AX",
+    )
+)
+_CONTOUR_WORDS: Final = frozenset(("ON", "OFF", "PRE_ACTION", "INTER_ACTION", "POST_ACTION", *CONTOUR_TYPES))
+_HSC_KEYS: Final = frozenset(
+    (
+        "OPMODE",
+        "CONTERROR",
+        "PATH_DEV",
+        "TRACK_DEV",
+        "MERGE",
+        "AUTO_OFF_PATH",
+        "AUTO_OFF_TRACK",
+        "AUTO_OFF_G00",
+        "AUTO_OFF_G60",
+        "MAX_PATH_LENGTH",
+        "MAX_ANGLE",
+    )
+)
+_HSC_WORDS: Final = frozenset(("ON", "OFF", "BSPLINE"))
+_SPLINE_WORDS: Final = frozenset(("ON", "OFF", "TYPE", "AKIMA", "BSPLINE"))
+_DEVIATION_KEYS: Final = frozenset(("PATH_DEV", "CONTERROR"))
+A_CORNER_DEVIATION: Final = 120129
+"""The kernel's "corner deviation of polynomial contouring smaller than permissible minimum value"
+(tf5200_diagnosis/264341387.html)."""
 
 
 class IterationCapError(Exception):
@@ -1130,6 +1196,70 @@ class Interpreter(Env):
             except EvalError as exc:
                 raise NcError(exc.alarm, declaration.line, stmt.place, exc.message) from None
 
+    def _contour(self, frame: _Frame, stmt: Hash) -> ContourDirective:
+        """Checks and evaluates ``#CONTOUR MODE``, ``#HSC``, ``#SPLINE`` (M-20..M-23)."""
+        command = stmt.command
+        name = {"CONTOUR MODE": "CONTOUR", "HSC": "HSC", "SPLINE": "SPLINE"}[command]
+        words, keys = {
+            "CONTOUR": (_CONTOUR_WORDS, _CONTOUR_KEYS),
+            "HSC": (_HSC_WORDS, _HSC_KEYS),
+            "SPLINE": (_SPLINE_WORDS, frozenset[str]()),
+        }[name]
+        for word in stmt.options:
+            if word not in words:
+                known = ", ".join(sorted(words | keys))
+                raise stmt.error(A_CONTROL_SYNTAX, f"#{command}: unknown word {word!r} (known: {known})")
+        for key in stmt.params:
+            if key not in keys:
+                known = ", ".join(sorted(words | keys)) or "none"
+                raise stmt.error(A_CONTROL_SYNTAX, f"#{command}: unknown parameter {key!r} (known: {known})")
+        if "ON" in stmt.options and "OFF" in stmt.options:
+            raise stmt.error(A_CONTROL_SYNTAX, f"#{command}: ON and OFF in one command")
+        on = True if "ON" in stmt.options else False if "OFF" in stmt.options else None
+        values: dict[str, float] = {}
+        for key, expr in stmt.params.items():
+            value = self._number(stmt, expr, f"{key} of #{command}")
+            if key in _DEVIATION_KEYS and value < 0.0:
+                raise stmt.error(
+                    A_CORNER_DEVIATION,
+                    f"#{command}: {key}={format_value(value)} is smaller than the least permitted value 0 "
+                    "(a corner deviation in mm)",
+                )
+            if key in ("PRE_DIST", "POST_DIST") and value < 0.0:
+                raise stmt.error(A_RANGE, f"#{command}: {key}={format_value(value)} must not be negative")
+            if key in _DEVIATION_KEYS | {"PRE_DIST", "POST_DIST"} and value > word_parser._POSITION_MAX:
+                raise stmt.error(A_RANGE, f"#{command}: {key} is out of range: {_POSITION_RANGE}")
+            values[key] = value
+        mode: str | None = None
+        if name == "CONTOUR":
+            types = [w for w in stmt.options if w in CONTOUR_TYPES]
+            if len(types) > 1:
+                raise stmt.error(
+                    A_CONTROL_SYNTAX, f"#{command}: two contouring types {types[0]} and {types[1]}"
+                )
+            mode = types[0] if types else None
+        elif name == "HSC":
+            if "BSPLINE" in stmt.options:
+                mode = "BSPLINE"
+            elif "OPMODE" in values:
+                opmode = values["OPMODE"]
+                if opmode not in (1.0, 2.0):
+                    raise stmt.error(
+                        A_RANGE, f"#HSC: OPMODE {format_value(opmode)}: the operation modes are 1, 2"
+                    )
+                mode = f"OPMODE {int(opmode)}"
+        else:
+            for word in ("AKIMA", "BSPLINE"):
+                if word in stmt.options:
+                    mode = word
+            if "TYPE" in stmt.options and mode is None:
+                raise stmt.error(A_CONTROL_SYNTAX, "#SPLINE TYPE: AKIMA or BSPLINE expected")
+            if mode is not None and "TYPE" not in stmt.options:
+                raise stmt.error(A_CONTROL_SYNTAX, f"#SPLINE {mode}: write #SPLINE TYPE {mode}")
+            if mode is None and on is None:
+                raise stmt.error(A_CONTROL_SYNTAX, "#SPLINE: ON, OFF or TYPE AKIMA|BSPLINE expected")
+        return ContourDirective(self._place_block(frame, stmt), name, on, mode, values)
+
     def _scope(self, frame: _Frame, ref: Ref) -> dict[str, Variable]:
         if ref.kind == KIND_VP:
             return self._program_vars
@@ -1204,6 +1334,9 @@ class Interpreter(Env):
             return
         if command == "FILE NAME":
             self._message_file = stmt.files.get("MSG", self._message_file)
+            return
+        if command in ("CONTOUR MODE", "HSC", "SPLINE"):
+            self._pending.append(self._contour(frame, stmt))
             return
         # MSG
         if self._needs_flush(frame, stmt, stmt.args):

@@ -321,18 +321,10 @@ word with 910109."""
 SLOPE_TYPES: Final = ("STEP", "TRAPEZ", "SIN2", "HSC")
 """``#SLOPE [TYPE=<ident>]``'s profiles (P-CHAN-00071's 0..3)."""
 MOTION_FUNCTIONS: Final[dict[str, str]] = {
-    "CONTOUR": "contouring (#CONTOUR MODE)",
-    "HSC": "HSC contouring (#HSC)",
-    "SPLINE": "spline interpolation (#SPLINE)",
     "TRC": "tool radius compensation options (#TRC)",
 }
 """The motion functions issue 24 adds (N-09): refused by name until then."""
-MOTION_G_CODES: Final[dict[int, str]] = {
-    61: "contouring, exact stop (G61)",
-    64: "contouring (G64)",
-    260: "contouring mode (G260)",
-    261: "contouring mode (G261)",
-}
+MOTION_G_CODES: Final[dict[int, str]] = {}
 """G codes of the motion functions of issue 24 (N-09), refused by name with 910110."""
 VALUE_G_CODES: Final = frozenset((131, 231, 133, 134, 233, 334, 339))
 """G functions programmed with a value, ``G131=50`` (acceleration and ramp-time weightings)."""
@@ -345,7 +337,16 @@ _DWELL: Final = re.compile(r"G0*4(?![0-9.])", re.IGNORECASE)
 UNIT_G_CODES: Final = frozenset((8, 9, 70, 71, 94, 95, 900, 901))
 """Units and words of issue 24 item 5 (M-06..M-09): G70/G71 inch/metric, G94/G95 feed per minute /
 per revolution, G08/G09/G900/G901 acceleration at block start / deceleration at block end."""
-KNOWN_G: Final = word_parser.KNOWN_G_CODES | EXTRA_G_CODES | UNIT_G_CODES
+CONTOUR_G_CODES: Final = frozenset((61, 64, 150, 151, 260, 261))
+"""Polynomial contouring G61/G261/G260 (G64 as G261), spline interpolation G151/G150 (simulated as
+contouring): issue 24, M-20..M-23, docs/nc-language.md "Contouring"."""
+KNOWN_G: Final = word_parser.KNOWN_G_CODES | EXTRA_G_CODES | UNIT_G_CODES | CONTOUR_G_CODES
+REFUSED_HASH: Final[dict[str, str]] = {
+    "KIN": "kinematic transformations (#KIN)",
+    "TRAFO": "kinematic transformations (#TRAFO)",
+}
+"""Refused with their own message (issue 24 item 6): docs/nc-language.md says what simulating them
+would take."""
 
 _CONSTANT: Final = ConstantEnv()
 _UPPER: Final = str.maketrans("abcdefghijklmnopqrstuvwxyz", "ABCDEFGHIJKLMNOPQRSTUVWXYZ")
@@ -749,12 +750,15 @@ class Hash(Stmt):
         options: list[str],
         args: list[Expr],
         files: dict[str, str] | None = None,
+        params: dict[str, Expr] | None = None,
     ) -> None:
         super().__init__(raw, number)
         self.command = command
         self.options = options
         self.args = args
         self.files = files or {}
+        self.params = params or {}
+        """``#CONTOUR MODE``, ``#HSC``, ``#SPLINE``: KEY -> value expression."""
 
 
 # --- the compiler --------------------------------------------------------------------------------------
@@ -1571,6 +1575,21 @@ class _BlockParser:
             return self.meas_mode()
         if name == "SLOPE":
             return self.slope()
+        if name == "CONTOUR" and self.keyword("MODE"):
+            return self.motion_options("CONTOUR MODE")
+        if name in ("HSC", "SPLINE"):
+            return self.motion_options(name)
+        if name == "SET" and self.keyword("SPLINE"):
+            return self.motion_options("SPLINE")  # the older spelling of #SPLINE ON/OFF (207209611)
+        if name == "SET" and self.keyword("SPLINETYPE"):
+            return self.motion_options("SPLINE", prefix=["TYPE"])
+        if name in REFUSED_HASH:
+            self.fail(
+                A_NOT_SIMULATED,
+                f"#{name}: {REFUSED_HASH[name]} are not simulated (the areas are monitored on the TCP in "
+                "machine coordinates of cartesian main axes only): docs/nc-language.md, "
+                '"What stays refused"',
+            )
         if name == "ENDVAR":
             self.fail(A_DECLARATION, "#ENDVAR without #VAR")
         if name == "VAR":
@@ -1828,6 +1847,56 @@ class _BlockParser:
                 f"{self.word_at(self.pos)!r} after #SLOPE: #SLOPE [..] stands alone in its block",
             )
         return Hash(self.raw, self.number, "SLOPE", options, [])
+
+    def motion_options(self, command: str, prefix: list[str] | None = None) -> Stmt:
+        """``#CONTOUR MODE [ON|OFF] [<type> KEY=<expr> ...]``, ``#HSC [ON|OFF] [OPMODE 1 CONTERROR 0.1]``,
+        ``#SPLINE ON|OFF|TYPE AKIMA``: the words (``options``) and the values (``params``), checked and
+        evaluated by the interpreter. A value follows ``=`` or, inside the brackets, a blank (``#HSC``'s
+        ``OPMODE 1``); commas between the entries are allowed (the manual's ``[DEV, PATH_DEV=5]``)."""
+        options: list[str] = list(prefix or [])
+        params: dict[str, Expr] = {}
+        inside = False
+        while True:
+            self.blanks()
+            if self.at_end():
+                break
+            char = self.peek()
+            if char == "[" and not inside:
+                self.pos += 1
+                inside = True
+                continue
+            if char == "]" and inside:
+                self.pos += 1
+                inside = False
+                continue
+            if char == "," and inside:
+                self.pos += 1
+                continue
+            start = self.pos
+            key = self.name()
+            if not key:
+                self.fail(A_CONTROL_SYNTAX, f"#{command}: unexpected {self.word_at(start)!r}")
+            if key in params or key in options:
+                self.fail(A_CONTROL_SYNTAX, f"#{command}: {key} given twice")
+            self.blanks()
+            nxt = self.peek()
+            if nxt == "=" or (inside and nxt != "" and (nxt.isdigit() or nxt in "+-.")):
+                if nxt == "=":
+                    self.pos += 1
+                    self.blanks()
+                if self.at_end() or self.peek() in ("]", ","):
+                    self.fail(A_CONTROL_SYNTAX, f"#{command}: {key}= without a value")
+                saved = self.depth
+                self.depth = 0
+                try:
+                    params[key] = self.expression(stop_at_blank=True)
+                finally:
+                    self.depth = saved
+            else:
+                options.append(key)
+        if inside:
+            self.fail(A_CONTROL_SYNTAX, f"#{command}: ']' missing")
+        return Hash(self.raw, self.number, command, options, [], params=params)
 
     def file_name(self, named: bool = False) -> Stmt:
         """``#FILE NAME [MSG="report.txt"]`` (207504523; older ``#FILENAME``): the file ``#MSG SAVE``
