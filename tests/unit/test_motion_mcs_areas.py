@@ -188,7 +188,8 @@ def test_contouring_with_a_frame_or_a_tool_is_refused_by_name(transform: str, co
     """The contouring stage and the frames/tools stages are not chained yet: a contoured move under a
     coordinate system, a rotation, a tool or radius compensation is refused with 910110 on its own
     block, never run with the corners silently sharp (docs/nc-language.md)."""
-    m, pos = go(f"G01 X10 Y10 F5000\n{contouring}\n{transform}\nX20 Y10\nX20 Y20\n")
+    m, _ = go(f"G01 X10 Y10 F5000\n{contouring}\n{transform}\nX20 Y10\nX20 Y20\n")
     message = only_alarm(m, 910110).message
     assert [a for a in alarm_ids(m) if a != 911040] == [910110]  # 911040: #HSC/#SPLINE simulated as DEV
-    assert "contouring" in message and "not simulated" in message
+    assert "contouring" in message
+    assert "not simulated" in message
