@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import math
 import os
@@ -54,7 +53,6 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, cast
 
@@ -69,7 +67,15 @@ from pydantic import (
 )
 
 from hli_server.adapters.faults import CommFaults, Door
-from schemas.events import AlarmRaised, Event
+from hli_server.codecs.event_json import (
+    DROPPED_TOPIC,
+    SNAPSHOT_TOPIC,
+    STATUS_TOPIC,
+    dumps,
+    encode_event,
+    wall_time_text,
+)
+from schemas.events import Event
 
 if TYPE_CHECKING:
     import aiomqtt
@@ -79,13 +85,9 @@ if TYPE_CHECKING:
 __all__ = [
     "DEFAULT_PORT",
     "DEFAULT_TLS_PORT",
-    "DROPPED_TOPIC",
-    "SNAPSHOT_TOPIC",
     "STATE_KINDS",
-    "STATUS_TOPIC",
     "MqttAdapter",
     "MqttOptions",
-    "encode_event",
     "topic_safe",
 ]
 
@@ -93,12 +95,6 @@ logger = logging.getLogger(__name__)
 
 DEFAULT_PORT: Final = 1883
 DEFAULT_TLS_PORT: Final = 8883
-STATUS_TOPIC: Final = "status"
-"""Retained ``online``/``offline`` below the prefix; ``offline`` is also the Will."""
-SNAPSHOT_TOPIC: Final = "snapshot"
-"""Retained JSON picture of the channels and the active alarms below the prefix."""
-DROPPED_TOPIC: Final = "dropped"
-"""JSON report of the events the bounded queue dropped, below the prefix."""
 STATE_KINDS: Final = frozenset({"program_state", "mode", "hold", "control_unit", "alarm", "alarms_cleared"})
 """Event kinds after which the retained snapshot is published again."""
 WINDOW: Final = 64
@@ -238,66 +234,6 @@ class MqttOptions(BaseModel):
     def host_port(self) -> tuple[str, int]:
         host, port = _split_broker(self.broker)
         return host, port if port is not None else (DEFAULT_TLS_PORT if self.use_tls else DEFAULT_PORT)
-
-
-# --------------------------------------------------------------------------------------------
-# Encoding (no I/O)
-# --------------------------------------------------------------------------------------------
-
-
-def wall_time_text(wall: float) -> str:
-    """``2025-05-01T09:30:12.345Z``: UTC, milliseconds."""
-    return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
-
-
-def _axis_of(event: Event) -> str | None:
-    if isinstance(event, AlarmRaised):
-        return event.alarm.axis
-    for name in ("axis", "master"):
-        value = getattr(event, name, None)
-        if isinstance(value, str):
-            return value
-    return None
-
-
-def _finite(value: Any) -> Any:
-    """JSON has no NaN or infinity: such floats become None (strict parsers refuse ``NaN``)."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_finite(v) for v in value]
-    return value
-
-
-def dumps(obj: dict[str, Any]) -> bytes:
-    """Compact JSON, UTF-8; non-finite floats as null."""
-    try:
-        text = json.dumps(obj, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
-    except ValueError:
-        text = json.dumps(_finite(obj), separators=(",", ":"), ensure_ascii=False, allow_nan=False)
-    return text.encode("utf-8")
-
-
-def event_message(event: Event, *, machine: str, seq: int, wall: float) -> dict[str, Any]:
-    """The JSON object of one event (docs/mqtt.md): envelope plus the schema's payload as ``data``."""
-    return {
-        "machine": machine,
-        "kind": event.KIND,
-        "seq": seq,
-        "cycle": event.cycle,
-        "time_s": event.time_s,
-        "wall_time": wall_time_text(wall),
-        "channel": event.channel,
-        "axis": _axis_of(event),
-        "data": event.payload(),
-    }
-
-
-def encode_event(event: Event, *, prefix: str, machine: str, seq: int, wall: float) -> tuple[str, bytes]:
-    """``(topic, payload)`` of one event."""
-    return prefix + event.topic(), dumps(event_message(event, machine=machine, seq=seq, wall=wall))
 
 
 # --------------------------------------------------------------------------------------------

@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 from collections import deque
 from dataclasses import dataclass, field
@@ -137,13 +136,8 @@ def _sse(name: bytes, data: bytes) -> bytes:
 
 
 def _scene_bytes(scene: dict[str, Any]) -> bytes:
-    """A scene as an SSE message. Its numbers are finite and rounded (``hli_server.scene``), so the plain
-    encoder does, without the walk that names non-finite numbers (a scene has thousands of them)."""
-    try:
-        data = json.dumps(scene, ensure_ascii=True, allow_nan=False, separators=(",", ":")).encode("ascii")
-    except ValueError:
-        data = json_bytes(scene)
-    return _sse(b"scene", data)
+    """A scene as an SSE message (its numbers are finite and rounded, ``hli_server.scene``)."""
+    return _sse(b"scene", json_bytes(scene))
 
 
 class _AxisSignals:
