@@ -32,12 +32,24 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
 from hli_server.adapters.faults import CommFaults
-from hli_server.adapters.host import AccessPolicy, LoggedEvent, Readiness, Trace, door_host
-from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
+from hli_server.adapters.host import (
+    AccessPolicy,
+    EventFeed,
+    ImagePort,
+    LoggedEvent,
+    OperatorPort,
+    Readiness,
+    RecorderPort,
+    StepRefusedError,
+    Trace,
+    door_host,
+)
+from hli_server.adapters.registry import ADAPTERS, Adapter, AdapterError, create_adapter
 from hli_server.engine.machine import Machine
 from hli_server.recording.tap import JournaledOperator, RecordingOptions, SessionRecorderPort, SessionTap
+from hli_server.runtime.doors import DoorsProcess
 from hli_server.runtime.events import EventLog
-from hli_server.runtime.host import OperatorPanel, RuntimeHost
+from hli_server.runtime.host import OperatorPanel
 from hli_server.runtime.image import ImageFactory, RuntimeImage, shared_memory_image
 from hli_server.runtime.nc_files import NcFileWriter
 from hli_server.runtime.pacing import (
@@ -51,7 +63,7 @@ from hli_server.runtime.pacing import (
     raise_priority,
     run_free,
     run_realtime,
-    summarize,
+    summarize_timing,
 )
 from hli_server.runtime.programs import RuntimeLibrary, read_program_file
 
@@ -63,7 +75,15 @@ if TYPE_CHECKING:
     from schemas.events import Event
     from schemas.layout import Layout
 
-__all__ = ["AdapterSpec", "Recording", "RequestService", "Runtime", "RuntimeStateError", "summarize_timing"]
+__all__ = [
+    "AdapterSpec",
+    "Recording",
+    "RequestService",
+    "Runtime",
+    "RuntimeHost",
+    "RuntimeStateError",
+    "summarize_timing",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -424,9 +444,6 @@ class Runtime:
         between cycles."""
         if not self.doors_process:
             return list(self._adapter_specs)
-        from hli_server.adapters.registry import ADAPTERS
-        from hli_server.runtime.doors import DoorsProcess
-
         here: list[AdapterSpec] = []
         moved: list[tuple[str, dict[str, Any]]] = []
         for spec in self._adapter_specs:
@@ -710,13 +727,6 @@ class Runtime:
         return f"Runtime({self.config.name!r}, {self.clock} clock, cycle {self.machine.cycle}, {state})"
 
 
-def summarize_timing(raw: dict[str, Any]) -> dict[str, Any]:
-    """``GET /api/timing`` from :meth:`Runtime.timing_raw`."""
-    out = summarize(raw)
-    out["failed_cycles"] = raw.get("failed_cycles", 0)
-    return out
-
-
 def _spec_name(spec: AdapterSpec) -> str:
     if isinstance(spec, str):
         return spec
@@ -759,3 +769,67 @@ class Recording:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+class RuntimeHost:
+    """The :class:`~hli_server.adapters.host.AdapterHost` of a running :class:`Runtime`."""
+
+    def __init__(self, runtime: Runtime, operator: OperatorPanel) -> None:
+        self._rt = runtime
+        self._operator = operator
+        # the operator panel's trails follow the cycles, its scenes the events (the dashboard)
+        runtime.on_cycle(operator.recorder.after_cycle)
+        runtime.event_log.subscribe(operator.recorder.on_event)
+
+    @property
+    def image(self) -> ImagePort:
+        return self._rt.image
+
+    @property
+    def operator(self) -> OperatorPort:
+        return self._rt.operator  # the panel, with every request noted by the session recorder
+
+    @property
+    def recorder(self) -> RecorderPort:
+        return self._rt.recorder_port
+
+    @property
+    def faults(self) -> CommFaults:
+        return self._rt.comm_faults
+
+    @property
+    def events(self) -> EventFeed:
+        return self._rt.event_log
+
+    @property
+    def clock(self) -> str:
+        return str(self._rt.clock)
+
+    @property
+    def bind(self) -> str:
+        return self._rt.bind
+
+    @property
+    def policy(self) -> AccessPolicy:
+        return self._rt.policy
+
+    async def step(self, cycles: int = 1) -> int:
+        try:
+            return await self._rt.step(cycles)
+        except (ClockError, RuntimeStateError) as exc:
+            raise StepRefusedError(str(exc)) from None
+
+    async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
+        try:
+            return await self._rt.step_traced(cycles, signals)
+        except (ClockError, RuntimeStateError) as exc:
+            raise StepRefusedError(str(exc)) from None
+
+    def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
+        return self._rt.on_cycle(listener)
+
+    def readiness(self) -> Readiness:
+        return self._rt.readiness()
+
+    def __repr__(self) -> str:
+        return f"RuntimeHost({self._rt!r})"

@@ -1,4 +1,4 @@
-"""The host the runtime hands its adapters (``hli_server.adapters.host``): image, operator, events, step.
+"""The operator port the runtime hands its adapters (``hli_server.adapters.host``).
 
 :class:`OperatorPanel` is the operator panel's door onto the machine: every request goes through
 the channel's own methods (latched at the next cycle, refused with the channel's own alarm), faults
@@ -8,23 +8,15 @@ engine rule.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Mapping
+from typing import Any
 
-from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     Accepted,
-    AccessPolicy,
     ConflictError,
-    EventFeed,
-    ImagePort,
     InvalidRequestError,
     NotFoundError,
     OperatorPort,
-    Readiness,
-    RecorderPort,
-    StepRefusedError,
-    Trace,
 )
 from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis
@@ -35,10 +27,7 @@ from hli_server.runtime.programs import RuntimeLibrary
 from schemas.units import increments_from_mm, mm_from_increments
 from schemas.wire import Mode
 
-if TYPE_CHECKING:
-    from hli_server.runtime.core import Runtime
-
-__all__ = ["OperatorPanel", "RuntimeHost"]
+__all__ = ["OperatorPanel"]
 
 
 class OperatorPanel(OperatorPort):
@@ -307,73 +296,3 @@ class OperatorPanel(OperatorPort):
 
     def collision_pairs(self) -> list[dict[str, Any]]:
         return collision_pairs(self._m)
-
-
-class RuntimeHost:
-    """The :class:`~hli_server.adapters.host.AdapterHost` of a running :class:`Runtime`."""
-
-    def __init__(self, runtime: Runtime, operator: OperatorPanel) -> None:
-        self._rt = runtime
-        self._operator = operator
-        # the operator panel's trails follow the cycles, its scenes the events (the dashboard)
-        runtime.on_cycle(operator.recorder.after_cycle)
-        runtime.event_log.subscribe(operator.recorder.on_event)
-
-    @property
-    def image(self) -> ImagePort:
-        return self._rt.image
-
-    @property
-    def operator(self) -> OperatorPort:
-        return self._rt.operator  # the panel, with every request noted by the session recorder
-
-    @property
-    def recorder(self) -> RecorderPort:
-        return self._rt.recorder_port
-
-    @property
-    def faults(self) -> CommFaults:
-        return self._rt.comm_faults
-
-    @property
-    def events(self) -> EventFeed:
-        return self._rt.event_log
-
-    @property
-    def clock(self) -> str:
-        return str(self._rt.clock)
-
-    @property
-    def bind(self) -> str:
-        return self._rt.bind
-
-    @property
-    def policy(self) -> AccessPolicy:
-        return self._rt.policy
-
-    async def step(self, cycles: int = 1) -> int:
-        from hli_server.runtime.core import RuntimeStateError
-        from hli_server.runtime.pacing import ClockError
-
-        try:
-            return await self._rt.step(cycles)
-        except (ClockError, RuntimeStateError) as exc:
-            raise StepRefusedError(str(exc)) from None
-
-    async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
-        from hli_server.runtime.core import RuntimeStateError
-        from hli_server.runtime.pacing import ClockError
-
-        try:
-            return await self._rt.step_traced(cycles, signals)
-        except (ClockError, RuntimeStateError) as exc:
-            raise StepRefusedError(str(exc)) from None
-
-    def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
-        return self._rt.on_cycle(listener)
-
-    def readiness(self) -> Readiness:
-        return self._rt.readiness()
-
-    def __repr__(self) -> str:
-        return f"RuntimeHost({self._rt!r})"

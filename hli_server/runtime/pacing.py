@@ -62,6 +62,7 @@ __all__ = [
     "run_free",
     "run_realtime",
     "summarize",
+    "summarize_timing",
 ]
 
 logger = logging.getLogger(__name__)
@@ -594,6 +595,13 @@ def summarize(raw: dict[str, Any]) -> dict[str, Any]:
         "simulated_s": round(simulated, 6),
         "rate": round(simulated / wall, 6) if wall > 0 else None,
     }
+
+
+def summarize_timing(raw: dict[str, Any]) -> dict[str, Any]:
+    """``GET /api/timing`` from the runtime's ``timing_raw()`` (the pacing figures and the failed cycles)."""
+    out = summarize(raw)
+    out["failed_cycles"] = raw.get("failed_cycles", 0)
+    return out
 
 
 def _percentile(sorted_data: Sequence[float], q: float) -> float:

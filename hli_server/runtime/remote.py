@@ -50,30 +50,31 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from hli_server.adapters.faults import ActiveFault, CommFaults, FaultError, FaultSpec
 from hli_server.adapters.host import (
     Accepted,
+    AdapterHost,
     EventFeed,
     ImagePort,
     LoggedEvent,
     OperatorError,
     OperatorPort,
+    Readiness,
     RecorderPort,
     Trace,
     UnavailableError,
 )
 from hli_server.runtime.events import EventLog
+from hli_server.runtime.pacing import summarize_timing
 from schemas.events import Event
 from schemas.wire import Mode
-
-if TYPE_CHECKING:
-    from hli_server.runtime.core import Runtime
 
 __all__ = [
     "CALL_TIMEOUT_S",
     "OPERATOR_CALLS",
+    "EngineSide",
     "EventMirror",
     "OperatorService",
     "RemoteFaults",
@@ -170,6 +171,33 @@ def _portable(exc: BaseException) -> BaseException:
 # --------------------------------------------------------------------------------------------
 
 
+class EngineSide(Protocol):
+    """What the engine's end of the link needs of the runtime (:class:`~hli_server.runtime.Runtime` is
+    one; a protocol, so that this module does not import the runtime that builds on it)."""
+
+    @property
+    def defers_requests(self) -> bool: ...
+
+    @property
+    def event_log(self) -> EventLog: ...
+
+    @property
+    def comm_faults(self) -> CommFaults: ...
+
+    @property
+    def recorder_port(self) -> RecorderPort: ...
+
+    @property
+    def operator(self) -> OperatorPort: ...
+
+    @property
+    def host(self) -> AdapterHost: ...
+
+    def timing_raw(self) -> dict[str, Any]: ...
+
+    def readiness(self) -> Readiness: ...
+
+
 class OperatorService(asyncio.Protocol):
     """The engine's end of the link, on the clock's loop.
 
@@ -181,7 +209,7 @@ class OperatorService(asyncio.Protocol):
     Events are sent after each batch of cycles, before any answer, so that an answer never overtakes the
     events of the cycles it reports."""
 
-    def __init__(self, runtime: Runtime) -> None:
+    def __init__(self, runtime: EngineSide) -> None:
         self._rt = runtime
         self._panel = runtime.operator
         self._reader = FrameReader()
@@ -649,8 +677,6 @@ class RemoteOperator(OperatorPort):
         return out
 
     def timing(self) -> dict[str, Any]:
-        from hli_server.runtime.core import summarize_timing
-
         return summarize_timing(self._link.call("timing"))
 
     def scene(self, channel: int) -> dict[str, Any]:

@@ -47,6 +47,7 @@ from collections.abc import Callable, Coroutine, Iterable, Iterator, Mapping, Se
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar, cast
 
+from hli_server.testing.transports import open_transport
 from schemas.layout import Direction, Layout
 
 if TYPE_CHECKING:
@@ -573,8 +574,6 @@ class Harness:
     def transport(self, kind: str = "shm") -> Transport:
         """A PLC-side transport to this server (``plc_clients``): ``"shm"``, ``"modbus"``, ``"ads"``
         or any registered one (:mod:`hli_server.testing.transports`). Closed when the harness stops."""
-        from hli_server.testing.transports import open_transport
-
         self._loop_or_raise()
         transport = open_transport(self, kind)
         self._transports.append(transport)
