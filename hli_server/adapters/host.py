@@ -35,6 +35,18 @@ from typing import TYPE_CHECKING, Any, Protocol
 from hli_server.adapters.faults import CommFaults
 from schemas.events import Event
 from schemas.layout import Direction, Layout, Signal, SignalType
+from schemas.results import (
+    AlarmList,
+    AreaTable,
+    AxisFaults,
+    CollisionPair,
+    MachineState,
+    ProgramEntry,
+    ProgramLoaded,
+    ProgramSelected,
+    Scene,
+    SoftLimits,
+)
 from schemas.wire import Mode
 
 if TYPE_CHECKING:
@@ -345,14 +357,14 @@ class OperatorPort(Protocol):
 
     def load_program(
         self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
-    ) -> dict[str, Any]:
+    ) -> ProgramLoaded:
         """Load ``text`` as the channel's program; ``files`` (name -> text) are its subprograms and
         cycles, found by ``L name`` before the program directories (they replace the files of the
         channel's previous load). InvalidRequestError for a file name that leaves its directory
         (``..``, absolute), too many or too large files; ConflictError while a program runs."""
         ...
 
-    def select_program(self, channel: int, number: int) -> dict[str, Any]: ...
+    def select_program(self, channel: int, number: int) -> ProgramSelected: ...
 
     def start(self, channel: int) -> Accepted: ...
 
@@ -370,33 +382,33 @@ class OperatorPort(Protocol):
 
     def reference(self, axis: str) -> Accepted: ...
 
-    def faults(self, axis: str) -> dict[str, Any]: ...
+    def faults(self, axis: str) -> AxisFaults: ...
 
-    def inject_faults(self, axis: str, **fields: float | bool) -> dict[str, Any]: ...
+    def inject_faults(self, axis: str, **fields: float | bool) -> AxisFaults: ...
 
-    def clear_faults(self, axis: str) -> dict[str, Any]: ...
+    def clear_faults(self, axis: str) -> AxisFaults: ...
 
-    def soft_limits(self, axis: str) -> dict[str, Any]:
+    def soft_limits(self, axis: str) -> SoftLimits:
         """The software limits in effect and in the axis record [0.1 µm] (P-AXIS-00177/00178/00179)."""
         ...
 
-    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+    def set_soft_limits(self, axis: str, **values: int) -> SoftLimits:
         """Limits in effect until the next reset or mode change (the kernel's G98/G99) [0.1 µm]."""
         ...
 
-    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+    def update_axis_record(self, axis: str, **values: int) -> SoftLimits:
         """The axis record's limits [0.1 µm]: taken over at the next reset or mode change."""
         ...
 
-    def snapshot(self) -> dict[str, Any]:
+    def snapshot(self) -> MachineState:
         """Channels, axes, active alarms, the V.E. variables (``external``): ``GET /api/state``."""
         ...
 
-    def alarms(self, history: int = 200) -> dict[str, Any]:
+    def alarms(self, history: int = 200) -> AlarmList:
         """``{"active": [...], "history": [...]}`` (the newest ``history`` of the history)."""
         ...
 
-    def areas(self, channel: int) -> dict[str, Any]:
+    def areas(self, channel: int) -> AreaTable:
         """The channel's area table (FCT-C14) as ``check`` lists it."""
         ...
 
@@ -405,18 +417,18 @@ class OperatorPort(Protocol):
         ...
 
     # --- what the dashboard draws (issue 15); lengths in mm ----------------------------------
-    def scene(self, channel: int) -> dict[str, Any]:
+    def scene(self, channel: int) -> Scene:
         """The channel's live scene, as :func:`hli_server.scene.build_scene` computes it for ``check
         --plot``: the area table, the recent trail of the setpoints (since the last program start, the
         newest points), the active alarms' refused block and violation point, the position now and the
         path the channel has decoded ahead. Unchanged inputs give the same (cached) object."""
         ...
 
-    def programs(self, channel: int) -> list[dict[str, Any]]:
+    def programs(self, channel: int) -> list[ProgramEntry]:
         """The channel's program table: ``[{"number", "name"}]`` (for ``select_program``)."""
         ...
 
-    def collision_pairs(self) -> list[dict[str, Any]]:
+    def collision_pairs(self) -> list[CollisionPair]:
         """The collision pairs (FCT-C3) now: ``{"master", "partner", "distance", "min_distance",
         "brake_master", "brake_partner", "monitoring", "stopped", "latched"}``."""
         ...

@@ -9,7 +9,7 @@ engine rule.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any
+from typing import Any, cast
 
 from hli_server.adapters.host import (
     Accepted,
@@ -24,6 +24,19 @@ from hli_server.engine.channel import Channel
 from hli_server.engine.machine import Machine
 from hli_server.runtime.live import TrailRecorder, collision_pairs, live_scene, program_table, scene_key
 from hli_server.runtime.programs import RuntimeLibrary
+from schemas.results import (
+    AlarmList,
+    AreaTable,
+    AxisFaults,
+    CollisionPair,
+    ExternalVariable,
+    MachineState,
+    ProgramEntry,
+    ProgramLoaded,
+    ProgramSelected,
+    Scene,
+    SoftLimits,
+)
 from schemas.units import increments_from_mm, mm_from_increments
 from schemas.wire import Mode
 
@@ -42,7 +55,7 @@ class OperatorPanel(OperatorPort):
         self._timing = timing
         self.recorder = TrailRecorder(machine)
         """The trails and scene revisions; fed by the runtime host (a cycle listener, an event listener)."""
-        self._scenes: dict[int, tuple[tuple[object, ...], dict[str, Any]]] = {}
+        self._scenes: dict[int, tuple[tuple[object, ...], Scene]] = {}
 
     # --- what and where -------------------------------------------------------------------
     @property
@@ -89,7 +102,7 @@ class OperatorPanel(OperatorPort):
     # --- programs -------------------------------------------------------------------------
     def load_program(
         self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
-    ) -> dict[str, Any]:
+    ) -> ProgramLoaded:
         ch = self._channel(channel)
         library = self._library
         uploads: dict[str, str] = {}
@@ -114,7 +127,7 @@ class OperatorPanel(OperatorPort):
             "cycle": self._m.cycle,
         }
 
-    def select_program(self, channel: int, number: int) -> dict[str, Any]:
+    def select_program(self, channel: int, number: int) -> ProgramSelected:
         ch = self._channel(channel)
         entry = next((p for p in ch.config.programs if p.number == number), None)
         if entry is None:
@@ -181,11 +194,11 @@ class OperatorPanel(OperatorPort):
         return self._accepted(ch, f"reference {ax.name}")
 
     # --- faults (A3-05) -------------------------------------------------------------------
-    def faults(self, axis: str) -> dict[str, Any]:
+    def faults(self, axis: str) -> AxisFaults:
         ax = self._axis(axis)
-        return {"axis": ax.name, **ax.faults.as_dict()}
+        return cast(AxisFaults, {"axis": ax.name, **ax.faults.as_dict()})
 
-    def inject_faults(self, axis: str, **fields: float | bool) -> dict[str, Any]:
+    def inject_faults(self, axis: str, **fields: float | bool) -> AxisFaults:
         ax = self._axis(axis)
         if not fields:
             raise InvalidRequestError("give at least one fault field (DELETE clears them all)")
@@ -195,13 +208,13 @@ class OperatorPanel(OperatorPort):
             raise InvalidRequestError(str(exc)) from None
         return self.faults(axis)
 
-    def clear_faults(self, axis: str) -> dict[str, Any]:
+    def clear_faults(self, axis: str) -> AxisFaults:
         ax = self._axis(axis)
         self._m.inject_fault(ax.name)
         return self.faults(axis)
 
     # --- software limits (E-06, P-AXIS-00177/00178/00179) ------------------------------------
-    def soft_limits(self, axis: str) -> dict[str, Any]:
+    def soft_limits(self, axis: str) -> SoftLimits:
         ax = self._axis(axis)
         rec = ax.config
         return {
@@ -214,7 +227,7 @@ class OperatorPanel(OperatorPort):
             "record": {"swe_neg": rec.swe_neg, "swe_pos": rec.swe_pos, "swe_toleranz": rec.swe_toleranz},
         }
 
-    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+    def set_soft_limits(self, axis: str, **values: int) -> SoftLimits:
         ax = self._axis(axis)
         unknown = sorted(set(values) - {"swe_neg", "swe_pos"})
         if unknown or not values:
@@ -228,7 +241,7 @@ class OperatorPanel(OperatorPort):
             raise InvalidRequestError(str(exc)) from None
         return self.soft_limits(axis)
 
-    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+    def update_axis_record(self, axis: str, **values: int) -> SoftLimits:
         ax = self._axis(axis)
         if not values:
             raise InvalidRequestError("give swe_neg, swe_pos and/or swe_toleranz [0.1 µm]")
@@ -239,18 +252,18 @@ class OperatorPanel(OperatorPort):
         return self.soft_limits(axis)
 
     # --- state ----------------------------------------------------------------------------
-    def snapshot(self) -> dict[str, Any]:
-        snap = self._m.snapshot()
+    def snapshot(self) -> MachineState:
+        snap = cast(MachineState, self._m.snapshot())
         snap["external"] = self.external_variables()
         return snap
 
-    def external_variables(self) -> list[dict[str, Any]]:
+    def external_variables(self) -> list[ExternalVariable]:
         """The V.E. variables and their values now (N-05): ``name`` (``V.E.MODE``), ``channel`` (None:
         the global area), ``symbol`` (the image's ST path, ``gpVECh[0]^MODE``; an array's elements add
         ``[i]``), ``type`` (the kernel's), ``dims``, ``value`` (a list, row-major, for an array)."""
         m = self._m
         index_of = {ch.number: i for i, ch in enumerate(m.channels)}
-        out: list[dict[str, Any]] = []
+        out: list[ExternalVariable] = []
         for spec in m.external:
             values = m.external.values(spec)
             head = "gpVEGlob^" if spec.channel is None else f"gpVECh[{index_of[spec.channel]}]^"
@@ -266,22 +279,25 @@ class OperatorPanel(OperatorPort):
             )
         return out
 
-    def alarms(self, history: int = 200) -> dict[str, Any]:
+    def alarms(self, history: int = 200) -> AlarmList:
         m = self._m
         newest = list(m.alarm_history)[-history:] if history > 0 else []
-        return {"active": [a.to_json() for a in m.active_alarms], "history": [a.to_json() for a in newest]}
+        return cast(
+            AlarmList,
+            {"active": [a.to_json() for a in m.active_alarms], "history": [a.to_json() for a in newest]},
+        )
 
-    def areas(self, channel: int) -> dict[str, Any]:
+    def areas(self, channel: int) -> AreaTable:
         ch = self._channel(channel)
         if not self._m.has_monitor(AreaMonitor):
             return {"channel": ch.number, "axes": list(ch.axis_names), "areas": []}
-        return self._m.monitor(AreaMonitor).handler(ch.number).to_json()
+        return cast(AreaTable, self._m.monitor(AreaMonitor).handler(ch.number).to_json())
 
     def timing(self) -> dict[str, Any]:
         return self._timing()
 
     # --- the dashboard (issue 15): hli_server/runtime/live.py ------------------------------
-    def scene(self, channel: int) -> dict[str, Any]:
+    def scene(self, channel: int) -> Scene:
         ch = self._channel(channel)
         key = scene_key(self._m, self.recorder, ch.number)
         cached = self._scenes.get(ch.number)
@@ -291,8 +307,8 @@ class OperatorPanel(OperatorPort):
         self._scenes[ch.number] = (key, scene)
         return scene
 
-    def programs(self, channel: int) -> list[dict[str, Any]]:
+    def programs(self, channel: int) -> list[ProgramEntry]:
         return program_table(self._channel(channel))
 
-    def collision_pairs(self) -> list[dict[str, Any]]:
+    def collision_pairs(self) -> list[CollisionPair]:
         return collision_pairs(self._m)

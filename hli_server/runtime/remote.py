@@ -69,6 +69,18 @@ from hli_server.adapters.host import (
 from hli_server.runtime.events import EventLog
 from hli_server.runtime.pacing import summarize_timing
 from schemas.events import Event
+from schemas.results import (
+    AlarmList,
+    AreaTable,
+    AxisFaults,
+    CollisionPair,
+    MachineState,
+    ProgramEntry,
+    ProgramLoaded,
+    ProgramSelected,
+    Scene,
+    SoftLimits,
+)
 from schemas.wire import Mode
 
 __all__ = [
@@ -604,12 +616,12 @@ class RemoteOperator(OperatorPort):
 
     def load_program(
         self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
-    ) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("load_program", channel, text, name, dict(files) if files else None)
+    ) -> ProgramLoaded:
+        out: ProgramLoaded = self._call("load_program", channel, text, name, dict(files) if files else None)
         return out
 
-    def select_program(self, channel: int, number: int) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("select_program", channel, number)
+    def select_program(self, channel: int, number: int) -> ProgramSelected:
+        out: ProgramSelected = self._call("select_program", channel, number)
         return out
 
     def _accepted(self, name: str, *args: Any) -> Accepted:
@@ -640,55 +652,55 @@ class RemoteOperator(OperatorPort):
     def reference(self, axis: str) -> Accepted:
         return self._accepted("reference", axis)
 
-    def faults(self, axis: str) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("faults", axis)
+    def faults(self, axis: str) -> AxisFaults:
+        out: AxisFaults = self._call("faults", axis)
         return out
 
-    def inject_faults(self, axis: str, **fields: float | bool) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("inject_faults", axis, **fields)
+    def inject_faults(self, axis: str, **fields: float | bool) -> AxisFaults:
+        out: AxisFaults = self._call("inject_faults", axis, **fields)
         return out
 
-    def clear_faults(self, axis: str) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("clear_faults", axis)
+    def clear_faults(self, axis: str) -> AxisFaults:
+        out: AxisFaults = self._call("clear_faults", axis)
         return out
 
-    def soft_limits(self, axis: str) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("soft_limits", axis)
+    def soft_limits(self, axis: str) -> SoftLimits:
+        out: SoftLimits = self._call("soft_limits", axis)
         return out
 
-    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("set_soft_limits", axis, **values)
+    def set_soft_limits(self, axis: str, **values: int) -> SoftLimits:
+        out: SoftLimits = self._call("set_soft_limits", axis, **values)
         return out
 
-    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("update_axis_record", axis, **values)
+    def update_axis_record(self, axis: str, **values: int) -> SoftLimits:
+        out: SoftLimits = self._call("update_axis_record", axis, **values)
         return out
 
-    def snapshot(self) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("snapshot")
+    def snapshot(self) -> MachineState:
+        out: MachineState = self._call("snapshot")
         return out
 
-    def alarms(self, history: int = 200) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("alarms", history)
+    def alarms(self, history: int = 200) -> AlarmList:
+        out: AlarmList = self._call("alarms", history)
         return out
 
-    def areas(self, channel: int) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("areas", channel)
+    def areas(self, channel: int) -> AreaTable:
+        out: AreaTable = self._call("areas", channel)
         return out
 
     def timing(self) -> dict[str, Any]:
         return summarize_timing(self._link.call("timing"))
 
-    def scene(self, channel: int) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("scene", channel)
+    def scene(self, channel: int) -> Scene:
+        out: Scene = self._call("scene", channel)
         return out
 
-    def programs(self, channel: int) -> list[dict[str, Any]]:
-        out: list[dict[str, Any]] = self._call("programs", channel)
+    def programs(self, channel: int) -> list[ProgramEntry]:
+        out: list[ProgramEntry] = self._call("programs", channel)
         return out
 
-    def collision_pairs(self) -> list[dict[str, Any]]:
-        out: list[dict[str, Any]] = self._call("collision_pairs")
+    def collision_pairs(self) -> list[CollisionPair]:
+        out: list[CollisionPair] = self._call("collision_pairs")
         return out
 
     async def step(self, cycles: int) -> int:

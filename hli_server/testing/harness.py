@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING, Any, Literal, TypeVar, cast
 
 from hli_server.testing.transports import open_transport
 from schemas.layout import Direction, Layout
+from schemas.results import ProgramLoaded
 
 if TYPE_CHECKING:
     from hli_server.adapters.host import OperatorPort, Value
@@ -518,7 +519,7 @@ class Harness:
         *,
         files: Mapping[str, str | os.PathLike[str]] | Iterable[str | os.PathLike[str]] = (),
         name: str | None = None,
-    ) -> dict[str, Any]:
+    ) -> ProgramLoaded:
         """Load a program into ``channel`` with the subprograms and cycles it calls.
 
         ``program`` is NC text, or the path of a program file (a :class:`~pathlib.Path`, relative to

@@ -39,6 +39,7 @@ import asyncio
 import contextlib
 import logging
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -47,6 +48,7 @@ from hli_server.adapters.http.deps import json_bytes
 from schemas.events import Event
 from schemas.image_format import read_field
 from schemas.layout import Direction, Signal
+from schemas.results import Scene
 from schemas.wire import DynPosLimitState
 
 __all__ = [
@@ -135,7 +137,7 @@ def _sse(name: bytes, data: bytes) -> bytes:
     return b"event: " + name + b"\ndata: " + data + b"\n\n"
 
 
-def _scene_bytes(scene: dict[str, Any]) -> bytes:
+def _scene_bytes(scene: Scene) -> bytes:
     """A scene as an SSE message (its numbers are finite and rounded, ``hli_server.scene``)."""
     return _sse(b"scene", json_bytes(scene))
 
@@ -193,7 +195,7 @@ class LiveFeed:
         self._task: asyncio.Task[None] | None = None
         self._closed = False
         self._dirty: set[int] = set()
-        self._scenes: dict[int, dict[str, Any]] = {}
+        self._scenes: dict[int, Scene] = {}
         self._scene_failed: set[int] = set()
         self._scene_checked = 0.0
         self._axes: list[_AxisSignals] | None = None
@@ -336,7 +338,7 @@ class LiveFeed:
             stream.state = state
             stream.wake.set()
 
-    def _scene(self, number: int) -> dict[str, Any] | None:
+    def _scene(self, number: int) -> Scene | None:
         """The channel's scene, or None (logged once per channel) if computing it fails: a page without
         one channel's picture is better than no page."""
         try:
@@ -349,14 +351,14 @@ class LiveFeed:
                 )
             return None
 
-    def _current_scenes(self) -> dict[int, dict[str, Any]]:
+    def _current_scenes(self) -> dict[int, Scene]:
         for number in self.host.operator.channel_numbers():
             scene = self._scene(number)
             if scene is not None:
                 self._scenes[number] = scene
         return dict(self._scenes)
 
-    def _changed_scenes(self, channels: set[int] | None) -> dict[int, dict[str, Any]]:
+    def _changed_scenes(self, channels: set[int] | None) -> dict[int, Scene]:
         """The scenes that changed since last sent (the operator returns the same object while its
         inputs are unchanged), of ``channels`` or all."""
         op = self.host.operator
@@ -404,7 +406,7 @@ class LiveFeed:
             )
         axes = []
         for sigs in self._axes:
-            base = snap["axes"].get(sigs.name, {})
+            base: Mapping[str, Any] = snap["axes"].get(sigs.name, {})
             values = {k: read_field(c2p, 0, s) for k, s in sigs.c2p.items()}
             dpl = {}
             for side, (state_sig, enable_sig, command_sig) in sigs.dpl.items():
