@@ -29,6 +29,7 @@ from typing import Any
 
 import click
 
+from hli_server._compiled import stale_notice
 from hli_server.adapters.host import AccessPolicy
 from hli_server.adapters.registry import (
     CLI_ALIASES,
@@ -73,6 +74,9 @@ def _banner(runtime: Runtime, event_loop: str, guards: list[DoorGuard]) -> None:
     if runtime.clock == "realtime":
         clock += f", priority: {runtime.priority_granted}"
     click.echo(clock + ")")
+    notice = stale_notice()
+    if notice is not None:  # an edited engine source: the whole engine runs as pure Python
+        click.echo(f"  WARNING: {notice}")
     image = runtime.image
     layout = runtime.layout
     click.echo(

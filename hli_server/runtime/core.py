@@ -31,6 +31,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
+from hli_server._compiled import stale_notice
 from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     AccessPolicy,
@@ -374,6 +375,9 @@ class Runtime:
         if self.started:
             raise RuntimeStateError("the runtime was started already; build a new Runtime to run again")
         self.started = True
+        notice = stale_notice()
+        if notice is not None:
+            logger.warning("%s", notice)
         self._stop_event = asyncio.Event()
         self._step_lock = asyncio.Lock()
         if self.stop_after_cycles is not None:
