@@ -1,4 +1,4 @@
-"""Compiled or pure engine: which one this process runs (issue 16, docs/performance.md "Compiled engine").
+"""Compiled or pure engine: which one this process runs (docs/performance.md "Compiled engine").
 
 ``pip install`` compiles the modules of ``hli_server/engine`` with mypyc where a C compiler and the
 Python headers are present (``setup.py``); the same source runs as plain Python everywhere else. The

@@ -40,8 +40,8 @@ Header::
 
 ``server_pid`` with ``server_start`` names the very process that wrote the image: a PID the kernel
 has since given to another process has another start time, so a restarted server can tell its
-crashed predecessor's segment from the image of a live server (H-01; issue 12 finding 7). The PID
-namespace says whether the PID means anything here (another container's PIDs do not).
+crashed predecessor's segment from the image of a live server (H-01; reliability.md, round 1, finding 7). The
+PID namespace says whether the PID means anything here (another container's PIDs do not).
 
 Consistency:
 

@@ -11,9 +11,9 @@ An adapter never sees the runtime or the machine. It is handed an :class:`Adapte
   dashboard use it; the PLC doors do not;
 * ``events`` (:class:`EventFeed`): the typed events of ``schemas.events``, live and as a log;
 * ``recorder`` (:class:`RecorderPort`): start and stop a recording of the session, list and fetch
-  recordings (issue 25; the HTTP API and the dashboard);
+  recordings (docs/record-replay.md; the HTTP API and the dashboard);
 * ``faults`` (:class:`~hli_server.adapters.faults.CommFaults`): faults in the PLC's communication on
-  demand, which the doors consult once per request (issue 25);
+  demand, which the doors consult once per request (docs/record-replay.md);
 * ``step(n)`` for the stepped clock (``step_traced(n, signals)`` also returns chosen signals in every
   one of those cycles, :class:`Trace`), and ``on_cycle`` for work that must follow every published
   cycle (ADS device notifications).
@@ -83,7 +83,7 @@ LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "::1", "[::1]"})
 
 @dataclass(frozen=True, slots=True)
 class AccessPolicy:
-    """Who may do what through the network doors (issue 12; ``hli-server run`` flags).
+    """Who may do what through the network doors (docs/reliability.md; ``hli-server run`` flags).
 
     * ``api_token``: state-changing HTTP requests need ``Authorization: Bearer <token>``
       (``--api-token`` or ``HLI_API_TOKEN``); ``run`` requires one when it binds beyond loopback,
@@ -99,8 +99,8 @@ class AccessPolicy:
       (``--read-only-door NAME``); :meth:`for_door` is the policy one door sees.
 
     The token guards the HTTP door only; Modbus and ADS are guarded by their allowlists of peer addresses
-    (their ``allow`` option) or by being read-only (issue 27, finding 8; ``hli-server run`` refuses to
-    open an unguarded write door beyond loopback without ``--insecure``).
+    (their ``allow`` option) or by being read-only (reliability.md, round 2, finding 8; ``hli-server run``
+    refuses to open an unguarded write door beyond loopback without ``--insecure``).
     """
 
     api_token: str | None = None
@@ -416,7 +416,7 @@ class OperatorPort(Protocol):
         """Pacing statistics of the clock (``GET /api/timing``)."""
         ...
 
-    # --- what the dashboard draws (issue 15); lengths in mm ----------------------------------
+    # --- what the dashboard draws (docs/dashboard.md); lengths in mm ----------------------------------
     def scene(self, channel: int) -> Scene:
         """The channel's live scene, as :func:`hli_server.scene.build_scene` computes it for ``check
         --plot``: the area table, the recent trail of the setpoints (since the last program start, the
@@ -435,7 +435,7 @@ class OperatorPort(Protocol):
 
 
 class RecorderPort(Protocol):
-    """Recording the session (issue 25, docs/record-replay.md): one recording at a time, by name in the
+    """Recording the session (docs/record-replay.md): one recording at a time, by name in the
     server's recording directory. Errors are :class:`OperatorError` subclasses."""
 
     def status(self) -> dict[str, Any]:
@@ -562,12 +562,13 @@ class AdapterHost(Protocol):
 
     @property
     def recorder(self) -> RecorderPort:
-        """Recording the session (issue 25)."""
+        """Recording the session (docs/record-replay.md)."""
         ...
 
     @property
     def faults(self) -> CommFaults:
-        """Faults in the PLC's communication on demand (issue 25); the doors consult it per request."""
+        """Faults in the PLC's communication on demand (docs/record-replay.md); the doors consult it per
+        request."""
         ...
 
     async def step(self, cycles: int = 1) -> int:

@@ -185,7 +185,7 @@ class RegisterMap:
     def __init__(self, image: ImagePort, word_order: str = "ABCD", *, read_only: bool = False) -> None:
         order = check_word_order(word_order)
         self.read_only = read_only
-        """``--read-only``: every write function is refused with exception 0x01 (issue 12)."""
+        """``--read-only``: every write function is refused with exception 0x01 (docs/reliability.md)."""
         self.image = image
         self.layout: Layout = image.layout
         self.word_order = order
@@ -548,10 +548,10 @@ class _Connection(asyncio.Protocol):
     """One client: its requests are answered in order, in turns of at most ``BATCH`` frames.
 
     A client that pipelines thousands of requests (or never reads its answers) must neither delay the
-    cycle nor starve another client (issue 12, finding 5): after a turn of ``BATCH`` frames the rest
-    waits in this connection's queue, reading from the socket is paused, and the next turn is scheduled
-    behind every other ready callback (the clock's wake-up and the other connections' turns included).
-    Reading resumes when the queue is empty and the client reads its answers (asyncio's write
+    cycle nor starve another client (reliability.md, round 1, finding 5): after a turn of ``BATCH`` frames
+    the rest waits in this connection's queue, reading from the socket is paused, and the next turn is
+    scheduled behind every other ready callback (the clock's wake-up and the other connections' turns
+    included). Reading resumes when the queue is empty and the client reads its answers (asyncio's write
     high-water mark pauses us too). Input held per connection is therefore bounded by one socket read.
     """
 
@@ -616,8 +616,8 @@ class _Connection(asyncio.Protocol):
         self._idle = asyncio.get_running_loop().call_later(max(timeout - quiet, 0.05), self._idle_check)
 
     def _frame_check(self) -> None:
-        """A frame must complete within ``frame_timeout`` of its first byte (issue 27, finding 3: a byte
-        every 1.5 s kept a connection "active" for ever)."""
+        """A frame must complete within ``frame_timeout`` of its first byte (reliability.md, round 2, finding
+        3: a byte every 1.5 s kept a connection "active" for ever)."""
         self._frame_timer = None
         began, transport = self.partial_since, self._transport
         if began is None or transport is None or transport.is_closing():
@@ -854,7 +854,8 @@ class ModbusAdapter:
 
     def _accept(self, connection: _Connection, peer: object) -> bool:
         """Admit ``connection``; at the limit, the connection whose last request was answered longest ago
-        makes room (issue 12, finding 4; issue 27, finding 3; ``adapters/tcp.py``)."""
+        makes room (reliability.md, round 1, finding 4; reliability.md, round 2, finding 3;
+        ``adapters/tcp.py``)."""
         admission = self._slots.admit(connection, peer)
         if admission is Admission.REFUSED:
             self.server.stats.refused += 1

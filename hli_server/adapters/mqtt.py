@@ -19,7 +19,7 @@ An event's message::
 (reported on ``<prefix>dropped``), a repeated ``seq`` a redelivery after a reconnect (see below).
 ``wall_time`` is when the event happened (not when it was published), UTC.
 
-**The cycle never waits on the broker** (issue 12's bar for every door). The feed calls
+**The cycle never waits on the broker** (the bar for every door). The feed calls
 :meth:`MqttAdapter._on_event` inside the cycle: it appends ``(seq, wall time, event)`` to a bounded
 deque and returns; no await, no lock, no encoding. A client task of its own takes the events off the
 deque, encodes them and publishes them, up to :data:`WINDOW` at once, and takes them off for good only
@@ -290,7 +290,8 @@ class MqttAdapter:
         self._wakeup = asyncio.Event()
         self._stop_requested = asyncio.Event()
         self._faults = CommFaults()
-        """The communication faults (issue 25): a ``disconnect`` fault cuts the broker connection."""
+        """The communication faults (docs/record-replay.md): a ``disconnect`` fault cuts the broker
+        connection."""
         self._cut = asyncio.Event()
         self._unsubscribe_faults: Any = lambda: None
         self._task: asyncio.Task[None] | None = None
@@ -432,7 +433,7 @@ class MqttAdapter:
         self._queue(event, time.time())
 
     def _on_fault(self, _change: dict[str, Any]) -> None:
-        """A communication fault changed: a ``disconnect`` cuts the session now (issue 25)."""
+        """A communication fault changed: a ``disconnect`` cuts the session now (docs/record-replay.md)."""
         if self._faults.door_down(Door.MQTT):
             self._cut.set()
         else:

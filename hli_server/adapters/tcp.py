@@ -1,5 +1,6 @@
 """What the TCP doors (Modbus, ADS) share: listening with a clear error, bounded connections with a slot
-for a newcomer (issue 12, finding 4; issue 27, finding 3), and an allowlist of peer addresses.
+for a newcomer (reliability.md, round 1, finding 4; reliability.md, round 2, finding 3), and an allowlist of
+peer addresses.
 
 A door holds at most ``max_connections``. At the limit a newcomer is never locked out by connections that
 do nothing for anyone (a PLC that reconnects after a restart must never find the door locked by the dead

@@ -1,4 +1,4 @@
-"""The session recorder: the runtime's tap at the latch boundary (issue 25, B-02).
+"""The session recorder: the runtime's tap at the latch boundary (docs/record-replay.md, B-02).
 
 Every cycle the runtime hands :meth:`SessionTap.after_cycle` the PLC->CNC half it latched and the
 CNC->PLC half it packed. The tap keeps, in the cycle, only what changed, as raw bytes (a slice, a

@@ -14,7 +14,7 @@ Adapters start in order after the image exists and before the first cycle and st
 order; then the image is closed and unlinked. :meth:`Runtime.serve` does all of it and stops
 cleanly on SIGINT/SIGTERM.
 
-A failure inside a cycle never ends the server (issue 12): the cycle's exception is logged with its
+A failure inside a cycle never ends the server (docs/reliability.md): the cycle's exception is logged with its
 traceback, every channel takes alarm 919000 (its axes stop, its program is aborted), the failed
 cycles are counted (``GET /api/timing``), and the clock keeps pacing. A reset clears the alarm.
 """
@@ -174,7 +174,8 @@ class Runtime:
         self.programs = RuntimeLibrary([*program_dirs, *config.program_directories])
         """Where ``L name`` finds global subprograms: uploads, ``program_dirs``, the machine file's (N-02)."""
         self.session = SessionTap(config, recording)
-        """Records the session (issue 25): the input journal always, a recording file on demand."""
+        """Records the session (docs/record-replay.md): the input journal always, a recording file on
+        demand."""
         self.machine = Machine(
             config, read_program=self.session.wrap_reader(read_program), programs=self.programs
         )
@@ -184,7 +185,7 @@ class Runtime:
         """Carries out the programs' ``#MSG SAVE`` writes inside its output directory (N-07)."""
         self.machine.event_listeners.append(self.nc_files)
         self.comm_faults = CommFaults(lambda: self.machine.cycle)
-        """Faults in the PLC's communication on demand (issue 25, ``adapters/faults.py``)."""
+        """Faults in the PLC's communication on demand (docs/record-replay.md, ``adapters/faults.py``)."""
         self.comm_faults.subscribe(self.session.note_fault)
         self.recorder_port = SessionRecorderPort(self.session)
         self.t_a = self.machine.t_a
@@ -560,8 +561,8 @@ class Runtime:
                 return
             # everything built so far lives as long as the process: keep it out of the cyclic garbage
             # collector's full passes, which otherwise scan it again and again and delay cycles by
-            # tens of milliseconds (measured under a flooding client, issue 12). Before the banner: a
-            # client that reads it finds the clock already running.
+            # tens of milliseconds (measured under a flooding client, docs/reliability.md). Before the
+            # banner: a client that reads it finds the clock already running.
             gc.collect()
             gc.freeze()
             if ready is not None:

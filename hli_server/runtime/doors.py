@@ -1,4 +1,5 @@
-"""The network doors in a process of their own (``run --doors-process``, the default; issues 12, 26).
+"""The network doors in a process of their own (``run --doors-process``, the default; docs/reliability.md,
+docs/runtime.md).
 
 The image lives in shared memory, so the doors that serve it (Modbus, ADS) attach it by name like a PLC
 does and answer from there; the doors that need the engine (the HTTP API with the dashboard's streams,
@@ -178,7 +179,8 @@ class DoorsHost(AdapterHost):
         self._watch: asyncio.Task[None] | None = None
         self._t_a_s = t_a_us * 1e-6
         self._faults = RemoteFaults(link, lambda: image.cycle)
-        """A mirror of the server's communication faults (the engine's process owns them, issue 25)."""
+        """A mirror of the server's communication faults (the engine's process owns them,
+        docs/record-replay.md)."""
         self._recorder = RemoteRecorder(link)
 
     @property
@@ -281,7 +283,8 @@ def doors_main(plan: DoorsPlan, link: socket.socket, conn: Connection) -> None:
     it so, and it stays so): a Ctrl+C reaches the whole process group, and the parent stops the doors."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if plan.nice:
-        with contextlib.suppress(OSError):  # the clock's process wins the CPU from its doors (issue 26)
+        with contextlib.suppress(OSError):  # the clock's process wins the CPU from its doors
+            # (docs/runtime.md)
             os.nice(plan.nice)
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s doors %(name)s: %(message)s")
     # asyncio's own loop: the doors need no timer finer than a millisecond, and its one epoll_wait a turn

@@ -296,7 +296,7 @@ class OperatorPanel(OperatorPort):
     def timing(self) -> dict[str, Any]:
         return self._timing()
 
-    # --- the dashboard (issue 15): hli_server/runtime/live.py ------------------------------
+    # --- the dashboard (docs/dashboard.md): hli_server/runtime/live.py ------------------------------
     def scene(self, channel: int) -> Scene:
         ch = self._channel(channel)
         key = scene_key(self._m, self.recorder, ch.number)

@@ -1,5 +1,5 @@
-"""What the operator panel shows beyond the snapshot (the dashboard, issue 15): the recent trail of each
-channel's axes, the programmed path ahead, the live scene, the collision pairs.
+"""What the operator panel shows beyond the snapshot (the dashboard, docs/dashboard.md): the recent trail of
+each channel's axes, the programmed path ahead, the live scene, the collision pairs.
 
 The trail is recorded by the runtime after every cycle (:meth:`TrailRecorder.after_cycle`, a cycle
 listener), cheaply: every :data:`TRAIL_EVERY` th cycle one sample of the channel's setpoints, and a

@@ -1,9 +1,10 @@
 """The operator's door across processes: the engine's process serves its operator panel, its event feed
-and its stepped clock to the doors process over a socket pair (issues 26 and 27).
+and its stepped clock to the doors process over a socket pair (docs/runtime.md, docs/reliability.md).
 
 Why: the HTTP API, the dashboard's streams and MQTT are work of the network, and on the clock's event
-loop each of them cost cycles (one read of 10,000 events took the loop for 140-250 ms and dropped
-thousands of cycles; the collector's passes over the server's objects came on top). In the doors process
+loop each of them cost cycles (a long read of the event log held the loop and dropped cycles; the
+collector's passes over the server's objects came on top: docs/performance.md, "The clock under load", has
+the figures). In the doors process
 they cost the clock nothing: what remains in the engine's process is this service, and the clock serves it
 *between* cycles (``run_realtime``'s ``serve``), in the slack before the next cycle is due.
 
@@ -14,7 +15,7 @@ What crosses the socket (frames: a 4-byte length, then a pickle; both ends are t
                       ("readiness", id)                        the server's readiness (GET /api/ready)
                       ("step", id, cycles, signals | None)     the stepped clock (async at the doors)
                       ("cancel", id)                           the client of that step went away
-                      ("recorder", id, method, args)           the session recorder (issue 25)
+                      ("recorder", id, method, args)           the session recorder (docs/record-replay.md)
                       ("faults", id, op, args)                 set, end or reset communication faults
                       ("fault-ended", 0, fault id, reason)     a fault the doors used up (no answer)
     engine -> doors   ("ok", id, result) / ("err", id, exception)
@@ -26,10 +27,10 @@ answers what never changes from a cache (channels, axes, program tables, the mac
 and time from the image it attached, and sorts the timing samples itself: a read, however large its
 answer, reaches the engine as one small request or not at all.
 
-The engine's process owns the communication faults (issue 25: the recording notes every change, a stall
-acts on the publish); the doors process keeps a mirror that its connections consult (:class:`RemoteFaults`),
-which sends what users set through the doors (the HTTP API) to the engine and takes the engine's table on
-every change.
+The engine's process owns the communication faults (docs/record-replay.md: the recording notes every change,
+a stall acts on the publish); the doors process keeps a mirror that its connections consult
+(:class:`RemoteFaults`), which sends what users set through the doors (the HTTP API) to the engine and takes
+the engine's table on every change.
 
 * :class:`OperatorService`: the engine's end, an ``asyncio.Protocol`` on the clock's loop;
 * :class:`RemoteLink`, :class:`RemoteOperator`, :class:`EventMirror`, :class:`RemoteFaults`,
@@ -783,8 +784,8 @@ class RemoteFaults(CommFaults):
 
 
 class RemoteRecorder(RecorderPort):
-    """The session recorder of the engine's process, asked over the link (issue 25). A recording's file
-    is on the machine's file system, which both processes see: ``file`` gives its path."""
+    """The session recorder of the engine's process, asked over the link (docs/record-replay.md). A
+    recording's file is on the machine's file system, which both processes see: ``file`` gives its path."""
 
     def __init__(self, link: RemoteLink) -> None:
         self._link = link

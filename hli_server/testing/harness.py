@@ -199,9 +199,9 @@ class SessionRecording:
 
 
 class CommFaultsView:
-    """The communication faults of the harness' server (issue 25, ``hli.comm_faults``): each call is
-    handed to the server's loop. ``with hli.comm_faults.fault(kind="delay", door="modbus", delay_ms=50,
-    count=3): ...`` ends the fault at the end of the block."""
+    """The communication faults of the harness' server (docs/record-replay.md, ``hli.comm_faults``): each
+    call is handed to the server's loop. ``with hli.comm_faults.fault(kind="delay", door="modbus",
+    delay_ms=50, count=3): ...`` ends the fault at the end of the block."""
 
     def __init__(self, harness: Harness) -> None:
         self._harness = harness
@@ -480,7 +480,8 @@ class Harness:
         self._loop_or_raise()
         return self._call_soon(lambda: self.runtime.record(signals))
 
-    # --- recording and replay (issue 25) -----------------------------------------------------------
+    # --- recording and replay (docs/record-replay.md)
+    # -----------------------------------------------------------
     def record(self, path: str | os.PathLike[str], *, overwrite: bool = True) -> SessionRecording:
         """Record this session into ``path`` (gzip JSON Lines, docs/record-replay.md) from the next cycle
         on, with every input since the first cycle; ``with hli.record(p): ...`` or ``.stop()``."""

@@ -1,8 +1,8 @@
 """Options of the ADS adapter (light: importing it imports neither asyncio servers nor the codec).
 
 ``[[adapters]] name = "ads"`` in the machine file, ``--adapter ads:KEY=VALUE``, ``--ads-port`` and
-``--ams-net-id`` (H-04; docs/ads.md). The limits are the door's robustness bar (issue 12): every one
-bounds what one client can make the server hold or do, and each has a default that serves a test
+``--ams-net-id`` (H-04; docs/ads.md). The limits are the door's robustness bar (docs/reliability.md): every
+one bounds what one client can make the server hold or do, and each has a default that serves a test
 farm of a few hundred clients.
 """
 

@@ -3,7 +3,7 @@
 The operator panel of the simulated machine and the remote control of the integration tests (H-07):
 machine state, programs, start/feedhold/reset, mode, jog, override, referencing, stepping the stepped
 clock, fault injection (A3-05), alarms and events, and every image field by its ST path (H-01, H-02);
-the live dashboard at ``/`` (issue 15, ``routers/page.py``, ``live.py``).
+the live dashboard at ``/`` (docs/dashboard.md, ``routers/page.py``, ``live.py``).
 Each concern is a router of its own (``routers/``); each takes the host as a dependency and knows
 nothing of the runtime or the engine.
 

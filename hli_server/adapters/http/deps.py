@@ -49,8 +49,8 @@ class SafeJSONResponse(JSONResponse):
 
 
 ECHO_LIMIT = 200
-"""Characters of a refused input that a 422 quotes back (issue 27, finding 9: a list of 100,000 trace
-names was sent back whole, 3.9 MB); beyond, the answer says what it was and how large."""
+"""Characters of a refused input that a 422 quotes back (reliability.md, round 2, finding 9: a list of
+100,000 trace names was sent back whole, 3.9 MB); beyond, the answer says what it was and how large."""
 
 
 def _brief(value: Any) -> Any:

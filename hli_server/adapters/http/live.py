@@ -1,4 +1,5 @@
-"""The dashboard's live feed: one server-sent event stream per open page (``GET /api/live``, issue 15).
+"""The dashboard's live feed: one server-sent event stream per open page (``GET /api/live``,
+docs/dashboard.md).
 
 What a stream carries (``event:`` names, ``data:`` one JSON object each):
 
@@ -22,9 +23,9 @@ operator's snapshot; a stream keeps only the newest state (states are not queued
 happens in the streams' own tasks. Without an open stream nothing runs: no listener, no task.
 
 Bounds: at most :attr:`LiveFeed.max_streams` streams at once (16 by default). A page that does not read
-what it is sent holds nothing for long (issue 27, finding 4): when every slot is taken, a newcomer takes
-the slot of the stream that has waited longest (at least :data:`STALL_EVICT_S`) for its page to take a
-message; and the door drops a connection whose client leaves an answer unread for ``write_timeout``
+what it is sent holds nothing for long (reliability.md, round 2, finding 4): when every slot is taken, a
+newcomer takes the slot of the stream that has waited longest (at least :data:`STALL_EVICT_S`) for its page to
+take a message; and the door drops a connection whose client leaves an answer unread for ``write_timeout``
 seconds (``protocol.py``). Only when every open page reads is a newcomer refused (503). At shutdown
 :meth:`LiveFeed.close` ends every stream, so none holds the server's graceful shutdown.
 
