@@ -26,7 +26,19 @@ References, measured in the same run, interleaved round by round (best of ``--ro
 * peak memory (``ru_maxrss``) of ``hli-server check`` processes on the program and on one twice as long:
   a streaming check stays flat.
 
-    .venv/bin/python -m benchmarks.bench_check [--blocks N] [--rounds R]
+Then the hard case for arcs (issue 26, ``near_area_arcs``): a program of as many motion blocks, most of
+them arcs close to the same 20 areas (rings of G02/G03 and short chords hugging the protection circles,
+offset curves and bulging arcs round the squares, travel arcs, arcs in G18 and G19 beside the areas,
+G161/G162 tour by tour), against ``rs274 -g`` on the same moves (``near_area_arcs_rs274``), the same
+program without areas, and the plain-line figure above, all in the same run; the exact path on
+its first 1/200 (an arc in G18/G19 is cut into chords there: slow).
+
+With ``--before DIR`` (another checkout of this repository with its engine built, e.g. the commit
+before a change, ``python setup.py build_ext --inplace`` there for the compiled engine), the plain-line
+and the arc programs are also checked by that engine and by this one, each in a process of its own,
+interleaved round by round: before and after in the same run.
+
+    .venv/bin/python -m benchmarks.bench_check [--blocks N] [--rounds R] [--only-arcs] [--before DIR]
 """
 
 from __future__ import annotations
@@ -46,6 +58,8 @@ from benchmarks.programs import (
     WORK_POLYGON,
     _near_moves,
     interleaved,
+    near_area_arcs,
+    near_area_arcs_rs274,
     near_area_lines,
     near_area_lines_rs274,
     write_lines,
@@ -87,6 +101,51 @@ def _exact_share(path: Path) -> tuple[int, int]:
                 if isinstance(item, Marker) and item.kind == MarkerKind.ACTION:
                     item.payload()
     return batch.exact_blocks, batch.exact_blocks + batch.batched_blocks
+
+
+_TIMED = """
+import sys, time
+from hli_server._compiled import ENGINE_COMPILED
+from hli_server.commands.check import check_program
+from hli_server.configuration import load_machine
+from hli_server.engine import Machine
+machine = Machine(load_machine(sys.argv[1]))
+with open(sys.argv[2], encoding="utf-8", newline="") as f:
+    began = time.perf_counter()
+    result = check_program(machine, f, geometry_only=True)
+    elapsed = time.perf_counter() - began
+assert result.completed and not result.alarms
+print(result.blocks / elapsed, "compiled" if ENGINE_COMPILED else "pure")
+"""
+
+
+def _ours_in(tree: Path, path: Path) -> tuple[float, str]:
+    """blocks/s of ``check --geometry-only`` on ``path`` with the engine of the checkout ``tree``, in a
+    process of its own (and whether that engine ran compiled)."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    env.pop(BATCH_ENV, None)
+    done = subprocess.run(
+        [sys.executable, "-c", _TIMED, str(FULL_MACHINE), str(path)],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=1200,
+        env=env,
+        cwd=tree,
+    )
+    rate, engine = done.stdout.split()
+    return float(rate), engine
+
+
+def _arc_share(path: Path) -> float:
+    """Per cent of the program's motion blocks that are arcs."""
+    arcs = moves = 0
+    with path.open(encoding="utf-8") as f:
+        for line in f:
+            if line.startswith(("G01", "G02", "G03")):
+                moves += 1
+                arcs += not line.startswith("G01")
+    return 100.0 * arcs / max(moves, 1)
 
 
 def _rs274(path: Path, tool_table: Path, out: Path) -> float | None:
@@ -162,6 +221,10 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--no-memory", action="store_true", help="skip the peak-memory comparison")
     ap.add_argument("--no-exact", action="store_true", help="skip the exact (block by block) reference")
+    ap.add_argument(
+        "--only-arcs", action="store_true", help="only the arc program, the lines and rs274 on both"
+    )
+    ap.add_argument("--before", type=Path, help="another checkout: its engine against this one, same run")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
@@ -169,21 +232,53 @@ def main() -> None:
         write_lines(with_areas, near_area_lines(args.blocks))
         write_lines(plain, near_area_lines(args.blocks, with_areas=False))
         write_lines(ngc, near_area_lines_rs274(args.blocks))
+        arcs, arcs_plain, arcs_ngc = d / "arcs.nc", d / "arcs_plain.nc", d / "arcs.ngc"
+        arcs_short = d / "arcs_short.nc"
+        write_lines(arcs, near_area_arcs(args.blocks))
+        write_lines(arcs_plain, near_area_arcs(args.blocks, with_areas=False))
+        write_lines(arcs_ngc, near_area_arcs_rs274(args.blocks))
+        write_lines(arcs_short, near_area_arcs(max(args.blocks // 200, 1)))
         tool_table = d / "tool.tbl"
         tool_table.write_text("T1 P1 D0 Z0 ;\n", encoding="utf-8")
-        mixes = [(5, "(a comment)"), (50, "M08"), (200, "M08"), (1000, "M08")]
+        mixes = [] if args.only_arcs else [(5, "(a comment)"), (50, "M08"), (200, "M08"), (1000, "M08")]
         mixed = [d / f"mixed{k}.nc" for k in range(len(mixes))]
         for (every, extra), path in zip(mixes, mixed, strict=True):
             write_lines(path, interleaved(near_area_lines(args.blocks // 5), every, extra))
         best_mixed = [[0.0, 0.0] for _ in mixes]
-        best = {"areas": 0.0, "plain": 0.0, "rs274": 0.0, "exact": 0.0}
-        blocks = 0
+        best = {
+            "areas": 0.0,
+            "plain": 0.0,
+            "rs274": 0.0,
+            "exact": 0.0,
+            "arcs": 0.0,
+            "arcs_plain": 0.0,
+            "arcs_rs274": 0.0,
+            "arcs_exact": 0.0,
+        }
+        blocks = arc_blocks = 0
+        here = Path(__file__).resolve().parent.parent
+        trees = {"before": args.before.resolve(), "after": here} if args.before else {}
+        versus = {(name, kind): 0.0 for name in trees for kind in ("lines", "arcs")}
+        engines: dict[str, str] = {}
         for _ in range(args.rounds):
+            for (name, kind), figure in versus.items():
+                rate, engines[name] = _ours_in(trees[name], with_areas if kind == "lines" else arcs_short)
+                versus[name, kind] = max(figure, rate)
             t, blocks = _ours(with_areas)
             best["areas"] = max(best["areas"], blocks / t)
+            t, arc_blocks = _ours(arcs)
+            best["arcs"] = max(best["arcs"], arc_blocks / t)
+            t, n = _ours(arcs_plain)
+            best["arcs_plain"] = max(best["arcs_plain"], n / t)
             t, n = _ours(plain)
             best["plain"] = max(best["plain"], n / t)
+            t_rs = _rs274(arcs_ngc, tool_table, d / "rs274_arcs.out")
+            if t_rs is not None:
+                best["arcs_rs274"] = max(best["arcs_rs274"], (args.blocks + 2) / t_rs)
             if not args.no_exact:
+                t, n = _ours(arcs_short, exact=True)
+                best["arcs_exact"] = max(best["arcs_exact"], n / t)
+            if not args.no_exact and not args.only_arcs:
                 t, n = _ours(with_areas, exact=True)
                 best["exact"] = max(best["exact"], n / t)
             for path, figures in zip(mixed, best_mixed, strict=True):
@@ -220,20 +315,47 @@ def main() -> None:
             )
         else:
             print("reference rs274: skipped (not installed; Debian: apt-get install linuxcnc-uspace)")
+        exact_arcs, total_arcs = _exact_share(arcs)
+        print(
+            f"mostly arcs near the same 20 areas ({arc_blocks:,} blocks, {_arc_share(arcs):.0f} % of them "
+            f"arcs): {best['arcs']:,.0f} blocks/s; without areas: {best['arcs_plain']:,.0f} blocks/s; "
+            f"arcs / plain lines (same run): {best['arcs'] / best['areas']:.2f}; decoded exactly: "
+            f"{exact_arcs:,} of {total_arcs:,}"
+        )
+        if best["arcs_rs274"]:
+            print(
+                f"reference: LinuxCNC rs274 -g, the same arcs, no areas: {best['arcs_rs274']:,.0f} blocks/s; "
+                f"ratio ours (20 areas) / rs274: {best['arcs'] / best['arcs_rs274']:.2f}, "
+                f"ours without areas / rs274: {best['arcs_plain'] / best['arcs_rs274']:.2f}"
+            )
+        if best["arcs_exact"]:
+            print(
+                f"reference: the exact path on the first {max(args.blocks // 200, 1):,} blocks of the arc "
+                f"program: {best['arcs_exact']:,.0f} blocks/s; batch / exact: "
+                f"{best['arcs'] / best['arcs_exact']:.1f}"
+            )
         for (every, extra), (batch, exact) in zip(mixes, best_mixed, strict=True):
             print(
                 f"the same moves ({args.blocks // 5:,}) with {extra!r} after every {every} motion lines: "
                 f"{batch:,.0f} blocks/s; the exact path: {exact:,.0f} blocks/s; "
                 f"batch / exact: {batch / exact:.2f}"
             )
-        shp = _shapely_batched(args.blocks)
+        shp = None if args.only_arcs else _shapely_batched(args.blocks)
         if shp is not None:
             t, n = shp
             print(
                 f"reference: shapely batched intersects, the program's {n:,} lines x 20 areas, one call: "
                 f"{n / t:,.0f} lines/s (yes/no only); ratio ours / shapely: {best['areas'] / (n / t):.2f}"
             )
-        if not args.no_memory:
+        for kind in ("lines", "arcs") if trees else ():
+            before, after = versus["before", kind], versus["after", kind]
+            print(
+                f"before / after ({kind} near 20 areas{'' if kind == 'lines' else ', the first 1/200'}, "
+                f"{engines['before']} / {engines['after']} engine, own "
+                f"processes, same run): {before:,.0f} / {after:,.0f} blocks/s; after / before: "
+                f"{after / before:.2f}"
+            )
+        if not args.no_memory and not args.only_arcs:
             double = d / "near2.nc"
             write_lines(double, near_area_lines(2 * args.blocks))
             m1, m2 = _peak_rss_mb(with_areas), _peak_rss_mb(double)

@@ -48,7 +48,7 @@ import numpy.typing as npt
 
 from hli_server.engine.areas.geometry import Group
 from hli_server.engine.areas.path_check import AreaPathCheck
-from hli_server.engine.areas.prefilter import MARGIN, PathBatch, clear_of_areas
+from hli_server.engine.areas.prefilter import MARGIN, PathBatch, clear_of_areas, cut_into_chords
 from hli_server.engine.channel import Channel
 from hli_server.engine.decoder import Decoder, PathCheck
 from hli_server.engine.monitors.collision import MoveApartCheck
@@ -232,7 +232,8 @@ class BatchGeometryCheck:
         decoder = self.decoder
         groups, all_exact = self._checks()
         areas = sum(len(g.works) + len(g.prots) for g in groups)
-        if decoder.modal.in_area_definition or count < SMALL_RUN + SMALL_RUN_PER_AREA * areas:
+        short = count < SMALL_RUN + SMALL_RUN_PER_AREA * areas and not self._chords(chunk, idx, groups)
+        if decoder.modal.in_area_definition or short:
             for k in idx.tolist():
                 self.line = chunk.first_line + k
                 self.exact_blocks += 1
@@ -241,6 +242,15 @@ class BatchGeometryCheck:
                     return
             return
         yield from self._batch(chunk, idx, groups, all_exact)
+
+    def _chords(self, chunk: _Chunk, idx: Ints, groups: list[Group]) -> bool:
+        """Has the stretch arcs that the exact check cuts into chords (a G18 arc among G17 areas)? Each
+        costs it hundreds of chords: a short stretch with one is batched all the same."""
+        plane = self._plane()
+        if plane is None or not cut_into_chords(groups, plane):
+            return False
+        motion = _fill(chunk.plain.values[COL_G, idx], float(self.decoder.modal.motion))
+        return bool((motion >= 2.0).any())
 
     def _batch(self, chunk: _Chunk, idx: Ints, groups: list[Group], all_exact: bool) -> Iterator[list[Item]]:
         decoder = self.decoder

@@ -32,7 +32,7 @@ from hli_server.engine.alarms import Severity
 from hli_server.engine.areas.geometry import Circle, Group, Polygon, Prism, first_violation
 from hli_server.engine.areas.prefilter import PathBatch, clear_of_areas
 from hli_server.engine.batch import BatchGeometryCheck
-from hli_server.engine.geometry import ArcSegment, LineSegment, Segment
+from hli_server.engine.geometry import ArcSegment, LineSegment, Segment, arc_from_centre
 from hli_server.engine.monitors.base import ChannelHooks, Monitor
 from hli_server.engine.nc import NcError, parse_line
 from hli_server.engine.nc import source as source_module
@@ -658,6 +658,359 @@ def test_several_work_areas_and_mixed_protections(
     assert batched >= 290  # the zigzag is in the circle only: cleared by the second work area
 
 
+# --- arcs near the areas, one by one (issue 26) ------------------------------------------------------
+_CENTRE_LETTER = {"X": "I", "Y": "J", "Z": "K"}
+_PLANE_OF = {17: (0, 1), 18: (2, 0), 19: (1, 2)}
+
+
+def _area_groups(config: MachineConfig, areas: str) -> list[Group]:
+    """The active area groups after ``areas`` (as the batch hands them to the prefilter)."""
+    machine = Machine(config)
+    checker = BatchGeometryCheck(machine.channel(1))
+    for items in checker.items(areas):
+        for item in items:
+            if getattr(item, "kind", None) is not None and item.kind.name == "ACTION":
+                item.payload()
+    groups, _ = checker._checks()
+    return groups
+
+
+def _arc_text(
+    g: str, start: dict[str, float], end: dict[str, float], centre: dict[str, float], absolute: bool
+) -> str:
+    words = [g, *(f"{k}{_f(v)}" for k, v in end.items())]
+    for axis, c in centre.items():
+        words.append(f"{_CENTRE_LETTER[axis]}{_f(c if absolute else c - start[axis])}")
+    return " ".join(words)
+
+
+def _arc_segment(
+    plane: int, g: str, start: dict[str, float], end: dict[str, float], centre: dict[str, float]
+) -> ArcSegment:
+    """The arc as the decoder builds it (machine coordinates: no offset in AREAS)."""
+    p0 = tuple(start[a] for a in AXES)
+    p1 = tuple(end.get(a, start[a]) for a in AXES)
+    i, j = _PLANE_OF[plane]
+    arc, mismatch = arc_from_centre(p0, p1, (i, j), (centre[AXES[i]], centre[AXES[j]]), g == "G02")
+    assert mismatch < 1e-3
+    return arc
+
+
+# (name, approach points X/Y from (0, 30) at Z0 then Z, plane, G, end, centre, leave points, alarm, cleared)
+# the circle of AREAS: centre (50, 0), radius 10; the square: x -80..-60, y -20..20; the work area +-200
+_Points = list[tuple[float, float]]
+_NearArc = tuple[
+    str, _Points, float, int, str, dict[str, float], dict[str, float], _Points, int | None, bool | None
+]
+_NEAR_ARCS: list[_NearArc] = [
+    # rings about the circle
+    (
+        "ring 0.1 µm off the circle",
+        [(62, 30), (60.0001, 0)],
+        0,
+        17,
+        "G02",
+        {"X": 60.0001, "Y": 0},
+        {"X": 50, "Y": 0},
+        [(62, 30)],
+        None,
+        True,
+    ),
+    (
+        "circle inside touching it",
+        [(62, 30), (61, 0)],
+        0,
+        17,
+        "G02",
+        {"X": 61, "Y": 0},
+        {"X": 50.5, "Y": 0},
+        [(62, 30)],
+        912001,
+        False,
+    ),
+    (
+        "its quarter away from the touch",
+        [(62, 30), (61, 0)],
+        0,
+        17,
+        "G03",
+        {"X": 50.5, "Y": 10.5},
+        {"X": 50.5, "Y": 0},
+        [(50.5, 30)],
+        None,
+        True,
+    ),
+    # about (53, 0), radius 13: inside tangent to the circle at (40, 0), the angle pi (the seam)
+    (
+        "over the seam onto the touch",
+        [(41, 30), (41, 5)],
+        0,
+        17,
+        "G03",
+        {"X": 41, "Y": -5},
+        {"X": 53, "Y": 0},
+        [(30, -5), (30, 30)],
+        912001,
+        False,
+    ),
+    (
+        "the long way round it",
+        [(41, 30), (41, 5)],
+        0,
+        17,
+        "G02",
+        {"X": 41, "Y": -5},
+        {"X": 53, "Y": 0},
+        [(30, -5), (30, 30)],
+        None,
+        True,
+    ),
+    (
+        "over the seam 0.8 µm off",
+        [(41, 30), (41, 5)],
+        0,
+        17,
+        "G03",
+        {"X": 41, "Y": -5},
+        {"X": 52.99, "Y": 0},
+        [(30, -5), (30, 30)],
+        None,
+        True,
+    ),
+    (
+        "over the seam 10 µm in",
+        [(41, 30), (41, 5)],
+        0,
+        17,
+        "G03",
+        {"X": 41, "Y": -5},
+        {"X": 53.0001, "Y": 0},
+        [(30, -5), (30, 30)],
+        912001,
+        False,
+    ),
+    # the square's right edge x = -60
+    (
+        "whole circle tangent to the edge",
+        [(-50, 30), (-50, 0)],
+        0,
+        17,
+        "G02",
+        {"X": -50, "Y": 0},
+        {"X": -55, "Y": 0},
+        [(-50, 30)],
+        912001,
+        False,
+    ),
+    (
+        "whole circle 10 µm off the edge",
+        [(-49.99, 30), (-49.99, 0)],
+        0,
+        17,
+        "G02",
+        {"X": -49.99, "Y": 0},
+        {"X": -54.99, "Y": 0},
+        [(-49.99, 30)],
+        None,
+        True,
+    ),
+    (
+        "its half away from the edge",
+        [(-50, 30), (-50, -5), (-55, -5)],
+        0,
+        17,
+        "G03",
+        {"X": -55, "Y": 5},
+        {"X": -55, "Y": 0},
+        [(-50, 5), (-50, 30)],
+        None,
+        True,
+    ),
+    # from (-58, 15) to (-58, -15): the chord 2 mm off the edge, the arc bulging onto it
+    (
+        "chord off, bulge on the edge",
+        [(-58, 30), (-58, 15)],
+        0,
+        17,
+        "G03",
+        {"X": -58, "Y": -15},
+        {"X": -2.75, "Y": 0},
+        [(-50, -15), (-50, 30)],
+        912001,
+        False,
+    ),
+    (
+        "chord off, bulge 9 µm off",
+        [(-57.99, 30), (-57.99, 15)],
+        0,
+        17,
+        "G03",
+        {"X": -57.99, "Y": -15},
+        {"X": -2.75, "Y": 0},
+        [(-50, -15), (-50, 30)],
+        None,
+        True,
+    ),
+    # tiny arcs (radius 1 µm) 0.5 µm off the edge: the half away from it, the half onto it
+    (
+        "tiny arc off the edge",
+        [(-59.9995, 30), (-59.9995, 4.999)],
+        0,
+        17,
+        "G03",
+        {"X": -59.9995, "Y": 5.001},
+        {"X": -59.9995, "Y": 5},
+        [(-59.9995, 30)],
+        None,
+        True,
+    ),
+    (
+        "tiny arc into the square",
+        [(-59.9995, 30), (-59.9995, 4.999)],
+        0,
+        17,
+        "G02",
+        {"X": -59.9995, "Y": 5.001},
+        {"X": -59.9995, "Y": 5},
+        [(-59.9995, 30)],
+        912001,
+        False,
+    ),
+    # the work area (+-200): a large arc whose whole circle leaves it, one whose sweep does
+    (
+        "large arc in the work area",
+        [(120, 100)],
+        0,
+        17,
+        "G03",
+        {"X": -120, "Y": 100},
+        {"X": 0, "Y": -250},
+        [(0, 30)],
+        None,
+        True,
+    ),
+    (
+        "large arc out of it",
+        [(195, 150)],
+        0,
+        17,
+        "G03",
+        {"X": -195, "Y": 150},
+        {"X": 0, "Y": -200},
+        [(0, 30)],
+        120486,
+        False,
+    ),
+    # G18 beside the circle (y = 0, x = 60.5): a half circle up, bulging away (its whole circle reaches
+    # into the circle) and the same towards it; a helix across the base plane (y moves: not a segment)
+    (
+        "G18 half circle away",
+        [(62, 30), (60.5, 0)],
+        -5,
+        18,
+        "G02",
+        {"X": 60.5, "Z": 5},
+        {"X": 60.5, "Z": 0},
+        [(62, 30)],
+        None,
+        True,
+    ),
+    (
+        "G18 half circle into it",
+        [(62, 30), (60.5, 0)],
+        -5,
+        18,
+        "G03",
+        {"X": 60.5, "Z": 5},
+        {"X": 60.5, "Z": 0},
+        [(62, 30)],
+        912001,
+        False,
+    ),
+    (
+        "G18 helix across the base",
+        [(62, 30), (60.5, 0)],
+        -5,
+        18,
+        "G02",
+        {"X": 60.5, "Y": 1, "Z": 5},
+        {"X": 60.5, "Z": 0},
+        [(62, 30)],
+        None,
+        None,
+    ),
+    # G19 above the square (x = -70, y = 20.5)
+    (
+        "G19 half circle away",
+        [(-70, 30), (-70, 20.5)],
+        -5,
+        19,
+        "G03",
+        {"Y": 20.5, "Z": 5},
+        {"Y": 20.5, "Z": 0},
+        [(-70, 30)],
+        None,
+        True,
+    ),
+    (
+        "G19 half circle into it",
+        [(-70, 30), (-70, 20.5)],
+        -5,
+        19,
+        "G02",
+        {"Y": 20.5, "Z": 5},
+        {"Y": 20.5, "Z": 0},
+        [(-70, 30)],
+        912001,
+        False,
+    ),
+]
+
+
+@pytest.mark.req("C14-15")
+@pytest.mark.parametrize("absolute", [False, True], ids=["G162", "G161"])
+@pytest.mark.parametrize(
+    ("approach", "z", "plane", "g", "end", "centre", "leave", "alarm", "cleared"),
+    [case[1:] for case in _NEAR_ARCS],
+    ids=[case[0] for case in _NEAR_ARCS],
+)
+def test_arcs_near_the_areas(
+    config: MachineConfig,
+    absolute: bool,
+    approach: list[tuple[float, float]],
+    z: float,
+    plane: int,
+    g: str,
+    end: dict[str, float],
+    centre: dict[str, float],
+    leave: list[tuple[float, float]],
+    alarm: int | None,
+    cleared: bool | None,
+) -> None:
+    """Arcs tangent to circles and polygon edges, whole circles, tiny arcs, arcs over the +-180 degree
+    seam, arcs whose chord keeps off but whose bulge does not, large arcs in a work area, G18/G19 arcs
+    beside G17 areas, with relative and absolute centres: the batch reports what the exact path
+    reports (the alarm on the arc's own line), and the prefilter clears the arc alone exactly where
+    it keeps off (an alarm: never)."""
+    start = {"X": approach[-1][0], "Y": approach[-1][1], "Z": float(z)}
+    arc = _arc_text(g, start, end, centre, absolute)
+    lines = [*_zigzag(200), "G01 X0 Y30", *(f"G01 X{_f(x)} Y{_f(y)}" for x, y in approach), f"G01 Z{_f(z)}"]
+    lines += ["G161" if absolute else "G162", f"G{plane}", arc, "G17 G162", "G01 Z0"]
+    lines += [f"G01 X{_f(x)} Y{_f(y)}" for x, y in [*leave, (0, 30)]] + [*_zigzag(200), "M30"]
+    text = AREAS + "\n".join(lines) + "\n"
+    result = assert_same(config, text)
+    errors = [a for a in result.alarms if a.severity == Severity.ERROR]
+    assert [a.number for a in errors] == ([alarm] if alarm else [])
+    if alarm:
+        assert errors[0].line == AREAS.count("\n") + lines.index(arc) + 1
+    if cleared is not None:
+        segment = _arc_segment(plane, g, start, end, centre)
+        groups = _area_groups(config, AREAS)
+        assert bool(clear_of_areas(groups, _path_batch([segment], segment.plane))[0]) is cleared
+        if alarm:
+            assert first_violation(groups, segment) is not None
+
+
 def _prism(rng: random.Random, axes: tuple[int, int, int], protection: bool) -> Prism:
     a, b, c = axes
     if protection:
@@ -794,6 +1147,126 @@ def test_the_prefilter_clears_most_allowed_paths_of_random_groups() -> None:
                 arcs_cleared += bool(clear[k]) and isinstance(path, ArcSegment)
     assert cleared > 0.8 * allowed, (cleared, allowed)
     assert arcs_cleared > 200, arcs_cleared
+
+
+def _near_arcs(rng: random.Random, groups: list[Group], plane: tuple[int, int], n: int) -> list[Segment]:
+    """Arcs in ``plane`` placed on the areas' boundaries (issue 26): about a point at ``rho + delta``
+    from a circle's centre or from a point of a polygon's edge along its normal (``delta`` 0 - a touch -,
+    10 nm in or out, a little more, half a millimetre), with sweeps through the touching angle or
+    away from it, whole circles, tiny radii (1 µm), large ones (up to 400 mm), sweeps over the +-180
+    degree seam; for prisms that see the plane at an angle, arcs whose whole circle reaches into the
+    prism while their sweep stays beside it. Each arc is reached by a line from the last point."""
+    i, j = plane
+    prisms = [q for g in groups for q in g.works + g.prots]
+    out: list[Segment] = []
+    if not prisms:
+        return out
+    p = [rng.uniform(-50, 50) for _ in range(5)]
+    for _ in range(n):
+        q = rng.choice(prisms)
+        rho = rng.choice((1e-3, 0.5, 3.0, 20.0, rng.uniform(50.0, 400.0)))
+        delta = rng.choice((0.0, 1e-5, -1e-5, 2e-5, 1e-3, -1e-3, 0.5))
+        region = q.region
+        if {q.a, q.b} == {i, j} or rng.random() < 0.5:
+            # a point of the boundary and the outward direction there, in the prism's base plane
+            if isinstance(region, Circle):
+                t = rng.uniform(-math.pi, math.pi)
+                ux, uy = math.cos(t), math.sin(t)
+                bx, by = region.cx + region.r * ux, region.cy + region.r * uy
+            else:
+                pts = region.points
+                k = rng.randrange(len(pts))
+                (x0, y0), (x1, y1) = pts[k], pts[(k + 1) % len(pts)]
+                f = rng.choice((0.0, 0.5, 1.0, rng.random()))
+                bx, by = x0 + (x1 - x0) * f, y0 + (y1 - y0) * f
+                length = math.hypot(x1 - x0, y1 - y0) or 1.0
+                ux, uy = (y1 - y0) / length, -(x1 - x0) / length
+                if rng.random() < 0.5:
+                    ux, uy = -ux, -uy  # either side: the polygon may turn either way
+            centre = [0.0] * 5
+            centre[q.a], centre[q.b] = bx + ux * (rho + delta), by + uy * (rho + delta)
+            centre[q.c] = p[q.c]
+            touch = math.atan2(-uy, -ux) if q.a == i else math.atan2(-ux, -uy)
+        else:
+            # beside the prism along one of the plane's axes that is one of its base axes
+            base = i if i in (q.a, q.b) else j
+            x0, y0, x1, y1 = region.bbox
+            lo_, hi_ = (x0, x1) if base == q.a else (y0, y1)
+            centre = list(p)
+            centre[base] = rng.choice((lo_ - rho - delta, hi_ + rho + delta, (lo_ + hi_) / 2.0))
+            touch = rng.uniform(-math.pi, math.pi)
+        cx, cy = centre[i], centre[j]
+        kind = rng.random()
+        if kind < 0.15:
+            a0, sweep = rng.uniform(-math.pi, math.pi), rng.choice((2.0, -2.0)) * math.pi
+        elif kind < 0.3:
+            u = rng.uniform(0.0, 0.5)  # over the seam, either way
+            a0, sweep = (math.pi - u, rng.uniform(u + 0.01, u + 1.5))
+            if rng.random() < 0.5:
+                a0, sweep = -a0, -sweep
+        elif kind < 0.65:
+            a0 = touch - rng.uniform(0.05, 1.0)  # through the touching angle
+            sweep = rng.uniform(0.1, 2.5)
+            if rng.random() < 0.5:
+                a0, sweep = a0 + sweep, -sweep
+        else:
+            a0 = touch + rng.uniform(0.3, 2.0)  # beside it
+            sweep = rng.choice((1, -1)) * rng.uniform(0.05, 2.0)
+        start = list(p)
+        start[i], start[j] = cx + rho * math.cos(a0), cy + rho * math.sin(a0)
+        if rng.random() < 0.5:
+            for k in range(5):
+                if k not in (i, j):
+                    start[k] = centre[k]
+        out.append(LineSegment(tuple(p), tuple(start)))
+        end = list(start)
+        if abs(abs(sweep) - 2.0 * math.pi) > 1e-12:
+            end[i], end[j] = cx + rho * math.cos(a0 + sweep), cy + rho * math.sin(a0 + sweep)
+        if rng.random() < 0.2:
+            k = rng.choice([k for k in range(5) if k not in (i, j)])
+            end[k] += rng.choice((1e-3, 5.0))  # a helix
+        a_start = math.atan2(start[j] - cy, start[i] - cx)
+        out.append(ArcSegment(tuple(start), tuple(end), plane, (cx, cy), rho, a_start, sweep))
+        p = end
+    return out
+
+
+@pytest.mark.req("C14-15")
+@settings(max_examples=150, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2**32 - 1), plane=st.sampled_from([(0, 1), (1, 0), (2, 0), (1, 2), (3, 4)]))
+def test_the_prefilter_clears_only_arcs_the_exact_check_passes(seed: int, plane: tuple[int, int]) -> None:
+    """Arcs on and beside the areas' boundaries (:func:`_near_arcs`): every arc the prefilter clears
+    has no violation in the exact check."""
+    rng = random.Random(seed)
+    groups = _random_groups(rng)
+    paths = _near_arcs(rng, groups, plane, 60)
+    clear = clear_of_areas(groups, _path_batch(paths, plane))
+    for k in np.flatnonzero(clear).tolist():
+        assert first_violation(groups, paths[k]) is None, (k, paths[k])
+    arcs = [k for k, s in enumerate(paths) if isinstance(s, ArcSegment)]
+    event(f"arcs cleared: {int(clear[arcs].sum()) * 4 // max(len(arcs), 1) * 25}%+")
+
+
+def test_the_prefilter_clears_most_arcs_beside_the_areas() -> None:
+    """... and it is not empty: of the arcs the exact check passes, most are cleared - those in the
+    prisms' base plane and those in a plane that sees them at an angle (G18 arcs beside G17 areas)."""
+    for planes in ([(0, 1), (1, 0)], [(2, 0), (1, 2)]):
+        allowed = cleared = 0
+        for seed in range(60):
+            rng = random.Random(seed)
+            groups = [g for g in _random_groups(rng) if g.axes == frozenset((0, 1, 2))]
+            for g in groups:  # every prism on X/Y, height Z
+                for q in g.works + g.prots:
+                    q.a, q.b, q.c = 0, 1, 2
+            groups = [Group(g.axes, g.works, g.prots) for g in groups]
+            plane = planes[seed % 2]
+            paths = _near_arcs(rng, groups, plane, 60)
+            clear = clear_of_areas(groups, _path_batch(paths, plane))
+            for k, path in enumerate(paths):
+                if isinstance(path, ArcSegment) and first_violation(groups, path) is None:
+                    allowed += 1
+                    cleared += bool(clear[k])
+        assert cleared > 0.6 * allowed, (planes, cleared, allowed)
 
 
 # --- the tokenizer of plain lines against the parser ------------------------------------------------

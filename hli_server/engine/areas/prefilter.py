@@ -46,7 +46,7 @@ import numpy.typing as npt
 
 from hli_server.engine.areas.geometry import Circle, Group, Polygon, Prism
 
-__all__ = ["MARGIN", "PathBatch", "clear_of_areas"]
+__all__ = ["MARGIN", "PathBatch", "clear_of_areas", "cut_into_chords"]
 
 MARGIN = 1e-5
 """mm: a path this far from every boundary is decided without the exact check (project's own)."""
@@ -87,9 +87,44 @@ class PathBatch:
 def clear_of_areas(groups: list[Group], paths: PathBatch) -> Bools:
     """True for each path that surely passes the exact path check of every group."""
     clear = np.ones(paths.arc.shape[0], np.bool_)
+    if groups:
+        paths = _swept_boxes(paths)
     for group in groups:
         clear = _group_clear(group, paths, clear)
     return clear
+
+
+_CARDINAL = np.array([0.0, 0.5 * math.pi, math.pi, 1.5 * math.pi])[:, None]
+"""The angles of a circle's extremes: +first axis, +second, -first, -second."""
+
+
+def cut_into_chords(groups: list[Group], plane: tuple[int, int]) -> bool:
+    """Does the exact check cut the arcs of ``plane`` into chords for some group (a prism sees them at
+    an angle)? Then an arc costs it hundreds of chords."""
+    return any(_stacks(group).plane(plane).chords for group in groups)
+
+
+def _swept_boxes(p: PathBatch) -> PathBatch:
+    """``p`` with each arc's box shrunk from its whole circle to what its path covers: its start, its
+    programmed end, the circle's point at the end of the sweep (the end may lie off the circle) and the
+    circle's extremes on its sweep (angles within :data:`_ANGLE_TOLERANCE` of it counted as on it).
+    The exact check's path, and every chord it cuts an arc into, lies within that box."""
+    k = np.flatnonzero(p.arc)
+    if not k.shape[0] or p.plane is None:
+        return p
+    i, j = p.plane
+    cx, cy, r = p.centre[0, k], p.centre[1, k], p.radius[k]
+    a0, sweep = p.start_angle[k], p.sweep[k]
+    a1 = a0 + sweep
+    on = _on_sweep(_CARDINAL, a0, sweep)
+    lo, hi = p.lo.copy(), p.hi.copy()
+    si, sj, ei, ej = p.start[i, k], p.start[j, k], p.end[i, k], p.end[j, k]
+    at_i, at_j = cx + r * np.cos(a1), cy + r * np.sin(a1)
+    hi[i, k] = np.where(on[0], cx + r, np.maximum(np.maximum(si, ei), at_i))
+    hi[j, k] = np.where(on[1], cy + r, np.maximum(np.maximum(sj, ej), at_j))
+    lo[i, k] = np.where(on[2], cx - r, np.minimum(np.minimum(si, ei), at_i))
+    lo[j, k] = np.where(on[3], cy - r, np.minimum(np.minimum(sj, ej), at_j))
+    return PathBatch(p.start, p.end, lo, hi, p.arc, p.plane, p.centre, p.radius, p.start_angle, p.sweep)
 
 
 def _relation(q: Prism, plane: tuple[int, int] | None) -> int:
@@ -107,11 +142,12 @@ def _relation(q: Prism, plane: tuple[int, int] | None) -> int:
 # --- a group's prisms as arrays ----------------------------------------------------------------------
 class _Table:
     """Polygons with about as many edges (``width``: a power of two) and the same ``convex``, one row
-    each: their edges (x0, y0, x1, y1) and half-planes (``nx``, ``ny``, ``off``; work prisms that are
-    convex), a short polygon's row filled up with copies of its first edge (``real``: not a copy); a
-    copy changes no least distance and no half-plane test, and the even-odd count skips it."""
+    each: their edges (x0, y0, x1, y1) and, for convex ones, half-planes (unit outward normals ``nx``,
+    ``ny``; ``line``: the edge's line ``n . p = line``; ``off``: ``line`` less :data:`MARGIN`), a short
+    polygon's row filled up with copies of its first edge (``real``: not a copy); a copy changes no
+    least distance and no half-plane test, and the even-odd count skips it."""
 
-    __slots__ = ("convex", "nx", "ny", "off", "real", "rows", "width", "x0", "x1", "y0", "y1")
+    __slots__ = ("convex", "line", "nx", "ny", "off", "real", "rows", "width", "x0", "x1", "y0", "y1")
 
     def __init__(self, convex: bool, width: int, polygons: list[Polygon]) -> None:
         self.convex = convex
@@ -141,6 +177,7 @@ class _Table:
                 self.nx[row] = nx[0, fill]
                 self.ny[row] = ny[0, fill]
                 self.off[row] = off[0, fill]
+        self.line: Floats = self.off + MARGIN
 
 
 class _Stack:
@@ -157,6 +194,7 @@ class _Stack:
         "prisms",
         "r",
         "row",
+        "shared",
         "size",
         "table",
         "tables",
@@ -170,6 +208,8 @@ class _Stack:
         self.axes: Ints = np.array(
             [[q.a for q in prisms], [q.b for q in prisms], [q.c for q in prisms]], np.int64
         ).reshape(3, m)
+        self.shared = [int(row[0]) if m and (row == row[0]).all() else -1 for row in self.axes]
+        """Per row (a, b, c): the axis every prism has there, or -1."""
         lower = np.zeros((3, m, 1))
         upper = np.zeros((3, m, 1))
         self.circle: Bools = np.zeros(m, np.bool_)
@@ -195,9 +235,8 @@ class _Stack:
                 self.cy[k] = region.cy
                 self.r[k] = region.r
                 continue
-            # half-planes only for work prisms (a protection polygon is tested by its edges)
             key = (
-                not protection and _half_planes(region) is not None,
+                _half_planes(region) is not None,
                 1 << (len(region.points) - 1).bit_length(),
             )
             if key not in keys:
@@ -232,38 +271,41 @@ class _Stacks:
 
 
 class _Plane:
-    """How the prisms of a group see the arcs of one plane, per prism (protection, work): as lines
-    from start to end (``linear``: the plane has none of the prism's axes), as arcs (``circle``: the
-    plane is the prism's base plane; ``swap`` where the prism's axes are (j, i)); ``chords``: some
-    prism of the group sees them at an angle, and the exact check cuts them into chords for every
-    prism of the group (``geometry._pieces``)."""
+    """How the prisms of a group see the arcs of one plane, per stack (protection, work), as
+    :class:`_Relations`; ``chords``: some prism of the group sees them at an angle, and the exact
+    check cuts them into chords for every prism of the group (``geometry._pieces``)."""
 
-    __slots__ = (
-        "chords",
-        "prot_circle",
-        "prot_linear",
-        "prot_swap",
-        "work_circle",
-        "work_linear",
-        "work_swap",
-    )
+    __slots__ = ("chords", "prot", "work")
 
     def __init__(self, stacks: _Stacks, plane: tuple[int, int] | None) -> None:
         relations = [_relation(q, plane) for q in stacks.prots.prisms + stacks.works.prisms]
         self.chords = _MIXED in relations
-        self.prot_linear, self.prot_circle, self.prot_swap = _relations(stacks.prots, plane)
-        self.work_linear, self.work_circle, self.work_swap = _relations(stacks.works, plane)
+        self.prot = _Relations(stacks.prots, plane)
+        self.work = _Relations(stacks.works, plane)
 
 
-def _relations(stack: _Stack, plane: tuple[int, int] | None) -> tuple[Bools, Bools, Bools]:
-    rel = [_relation(q, plane) for q in stack.prisms]
-    i = plane[0] if plane is not None else -1
-    linear: Bools = np.array([x == _LINEAR for x in rel], np.bool_).reshape(stack.size)
-    circle: Bools = np.array([x == _CIRCLE for x in rel], np.bool_).reshape(stack.size)
-    swap: Bools = np.array(
-        [x == _CIRCLE and q.a != i for x, q in zip(rel, stack.prisms, strict=True)], np.bool_
-    ).reshape(stack.size)
-    return linear, circle, swap
+class _Relations:
+    """Per prism of a stack, how it sees the arcs of one plane: as lines from start to end
+    (``linear``: the plane has none of the prism's axes), as arcs (``circle``: the plane is the
+    prism's base plane; ``swap`` where the prism's axes are (j, i)), or at an angle (``mixed``; then
+    ``a_in``/``b_in``: the prism's first/second base axis is one of the plane's)."""
+
+    __slots__ = ("a_in", "b_in", "circle", "linear", "mixed", "swap")
+
+    def __init__(self, stack: _Stack, plane: tuple[int, int] | None) -> None:
+        rel = [_relation(q, plane) for q in stack.prisms]
+        i, j = plane if plane is not None else (-1, -1)
+        m = stack.size
+
+        def flags(values: list[bool]) -> Bools:
+            return np.array(values, np.bool_).reshape(m)
+
+        self.linear = flags([x == _LINEAR for x in rel])
+        self.circle = flags([x == _CIRCLE for x in rel])
+        self.mixed = flags([x == _MIXED for x in rel])
+        self.swap = flags([x == _CIRCLE and q.a != i for x, q in zip(rel, stack.prisms, strict=True)])
+        self.a_in = flags([q.a in (i, j) for q in stack.prisms])
+        self.b_in = flags([q.b in (i, j) for q in stack.prisms])
 
 
 _STACKS: dict[int, tuple[Group, _Stacks]] = {}
@@ -293,34 +335,14 @@ def _group_clear(group: Group, p: PathBatch, clear: Bools) -> Bools:
     if prots.size:
         prism, path = _box_pairs(prots, p, ok, protection=True)
         if path.shape[0]:
-            apart = _pairs(
-                prots,
-                p,
-                prism,
-                path,
-                plane.prot_linear,
-                plane.prot_circle,
-                plane.prot_swap,
-                plane.chords,
-                True,
-            )
+            apart = _pairs(prots, p, prism, path, plane.prot, plane.chords, True)
             ok[path[~apart]] = False
     works = stacks.works
     if works.size:
         inside = np.zeros(n, np.bool_)
         prism, path = _box_pairs(works, p, ok, protection=False)
         if path.shape[0]:
-            held = _pairs(
-                works,
-                p,
-                prism,
-                path,
-                plane.work_linear,
-                plane.work_circle,
-                plane.work_swap,
-                plane.chords,
-                False,
-            )
+            held = _pairs(works, p, prism, path, plane.work, plane.chords, False)
             inside[path[held]] = True
         ok &= inside
     return ok
@@ -329,57 +351,121 @@ def _group_clear(group: Group, p: PathBatch, clear: Bools) -> Bools:
 def _box_pairs(st: _Stack, p: PathBatch, ok: Bools, protection: bool) -> tuple[Ints, Ints]:
     """The (prism, path) pairs, among the paths still ``ok``, that the box test leaves to the region
     tests: protection - the boxes meet (the prism's grown by MARGIN); work - the path's box lies within
-    the prism's (shrunk by MARGIN)."""
+    the prism's (shrunk by MARGIN). Where the prisms share their axes, each row of the paths' boxes is
+    compared as it is (no copy per prism)."""
     n = ok.shape[0]
-    hit = np.repeat(ok[None, :], st.size, axis=0)
+    hit = ok
     for row in range(3):
-        axis = st.axes[row]
+        axis = st.shared[row]
+        lo: Floats = p.lo[axis] if axis >= 0 else p.lo[st.axes[row]]
+        hi: Floats = p.hi[axis] if axis >= 0 else p.hi[st.axes[row]]
         if protection:
-            hit &= p.lo[axis] <= st.upper[row]
-            hit &= p.hi[axis] >= st.lower[row]
+            hit = hit & (lo <= st.upper[row]) & (hi >= st.lower[row])
         else:
-            hit &= p.lo[axis] >= st.lower[row]
-            hit &= p.hi[axis] <= st.upper[row]
+            hit = hit & (lo >= st.lower[row]) & (hi <= st.upper[row])
     flat: Ints = np.flatnonzero(hit)
     prism: Ints = flat // n
     return prism, flat - prism * n
 
 
 def _pairs(
-    st: _Stack,
-    p: PathBatch,
-    prism: Ints,
-    path: Ints,
-    linear: Bools,
-    circle: Bools,
-    swap: Bools,
-    chords: bool,
-    protection: bool,
+    st: _Stack, p: PathBatch, prism: Ints, path: Ints, rel: _Relations, chords: bool, protection: bool
 ) -> Bools:
     """For (prism, path) pairs whose boxes meet: protection - the path keeps off the prism's region;
     work - the path lies inside it; in the prism's base plane, with :data:`MARGIN`. False where not
-    sure (an arc that some prism of the group sees at an angle: never tested)."""
+    sure: an arc that the prism sees in its base plane while another prism of the group sees it at an
+    angle (the exact check's chords are not tested), an arc the prism sees at an angle whose
+    projection is not a segment.
+
+    An arc that the prism sees at an angle (a G18 arc against a G17 area) is cut into chords by the
+    exact check, and every chord lies within the arc's box (:func:`_swept_boxes`). Projected onto the
+    prism's base plane, that box is a segment - from the box's low to its high end along the base axis
+    that is one of the arc's plane, where the other base axis does not move (no helix across the
+    base) - or, where neither base axis is one of the plane's, the line from start to end (those axes
+    move linearly along the arc). Such segments are tested as lines (the height is the box test's)."""
     result = np.zeros(prism.shape[0], np.bool_)
     arcs = p.arc[path]
-    round_ = st.circle[prism]
-    # lines; an arc whose plane has none of the prism's axes is a line from start to end for it
-    as_line = ~arcs | linear[prism]
-    k = np.flatnonzero(as_line & round_)
-    if k.shape[0]:
-        result[k] = _line_circle(st, p, prism[k], path[k], protection)
-    k = np.flatnonzero(as_line & ~round_)
-    if k.shape[0]:
-        result[k] = _line_polygon(st, p, prism[k], path[k], protection)
     plane = p.plane
+    a, b = _axis(st, 0, prism), _axis(st, 1, prism)
+    # segments in the prism's base plane: lines, arcs whose plane has none of the prism's axes (a line
+    # from start to end for it), arcs it sees at an angle (projected)
+    segment = ~arcs | rel.linear[prism]
+    mixed = arcs & rel.mixed[prism] if plane is not None else None
+    candidates = segment if mixed is None or not mixed.any() else segment | mixed
+    k = np.flatnonzero(candidates)
+    if k.shape[0]:
+        # gathered for the candidate pairs only (arcs in the prism's base plane are tested as arcs)
+        pk, qk = prism[k], path[k]
+        ak, bk = _sub(a, k), _sub(b, k)
+        sx, sy, ex, ey = _at(p.start, ak, qk), _at(p.start, bk, qk), _at(p.end, ak, qk), _at(p.end, bk, qk)
+        chosen = segment[k]
+        if mixed is not None and candidates is not segment:
+            mk = mixed[k]
+            a_in, b_in = rel.a_in[pk] & mk, rel.b_in[pk] & mk
+            sx = np.where(a_in, _at(p.lo, ak, qk), sx)
+            ex = np.where(a_in, _at(p.hi, ak, qk), ex)
+            sy = np.where(b_in, _at(p.lo, bk, qk), sy)
+            ey = np.where(b_in, _at(p.hi, bk, qk), ey)
+            chosen = chosen | (mk & ((a_in & (sy == ey)) | (b_in & (sx == ex)) | (~a_in & ~b_in)))
+        if not chosen.all():
+            c = np.flatnonzero(chosen)
+            k, pk, sx, sy, ex, ey = k[c], pk[c], sx[c], sy[c], ex[c], ey[c]
+        if k.shape[0]:
+            result[k] = _segments(st, pk, st.circle[pk], sx, sy, ex, ey, protection)
     if plane is not None and not chords:
-        as_arc = arcs & circle[prism]
-        k = np.flatnonzero(as_arc & round_)
-        if k.shape[0]:
-            result[k] = _arc_circle(st, p, plane, prism[k], path[k], swap[prism[k]], protection)
-        k = np.flatnonzero(as_arc & ~round_)
-        if k.shape[0]:
-            result[k] = _arc_polygon(st, p, plane, prism[k], path[k], swap[prism[k]], protection)
+        as_arc = arcs & rel.circle[prism]
+        if as_arc.any():
+            round_ = st.circle[prism]
+            k = np.flatnonzero(as_arc & round_)
+            if k.shape[0]:
+                result[k] = _arc_circle(st, p, plane, prism[k], path[k], rel.swap[prism[k]], protection)
+            k = np.flatnonzero(as_arc & ~round_)
+            if k.shape[0]:
+                result[k] = _arc_polygon(st, p, plane, prism[k], path[k], rel.swap[prism[k]], protection)
     return result
+
+
+def _segments(
+    st: _Stack,
+    prism: Ints,
+    round_: Bools,
+    sx: Floats,
+    sy: Floats,
+    ex: Floats,
+    ey: Floats,
+    protection: bool,
+) -> Bools:
+    """Segments (in each prism's base plane) against circle and polygon prisms."""
+    result = np.zeros(prism.shape[0], np.bool_)
+    k = np.flatnonzero(round_)
+    if k.shape[0]:
+        result[k] = _line_circle(st, prism[k], sx[k], sy[k], ex[k], ey[k], protection)
+    k = np.flatnonzero(~round_)
+    if k.shape[0]:
+        result[k] = _line_polygon(st, prism[k], sx[k], sy[k], ex[k], ey[k], protection)
+    return result
+
+
+def _axis(st: _Stack, row: int, prism: Ints) -> int | Ints:
+    """The prisms' axis of ``row`` (a, b, c): one number where they share it, else one per pair."""
+    shared = st.shared[row]
+    if shared >= 0:
+        return shared
+    axes: Ints = st.axes[row, prism]
+    return axes
+
+
+def _sub(axis: int | Ints, k: Ints) -> int | Ints:
+    if isinstance(axis, int):
+        return axis
+    taken: Ints = axis[k]
+    return taken
+
+
+def _at(values: Floats, axis: int | Ints, path: Ints) -> Floats:
+    """``values[axis, path]``: a row taken where the axis is shared (a third of the cost)."""
+    taken: Floats = values[axis].take(path) if isinstance(axis, int) else values[axis, path]
+    return taken
 
 
 def _by_table(st: _Stack, prism: Ints) -> list[tuple[Ints, _Table, Ints]]:
@@ -413,42 +499,70 @@ def _edge_rows(table: _Table, rows: Ints) -> tuple[Floats, Floats, Floats, Float
 
 
 # --- lines -------------------------------------------------------------------------------------------
-def _line_circle(st: _Stack, p: PathBatch, prism: Ints, path: Ints, protection: bool) -> Bools:
-    a, b = st.axes[0, prism], st.axes[1, prism]
-    sx, sy, ex, ey = p.start[a, path], p.start[b, path], p.end[a, path], p.end[b, path]
+def _line_circle(
+    st: _Stack, prism: Ints, sx: Floats, sy: Floats, ex: Floats, ey: Floats, protection: bool
+) -> Bools:
     cx, cy, r = st.cx[prism], st.cy[prism], st.r[prism]
     if protection:
         apart: Bools = _point_segment(cx, cy, sx, sy, ex, ey) > r + MARGIN
         return apart
     limit = r - MARGIN
-    within: Bools = (np.hypot(sx - cx, sy - cy) < limit) & (np.hypot(ex - cx, ey - cy) < limit)
+    within: Bools = (_norm(sx - cx, sy - cy) < limit) & (_norm(ex - cx, ey - cy) < limit)
     return within
 
 
-def _line_polygon(st: _Stack, p: PathBatch, prism: Ints, path: Ints, protection: bool) -> Bools:
-    a, b = st.axes[0, prism], st.axes[1, prism]
+def _line_polygon(
+    st: _Stack, prism: Ints, sx: Floats, sy: Floats, ex: Floats, ey: Floats, protection: bool
+) -> Bools:
     result = np.zeros(prism.shape[0], np.bool_)
     for k, table, rows in _by_table(st, prism):
-        pk = path[k]
-        ak, bk = a[k], b[k]
-        sx, sy = p.start[ak, pk][:, None], p.start[bk, pk][:, None]
-        ex, ey = p.end[ak, pk][:, None], p.end[bk, pk][:, None]
+        x, y = sx[k][:, None], sy[k][:, None]
+        u, v = ex[k][:, None], ey[k][:, None]
         if table.convex:
+            nx, ny = _take(table.nx, rows, table), _take(table.ny, rows, table)
+            if protection:
+                result[k] = _separated(x, y, u, v, nx, ny, _take(table.line, rows, table), table, rows)
+                continue
             # convex work polygon: the segment lies inside with the margin when both ends do
-            nx, ny, off = (
-                _take(table.nx, rows, table),
-                _take(table.ny, rows, table),
-                _take(table.off, rows, table),
-            )
-            start_in = np.all(sx * nx + sy * ny < off, axis=1)
-            end_in = np.all(ex * nx + ey * ny < off, axis=1)
+            off = _take(table.off, rows, table)
+            start_in = np.all(x * nx + y * ny < off, axis=1)
+            end_in = np.all(u * nx + v * ny < off, axis=1)
             result[k] = start_in & end_in
             continue
         x0, y0, x1, y1 = _edge_rows(table, rows)
-        apart = _segment_segment(sx, sy, ex, ey, x0, y0, x1, y1).min(axis=1) > MARGIN
-        inside = _inside(x0, y0, x1, y1, _take_real(table, rows), sx, sy)
+        apart = _segment_segment(x, y, u, v, x0, y0, x1, y1).min(axis=1) > MARGIN
+        inside = _inside(x0, y0, x1, y1, _take_real(table, rows), x, y)
         result[k] = apart & (~inside if protection else inside)
     return result
+
+
+def _separated(
+    x: Floats,
+    y: Floats,
+    u: Floats,
+    v: Floats,
+    nx: Floats,
+    ny: Floats,
+    line: Floats,
+    table: _Table,
+    rows: Ints,
+) -> Bools:
+    """Segments (x, y)-(u, v) more than :data:`MARGIN` apart from convex polygons, by separating axes:
+    an edge's outward normal with both ends more than MARGIN beyond its line, or the segment's normal
+    with every corner more than MARGIN to one side. A gap along a unit axis is no more than the
+    distance, so a separated segment keeps more than MARGIN off (a segment that passes a corner at
+    a slant by little more than MARGIN may not be separated: then the exact check decides)."""
+    limit = line + MARGIN
+    beyond = np.any((x * nx + y * ny > limit) & (u * nx + v * ny > limit), axis=1)
+    dx, dy = u - x, v - y
+    length = _norm(dx, dy)
+    safe = np.where(length > 0.0, length, 1.0)
+    side = (_take(table.x0, rows, table) - x) * (-dy / safe) + (_take(table.y0, rows, table) - y) * (
+        dx / safe
+    )
+    aside = (length[:, 0] > 0.0) & ((side.min(axis=1) > MARGIN) | (side.max(axis=1) < -MARGIN))
+    separated: Bools = beyond | aside
+    return separated
 
 
 def _take_real(table: _Table, rows: Ints) -> Bools:
@@ -462,21 +576,52 @@ def _take_real(table: _Table, rows: Ints) -> Bools:
 def _arc_circle(
     st: _Stack, p: PathBatch, plane: tuple[int, int], prism: Ints, path: Ints, swap: Bools, protection: bool
 ) -> Bools:
-    """Arcs in the base plane of circle prisms (the circle in the arcs' plane coordinates)."""
+    """Arcs in the base plane of circle prisms (the circle in the arcs' plane coordinates). First the
+    arc's whole circle (protection: every point of it is ``|d - r|`` or more from the prism's centre;
+    work: ``d + r`` or less); where that does not decide, the arc with its sweep: the point nearest to
+    (protection) or farthest from (work) the prism's centre is where the ray from the arc's centre
+    towards (away from) it meets the arc, if it does, else an end of the arc. The programmed end
+    counts too (it may lie off the circle)."""
     i, j = plane
     px = np.where(swap, st.cy[prism], st.cx[prism])
     py = np.where(swap, st.cx[prism], st.cy[prism])
     cx, cy, r = p.centre[0, path], p.centre[1, path], p.radius[path]
-    d = np.hypot(px - cx, py - cy)
-    to_end = np.hypot(px - p.end[i, path], py - p.end[j, path])
+    dx, dy = px - cx, py - cy
+    d = _norm(dx, dy)
+    to_end = _norm(px - p.end[i, path], py - p.end[j, path])
     radius = st.r[prism]
     if protection:
-        # every point of the circle through the start is |d - r| or more from the centre
-        off_circle: Bools = (np.abs(d - r) > radius + MARGIN) & (to_end > radius + MARGIN)
-        return off_circle
-    limit = radius - MARGIN
-    in_circle: Bools = (d + r < limit) & (to_end < limit)
-    return in_circle
+        limit = radius + MARGIN
+        ok: Bools = (np.abs(d - r) > limit) & (to_end > limit)
+    else:
+        limit = radius - MARGIN
+        ok = (d + r < limit) & (to_end < limit)
+    k = np.flatnonzero(~ok & (to_end > limit if protection else to_end < limit))
+    if k.shape[0]:
+        ok[k] = _arc_circle_swept(p, path[k], px[k], py[k], d[k], limit[k], protection)
+    return ok
+
+
+def _arc_circle_swept(
+    p: PathBatch, path: Ints, px: Floats, py: Floats, d: Floats, limit: Floats, protection: bool
+) -> Bools:
+    cx, cy, r = p.centre[0, path], p.centre[1, path], p.radius[path]
+    a0, sweep = p.start_angle[path], p.sweep[path]
+    a1 = a0 + sweep
+    dx, dy = px - cx, py - cy
+    ends = np.minimum if protection else np.maximum
+    at_ends = ends(
+        _norm(dx - r * np.cos(a0), dy - r * np.sin(a0)), _norm(dx - r * np.cos(a1), dy - r * np.sin(a1))
+    )
+    if protection:
+        towards = _on_sweep(np.arctan2(dy, dx), a0, sweep)
+        nearest = np.where(towards, np.minimum(np.abs(d - r), at_ends), at_ends)
+        apart: Bools = nearest > limit
+        return apart
+    away = _on_sweep(np.arctan2(-dy, -dx), a0, sweep)
+    farthest = np.where(away, np.maximum(d + r, at_ends), at_ends)
+    within: Bools = farthest < limit
+    return within
 
 
 def _arc_polygon(
@@ -484,7 +629,7 @@ def _arc_polygon(
 ) -> Bools:
     """Arcs in the base plane of polygon prisms (the edges in the arcs' plane coordinates)."""
     i, j = plane
-    a, b = st.axes[0, prism], st.axes[1, prism]
+    a, b = _axis(st, 0, prism), _axis(st, 1, prism)
     result = np.zeros(prism.shape[0], np.bool_)
     for k, table, rows in _by_table(st, prism):
         pk = path[k]
@@ -492,8 +637,10 @@ def _arc_polygon(
         ex, ey = p.end[i, pk][:, None], p.end[j, pk][:, None]
         flip = swap[k][:, None]
         swapped = bool(flip.any())
-        if table.convex:
-            # convex work polygon: the arc's whole circle and its end inside with the margin
+        if table.convex and not protection:
+            # convex work polygon: inside every half-plane with the margin - the arc's farthest point
+            # along each normal (the circle's, where the normal's direction is on the sweep, else an
+            # end of the arc), its start and its programmed end
             nx, ny, off = (
                 _take(table.nx, rows, table),
                 _take(table.ny, rows, table),
@@ -501,9 +648,14 @@ def _arc_polygon(
             )
             if swapped:
                 nx, ny = np.where(flip, ny, nx), np.where(flip, nx, ny)
-            circle_in = np.all(cx * nx + cy * ny + r < off, axis=1)
+            centre = cx * nx + cy * ny
             end_in = np.all(ex * nx + ey * ny < off, axis=1)
-            result[k] = circle_in & end_in
+            held = end_in & np.all(centre + r < off, axis=1)
+            # where the whole circle is not inside: the arc, with its sweep
+            again = np.flatnonzero(end_in & ~held)
+            if again.shape[0]:
+                held[again] = _arc_half_planes(p, pk[again], centre[again], r[again], nx, ny, off, again)
+            result[k] = held
             continue
         x0, y0, x1, y1 = _edge_rows(table, rows)
         qx0, qy0, qx1, qy1 = x0, y0, x1, y1
@@ -513,19 +665,47 @@ def _arc_polygon(
         to_arc = _arc_segment(cx, cy, r, p.start_angle[pk][:, None], p.sweep[pk][:, None], qx0, qy0, qx1, qy1)
         to_end = _point_segment(ex, ey, qx0, qy0, qx1, qy1)
         apart = (to_arc.min(axis=1) > MARGIN) & (to_end.min(axis=1) > MARGIN)
-        # start and end inside: in the prism's own coordinates, with its own edges
-        ak, bk = a[k], b[k]
-        real = _take_real(table, rows)
-        inside_start = _inside(x0, y0, x1, y1, real, p.start[ak, pk][:, None], p.start[bk, pk][:, None])
-        inside_end = _inside(x0, y0, x1, y1, real, p.end[ak, pk][:, None], p.end[bk, pk][:, None])
+        # start and end inside: in the prism's own coordinates, with its own edges (a convex polygon:
+        # outside where beyond an edge's line; the points are more than MARGIN from every edge here)
+        ak, bk = _sub(a, k), _sub(b, k)
+        s_a, s_b = _at(p.start, ak, pk)[:, None], _at(p.start, bk, pk)[:, None]
+        e_a, e_b = _at(p.end, ak, pk)[:, None], _at(p.end, bk, pk)[:, None]
+        if table.convex:
+            hx, hy, line = (
+                _take(table.nx, rows, table),
+                _take(table.ny, rows, table),
+                _take(table.line, rows, table),
+            )
+            inside_start = np.all(s_a * hx + s_b * hy < line, axis=1)
+            inside_end = np.all(e_a * hx + e_b * hy < line, axis=1)
+        else:
+            real = _take_real(table, rows)
+            inside_start = _inside(x0, y0, x1, y1, real, s_a, s_b)
+            inside_end = _inside(x0, y0, x1, y1, real, e_a, e_b)
         held = ~inside_start & ~inside_end if protection else inside_start & inside_end
         result[k] = apart & held
     return result
 
 
+def _arc_half_planes(
+    p: PathBatch, path: Ints, centre: Floats, r: Floats, nx: Floats, ny: Floats, off: Floats, rows: Ints
+) -> Bools:
+    """Arcs inside every half-plane with the margin: the arc's farthest point along each normal is the
+    circle's where the normal's direction is on the sweep, else an end of the arc (``centre``: the
+    centre's projections; ``nx``, ``ny``, ``off``: the half-planes, of these ``rows`` unless shared)."""
+    nx, ny, off = (h if h.shape[0] == 1 else h[rows] for h in (nx, ny, off))
+    a0, sweep = p.start_angle[path][:, None], p.sweep[path][:, None]
+    a1 = a0 + sweep
+    reach = np.maximum(np.cos(a0) * nx + np.sin(a0) * ny, np.cos(a1) * nx + np.sin(a1) * ny)
+    reach = np.where(_on_sweep(np.arctan2(ny, nx), a0, sweep), 1.0, reach)
+    inside: Bools = np.all(centre + r * reach < off, axis=1)
+    return inside
+
+
 def _on_sweep(angle: Floats, a0: Floats, sweep: Floats) -> Bools:
     """Is ``angle`` on the arc (within :data:`_ANGLE_TOLERANCE`)? Whole circles: always."""
-    delta = np.where(sweep >= 0.0, angle - a0, a0 - angle) % _TAU
+    delta = np.where(sweep >= 0.0, angle - a0, a0 - angle)
+    delta = delta - _TAU * np.floor(delta * (1.0 / _TAU))  # in [0, TAU] (as ``%``, cheaper)
     span = np.abs(sweep)
     return (
         (span >= _TAU - _ANGLE_TOLERANCE)
@@ -557,14 +737,14 @@ def _arc_segment(
     safe = np.where(l2 > 0.0, l2, 1.0)
     t = np.where(l2 > 0.0, ((cx - qx0) * ux + (cy - qy0) * uy) / safe, 0.0)
     fx, fy = qx0 + t * ux, qy0 + t * uy
-    df = np.hypot(fx - cx, fy - cy)
+    df = _norm(fx - cx, fy - cy)
     h = np.sqrt(np.maximum(r * r - df * df, 0.0) / safe)
     tt = np.stack((t - h, t + h))
     # the angles of the segment's ends, its foot point and where its line crosses the circle, at once
     dx = np.concatenate((np.stack((qx0, qx1)) - cx, (fx - cx)[None], qx0 + tt * ux - cx))
     dy = np.concatenate((np.stack((qy0, qy1)) - cy, (fy - cy)[None], qy0 + tt * uy - cy))
     on = _on_sweep(np.arctan2(dy, dx), a0, sweep)
-    dq = np.hypot(dx[:2], dy[:2])
+    dq = _norm(dx[:2], dy[:2])
     best = np.minimum(best, np.where(on[:2] | (dq <= 1e-12), np.abs(dq - r), inf).min(axis=0))
     foot_on = (t >= 0.0) & (t <= 1.0) & (on[2] | (df <= 1e-12))
     best = np.minimum(best, np.where(foot_on, np.abs(df - r), inf))
@@ -621,6 +801,12 @@ def _half_planes(poly: Polygon) -> tuple[Floats, Floats, Floats] | None:
     return halves
 
 
+def _norm(dx: Floats, dy: Floats) -> Floats:
+    """``hypot`` at a third of its cost: the coordinates the parser accepts cannot overflow a square."""
+    result: Floats = np.sqrt(dx * dx + dy * dy)
+    return result
+
+
 def _point_segment(
     px: Floats | float, py: Floats | float, ax: Floats, ay: Floats, bx: Floats, by: Floats
 ) -> Floats:
@@ -628,7 +814,7 @@ def _point_segment(
     l2 = dx * dx + dy * dy
     safe = np.where(l2 > 0.0, l2, 1.0)
     t = np.clip(np.where(l2 > 0.0, ((px - ax) * dx + (py - ay) * dy) / safe, 0.0), 0.0, 1.0)
-    result: Floats = np.hypot(px - (ax + t * dx), py - (ay + t * dy))
+    result: Floats = _norm(px - (ax + t * dx), py - (ay + t * dy))
     return result
 
 
