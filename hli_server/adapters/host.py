@@ -18,7 +18,7 @@ An adapter never sees the runtime or the machine. It is handed an :class:`Adapte
   one of those cycles, :class:`Trace`), and ``on_cycle`` for work that must follow every published
   cycle (ADS device notifications).
 
-The runtime implements these protocols (``hli_server/runtime/host.py``). ``make lint`` forbids
+The runtime implements these protocols (``hli_server/runtime/operator_panel.py``). ``make lint`` forbids
 ``hli_server.adapters`` to import ``hli_server.engine`` or ``hli_server.runtime``: everything an
 adapter may use is named here.
 """
