@@ -67,7 +67,7 @@ from hli_server.adapters.host import (
     Trace,
     UnavailableError,
 )
-from hli_server.runtime.events import EventLog
+from hli_server.runtime.event_log import EventLog
 from hli_server.runtime.pacing import summarize_timing
 from schemas.events import Event
 from schemas.results import (
