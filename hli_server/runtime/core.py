@@ -50,7 +50,7 @@ from hli_server.engine.machine import Machine
 from hli_server.recording.tap import JournaledOperator, RecordingOptions, SessionRecorderPort, SessionTap
 from hli_server.runtime.doors import DoorsProcess
 from hli_server.runtime.event_log import EventLog
-from hli_server.runtime.image import ImageFactory, RuntimeImage, shared_memory_image
+from hli_server.runtime.image_factory import ImageFactory, RuntimeImage, shared_memory_image
 from hli_server.runtime.nc_files import NcFileWriter
 from hli_server.runtime.operator_panel import OperatorPanel
 from hli_server.runtime.pacing import (
