@@ -22,7 +22,7 @@ from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel import Channel
 from hli_server.engine.machine import Machine
-from hli_server.runtime.live import TrailRecorder, collision_pairs, live_scene, program_table, scene_key
+from hli_server.runtime.dashboard import TrailRecorder, collision_pairs, live_scene, program_table, scene_key
 from hli_server.runtime.programs import RuntimeLibrary
 from schemas.results import (
     AlarmList,
@@ -296,7 +296,7 @@ class OperatorPanel(OperatorPort):
     def timing(self) -> dict[str, Any]:
         return self._timing()
 
-    # --- the dashboard (docs/dashboard.md): hli_server/runtime/live.py ------------------------------
+    # --- the dashboard (docs/dashboard.md): hli_server/runtime/dashboard.py ------------------------------
     def scene(self, channel: int) -> Scene:
         ch = self._channel(channel)
         key = scene_key(self._m, self.recorder, ch.number)
