@@ -12,7 +12,7 @@ from collections.abc import AsyncIterator
 import pytest
 from shapely.geometry import LineString, Point
 
-from hli_server.adapters.http.live import LiveFeed, TooManyStreamsError
+from hli_server.adapters.http.live_feed import LiveFeed, TooManyStreamsError
 from hli_server.commands.check import check_program, scene_of
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine

@@ -9,7 +9,7 @@ from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import StreamingResponse
 
 from hli_server.adapters.http.deps import HostDep
-from hli_server.adapters.http.live import LiveFeed, TooManyStreamsError
+from hli_server.adapters.http.live_feed import LiveFeed, TooManyStreamsError
 from schemas.results import CollisionPair, ProgramEntry, Scene
 
 __all__ = ["router"]

@@ -25,7 +25,7 @@ from fastapi.responses import Response
 
 from hli_server.adapters.host import LoggedEvent
 from hli_server.adapters.http.deps import json_bytes
-from hli_server.adapters.http.live import LiveFeed
+from hli_server.adapters.http.live_feed import LiveFeed
 
 __all__ = ["PAGE_FILES", "router"]
 
