@@ -3,7 +3,8 @@
 The scenario is FCT-C43's obstacle (``plc_clients.demos.c43_obstacle``): the PLC limits X while a
 sensor reports an obstacle, the NC program holds at the limit and finishes once the PLC lifted it.
 ``hli.record(path)`` keeps every input the CNC took (the PLC's writes as latched, the operator's
-requests with the program text) and every output, cycle by cycle. ``hli.replay(path)`` runs the same
+requests with the program text) at their cycles, the events, and the outputs sampled every 100 cycles
+(``outputs_every=1``: every cycle). ``hli.replay(path)`` runs the same
 machine on the recorded inputs and fails, with the first difference, when an output is not what it was.
 
 In a project the recording is made once (on a test bench, or by ``hli-server run --record`` when the

@@ -235,6 +235,18 @@ class AxisConfig(_Strict):
     position_settling_time_us: Dint = Field(
         default=-1, description="P-AXIS-00532 max settling time into the window [µs]; 0 off, <0 P-AXIS-00151"
     )
+    tr_beschl_ab: int = Field(
+        default=50_000, ge=0, le=UDINT_MAX, description="P-AXIS-00195 ramp time, acceleration taken down [µs]"
+    )
+    tr_beschl_zu: int = Field(
+        default=50_000, ge=0, le=UDINT_MAX, description="P-AXIS-00196 ramp time, acceleration built up [µs]"
+    )
+    tr_brems_ab: int = Field(
+        default=50_000, ge=0, le=UDINT_MAX, description="P-AXIS-00197 ramp time, deceleration taken down [µs]"
+    )
+    tr_brems_zu: int = Field(
+        default=50_000, ge=0, le=UDINT_MAX, description="P-AXIS-00198 ramp time, deceleration built up [µs]"
+    )
     # project's own: what motion needs
     v_max: float = Field(
         default=30_000.0,
@@ -415,6 +427,13 @@ class ChannelConfig(_Strict):
         lt=UDINT_MAX,
         description="P-CHAN-00874 a new dynamic position limit is taken every n cycles (FCT-C43) [cycles]; "
         "0 and 1: every cycle",
+    )
+    slope_profile: int = Field(
+        default=0,
+        ge=0,
+        le=3,
+        description="P-CHAN-00071 acceleration profile at program start: 0 STEP, 1 TRAPEZ, 2 SIN2, 3 HSC "
+        "(simulated as TRAPEZ)",
     )
     feedhold_deceleration: float = Field(
         default=1000.0,
@@ -847,6 +866,38 @@ AXIS_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
         ),
         ("handbetrieb.acs_limit_pos", "acs_limit_pos", "P-AXIS-00493", "0.1 µm", _AX + "118116619.html", ""),
         (
+            "getriebe[0].slope_profil.tr_beschl_ab",
+            "tr_beschl_ab",
+            "P-AXIS-00195",
+            "µs",
+            _AX + "117619339.html",
+            "",
+        ),
+        (
+            "getriebe[0].slope_profil.tr_beschl_zu",
+            "tr_beschl_zu",
+            "P-AXIS-00196",
+            "µs",
+            _AX + "117617803.html",
+            "",
+        ),
+        (
+            "getriebe[0].slope_profil.tr_brems_ab",
+            "tr_brems_ab",
+            "P-AXIS-00197",
+            "µs",
+            _AX + "117622411.html",
+            "",
+        ),
+        (
+            "getriebe[0].slope_profil.tr_brems_zu",
+            "tr_brems_zu",
+            "P-AXIS-00198",
+            "µs",
+            _AX + "117620875.html",
+            "",
+        ),
+        (
             "getriebe[0].position_settling_time",
             "position_settling_time_us",
             "P-AXIS-00532",
@@ -907,6 +958,14 @@ CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
             "",
         ),
         ("dpl_input_cycles", "dpl_input_cycles", "P-CHAN-00874", "cycles", _CH + "1201698699.html", ""),
+        (
+            "prog_start.slope.profile",
+            "slope_profile",
+            "P-CHAN-00071",
+            "0..3",
+            "https://infosys.beckhoff.com/content/1033/tf5200_oscillating_axis/222124555.html",
+            "",
+        ),
         # a start-up parameter (P-STUP) that belongs to one channel; [0] stands for the channel's index
         (
             "configuration.channel[0].interpolator.function",

@@ -47,10 +47,13 @@ __all__ = [
 ]
 
 _ENVELOPE = frozenset({"cycle", "time_s", "channel"})
+_SCALARS = frozenset({int, float, str, bool})
 
 
 def _plain(value: Any) -> Any:
     """JSON-able copy: tuples become lists, dataclasses dictionaries."""
+    if value is None or type(value) in _SCALARS:  # most leaves (an area's vertices: many numbers)
+        return value
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         to_json = getattr(value, "to_json", None)
         if callable(to_json):

@@ -52,7 +52,7 @@ def _no_leaked_shared_memory():
 # --------------------------------------------------------------------------------------------
 
 _REQ_IDS: dict[str, int] = {}
-_REQ_PATTERN = r"^- ((?:E|C14|C43|C3|A3|H|N|B)-\d+) "
+_REQ_PATTERN = r"^- ((?:E|C14|C43|C3|A3|H|N|B|M)-\d+) "
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:

@@ -566,6 +566,11 @@ class _HeldTransport:
             self._inner.write(b"".join(out))
         self._arm()
 
+    @property
+    def idle(self) -> bool:
+        """Nothing held back, no delay asked for, not dropped: a write would go straight through."""
+        return not self._held and self.hold_s <= 0 and not self.dropped
+
     def get_write_buffer_size(self) -> int:
         return int(self._inner.get_write_buffer_size()) + self._held_bytes
 
@@ -613,6 +618,11 @@ class ConnectionGate:
     @property
     def transport(self) -> Any:
         return self._held
+
+    @property
+    def quiet(self) -> bool:
+        """No fault acts and nothing is held back: the connection may answer straight on ``raw``."""
+        return not self.faults.active and self._held.idle
 
     def modbus(self, frame: Frame) -> bytes | None:
         """None: serve ``frame``; bytes: the answer the fault gives instead (b"": none, dropped)."""

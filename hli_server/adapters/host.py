@@ -53,10 +53,16 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
 __all__ = [
+    "CHECK_MAX_CYCLES",
+    "CHECK_MAX_ITERATIONS",
+    "CHECK_MAX_TIMEOUT_S",
+    "CHECK_TIMEOUT_S",
     "LOOPBACK_NAMES",
     "Accepted",
     "AccessPolicy",
     "AdapterHost",
+    "CheckPort",
+    "CheckTimeoutError",
     "ConflictError",
     "DoorView",
     "EventFeed",
@@ -144,6 +150,10 @@ class StepRefusedError(OperatorError):
 
 class UnavailableError(OperatorError):
     """The engine cannot answer now (the doors process lost it, or it did not answer in time): 503."""
+
+
+class CheckTimeoutError(OperatorError):
+    """A program check did not finish within its wall-clock limit and was ended: 504."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -434,6 +444,38 @@ class OperatorPort(Protocol):
         ...
 
 
+CHECK_MAX_CYCLES = 10_000_000
+"""A check through the API stops here unless the request says otherwise (2.8 h of machine time at 1 ms)."""
+CHECK_MAX_ITERATIONS = 1_000_000
+"""A geometry check through the API stops after this many loop iterations (``check``'s default)."""
+CHECK_TIMEOUT_S = 120.0
+"""Wall-clock limit of one check through the API unless the request says otherwise [s]."""
+CHECK_MAX_TIMEOUT_S = 600.0
+
+
+class CheckPort(Protocol):
+    """Checking a program offline on a fresh machine of the server's machine file, as ``hli-server check``
+    does (issue 20; ``POST /api/check``): the engine's ``ProgramCheck``, in a process of its own, so that
+    the running machine is never touched and its clock never waits."""
+
+    async def check(
+        self,
+        text: str,
+        *,
+        name: str = "program",
+        files: Mapping[str, str] | None = None,
+        channel: int = 1,
+        geometry_only: bool = False,
+        max_cycles: int = CHECK_MAX_CYCLES,
+        max_iterations: int = CHECK_MAX_ITERATIONS,
+        timeout_s: float = CHECK_TIMEOUT_S,
+    ) -> dict[str, Any]:
+        """``check --format json``'s report with ``program``, ``status`` (``ok``, ``stopped``, ``capped``)
+        and ``exit_code``. NotFoundError (channel), InvalidRequestError (files), UnavailableError (busy),
+        CheckTimeoutError (the wall-clock limit)."""
+        ...
+
+
 class RecorderPort(Protocol):
     """Recording the session (docs/record-replay.md): one recording at a time, by name in the
     server's recording directory. Errors are :class:`OperatorError` subclasses."""
@@ -510,6 +552,10 @@ class DoorView:
         return self._host.recorder
 
     @property
+    def checker(self) -> CheckPort:
+        return self._host.checker
+
+    @property
     def faults(self) -> CommFaults:
         return self._host.faults
 
@@ -563,6 +609,11 @@ class AdapterHost(Protocol):
     @property
     def recorder(self) -> RecorderPort:
         """Recording the session (docs/record-replay.md)."""
+        ...
+
+    @property
+    def checker(self) -> CheckPort:
+        """Checking programs offline (issue 20, ``POST /api/check``)."""
         ...
 
     @property

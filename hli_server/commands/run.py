@@ -40,7 +40,7 @@ from hli_server.adapters.registry import (
     plan_adapters,
 )
 from hli_server.configuration import ConfigError, ConfigFileError, load_machine, machine_summary
-from hli_server.recording.tap import RecordingOptions
+from hli_server.recording.tap import DEFAULT_OUTPUTS_EVERY, RecordingOptions
 from hli_server.runtime import Clock, Runtime, precise_event_loop
 from hli_server.runtime.doors import DoorsProcess
 from hli_server.runtime.pacing import PRIORITIES, probed_default_loop
@@ -312,6 +312,14 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     help="a recording is closed when it reaches this size",
 )
 @click.option(
+    "--record-outputs-every",
+    type=click.IntRange(1, 1_000_000),
+    default=DEFAULT_OUTPUTS_EVERY,
+    show_default=True,
+    help="a recording samples the outputs every N cycles (the replay's checkpoints; the inputs and "
+    "events are stored at every cycle); 1: every cycle, at a cost per cycle (docs/record-replay.md)",
+)
+@click.option(
     "--journal-limit-mb",
     type=click.IntRange(1, 100_000),
     default=256,
@@ -359,6 +367,7 @@ def run(
     record_flush: float,
     record_max_mb: int,
     journal_limit_mb: int,
+    record_outputs_every: int,
     program_dirs: tuple[Path, ...],
     nc_output_dir: Path | None,
     **alias_values: Any,
@@ -430,6 +439,7 @@ def run(
                 flush_s=record_flush,
                 max_bytes=record_max_mb * 1024 * 1024,
                 journal_limit=journal_limit_mb * 1024 * 1024,
+                outputs_every=record_outputs_every,
             ),
             program_dirs=program_dirs,
             nc_output_dir=nc_output_dir,

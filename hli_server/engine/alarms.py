@@ -217,6 +217,18 @@ _TABLE: tuple[AlarmDef, ...] = (
     # --- the kernel's diagnosis pages: G100 measuring moves (C14-23) --------------------------
     _e(20138, "G100 is not allowed with the current measuring type", "kernel", page=_DIAG + "250906763.html"),
     _e(
+        20685,
+        "Dwell time programmed with additional axes (G04 takes the first main axis only)",
+        "kernel",
+        page=_DIAG + "252216715.html",
+    ),
+    _e(
+        60131,
+        "Feedrate per revolution with the spindle stopped (G95 without M3/M4 and S)",
+        "kernel",
+        page=_DIAG + "259219083.html",
+    ),
+    _e(
         50059,
         "Unable to measure with the axis: it is not a measuring axis (P-AXIS-00118)",
         "kernel",

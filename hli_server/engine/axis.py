@@ -159,7 +159,9 @@ class Axis:
         "referencing",
         "rotary",
         "setpoint",
+        "slope_ramp",
         "stop_deceleration",
+        "stop_elapsed",
         "stop_velocity",
         "stopping",
         "swe_neg",
@@ -208,6 +210,11 @@ class Axis:
         self.stopping = False
         self.stop_velocity = 0.0
         self.stop_deceleration = 0.0
+        self.stop_elapsed = 0.0
+        """Time since the independent stop began [s] (the deceleration's ramp, ``slope_ramp``)."""
+        self.slope_ramp = 0.0
+        """Ramp time of the channel's active acceleration profile [s] (0: STEP, M-05): an independent
+        stop builds its deceleration up linearly over it (FCT-C3's braking distance counts it)."""
 
     # --- software limits in effect (P-AXIS-00177/00178) ------------------------------------
     def set_soft_limits(self, negative: float | None = None, positive: float | None = None) -> None:
@@ -249,10 +256,19 @@ class Axis:
         self.stopping = True
         self.stop_velocity = (self.setpoint - self.prev_setpoint) / t_a
         self.stop_deceleration = deceleration
+        self.stop_elapsed = 0.0
+
+    def stop_distance(self, velocity: float, deceleration: float) -> float:
+        """How far an independent stop from ``velocity`` with ``deceleration`` runs at most: v²/(2a),
+        plus v * t_r / 2 while a jerk-limited profile builds the deceleration up over t_r (M-05)."""
+        v = abs(velocity)
+        return v * v / (2.0 * deceleration) + 0.5 * v * self.slope_ramp
 
     def advance_independent_stop(self, t_a: float) -> None:
         v = self.stop_velocity
-        dv = self.stop_deceleration * t_a
+        self.stop_elapsed += t_a
+        ramp = self.slope_ramp
+        dv = self.stop_deceleration * t_a * (min(1.0, self.stop_elapsed / ramp) if ramp > 0.0 else 1.0)
         v = max(0.0, v - dv) if v > 0 else min(0.0, v + dv)
         self.stop_velocity = v
         self.setpoint += v * t_a

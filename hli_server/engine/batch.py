@@ -15,8 +15,9 @@ of a CAM program:
 2. Every *other* line (comments, ``#`` commands, control statements, variables, calls, M codes, G90/G91,
    ``X2=..``, anything unusual or wrong) goes to the interpreter and the decoder, exactly as in a run;
    so do plain lines inside loops and subroutines (the interpreter runs them), plain lines while an area
-   is being defined, and short stretches of plain lines (fewer than :data:`SMALL_RUN` plus
-   :data:`SMALL_RUN_PER_AREA` for each active area). A line with only a comment does not end a stretch.
+   is being defined, plain lines under G70 (inch) or G95 (feed per revolution), and short stretches of
+   plain lines (fewer than :data:`SMALL_RUN` plus :data:`SMALL_RUN_PER_AREA` for each active area). A
+   line with only a comment does not end a stretch.
 3. A stretch of plain lines ahead of the interpreter is decoded at once: the modal motion and feed, the
    targets (G90 with the zero offset, G91 summed in program order: the same floats), the segments' boxes;
    then the blocks that might fail a check are picked, conservatively: a line shorter than 1 µm (the
@@ -233,7 +234,9 @@ class BatchGeometryCheck:
         groups, all_exact = self._checks()
         areas = sum(len(g.works) + len(g.prots) for g in groups)
         short = count < SMALL_RUN + SMALL_RUN_PER_AREA * areas and not self._chords(chunk, idx, groups)
-        if decoder.modal.in_area_definition or short:
+        modal = decoder.modal
+        # G70 (inch) and G95 (feed per revolution, M-06/M-07): the exact decoder scales and checks them
+        if modal.in_area_definition or short or modal.inch or modal.feed_per_rev:
             for k in idx.tolist():
                 self.line = chunk.first_line + k
                 self.exact_blocks += 1

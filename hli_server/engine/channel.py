@@ -25,6 +25,7 @@ from hli_server.engine.hli import AxisHli, ChannelHli
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.interpreter import Interpreter
 from hli_server.engine.nc.syntax import Compiler
+from hli_server.engine.path.profiles import SlopeProfile, SlopeType
 from hli_server.engine.planner import Marker, MarkerKind, Planner
 from hli_server.engine.ports import MachinePort
 from hli_server.engine.programs import ProgramFile
@@ -38,7 +39,7 @@ from schemas.events import (
     NcMessage,
     ProgramStateChanged,
 )
-from schemas.units import mm_from_increments
+from schemas.units import mm_from_increments, s_from_us
 from schemas.wire import HoldSource, Mode, ProgramState
 
 __all__ = ["LOOKAHEAD_ITEMS", "Channel", "ChannelHost", "JogGuard"]
@@ -181,6 +182,23 @@ class Channel:
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))
         """Runs the NC programs of this channel ahead of the motion (N-01..N-08)."""
         self.planner = Planner(t_a=self.t_a, feedhold_decel=config.feedhold_deceleration)
+        self.slope_ramp_time = max(
+            (
+                s_from_us(
+                    max(
+                        a.config.tr_beschl_ab,
+                        a.config.tr_beschl_zu,
+                        a.config.tr_brems_ab,
+                        a.config.tr_brems_zu,
+                    )
+                )
+                for a in axes
+            ),
+            default=0.0,
+        )
+        """The ramp time of the jerk-limited profiles [s]: the longest of the axes' P-AXIS-00195..00198."""
+        self.decoder.slope_handler = self.set_slope
+        self.decoder.rotary_axes = frozenset(a.name for a in axes if a.rotary)
         self.jog_guards: list[JogGuard] = []
         self.jog_velocity: list[float] = [0.0] * len(axes)
         self.current_block: Block | None = None
@@ -421,10 +439,21 @@ class Channel:
             return
         self.interpreter.start(self.program_text, self.program_name)
         self.planner.clear()
+        self.set_slope(None)  # P-CHAN-00071 at every program start (#SLOPE's page)
         self.decoder.start(self.interpreter, self.setpoints())
         self.aborting = False
         self.current_block = None
         self._state.apply(Cause.START)
+
+    def set_slope(self, profile: int | None) -> None:
+        """The acceleration profile from now on (``#SLOPE``, M-01..M-03): 0 STEP, 1 TRAPEZ, 2 SIN2,
+        3 HSC (simulated as TRAPEZ); None: P-CHAN-00071's, as at program start (``#SLOPE DEFAULT``)."""
+        value = self.config.slope_profile if profile is None else profile
+        active = SlopeProfile(SlopeType(value), self.slope_ramp_time)
+        self.planner.set_profile(active)
+        ramp = 0.0 if active.type == SlopeType.STEP else self.slope_ramp_time
+        for axis in self.axes:
+            axis.slope_ramp = ramp  # independent stops (reset, collision) in the profile too (M-05)
 
     def reset(self) -> None:
         """E-03: stop motion, clear the channel's errors, reset modal state; hooks for the monitors."""
@@ -491,7 +520,7 @@ class Channel:
             self.planner.feedhold = True
             point, _ = self.planner.step()
             self._apply(point)
-            if self.planner.velocity <= 0.0:
+            if self.planner.at_rest:
                 self.planner.clear()
                 self.aborting = False
             return
@@ -507,7 +536,7 @@ class Channel:
             self.current_block = head.block
         for marker in markers:
             self._marker(marker)
-        self._state.set_held(bool(holds) and self.planner.velocity == 0.0)
+        self._state.set_held(bool(holds) and self.planner.at_rest)
 
     def _set_holds(self, holds: HoldSource) -> None:
         if holds == self.hold_source:

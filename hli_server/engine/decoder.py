@@ -14,13 +14,21 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 from hli_server.engine.geometry import LineSegment, Point, Segment, arc_from_centre
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
-from hli_server.engine.nc.interpreter import PAUSE, Directive, FlushStop, FlushWait, MeasMode, SyncAction
-from hli_server.engine.planner import Marker, MarkerKind, Motion
+from hli_server.engine.nc.interpreter import (
+    PAUSE,
+    Directive,
+    FlushStop,
+    FlushWait,
+    MeasMode,
+    Slope,
+    SyncAction,
+)
+from hli_server.engine.planner import Dwell, Marker, MarkerKind, Motion
 
 __all__ = [
     "AreaHandler",
@@ -130,6 +138,16 @@ class ModalState:
     """G130 <axis><percent>: per axis, for G01/G02/G03."""
     axis_accel_weight_rapid: dict[str, float] = field(default_factory=dict)
     """G230 <axis><percent>: per axis, for G00."""
+    inch: bool = False
+    """G70 (inch) / G71 (metric, the initial state): path and coordinate values in inch (M-06)."""
+    feed_per_rev: bool = False
+    """G95 (feed per revolution) / G94 (feed per minute, the initial state) (M-07)."""
+    feed_rev: float | None = None
+    """mm/rev: the F word programmed under G95 (kept apart from G94's, as the kernel does)."""
+    spindle_speed: float = 0.0
+    """rpm: the last S word (the command spindle speed G95 multiplies with)."""
+    spindle_on: bool = False
+    """M3/M4 turn the main spindle on, M5 off (G95 needs it turning: the kernel's ID 60131)."""
     meas_type: int | None = None
     """The measuring type of G100 selected in the program (the kernel's ``#MEAS MODE [n]``); None: the
     channel's default P-CHAN-00057. ``#MEAS MODE`` sets it (the interpreter's ``MeasMode``)."""
@@ -172,6 +190,10 @@ class Decoder:
         self.current_block: Block | None = None
         self._position_before_area: list[float] | None = None
         self.blocks_decoded = 0
+        self.rotary_axes: frozenset[str] = frozenset()
+        """Axes in degrees: G70 does not scale them."""
+        self.slope_handler: Callable[[int | None], None] | None = None
+        """Switches the acceleration profile (``#SLOPE``: 0..3 as P-CHAN-00071, None: the default)."""
         self.last_centre: dict[str, float] = {}
         """I, J, K of the last circle programmed (V.G.I, V.G.J, V.G.K)."""
 
@@ -231,6 +253,14 @@ class Decoder:
             return [Marker(MarkerKind.ACTION, block, payload=self._end_wait)]
         if isinstance(out, FlushStop):
             return [Marker(MarkerKind.ACTION, block, payload=_nothing)]
+        if isinstance(out, Slope):
+            # #SLOPE (M-02): the path comes to rest here and the axes with it, then the profile
+            # changes (the filter of the new profile starts at rest; docs/nc-language.md)
+            handler = self.slope_handler
+            if handler is None:
+                return []
+            profile = out.profile
+            return [Marker(MarkerKind.ACTION, block, payload=lambda: handler(profile))]
         if isinstance(out, MeasMode):
             self.modal.meas_type = out.meas_type  # modal, decoded in order (the G100 blocks after it)
             return []
@@ -274,6 +304,26 @@ class Decoder:
         m = self.modal
         if block.two_path:
             return self._error(block, 910110, "two-path programming (': G0 ... : G0 ...') is not supported")
+        if 70 in block.g_codes:
+            m.inch = True  # the new unit applies to this block already (M-06)
+        elif 71 in block.g_codes:
+            m.inch = False
+        if 4 in block.g_codes:
+            return self._dwell(block)  # before G70's scaling: the time is in seconds
+        if m.inch:
+            block = _block_in_mm(block, self.rotary_axes)
+        if 95 in block.g_codes:
+            m.feed_per_rev = True
+        elif 94 in block.g_codes:
+            m.feed_per_rev = False
+        speed = block.extra.get("S")
+        if speed is not None:
+            m.spindle_speed = abs(speed)
+        for code in block.m_codes:
+            if code in (3, 4):
+                m.spindle_on = True
+            elif code == 5:
+                m.spindle_on = False
         items: list[Motion | Marker] = []
         if block.area is not None:
             return self._area(block, block.area)
@@ -299,12 +349,15 @@ class Decoder:
                 measuring = True
             elif g in (130, 131, 230, 231, 132, 133, 134, 233, 333, 334, 338, 339):
                 self._weighting(g, block)
-            elif g in (100, 200, 201, 202, 4):
+            elif g in (100, 200, 201, 202):
                 return self._error(block, 910110, f"G{g} is not supported in this block context")
         if block.feed is not None:
             if block.feed <= 0:
                 return self._error(block, 911000, f"feed F{block.feed:g} must be positive")
-            m.feed = block.feed
+            if m.feed_per_rev:
+                m.feed_rev = block.feed
+            else:
+                m.feed = block.feed
         if 92 in block.g_codes:
             # G92: the current position gets the programmed program coordinates
             for name, value in block.axes:
@@ -324,6 +377,31 @@ class Decoder:
             if code in (2, 30):
                 items.append(Marker(MarkerKind.END, block, payload=f"M{code:02d}"))
         return items
+
+    def _dwell(self, block: Block) -> list[Motion | Marker]:
+        """``G04 <first main axis><s>`` (M-09, PM 206132747): the path rests for the time, then goes on
+        (the axes at rest first). The time by the first main axis only; another axis in the block is the
+        kernel's 20685 (refused here, where the kernel warns and goes on); the bare-number form
+        ``G04 2.5``, ``G04 P1`` and the spindle form ``G04 S10`` are not simulated (910110)."""
+        first = self.main[0]
+        others = [name for name, _ in block.axes if name != first]
+        if others:
+            return self._error(
+                block,
+                20685,
+                f"G04 with the axes {', '.join(others)}: the dwell time takes the first main axis only",
+            )
+        seconds = dict(block.axes).get(first)
+        if seconds is None:
+            return self._error(
+                block,
+                910110,
+                f"G04 without {first}<seconds>: only G04 {first}<s> is simulated "
+                "(not G04 <s>, G04 P.., G04 S..)",
+            )
+        if seconds < 0.0:
+            return self._error(block, 911000, f"G04 {first}{seconds:g}: a dwell time is not negative")
+        return [Marker(MarkerKind.ACTION, block, payload=Dwell(seconds))]
 
     def _weighting(self, g: int, block: Block) -> None:
         """G130/G131/G230/G231: acceleration weighting in percent of the axes' acceleration (manual
@@ -370,10 +448,23 @@ class Decoder:
             words = dict(block.centre)
             self.last_centre = words
             wi, wj = _CENTRE_WORDS[plane[0]], _CENTRE_WORDS[plane[1]]
+            radius = block.extra.get("R")
+            if radius is not None:
+                if wi in words or wj in words:
+                    return self._error(
+                        block,
+                        911002,
+                        f"circle G0{m.motion} with both R and a centre ({wi}/{wj}): program one",
+                    )
+                found = _centre_from_radius((start[i], start[j]), (target[i], target[j]), radius, cw)
+                if isinstance(found, str):
+                    return self._error(block, 911001, f"circle G0{m.motion} R{radius:g}: {found}")
+                words = {wi: found[0] - start[i], wj: found[1] - start[j]}
+                self.last_centre = words
             if wi not in words and wj not in words:
                 return self._error(block, 911002, f"circle G0{m.motion} without centre ({wi}/{wj})")
             ci_val, cj_val = words.get(wi, 0.0), words.get(wj, 0.0)
-            if m.centre_absolute:
+            if m.centre_absolute and radius is None:
                 centre = (ci_val + m.offset(first), cj_val + m.offset(second))
             else:
                 centre = (start[i] + ci_val, start[j] + cj_val)
@@ -399,8 +490,18 @@ class Decoder:
             self.position = target
             return []
         rapid = m.motion == 0
-        if not rapid and m.feed is None:
-            return self._error(block, 911000, "no feed (F word) programmed for a feed move")
+        if not rapid:
+            if m.feed_per_rev:
+                if m.feed_rev is None:
+                    return self._error(block, 911000, "G95: no feed per revolution (F word) programmed")
+                if not m.spindle_on or m.spindle_speed <= 0.0:
+                    return self._error(
+                        block,
+                        60131,
+                        "G95 feed per revolution with the spindle stopped: program M3/M4 and S first",
+                    )
+            elif m.feed is None:
+                return self._error(block, 911000, "no feed (F word) programmed for a feed move")
         for check in self.path_checks:
             err = check(segment, block)
             if err is not None:
@@ -444,7 +545,7 @@ class Decoder:
         """Path velocity and acceleration the axes allow along the segment (mm/s, mm/s²); ``feed``
         (mm/min) instead of the programmed F where given."""
         length = segment.length
-        v = math.inf if rapid else (feed if feed is not None else self.modal.feed or 0.0) / 60.0
+        v = math.inf if rapid else (feed if feed is not None else self.path_feed()) / 60.0
         a = math.inf
         if isinstance(segment, LineSegment):
             for k, name in enumerate(self.axes):
@@ -469,6 +570,14 @@ class Decoder:
         if math.isinf(a):
             a = 1000.0
         return v, a * self._weight(segment, rapid)
+
+    def path_feed(self) -> float:
+        """mm/min: the programmed path feed; under G95 F [mm/rev] times S [rpm] (the manual's
+        example: F1.5 at S1200 is 1800 mm/min; the override of a real spindle is not simulated)."""
+        m = self.modal
+        if m.feed_per_rev:
+            return (m.feed_rev or 0.0) * m.spindle_speed if m.spindle_on else 0.0
+        return m.feed or 0.0
 
     def _weight(self, segment: Segment, rapid: bool) -> float:
         """The acceleration weighting of G130/G131 (feed) or G230/G231 (rapid) for this segment."""
@@ -506,3 +615,52 @@ class Decoder:
         if result is not None:
             return [Marker(MarkerKind.ACTION, block, payload=result)]
         return []
+
+
+INCH = 25.4
+"""mm per inch (G70)."""
+
+
+def _block_in_mm(block: Block, rotary: frozenset[str]) -> Block:
+    """The block's path and coordinate values from inch to mm (G70, M-06: "acts on all path and
+    coordinate values", programming manual 206272267): axis words (not rotary axes), I/J/K, R, the
+    feed (F in inch/min, inch/rev as the G95 page's "[mm/rev, inch/rev]"), and an area's MIN_EXCUR /
+    MAX_EXCUR ("in [mm, inch]", FCT-C14 2.4)."""
+    area = block.area
+    if isinstance(area, AreaBegin):
+        area = replace(area, min_excur=area.min_excur * INCH, max_excur=area.max_excur * INCH)
+    extra = block.extra
+    if "R" in extra:
+        extra = {**extra, "R": extra["R"] * INCH}
+    return replace(
+        block,
+        axes=tuple((name, value if name in rotary else value * INCH) for name, value in block.axes),
+        centre=tuple((word, value * INCH) for word, value in block.centre),
+        feed=block.feed * INCH if block.feed is not None else None,
+        area=area,
+        extra=extra,
+    )
+
+
+def _centre_from_radius(
+    start: tuple[float, float], end: tuple[float, float], radius: float, cw: bool
+) -> tuple[float, float] | str:
+    """The centre of a circle programmed by its radius (M-08): R > 0 the arc of at most 180°, R < 0
+    the one of more than 180° (programming manual, circular interpolation with radius); the centre
+    lies right of the chord for a short G02 arc, left for a short G03 arc. A message if there is none."""
+    dx, dy = end[0] - start[0], end[1] - start[1]
+    chord = math.hypot(dx, dy)
+    r = abs(radius)
+    if chord <= 1e-9:
+        return "start and end point coincide: a full circle needs its centre (I/J/K)"
+    if r <= 1e-9:
+        return "radius 0"
+    if chord > 2.0 * r + ARC_RADIUS_TOLERANCE:
+        return f"the end point is {chord:.4f} mm away, farther than the diameter {2 * r:.4f} mm"
+    h = math.sqrt(max(0.0, r * r - 0.25 * chord * chord))
+    mx, my = start[0] + 0.5 * dx, start[1] + 0.5 * dy
+    # unit normal left of the chord
+    nx, ny = -dy / chord, dx / chord
+    left = (not cw) == (radius > 0)
+    sign = 1.0 if left else -1.0
+    return (mx + sign * h * nx, my + sign * h * ny)

@@ -22,6 +22,15 @@ counts :meth:`Planner.clear`, so that a function holding path coordinates notice
 G60 (exact stop, FCT-A3 section 2): after a G60 block the next item starts only when
 ``exact_stop_gate(motion)`` says the axes are in their exact-stop window (the position monitor
 installs the gate; without one, the path goes on at once).
+
+Acceleration profiles (``#SLOPE``, P-CHAN-00071, M-01..M-05): the velocities above are the step
+profile's. With TRAPEZ, SIN2 or HSC active (:meth:`Planner.set_profile`) the point handed to the
+axes is the one at the *filtered* path coordinate (:class:`~hli_server.engine.path.profiles.PathFilter`):
+it lags the planned one by half the ramp time, never passes it, and comes to rest where it does.
+Where the planned path comes to rest (a marker, a reversal, the end of a G00 or G60 block, a stop
+point), it waits until the filtered path is at rest too (:attr:`Planner.at_rest`) before it goes
+on: a marker runs with the axes at rest, and a corner passed at velocity 0 stays a stop. A SYNC
+marker runs when the planned path passes it (half a ramp time before the axes get there).
 """
 
 from __future__ import annotations
@@ -35,8 +44,9 @@ from typing import Any
 
 from hli_server.engine.geometry import Point, Segment
 from hli_server.engine.nc.blocks import Block
+from hli_server.engine.path.profiles import PathFilter, SlopeProfile
 
-__all__ = ["JUNCTION_DEVIATION", "ExactStopGate", "Marker", "MarkerKind", "Motion", "Planner"]
+__all__ = ["JUNCTION_DEVIATION", "Dwell", "ExactStopGate", "Marker", "MarkerKind", "Motion", "Planner"]
 
 JUNCTION_DEVIATION = 0.02
 """mm: how far a corner may be cut in thought to bound the corner velocity (project's own)."""
@@ -84,6 +94,19 @@ class Marker:
 
 Item = Motion | Marker
 
+
+class Dwell:
+    """The payload of a G04 action marker: the path rests ``seconds`` there (whole cycles)."""
+
+    __slots__ = ("seconds",)
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+
+    def __call__(self) -> None:
+        """Run by the channel like any action: the planner has started the rest already."""
+
+
 ExactStopGate = Callable[[Motion], bool]
 """Asked at standstill after a G60 block: may the next item start? (FCT-A3: axes in their window)"""
 
@@ -105,6 +128,17 @@ class Planner:
     """Incremented by :meth:`clear`: path coordinates of an older generation mean nothing any more."""
     exact_stop_gate: ExactStopGate | None = None
     """Asked at standstill after a G60 block: may the next item start? (FCT-A3: axes in the window)"""
+    profile: SlopeProfile = field(default_factory=SlopeProfile)
+    """The active acceleration profile (``#SLOPE``; P-CHAN-00071 at program start)."""
+    s_out: float = 0.0
+    """Path coordinate of the point handed to the axes (the filtered one; ``s_abs`` under STEP)."""
+    v_out: float = 0.0
+    """Velocity of the point handed to the axes [mm/s] (the filtered path's)."""
+    dwell_remaining: float = 0.0
+    """Seconds the path still rests (G04)."""
+    _filter: PathFilter | None = None
+    _trail: deque[Motion] = field(default_factory=deque)
+    """Motions the planned path has left but the filtered one has not (yet)."""
     _exact_stop_pending: Motion | None = None
     _dirty: bool = True
     _motions: int = 0
@@ -122,6 +156,41 @@ class Planner:
         self.generation += 1
         self._dirty = True
         self._motions = 0
+        self._trail.clear()
+        self.dwell_remaining = 0.0
+        self.s_out = 0.0
+        self.v_out = 0.0
+        if self._filter is not None:
+            self._filter.reset(0.0)
+
+    def start_dwell(self, seconds: float) -> None:
+        """G04: the path rests ``seconds`` (whole cycles, rounded) from the next cycle on."""
+        self.dwell_remaining = round(seconds / self.t_a) * self.t_a
+
+    def set_profile(self, profile: SlopeProfile) -> None:
+        """Make ``profile`` the active acceleration profile. Called at rest (program start, a
+        ``#SLOPE`` block, which stops the path): the filter starts on the current point."""
+        self.profile = profile
+        kernel = profile.kernel(self.t_a)
+        if len(kernel) == 1:
+            self._filter = None
+            self.s_out = self.s_abs
+        else:
+            self._filter = PathFilter(kernel, self.s_out)
+
+    @property
+    def at_rest(self) -> bool:
+        """The planned path and the point handed to the axes are both at rest."""
+        f = self._filter
+        return self.velocity <= 0.0 and (f is None or f.settled)
+
+    def stop_distance(self, decel: float | None = None) -> float:
+        """Path the axes still travel when the path brakes with ``decel`` (the feedhold deceleration
+        if None) from now, in the active profile: the planned path's ramp plus the filter's lag."""
+        a = decel if decel is not None else self.feedhold_decel
+        v = self.velocity
+        planned = v * v / (2.0 * a) + 0.5 * v * self.t_a if v > 0.0 else 0.0
+        return planned + (self.s_abs - self.s_out)
 
     def push(self, item: Item) -> None:
         if isinstance(item, Motion):
@@ -231,11 +300,57 @@ class Planner:
 
     # --- one cycle -----------------------------------------------------------------------
     def step(self) -> tuple[Point | None, list[Marker]]:
-        """Advance one cycle. Returns the new path point (None if nothing moved) and the markers
-        reached in this cycle, in order. A marker is reached only at standstill."""
+        """Advance one cycle. Returns the point for the axes (None if nothing moved) and the markers
+        reached in this cycle, in order (see :meth:`_step_planned`); with a jerk-limited profile the
+        point is the filtered path's (see the module's description)."""
+        f = self._filter
+        if f is None:
+            before = self.s_abs
+            point, reached = self._step_planned()
+            self.s_out = self.s_abs
+            self.v_out = (self.s_abs - before) / self.t_a if self.s_abs >= before else 0.0
+            return point, reached
+        held: list[Marker] = []
+        if self.velocity <= 0.0 and not f.settled:
+            # where the planned path comes to rest (a marker, a reversal, G00/G60 block end, a
+            # stop point), the axes come to rest too before it goes on: a corner with velocity
+            # 0 stays one, and a marker runs with the axes at rest
+            reached = held
+        else:
+            _, reached = self._step_planned()
+        before = self.s_out
+        s_f = f.push(self.s_abs)
+        self.s_out = s_f
+        self.v_out = (s_f - before) / self.t_a
+        trail = self._trail
+        while trail and trail[0].s_start + trail[0].length < s_f - 1e-9:
+            trail.popleft()
+        if s_f == before:
+            return None, reached
+        return self._point_out(s_f), reached
+
+    def _point_out(self, s: float) -> Point | None:
+        for passed in self._trail:
+            if passed.s_start - 1e-9 <= s <= passed.s_start + passed.length + 1e-9:
+                return passed.segment.point_at(min(max(s - passed.s_start, 0.0), passed.length))
+        for item in self.queue:
+            if isinstance(item, Motion) and item.s_start - 1e-9 <= s <= item.s_start + item.length + 1e-9:
+                return item.segment.point_at(min(max(s - item.s_start, 0.0), item.length))
+        return None
+
+    def _step_planned(self) -> tuple[Point | None, list[Marker]]:
+        """Advance the planned (step-profile) path one cycle. Returns the new path point (None if
+        nothing moved) and the markers reached in this cycle, in order. A marker is reached only at
+        standstill."""
         if self._dirty:
             self._backward_pass()
         reached: list[Marker] = []
+        if self.dwell_remaining > 0.0:
+            self.dwell_remaining = max(0.0, self.dwell_remaining - self.t_a)
+            if self.dwell_remaining < 0.5 * self.t_a:
+                self.dwell_remaining = 0.0
+            self.velocity = 0.0
+            return None, reached
         pending = self._exact_stop_pending
         if pending is not None:
             # G60: hold at the block end until the axes are in their exact-stop window
@@ -249,6 +364,9 @@ class Planner:
             assert isinstance(marker, Marker)
             reached.append(marker)
             if marker.kind not in (MarkerKind.ACTION, MarkerKind.SYNC):
+                return None, reached
+            if isinstance(marker.payload, Dwell):
+                self.start_dwell(marker.payload.seconds)  # G04: rest from the next cycle on
                 return None, reached
         if not self.queue:
             self.velocity = 0.0
@@ -294,6 +412,8 @@ class Planner:
             self.s_abs = item.s_start + item.length
             ds -= max(s_rem, 0.0)
             self.queue.popleft()
+            if self._filter is not None:
+                self._trail.append(item)
             self._motions -= 1
             self.position_in_item = 0.0
             # SYNC markers are passed on the way (their actions run this cycle, in program order)

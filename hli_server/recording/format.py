@@ -65,7 +65,7 @@ __all__ = [
 ]
 
 FORMAT: Final = "hli-recording"
-FORMAT_VERSION: Final = 1
+FORMAT_VERSION: Final = 2
 """Raised when a reader of this version could not read the new files; readers refuse newer versions."""
 SUFFIX: Final = ".jsonl.gz"
 COMPRESS_LEVEL: Final = 1

@@ -6,8 +6,10 @@ The replay builds the recorded machine from the recorded configuration and runs 
 :class:`Feeder` instead of the recorder: before each cycle it writes the PLC->CNC half recorded for that
 cycle into the image and repeats the operator's requests stamped with it (program texts and the files
 the engine read come from the recording); after the cycle it compares the CNC->PLC half the engine
-packed, and the events, with the recorded ones. The first difference ends the replay (``all_differences``:
-every difference is counted, the first ``max_differences`` kept).
+packed with the recorded one at every recorded sample of the outputs (every cycle in format version 1;
+every ``outputs_every`` cycles from the window's first in version 2), and the events at every cycle.
+The first difference ends the replay (``all_differences``: every difference is counted, the first
+``max_differences`` kept).
 
 Verdicts and exit statuses: ``pass`` 0, ``differ`` 1, ``cannot replay`` 3 (2 is a usage error): a file that
 is no recording or of a newer format, a recording whose start state cannot be rebuilt (started in a
@@ -277,6 +279,8 @@ class Feeder:
         self.until = until
         self.window = int(header.get("window_start", 1))
         self.t_a_us = int(header.get("t_a_us", 1000))
+        self.every = max(1, int(header.get("outputs_every", 1)))
+        """the outputs were sampled every this many cycles from the window's first (format 2)"""
         self._buffer: deque[dict[str, Any]] = deque()
         self._exhausted = False
         self.end_cycle: int | None = None
@@ -525,10 +529,12 @@ class Feeder:
                 if self.fast:
                     self.out_structs[at].pack_into(self.expected_bytes, self.offsets[at], own)
         buffer = self._buffer
+        sampled = False
         if buffer and buffer[0]["c"] == cycle and ("o" in buffer[0] or "e" in buffer[0]):
             record = buffer.popleft()
             flat = record.get("o")
             if flat:
+                sampled = True  # a sample of the outputs (the recording's last cycle is one as well)
                 self._expect(flat)
             self._expected_events = record.get("e") or []
         else:
@@ -536,7 +542,9 @@ class Feeder:
         self.report.last_cycle = cycle
         if cycle < self.window or packed is None:
             return
-        if self.fast:
+        if self.every > 1 and (cycle - self.window) % self.every and not sampled:
+            pass  # not a sample of the outputs: the events alone
+        elif self.fast:
             if packed[8:] != self.expected_bytes:
                 self._compare_values(cycle, packed)
         else:

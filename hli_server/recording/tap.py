@@ -13,8 +13,10 @@ Two sinks:
   makes a recording started in a running server replayable: the replay runs the same inputs from cycle
   1 and compares the outputs from the recording's window on;
 * **the recording file**, between :meth:`SessionTap.start` and :meth:`SessionTap.stop`: the header, the
-  journal so far, then inputs and outputs (the CNC->PLC half and the events) of every cycle that
-  changed something (:mod:`hli_server.recording.format`).
+  journal so far, then the inputs of every cycle that changed them, the events at their cycle, and the
+  outputs (the CNC->PLC half) sampled every ``outputs_every`` cycles where they changed
+  (:mod:`hli_server.recording.format`). The engine is deterministic: the inputs reproduce every cycle,
+  the samples are the replay's checkpoints, and the cycle pays one comparison for them.
 
 The operator's requests reach the tap through :class:`JournaledOperator`, the runtime's operator panel
 wrapped; program files through :meth:`SessionTap.wrap_reader`.
@@ -85,6 +87,7 @@ __all__ = [
     "DEFAULT_FLUSH_S",
     "DEFAULT_JOURNAL_LIMIT",
     "DEFAULT_MAX_BYTES",
+    "DEFAULT_OUTPUTS_EVERY",
     "OPERATOR_REQUESTS",
     "HalfCodec",
     "JournaledOperator",
@@ -101,6 +104,12 @@ DEFAULT_FLUSH_S: Final = 1.0
 """Seconds between two flushes of a recording (what a crash can lose at most)."""
 DEFAULT_MAX_BYTES: Final = 2 * 1024**3
 """A recording file is closed when it reaches this size (2 GiB; ``--record-max-mb``)."""
+DEFAULT_OUTPUTS_EVERY: Final = 100
+"""The outputs (CNC->PLC half) are sampled every this many cycles (``--record-outputs-every``; 100 =
+0.1 s at 1 ms): the engine is deterministic, so the inputs stored at their cycles reproduce every cycle, and
+the samples are the checkpoints the replay verifies. Events (alarms) are stored at their own cycle
+always. 1 stores every cycle whose outputs changed (format version 1's behaviour; its cost per cycle is
+in docs/performance.md)."""
 DEFAULT_JOURNAL_LIMIT: Final = 256 * 1024**2
 """The input journal in memory (compressed) is dropped beyond this (256 MiB); a recording started
 later then cannot be replayed from the server's first cycle, and says so."""
@@ -262,6 +271,8 @@ class RecordingOptions:
     max_bytes: int = DEFAULT_MAX_BYTES
     journal_limit: int = DEFAULT_JOURNAL_LIMIT
     overwrite: bool = False
+    outputs_every: int = DEFAULT_OUTPUTS_EVERY
+    """Sample the outputs every this many cycles (``--record-outputs-every``; 1: every cycle)."""
 
 
 class SessionTap:
@@ -277,6 +288,13 @@ class SessionTap:
         self.flush_s = options.flush_s
         self.max_bytes = options.max_bytes
         self.journal_limit = options.journal_limit
+        if options.outputs_every < 1:
+            raise ValueError(f"outputs_every must be at least 1 cycle, not {options.outputs_every}")
+        self.outputs_every = options.outputs_every
+        self._next_out = 0
+        """the next cycle whose outputs are sampled (while recording)"""
+        self._packed: bytearray | None = None
+        """the runtime's packing buffer, for the sample of the recording's last cycle"""
         self.machine: Machine | Any = None
         self.layout: Layout | None = None
         self.inputs: HalfCodec | None = None
@@ -349,11 +367,16 @@ class SessionTap:
             pending.append((_IN, cycle, latched))
             self._last_in = latched
         if self._recording_out and packed is not None:
-            half = packed[8:]
-            if half != self._last_out:
-                pending.append((_OUT, cycle, (bytes(half), self._take_events())))
-                self._last_out = half
-            elif self._events:
+            if cycle >= self._next_out:  # a sample of the outputs (a checkpoint of the replay)
+                self._next_out = cycle + self.outputs_every
+                self._packed = packed  # the runtime's packing buffer (the same every cycle): the last sample
+                half = packed[8:]
+                if half != self._last_out:
+                    pending.append((_OUT, cycle, (bytes(half), self._take_events())))
+                    self._last_out = half
+                elif self._events:
+                    pending.append((_OUT, cycle, (None, self._take_events())))
+            elif self._events:  # events at their own cycle, every cycle
                 pending.append((_OUT, cycle, (None, self._take_events())))
         if len(pending) > MAX_PENDING:
             self._encode(len(pending))
@@ -423,11 +446,16 @@ class SessionTap:
             name += SUFFIX
         return self.directory / name
 
-    def start(self, path: Path, *, origin: str = "api", overwrite: bool = False) -> RecordingStatus:
+    def start(
+        self, path: Path, *, origin: str = "api", overwrite: bool = False, outputs_every: int | None = None
+    ) -> RecordingStatus:
         """Start recording into ``path`` (a new file, unless ``overwrite``): the header, the input
-        journal so far, then every cycle's changes. RecordingError when one runs already."""
+        journal so far, then every cycle's changes (the outputs every ``outputs_every`` cycles; None: the
+        server's setting). RecordingError when one runs already."""
         if self.layout is None or self.inputs is None or self.outputs is None:
             raise RecordingError("the server is not running yet")
+        if outputs_every is not None and outputs_every < 1:
+            raise RecordingError(f"outputs_every must be at least 1 cycle, not {outputs_every}")
         if self._writer is not None:
             raise RecordingError(f"a recording runs already: {self._writer.path}; stop it first")
         self._encode(len(self._pending))
@@ -453,6 +481,7 @@ class SessionTap:
             "inputs": self.inputs.header(),
             "outputs": self.outputs.header(),
             "follow_cycle": self.outputs.follow,
+            "outputs_every": outputs_every or self.options.outputs_every,
             "window_start": window,
             "journal": {
                 "from_cycle": 1,
@@ -469,8 +498,10 @@ class SessionTap:
             writer.close()
             raise RecordingError(f"cannot write {path}: {exc}") from None
         self._writer = writer
+        self.outputs_every = outputs_every or self.options.outputs_every
         self._window_start = window
         self._recording_out = True
+        self._next_out = window
         self._last_out = None
         self._enc_out = None
         self._events = []
@@ -487,7 +518,16 @@ class SessionTap:
         writer = self._writer
         if writer is None:
             raise RecordingError("no recording runs")
+        packed, last = self._packed, self._last_cycle
+        if (
+            packed is not None and self._next_out - self.outputs_every < last
+        ):  # the last cycle is a sample too
+            half = packed[8:]
+            self._pending.append(
+                (_OUT, last, (bytes(half) if half != self._last_out else None, self._take_events()))
+            )
         self._recording_out = False
+        self._packed = None
         self._stop_listening()
         self._encode(len(self._pending))
         status = self.status()

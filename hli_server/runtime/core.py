@@ -35,6 +35,7 @@ from hli_server._compiled import stale_notice
 from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     AccessPolicy,
+    CheckPort,
     EventFeed,
     ImagePort,
     LoggedEvent,
@@ -48,6 +49,7 @@ from hli_server.adapters.host import (
 from hli_server.adapters.registry import ADAPTERS, Adapter, AdapterError, create_adapter
 from hli_server.engine.machine import Machine
 from hli_server.recording.tap import JournaledOperator, RecordingOptions, SessionRecorderPort, SessionTap
+from hli_server.runtime.checks import ProgramChecker
 from hli_server.runtime.doors import DoorsProcess
 from hli_server.runtime.event_log import EventLog
 from hli_server.runtime.image_factory import ImageFactory, RuntimeImage, shared_memory_image
@@ -173,6 +175,8 @@ class Runtime:
         self.stop_after_cycles = stop_after_cycles
         self.programs = RuntimeLibrary([*program_dirs, *config.program_directories])
         """Where ``L name`` finds global subprograms: uploads, ``program_dirs``, the machine file's (N-02)."""
+        self.checker = ProgramChecker(config, self.programs.directories.directories)
+        """Checks programs offline for ``POST /api/check`` (a worker process, started at the first check)."""
         self.session = SessionTap(config, recording)
         """Records the session (docs/record-replay.md): the input journal always, a recording file on
         demand."""
@@ -511,6 +515,7 @@ class Runtime:
         with contextlib.suppress(ValueError):
             self.machine.event_listeners.remove(self.event_log)
         self.nc_files.close()
+        await self.checker.close()
         if errors:
             raise errors[0]
 
@@ -801,6 +806,10 @@ class RuntimeHost:
     @property
     def faults(self) -> CommFaults:
         return self._rt.comm_faults
+
+    @property
+    def checker(self) -> CheckPort:
+        return self._rt.checker
 
     @property
     def events(self) -> EventFeed:

@@ -39,6 +39,7 @@ from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     AccessPolicy,
     AdapterHost,
+    CheckPort,
     EventFeed,
     ImagePort,
     OperatorPort,
@@ -49,6 +50,7 @@ from hli_server.adapters.host import (
     door_host,
 )
 from hli_server.adapters.registry import Adapter, create_adapter
+from hli_server.runtime.checks import ProgramChecker
 from hli_server.runtime.remote import (
     EngineSide,
     EventMirror,
@@ -167,7 +169,9 @@ class DoorsHost(AdapterHost):
         clock: str,
         bind: str,
         policy: AccessPolicy,
+        checker: ProgramChecker,
     ):
+        self._checker = checker
         self._image = image
         self._link = link
         self._operator = RemoteOperator(link, image, t_a_us)
@@ -255,7 +259,13 @@ class DoorsHost(AdapterHost):
         readiness: Readiness = self._link.call("readiness")
         return readiness
 
+    @property
+    def checker(self) -> CheckPort:
+        """Checks run here, in a worker of the doors process: the engine's process never sees them."""
+        return self._checker
+
     async def close(self) -> None:
+        await self._checker.close()
         if self._watch is not None:
             self._watch.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -272,6 +282,10 @@ class DoorsPlan:
     policy: AccessPolicy
     t_a_us: int
     clock: str
+    config: MachineConfig | None = None
+    """The machine file's configuration, for the checks of ``POST /api/check`` (a fresh machine each)."""
+    program_dirs: tuple[str, ...] = ()
+    """Where the checks find subprograms after the files sent with the program (the server's directories)."""
     nice: int = 0
     """How much nicer than the clock's process the doors run (:data:`DOORS_NICE` unless the clock runs at
     the realtime priority, which goes first anyway: then the doors need not give way to other work)."""
@@ -308,7 +322,19 @@ async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -
     events.start(loop)
     link = RemoteLink(sock, events.take)
     policy = plan.policy
-    host = DoorsHost(image, link, events, t_a_us=plan.t_a_us, clock=plan.clock, bind=plan.bind, policy=policy)
+    if plan.config is None:
+        raise ValueError("the doors plan has no machine configuration")
+    checker = ProgramChecker(plan.config, plan.program_dirs)
+    host = DoorsHost(
+        image,
+        link,
+        events,
+        t_a_us=plan.t_a_us,
+        clock=plan.clock,
+        bind=plan.bind,
+        policy=policy,
+        checker=checker,
+    )
     link.start(loop)  # the host's fault mirror takes the engine's table from the first message on
     started: list[Adapter] = []
     try:
@@ -380,6 +406,9 @@ class DoorsRuntime(EngineSide, Protocol):
     @property
     def priority_granted(self) -> str: ...
 
+    @property
+    def checker(self) -> ProgramChecker: ...
+
     def add_service(self, service: OperatorService) -> Callable[[], None]: ...
 
 
@@ -434,6 +463,8 @@ class DoorsProcess:
             policy=rt.policy,
             t_a_us=rt.config.cycle_time_us,
             clock=str(rt.clock),
+            config=rt.config,
+            program_dirs=rt.checker.directories,
             nice=0 if rt.priority_granted.startswith("realtime") else DOORS_NICE,
         )
         self._process = ctx.Process(

@@ -54,6 +54,7 @@ from schemas.results import ProgramLoaded
 if TYPE_CHECKING:
     from hli_server.adapters.host import OperatorPort, Value
     from hli_server.adapters.registry import Adapter
+    from hli_server.engine.program_check import CheckResult
     from hli_server.runtime import AdapterSpec, Recording, Runtime, RuntimeImage
     from plc_clients.task import PlcTask
     from plc_clients.transports import Transport
@@ -480,15 +481,22 @@ class Harness:
         self._loop_or_raise()
         return self._call_soon(lambda: self.runtime.record(signals))
 
-    # --- recording and replay (docs/record-replay.md)
-    # -----------------------------------------------------------
-    def record(self, path: str | os.PathLike[str], *, overwrite: bool = True) -> SessionRecording:
+    # --- recording and replay (docs/record-replay.md) ----------------------------------------------
+    def record(
+        self, path: str | os.PathLike[str], *, overwrite: bool = True, outputs_every: int | None = None
+    ) -> SessionRecording:
         """Record this session into ``path`` (gzip JSON Lines, docs/record-replay.md) from the next cycle
-        on, with every input since the first cycle; ``with hli.record(p): ...`` or ``.stop()``."""
+        on, with every input since the first cycle; ``with hli.record(p): ...`` or ``.stop()``. The
+        outputs are sampled every ``outputs_every`` cycles (None: the server's setting, 100 by default;
+        1: every cycle, for a replay that names the exact cycle of a difference)."""
         self._loop_or_raise()
         target = Path(os.fspath(path))
         runtime = self.runtime
-        self._call_soon(lambda: runtime.session.start(target, origin="pytest", overwrite=overwrite))
+        self._call_soon(
+            lambda: runtime.session.start(
+                target, origin="pytest", overwrite=overwrite, outputs_every=outputs_every
+            )
+        )
         return SessionRecording(self, target)
 
     def replay(self, path: str | os.PathLike[str], **options: Any) -> Any:
@@ -543,6 +551,58 @@ class Harness:
             else:
                 uploads[key] = value
         return self.operator.load_program(channel, text, name, uploads)
+
+    def check(
+        self,
+        program: str | os.PathLike[str],
+        *,
+        files: Mapping[str, str | os.PathLike[str]] | Iterable[str | os.PathLike[str]] = (),
+        name: str | None = None,
+        channel: int = 1,
+        geometry_only: bool = False,
+        max_cycles: int = 10_000_000,
+        max_iterations: int = 1_000_000,
+        record_path: bool = False,
+    ) -> CheckResult:
+        """Check a program offline, as ``hli-server check`` and ``POST /api/check`` do: the engine's
+        :class:`~hli_server.engine.program_check.ProgramCheck` on a fresh machine of this server's machine
+        file (the running machine, its programs and V.E. variables are not touched; no cycle is stepped).
+
+        ``program`` and ``files`` as for :meth:`load_program`; subprograms are found among ``files``, then
+        in the directory of a program given by path, then in the server's program directories. Returns
+        the :class:`~hli_server.engine.program_check.CheckResult`: ``completed``, ``alarms`` (each with
+        ``number``, ``line``, ``block``, ``message``), ``messages`` (``#MSG``), ``final_position``,
+        ``capped``; ``to_json()`` is ``check --format json``'s report."""
+        from hli_server.runtime.checks import run_check
+
+        directories: list[str | os.PathLike[str]] = []
+        if isinstance(program, os.PathLike):
+            path = _relative_to(Path(program), self._base)
+            text, name = path.read_text(encoding="utf-8"), name or path.name
+            directories.append(path.parent)
+        else:
+            text, name = program, name or "program"
+        uploads: dict[str, str] = {}
+        items = files.items() if isinstance(files, Mapping) else ((None, f) for f in files)
+        for key, value in items:
+            if isinstance(value, os.PathLike) or key is None:
+                file = _relative_to(Path(os.fspath(value)), self._base)
+                uploads[key or file.name] = file.read_text(encoding="utf-8")
+            else:
+                uploads[key] = value
+        rt = self.runtime
+        return run_check(
+            rt.config,
+            text,
+            directories=[*directories, *rt.checker.directories],
+            files=uploads,
+            name=name,
+            channel=channel,
+            geometry_only=geometry_only,
+            max_cycles=max_cycles,
+            max_iterations=max_iterations,
+            record_path=record_path,
+        )
 
     @property
     def nc_files(self) -> Path:

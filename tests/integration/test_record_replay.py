@@ -150,10 +150,13 @@ def test_the_commands_replay_record_show_and_export(tmp_path: Path) -> None:
     program = tmp_path / "part.nc"
     program.write_text(PROGRAM, encoding="utf-8")
     done = cli(
-        "run", "--no-http", "--no-modbus", "--clock", "free", "--cycles", "3000", "--record", str(record)
-    )
+        "run", "--no-http", "--no-modbus", "--clock", "free", "--cycles", "3000", "--record", str(record),
+        "--record-outputs-every", "10",
+    )  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert f"recording to {record} from cycle 1" in done.stdout
+    with gzip.open(record, "rt", encoding="ascii") as f:
+        assert json.loads(f.readline())["outputs_every"] == 10
     shown = cli("record", "show", str(record), "--format", "json")
     assert shown.returncode == 0
     summary = json.loads(shown.stdout)

@@ -765,3 +765,85 @@ def test_the_kernels_type_names_are_served_as_their_iec_names() -> None:
     assert ads_data_type("REAL32") == (AdsDataType.REAL32, 4)
     with pytest.raises(ValueError, match="no IEC base type"):
         ads_data_type("STRING(80)")
+
+
+# ================================================================================================
+# The fast path of one frame (AdsDevice.handle_frame, issue 22 item 5)
+# ================================================================================================
+
+
+def _fast_cases(layout: Layout) -> list[bytes]:
+    c2p = layout.signal(X_POS)
+    p2c = layout.signal(CMD_LOW)
+    get_handle = ReadWriteRequest(0xF003, 0, 4, X_POS.encode() + b"\0").encode()
+    frames = [
+        ReadRequest(c2p.image_ads_group, c2p.offset, 4).encode(),
+        ReadRequest(c2p.image_ads_group, 10**6, 4).encode(),  # beyond the half: 0x703
+        ReadRequest(c2p.image_ads_group, c2p.offset, 10**6).encode(),  # past its end: 0x705
+        ReadRequest(0x1234, 0, 4).encode(),  # no such group
+        WriteRequest(p2c.image_ads_group, p2c.offset, struct.pack("<i", 1234)).encode(),
+        WriteRequest(p2c.image_ads_group, p2c.offset, b"\x01").encode(),  # wrong size
+        get_handle,
+        ReadWriteRequest(0xF003, 0, 4, b"no.such.symbol\0").encode(),
+    ]
+    out = [encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ, 7, f) for f in frames[:4]]
+    out += [encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.WRITE, 8, f) for f in frames[4:6]]
+    out += [encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ_WRITE, 9, f) for f in frames[6:]]
+    out.append(encode_request(AmsAddress(SERVER, 9999), CLIENT, CommandId.READ, 1, frames[0]))  # no port
+    out.append(
+        encode_request(AmsAddress(NetId.parse("1.2.3.4.5.6"), 851), CLIENT, CommandId.READ, 1, frames[0])
+    )
+    out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ_STATE, 1, b""))  # not fast
+    out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ, 1, frames[0][:8]))  # short
+    return out
+
+
+@pytest.mark.fuzz
+def test_the_fast_path_answers_exactly_as_handle_or_leaves_the_frame_to_it(image: ProcessImage) -> None:
+    """Every frame the fast path answers gets the reply ``handle`` gives the decoded frame (the
+    errors included, and the same counters); what it leaves (None) are the frames ``handle`` must see.
+    Seeded mutations of each case (flipped bytes, cut or extended frames) keep that true."""
+    import random
+
+    from tests.fuzz import count, seed_for
+
+    publish(image, 5, **{X_POS: 4242})
+    fast, slow = AdsDevice(image, SERVER), AdsDevice(image, SERVER)
+    fast_session, slow_session = Session(), Session()
+    cases = _fast_cases(image.layout)
+    rng = random.Random(seed_for("ads_fast_path"))
+    mutated = []
+    for _ in range(count(400)):
+        frame = bytearray(rng.choice(cases))
+        for _ in range(rng.randint(1, 3)):
+            what = rng.random()
+            if what < 0.6:
+                frame[rng.randrange(len(frame))] = rng.randrange(256)
+            elif what < 0.8:
+                del frame[rng.randrange(len(frame)) :]
+            else:
+                frame += bytes(rng.randint(1, 8))
+        mutated.append(bytes(frame))
+    answered = left = 0
+    for frame in [*cases, *mutated]:
+        reply = fast.handle_frame(fast_session, frame, CLIENT.net_id) if len(frame) >= 38 else None
+        decoder = AmsStreamDecoder()
+        try:
+            packets = list(decoder.feed(frame))
+        except Exception:
+            packets = []
+        if reply is None:
+            left += 1
+            for packet in packets:  # the slow path's answer, on both devices (their states stay alike)
+                if isinstance(packet, AmsPacket):
+                    fast.handle(fast_session, packet)
+                    slow.handle(slow_session, packet)
+            continue
+        answered += 1
+        assert len(packets) == 1, frame.hex()
+        assert isinstance(packets[0], AmsPacket), frame.hex()
+        assert reply == slow.handle(slow_session, packets[0]), frame.hex()
+    assert answered >= 8
+    assert left >= 4
+    assert fast.stats.requests == slow.stats.requests
+    assert fast_session.handles.keys() == slow_session.handles.keys()

@@ -867,6 +867,11 @@ KERNEL_DEFAULTS: dict[str, object] = {
     "P-AXIS-00003": 0,  # a_emergency; 0: a_max is used
     "P-AXIS-00008": 1000,
     "P-AXIS-00015": 0x00000001,
+    "P-AXIS-00195": 50_000,  # ramp times of the non-linear slopes (their pages, 117617803 ...)
+    "P-AXIS-00196": 50_000,
+    "P-AXIS-00197": 50_000,
+    "P-AXIS-00198": 50_000,
+    "P-CHAN-00071": 0,  # STEP
     "P-AXIS-00043": 0,
     "P-AXIS-00044": 0,
     "P-AXIS-00045": 0,

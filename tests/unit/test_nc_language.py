@@ -779,7 +779,6 @@ def test_flush_stops_the_path_flush_wait_waits_flush_continue_neither():
 @pytest.mark.parametrize(
     ("program", "alarm", "words"),
     [
-        ("#SLOPE [TYPE=STEP]", 910110, "#SLOPE"),
         ("#CS ON [0,0,0,0,0,0]", 910110, "#CS"),
         ("#ACS ON", 910110, "#ACS"),
         ("#ROTATION ON [ANGLE=30]", 910110, "#ROTATION"),
@@ -789,8 +788,6 @@ def test_flush_stops_the_path_flush_wait_waits_flush_continue_neither():
         ("G41 X10", 910110, "G41"),
         ("G61", 910110, "G61"),
         ("G260", 910110, "G260"),
-        ("G71", 910110, "G71"),
-        ("G02 X10 R5", 910110, "R"),
         ("G01 X10 E100", 910110, "E"),
         ('"STRING1" = "5"', 910110, "macros"),
         ("#TIMER", 910110, "#TIMER"),

@@ -283,10 +283,12 @@ async def test_a_crash_leaves_everything_up_to_the_last_flush_readable(
     assert info.truncated is not None
     assert "incomplete" in info.truncated
     assert "end" not in records[-1]
-    assert records[-1]["c"] == 1200
+    # the outputs are sampled every 100 cycles from the window's first (format 2): the last line flushed
+    # is the sample of cycle 1101 (the program runs, its outputs change)
+    assert records[-1]["c"] == 1101
     report = await replay(path)
     assert report.verdict is Verdict.PASS, report.text()
-    assert report.last_cycle == 1200
+    assert report.last_cycle == 1101
     assert any("incomplete" in n for n in report.notes)
     # a file cut inside its header's member is no recording (yet)
     path.write_bytes(data[:30])
@@ -482,3 +484,79 @@ async def test_software_limits_set_by_the_operator_are_inputs_of_the_recording(
 
     report = await replay(_rewrite(path, no_limit))
     assert report.verdict is Verdict.DIFFER  # without the limit the program runs: the outputs differ
+
+
+async def _recorded(tmp_path: Path, every: int) -> Path:
+    path = tmp_path / f"every{every}.jsonl.gz"
+    async with Runtime(
+        demo(),
+        clock="stepped",
+        http_port=None,
+        adapters=[],
+        image_factory=memory_image,
+        recording=RecordingOptions(directory=tmp_path, outputs_every=every),
+    ) as rt:
+        await scenario(rt, path)
+    return path
+
+
+def _output_cycles(path: Path) -> list[int]:
+    return [r["c"] for r in read_records(path) if "o" in r]
+
+
+async def test_the_outputs_are_sampled_every_n_cycles_and_the_events_kept_at_their_cycle(
+    tmp_path: Path,
+) -> None:
+    """Format 2: the outputs every ``outputs_every`` cycles from the window's first (and the last cycle),
+    the inputs and events at their own cycle; 1 stores every cycle that changed (format 1's way)."""
+    sampled = await _recorded(tmp_path, 100)
+    assert read_header(sampled)["outputs_every"] == 100
+    cycles = _output_cycles(sampled)
+    assert cycles[0] == 1
+    assert all((c - 1) % 100 == 0 for c in cycles[:-1])
+    assert cycles[-1] == 2100  # the recording's last cycle is a sample as well
+    every = await _recorded(tmp_path, 1)
+    events = [(r["c"], r["e"]) for r in read_records(sampled) if "e" in r]
+    assert events
+    assert events == [(r["c"], r["e"]) for r in read_records(every) if "e" in r]  # at their own cycle
+    assert len(_output_cycles(every)) > 10 * len(cycles)  # the axes move: nearly every cycle
+    assert sampled.stat().st_size * 5 < every.stat().st_size
+    for path in (sampled, every):
+        report = await replay(path)
+        assert report.verdict is Verdict.PASS, report.text()
+        assert report.last_cycle == 2100
+
+
+async def test_a_difference_between_two_samples_shows_at_the_next_sample(tmp_path: Path) -> None:
+    """The replay compares the outputs at the samples: a forged sample is found at its cycle, with the
+    signal, the expected and the actual value; and a version 1 file (no ``outputs_every``) is compared at
+    every cycle."""
+    path = await _recorded(tmp_path, 100)
+    index = [e[0] for e in read_header(path)["outputs"]].index(CMD_X)
+    forged_at: list[int] = []
+
+    def forge(record: dict[str, Any]) -> dict[str, Any]:
+        flat = record.get("o")
+        if flat and record["c"] >= 700 and not forged_at and index in flat[0::2]:
+            k = flat[0::2].index(index) * 2
+            forged_at.append(record["c"])
+            flat[k + 1] += 7
+        return record
+
+    report = await replay(_rewrite(path, forge))
+    assert report.verdict is Verdict.DIFFER
+    assert report.first is not None
+    assert (report.first.cycle, report.first.signal) == (forged_at[0], CMD_X)
+    assert forged_at[0] % 100 == 1
+
+    def version_1(record: dict[str, Any]) -> dict[str, Any]:
+        if record.get("record") == "header":
+            record = {k: v for k, v in record.items() if k != "outputs_every"}
+            record["format_version"] = 1
+        return record
+
+    # read as version 1, the samples alone look like outputs that stood still between them
+    old = await replay(_rewrite(path, version_1))
+    assert old.verdict is Verdict.DIFFER
+    assert old.first is not None
+    assert old.first.cycle == 2

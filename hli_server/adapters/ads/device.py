@@ -54,6 +54,7 @@ from hli_server.codecs.ads import (
     DeleteDeviceNotificationResponse,
     ErrorCode,
     IndexGroup,
+    NetId,
     NotificationSample,
     NotificationStamp,
     ReadRequest,
@@ -75,7 +76,6 @@ from schemas.layout import (
 
 if TYPE_CHECKING:
     from hli_server.adapters.host import ImagePort
-    from hli_server.codecs.ads import NetId
 
 __all__ = [
     "COMMANDS",
@@ -97,6 +97,13 @@ _U32x3: Final = struct.Struct("<III")
 _U32x4: Final = struct.Struct("<IIII")
 _RESULT_AND_LENGTH: Final = struct.Struct("<II")
 _OK: Final = bytes(4)
+_FRAME_HEAD: Final = struct.Struct("<HI6sH6sHHHIII")
+"""AMS/TCP header and AMS header of one frame (the codec's layout), for :meth:`AdsDevice.handle_frame`."""
+_FAST_COMMANDS: Final = frozenset((CommandId.READ, CommandId.WRITE, CommandId.READ_WRITE))
+_RESPONSE_FLAGS: Final = 0x0005
+_NO_HEADER: Final = AmsHeader(NetId(bytes(6)), 0, NetId(bytes(6)), 0, 0, 0, 0, 0, 0)
+"""The header argument of the data commands in :meth:`AdsDevice.handle_frame` (Read, Write, ReadWrite do
+not read it: they answer from their payload)."""
 
 
 ReadHandler = Callable[["Session", int, int], bytes]
@@ -308,6 +315,7 @@ class AdsDevice:
         self._commands: dict[int, Callable[[Session, PortTable, AmsHeader, bytes], bytes]] = {
             command: getattr(self, method) for command, method in COMMANDS.items()
         }
+        self._net_id_bytes = bytes(net_id)
 
     @property
     def read_only(self) -> bool:
@@ -416,6 +424,46 @@ class AdsDevice:
                 header, error_reply_payload(header.command, ErrorCode.GENERAL_DEVICE_ERROR)
             )
         return encode_response(header, payload)
+
+    def handle_frame(self, session: Session, frame: bytes, source: bytes) -> bytes | None:
+        """:meth:`handle` for the requests that make up a client's polling (Read, Write, ReadWrite), taken
+        straight from one AMS/TCP ``frame`` (the 6-byte TCP header, then the AMS header) without building
+        its header objects: the reply, or None where the frame is anything else (a response, another
+        command, a NetId other than this server's or a source NetId other than ``source``, the admitted
+        one, an unknown port, sizes that do not add up): then the caller decodes it and calls
+        :meth:`handle`, which answers every such case. Same replies, errors and counters as :meth:`handle`."""
+        reserved, length, tn, tp, sn, sp, cmd, flags, data_length, _, invoke = _FRAME_HEAD.unpack_from(frame)
+        if (
+            reserved
+            or cmd not in _FAST_COMMANDS
+            or flags & 0x0001
+            or length + 6 != len(frame)
+            or data_length + 32 != length
+            or tn != self._net_id_bytes
+            or sn != source
+        ):
+            return None
+        table = self.ports.get(tp)
+        if table is None:
+            return None
+        self.stats.requests += 1
+        try:
+            payload = self._commands[cmd](session, table, _NO_HEADER, frame[38:])
+        except AdsError as exc:
+            self.stats.count_error(exc.code)
+            logger.debug("ADS %s port %d: %s", session.name, tp, exc)
+            payload = error_reply_payload(cmd, exc.code)
+        except Exception:
+            self.stats.failures += 1
+            self.stats.count_error(ErrorCode.GENERAL_DEVICE_ERROR)
+            logger.exception("ADS: request %d to port %d from %s failed", cmd, tp, session.name)
+            payload = error_reply_payload(cmd, ErrorCode.GENERAL_DEVICE_ERROR)
+        return (
+            _FRAME_HEAD.pack(
+                0, 32 + len(payload), sn, sp, tn, tp, cmd, _RESPONSE_FLAGS, len(payload), 0, invoke
+            )
+            + payload
+        )
 
     # --- the commands: (session, port table, header, payload) -> reply payload --------------------
     def read_device_info(self, session: Session, table: PortTable, header: AmsHeader, data: bytes) -> bytes:

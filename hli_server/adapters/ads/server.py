@@ -63,6 +63,7 @@ from hli_server.adapters.ads.udp import UdpDoor
 from hli_server.adapters.faults import CommFaults, Door
 from hli_server.adapters.tcp import listen
 from hli_server.codecs.ads import (
+    MAX_AMS_LENGTH,
     NEED_DATA,
     AdsCodecError,
     AmsPacket,
@@ -136,6 +137,10 @@ _REFUSED: Final = _Refused()
 answers before it."""
 
 
+_FAST_MAX: Final = 6 + MAX_AMS_LENGTH
+"""The longest read :meth:`_Connection.data_received` answers on its fast path (one whole AMS frame)."""
+
+
 class _Connection(asyncio.Protocol):
     """One client: frames in, replies out, a fair share of each turn of the loop."""
 
@@ -147,6 +152,8 @@ class _Connection(asyncio.Protocol):
         self._decoder = AmsStreamDecoder()
         self._gate = adapter.faults.gate(Door.ADS, None)
         self._transport: asyncio.Transport | None = None
+        self._raw: asyncio.Transport | None = None
+        """the socket's own transport, for the replies of :meth:`data_received`'s fast path (no fault acts)"""
         self.peer: Any = None
         self.host: str | None = None
         self.session = Session(self._send, self._backlogged)
@@ -189,12 +196,36 @@ class _Connection(asyncio.Protocol):
         transport.set_write_buffer_limits(high=limit, low=limit // 2)
         self._gate = self._adapter.faults.gate(Door.ADS, transport)  # communication faults on demand
         self._transport = self._gate.transport
+        self._raw = transport
         self._adapter.stats.connections += 1
         logger.debug("ADS: connection from %s", self.session.name)
 
     def data_received(self, data: bytes) -> None:
         transport = self._transport
-        if transport is None or transport.is_closing():
+        if transport is None:
+            return
+        raw = self._raw
+        admitted = self._admitted
+        if (  # the fast path: one Read/Write/ReadWrite in flight, all of it in this read, no fault acting
+            admitted is not None
+            and raw is not None
+            and not self._read_paused
+            and not self._scheduled
+            and 38 <= len(data) <= _FAST_MAX
+            and self._gate.quiet
+            and not self._decoder.pending
+        ):
+            if raw.is_closing():
+                return
+            reply = self._device.handle_frame(self.session, data, admitted)
+            if reply is not None:
+                self._adapter.stats.turns += 1
+                self.frames += 1
+                self.last_activity = time.monotonic()
+                self.partial_since = None
+                raw.write(reply)
+                return
+        if transport.is_closing():
             return
         if not self._read_paused and not self._scheduled:
             packet = self._decoder.single_frame(data)

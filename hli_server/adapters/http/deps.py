@@ -13,6 +13,7 @@ from fastapi.responses import JSONResponse
 from hli_server.adapters.host import (
     Accepted,
     AdapterHost,
+    CheckTimeoutError,
     ConflictError,
     InvalidRequestError,
     NotFoundError,
@@ -93,6 +94,7 @@ _STATUS: tuple[tuple[type[OperatorError], int], ...] = (
     (StepRefusedError, 409),
     (InvalidRequestError, 422),
     (UnavailableError, 503),
+    (CheckTimeoutError, 504),
 )
 
 

@@ -2,9 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, model_validator
+
+from hli_server.adapters.host import (
+    CHECK_MAX_CYCLES,
+    CHECK_MAX_ITERATIONS,
+    CHECK_MAX_TIMEOUT_S,
+    CHECK_TIMEOUT_S,
+)
 
 __all__ = [
     "MAX_PROGRAM_FILES",
@@ -12,6 +19,11 @@ __all__ = [
     "MAX_TRACE_SIGNALS",
     "MAX_TRACE_VALUES",
     "AcceptedBody",
+    "CheckAlarm",
+    "CheckBody",
+    "CheckCap",
+    "CheckMessage",
+    "CheckReport",
     "FaultsBody",
     "FeedholdBody",
     "ImageWriteBody",
@@ -50,6 +62,84 @@ class ProgramBody(_Body):
         max_length=MAX_PROGRAM_FILES,
         description="its subprograms and cycles, file name -> NC text: `L name` finds them before the "
         "program directories (a name below a directory, e.g. cycles/drill.nc; no '..', not absolute)",
+    )
+
+
+class CheckBody(ProgramBody):
+    """``POST /api/check``: a program (with its subprograms) to check offline, as ``hli-server check``."""
+
+    channel: int = Field(default=1, ge=1, le=255, description="the channel to run it in")
+    geometry_only: bool = Field(
+        default=False,
+        description="interpret and check every block's whole path without cycles (``check --geometry-only``)",
+    )
+    max_cycles: int = Field(
+        default=CHECK_MAX_CYCLES,
+        ge=1,
+        le=50_000_000,
+        description="a full check stops here (status `capped`) if the program has not ended",
+    )
+    max_iterations: int = Field(
+        default=CHECK_MAX_ITERATIONS,
+        ge=1,
+        le=100_000_000,
+        description="a geometry check stops after this many loop iterations and jumps back (status `capped`)",
+    )
+    timeout_s: float = Field(
+        default=CHECK_TIMEOUT_S,
+        gt=0,
+        le=CHECK_MAX_TIMEOUT_S,
+        description="wall-clock limit [s]: past it the check is ended and the answer is 504",
+    )
+
+
+class CheckAlarm(BaseModel):
+    id: int = Field(description="the alarm number (the kernel's error ID where it has one; docs/alarms.md)")
+    severity: str
+    line: int | None = Field(description="line of the program (or of the subprogram named in the message)")
+    block: str | None = Field(description="the block's label (N10) or `line N`")
+    message: str
+    params: dict[str, Any]
+    cycle: int
+
+
+class CheckMessage(BaseModel):
+    cycle: int
+    text: str = Field(description="the #MSG text, formatted")
+    save: bool = Field(description="#MSG SAVE (a check writes no file)")
+    program: str
+    line: int
+    block: str
+
+
+class CheckCap(BaseModel):
+    by: Literal["cycles", "iterations"]
+    cap: int
+
+
+class CheckReport(BaseModel):
+    """What ``hli-server check --format json`` prints, with the program's name and the verdict."""
+
+    program: str
+    status: Literal["ok", "stopped", "capped"] = Field(
+        description="ok: ran to its end without an error alarm; stopped: an error alarm stopped it (or it "
+        "ended without M30/M02 where that is an error); capped: it did not end within max_cycles / "
+        "max_iterations"
+    )
+    exit_code: int = Field(description="what `hli-server check` would exit with: 0 ok, 1 stopped, 3 capped")
+    completed: bool
+    mode: Literal["full", "geometry"]
+    channel: int
+    cycles: int
+    simulated_time_s: float
+    blocks: int
+    alarms: list[CheckAlarm]
+    messages: list[CheckMessage]
+    capped: CheckCap | None
+    final_position: dict[str, float] = Field(description="mm (degrees for rotary axes), rounded to 0.1 µm")
+    elapsed_s: float = Field(description="wall-clock time of the check [s]")
+    areas: list[dict[str, Any]] | None = Field(
+        default=None, description="the channel's work and protection areas at the end (FCT-C14)"
     )
 
 

@@ -21,7 +21,8 @@ drives, for every pair whose two axes are referenced (C3-06)::
 
     v_t     = (setpoint_n - setpoint_n-1) / T_A                  per axis
     s_brake = v_t^2 / (2 a_coll)                                 a_coll = a_max, or a_emergency
-                                                                 with P-AXIS-00267 (C3-07)
+              (+ |v_t| * t_r / 2 with a jerk-limited profile,   with P-AXIS-00267 (C3-07)
+               M-05: the stop builds a_coll up over t_r)
     stop if d - s_brake(master, if it moves toward the partner)
               - s_brake(partner, if it moves toward the master) < coll_offset
 
@@ -202,8 +203,8 @@ class CollisionMonitor(Monitor):
             direction = 1.0 if g >= 0.0 else -1.0
             toward_m = direction * v_m < 0.0
             toward_p = direction * pair.sign * v_p > 0.0
-            brake = (v_m * v_m / (2.0 * self.a_coll(m)) if toward_m else 0.0) + (
-                v_p * v_p / (2.0 * self.a_coll(p)) if toward_p else 0.0
+            brake = (m.stop_distance(v_m, self.a_coll(m)) if toward_m else 0.0) + (
+                p.stop_distance(v_p, self.a_coll(p)) if toward_p else 0.0
             )
             if d - brake < pair.offset - _EPS and (toward_m or toward_p or newly_active):
                 self._trip(pair, d, brake)
@@ -232,6 +233,7 @@ class CollisionMonitor(Monitor):
             axis.stopping = True
             axis.stop_velocity = self._last_step[axis.index] / t
             axis.stop_deceleration = a_coll
+            axis.stop_elapsed = 0.0
             axis.advance_independent_stop(t)
         channels = sorted({pair.master.channel, pair.partner.channel})
         for index in channels:
@@ -308,7 +310,7 @@ class CollisionMonitor(Monitor):
             v = (axis.setpoint - axis.prev_setpoint) / t
             obj.active = any(m.referenced and p.referenced for m, p in members)
             obj.velocity = v * INCREMENTS_PER_MM
-            obj.brake_dist = v * v / (2.0 * a) * INCREMENTS_PER_MM
+            obj.brake_dist = axis.stop_distance(v, a) * INCREMENTS_PER_MM
             obj.coll_offset = offset
             obj.deceleration = a
             self._last_step[axis.index] = axis.setpoint - axis.prev_setpoint

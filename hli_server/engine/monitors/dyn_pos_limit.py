@@ -34,6 +34,13 @@ differs from the adopted value by at least P-CHAN-00751 ``dpl_tol_limit_change``
 change). The kernel's defaults (0, 0; its pages) adopt every change at once: 0 and 1 cycles both
 mean every cycle.
 
+Acceleration profiles (``#SLOPE``, M-04): with TRAPEZ, SIN2 or HSC the axes follow the planned path
+through the profile's filter (:mod:`hli_server.engine.path.profiles`): they lag it and come to rest
+where it comes to rest. The ramp is computed each cycle as above on the planned path, whose end is
+the end of the axes' jerk-limited ramp; its reach counts from the axes' point (the lag added), and
+its 20 samples lie between the axes and that end. So the path stops on the limit in every profile,
+and the one-cycle tolerance holds for SIN2 as for STEP (tests/unit/test_motion_mslope_*).
+
 Documented limitations, reproduced (C43-08, C43-09; see docs/monitors.md):
 
 * only 20 samples of the ramp are checked: a contour element that crosses the limit and comes back
@@ -168,8 +175,10 @@ class _Ramp:
     ) -> None:
         self._planner = planner
         self.s0, self.v0, self.s1, self.v1, self.a, self.t_brake = s0, v0, s1, v1, a, t_brake
-        self.reach = s1 + v1 * t_brake - 0.5 * a * t_brake * t_brake - s0
-        """How far along the path the ramp reaches: no axis can travel farther than this."""
+        self.reach = s1 + v1 * t_brake - 0.5 * a * t_brake * t_brake - s0 + (planner.s_abs - planner.s_out)
+        """How far along the path the ramp reaches from where the axes are: no axis can travel
+        farther than this. With a jerk-limited profile (M-04) the axes lag the planned path by the
+        profile's filter; their ramp ends where the planned one ends, so it reaches that much farther."""
         self._samples: list[tuple[float, tuple[float, ...]]] | None = None
 
     @property
@@ -276,7 +285,7 @@ class DynPosLimits(Monitor):
                     lim.stop_s = None
                     lim.generation = planner.generation
                     self._fire(lim, DplEvent.RELEASE)
-                elif lim.state == _BRAKING and planner.velocity == 0.0 and planner.s_abs >= lim.stop_s - _EPS:
+                elif lim.state == _BRAKING and planner.at_rest and planner.s_abs >= lim.stop_s - _EPS:
                     self._fire(lim, DplEvent.STANDSTILL)
 
     # --- pieces --------------------------------------------------------------------------

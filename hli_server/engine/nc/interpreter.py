@@ -111,6 +111,7 @@ __all__ = [
     "Host",
     "Interpreter",
     "IterationCapError",
+    "Slope",
     "SyncAction",
 ]
 
@@ -198,6 +199,23 @@ _EXTRA_RANGE: Final = word_parser._EXTRA_RANGE
 
 
 # --- what the interpreter hands out besides blocks ------------------------------------------------------
+
+_OUTSIDE = (
+    " (a path that is absolute or leaves its directory is never read here: programs are found by name "
+    "below the program directories; see docs/nc-language.md)"
+)
+
+
+def _leaves_directories(name: str) -> bool:
+    """``D:\\prog\\x.nc``, ``/prog/x.nc``, ``..\\x.nc``: a name the program libraries never follow."""
+    unified = name.replace("\\", "/")
+    return (
+        unified.startswith("/")
+        or (len(unified) > 1 and unified[1] == ":" and unified[0].isalpha())
+        or ".." in unified.split("/")
+    )
+
+
 class Directive:
     """An output that is not a block (see the module's description)."""
 
@@ -232,6 +250,15 @@ class MeasMode(Directive):
     def __init__(self, block: Block, meas_type: int | None) -> None:
         super().__init__(block)
         self.meas_type = meas_type
+
+
+class Slope(Directive):
+    """``#SLOPE [TYPE=..]`` / ``#SLOPE DEFAULT``: the acceleration profile from here on (``profile``:
+    0 STEP, 1 TRAPEZ, 2 SIN2, 3 HSC as P-CHAN-00071; None: the channel's default, P-CHAN-00071)."""
+
+    def __init__(self, block: Block, profile: int | None) -> None:
+        super().__init__(block)
+        self.profile = profile
 
 
 class IterationCapError(Exception):
@@ -1088,6 +1115,13 @@ class Interpreter(Env):
                 meas_type = int(value)
             self._pending.append(MeasMode(self._place_block(frame, stmt), meas_type))
             return
+        if command == "SLOPE":
+            profile: int | None = None
+            for option in stmt.options:
+                if option.startswith("TYPE="):
+                    profile = ("STEP", "TRAPEZ", "SIN2", "HSC").index(option[5:])
+            self._pending.append(Slope(self._place_block(frame, stmt), profile))
+            return
         if command == "FILE NAME":
             self._message_file = stmt.files.get("MSG", self._message_file)
             return
@@ -1206,7 +1240,7 @@ class Interpreter(Env):
                 raise stmt.error(
                     A_NOT_FOUND,
                     f"{'cycle' if call.cycle else 'global subroutine'} {call.name} not found; searched: "
-                    f"{where}",
+                    f"{where}{_OUTSIDE if _leaves_directories(call.name) else ''}",
                 )
             units = self._global_units(found.name, found.text)
             kind = "cycle" if call.cycle else "global"

@@ -110,6 +110,9 @@ _G_GROUP: dict[int, str] = {
     **dict.fromkeys((161, 162), "circle centre (G161/G162)"),
     **dict.fromkeys((53, 54, 55, 56, 57, 58, 59), "zero offset (G53..G59)"),
     **dict.fromkeys((200, 201, 202), "manual mode (G200/G201/G202)"),
+    **dict.fromkeys((70, 71), "units (G70/G71)"),
+    **dict.fromkeys((94, 95), "feed (G94/G95)"),
+    **dict.fromkeys((900, 901), "deceleration (G900/G901)"),
 }
 
 # "1", "01", "001" -> 1: the common spellings of the known codes without int() per word.

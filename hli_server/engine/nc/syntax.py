@@ -318,8 +318,9 @@ KERNEL_HASH_COMMANDS: Final = frozenset(
 """``#`` commands of the kernel (the programming manual's command overview, as ISG's editor lists them);
 any of them that the simulator does not model is refused by name with alarm 910110, any other ``#``
 word with 910109."""
+SLOPE_TYPES: Final = ("STEP", "TRAPEZ", "SIN2", "HSC")
+"""``#SLOPE [TYPE=<ident>]``'s profiles (P-CHAN-00071's 0..3)."""
 MOTION_FUNCTIONS: Final[dict[str, str]] = {
-    "SLOPE": "acceleration profiles (#SLOPE)",
     "CS": "coordinate systems (#CS)",
     "ACS": "clamping coordinate systems (#ACS)",
     "ROTATION": "contour rotation (#ROTATION)",
@@ -335,8 +336,6 @@ MOTION_G_CODES: Final[dict[int, str]] = {
     42: "tool radius compensation right (G42)",
     61: "contouring, exact stop (G61)",
     64: "contouring (G64)",
-    70: "inch dimensions (G70)",
-    71: "metric dimensions (G71)",
     260: "contouring mode (G260)",
     261: "contouring mode (G261)",
 }
@@ -347,7 +346,12 @@ AXIS_VALUE_G_CODES: Final = frozenset((130, 230, 132, 333, 338))
 """G functions whose axis words are weightings, ``G130 X70`` (not motion)."""
 EXTRA_G_CODES: Final = VALUE_G_CODES | AXIS_VALUE_G_CODES
 """The weighting G codes the interpreter accepts beyond the word parser's (docs/nc-language.md)."""
-KNOWN_G: Final = word_parser.KNOWN_G_CODES | EXTRA_G_CODES
+_DWELL: Final = re.compile(r"G0*4(?![0-9.])", re.IGNORECASE)
+"""A G04 block: its time may follow G04 directly (``G04 2.5``), which the word parser does not read."""
+UNIT_G_CODES: Final = frozenset((8, 9, 70, 71, 94, 95, 900, 901))
+"""Units and words of issue 24 item 5 (M-06..M-09): G70/G71 inch/metric, G94/G95 feed per minute /
+per revolution, G08/G09/G900/G901 acceleration at block start / deceleration at block end."""
+KNOWN_G: Final = word_parser.KNOWN_G_CODES | EXTRA_G_CODES | UNIT_G_CODES
 
 _CONSTANT: Final = ConstantEnv()
 _UPPER: Final = str.maketrans("abcdefghijklmnopqrstuvwxyz", "ABCDEFGHIJKLMNOPQRSTUVWXYZ")
@@ -813,7 +817,7 @@ class Compiler:
             try:
                 block = self._fast(raw.text, code.translate(_UPPER), 0, _TO_END, raw.first, None, True)
             except NcError as exc:
-                if exc.alarm != A_UNKNOWN_G:
+                if exc.alarm != A_UNKNOWN_G and not _DWELL.search(code):
                     return Refused(raw, _leading_number(code), exc)
             else:
                 if program:
@@ -870,7 +874,7 @@ class Compiler:
             except NcError as exc:
                 # a G code the word parser does not know may be one the interpreter takes (G130, G131
                 # ...) or refuses by name (G41, issue 24): its own parser decides
-                if exc.alarm != A_UNKNOWN_G or _CONTROL_HEAD.match(code):
+                if (exc.alarm != A_UNKNOWN_G and not _DWELL.search(code)) or _CONTROL_HEAD.match(code):
                     raise
                 return self._parsed(raw, code)
             if block is None:
@@ -954,7 +958,14 @@ def _two_path(code: str) -> bool:
     """A two-path line (``N50 : G0 X.. : G0 U..``, FCT-C14 2.4) or a lone ``:`` (the word parser's)."""
     if ":" not in code or '"' in code or "[" in code or "=" in code:
         return False
+    if _CALL_WORD.search(code) is not None:  # L D:\prog\x.nc: a call whose name holds a ':'
+        return False
     return _N_LABEL.match(code) is None or code.count(":") > 1
+
+
+_M_RETURN_BEFORE = re.compile(r"(?:^|[\s])M0*(?:17|29)[ \t]*$")
+"""``M17 [MAIN ..]``: the M17/M29 right before a ``[`` (the parameterised jump)."""
+_CALL_WORD = re.compile(r"(?:^|[\s:])LL?[ \t]", re.IGNORECASE)
 
 
 class _BlockParser:
@@ -1084,6 +1095,15 @@ class _BlockParser:
             if isinstance(item, Call):
                 seen_call = item
             items.append(item)
+            if (
+                isinstance(item, Word)
+                and item.letter == "G"
+                and isinstance(item.value, Const)
+                and item.value.value == 4.0
+            ):
+                dwell = self.dwell_time()
+                if dwell is not None:
+                    items.append(dwell)
             if isinstance(item, Goto) and not self.at_end():
                 self.fail(
                     A_GOTO_CHAR,
@@ -1091,6 +1111,19 @@ class _BlockParser:
                     "of its block",
                 )
         return items
+
+    def dwell_time(self) -> Word | None:
+        """``G04 2.5``, ``G04 P1``, ``G04 V.L.TIME`` (PM 206132747): the time written directly after G04,
+        read as the first main axis' word (``G04 X2.5``), as the kernel treats both (M-09)."""
+        self.blanks()
+        if self.at_end():
+            return None
+        c, d = self.peek(), self.peek(1)
+        if c in "0123456789." or (c == "P" and (d in _DIGITS or d in "P[")) or (c == "V" and d == "."):
+            start = self.pos
+            expr = self.expression(stop_at_blank=True)
+            return Word(self.u[start : self.pos], "AXIS", self.c.main_axes[0], expr)
+        return None
 
     def item(self) -> Item:
         u = self.u
@@ -1115,6 +1148,14 @@ class _BlockParser:
             )
         if c == "@":
             return self.at_word(start)
+        if (c == "[" or u.startswith(("MAIN", "JUMPS", "N"), start)) and _M_RETURN_BEFORE.search(
+            u, 0, start
+        ) is not None:
+            self.fail(
+                A_NOT_SIMULATED,
+                f"the parameterised jump of M17/M29 ({u[start:].strip()}: PM 206781707) is not "
+                "simulated: see docs/nc-language.md",
+            )
         if c == "[":
             self.fail(
                 A_UNKNOWN_WORD,
@@ -1131,7 +1172,7 @@ class _BlockParser:
             ref = self.parameter()
             return self.assignment(start, ref)
         if c == "L" and (
-            self.peek(1) in (" ", "\t") or (self.peek(1) == "L" and self.peek(2) in (" ", "\t"))
+            self.peek(1) in (" ", "\t", "") or (self.peek(1) == "L" and self.peek(2) in (" ", "\t", ""))
         ):
             return self.call(start)
         if c == "L" and self.peek(1) not in _LETTERS and self.peek(1) != "":
@@ -1163,12 +1204,9 @@ class _BlockParser:
             self.pos += 1
         if letter in "GMH":
             return self.function_word(start, letter)
-        if letter == "R":
-            self.fail(
-                A_NOT_SIMULATED,
-                f"{self.word_at(start)}: circles by radius (R) are not simulated yet (issue 24, N-09); "
-                "program the centre with I/J/K: see docs/nc-language.md",
-            )
+        if letter == "R" and "R" not in self.c._single_axes:
+            # the circle's radius (G02/G03 X.. Y.. R.., M-08)
+            return Word(self.word_at(start), "R", "R", self.word_value(start))
         if letter == "E":
             self.fail(
                 A_NOT_SIMULATED,
@@ -1301,7 +1339,7 @@ class _BlockParser:
 
     # --- calls -------------------------------------------------------------------------------------------
     def call(self, start: int) -> Call:
-        local = self.u.startswith("LL", start) and self.peek(2) in (" ", "\t")
+        local = self.u.startswith("LL", start) and self.peek(2) in (" ", "\t", "")
         self.pos = start + (2 if local else 1)
         self.blanks()
         if self.keyword("CYCLE"):
@@ -1537,6 +1575,8 @@ class _BlockParser:
             return Hash(raw, self.number, "FLUSH", options, [])
         if name == "MEAS" and self.keyword("MODE"):
             return self.meas_mode()
+        if name == "SLOPE":
+            return self.slope()
         if name == "ENDVAR":
             self.fail(A_DECLARATION, "#ENDVAR without #VAR")
         if name == "VAR":
@@ -1637,6 +1677,57 @@ class _BlockParser:
                 f"{self.word_at(self.pos)!r} after #MEAS MODE: #MEAS MODE [<type>] stands alone in its block",
             )
         return Hash(self.raw, self.number, "MEAS MODE", [], args)
+
+    def slope(self) -> Stmt:
+        """``#SLOPE [TYPE=<ident> [NO_OPT=..]]`` and ``#SLOPE DEFAULT`` (207190411): the acceleration
+        profile of the path from here on. ``options`` holds ``TYPE=<ident>`` (STEP, TRAPEZ, SIN2,
+        HSC), ``NO_OPT=<0|1>`` or ``DEFAULT``."""
+        options: list[str] = []
+        if self.keyword("DEFAULT"):
+            options.append("DEFAULT")
+        else:
+            self.expect("[", "after #SLOPE: #SLOPE [TYPE=STEP|TRAPEZ|SIN2|HSC] or #SLOPE DEFAULT")
+            self.depth += 1
+            while True:
+                self.blanks()
+                if self.peek() == "]":
+                    self.pos += 1
+                    self.depth -= 1
+                    break
+                if self.peek() == ",":
+                    self.pos += 1
+                    continue
+                if self.keyword("TYPE"):
+                    self.expect("=", "after #SLOPE [TYPE")
+                    self.blanks()
+                    start = self.pos
+                    while self.pos < self.n and self.u[self.pos] in _NAME_CHARS:
+                        self.pos += 1
+                    ident = self.u[start : self.pos]
+                    if ident not in SLOPE_TYPES:
+                        self.fail(
+                            A_CONTROL_SYNTAX,
+                            f"#SLOPE [TYPE={ident}]: the profiles are {', '.join(SLOPE_TYPES)}",
+                        )
+                    options.append(f"TYPE={ident}")
+                elif self.keyword("NO_OPT"):
+                    self.expect("=", "after #SLOPE [.. NO_OPT")
+                    self.blanks()
+                    if self.peek() not in ("0", "1") or (self.peek(1) not in ("", " ", "\t", "]", ",")):
+                        self.fail(A_CONTROL_SYNTAX, "#SLOPE [.. NO_OPT=<0|1>]: 0 or 1")
+                    options.append(f"NO_OPT={self.peek()}")
+                    self.pos += 1
+                else:
+                    got = self.word_at(self.pos) if self.pos < self.n else "the end of the block"
+                    self.fail(A_CONTROL_SYNTAX, f"#SLOPE [..]: unexpected {got!r} (TYPE=.., NO_OPT=..)")
+            if not any(o.startswith("TYPE=") for o in options):
+                self.fail(A_CONTROL_SYNTAX, "#SLOPE [..] without TYPE=STEP|TRAPEZ|SIN2|HSC")
+        if not self.at_end():
+            self.fail(
+                A_CONTROL_SYNTAX,
+                f"{self.word_at(self.pos)!r} after #SLOPE: #SLOPE [..] stands alone in its block",
+            )
+        return Hash(self.raw, self.number, "SLOPE", options, [])
 
     def file_name(self, named: bool = False) -> Stmt:
         """``#FILE NAME [MSG="report.txt"]`` (207504523; older ``#FILENAME``): the file ``#MSG SAVE``
@@ -2290,6 +2381,14 @@ def build_block(
                     A_RANGE, line, number, f"F{_shown(value)} is out of range: {word_parser._FEED_RANGE}"
                 )
             feed = value
+        elif letter == "R":
+            if "R" in extra:
+                word_parser._twice("circle radius", "R", extra["R"], _shown(value), line, number)
+            if not -word_parser._CENTRE_MAX <= value <= word_parser._CENTRE_MAX:
+                word_parser._fail(
+                    A_RANGE, line, number, f"R{_shown(value)} is out of range: {word_parser._CENTRE_RANGE}"
+                )
+            extra["R"] = value
         elif letter in ("I", "J", "K"):
             if letter in centre:
                 word_parser._twice(

@@ -1,0 +1,95 @@
+"""``POST /api/check``: check a program offline, as ``hli-server check`` does (issue 20).
+
+The engine's ``ProgramCheck`` runs on a fresh machine of the server's machine file, in a worker process
+(``runtime/checks.py``): the running machine, its programs and its V.E. variables are not touched, and the
+realtime clock does not wait. The answer is ``check --format json``'s report with the verdict.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, HTTPException, Query, Request
+from fastapi.exceptions import RequestValidationError
+from pydantic import ValidationError
+
+from hli_server.adapters.http.deps import HostDep
+from hli_server.adapters.http.models import CheckBody, CheckReport
+
+__all__ = ["router"]
+
+router = APIRouter(tags=["check"])
+
+_BODY_DOC = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "application/json": {"schema": CheckBody.model_json_schema()},
+            "text/plain": {"schema": {"type": "string"}, "example": "N10 G01 X10 F1000\nN20 M30\n"},
+        },
+    }
+}
+
+
+@router.post(
+    "/api/check",
+    summary="Check a program offline (as `hli-server check`): JSON {text, name, files, channel, "
+    "geometry_only, max_cycles, max_iterations, timeout_s}, or the NC text as text/plain with those as "
+    "query parameters",
+    openapi_extra=_BODY_DOC,
+    response_model=CheckReport,
+    responses={
+        404: {"description": "no such channel"},
+        422: {"description": "no text, a bad file name, a value out of range"},
+        503: {"description": "the checker is busy (one check runs, four wait)"},
+        504: {"description": "the check did not finish within timeout_s and was ended"},
+    },
+)
+async def post_check(
+    host: HostDep,
+    request: Request,
+    name: Annotated[str, Query(min_length=1, max_length=200)] = "program",
+    channel: Annotated[int, Query(ge=1, le=255)] = 1,
+    geometry_only: bool = False,
+    max_cycles: Annotated[int | None, Query(ge=1, le=50_000_000)] = None,
+    max_iterations: Annotated[int | None, Query(ge=1, le=100_000_000)] = None,
+    timeout_s: Annotated[float | None, Query(gt=0, le=600)] = None,
+) -> dict[str, Any]:
+    raw = await request.body()
+    content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if content_type == "application/json":
+        try:
+            body = CheckBody.model_validate_json(raw)
+        except ValidationError as exc:
+            raise RequestValidationError(exc.errors(include_url=False)) from None
+    else:
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise HTTPException(422, f"program text is not UTF-8 (byte {exc.start})") from None
+        if not text.strip():
+            raise HTTPException(422, "empty program: send the NC text as the body (text/plain)")
+        fields: dict[str, Any] = {
+            "text": text,
+            "name": name,
+            "channel": channel,
+            "geometry_only": geometry_only,
+        }
+        for key, value in (
+            ("max_cycles", max_cycles),
+            ("max_iterations", max_iterations),
+            ("timeout_s", timeout_s),
+        ):
+            if value is not None:
+                fields[key] = value
+        body = CheckBody(**fields)
+    return await host.checker.check(
+        body.text,
+        name=body.name,
+        files=body.files,
+        channel=body.channel,
+        geometry_only=body.geometry_only,
+        max_cycles=body.max_cycles,
+        max_iterations=body.max_iterations,
+        timeout_s=body.timeout_s,
+    )
