@@ -23,7 +23,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from hli_server.adapters.mqtt import WINDOW, MqttAdapter, encode_event
+from hli_server.adapters.mqtt import WINDOW, MqttAdapter
+from hli_server.codecs.event_json import encode_event
 from hli_server.configuration import load_machine
 from hli_server.runtime import Runtime, precise_event_loop
 from schemas.events import FaultInjected

@@ -1,4 +1,4 @@
-"""Compiled or pure engine: which one this process runs (issue 16, docs/performance.md "Compiled engine").
+"""Compiled or pure engine: which one this process runs (docs/performance.md "Compiled engine").
 
 ``pip install`` compiles the modules of ``hli_server/engine`` with mypyc where a C compiler and the
 Python headers are present (``setup.py``); the same source runs as plain Python everywhere else. The
@@ -32,7 +32,15 @@ from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
 
-__all__ = ["ENGINE_COMPILED", "NOT_COMPILED", "PURE_ENV", "select", "stale_modules", "why_not_compilable"]
+__all__ = [
+    "ENGINE_COMPILED",
+    "NOT_COMPILED",
+    "PURE_ENV",
+    "select",
+    "stale_modules",
+    "stale_notice",
+    "why_not_compilable",
+]
 
 PURE_ENV = "HLI_PURE_PYTHON"
 """Set to 1 to run the engine as pure Python although it is compiled."""
@@ -123,6 +131,16 @@ class _PureEngineFinder(importlib.abc.MetaPathFinder):
         return None
 
 
+_STALE_NOTICE: str | None = None
+
+
+def stale_notice() -> str | None:
+    """Why this process runs the engine as pure Python although it is compiled (an edited source), or None.
+    ``hli-server run`` prints it in its banner and a :class:`~hli_server.runtime.Runtime` logs it at start, so
+    that the switch is said where the server starts, not only as an import-time warning."""
+    return _STALE_NOTICE
+
+
 def select() -> bool:
     """Decide compiled or pure for this process (before any engine module is imported)."""
     global ENGINE_COMPILED  # noqa: PLW0603 - decided once per process, read by everyone after
@@ -131,15 +149,15 @@ def select() -> bool:
     compiled, stale = stale_modules()
     forced = os.environ.get(PURE_ENV, "") not in ("", "0")
     if compiled and stale and not forced:
+        global _STALE_NOTICE  # noqa: PLW0603 - decided with ENGINE_COMPILED
         shown = ", ".join(str(p.relative_to(_ENGINE_DIR.parent.parent)) for p in stale[:3])
         more = f" and {len(stale) - 3} more" if len(stale) > 3 else ""
-        warnings.warn(
-            f"hli_server: the compiled engine is older than its source ({shown}{more}): running the engine "
-            "as pure Python. Rebuild it with `pip install -e .` (or `make compile`), or set "
-            f"{PURE_ENV}=1 to silence this",
-            RuntimeWarning,
-            stacklevel=2,
+        _STALE_NOTICE = (
+            f"the compiled engine is older than its source ({shown}{more}): the whole engine runs as pure "
+            "Python (slower). Rebuild it with `make compile` (or `pip install -e .`), or set "
+            f"{PURE_ENV}=1 to choose pure Python"
         )
+        warnings.warn(f"hli_server: {_STALE_NOTICE}", RuntimeWarning, stacklevel=2)
     ENGINE_COMPILED = bool(compiled) and not stale and not forced
     if compiled and not ENGINE_COMPILED:
         sys.meta_path.insert(0, _PureEngineFinder())

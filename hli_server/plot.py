@@ -5,7 +5,7 @@ each, the path with its height, the refused block, the violation and the stop po
 only draws it, so the picture and the dashboard, which draws the same scene JSON in the browser, show
 the same thing.
 
-Two panels, because height is what a projection hides (issue 15: a path 100 mm above a protection
+Two panels, because height is what a projection hides (docs/dashboard.md: a path 100 mm above a protection
 cylinder looked as if it went through it):
 
 * top view: the base plane with the areas (work green, protection red and hatched, inactive dashed),

@@ -6,7 +6,7 @@ the scene this module computes; neither does geometry of its own. The module is 
 and :mod:`schemas` only (no matplotlib, no engine, no runtime, no adapters), so any side can import it.
 
 Why a scene and not a projection: a plain projection of the path on the base plane draws a path that
-passes 100 mm above a protection cylinder straight through it (issue 15). An area is a prism (FCT-C14
+passes 100 mm above a protection cylinder straight through it (docs/dashboard.md). An area is a prism (FCT-C14
 2.3: base region times the height band ``MIN_EXCUR..MAX_EXCUR``), so the scene says for every area
 whether the path goes through the prism, passes above or below it, or never comes over its base region,
 and where along the path that happens, so a picture can show height: a side view of the height along

@@ -17,7 +17,6 @@ these modules runs against any server that serves the same layout.
 See docs/plc-clients.md.
 """
 
-from plc_clients.ads import AdsTransport, AdsTransportError, AsyncAdsTransport
 from plc_clients.plcopen import (
     AXIS_REF,
     ControlBoolUnit,
@@ -44,6 +43,7 @@ from plc_clients.transports import (
     TransportError,
     load_layout,
 )
+from plc_clients.transports.ads import AdsTransport, AdsTransportError, AsyncAdsTransport
 
 __all__ = [
     "AXIS_REF",

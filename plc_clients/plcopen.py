@@ -29,7 +29,7 @@ The block drives the SGN32 control unit ``gpAx[Axis.index]^ipo_mc_control.dyn_po
 Decisions where the document leaves room:
 
 * **State.** FCT-C43 3.2 gives ``State : DINT`` as "Aktueller Positionsgrenzwert", the position
-  limit now in effect (issue 21: the document is followed to the letter). With Valid TRUE ("Ist TRUE,
+  limit now in effect (docs/alarms.md: the document is followed to the letter). With Valid TRUE ("Ist TRUE,
   wenn die Sollwertvorgabe aktiviert ist") a limit is in effect, and it is the one the CNC took over:
   the ``command_w`` this block wrote and the CNC latched (the CNC offers no other read-back,
   ``request_r`` "wird derzeit nicht unterstützt", 3.1.1). So ``State`` is that value, in the unit of

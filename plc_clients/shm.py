@@ -42,7 +42,7 @@ from schemas.image_format import (
     ImageNotReadyError,
     attach_untracked,
 )
-from schemas.layout import Direction, Layout, LayoutError, ReadOnlySignalError, Signal, SignalType
+from schemas.layout import Direction, Layout, ReadOnlySignalError, Signal, SignalType
 
 __all__ = [
     "ImageBusyError",
@@ -105,21 +105,9 @@ class ImageClient(ClosesOnExit):
         image raises :class:`ImageMismatchError`. ``timeout``: keep trying that many seconds while
         the segment does not exist yet or the server is still writing its header.
         """
-        fmt.check_host()
         expected_hash = expect.hash if isinstance(expect, Layout) else expect
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                return cls._attach_once(name, expected_hash)
-            except (FileNotFoundError, ImageNotReadyError) as exc:
-                if time.monotonic() >= deadline:
-                    if isinstance(exc, FileNotFoundError):
-                        raise FileNotFoundError(
-                            f"no shared memory {name!r}: is the server running, and with this image name? "
-                            "(`hli-server run` prints it)"
-                        ) from None
-                    raise
-                time.sleep(0.01)
+        seg = fmt.attach_segment(name, expected_hash=expected_hash, timeout=timeout)
+        return cls(seg.buf, seg.header, seg.layout, name=seg.name, shm=seg.shm)
 
     @classmethod
     def over(
@@ -131,42 +119,8 @@ class ImageClient(ClosesOnExit):
         fmt.check_host()
         expected_hash = expect.hash if isinstance(expect, Layout) else expect
         view = memoryview(buffer)  # our own view: it stays valid when the server releases its own
-        header, layout = cls._check(view, name, len(view), expected_hash)
+        header, layout = fmt.check_segment(view, name, len(view), expected_hash)
         return cls(view, header, layout, name=name)
-
-    @classmethod
-    def _attach_once(cls, name: str, expected_hash: str | None) -> ImageClient:
-        shm = attach_untracked(name)
-        try:
-            buf = shm.buf
-            assert buf is not None
-            header, layout = cls._check(buf, name, shm.size, expected_hash)
-            return cls(buf, header, layout, name=shm.name.removeprefix("/"), shm=shm)
-        except BaseException:
-            shm.close()
-            raise
-
-    @staticmethod
-    def _check(
-        buf: memoryview, name: str, size: int, expected_hash: str | None
-    ) -> tuple[fmt.ImageHeader, Layout]:
-        """The header and the layout stored in the segment, checked against each other."""
-        header = fmt.read_header(buf, name, segment_size=size)
-        fmt.check_layout(header, name, expected_hash)
-        plan = header.plan
-        raw = bytes(buf[plan.layout_json_offset : plan.layout_json_offset + plan.layout_json_size])
-        try:
-            layout = Layout.from_json(raw)
-        except LayoutError as exc:
-            raise ImageMismatchError(f"image {name!r}: the stored layout is damaged: {exc}") from exc
-        if layout.hash != header.layout_hash:
-            raise ImageMismatchError(
-                f"image {name!r}: header hash {header.layout_hash[:16]}... does not match the stored "
-                f"layout ({layout.hash[:16]}...): the segment is damaged; restart the server"
-            )
-        if layout.p2c_size != plan.p2c_size or layout.c2p_size != plan.c2p_size:
-            raise ImageMismatchError(f"image {name!r}: half sizes in the header differ from the layout")
-        return header, layout
 
     def close(self) -> None:
         """Unmap (never unlink: the server owns the segment). Idempotent."""

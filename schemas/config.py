@@ -5,7 +5,7 @@ P-STUP-00070); positions in 0.1 µm (0.0001° rotary), times in µs, acceleratio
 Parameters the documents do not name (velocities, jog, drive model) are the project's own and are
 marked so in ``docs/configuration.md``.
 
-Every number has a range (E-07; issue 12 finding 1): positions and distances a DINT in 0.1 µm,
+Every number has a range (E-07; reliability.md, round 1, finding 1): positions and distances a DINT in 0.1 µm,
 times in µs within their type, velocities and accelerations positive and at most
 :data:`~schemas.units.VELOCITY_LIMIT_MM_PER_MIN` / :data:`~schemas.units.ACCELERATION_LIMIT`; no
 model takes inf or NaN (``allow_inf_nan=False``; TOML and the text lists can write ``inf`` and ``nan``).
@@ -762,7 +762,7 @@ class MachineConfig(_Strict):
 
 class ParameterInfo(BaseModel):
     """One ISG parameter the configuration accepts: its text-list path, model field, P-ID, unit, the
-    kernel page that gives its default and range (B-04, issue 21), and why our default differs where
+    kernel page that gives its default and range (B-04, docs/alarms.md), and why our default differs where
     it does (``note``; empty where ours is the kernel's)."""
 
     model_config = ConfigDict(frozen=True)

@@ -40,8 +40,8 @@ Header::
 
 ``server_pid`` with ``server_start`` names the very process that wrote the image: a PID the kernel
 has since given to another process has another start time, so a restarted server can tell its
-crashed predecessor's segment from the image of a live server (H-01; issue 12 finding 7). The PID
-namespace says whether the PID means anything here (another container's PIDs do not).
+crashed predecessor's segment from the image of a live server (H-01; reliability.md, round 1, finding 7). The
+PID namespace says whether the PID means anything here (another container's PIDs do not).
 
 Consistency:
 
@@ -73,7 +73,15 @@ from dataclasses import dataclass
 from multiprocessing import resource_tracker, shared_memory
 from typing import Final
 
-from schemas.layout import LAYOUT_VERSION, Direction, Layout, Signal, SignalType, SignalValueError
+from schemas.layout import (
+    LAYOUT_VERSION,
+    Direction,
+    Layout,
+    LayoutError,
+    Signal,
+    SignalType,
+    SignalValueError,
+)
 
 __all__ = [
     "C2P_BUFFER_HEADER",
@@ -86,15 +94,18 @@ __all__ = [
     "OFF_FLAGS",
     "OFF_MAGIC",
     "OFF_PUBLISH_COUNT",
+    "AttachedSegment",
     "ImageBusyError",
     "ImageError",
     "ImageHeader",
     "ImageMismatchError",
     "ImageNotReadyError",
     "SegmentPlan",
+    "attach_segment",
     "attach_untracked",
     "check_host",
     "check_layout",
+    "check_segment",
     "header_construct",
     "plan_segment",
     "read_c2p",
@@ -448,3 +459,73 @@ def attach_untracked(name: str) -> shared_memory.SharedMemory:
             return shared_memory.SharedMemory(name=plain, create=False)
         finally:
             resource_tracker.register = original
+
+
+def check_segment(
+    buf: memoryview, name: str, size: int, expected_hash: str | None
+) -> tuple[ImageHeader, Layout]:
+    """The header and the layout stored in a segment, checked against each other (and against
+    ``expected_hash``, the layout the caller was built for, when given)."""
+    header = read_header(buf, name, segment_size=size)
+    check_layout(header, name, expected_hash)
+    plan = header.plan
+    raw = bytes(buf[plan.layout_json_offset : plan.layout_json_offset + plan.layout_json_size])
+    try:
+        layout = Layout.from_json(raw)
+    except LayoutError as exc:
+        raise ImageMismatchError(f"image {name!r}: the stored layout is damaged: {exc}") from exc
+    if layout.hash != header.layout_hash:
+        raise ImageMismatchError(
+            f"image {name!r}: header hash {header.layout_hash[:16]}... does not match the stored "
+            f"layout ({layout.hash[:16]}...): the segment is damaged; restart the server"
+        )
+    if layout.p2c_size != plan.p2c_size or layout.c2p_size != plan.c2p_size:
+        raise ImageMismatchError(f"image {name!r}: half sizes in the header differ from the layout")
+    return header, layout
+
+
+@dataclass(frozen=True, slots=True)
+class AttachedSegment:
+    """An image another process created, mapped by name and checked: what a PLC client and the server's
+    doors process both attach. ``close`` unmaps it (never unlinks: the creator owns the segment)."""
+
+    shm: shared_memory.SharedMemory
+    buf: memoryview
+    header: ImageHeader
+    layout: Layout
+    name: str
+
+    def close(self) -> None:
+        self.shm.close()
+
+
+def _attach_once(name: str, expected_hash: str | None) -> AttachedSegment:
+    shm = attach_untracked(name)
+    try:
+        buf = shm.buf
+        assert buf is not None
+        header, layout = check_segment(buf, name, shm.size, expected_hash)
+        return AttachedSegment(shm, buf, header, layout, shm.name.removeprefix("/"))
+    except BaseException:
+        shm.close()
+        raise
+
+
+def attach_segment(name: str, *, expected_hash: str | None = None, timeout: float = 0.0) -> AttachedSegment:
+    """Attach image ``name``: keep trying ``timeout`` seconds while the segment does not exist yet or its
+    creator is still writing the header. A layout other than ``expected_hash`` raises
+    :class:`ImageMismatchError`."""
+    check_host()
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            return _attach_once(name, expected_hash)
+        except (FileNotFoundError, ImageNotReadyError) as exc:
+            if time.monotonic() >= deadline:
+                if isinstance(exc, FileNotFoundError):
+                    raise FileNotFoundError(
+                        f"no shared memory {name!r}: is the server running, and with this image name? "
+                        "(`hli-server run` prints it)"
+                    ) from None
+                raise
+            time.sleep(0.01)

@@ -38,7 +38,7 @@ DINT_MIN = -(2**31)
 DINT_MAX = 2**31 - 1
 UDINT_MAX = 2**32 - 1
 
-# --- the ranges every number that enters must lie in (E-04, E-07; issue 12 finding 1) --------------
+# --- the ranges every number that enters must lie in (E-04, E-07; reliability.md, round 1, finding 1) ---
 POSITION_LIMIT_MM = DINT_MAX / INCREMENTS_PER_MM
 """214748.3647 mm (or °): the largest position the interface can carry, a DINT in 0.1 µm (0.0001°).
 NC positions, MIN_EXCUR/MAX_EXCUR and configured positions lie within +/- this."""

@@ -1,4 +1,4 @@
-"""Faults in the PLC's communication, on demand (issue 25, B-03): a policy the doors consult.
+"""Faults in the PLC's communication, on demand (docs/record-replay.md, B-03): a policy the doors consult.
 
 How does a PLC program react when the CNC link hiccups? :class:`CommFaults` holds the faults a user
 asked for (``POST /api/comm/faults``, the pytest plugin's ``hli.comm_faults``), each with its end: a

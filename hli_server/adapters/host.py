@@ -11,14 +11,14 @@ An adapter never sees the runtime or the machine. It is handed an :class:`Adapte
   dashboard use it; the PLC doors do not;
 * ``events`` (:class:`EventFeed`): the typed events of ``schemas.events``, live and as a log;
 * ``recorder`` (:class:`RecorderPort`): start and stop a recording of the session, list and fetch
-  recordings (issue 25; the HTTP API and the dashboard);
+  recordings (docs/record-replay.md; the HTTP API and the dashboard);
 * ``faults`` (:class:`~hli_server.adapters.faults.CommFaults`): faults in the PLC's communication on
-  demand, which the doors consult once per request (issue 25);
+  demand, which the doors consult once per request (docs/record-replay.md);
 * ``step(n)`` for the stepped clock (``step_traced(n, signals)`` also returns chosen signals in every
   one of those cycles, :class:`Trace`), and ``on_cycle`` for work that must follow every published
   cycle (ADS device notifications).
 
-The runtime implements these protocols (``hli_server/runtime/host.py``). ``make lint`` forbids
+The runtime implements these protocols (``hli_server/runtime/operator_panel.py``). ``make lint`` forbids
 ``hli_server.adapters`` to import ``hli_server.engine`` or ``hli_server.runtime``: everything an
 adapter may use is named here.
 """
@@ -35,6 +35,18 @@ from typing import TYPE_CHECKING, Any, Protocol
 from hli_server.adapters.faults import CommFaults
 from schemas.events import Event
 from schemas.layout import Direction, Layout, Signal, SignalType
+from schemas.results import (
+    AlarmList,
+    AreaTable,
+    AxisFaults,
+    CollisionPair,
+    MachineState,
+    ProgramEntry,
+    ProgramLoaded,
+    ProgramSelected,
+    Scene,
+    SoftLimits,
+)
 from schemas.wire import Mode
 
 if TYPE_CHECKING:
@@ -77,7 +89,7 @@ LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "::1", "[::1]"})
 
 @dataclass(frozen=True, slots=True)
 class AccessPolicy:
-    """Who may do what through the network doors (issue 12; ``hli-server run`` flags).
+    """Who may do what through the network doors (docs/reliability.md; ``hli-server run`` flags).
 
     * ``api_token``: state-changing HTTP requests need ``Authorization: Bearer <token>``
       (``--api-token`` or ``HLI_API_TOKEN``); ``run`` requires one when it binds beyond loopback,
@@ -93,8 +105,8 @@ class AccessPolicy:
       (``--read-only-door NAME``); :meth:`for_door` is the policy one door sees.
 
     The token guards the HTTP door only; Modbus and ADS are guarded by their allowlists of peer addresses
-    (their ``allow`` option) or by being read-only (issue 27, finding 8; ``hli-server run`` refuses to
-    open an unguarded write door beyond loopback without ``--insecure``).
+    (their ``allow`` option) or by being read-only (reliability.md, round 2, finding 8; ``hli-server run``
+    refuses to open an unguarded write door beyond loopback without ``--insecure``).
     """
 
     api_token: str | None = None
@@ -355,14 +367,14 @@ class OperatorPort(Protocol):
 
     def load_program(
         self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
-    ) -> dict[str, Any]:
+    ) -> ProgramLoaded:
         """Load ``text`` as the channel's program; ``files`` (name -> text) are its subprograms and
         cycles, found by ``L name`` before the program directories (they replace the files of the
         channel's previous load). InvalidRequestError for a file name that leaves its directory
         (``..``, absolute), too many or too large files; ConflictError while a program runs."""
         ...
 
-    def select_program(self, channel: int, number: int) -> dict[str, Any]: ...
+    def select_program(self, channel: int, number: int) -> ProgramSelected: ...
 
     def start(self, channel: int) -> Accepted: ...
 
@@ -380,33 +392,33 @@ class OperatorPort(Protocol):
 
     def reference(self, axis: str) -> Accepted: ...
 
-    def faults(self, axis: str) -> dict[str, Any]: ...
+    def faults(self, axis: str) -> AxisFaults: ...
 
-    def inject_faults(self, axis: str, **fields: float | bool) -> dict[str, Any]: ...
+    def inject_faults(self, axis: str, **fields: float | bool) -> AxisFaults: ...
 
-    def clear_faults(self, axis: str) -> dict[str, Any]: ...
+    def clear_faults(self, axis: str) -> AxisFaults: ...
 
-    def soft_limits(self, axis: str) -> dict[str, Any]:
+    def soft_limits(self, axis: str) -> SoftLimits:
         """The software limits in effect and in the axis record [0.1 µm] (P-AXIS-00177/00178/00179)."""
         ...
 
-    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+    def set_soft_limits(self, axis: str, **values: int) -> SoftLimits:
         """Limits in effect until the next reset or mode change (the kernel's G98/G99) [0.1 µm]."""
         ...
 
-    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+    def update_axis_record(self, axis: str, **values: int) -> SoftLimits:
         """The axis record's limits [0.1 µm]: taken over at the next reset or mode change."""
         ...
 
-    def snapshot(self) -> dict[str, Any]:
+    def snapshot(self) -> MachineState:
         """Channels, axes, active alarms, the V.E. variables (``external``): ``GET /api/state``."""
         ...
 
-    def alarms(self, history: int = 200) -> dict[str, Any]:
+    def alarms(self, history: int = 200) -> AlarmList:
         """``{"active": [...], "history": [...]}`` (the newest ``history`` of the history)."""
         ...
 
-    def areas(self, channel: int) -> dict[str, Any]:
+    def areas(self, channel: int) -> AreaTable:
         """The channel's area table (FCT-C14) as ``check`` lists it."""
         ...
 
@@ -414,19 +426,19 @@ class OperatorPort(Protocol):
         """Pacing statistics of the clock (``GET /api/timing``)."""
         ...
 
-    # --- what the dashboard draws (issue 15); lengths in mm ----------------------------------
-    def scene(self, channel: int) -> dict[str, Any]:
+    # --- what the dashboard draws (docs/dashboard.md); lengths in mm ----------------------------------
+    def scene(self, channel: int) -> Scene:
         """The channel's live scene, as :func:`hli_server.scene.build_scene` computes it for ``check
         --plot``: the area table, the recent trail of the setpoints (since the last program start, the
         newest points), the active alarms' refused block and violation point, the position now and the
         path the channel has decoded ahead. Unchanged inputs give the same (cached) object."""
         ...
 
-    def programs(self, channel: int) -> list[dict[str, Any]]:
+    def programs(self, channel: int) -> list[ProgramEntry]:
         """The channel's program table: ``[{"number", "name"}]`` (for ``select_program``)."""
         ...
 
-    def collision_pairs(self) -> list[dict[str, Any]]:
+    def collision_pairs(self) -> list[CollisionPair]:
         """The collision pairs (FCT-C3) now: ``{"master", "partner", "distance", "min_distance",
         "brake_master", "brake_partner", "monitoring", "stopped", "latched"}``."""
         ...
@@ -465,7 +477,7 @@ class CheckPort(Protocol):
 
 
 class RecorderPort(Protocol):
-    """Recording the session (issue 25, docs/record-replay.md): one recording at a time, by name in the
+    """Recording the session (docs/record-replay.md): one recording at a time, by name in the
     server's recording directory. Errors are :class:`OperatorError` subclasses."""
 
     def status(self) -> dict[str, Any]:
@@ -596,7 +608,7 @@ class AdapterHost(Protocol):
 
     @property
     def recorder(self) -> RecorderPort:
-        """Recording the session (issue 25)."""
+        """Recording the session (docs/record-replay.md)."""
         ...
 
     @property
@@ -606,7 +618,8 @@ class AdapterHost(Protocol):
 
     @property
     def faults(self) -> CommFaults:
-        """Faults in the PLC's communication on demand (issue 25); the doors consult it per request."""
+        """Faults in the PLC's communication on demand (docs/record-replay.md); the doors consult it per
+        request."""
         ...
 
     async def step(self, cycles: int = 1) -> int:

@@ -70,19 +70,19 @@ import logging
 import struct
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from operator import itemgetter
-from typing import TYPE_CHECKING, Any, Final, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Final, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import Field, ValidationError, field_validator
 
 from hli_server.adapters.faults import CommFaults, Door
 from hli_server.adapters.tcp import (
     AddressAllowlist,
     Admission,
     ConnectionSlots,
-    check_allowlist,
+    TcpDoorOptions,
     close,
     listen,
 )
@@ -185,7 +185,7 @@ class RegisterMap:
     def __init__(self, image: ImagePort, word_order: str = "ABCD", *, read_only: bool = False) -> None:
         order = check_word_order(word_order)
         self.read_only = read_only
-        """``--read-only``: every write function is refused with exception 0x01 (issue 12)."""
+        """``--read-only``: every write function is refused with exception 0x01 (docs/reliability.md)."""
         self.image = image
         self.layout: Layout = image.layout
         self.word_order = order
@@ -454,9 +454,9 @@ class ServerStats:
     evicted: int = 0
     """connections closed to make room for a new client (the one served longest ago)"""
     idle_closed: int = 0
-    """connections closed after idle_timeout seconds of silence"""
+    """connections closed after idle_timeout_s seconds of silence"""
     frame_timeouts: int = 0
-    """connections closed because a frame did not complete within frame_timeout seconds"""
+    """connections closed because a frame did not complete within frame_timeout_s seconds"""
     not_allowed: int = 0
     """connections closed at once: the peer's address is not in the allowlist (``allow``)"""
 
@@ -548,10 +548,10 @@ class _Connection(asyncio.Protocol):
     """One client: its requests are answered in order, in turns of at most ``BATCH`` frames.
 
     A client that pipelines thousands of requests (or never reads its answers) must neither delay the
-    cycle nor starve another client (issue 12, finding 5): after a turn of ``BATCH`` frames the rest
-    waits in this connection's queue, reading from the socket is paused, and the next turn is scheduled
-    behind every other ready callback (the clock's wake-up and the other connections' turns included).
-    Reading resumes when the queue is empty and the client reads its answers (asyncio's write
+    cycle nor starve another client (reliability.md, round 1, finding 5): after a turn of ``BATCH`` frames
+    the rest waits in this connection's queue, reading from the socket is paused, and the next turn is
+    scheduled behind every other ready callback (the clock's wake-up and the other connections' turns
+    included). Reading resumes when the queue is empty and the client reads its answers (asyncio's write
     high-water mark pauses us too). Input held per connection is therefore bounded by one socket read.
     """
 
@@ -608,7 +608,7 @@ class _Connection(asyncio.Protocol):
         timeout = self._adapter.idle_timeout
         if quiet >= timeout and not self._queue:
             logger.info(
-                "Modbus: closing connection from %s: silent for %.0f s (idle_timeout)", self._peer, quiet
+                "Modbus: closing connection from %s: silent for %.0f s (idle_timeout_s)", self._peer, quiet
             )
             self._server.stats.idle_closed += 1
             self._transport.close()
@@ -616,8 +616,8 @@ class _Connection(asyncio.Protocol):
         self._idle = asyncio.get_running_loop().call_later(max(timeout - quiet, 0.05), self._idle_check)
 
     def _frame_check(self) -> None:
-        """A frame must complete within ``frame_timeout`` of its first byte (issue 27, finding 3: a byte
-        every 1.5 s kept a connection "active" for ever)."""
+        """A frame must complete within ``frame_timeout`` of its first byte (reliability.md, round 2, finding
+        3: a byte every 1.5 s kept a connection "active" for ever)."""
         self._frame_timer = None
         began, transport = self.partial_since, self._transport
         if began is None or transport is None or transport.is_closing():
@@ -627,7 +627,8 @@ class _Connection(asyncio.Protocol):
         if waited >= timeout:
             self._server.stats.frame_timeouts += 1
             logger.info(
-                "Modbus: closing connection from %s: a frame did not complete within %.1f s (frame_timeout)",
+                "Modbus: closing connection from %s: a frame did not complete within %.1f s "
+                "(frame_timeout_s)",
                 self._peer,
                 timeout,
             )
@@ -728,10 +729,17 @@ class _Connection(asyncio.Protocol):
             self._transport.abort()
 
 
-class ModbusOptions(BaseModel):
-    """``[[adapters]] name = "modbus"`` / ``--adapter modbus:KEY=VALUE`` / ``--modbus-port`` and friends."""
+class ModbusOptions(TcpDoorOptions):
+    """``[[adapters]] name = "modbus"`` / ``--adapter modbus:KEY=VALUE`` / ``--modbus-port`` and friends; the
+    options every TCP door has (``max_connections``, ``idle_timeout_s``, ``frame_timeout_s``, ``allow``)
+    come from :class:`~hli_server.adapters.tcp.TcpDoorOptions`."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    RENAMED: ClassVar[Mapping[str, str | None]] = {
+        "idle_timeout": "idle_timeout_s",
+        "frame_timeout": "frame_timeout_s",
+        "evict_after": None,
+    }
+    DOOR: ClassVar[str] = "Modbus"
 
     port: int = Field(default=DEFAULT_PORT, ge=0, le=65535, description="TCP port (0: any free port)")
     word_order: Literal["ABCD", "CDAB"] = Field(
@@ -747,31 +755,15 @@ class ModbusOptions(BaseModel):
         le=10_000,
         description="connections at once; beyond, the one answered longest ago makes room for a newcomer",
     )
-    idle_timeout: float = Field(
+    idle_timeout_s: float = Field(
         default=120.0, ge=0.0, le=86_400.0, description="seconds a connection may stay silent (0: no limit)"
     )
-    evict_after: float = Field(
-        default=5.0,
-        ge=0.0,
-        le=3600.0,
-        description="no longer used (kept so that older machine files load): at max_connections the "
-        "connection served longest ago makes room",
-    )
-    frame_timeout: float = Field(
+    frame_timeout_s: float = Field(
         default=2.0,
         ge=0.0,
         le=600.0,
         description="seconds a request frame may take from its first byte to its last (0: no limit)",
     )
-    allow: list[str] = Field(
-        default_factory=list,
-        description="peers allowed in: IP addresses, networks (10.0.0.0/8) or 'loopback'; empty: everybody",
-    )
-
-    @field_validator("allow", mode="before")
-    @classmethod
-    def _allow(cls, value: object) -> object:
-        return check_allowlist(value)
 
     @field_validator("word_order", mode="before")
     @classmethod
@@ -784,8 +776,8 @@ class ModbusAdapter:
 
     Options (``--adapter modbus:port=5020,word_order=CDAB`` or the ``run`` flags): ``port``
     (0 = a free port; :attr:`port` tells which after start), ``word_order`` ``ABCD``/``CDAB``,
-    ``unit_id`` (1), ``unknown_unit`` ``exception``/``ignore``, ``max_connections`` (256), ``idle_timeout``
-    (120 s), ``frame_timeout`` (2 s), ``allow`` (the peers let in; empty: everybody).
+    ``unit_id`` (1), ``unknown_unit`` ``exception``/``ignore``, ``max_connections`` (256), ``idle_timeout_s``
+    (120 s), ``frame_timeout_s`` (2 s), ``allow`` (the peers let in; empty: everybody).
     """
 
     name = "modbus"
@@ -806,9 +798,8 @@ class ModbusAdapter:
         self.unit_id = self.options.unit_id
         self.unknown_unit = self.options.unknown_unit
         self.max_connections = self.options.max_connections
-        self.idle_timeout = self.options.idle_timeout
-        self.evict_after = self.options.evict_after
-        self.frame_timeout = self.options.frame_timeout
+        self.idle_timeout = self.options.idle_timeout_s
+        self.frame_timeout = self.options.frame_timeout_s
         self.allowlist = AddressAllowlist(self.options.allow)
         self.port: int | None = None
         self.server: ModbusServer
@@ -816,7 +807,7 @@ class ModbusAdapter:
         """The communication faults the connections consult (the host's, once started)."""
         self._listener: asyncio.Server | None = None
         self._slots: ConnectionSlots[_Connection] = ConnectionSlots(
-            "Modbus", self.options.max_connections, self.options.evict_after, least_useful=True
+            "Modbus", self.options.max_connections, 0.0, least_useful=True
         )
 
     @property
@@ -863,7 +854,8 @@ class ModbusAdapter:
 
     def _accept(self, connection: _Connection, peer: object) -> bool:
         """Admit ``connection``; at the limit, the connection whose last request was answered longest ago
-        makes room (issue 12, finding 4; issue 27, finding 3; ``adapters/tcp.py``)."""
+        makes room (reliability.md, round 1, finding 4; reliability.md, round 2, finding 3;
+        ``adapters/tcp.py``)."""
         admission = self._slots.admit(connection, peer)
         if admission is Admission.REFUSED:
             self.server.stats.refused += 1

@@ -19,7 +19,7 @@ An event's message::
 (reported on ``<prefix>dropped``), a repeated ``seq`` a redelivery after a reconnect (see below).
 ``wall_time`` is when the event happened (not when it was published), UTC.
 
-**The cycle never waits on the broker** (issue 12's bar for every door). The feed calls
+**The cycle never waits on the broker** (the bar for every door). The feed calls
 :meth:`MqttAdapter._on_event` inside the cycle: it appends ``(seq, wall time, event)`` to a bounded
 deque and returns; no await, no lock, no encoding. A client task of its own takes the events off the
 deque, encodes them and publishes them, up to :data:`WINDOW` at once, and takes them off for good only
@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import math
 import os
@@ -54,7 +53,6 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, cast
 
@@ -69,7 +67,15 @@ from pydantic import (
 )
 
 from hli_server.adapters.faults import CommFaults, Door
-from schemas.events import AlarmRaised, Event
+from hli_server.codecs.event_json import (
+    DROPPED_TOPIC,
+    SNAPSHOT_TOPIC,
+    STATUS_TOPIC,
+    dumps,
+    encode_event,
+    wall_time_text,
+)
+from schemas.events import Event
 
 if TYPE_CHECKING:
     import aiomqtt
@@ -79,13 +85,9 @@ if TYPE_CHECKING:
 __all__ = [
     "DEFAULT_PORT",
     "DEFAULT_TLS_PORT",
-    "DROPPED_TOPIC",
-    "SNAPSHOT_TOPIC",
     "STATE_KINDS",
-    "STATUS_TOPIC",
     "MqttAdapter",
     "MqttOptions",
-    "encode_event",
     "topic_safe",
 ]
 
@@ -93,12 +95,6 @@ logger = logging.getLogger(__name__)
 
 DEFAULT_PORT: Final = 1883
 DEFAULT_TLS_PORT: Final = 8883
-STATUS_TOPIC: Final = "status"
-"""Retained ``online``/``offline`` below the prefix; ``offline`` is also the Will."""
-SNAPSHOT_TOPIC: Final = "snapshot"
-"""Retained JSON picture of the channels and the active alarms below the prefix."""
-DROPPED_TOPIC: Final = "dropped"
-"""JSON report of the events the bounded queue dropped, below the prefix."""
 STATE_KINDS: Final = frozenset({"program_state", "mode", "hold", "control_unit", "alarm", "alarms_cleared"})
 """Event kinds after which the retained snapshot is published again."""
 WINDOW: Final = 64
@@ -241,66 +237,6 @@ class MqttOptions(BaseModel):
 
 
 # --------------------------------------------------------------------------------------------
-# Encoding (no I/O)
-# --------------------------------------------------------------------------------------------
-
-
-def wall_time_text(wall: float) -> str:
-    """``2025-05-01T09:30:12.345Z``: UTC, milliseconds."""
-    return datetime.fromtimestamp(wall, UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
-
-
-def _axis_of(event: Event) -> str | None:
-    if isinstance(event, AlarmRaised):
-        return event.alarm.axis
-    for name in ("axis", "master"):
-        value = getattr(event, name, None)
-        if isinstance(value, str):
-            return value
-    return None
-
-
-def _finite(value: Any) -> Any:
-    """JSON has no NaN or infinity: such floats become None (strict parsers refuse ``NaN``)."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_finite(v) for v in value]
-    return value
-
-
-def dumps(obj: dict[str, Any]) -> bytes:
-    """Compact JSON, UTF-8; non-finite floats as null."""
-    try:
-        text = json.dumps(obj, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
-    except ValueError:
-        text = json.dumps(_finite(obj), separators=(",", ":"), ensure_ascii=False, allow_nan=False)
-    return text.encode("utf-8")
-
-
-def event_message(event: Event, *, machine: str, seq: int, wall: float) -> dict[str, Any]:
-    """The JSON object of one event (docs/mqtt.md): envelope plus the schema's payload as ``data``."""
-    return {
-        "machine": machine,
-        "kind": event.KIND,
-        "seq": seq,
-        "cycle": event.cycle,
-        "time_s": event.time_s,
-        "wall_time": wall_time_text(wall),
-        "channel": event.channel,
-        "axis": _axis_of(event),
-        "data": event.payload(),
-    }
-
-
-def encode_event(event: Event, *, prefix: str, machine: str, seq: int, wall: float) -> tuple[str, bytes]:
-    """``(topic, payload)`` of one event."""
-    return prefix + event.topic(), dumps(event_message(event, machine=machine, seq=seq, wall=wall))
-
-
-# --------------------------------------------------------------------------------------------
 # The adapter
 # --------------------------------------------------------------------------------------------
 
@@ -354,7 +290,8 @@ class MqttAdapter:
         self._wakeup = asyncio.Event()
         self._stop_requested = asyncio.Event()
         self._faults = CommFaults()
-        """The communication faults (issue 25): a ``disconnect`` fault cuts the broker connection."""
+        """The communication faults (docs/record-replay.md): a ``disconnect`` fault cuts the broker
+        connection."""
         self._cut = asyncio.Event()
         self._unsubscribe_faults: Any = lambda: None
         self._task: asyncio.Task[None] | None = None
@@ -496,7 +433,7 @@ class MqttAdapter:
         self._queue(event, time.time())
 
     def _on_fault(self, _change: dict[str, Any]) -> None:
-        """A communication fault changed: a ``disconnect`` cuts the session now (issue 25)."""
+        """A communication fault changed: a ``disconnect`` cuts the session now (docs/record-replay.md)."""
         if self._faults.door_down(Door.MQTT):
             self._cut.set()
         else:

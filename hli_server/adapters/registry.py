@@ -351,10 +351,10 @@ def _restricts_addresses(entries: Sequence[str]) -> bool:
 
 
 def door_guards(plan: Sequence[tuple[str, Mapping[str, Any]]], policy: AccessPolicy) -> list[DoorGuard]:
-    """For each planned door through which a client can change the machine: what guards it (issue 27,
-    finding 8). The API token guards the HTTP door (its changes and the event log); Modbus and ADS are
-    guarded by an allowlist that lets in only some peer addresses (their ``allow``); any door by being
-    read-only (``--read-only``, ``--read-only-door NAME``). MQTT only publishes."""
+    """For each planned door through which a client can change the machine: what guards it
+    (docs/reliability.md, finding 8). The API token guards the HTTP door (its changes and the event log);
+    Modbus and ADS are guarded by an allowlist that lets in only some peer addresses (their ``allow``); any
+    door by being read-only (``--read-only``, ``--read-only-door NAME``). MQTT only publishes."""
     out = []
     for name, options in plan:
         kind = ADAPTERS.get(name)

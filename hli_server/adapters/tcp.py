@@ -1,5 +1,6 @@
 """What the TCP doors (Modbus, ADS) share: listening with a clear error, bounded connections with a slot
-for a newcomer (issue 12, finding 4; issue 27, finding 3), and an allowlist of peer addresses.
+for a newcomer (reliability.md, round 1, finding 4; reliability.md, round 2, finding 3), and an allowlist of
+peer addresses.
 
 A door holds at most ``max_connections``. At the limit a newcomer is never locked out by connections that
 do nothing for anyone (a PLC that reconnects after a restart must never find the door locked by the dead
@@ -22,9 +23,12 @@ import contextlib
 import ipaddress
 import logging
 import time
-from collections.abc import Callable, Iterable, Iterator
+import warnings
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from enum import Enum
-from typing import Generic, Protocol, TypeVar
+from typing import Any, ClassVar, Generic, Protocol, TypeVar
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 __all__ = [
     "AddressAllowlist",
@@ -32,6 +36,7 @@ __all__ = [
     "Connection",
     "ConnectionSlots",
     "ServedConnection",
+    "TcpDoorOptions",
     "check_allowlist",
     "close",
     "listen",
@@ -218,3 +223,69 @@ async def close(server: asyncio.Server | None, slots: ConnectionSlots[C]) -> Non
     if server is not None:
         with contextlib.suppress(Exception):
             await server.wait_closed()
+
+
+class TcpDoorOptions(BaseModel):
+    """The options every TCP door (Modbus, ADS) has, under one set of names: ``port``, ``max_connections``,
+    ``idle_timeout_s``, ``frame_timeout_s`` and ``allow``. A door's model derives from this one and sets its
+    own defaults and ranges (``--adapter modbus:idle_timeout_s=60`` and ``ads:idle_timeout_s=60`` mean the
+    same thing).
+
+    Names a door used before (``RENAMED``: Modbus' ``idle_timeout``, ``frame_timeout``, ``evict_after``, ADS'
+    ``evict_idle_after_s``) are still accepted, with a ``DeprecationWarning`` and a log line that name the new
+    option; they go in the next minor version. An old name that has no effect any more maps to None.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    RENAMED: ClassVar[Mapping[str, str | None]] = {}
+    DOOR: ClassVar[str] = "TCP"
+
+    port: int = Field(default=0, ge=0, le=65535, description="TCP port (0: any free port)")
+    max_connections: int = Field(
+        default=256,
+        ge=1,
+        le=10_000,
+        description="connections at once; beyond, the least useful one makes room for a newcomer",
+    )
+    idle_timeout_s: float = Field(
+        default=120.0, ge=0.0, le=86_400.0, description="seconds a connection may stay silent"
+    )
+    frame_timeout_s: float = Field(
+        default=2.0,
+        ge=0.0,
+        le=3600.0,
+        description="seconds a request frame may take from its first byte to its last",
+    )
+    allow: list[str] = Field(
+        default_factory=list,
+        description="peers allowed in: IP addresses, networks (10.0.0.0/8) or 'loopback'; empty: everybody",
+    )
+
+    @model_validator(mode="before")
+    @classmethod
+    def _renamed_options(cls, data: Any) -> Any:
+        if not isinstance(data, Mapping) or not cls.RENAMED.keys() & data.keys():
+            return data
+        out = dict(data)
+        for old, new in cls.RENAMED.items():
+            if old not in out:
+                continue
+            value = out.pop(old)
+            if new is None:
+                text = f"{cls.DOOR} option {old!r} has no effect any more and goes in the next minor version"
+            elif new in out:
+                raise ValueError(f"{old!r} is the old name of {new!r}: give one of them")
+            else:
+                out[new] = value
+                text = (
+                    f"{cls.DOOR} option {old!r} is now {new!r}; the old name goes in the next minor version"
+                )
+            warnings.warn(text, DeprecationWarning, stacklevel=2)
+            logger.warning("%s", text)
+        return out
+
+    @field_validator("allow", mode="before")
+    @classmethod
+    def _allow(cls, value: object) -> object:
+        return check_allowlist(value)

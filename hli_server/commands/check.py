@@ -151,7 +151,7 @@ def check_program(
     :class:`~hli_server.engine.program_check.ProgramCheck`; ``progress`` draws a bar on a terminal.
 
     ``record_path``: keep the path for the picture (``--plot``). ``text`` may be an open text file
-    (``newline=""``): a geometry check then streams it with flat memory (issue 16)."""
+    (``newline=""``): a geometry check then streams it with flat memory (docs/performance.md)."""
     meter = _Progress(_count_lines(text) if progress else 0, progress)
     try:
         return ProgramCheck(

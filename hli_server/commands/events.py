@@ -46,7 +46,7 @@ def mqtt_markdown(prefix: str = "hli/<machine>/") -> str:
     event, with its payload, and an example message."""
     import json
 
-    from hli_server.adapters.mqtt import DROPPED_TOPIC, SNAPSHOT_TOPIC, STATUS_TOPIC, encode_event
+    from hli_server.codecs.event_json import DROPPED_TOPIC, SNAPSHOT_TOPIC, STATUS_TOPIC, encode_event
     from schemas.events import ModeChanged
 
     own = (

@@ -1,4 +1,4 @@
-"""``hli-server record show|export`` and ``hli-server replay`` (issue 25, docs/record-replay.md).
+"""``hli-server record show|export`` and ``hli-server replay`` (docs/record-replay.md).
 
     hli-server record show FILE [--format text|json] [--limit N]
     hli-server record export FILE (--csv OUT | --vcd OUT | --plot OUT.png|.pdf) [--signals PATTERN ...]

@@ -29,6 +29,7 @@ from typing import Any
 
 import click
 
+from hli_server._compiled import stale_notice
 from hli_server.adapters.host import AccessPolicy
 from hli_server.adapters.registry import (
     CLI_ALIASES,
@@ -41,6 +42,7 @@ from hli_server.adapters.registry import (
 from hli_server.configuration import ConfigError, ConfigFileError, load_machine, machine_summary
 from hli_server.recording.tap import DEFAULT_OUTPUTS_EVERY, RecordingOptions
 from hli_server.runtime import Clock, Runtime, precise_event_loop
+from hli_server.runtime.doors import DoorsProcess
 from hli_server.runtime.pacing import PRIORITIES, probed_default_loop
 
 __all__ = ["run"]
@@ -51,6 +53,20 @@ _EXIT_FAILED = 1
 _EXIT_START = 2
 
 
+def doors_line(runtime: Runtime) -> str:
+    """Which process serves the network doors: ``run`` serves them from a second process by default, a
+    ``Runtime`` built in Python (the test harness) from its own; the banner says which one runs."""
+    doors = next((a for a in runtime.adapters if isinstance(a, DoorsProcess)), None)
+    if doors is not None:
+        return (
+            f"network doors: served by a second process (pid {doors.pid}), attached to the shared memory "
+            "(--no-doors-process: in the clock's process)"
+        )
+    if runtime.doors_process:
+        return "network doors: none that a second process serves (everything runs in the clock's process)"
+    return "network doors: served in the clock's process (--doors-process: from a second process)"
+
+
 def _banner(runtime: Runtime, event_loop: str, guards: list[DoorGuard]) -> None:
     config = runtime.config
     click.echo(f"hli-server: {machine_summary(config)}")
@@ -58,12 +74,16 @@ def _banner(runtime: Runtime, event_loop: str, guards: list[DoorGuard]) -> None:
     if runtime.clock == "realtime":
         clock += f", priority: {runtime.priority_granted}"
     click.echo(clock + ")")
+    notice = stale_notice()
+    if notice is not None:  # an edited engine source: the whole engine runs as pure Python
+        click.echo(f"  WARNING: {notice}")
     image = runtime.image
     layout = runtime.layout
     click.echo(
         f"  shared memory image: {image.name}  (/dev/shm/{image.name}; PLC->CNC {layout.p2c_size} B, "
         f"CNC->PLC {layout.c2p_size} B, layout {layout.hash[:12]})"
     )
+    click.echo(f"  {doors_line(runtime)}")
     for adapter in runtime.adapters:
         for line in adapter.endpoints():
             click.echo(f"  {line}")

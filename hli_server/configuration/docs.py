@@ -142,7 +142,7 @@ def _kernel_column(pinfo: ParameterInfo | None) -> str:
 def parameter_table_markdown() -> str:
     """Every configuration parameter: key, P-ID, ISG path, unit, default, range, the kernel's page
     (docs/configuration.md). The default is the kernel's wherever the row has no note; the notes
-    below a section say where and why ours differs (issue 21)."""
+    below a section say where and why ours differs (docs/alarms.md)."""
     out: list[str] = []
     for title, model, skip in _SECTIONS:
         known = _PARAMETERS_OF_MODEL.get(model, ()) or _LIST_PATHS.get(model, ())

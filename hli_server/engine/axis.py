@@ -22,8 +22,8 @@ The drive saturates: ``v_cmd`` is limited to :data:`DRIVE_SATURATION` times the 
 real drive's speed limit does. A loop made unstable by its gain (kv * T_A > 2 without a time
 constant, or a large ``gain_factor``) then oscillates with a bounded amplitude, the position
 monitor reports it, and no value grows without bound (before, such a loop reached inf within a
-few hundred cycles and ended the server, issue 12 finding 2). Injected fault values are checked
-by :func:`check_fault_value` before they reach the loop.
+few hundred cycles and ended the server, reliability.md, round 1, finding 2). Injected fault values are
+checked by :func:`check_fault_value` before they reach the loop.
 """
 
 from __future__ import annotations
@@ -99,7 +99,8 @@ def check_fault_value(axis: Axis, name: str, value: object) -> float | bool:
     """A fault value the drive model can take (A3-05), else ValueError naming the field, the value
     and the allowed range. ``Machine.inject_fault`` checks every field before it changes any.
 
-    The ranges, and why (issue 12 finding 2: ``encoder_drift=1e308`` reached inf in the next cycle):
+    The ranges, and why (reliability.md, round 1, finding 2: ``encoder_drift=1e308`` reached inf in the next
+    cycle):
 
     * ``friction`` 0 .. v_max [mm/s]: a dead band as wide as the axis' top speed already swallows
       every command the path gives; a wider one says nothing more.

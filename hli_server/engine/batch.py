@@ -1,4 +1,5 @@
-"""``check --geometry-only`` as a batch: plain motion lines decoded and checked many at a time (issue 16).
+"""``check --geometry-only`` as a batch: plain motion lines decoded and checked many at a time
+(docs/performance.md).
 
 The exact geometry check decodes a program block by block (:meth:`Decoder.next_items`): parse the line,
 update the modal state, build the segment, run every path check (soft limits, work and protection areas).
@@ -66,14 +67,12 @@ __all__ = ["SMALL_RUN", "SMALL_RUN_PER_AREA", "BatchGeometryCheck", "unsupported
 
 SMALL_RUN = 26
 """Fewer plain lines than this between two other lines are decoded one by one: numpy's set-up per
-stretch would cost more than it saves (measured without areas, compiled: a stretch of 20 lines between
-two M-code lines checks 0.83x as fast as a batch as block by block, of 25 0.98x, of 30 1.13x)."""
+stretch would cost more than it saves (the measurements behind the number: docs/performance.md, "Batch
+thresholds")."""
 SMALL_RUN_PER_AREA = 1
 """... and this many more for each active area: the area prefilter tests all areas of a group in a few
-numpy passes, so its set-up per stretch hardly grows with their number (measured, compiled, a stretch
-between two M-code lines as a batch against block by block: with 3 active areas 0.96x at 30 lines,
-1.36x at 50; with 20 areas 0.87x at 40, 1.06x at 50, 3.1x at 200). Before the prefilter was
-vectorized this was 12 (20 areas: 0.88x at 200 lines)."""
+numpy passes, so its set-up per stretch hardly grows with their number (docs/performance.md, "Batch
+thresholds")."""
 
 _TAU = 2.0 * math.pi
 _PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}

@@ -257,7 +257,7 @@ class Channel:
         self.interpolate: Callable[[], None] = self._interpolate
         """One cycle of path, jog or referencing (the machine calls it). An attribute, not a method, so
         that a test can put a failing function in its place where the engine is compiled (mypyc's
-        classes refuse to have a method replaced; issue 16)."""
+        classes refuse to have a method replaced; docs/performance.md)."""
 
     # --- state ---------------------------------------------------------------------------
     @property
@@ -593,7 +593,7 @@ class Channel:
 
     def _fill(self) -> None:
         """Decode ahead: up to the look-ahead's size, within the interpreter's budget for this cycle
-        (issue 20: a program that computes without moving goes on next cycle)."""
+        (docs/check.md: a program that computes without moving goes on next cycle)."""
         self.interpreter.refill()
         decoder = self.decoder
         planner = self.planner

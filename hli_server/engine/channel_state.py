@@ -60,7 +60,7 @@ class Cause(StrEnum):
     RESET = "reset"
 
 
-@mypyc_attr(native_class=False)  # mypyc compiles no subclass of RuntimeError (issue 16)
+@mypyc_attr(native_class=False)  # mypyc compiles no subclass of RuntimeError (docs/performance.md)
 class StateTransitionError(RuntimeError):
     """A transition the table does not list: a bug in the engine."""
 

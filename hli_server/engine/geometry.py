@@ -22,7 +22,7 @@ class LineSegment:
     start: Point
     end: Point
     length: float = field(init=False, repr=False, compare=False)
-    """Path length [mm], computed once: the interpolator asks for it every cycle (issue 16)."""
+    """Path length [mm], computed once: the interpolator asks for it every cycle (docs/performance.md)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "length", math.dist(self.start, self.end))
@@ -64,7 +64,7 @@ class ArcSegment:
     length: float = field(init=False, repr=False, compare=False)
     """Path length of the helix: hypot of the arc length and the linear axes' travel, computed once.
     ``hypot`` rather than a sum of squares: it stays finite for every finite result (a square of
-    1e155 overflowed, issue 12 finding 1)."""
+    1e155 overflowed, reliability.md, round 1, finding 1)."""
 
     def __post_init__(self) -> None:
         i, j = self.plane

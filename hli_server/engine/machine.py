@@ -397,7 +397,7 @@ class Machine:
     def publish(self) -> None:
         """The HLI ``_r`` fields of every axis and channel. Positions in 0.1 µm as
         :func:`~schemas.units.increments_from_mm` converts them (rounded to the nearest, clamped to a
-        DINT), written out here: 32 conversions a cycle on an 8-axis machine (issue 16)."""
+        DINT), written out here: 32 conversions a cycle on an 8-axis machine (docs/performance.md)."""
         scale = INCREMENTS_PER_MM
         lo, hi = DINT_MIN, DINT_MAX
         for axis, st in self._publish_rows:

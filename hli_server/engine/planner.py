@@ -61,7 +61,7 @@ class MarkerKind(StrEnum):
     """A callable run in program order when the path reaches it (the path comes to rest there)."""
     SYNC = "sync"
     """A callable run in program order when the path passes it, without stopping there (a ``#MSG SYN``,
-    a synchronous ``V.E.`` write: issue 20)."""
+    a synchronous ``V.E.`` write: docs/check.md)."""
 
 
 @dataclass(slots=True)

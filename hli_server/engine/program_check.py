@@ -1,5 +1,5 @@
 """Checking a program offline: the one place that runs a program to its end and collects what happened
-(issue 20; ``hli-server check``, the HTTP API and the pytest plugin all use :class:`ProgramCheck`).
+(docs/check.md; ``hli-server check``, the HTTP API and the pytest plugin all use :class:`ProgramCheck`).
 
 Two modes:
 

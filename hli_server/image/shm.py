@@ -13,8 +13,8 @@ writes one PLC->CNC field with a single store and refuses CNC->PLC fields (H-02)
 :meth:`ProcessImage.read` and :meth:`ProcessImage.snapshot` read. The segment is unlinked by
 :meth:`ProcessImage.close` (and, if the server dies, by the resource tracker of the server process).
 
-A segment of the wanted name that exists already (H-01; issue 12 finding 7) is replaced only when it
-is provably a stale HLI image: it has an image header, and the process that wrote it is gone. The
+A segment of the wanted name that exists already (H-01; reliability.md, round 1, finding 7) is replaced only
+when it is provably a stale HLI image: it has an image header, and the process that wrote it is gone. The
 header records that process as PID *and* start time (``/proc/<pid>/stat``, clock ticks since boot):
 a PID the kernel has since handed to another process has another start time, so a crashed server's
 segment is replaced even when its PID is alive again. The start time beats reading
@@ -387,7 +387,7 @@ class ProcessImage:
 
         Returns the packed buffer (the cycle as u64, then the half; valid until the next call).
         ``commit=False`` packs without publishing: the readers keep the previous publish (a stalled
-        publish, issue 25's communication fault), and the NC's V.E. writes wait for the next publish."""
+        publish, a communication fault), and the NC's V.E. writes wait for the next publish."""
         if commit and self._external is not None:
             self._external.publish(self._buf)
         private = self._c2p_private
@@ -524,10 +524,10 @@ class SignalRecorder:
     Cheap per cycle: :meth:`sample` is one ``unpack_from`` for the CNC->PLC signals (with the
     publish's cycle) and one for the PLC->CNC signals, packed without gaps onto a ``bytearray``
     (the signals' own widths: 2,000,000 cycles of one LREAL take 32 MB, not the 200 MB of Python
-    objects an earlier version kept, issue 27 finding 9); the columns are built once, as numpy arrays,
-    by :meth:`columns`. Sample on the writer's side, right after a publish (the runtime does): the newest
-    buffer is then not being written, so no seqlock retry is needed. PLC->CNC values are those of the
-    live half at that moment (what the cycle latched, unless a PLC wrote since).
+    objects an earlier version kept, reliability.md, round 2, finding 9); the columns are built once, as
+    numpy arrays, by :meth:`columns`. Sample on the writer's side, right after a publish (the runtime does):
+    the newest buffer is then not being written, so no seqlock retry is needed. PLC->CNC values are those of
+    the live half at that moment (what the cycle latched, unless a PLC wrote since).
     """
 
     __slots__ = (

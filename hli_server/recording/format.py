@@ -1,4 +1,5 @@
-"""The recording file: gzip-compressed JSON Lines, written while the server runs (issue 25, B-02).
+"""The recording file: gzip-compressed JSON Lines, written while the server runs (docs/record-replay.md,
+B-02).
 
 Why this format (docs/record-replay.md says it for users):
 

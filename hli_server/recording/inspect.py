@@ -1,4 +1,5 @@
-"""What is in a recording, for people: ``record show``, CSV, VCD (GTKWave) and a plot (issue 25, B-02).
+"""What is in a recording, for people: ``record show``, CSV, VCD (GTKWave) and a plot (docs/record-replay.md,
+B-02).
 
 Everything here streams the file once (:func:`~hli_server.recording.format.read_records`), so an hour of
 recording is read in bounded memory except for what is asked for: the summary keeps counts, the

@@ -1,4 +1,5 @@
-"""Replay a recording as a regression test (issue 25, B-02): ``hli-server replay FILE``, ``hli.replay(path)``.
+"""Replay a recording as a regression test (docs/record-replay.md, B-02): ``hli-server replay FILE``,
+``hli.replay(path)``.
 
 The replay builds the recorded machine from the recorded configuration and runs it on the stepped clock
 (a :class:`~hli_server.runtime.Runtime` with its image in memory and no doors). Its tap slot holds a

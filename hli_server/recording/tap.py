@@ -1,4 +1,4 @@
-"""The session recorder: the runtime's tap at the latch boundary (issue 25, B-02).
+"""The session recorder: the runtime's tap at the latch boundary (docs/record-replay.md, B-02).
 
 Every cycle the runtime hands :meth:`SessionTap.after_cycle` the PLC->CNC half it latched and the
 CNC->PLC half it packed. The tap keeps, in the cycle, only what changed, as raw bytes (a slice, a
@@ -61,6 +61,18 @@ from hli_server.recording.format import (
     gzip_member,
 )
 from schemas.layout import Direction, Signal, SignalType
+from schemas.results import (
+    AlarmList,
+    AreaTable,
+    AxisFaults,
+    CollisionPair,
+    MachineState,
+    ProgramEntry,
+    ProgramLoaded,
+    ProgramSelected,
+    Scene,
+    SoftLimits,
+)
 from schemas.wire import Mode
 
 if TYPE_CHECKING:
@@ -757,17 +769,17 @@ class JournaledOperator(OperatorPort):
     # --- what is noted ---------------------------------------------------------------------------
     def load_program(
         self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
-    ) -> dict[str, Any]:
+    ) -> ProgramLoaded:
         args: dict[str, Any] = {"channel": channel, "text": text, "name": name}
         if files:  # the subprograms uploaded with it (N-02): the replay uploads them again
             args["files"] = dict(files)
-        result: dict[str, Any] = self._do(
+        result: ProgramLoaded = self._do(
             "load_program", args, lambda: self.panel.load_program(channel, text, name, files)
         )
         return result
 
-    def select_program(self, channel: int, number: int) -> dict[str, Any]:
-        result: dict[str, Any] = self._do(
+    def select_program(self, channel: int, number: int) -> ProgramSelected:
+        result: ProgramSelected = self._do(
             "select_program",
             {"channel": channel, "number": number},
             lambda: self.panel.select_program(channel, number),
@@ -820,26 +832,24 @@ class JournaledOperator(OperatorPort):
         result: Accepted = self._do("reference", {"axis": axis}, lambda: self.panel.reference(axis))
         return result
 
-    def inject_faults(self, axis: str, **fields: float | bool) -> dict[str, Any]:
-        result: dict[str, Any] = self._do(
+    def inject_faults(self, axis: str, **fields: float | bool) -> AxisFaults:
+        result: AxisFaults = self._do(
             "inject_faults", {"axis": axis, **fields}, lambda: self.panel.inject_faults(axis, **fields)
         )
         return result
 
-    def clear_faults(self, axis: str) -> dict[str, Any]:
-        result: dict[str, Any] = self._do(
-            "clear_faults", {"axis": axis}, lambda: self.panel.clear_faults(axis)
-        )
+    def clear_faults(self, axis: str) -> AxisFaults:
+        result: AxisFaults = self._do("clear_faults", {"axis": axis}, lambda: self.panel.clear_faults(axis))
         return result
 
-    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
-        result: dict[str, Any] = self._do(
+    def set_soft_limits(self, axis: str, **values: int) -> SoftLimits:
+        result: SoftLimits = self._do(
             "set_soft_limits", {"axis": axis, **values}, lambda: self.panel.set_soft_limits(axis, **values)
         )
         return result
 
-    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
-        result: dict[str, Any] = self._do(
+    def update_axis_record(self, axis: str, **values: int) -> SoftLimits:
+        result: SoftLimits = self._do(
             "update_axis_record",
             {"axis": axis, **values},
             lambda: self.panel.update_axis_record(axis, **values),
@@ -869,31 +879,31 @@ class JournaledOperator(OperatorPort):
     def axis_names(self, channel: int | None = None) -> list[str]:
         return self.panel.axis_names(channel)
 
-    def faults(self, axis: str) -> dict[str, Any]:
+    def faults(self, axis: str) -> AxisFaults:
         return self.panel.faults(axis)
 
-    def soft_limits(self, axis: str) -> dict[str, Any]:
+    def soft_limits(self, axis: str) -> SoftLimits:
         return self.panel.soft_limits(axis)
 
-    def snapshot(self) -> dict[str, Any]:
+    def snapshot(self) -> MachineState:
         return self.panel.snapshot()
 
-    def alarms(self, history: int = 200) -> dict[str, Any]:
+    def alarms(self, history: int = 200) -> AlarmList:
         return self.panel.alarms(history)
 
-    def areas(self, channel: int) -> dict[str, Any]:
+    def areas(self, channel: int) -> AreaTable:
         return self.panel.areas(channel)
 
     def timing(self) -> dict[str, Any]:
         return self.panel.timing()
 
-    def scene(self, channel: int) -> dict[str, Any]:
+    def scene(self, channel: int) -> Scene:
         return self.panel.scene(channel)
 
-    def programs(self, channel: int) -> list[dict[str, Any]]:
+    def programs(self, channel: int) -> list[ProgramEntry]:
         return self.panel.programs(channel)
 
-    def collision_pairs(self) -> list[dict[str, Any]]:
+    def collision_pairs(self) -> list[CollisionPair]:
         return self.panel.collision_pairs()
 
 

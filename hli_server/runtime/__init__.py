@@ -6,10 +6,10 @@ files) and ``host.py`` (the door the adapters get: image, operator panel, events
 """
 
 from hli_server.adapters.host import LoggedEvent
-from hli_server.runtime.core import AdapterSpec, Recording, Runtime, RuntimeStateError
-from hli_server.runtime.events import EVENT_LOG, EventLog
-from hli_server.runtime.host import OperatorPanel, RuntimeHost
-from hli_server.runtime.image import ImageFactory, RuntimeImage, memory_image, shared_memory_image
+from hli_server.runtime.core import AdapterSpec, Recording, Runtime, RuntimeHost, RuntimeStateError
+from hli_server.runtime.event_log import EVENT_LOG, EventLog
+from hli_server.runtime.image_factory import ImageFactory, RuntimeImage, memory_image, shared_memory_image
+from hli_server.runtime.operator_panel import OperatorPanel
 from hli_server.runtime.pacing import Clock, ClockError, PacingStats, precise_event_loop
 
 __all__ = [

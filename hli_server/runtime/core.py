@@ -14,7 +14,7 @@ Adapters start in order after the image exists and before the first cycle and st
 order; then the image is closed and unlinked. :meth:`Runtime.serve` does all of it and stops
 cleanly on SIGINT/SIGTERM.
 
-A failure inside a cycle never ends the server (issue 12): the cycle's exception is logged with its
+A failure inside a cycle never ends the server (docs/reliability.md): the cycle's exception is logged with its
 traceback, every channel takes alarm 919000 (its axes stop, its program is aborted), the failed
 cycles are counted (``GET /api/timing``), and the clock keeps pacing. A reset clears the alarm.
 """
@@ -31,16 +31,30 @@ import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
+from hli_server._compiled import stale_notice
 from hli_server.adapters.faults import CommFaults
-from hli_server.adapters.host import AccessPolicy, LoggedEvent, Readiness, Trace, door_host
-from hli_server.adapters.registry import Adapter, AdapterError, create_adapter
+from hli_server.adapters.host import (
+    AccessPolicy,
+    CheckPort,
+    EventFeed,
+    ImagePort,
+    LoggedEvent,
+    OperatorPort,
+    Readiness,
+    RecorderPort,
+    StepRefusedError,
+    Trace,
+    door_host,
+)
+from hli_server.adapters.registry import ADAPTERS, Adapter, AdapterError, create_adapter
 from hli_server.engine.machine import Machine
 from hli_server.recording.tap import JournaledOperator, RecordingOptions, SessionRecorderPort, SessionTap
 from hli_server.runtime.checks import ProgramChecker
-from hli_server.runtime.events import EventLog
-from hli_server.runtime.host import OperatorPanel, RuntimeHost
-from hli_server.runtime.image import ImageFactory, RuntimeImage, shared_memory_image
+from hli_server.runtime.doors import DoorsProcess
+from hli_server.runtime.event_log import EventLog
+from hli_server.runtime.image_factory import ImageFactory, RuntimeImage, shared_memory_image
 from hli_server.runtime.nc_files import NcFileWriter
+from hli_server.runtime.operator_panel import OperatorPanel
 from hli_server.runtime.pacing import (
     FREE_SLICE_S,
     PRIORITIES,
@@ -52,7 +66,7 @@ from hli_server.runtime.pacing import (
     raise_priority,
     run_free,
     run_realtime,
-    summarize,
+    summarize_timing,
 )
 from hli_server.runtime.programs import RuntimeLibrary, read_program_file
 
@@ -64,7 +78,15 @@ if TYPE_CHECKING:
     from schemas.events import Event
     from schemas.layout import Layout
 
-__all__ = ["AdapterSpec", "Recording", "RequestService", "Runtime", "RuntimeStateError", "summarize_timing"]
+__all__ = [
+    "AdapterSpec",
+    "Recording",
+    "RequestService",
+    "Runtime",
+    "RuntimeHost",
+    "RuntimeStateError",
+    "summarize_timing",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -156,7 +178,8 @@ class Runtime:
         self.checker = ProgramChecker(config, self.programs.directories.directories)
         """Checks programs offline for ``POST /api/check`` (a worker process, started at the first check)."""
         self.session = SessionTap(config, recording)
-        """Records the session (issue 25): the input journal always, a recording file on demand."""
+        """Records the session (docs/record-replay.md): the input journal always, a recording file on
+        demand."""
         self.machine = Machine(
             config, read_program=self.session.wrap_reader(read_program), programs=self.programs
         )
@@ -166,7 +189,7 @@ class Runtime:
         """Carries out the programs' ``#MSG SAVE`` writes inside its output directory (N-07)."""
         self.machine.event_listeners.append(self.nc_files)
         self.comm_faults = CommFaults(lambda: self.machine.cycle)
-        """Faults in the PLC's communication on demand (issue 25, ``adapters/faults.py``)."""
+        """Faults in the PLC's communication on demand (docs/record-replay.md, ``adapters/faults.py``)."""
         self.comm_faults.subscribe(self.session.note_fault)
         self.recorder_port = SessionRecorderPort(self.session)
         self.t_a = self.machine.t_a
@@ -357,6 +380,9 @@ class Runtime:
         if self.started:
             raise RuntimeStateError("the runtime was started already; build a new Runtime to run again")
         self.started = True
+        notice = stale_notice()
+        if notice is not None:
+            logger.warning("%s", notice)
         self._stop_event = asyncio.Event()
         self._step_lock = asyncio.Lock()
         if self.stop_after_cycles is not None:
@@ -427,9 +453,6 @@ class Runtime:
         between cycles."""
         if not self.doors_process:
             return list(self._adapter_specs)
-        from hli_server.adapters.registry import ADAPTERS
-        from hli_server.runtime.doors import DoorsProcess
-
         here: list[AdapterSpec] = []
         moved: list[tuple[str, dict[str, Any]]] = []
         for spec in self._adapter_specs:
@@ -543,8 +566,8 @@ class Runtime:
                 return
             # everything built so far lives as long as the process: keep it out of the cyclic garbage
             # collector's full passes, which otherwise scan it again and again and delay cycles by
-            # tens of milliseconds (measured under a flooding client, issue 12). Before the banner: a
-            # client that reads it finds the clock already running.
+            # tens of milliseconds (measured under a flooding client, docs/reliability.md). Before the
+            # banner: a client that reads it finds the clock already running.
             gc.collect()
             gc.freeze()
             if ready is not None:
@@ -714,13 +737,6 @@ class Runtime:
         return f"Runtime({self.config.name!r}, {self.clock} clock, cycle {self.machine.cycle}, {state})"
 
 
-def summarize_timing(raw: dict[str, Any]) -> dict[str, Any]:
-    """``GET /api/timing`` from :meth:`Runtime.timing_raw`."""
-    out = summarize(raw)
-    out["failed_cycles"] = raw.get("failed_cycles", 0)
-    return out
-
-
 def _spec_name(spec: AdapterSpec) -> str:
     if isinstance(spec, str):
         return spec
@@ -763,3 +779,71 @@ class Recording:
 
     def __exit__(self, *exc: object) -> None:
         self.stop()
+
+
+class RuntimeHost:
+    """The :class:`~hli_server.adapters.host.AdapterHost` of a running :class:`Runtime`."""
+
+    def __init__(self, runtime: Runtime, operator: OperatorPanel) -> None:
+        self._rt = runtime
+        self._operator = operator
+        # the operator panel's trails follow the cycles, its scenes the events (the dashboard)
+        runtime.on_cycle(operator.recorder.after_cycle)
+        runtime.event_log.subscribe(operator.recorder.on_event)
+
+    @property
+    def image(self) -> ImagePort:
+        return self._rt.image
+
+    @property
+    def operator(self) -> OperatorPort:
+        return self._rt.operator  # the panel, with every request noted by the session recorder
+
+    @property
+    def recorder(self) -> RecorderPort:
+        return self._rt.recorder_port
+
+    @property
+    def faults(self) -> CommFaults:
+        return self._rt.comm_faults
+
+    @property
+    def checker(self) -> CheckPort:
+        return self._rt.checker
+
+    @property
+    def events(self) -> EventFeed:
+        return self._rt.event_log
+
+    @property
+    def clock(self) -> str:
+        return str(self._rt.clock)
+
+    @property
+    def bind(self) -> str:
+        return self._rt.bind
+
+    @property
+    def policy(self) -> AccessPolicy:
+        return self._rt.policy
+
+    async def step(self, cycles: int = 1) -> int:
+        try:
+            return await self._rt.step(cycles)
+        except (ClockError, RuntimeStateError) as exc:
+            raise StepRefusedError(str(exc)) from None
+
+    async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
+        try:
+            return await self._rt.step_traced(cycles, signals)
+        except (ClockError, RuntimeStateError) as exc:
+            raise StepRefusedError(str(exc)) from None
+
+    def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
+        return self._rt.on_cycle(listener)
+
+    def readiness(self) -> Readiness:
+        return self._rt.readiness()
+
+    def __repr__(self) -> str:
+        return f"RuntimeHost({self._rt!r})"

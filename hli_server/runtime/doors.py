@@ -1,4 +1,5 @@
-"""The network doors in a process of their own (``run --doors-process``, the default; issues 12, 26).
+"""The network doors in a process of their own (``run --doors-process``, the default; docs/reliability.md,
+docs/runtime.md).
 
 The image lives in shared memory, so the doors that serve it (Modbus, ADS) attach it by name like a PLC
 does and answer from there; the doors that need the engine (the HTTP API with the dashboard's streams,
@@ -32,7 +33,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
@@ -51,6 +52,7 @@ from hli_server.adapters.host import (
 from hli_server.adapters.registry import Adapter, create_adapter
 from hli_server.runtime.checks import ProgramChecker
 from hli_server.runtime.remote import (
+    EngineSide,
     EventMirror,
     OperatorService,
     RemoteFaults,
@@ -58,15 +60,21 @@ from hli_server.runtime.remote import (
     RemoteOperator,
     RemoteRecorder,
 )
-from plc_clients.shm import ImageClient
 from schemas import image_format as fmt
 from schemas.layout import Direction, Layout, Signal
 
 if TYPE_CHECKING:
-    from hli_server.runtime.core import Runtime
     from schemas.config import MachineConfig
 
-__all__ = ["DOORS_NICE", "AttachedImage", "DoorsHost", "DoorsPlan", "DoorsProcess", "doors_main"]
+__all__ = [
+    "DOORS_NICE",
+    "AttachedImage",
+    "DoorsHost",
+    "DoorsPlan",
+    "DoorsProcess",
+    "DoorsRuntime",
+    "doors_main",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -77,55 +85,72 @@ DOORS_NICE = 5
 
 
 class AttachedImage(ImagePort):
-    """The image of another process, attached by name: reads of consistent publishes, PLC writes."""
+    """The image of another process, attached by name (``schemas.image_format``, the format code the
+    server's own image and a PLC's ``ImageClient`` share): reads of consistent publishes, PLC writes."""
 
-    def __init__(self, client: ImageClient) -> None:
-        self._client = client
-        self._buf = client._buf
-        self._plan = client.plan
+    def __init__(self, segment: fmt.AttachedSegment) -> None:
+        self._segment = segment
+        self._buf = segment.buf
+        self._plan = segment.header.plan
+        self._layout = segment.layout
+        self._name = segment.name
+        self._closed = False
+
+    @classmethod
+    def attach(cls, name: str, *, timeout: float = 0.0) -> AttachedImage:
+        return cls(fmt.attach_segment(name, timeout=timeout))
 
     @property
     def name(self) -> str:
-        return self._client.name
+        return self._name
 
     @property
     def layout(self) -> Layout:
-        return self._client.layout
+        return self._layout
 
     @property
     def cycle(self) -> int:
-        return self._client.cycle
+        return fmt.read_u64(self._buf, fmt.OFF_CYCLE)
 
     @property
     def publish_count(self) -> int:
-        return self._client.publish_count
+        return fmt.read_u64(self._buf, fmt.OFF_PUBLISH_COUNT)
 
     @property
     def closed(self) -> bool:
-        return self._client.server_closed
+        """True once the server closed the image (it is then unlinked; the mapping stays valid)."""
+        flags: int = fmt.HEADER.unpack_from(self._buf, 0)[13]
+        return bool(flags & fmt.FLAG_CLOSED)
 
     def read(self, st_path: str) -> Value:
-        value: Value = self._client.read(st_path)
-        return value
+        signal = self._layout.signal(st_path)
+        if signal.plc_writable:
+            return fmt.read_field(self._buf, self._plan.p2c_offset, signal)
+        return fmt.read_c2p_field(self._buf, self._plan, signal, self._name)
 
     def write(self, st_path: str, value: object) -> None:
-        self._client.write(st_path, value)
+        self.write_signal(self._layout.signal(st_path), value)
 
     def write_signal(self, signal: Signal, value: object) -> None:
         signal.check_plc_write()
         fmt.write_field(self._buf, self._plan.p2c_offset, signal, signal.coerce(value))
 
     def write_bytes(self, offset: int, data: bytes) -> None:
-        fmt.write_p2c_bytes(self._buf, self._plan, self.layout, offset, data)
+        fmt.write_p2c_bytes(self._buf, self._plan, self._layout, offset, data)
 
     def read_half(self, direction: Direction) -> bytes:
-        return self._client.raw(direction)
+        if direction is Direction.CNC_TO_PLC:
+            return fmt.read_c2p(self._buf, self._plan, self._name)[1]
+        off = self._plan.p2c_offset
+        return bytes(self._buf[off : off + self._plan.p2c_size])
 
     def snapshot(self) -> tuple[int, bytes]:
-        return fmt.read_c2p(self._buf, self._plan, self.name)
+        return fmt.read_c2p(self._buf, self._plan, self._name)
 
     def close(self) -> None:
-        self._client.close()
+        if not self._closed:
+            self._closed = True
+            self._segment.close()
 
 
 class DoorsHost(AdapterHost):
@@ -158,7 +183,8 @@ class DoorsHost(AdapterHost):
         self._watch: asyncio.Task[None] | None = None
         self._t_a_s = t_a_us * 1e-6
         self._faults = RemoteFaults(link, lambda: image.cycle)
-        """A mirror of the server's communication faults (the engine's process owns them, issue 25)."""
+        """A mirror of the server's communication faults (the engine's process owns them,
+        docs/record-replay.md)."""
         self._recorder = RemoteRecorder(link)
 
     @property
@@ -271,7 +297,8 @@ def doors_main(plan: DoorsPlan, link: socket.socket, conn: Connection) -> None:
     it so, and it stays so): a Ctrl+C reaches the whole process group, and the parent stops the doors."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if plan.nice:
-        with contextlib.suppress(OSError):  # the clock's process wins the CPU from its doors (issue 26)
+        with contextlib.suppress(OSError):  # the clock's process wins the CPU from its doors
+            # (docs/runtime.md)
             os.nice(plan.nice)
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s doors %(name)s: %(message)s")
     # asyncio's own loop: the doors need no timer finer than a millisecond, and its one epoll_wait a turn
@@ -287,7 +314,7 @@ async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -
     with contextlib.suppress(NotImplementedError, RuntimeError):
         loop.add_signal_handler(signal.SIGTERM, terminated.set)
     try:
-        image = AttachedImage(ImageClient.attach(plan.image_name, timeout=5.0))
+        image = AttachedImage.attach(plan.image_name, timeout=5.0)
     except Exception as exc:
         _tell(conn, ("error", f"the doors process cannot attach the image {plan.image_name!r}: {exc}"))
         return
@@ -360,6 +387,31 @@ def _tell(conn: Connection, message: tuple[str, object]) -> bool:
     return True
 
 
+class DoorsRuntime(EngineSide, Protocol):
+    """What :class:`DoorsProcess` needs of the runtime that starts it (:class:`~hli_server.runtime.Runtime`
+    is one; a protocol, so that this module does not import the runtime that builds on it)."""
+
+    @property
+    def bind(self) -> str: ...
+
+    @property
+    def policy(self) -> AccessPolicy: ...
+
+    @property
+    def config(self) -> MachineConfig: ...
+
+    @property
+    def clock(self) -> object: ...
+
+    @property
+    def priority_granted(self) -> str: ...
+
+    @property
+    def checker(self) -> ProgramChecker: ...
+
+    def add_service(self, service: OperatorService) -> Callable[[], None]: ...
+
+
 class DoorsProcess:
     """The parent's side: an adapter of the runtime that runs the network doors in a child process and
     serves them the engine's operator panel, events and stepped clock between cycles
@@ -367,7 +419,7 @@ class DoorsProcess:
 
     name = "doors-process"
 
-    def __init__(self, specs: list[tuple[str, dict[str, Any]]], *, runtime: Runtime) -> None:
+    def __init__(self, specs: list[tuple[str, dict[str, Any]]], *, runtime: DoorsRuntime) -> None:
         self.specs = specs
         self.runtime = runtime
         self.doors: dict[str, tuple[int | None, list[str], str | None]] = {}

@@ -62,6 +62,7 @@ __all__ = [
     "run_free",
     "run_realtime",
     "summarize",
+    "summarize_timing",
 ]
 
 logger = logging.getLogger(__name__)
@@ -154,7 +155,7 @@ class PreciseEpollSelector(WaitProbe, selectors.EpollSelector):
     asyncio's default loop on Linux waits in ``epoll_wait``, whose timeout is whole milliseconds
     (Python rounds it up): with T_A = 1 ms every wake-up would come up to a millisecond late. A plain
     ``select(2)`` loop takes microseconds but cannot watch a descriptor numbered 1024 or above
-    (FD_SETSIZE): about a thousand open connections crashed such a server (issue 12). This selector
+    (FD_SETSIZE): about a thousand open connections crashed such a server (docs/reliability.md). This selector
     waits with ``select(2)`` on one descriptor only, the epoll instance itself (created with the loop,
     so its number is small; it is readable when any registered descriptor is ready), then collects the
     ready descriptors with a non-blocking ``epoll_wait``. Precise timers, no descriptor limit.
@@ -243,7 +244,7 @@ def raise_priority(priority: str) -> str:
     or ``CAP_SYS_NICE``: ``docker run --cap-add SYS_NICE``). Returns what was done, in words (the ``run``
     banner prints it); a refusal is said, not raised.
 
-    Why ``run`` asks for ``realtime`` by default (issue 26): on a machine with other work the clock's
+    Why ``run`` asks for ``realtime`` by default (docs/runtime.md): on a machine with other work the clock's
     lateness is the time its thread waits for a CPU (the tracer's ``os``), and no amount of work saved in
     the server changes that; with ``SCHED_FIFO`` the same load costs the cycle nothing (docs/performance.md,
     "The clock under load"). The thread sleeps between cycles (a fraction of one CPU); the doors process
@@ -594,6 +595,13 @@ def summarize(raw: dict[str, Any]) -> dict[str, Any]:
         "simulated_s": round(simulated, 6),
         "rate": round(simulated / wall, 6) if wall > 0 else None,
     }
+
+
+def summarize_timing(raw: dict[str, Any]) -> dict[str, Any]:
+    """``GET /api/timing`` from the runtime's ``timing_raw()`` (the pacing figures and the failed cycles)."""
+    out = summarize(raw)
+    out["failed_cycles"] = raw.get("failed_cycles", 0)
+    return out
 
 
 def _percentile(sorted_data: Sequence[float], q: float) -> float:

@@ -1,9 +1,10 @@
 """The operator's door across processes: the engine's process serves its operator panel, its event feed
-and its stepped clock to the doors process over a socket pair (issues 26 and 27).
+and its stepped clock to the doors process over a socket pair (docs/runtime.md, docs/reliability.md).
 
 Why: the HTTP API, the dashboard's streams and MQTT are work of the network, and on the clock's event
-loop each of them cost cycles (one read of 10,000 events took the loop for 140-250 ms and dropped
-thousands of cycles; the collector's passes over the server's objects came on top). In the doors process
+loop each of them cost cycles (a long read of the event log held the loop and dropped cycles; the
+collector's passes over the server's objects came on top: docs/performance.md, "The clock under load", has
+the figures). In the doors process
 they cost the clock nothing: what remains in the engine's process is this service, and the clock serves it
 *between* cycles (``run_realtime``'s ``serve``), in the slack before the next cycle is due.
 
@@ -14,7 +15,7 @@ What crosses the socket (frames: a 4-byte length, then a pickle; both ends are t
                       ("readiness", id)                        the server's readiness (GET /api/ready)
                       ("step", id, cycles, signals | None)     the stepped clock (async at the doors)
                       ("cancel", id)                           the client of that step went away
-                      ("recorder", id, method, args)           the session recorder (issue 25)
+                      ("recorder", id, method, args)           the session recorder (docs/record-replay.md)
                       ("faults", id, op, args)                 set, end or reset communication faults
                       ("fault-ended", 0, fault id, reason)     a fault the doors used up (no answer)
     engine -> doors   ("ok", id, result) / ("err", id, exception)
@@ -26,10 +27,10 @@ answers what never changes from a cache (channels, axes, program tables, the mac
 and time from the image it attached, and sorts the timing samples itself: a read, however large its
 answer, reaches the engine as one small request or not at all.
 
-The engine's process owns the communication faults (issue 25: the recording notes every change, a stall
-acts on the publish); the doors process keeps a mirror that its connections consult (:class:`RemoteFaults`),
-which sends what users set through the doors (the HTTP API) to the engine and takes the engine's table on
-every change.
+The engine's process owns the communication faults (docs/record-replay.md: the recording notes every change,
+a stall acts on the publish); the doors process keeps a mirror that its connections consult
+(:class:`RemoteFaults`), which sends what users set through the doors (the HTTP API) to the engine and takes
+the engine's table on every change.
 
 * :class:`OperatorService`: the engine's end, an ``asyncio.Protocol`` on the clock's loop;
 * :class:`RemoteLink`, :class:`RemoteOperator`, :class:`EventMirror`, :class:`RemoteFaults`,
@@ -50,30 +51,43 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from hli_server.adapters.faults import ActiveFault, CommFaults, FaultError, FaultSpec
 from hli_server.adapters.host import (
     Accepted,
+    AdapterHost,
     EventFeed,
     ImagePort,
     LoggedEvent,
     OperatorError,
     OperatorPort,
+    Readiness,
     RecorderPort,
     Trace,
     UnavailableError,
 )
-from hli_server.runtime.events import EventLog
+from hli_server.runtime.event_log import EventLog
+from hli_server.runtime.pacing import summarize_timing
 from schemas.events import Event
+from schemas.results import (
+    AlarmList,
+    AreaTable,
+    AxisFaults,
+    CollisionPair,
+    MachineState,
+    ProgramEntry,
+    ProgramLoaded,
+    ProgramSelected,
+    Scene,
+    SoftLimits,
+)
 from schemas.wire import Mode
-
-if TYPE_CHECKING:
-    from hli_server.runtime.core import Runtime
 
 __all__ = [
     "CALL_TIMEOUT_S",
     "OPERATOR_CALLS",
+    "EngineSide",
     "EventMirror",
     "OperatorService",
     "RemoteFaults",
@@ -170,6 +184,33 @@ def _portable(exc: BaseException) -> BaseException:
 # --------------------------------------------------------------------------------------------
 
 
+class EngineSide(Protocol):
+    """What the engine's end of the link needs of the runtime (:class:`~hli_server.runtime.Runtime` is
+    one; a protocol, so that this module does not import the runtime that builds on it)."""
+
+    @property
+    def defers_requests(self) -> bool: ...
+
+    @property
+    def event_log(self) -> EventLog: ...
+
+    @property
+    def comm_faults(self) -> CommFaults: ...
+
+    @property
+    def recorder_port(self) -> RecorderPort: ...
+
+    @property
+    def operator(self) -> OperatorPort: ...
+
+    @property
+    def host(self) -> AdapterHost: ...
+
+    def timing_raw(self) -> dict[str, Any]: ...
+
+    def readiness(self) -> Readiness: ...
+
+
 class OperatorService(asyncio.Protocol):
     """The engine's end of the link, on the clock's loop.
 
@@ -181,7 +222,7 @@ class OperatorService(asyncio.Protocol):
     Events are sent after each batch of cycles, before any answer, so that an answer never overtakes the
     events of the cycles it reports."""
 
-    def __init__(self, runtime: Runtime) -> None:
+    def __init__(self, runtime: EngineSide) -> None:
         self._rt = runtime
         self._panel = runtime.operator
         self._reader = FrameReader()
@@ -576,12 +617,12 @@ class RemoteOperator(OperatorPort):
 
     def load_program(
         self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
-    ) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("load_program", channel, text, name, dict(files) if files else None)
+    ) -> ProgramLoaded:
+        out: ProgramLoaded = self._call("load_program", channel, text, name, dict(files) if files else None)
         return out
 
-    def select_program(self, channel: int, number: int) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("select_program", channel, number)
+    def select_program(self, channel: int, number: int) -> ProgramSelected:
+        out: ProgramSelected = self._call("select_program", channel, number)
         return out
 
     def _accepted(self, name: str, *args: Any) -> Accepted:
@@ -612,57 +653,55 @@ class RemoteOperator(OperatorPort):
     def reference(self, axis: str) -> Accepted:
         return self._accepted("reference", axis)
 
-    def faults(self, axis: str) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("faults", axis)
+    def faults(self, axis: str) -> AxisFaults:
+        out: AxisFaults = self._call("faults", axis)
         return out
 
-    def inject_faults(self, axis: str, **fields: float | bool) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("inject_faults", axis, **fields)
+    def inject_faults(self, axis: str, **fields: float | bool) -> AxisFaults:
+        out: AxisFaults = self._call("inject_faults", axis, **fields)
         return out
 
-    def clear_faults(self, axis: str) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("clear_faults", axis)
+    def clear_faults(self, axis: str) -> AxisFaults:
+        out: AxisFaults = self._call("clear_faults", axis)
         return out
 
-    def soft_limits(self, axis: str) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("soft_limits", axis)
+    def soft_limits(self, axis: str) -> SoftLimits:
+        out: SoftLimits = self._call("soft_limits", axis)
         return out
 
-    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("set_soft_limits", axis, **values)
+    def set_soft_limits(self, axis: str, **values: int) -> SoftLimits:
+        out: SoftLimits = self._call("set_soft_limits", axis, **values)
         return out
 
-    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("update_axis_record", axis, **values)
+    def update_axis_record(self, axis: str, **values: int) -> SoftLimits:
+        out: SoftLimits = self._call("update_axis_record", axis, **values)
         return out
 
-    def snapshot(self) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("snapshot")
+    def snapshot(self) -> MachineState:
+        out: MachineState = self._call("snapshot")
         return out
 
-    def alarms(self, history: int = 200) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("alarms", history)
+    def alarms(self, history: int = 200) -> AlarmList:
+        out: AlarmList = self._call("alarms", history)
         return out
 
-    def areas(self, channel: int) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("areas", channel)
+    def areas(self, channel: int) -> AreaTable:
+        out: AreaTable = self._call("areas", channel)
         return out
 
     def timing(self) -> dict[str, Any]:
-        from hli_server.runtime.core import summarize_timing
-
         return summarize_timing(self._link.call("timing"))
 
-    def scene(self, channel: int) -> dict[str, Any]:
-        out: dict[str, Any] = self._call("scene", channel)
+    def scene(self, channel: int) -> Scene:
+        out: Scene = self._call("scene", channel)
         return out
 
-    def programs(self, channel: int) -> list[dict[str, Any]]:
-        out: list[dict[str, Any]] = self._call("programs", channel)
+    def programs(self, channel: int) -> list[ProgramEntry]:
+        out: list[ProgramEntry] = self._call("programs", channel)
         return out
 
-    def collision_pairs(self) -> list[dict[str, Any]]:
-        out: list[dict[str, Any]] = self._call("collision_pairs")
+    def collision_pairs(self) -> list[CollisionPair]:
+        out: list[CollisionPair] = self._call("collision_pairs")
         return out
 
     async def step(self, cycles: int) -> int:
@@ -745,8 +784,8 @@ class RemoteFaults(CommFaults):
 
 
 class RemoteRecorder(RecorderPort):
-    """The session recorder of the engine's process, asked over the link (issue 25). A recording's file
-    is on the machine's file system, which both processes see: ``file`` gives its path."""
+    """The session recorder of the engine's process, asked over the link (docs/record-replay.md). A
+    recording's file is on the machine's file system, which both processes see: ``file`` gives its path."""
 
     def __init__(self, link: RemoteLink) -> None:
         self._link = link

@@ -47,7 +47,9 @@ from collections.abc import Callable, Coroutine, Iterable, Iterator, Mapping, Se
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, TypeVar, cast
 
+from hli_server.testing.transports import open_transport
 from schemas.layout import Direction, Layout
+from schemas.results import ProgramLoaded
 
 if TYPE_CHECKING:
     from hli_server.adapters.host import OperatorPort, Value
@@ -198,9 +200,9 @@ class SessionRecording:
 
 
 class CommFaultsView:
-    """The communication faults of the harness' server (issue 25, ``hli.comm_faults``): each call is
-    handed to the server's loop. ``with hli.comm_faults.fault(kind="delay", door="modbus", delay_ms=50,
-    count=3): ...`` ends the fault at the end of the block."""
+    """The communication faults of the harness' server (docs/record-replay.md, ``hli.comm_faults``): each
+    call is handed to the server's loop. ``with hli.comm_faults.fault(kind="delay", door="modbus",
+    delay_ms=50, count=3): ...`` ends the fault at the end of the block."""
 
     def __init__(self, harness: Harness) -> None:
         self._harness = harness
@@ -479,7 +481,7 @@ class Harness:
         self._loop_or_raise()
         return self._call_soon(lambda: self.runtime.record(signals))
 
-    # --- recording and replay (issue 25) -----------------------------------------------------------
+    # --- recording and replay (docs/record-replay.md) ----------------------------------------------
     def record(
         self, path: str | os.PathLike[str], *, overwrite: bool = True, outputs_every: int | None = None
     ) -> SessionRecording:
@@ -526,7 +528,7 @@ class Harness:
         *,
         files: Mapping[str, str | os.PathLike[str]] | Iterable[str | os.PathLike[str]] = (),
         name: str | None = None,
-    ) -> dict[str, Any]:
+    ) -> ProgramLoaded:
         """Load a program into ``channel`` with the subprograms and cycles it calls.
 
         ``program`` is NC text, or the path of a program file (a :class:`~pathlib.Path`, relative to
@@ -634,8 +636,6 @@ class Harness:
     def transport(self, kind: str = "shm") -> Transport:
         """A PLC-side transport to this server (``plc_clients``): ``"shm"``, ``"modbus"``, ``"ads"``
         or any registered one (:mod:`hli_server.testing.transports`). Closed when the harness stops."""
-        from hli_server.testing.transports import open_transport
-
         self._loop_or_raise()
         transport = open_transport(self, kind)
         self._transports.append(transport)

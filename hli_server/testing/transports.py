@@ -24,14 +24,17 @@ from __future__ import annotations
 import importlib.util
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 if TYPE_CHECKING:
-    from hli_server.testing.harness import Harness
+    from hli_server.adapters.registry import Adapter
+    from hli_server.runtime import Runtime
     from plc_clients.transports import Transport
+    from schemas.layout import Layout
 
 __all__ = [
     "TRANSPORTS",
+    "ServerUnderTest",
     "TransportKind",
     "open_transport",
     "register_transport",
@@ -40,13 +43,30 @@ __all__ = [
 ]
 
 
+class ServerUnderTest(Protocol):
+    """What a door's opener needs of the server under test: :class:`~hli_server.testing.Harness` is one
+    (a protocol, so that this registry does not import the harness that uses it)."""
+
+    bind: str
+
+    @property
+    def runtime(self) -> Runtime: ...
+
+    @property
+    def layout(self) -> Layout: ...
+
+    def serve(self, adapter: str, **options: Any) -> Adapter: ...
+
+    def port(self, adapter: str) -> int: ...
+
+
 @dataclass(frozen=True, slots=True)
 class TransportKind:
     """One PLC door of the harness."""
 
     name: str
     summary: str
-    open: Callable[[Harness], Transport]
+    open: Callable[[ServerUnderTest], Transport]
     """Open a synchronous transport to the harness' server (start the adapter it needs first)."""
     adapter: str | None = None
     """The server adapter the door needs (checked in the adapter registry)."""
@@ -54,7 +74,7 @@ class TransportKind:
     """Modules that must be importable."""
 
 
-def _open_shm(hli: Harness) -> Transport:
+def _open_shm(hli: ServerUnderTest) -> Transport:
     from hli_server.image import ProcessImage
     from plc_clients.transports import ShmTransport
 
@@ -64,7 +84,7 @@ def _open_shm(hli: Harness) -> Transport:
     return ShmTransport.attach(image.name, expect=image.layout)
 
 
-def _open_modbus(hli: Harness) -> Transport:
+def _open_modbus(hli: ServerUnderTest) -> Transport:
     from plc_clients.transports import ModbusTransport
 
     adapter = hli.serve("modbus")
@@ -78,7 +98,7 @@ def _open_modbus(hli: Harness) -> Transport:
     )
 
 
-def _open_ads(hli: Harness) -> Transport:
+def _open_ads(hli: ServerUnderTest) -> Transport:
     """The ADS door: ``plc_clients.ads.AdsTransport.connect(host, port, layout=...)`` to the ``ads``
     adapter on a free port (the constructor the Modbus transport has; adjust here if it differs)."""
     ads = importlib.import_module("plc_clients.ads")
@@ -131,7 +151,7 @@ def unavailable(name: str) -> str | None:
     return None
 
 
-def open_transport(hli: Harness, name: str) -> Transport:
+def open_transport(hli: ServerUnderTest, name: str) -> Transport:
     """Open door ``name`` to ``hli``'s server; a missing part raises ``LookupError`` with the reason."""
     reason = unavailable(name)
     if reason is not None:

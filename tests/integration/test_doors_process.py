@@ -77,7 +77,10 @@ def test_run_serves_modbus_and_ads_from_the_doors_process_and_stops_it_cleanly()
 def test_the_doors_process_ends_when_the_server_is_killed() -> None:
     proc = start_server("--http-port", "0", "--modbus-port", "0")
     try:
-        doors = _pid_of(read_banner(proc)["Modbus TCP"])
+        banner = read_banner(proc)
+        doors = _pid_of(banner["Modbus TCP"])
+        # the banner says which process serves the doors (run's default differs from Runtime's)
+        assert f"network doors: served by a second process (pid {doors})" in banner["text"]
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
         deadline = time.monotonic() + 10
@@ -92,8 +95,9 @@ def test_the_doors_process_ends_when_the_server_is_killed() -> None:
 def test_no_doors_process_serves_modbus_in_the_engines_process() -> None:
     proc = start_server("--http-port", "0", "--modbus-port", "0", "--no-doors-process")
     try:
-        line = read_banner(proc)["Modbus TCP"]
-        assert "doors process" not in line
+        banner = read_banner(proc)
+        assert "doors process" not in banner["Modbus TCP"]
+        assert "network doors: served in the clock's process" in banner["text"]
     finally:
         stop_server(proc)
 

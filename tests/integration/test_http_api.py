@@ -623,3 +623,38 @@ async def test_referencing_through_the_api_and_the_image_starts_collision_monito
         await c.post("/api/channels/2/start")
         await step(c, 2)
         assert await image_value(c, "gpCh[1]^bahn_state.program_state_r") == ProgramState.RUNNING
+
+
+async def test_openapi_says_what_the_state_routes_answer(client: httpx.AsyncClient) -> None:
+    """The typed seam (schemas/results.py): each route's answer is a named schema in the OpenAPI description,
+    with its fields, and the answer served has them."""
+    spec = (await client.get("/openapi.json")).json()
+    schemas = spec["components"]["schemas"]
+
+    def answer(path: str, method: str = "get") -> dict[str, Any]:
+        ok: dict[str, Any] = spec["paths"][path][method]["responses"]["200"]["content"]["application/json"]
+        return ok["schema"]
+
+    for path, method, name in (
+        ("/api/state", "get", "MachineState"),
+        ("/api/alarms", "get", "AlarmList"),
+        ("/api/axes/{name}/faults", "get", "AxisFaults"),
+        ("/api/axes/{name}/faults", "post", "AxisFaults"),
+        ("/api/axes/{name}/soft-limits", "get", "SoftLimits"),
+        ("/api/channels/{number}/areas", "get", "AreaTable"),
+        ("/api/channels/{number}/scene", "get", "Scene"),
+        ("/api/channels/{number}/program", "post", "ProgramLoaded"),
+        ("/api/axes/{name}/soft-limits", "put", "SoftLimits"),
+    ):
+        assert answer(path, method)["$ref"].endswith("/" + name), (path, method)
+    assert answer("/api/collision-pairs")["items"]["$ref"].endswith("/CollisionPair")
+    assert answer("/api/channels/{number}/programs")["items"]["$ref"].endswith("/ProgramEntry")
+    state = schemas["MachineState"]
+    assert {"cycle", "time_s", "channels", "axes", "alarms"} <= set(state["required"])
+    assert {"external", "clock"} <= set(state["properties"])
+    assert set(schemas["AlarmJson"]["properties"]) >= {"id", "severity", "message", "line", "block", "axis"}
+    served = (await client.get("/api/state")).json()
+    assert set(state["properties"]) <= set(served)  # nothing declared is missing, nothing served is dropped
+    assert set(served["axes"]["X"]) == set(schemas["AxisState"]["properties"])
+    faults = (await client.get("/api/axes/X/faults")).json()
+    assert set(faults) == set(schemas["AxisFaults"]["properties"])

@@ -127,7 +127,7 @@ def test_a_stalled_body_is_timed_out_and_stalled_heads_lock_nobody_out() -> None
 def test_modbus_connections_that_trickle_are_closed_and_lock_nobody_out() -> None:
     """270 connections send a request one byte every 1.5 s (more than the door's 256). Before: each counted
     as active, none was evicted, every honest client was refused. Now a frame must complete within
-    ``frame_timeout`` (2 s) and a full house closes the connection answered longest ago, so an honest
+    ``frame_timeout_s`` (2 s) and a full house closes the connection answered longest ago, so an honest
     poller that connects in the middle of it is served throughout."""
     with server() as srv:
         before = srv.timing()
@@ -431,7 +431,7 @@ def test_soak_slow_clients_and_large_reads_at_once() -> None:
     rng = random.Random(seed_for("slow-clients-soak"))
     seconds = min(300.0, 3.0 * FUZZ_SCALE)
     with server(
-        "--adapter", "http:request_timeout=2,write_timeout=3", "--adapter", "modbus:frame_timeout=1"
+        "--adapter", "http:request_timeout=2,write_timeout=3", "--adapter", "modbus:frame_timeout_s=1"
     ) as srv:
         fill_event_log(srv.image, srv.url, wanted=10_000)
         before = srv.timing()

@@ -94,3 +94,39 @@ def test_an_install_with_a_c_compiler_compiled_the_engine() -> None:
         "`.venv/bin/python -m pip install -v --no-deps -e .` and read the lines that start 'hli-server:'"
     )
     assert not [p for p in missing if compiled._compiled_file(p) is None], missing
+
+
+def test_an_edited_engine_source_is_said_where_the_server_starts(
+    monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A compiled module older than its source switches the whole engine to pure Python: besides the
+    import-time warning, the runtime says so in its log at start and ``run`` in its banner (issue 28)."""
+    import asyncio
+    import logging
+
+    from hli_server.configuration import load_machine
+    from hli_server.runtime import Runtime, memory_image
+
+    monkeypatch.setattr(compiled, "ENGINE_COMPILED", compiled.ENGINE_COMPILED)
+    monkeypatch.setattr(compiled, "_STALE_NOTICE", None)
+    finders = [f for f in sys.meta_path if not isinstance(f, compiled._PureEngineFinder)]
+    monkeypatch.setattr(sys, "meta_path", finders)
+    monkeypatch.delenv(compiled.PURE_ENV, raising=False)
+    source = compiled._ENGINE_DIR / "axis.py"
+    monkeypatch.setattr(compiled, "stale_modules", lambda: ([source.with_suffix(".so")], [source]))
+    with pytest.warns(RuntimeWarning, match="older than its source"):
+        assert compiled.select() is False
+    notice = compiled.stale_notice()
+    assert notice is not None
+    assert "hli_server/engine/axis.py" in notice
+    assert "make compile" in notice
+
+    async def start_and_stop() -> None:
+        async with Runtime(
+            load_machine(None), clock="stepped", http_port=None, adapters=[], image_factory=memory_image
+        ):
+            pass
+
+    with caplog.at_level(logging.WARNING, logger="hli_server.runtime.core"):
+        asyncio.run(start_and_stop())
+    assert "the whole engine runs as pure Python" in caplog.text

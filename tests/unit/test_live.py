@@ -12,12 +12,12 @@ from collections.abc import AsyncIterator
 import pytest
 from shapely.geometry import LineString, Point
 
-from hli_server.adapters.http.live import LiveFeed, TooManyStreamsError
+from hli_server.adapters.http.live_feed import LiveFeed, TooManyStreamsError
 from hli_server.commands.check import check_program, scene_of
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine
 from hli_server.runtime import Runtime
-from hli_server.runtime.live import TRAIL_TOLERANCE, Trail, path_ahead
+from hli_server.runtime.dashboard import TRAIL_TOLERANCE, Trail, path_ahead
 from schemas.events import ModeChanged
 from tests.spec_examples import CIRC_PROT_OLD
 

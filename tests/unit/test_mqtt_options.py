@@ -13,11 +13,11 @@ from hli_server.adapters.mqtt import (
     DEFAULT_TLS_PORT,
     MqttAdapter,
     MqttOptions,
-    encode_event,
     topic_safe,
 )
 from hli_server.adapters.registry import AdapterError, check_options, plan_adapters
 from hli_server.cli import main
+from hli_server.codecs.event_json import encode_event
 from schemas.events import FaultInjected, ModeChanged
 
 pytestmark = pytest.mark.req("H-05")

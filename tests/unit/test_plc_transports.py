@@ -12,7 +12,8 @@ from pymodbus.client import ModbusTcpClient
 from hli_server.configuration import load_machine
 from plc_clients import MemoryImage, MemoryTransport, TransportError, load_layout
 from plc_clients.modbus_codec import MAX_READ_BITS, MAX_READ_REGISTERS, ModbusCodec
-from plc_clients.transports import CYCLE_R_MODULUS, CYCLE_SIGNAL, _CycleCounter
+from plc_clients.transports import CYCLE_R_MODULUS, CYCLE_SIGNAL
+from plc_clients.transports.base import _CycleCounter
 from schemas.layout import (
     Direction,
     Layout,

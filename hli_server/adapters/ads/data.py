@@ -61,7 +61,7 @@ class DataService:
         self.layout = image.layout
         self.limits = limits
         self.read_only = read_only
-        """``--read-only``: every write is refused with 0x704 (issue 12)."""
+        """``--read-only``: every write is refused with 0x704 (docs/reliability.md)."""
         self.sizes = {d: image.layout.size(d) for d in Direction}
         self._c2p = b""
         self._c2p_count = -1

@@ -1,4 +1,4 @@
-"""Device notifications: Add/DeleteDeviceNotification and the samples the cycle sends (H-04, issue 22).
+"""Device notifications: Add/DeleteDeviceNotification and the samples the cycle sends (H-04, docs/ads.md).
 
 TwinCAT's behaviour, as pyads, ads-client and AdsLib rely on it (Beckhoff Information System, "ADS
 Device Notification"; ``AdsSyncAddDeviceNotificationReqEx``: ``nMaxDelay`` "at the latest after this
@@ -17,7 +17,8 @@ this interval", both in 100 ns):
   (AdsLib registers its callback only after reading the response and drops what arrives before).
 * **Release**: DeleteDeviceNotification releases one handle (0x714 for one this connection does not
   hold); a connection that closes releases all of its notifications and queued samples at once.
-* **The budget is shared fairly** (issue 27, finding 5): at most ``max_notifications`` per connection,
+* **The budget is shared fairly** (reliability.md, round 2, finding 5): at most ``max_notifications`` per
+connection,
   ``max_notifications_per_net_id`` per client NetId (all its connections together),
   ``max_notifications_per_host`` per remote host (all its NetIds; loopback peers are one computer with
   the server and not limited by this), and ``max_notifications_total`` on the server. So one client can

@@ -1,8 +1,8 @@
 """Options of the ADS adapter (light: importing it imports neither asyncio servers nor the codec).
 
 ``[[adapters]] name = "ads"`` in the machine file, ``--adapter ads:KEY=VALUE``, ``--ads-port`` and
-``--ams-net-id`` (H-04; docs/ads.md). The limits are the door's robustness bar (issue 12): every one
-bounds what one client can make the server hold or do, and each has a default that serves a test
+``--ams-net-id`` (H-04; docs/ads.md). The limits are the door's robustness bar (docs/reliability.md): every
+one bounds what one client can make the server hold or do, and each has a default that serves a test
 farm of a few hundred clients.
 """
 
@@ -10,9 +10,12 @@ from __future__ import annotations
 
 import ipaddress
 import logging
-from typing import Final
+from collections.abc import Mapping
+from typing import ClassVar, Final
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
+
+from hli_server.adapters.tcp import TcpDoorOptions
 
 __all__ = [
     "DEFAULT_NET_ID",
@@ -102,10 +105,13 @@ class RouteAllowlist:
         return not self.net_ids or net_id in self.net_ids
 
 
-class AdsOptions(BaseModel):
-    """``[[adapters]] name = "ads"`` / ``--adapter ads:KEY=VALUE`` / ``--ads-port``, ``--ams-net-id``."""
+class AdsOptions(TcpDoorOptions):
+    """``[[adapters]] name = "ads"`` / ``--adapter ads:KEY=VALUE`` / ``--ads-port``, ``--ams-net-id``; the
+    options every TCP door has (``max_connections``, ``idle_timeout_s``, ``frame_timeout_s``, ``allow``) come
+    from :class:`~hli_server.adapters.tcp.TcpDoorOptions`."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    RENAMED: ClassVar[Mapping[str, str | None]] = {"evict_idle_after_s": None}
+    DOOR: ClassVar[str] = "ADS"
 
     port: int = Field(default=DEFAULT_PORT, ge=0, le=65535, description="AMS/TCP port (0: any free port)")
     ams_net_id: str = Field(
@@ -155,12 +161,6 @@ class AdsOptions(BaseModel):
         gt=0,
         le=86_400,
         description="close a connection that sent nothing for this long and has no notification it reads",
-    )
-    evict_idle_after_s: float | None = Field(
-        default=None,
-        ge=0,
-        description="no effect since issue 27 (a full house always makes room by closing its least useful "
-        "connection); accepted so that machine files that set it still load",
     )
     frame_timeout_s: float = Field(
         default=5.0,
@@ -260,11 +260,6 @@ class AdsOptions(BaseModel):
         if (self.route_user is None) != (self.route_password is None):
             raise ValueError(
                 "route_user and route_password go together: AddRoute is accepted with both, refused without"
-            )
-        if self.evict_idle_after_s is not None:
-            logger.warning(
-                "ADS option evict_idle_after_s has no effect any more: a full house closes its least useful "
-                "connection for a newcomer (docs/ads.md, Limits)"
             )
         return self
 

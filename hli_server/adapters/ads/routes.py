@@ -1,4 +1,4 @@
-"""Who may talk to the ADS door: the allowlist, and the routes AddRoute adds (H-04, issue 22).
+"""Who may talk to the ADS door: the allowlist, and the routes AddRoute adds (H-04, docs/ads.md).
 
 A TwinCAT router talks to a peer it has a route for: a route names an AMS NetId and the address where
 it lives. Here a client is admitted when
@@ -15,8 +15,8 @@ start. A route for a NetId that already has one replaces it, as TwinCAT's route 
 
 Router messages (AMS/TCP 0x1000 port connect, 0x1002 the router's NetId) carry no NetId: they are
 answered only where the allowlist restricts no NetId or admits the server's own (the one a port-connected
-client then sends from), so that a client outside the allowlist learns nothing (issue 27, finding 9).
-"""
+client then sends from), so that a client outside the allowlist learns nothing (reliability.md, round 2,
+finding 9)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""ADS over TCP: the asyncio server around the sans-I/O codec and the device (H-04, C3-10; issue 12).
+"""ADS over TCP: the asyncio server around the sans-I/O codec and the device (H-04, C3-10;
+docs/reliability.md).
 
 One :class:`_Connection` (an ``asyncio.Protocol``) per client: bytes go into its
 :class:`~hli_server.codecs.ads.AmsStreamDecoder`, each complete frame is answered by the
@@ -10,7 +11,7 @@ in one write. What a real TwinCAT router does and what this one does:
   of their own (Node ``ads-client`` without ``localAmsNetId``) work; 0x0001 port close is answered;
   0x1002 gets the server's NetId. They carry no NetId, so they are answered only where the allowlist
   restricts no NetId or admits the server's own (:meth:`Routes.answers_router_messages`): a client
-  outside the allowlist learns nothing, not even the NetId (issue 27, finding 9).
+  outside the allowlist learns nothing, not even the NetId (reliability.md, round 2, finding 9).
 * **Routes.** A client neither the allowlist nor a route added by AddRoute admits
   (:class:`~hli_server.adapters.ads.routes.Routes`) is treated as a TwinCAT router treats a peer it has
   no route for: the TCP connection is closed without an answer (its IP: at once; its NetId: at its first
@@ -25,8 +26,8 @@ Bounds (options in :class:`~hli_server.adapters.ads.options.AdsOptions`, figures
 docs/reliability.md):
 
 * ``max_connections`` at once (512). A full house never refuses a newcomer: it closes its least useful
-  connection (issue 27, finding 3): one that has held an incomplete frame the longest, else one that
-  never completed a request (oldest first), else the one whose last complete request is oldest (a
+  connection (reliability.md, round 2, finding 3): one that has held an incomplete frame the longest, else
+  one that never completed a request (oldest first), else the one whose last complete request is oldest (a
   client that reads its notifications counts as active).
 * ``frame_timeout_s``: a frame begun must be complete within this long. Only a complete frame counts
   as activity, so a client trickling a byte every second neither holds its slot nor escapes

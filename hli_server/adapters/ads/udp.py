@@ -1,4 +1,4 @@
-"""ADS over UDP: the discovery answer and AddRoute, where the TCP door listens (H-04, issue 22).
+"""ADS over UDP: the discovery answer and AddRoute, where the TCP door listens (H-04, docs/ads.md).
 
 The asyncio shell around the sans-I/O codec :mod:`hli_server.codecs.ads.udp`:
 

@@ -3,7 +3,7 @@
 The operator panel of the simulated machine and the remote control of the integration tests (H-07):
 machine state, programs, start/feedhold/reset, mode, jog, override, referencing, stepping the stepped
 clock, fault injection (A3-05), alarms and events, and every image field by its ST path (H-01, H-02);
-the live dashboard at ``/`` (issue 15, ``routers/page.py``, ``live.py``).
+the live dashboard at ``/`` (docs/dashboard.md, ``routers/page.py``, ``live_feed.py``).
 Each concern is a router of its own (``routers/``); each takes the host as a dependency and knows
 nothing of the runtime or the engine.
 
@@ -20,7 +20,7 @@ from fastapi import FastAPI
 from hli_server.adapters.host import AdapterHost
 from hli_server.adapters.http.deps import SafeJSONResponse, install_error_handlers
 from hli_server.adapters.http.guard import Guard
-from hli_server.adapters.http.live import DEFAULT_MAX_STREAMS, DEFAULT_RATE_HZ, LiveFeed
+from hli_server.adapters.http.live_feed import DEFAULT_MAX_STREAMS, DEFAULT_RATE_HZ, LiveFeed
 from hli_server.adapters.http.options import DEFAULT_MAX_BODY_BYTES
 from hli_server.adapters.http.routers import ROUTERS
 
@@ -36,7 +36,8 @@ def create_app(
 ) -> FastAPI:
     """The FastAPI application for ``host`` (usable without a socket, e.g. with an ASGI client), behind
     the guard (Host, Origin, token, read-only, body size: ``guard.py``). ``app.state.live`` is the
-    dashboard's :class:`~hli_server.adapters.http.live.LiveFeed` (close it before stopping the server)."""
+    dashboard's :class:`~hli_server.adapters.http.live_feed.LiveFeed` (close it before stopping the
+    server)."""
     app = FastAPI(
         default_response_class=SafeJSONResponse,
         title="hli-server control API",

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 from typing import Annotated, Any
 
 from fastapi import Depends, FastAPI, HTTPException, Request
@@ -23,6 +22,7 @@ from hli_server.adapters.host import (
     UnavailableError,
 )
 from hli_server.adapters.http.models import AcceptedBody
+from hli_server.codecs.json_policy import dumps_ascii, finite
 
 __all__ = [
     "ECHO_LIMIT",
@@ -35,42 +35,29 @@ __all__ = [
 ]
 
 
-def _json_safe(value: Any) -> Any:
-    """NaN and infinities (a client may send them: Python's JSON reader takes ``NaN``, ``Infinity`` and
-    ``1e400``) become their names, so that an answer that quotes the input is still JSON."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    return value
-
-
 def json_bytes(content: Any) -> bytes:
     """Compact JSON that always renders (see :class:`SafeJSONResponse`); also the event stream's."""
-    return json.dumps(_json_safe(content), ensure_ascii=True, allow_nan=False, separators=(",", ":")).encode(
-        "ascii"
-    )
+    return dumps_ascii(content)
 
 
 class SafeJSONResponse(JSONResponse):
-    """JSON that always renders: non-finite numbers named (see :func:`_json_safe`), text escaped to ASCII
-    (a lone surrogate in a client's string cannot break the answer). Issue 12, finding 6: these made 500s."""
+    """JSON that always renders (docs/reliability.md, finding 6): non-finite numbers as null (the project's
+    JSON policy, :mod:`hli_server.codecs.json_policy`), text escaped to ASCII (a lone surrogate in a
+    client's string cannot break the answer)."""
 
     def render(self, content: Any) -> bytes:
         return json_bytes(content)
 
 
 ECHO_LIMIT = 200
-"""Characters of a refused input that a 422 quotes back (issue 27, finding 9: a list of 100,000 trace
-names was sent back whole, 3.9 MB); beyond, the answer says what it was and how large."""
+"""Characters of a refused input that a 422 quotes back (reliability.md, round 2, finding 9: a list of
+100,000 trace names was sent back whole, 3.9 MB); beyond, the answer says what it was and how large."""
 
 
 def _brief(value: Any) -> Any:
     """``value`` if its JSON is short, else a description of it (type and size)."""
     try:
-        text = json.dumps(_json_safe(value), ensure_ascii=True, default=str)
+        text = json.dumps(finite(value), ensure_ascii=True, default=str)
     except (TypeError, ValueError, RecursionError):
         text = repr(value)
     if len(text) <= ECHO_LIMIT:

@@ -1,4 +1,5 @@
-"""The door's guard: every request passes it before a router sees it (issue 12, findings 5, 6 and 8).
+"""The door's guard: every request passes it before a router sees it (reliability.md, round 1, findings 5, 6
+and 8).
 
 A plain ASGI middleware (no per-request task, no streaming of its own):
 
@@ -9,11 +10,11 @@ A plain ASGI middleware (no per-request task, no streaming of its own):
   an ``Origin`` is refused (403) unless that origin is this server's own (same host and port) or in
   ``allowed_origins``. Browsers send ``Origin`` with every cross-site POST, so a web page in the user's
   browser cannot load or start a program here. ``Origin: null`` (a sandboxed frame, a ``data:`` or
-  ``file:`` page) is such a foreign origin too (issue 27, finding 7).
+  ``file:`` page) is such a foreign origin too (reliability.md, round 2, finding 7).
 * **Token**: with ``api_token`` set, a state-changing request needs ``Authorization: Bearer <token>``
   (401 with ``WWW-Authenticate`` otherwise), and so do the reads of the event log (``GET /api/events``;
-  issue 27, finding 8). A ``GET`` may carry the token as ``?access_token=`` instead (RFC 6750, 2.3: a
-  browser's ``EventSource`` cannot send headers). The other reads stay open; the dashboard's stream
+  reliability.md, round 2, finding 8). A ``GET`` may carry the token as ``?access_token=`` instead (RFC 6750,
+  2.3: a browser's ``EventSource`` cannot send headers). The other reads stay open; the dashboard's stream
   (``/api/live``) carries the events only to a holder of the token: whether the request had it is
   ``scope["state"]["hli_token"]`` for the routes.
 * **Read-only**: with ``read_only`` set, every state-changing request is refused (403).

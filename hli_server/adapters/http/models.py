@@ -39,7 +39,7 @@ __all__ = [
 MAX_STEP = 1_000_000
 """Most cycles one ``POST /api/step`` may ask for (1 000 s of simulated time at 1 ms; about ten seconds of
 the compiled engine's CPU, a minute or two of the pure-Python one). Longer runs go in parts: one step runs
-at a time, and closing its connection cancels it (issue 27, finding 6)."""
+at a time, and closing its connection cancels it (reliability.md, round 2, finding 6)."""
 MAX_TRACE_SIGNALS = 64
 """Most signals one ``POST /api/step`` may trace."""
 MAX_TRACE_VALUES = 2_000_000

@@ -1,5 +1,6 @@
 """uvicorn's HTTP/1.1 protocol with bounds: connections per door, time to send a request, time to read an
-answer, and a slot for a newcomer (issue 12, finding 3; issue 27, findings 2 and 4).
+answer, and a slot for a newcomer (reliability.md, round 1, finding 3; reliability.md, round 2, findings 2
+and 4).
 
 uvicorn keeps a connection that never sends a request open forever, waits forever for a body that was
 announced and never comes, keeps the answer of a client that never reads in memory, and refuses requests

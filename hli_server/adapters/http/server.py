@@ -17,7 +17,7 @@ import uvicorn
 
 from hli_server.adapters.host import AdapterHost
 from hli_server.adapters.http.app import create_app
-from hli_server.adapters.http.live import LiveFeed
+from hli_server.adapters.http.live_feed import LiveFeed
 from hli_server.adapters.http.options import HttpOptions
 from hli_server.adapters.http.protocol import abort_stalled, bounded_protocol
 

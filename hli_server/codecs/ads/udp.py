@@ -1,4 +1,4 @@
-"""ADS over UDP (port 48899): the discovery answer and AddRoute, sans-I/O (H-04, issue 22).
+"""ADS over UDP (port 48899): the discovery answer and AddRoute, sans-I/O (H-04, docs/ads.md).
 
 What a TwinCAT system answers on UDP 48899 (TwinCAT's "Broadcast Search", ``pyads.add_route_to_plc``,
 ``pyads.ads.get_net_id`` / ``adsGetNetIdForPLC``, Beckhoff AdsLib's ``AddRemoteRoute`` and

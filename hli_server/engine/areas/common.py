@@ -88,7 +88,7 @@ COORDINATE_LIMIT = DISTANCE_LIMIT_MM
 the range of positions, which the DINT in 0.1 µm bounds). The NC words are range-checked already;
 zero offsets and G92 can still add to them. Beyond it no axis can go, and the exact geometry's
 boundary tolerance (:data:`~hli_server.engine.areas.geometry.EPS`, 1e-9 mm) would drown in the
-floats' resolution; refused as 912002 (issue 12 finding 1)."""
+floats' resolution; refused as 912002 (reliability.md, round 1, finding 1)."""
 ALARM_COMMAND = 912003
 ALARM_MANUAL_STOP = 912004
 # the kernel's IDs of #CONTROL AREA errors (its diagnosis pages; docs/alarms.md)

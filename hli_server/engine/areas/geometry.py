@@ -84,7 +84,7 @@ class Polygon:
         n = len(points)
         pairs = [(points[k], points[(k + 1) % n]) for k in range(n)]
         # (x0, y0, dx, dy, |d|², |d|, y1); products, not ``** 2``, which raises OverflowError where a
-        # product is inf (the area handler refuses such coordinates before they get here, issue 12)
+        # product is inf (the area handler refuses such coordinates before they get here, docs/reliability.md)
         self.edges = tuple(
             (x0, y0, dx, dy, dx * dx + dy * dy, math.hypot(dx, dy), y1)
             for (x0, y0), (x1, y1) in pairs
@@ -543,7 +543,7 @@ def _segments_meet(
     d3 = _orient(p[0], p[1], q[0], q[1], r[0], r[1])
     d4 = _orient(p[0], p[1], q[0], q[1], s[0], s[1])
     largest = max(1.0, *(abs(v) for pt in (p, q, r, s) for v in pt))
-    scale = largest * largest  # not ** 2: that raises OverflowError (issue 12)
+    scale = largest * largest  # not ** 2: that raises OverflowError (docs/reliability.md)
     tol = 1e-12 * scale
     if ((d1 > tol and d2 < -tol) or (d1 < -tol and d2 > tol)) and (
         (d3 > tol and d4 < -tol) or (d3 < -tol and d4 > tol)

@@ -1,4 +1,5 @@
-"""Which paths of a batch surely keep clear of the active areas (issue 16: ``check --geometry-only``).
+"""Which paths of a batch surely keep clear of the active areas (docs/performance.md: ``check
+--geometry-only``).
 
 The exact path check (:mod:`hli_server.engine.areas.geometry`, C14-15) is the authority. This module only
 answers, for many blocks at once with numpy, "this path cannot violate any active area" - conservatively:

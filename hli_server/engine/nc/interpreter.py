@@ -17,7 +17,7 @@ is asked for one output at a time (:meth:`Interpreter.next`):
 Errors are :class:`~hli_server.engine.nc.blocks.NcError` with the kernel's ID where its diagnosis
 pages give one (docs/nc-language.md lists them), raised from :meth:`Interpreter.next`.
 
-Work per cycle is bounded (issue 20, "Bad input"): every statement run or skipped spends one unit of
+Work per cycle is bounded (docs/check.md, "Bad input"): every statement run or skipped spends one unit of
 the budget that :meth:`Interpreter.refill` sets each cycle; a program that computes without moving
 goes on in the next cycle instead of stalling the clock. A geometry check, which has no cycles, caps
 loop iterations instead (:class:`IterationCapError`).
@@ -121,7 +121,7 @@ __all__ = [
 ]
 
 STATEMENTS_PER_CYCLE: Final = 128
-"""Statements the interpreter runs or skips in one cycle at most (issue 20): 800,000 blocks without
+"""Statements the interpreter runs or skips in one cycle at most (docs/check.md): 800,000 blocks without
 motion take 6,250 cycles, not one cycle of 3.9 s; a ``$WHILE`` without motion runs on, cycle by cycle,
 and a reset still stops it."""
 MAX_CALL_DEPTH: Final = 20

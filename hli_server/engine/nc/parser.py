@@ -21,7 +21,7 @@ Syntax (DIN 66025 as used by the ISG documents FCT-C14 sections 2.4 and 3, and t
 
 Error messages show the offending word upper-cased (the parser works on the upper-cased code).
 
-Ranges (issue 12 finding 1): every number is range-checked where it is read, so that nothing
+Ranges (reliability.md, round 1, finding 1): every number is range-checked where it is read, so that nothing
 downstream (geometry, monitors, the DINT fields of the process image) can overflow; a number out of
 range is alarm 910111 naming the word and the range. Positions (axis words, MIN_EXCUR, MAX_EXCUR)
 must fit a DINT in 0.1 µm (0.0001° rotary): +/-214748.3647; circle centre words I/J/K twice that
@@ -75,7 +75,7 @@ _BAD_N = 910108
 _UNKNOWN_HASH = 910109
 _OUT_OF_RANGE = 910111
 
-# --- ranges (E-04; issue 12 finding 1): the largest magnitude of each kind of word, and why -------
+# --- ranges (E-04; reliability.md, round 1, finding 1): the largest magnitude of each word, and why ---
 # The hot loop compares each value with two module constants (one chained comparison; it also refuses
 # what float() made inf). Old and new parser interleaved in one process, bench_parser's text: no
 # measurable cost (new/old 0.99..1.02: the old per-line length test for 300-digit literals is gone).
@@ -903,7 +903,7 @@ def _parser_for(axis_names: frozenset[str]) -> _LineParser:
 
 def iter_blocks(text: str | Iterable[str], axis_names: Collection[str]) -> Iterator[Block]:
     """Blocks of a program, lazily, line by line (E-04). ``text`` is the program's text, or its lines
-    (an open text file: ``check`` streams a program of any length with flat memory, issue 16).
+    (an open text file: ``check`` streams a program of any length with flat memory, docs/performance.md).
 
     Raises :class:`NcError` when it reaches a malformed line, so the blocks before it can already
     run. A ``#CONTROL AREA`` command whose ``[`` is not closed on its line continues on the next
@@ -932,8 +932,8 @@ def iter_blocks(text: str | Iterable[str], axis_names: Collection[str]) -> Itera
 
 class BlockReader:
     """The parser of :func:`iter_blocks` for a caller that hands it the lines one by one: the batch
-    geometry check (``hli_server/engine/batch.py``, issue 16) reads plain motion lines itself and gives
-    every other line to :meth:`read`, which parses it exactly as :func:`iter_blocks` does."""
+    geometry check (``hli_server/engine/batch.py``, docs/performance.md) reads plain motion lines itself and
+    gives every other line to :meth:`read`, which parses it exactly as :func:`iter_blocks` does."""
 
     __slots__ = ("_parser",)
 

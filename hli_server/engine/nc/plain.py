@@ -1,4 +1,5 @@
-"""Plain motion lines read a chunk at a time with numpy (issue 16: ``check --geometry-only`` as a batch).
+"""Plain motion lines read a chunk at a time with numpy (docs/performance.md: ``check --geometry-only`` as a
+batch).
 
 A *plain* line is one the batch geometry check (``hli_server/engine/batch.py``) may decode without the
 parser: words only, each a letter immediately followed by its number, separated by blanks (spaces and

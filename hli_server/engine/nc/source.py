@@ -1,4 +1,4 @@
-"""The lines of one NC program text, by number, a window at a time (N-01, issue 16's flat memory).
+"""The lines of one NC program text, by number, a window at a time (N-01, flat memory, docs/performance.md).
 
 The interpreter reads a program line by line, and jumps: a loop goes back to its head, ``$GOTO`` goes
 to a label before or after, ``LL name`` to a local subroutine anywhere in the file. A text held in

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 from fastapi import APIRouter, HTTPException, Query, Request
 from fastapi.exceptions import RequestValidationError
@@ -19,6 +19,7 @@ from hli_server.adapters.http.models import (
     ProgramBody,
     SelectBody,
 )
+from schemas.results import ProgramLoaded, ProgramSelected
 from schemas.wire import Mode
 
 __all__ = ["router"]
@@ -47,7 +48,7 @@ async def post_program(
     request: Request,
     number: int,
     name: Annotated[str, Query(min_length=1, max_length=200, description="name for a text body")] = "program",
-) -> dict[str, Any]:
+) -> ProgramLoaded:
     raw = await request.body()
     content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if content_type == "application/json":
@@ -69,7 +70,7 @@ async def post_program(
 
 
 @router.post("/api/channels/{number}/select", summary="Select a program of the table")
-async def post_select(host: HostDep, number: int, body: SelectBody) -> dict[str, Any]:
+async def post_select(host: HostDep, number: int, body: SelectBody) -> ProgramSelected:
     return host.operator.select_program(number, body.number)
 
 

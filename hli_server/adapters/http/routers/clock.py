@@ -2,8 +2,8 @@
 
 One step at a time per server: a second ``POST /api/step`` while one runs is refused (409) rather than
 queued behind it, and a step whose client goes away (closes its connection) is cancelled between two
-slices of cycles (issue 27, finding 6). A traced step's answer is written a slice at a time from the
-trace's arrays (``Trace.json_chunks``), so that a long trace is never all of it Python objects or one
+slices of cycles (reliability.md, round 2, finding 6). A traced step's answer is written a slice at a time
+from the trace's arrays (``Trace.json_chunks``), so that a long trace is never all of it Python objects or one
 string (finding 9).
 """
 

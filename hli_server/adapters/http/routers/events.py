@@ -2,8 +2,8 @@
 
 The answer is written a slice of :data:`SLICE` events at a time, with the door's loop free between two
 slices: a read of the whole log (10,000 events, about 1.4 MB) then delays the door's other clients by
-milliseconds, not by the whole answer (issue 27, finding 1; the clock's loop it does not reach at all:
-the doors process keeps its own copy of the log, ``runtime/remote.py``).
+milliseconds, not by the whole answer (reliability.md, round 2, finding 1; the clock's loop it does not reach
+at all: the doors process keeps its own copy of the log, ``runtime/remote.py``).
 """
 
 from __future__ import annotations

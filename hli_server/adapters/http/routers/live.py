@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import asyncio
 from collections.abc import AsyncIterator
-from typing import Any
 
 from fastapi import APIRouter, HTTPException, Request
 from fastapi.responses import StreamingResponse
 
 from hli_server.adapters.http.deps import HostDep
-from hli_server.adapters.http.live import LiveFeed, TooManyStreamsError
+from hli_server.adapters.http.live_feed import LiveFeed, TooManyStreamsError
+from schemas.results import CollisionPair, ProgramEntry, Scene
 
 __all__ = ["router"]
 
@@ -69,15 +69,15 @@ async def get_live(request: Request) -> StreamingResponse:
     "/api/channels/{number}/scene",
     summary="The channel's live scene: areas, trail, path ahead, TCP, refused block (as check --plot draws)",
 )
-async def get_scene(host: HostDep, number: int) -> dict[str, Any]:
+async def get_scene(host: HostDep, number: int) -> Scene:
     return host.operator.scene(number)
 
 
 @router.get("/api/channels/{number}/programs", summary="The channel's program table (for select)")
-async def get_programs(host: HostDep, number: int) -> list[dict[str, Any]]:
+async def get_programs(host: HostDep, number: int) -> list[ProgramEntry]:
     return host.operator.programs(number)
 
 
 @router.get("/api/collision-pairs", summary="Collision pairs (FCT-C3): distance, minimum, braking distances")
-async def get_collision_pairs(host: HostDep) -> list[dict[str, Any]]:
+async def get_collision_pairs(host: HostDep) -> list[CollisionPair]:
     return host.operator.collision_pairs()

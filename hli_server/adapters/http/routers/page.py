@@ -6,7 +6,7 @@ that keep the page to itself: a Content-Security-Policy that allows only this se
 styles and connections and forbids framing (another site cannot put the operator panel in a frame and
 trick clicks onto it), ``nosniff``, and ``no-cache`` so that a new version is picked up at once.
 
-The page is served with the machine as it is at that moment (issue 23): the ``hello``, ``state`` and
+The page is served with the machine as it is at that moment (docs/dashboard.md): the ``hello``, ``state`` and
 ``scene`` messages of the live stream and the newest events of the event log, as JSON in a data block
 (``<script type="application/json" id="initial">``, which runs nothing and so passes the policy). The
 script draws them before the page's load event, so the page is whole at once (a screenshot, a slow
@@ -25,7 +25,7 @@ from fastapi.responses import Response
 
 from hli_server.adapters.host import LoggedEvent
 from hli_server.adapters.http.deps import json_bytes
-from hli_server.adapters.http.live import LiveFeed
+from hli_server.adapters.http.live_feed import LiveFeed
 
 __all__ = ["PAGE_FILES", "router"]
 
@@ -66,7 +66,8 @@ _INITIAL_MARK = b"<!-- initial state -->"
 
 def _initial(feed: LiveFeed, events_allowed: bool = True) -> dict[str, Any]:
     """``events_allowed``: whether the request may read the event log (with a token set: only a holder of
-    it, issue 27 finding 8; the page then asks for the token and its stream brings the events)."""
+    it, reliability.md, round 2, finding 8; the page then asks for the token and its stream brings the
+    events)."""
     host = feed.host
     scenes = []
     for number in host.operator.channel_numbers():

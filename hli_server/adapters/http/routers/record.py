@@ -1,4 +1,4 @@
-"""``/api/recording``, ``/api/recordings`` and ``/api/comm/faults`` (issue 25, docs/record-replay.md).
+"""``/api/recording``, ``/api/recordings`` and ``/api/comm/faults`` (docs/record-replay.md).
 
 Recording: start and stop a recording of the session (one at a time, by name in the server's recording
 directory, ``--record-dir``), its status, the list of recordings and their download. Communication

@@ -9,6 +9,7 @@ from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 
 from hli_server.adapters.http.deps import HostDep
+from schemas.results import AlarmList, AreaTable, MachineState
 
 __all__ = ["router"]
 
@@ -18,7 +19,7 @@ ALARM_HISTORY_SHOWN = 200
 
 
 @router.get("/api/state", summary="Machine snapshot: channels, axes, active alarms")
-async def get_state(host: HostDep) -> dict[str, Any]:
+async def get_state(host: HostDep) -> MachineState:
     snap = host.operator.snapshot()
     snap["clock"] = host.clock
     return snap
@@ -44,10 +45,10 @@ async def get_ready(host: HostDep) -> JSONResponse:
 
 
 @router.get("/api/alarms", summary="Active alarms and the newest of the history")
-async def get_alarms(host: HostDep) -> dict[str, Any]:
+async def get_alarms(host: HostDep) -> AlarmList:
     return host.operator.alarms(ALARM_HISTORY_SHOWN)
 
 
 @router.get("/api/channels/{number}/areas", summary="The channel's work and protection areas (FCT-C14)")
-async def get_areas(host: HostDep, number: int) -> dict[str, Any]:
+async def get_areas(host: HostDep, number: int) -> AreaTable:
     return host.operator.areas(number)

@@ -1,4 +1,4 @@
-"""The host the runtime hands its adapters (``hli_server.adapters.host``): image, operator, events, step.
+"""The operator port the runtime hands its adapters (``hli_server.adapters.host``).
 
 :class:`OperatorPanel` is the operator panel's door onto the machine: every request goes through
 the channel's own methods (latched at the next cycle, refused with the channel's own alarm), faults
@@ -8,38 +8,39 @@ engine rule.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Mapping
+from typing import Any, cast
 
-from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
     Accepted,
-    AccessPolicy,
-    CheckPort,
     ConflictError,
-    EventFeed,
-    ImagePort,
     InvalidRequestError,
     NotFoundError,
     OperatorPort,
-    Readiness,
-    RecorderPort,
-    StepRefusedError,
-    Trace,
 )
 from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel import Channel
 from hli_server.engine.machine import Machine
-from hli_server.runtime.live import TrailRecorder, collision_pairs, live_scene, program_table, scene_key
+from hli_server.runtime.dashboard import TrailRecorder, collision_pairs, live_scene, program_table, scene_key
 from hli_server.runtime.programs import RuntimeLibrary
+from schemas.results import (
+    AlarmList,
+    AreaTable,
+    AxisFaults,
+    CollisionPair,
+    ExternalVariable,
+    MachineState,
+    ProgramEntry,
+    ProgramLoaded,
+    ProgramSelected,
+    Scene,
+    SoftLimits,
+)
 from schemas.units import increments_from_mm, mm_from_increments
 from schemas.wire import Mode
 
-if TYPE_CHECKING:
-    from hli_server.runtime.core import Runtime
-
-__all__ = ["OperatorPanel", "RuntimeHost"]
+__all__ = ["OperatorPanel"]
 
 
 class OperatorPanel(OperatorPort):
@@ -54,7 +55,7 @@ class OperatorPanel(OperatorPort):
         self._timing = timing
         self.recorder = TrailRecorder(machine)
         """The trails and scene revisions; fed by the runtime host (a cycle listener, an event listener)."""
-        self._scenes: dict[int, tuple[tuple[object, ...], dict[str, Any]]] = {}
+        self._scenes: dict[int, tuple[tuple[object, ...], Scene]] = {}
 
     # --- what and where -------------------------------------------------------------------
     @property
@@ -101,7 +102,7 @@ class OperatorPanel(OperatorPort):
     # --- programs -------------------------------------------------------------------------
     def load_program(
         self, channel: int, text: str, name: str = "program", files: Mapping[str, str] | None = None
-    ) -> dict[str, Any]:
+    ) -> ProgramLoaded:
         ch = self._channel(channel)
         library = self._library
         uploads: dict[str, str] = {}
@@ -126,7 +127,7 @@ class OperatorPanel(OperatorPort):
             "cycle": self._m.cycle,
         }
 
-    def select_program(self, channel: int, number: int) -> dict[str, Any]:
+    def select_program(self, channel: int, number: int) -> ProgramSelected:
         ch = self._channel(channel)
         entry = next((p for p in ch.config.programs if p.number == number), None)
         if entry is None:
@@ -193,11 +194,11 @@ class OperatorPanel(OperatorPort):
         return self._accepted(ch, f"reference {ax.name}")
 
     # --- faults (A3-05) -------------------------------------------------------------------
-    def faults(self, axis: str) -> dict[str, Any]:
+    def faults(self, axis: str) -> AxisFaults:
         ax = self._axis(axis)
-        return {"axis": ax.name, **ax.faults.as_dict()}
+        return cast(AxisFaults, {"axis": ax.name, **ax.faults.as_dict()})
 
-    def inject_faults(self, axis: str, **fields: float | bool) -> dict[str, Any]:
+    def inject_faults(self, axis: str, **fields: float | bool) -> AxisFaults:
         ax = self._axis(axis)
         if not fields:
             raise InvalidRequestError("give at least one fault field (DELETE clears them all)")
@@ -207,13 +208,13 @@ class OperatorPanel(OperatorPort):
             raise InvalidRequestError(str(exc)) from None
         return self.faults(axis)
 
-    def clear_faults(self, axis: str) -> dict[str, Any]:
+    def clear_faults(self, axis: str) -> AxisFaults:
         ax = self._axis(axis)
         self._m.inject_fault(ax.name)
         return self.faults(axis)
 
     # --- software limits (E-06, P-AXIS-00177/00178/00179) ------------------------------------
-    def soft_limits(self, axis: str) -> dict[str, Any]:
+    def soft_limits(self, axis: str) -> SoftLimits:
         ax = self._axis(axis)
         rec = ax.config
         return {
@@ -226,7 +227,7 @@ class OperatorPanel(OperatorPort):
             "record": {"swe_neg": rec.swe_neg, "swe_pos": rec.swe_pos, "swe_toleranz": rec.swe_toleranz},
         }
 
-    def set_soft_limits(self, axis: str, **values: int) -> dict[str, Any]:
+    def set_soft_limits(self, axis: str, **values: int) -> SoftLimits:
         ax = self._axis(axis)
         unknown = sorted(set(values) - {"swe_neg", "swe_pos"})
         if unknown or not values:
@@ -240,7 +241,7 @@ class OperatorPanel(OperatorPort):
             raise InvalidRequestError(str(exc)) from None
         return self.soft_limits(axis)
 
-    def update_axis_record(self, axis: str, **values: int) -> dict[str, Any]:
+    def update_axis_record(self, axis: str, **values: int) -> SoftLimits:
         ax = self._axis(axis)
         if not values:
             raise InvalidRequestError("give swe_neg, swe_pos and/or swe_toleranz [0.1 µm]")
@@ -251,18 +252,18 @@ class OperatorPanel(OperatorPort):
         return self.soft_limits(axis)
 
     # --- state ----------------------------------------------------------------------------
-    def snapshot(self) -> dict[str, Any]:
-        snap = self._m.snapshot()
+    def snapshot(self) -> MachineState:
+        snap = cast(MachineState, self._m.snapshot())
         snap["external"] = self.external_variables()
         return snap
 
-    def external_variables(self) -> list[dict[str, Any]]:
+    def external_variables(self) -> list[ExternalVariable]:
         """The V.E. variables and their values now (N-05): ``name`` (``V.E.MODE``), ``channel`` (None:
         the global area), ``symbol`` (the image's ST path, ``gpVECh[0]^MODE``; an array's elements add
         ``[i]``), ``type`` (the kernel's), ``dims``, ``value`` (a list, row-major, for an array)."""
         m = self._m
         index_of = {ch.number: i for i, ch in enumerate(m.channels)}
-        out: list[dict[str, Any]] = []
+        out: list[ExternalVariable] = []
         for spec in m.external:
             values = m.external.values(spec)
             head = "gpVEGlob^" if spec.channel is None else f"gpVECh[{index_of[spec.channel]}]^"
@@ -278,22 +279,25 @@ class OperatorPanel(OperatorPort):
             )
         return out
 
-    def alarms(self, history: int = 200) -> dict[str, Any]:
+    def alarms(self, history: int = 200) -> AlarmList:
         m = self._m
         newest = list(m.alarm_history)[-history:] if history > 0 else []
-        return {"active": [a.to_json() for a in m.active_alarms], "history": [a.to_json() for a in newest]}
+        return cast(
+            AlarmList,
+            {"active": [a.to_json() for a in m.active_alarms], "history": [a.to_json() for a in newest]},
+        )
 
-    def areas(self, channel: int) -> dict[str, Any]:
+    def areas(self, channel: int) -> AreaTable:
         ch = self._channel(channel)
         if not self._m.has_monitor(AreaMonitor):
             return {"channel": ch.number, "axes": list(ch.axis_names), "areas": []}
-        return self._m.monitor(AreaMonitor).handler(ch.number).to_json()
+        return cast(AreaTable, self._m.monitor(AreaMonitor).handler(ch.number).to_json())
 
     def timing(self) -> dict[str, Any]:
         return self._timing()
 
-    # --- the dashboard (issue 15): hli_server/runtime/live.py ------------------------------
-    def scene(self, channel: int) -> dict[str, Any]:
+    # --- the dashboard (docs/dashboard.md): hli_server/runtime/dashboard.py ------------------------------
+    def scene(self, channel: int) -> Scene:
         ch = self._channel(channel)
         key = scene_key(self._m, self.recorder, ch.number)
         cached = self._scenes.get(ch.number)
@@ -303,82 +307,8 @@ class OperatorPanel(OperatorPort):
         self._scenes[ch.number] = (key, scene)
         return scene
 
-    def programs(self, channel: int) -> list[dict[str, Any]]:
+    def programs(self, channel: int) -> list[ProgramEntry]:
         return program_table(self._channel(channel))
 
-    def collision_pairs(self) -> list[dict[str, Any]]:
+    def collision_pairs(self) -> list[CollisionPair]:
         return collision_pairs(self._m)
-
-
-class RuntimeHost:
-    """The :class:`~hli_server.adapters.host.AdapterHost` of a running :class:`Runtime`."""
-
-    def __init__(self, runtime: Runtime, operator: OperatorPanel) -> None:
-        self._rt = runtime
-        self._operator = operator
-        # the operator panel's trails follow the cycles, its scenes the events (the dashboard)
-        runtime.on_cycle(operator.recorder.after_cycle)
-        runtime.event_log.subscribe(operator.recorder.on_event)
-
-    @property
-    def image(self) -> ImagePort:
-        return self._rt.image
-
-    @property
-    def operator(self) -> OperatorPort:
-        return self._rt.operator  # the panel, with every request noted by the session recorder
-
-    @property
-    def recorder(self) -> RecorderPort:
-        return self._rt.recorder_port
-
-    @property
-    def faults(self) -> CommFaults:
-        return self._rt.comm_faults
-
-    @property
-    def checker(self) -> CheckPort:
-        return self._rt.checker
-
-    @property
-    def events(self) -> EventFeed:
-        return self._rt.event_log
-
-    @property
-    def clock(self) -> str:
-        return str(self._rt.clock)
-
-    @property
-    def bind(self) -> str:
-        return self._rt.bind
-
-    @property
-    def policy(self) -> AccessPolicy:
-        return self._rt.policy
-
-    async def step(self, cycles: int = 1) -> int:
-        from hli_server.runtime.core import RuntimeStateError
-        from hli_server.runtime.pacing import ClockError
-
-        try:
-            return await self._rt.step(cycles)
-        except (ClockError, RuntimeStateError) as exc:
-            raise StepRefusedError(str(exc)) from None
-
-    async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
-        from hli_server.runtime.core import RuntimeStateError
-        from hli_server.runtime.pacing import ClockError
-
-        try:
-            return await self._rt.step_traced(cycles, signals)
-        except (ClockError, RuntimeStateError) as exc:
-            raise StepRefusedError(str(exc)) from None
-
-    def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
-        return self._rt.on_cycle(listener)
-
-    def readiness(self) -> Readiness:
-        return self._rt.readiness()
-
-    def __repr__(self) -> str:
-        return f"RuntimeHost({self._rt!r})"

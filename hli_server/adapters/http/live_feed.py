@@ -1,4 +1,5 @@
-"""The dashboard's live feed: one server-sent event stream per open page (``GET /api/live``, issue 15).
+"""The dashboard's live feed: one server-sent event stream per open page (``GET /api/live``,
+docs/dashboard.md).
 
 What a stream carries (``event:`` names, ``data:`` one JSON object each):
 
@@ -22,9 +23,9 @@ operator's snapshot; a stream keeps only the newest state (states are not queued
 happens in the streams' own tasks. Without an open stream nothing runs: no listener, no task.
 
 Bounds: at most :attr:`LiveFeed.max_streams` streams at once (16 by default). A page that does not read
-what it is sent holds nothing for long (issue 27, finding 4): when every slot is taken, a newcomer takes
-the slot of the stream that has waited longest (at least :data:`STALL_EVICT_S`) for its page to take a
-message; and the door drops a connection whose client leaves an answer unread for ``write_timeout``
+what it is sent holds nothing for long (reliability.md, round 2, finding 4): when every slot is taken, a
+newcomer takes the slot of the stream that has waited longest (at least :data:`STALL_EVICT_S`) for its page to
+take a message; and the door drops a connection whose client leaves an answer unread for ``write_timeout``
 seconds (``protocol.py``). Only when every open page reads is a newcomer refused (503). At shutdown
 :meth:`LiveFeed.close` ends every stream, so none holds the server's graceful shutdown.
 
@@ -37,9 +38,9 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -48,6 +49,7 @@ from hli_server.adapters.http.deps import json_bytes
 from schemas.events import Event
 from schemas.image_format import read_field
 from schemas.layout import Direction, Signal
+from schemas.results import Scene
 from schemas.wire import DynPosLimitState
 
 __all__ = [
@@ -136,14 +138,9 @@ def _sse(name: bytes, data: bytes) -> bytes:
     return b"event: " + name + b"\ndata: " + data + b"\n\n"
 
 
-def _scene_bytes(scene: dict[str, Any]) -> bytes:
-    """A scene as an SSE message. Its numbers are finite and rounded (``hli_server.scene``), so the plain
-    encoder does, without the walk that names non-finite numbers (a scene has thousands of them)."""
-    try:
-        data = json.dumps(scene, ensure_ascii=True, allow_nan=False, separators=(",", ":")).encode("ascii")
-    except ValueError:
-        data = json_bytes(scene)
-    return _sse(b"scene", data)
+def _scene_bytes(scene: Scene) -> bytes:
+    """A scene as an SSE message (its numbers are finite and rounded, ``hli_server.scene``)."""
+    return _sse(b"scene", json_bytes(scene))
 
 
 class _AxisSignals:
@@ -199,7 +196,7 @@ class LiveFeed:
         self._task: asyncio.Task[None] | None = None
         self._closed = False
         self._dirty: set[int] = set()
-        self._scenes: dict[int, dict[str, Any]] = {}
+        self._scenes: dict[int, Scene] = {}
         self._scene_failed: set[int] = set()
         self._scene_checked = 0.0
         self._axes: list[_AxisSignals] | None = None
@@ -342,7 +339,7 @@ class LiveFeed:
             stream.state = state
             stream.wake.set()
 
-    def _scene(self, number: int) -> dict[str, Any] | None:
+    def _scene(self, number: int) -> Scene | None:
         """The channel's scene, or None (logged once per channel) if computing it fails: a page without
         one channel's picture is better than no page."""
         try:
@@ -355,14 +352,14 @@ class LiveFeed:
                 )
             return None
 
-    def _current_scenes(self) -> dict[int, dict[str, Any]]:
+    def _current_scenes(self) -> dict[int, Scene]:
         for number in self.host.operator.channel_numbers():
             scene = self._scene(number)
             if scene is not None:
                 self._scenes[number] = scene
         return dict(self._scenes)
 
-    def _changed_scenes(self, channels: set[int] | None) -> dict[int, dict[str, Any]]:
+    def _changed_scenes(self, channels: set[int] | None) -> dict[int, Scene]:
         """The scenes that changed since last sent (the operator returns the same object while its
         inputs are unchanged), of ``channels`` or all."""
         op = self.host.operator
@@ -410,7 +407,7 @@ class LiveFeed:
             )
         axes = []
         for sigs in self._axes:
-            base = snap["axes"].get(sigs.name, {})
+            base: Mapping[str, Any] = snap["axes"].get(sigs.name, {})
             values = {k: read_field(c2p, 0, s) for k, s in sigs.c2p.items()}
             dpl = {}
             for side, (state_sig, enable_sig, command_sig) in sigs.dpl.items():

@@ -1,5 +1,5 @@
-"""What the operator panel shows beyond the snapshot (the dashboard, issue 15): the recent trail of each
-channel's axes, the programmed path ahead, the live scene, the collision pairs.
+"""What the operator panel shows beyond the snapshot (the dashboard, docs/dashboard.md): the recent trail of
+each channel's axes, the programmed path ahead, the live scene, the collision pairs.
 
 The trail is recorded by the runtime after every cycle (:meth:`TrailRecorder.after_cycle`, a cycle
 listener), cheaply: every :data:`TRAIL_EVERY` th cycle one sample of the channel's setpoints, and a
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Any
+from typing import Any, cast
 
 from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.channel import Channel
@@ -31,6 +31,7 @@ from hli_server.engine.monitors.collision import CollisionMonitor
 from hli_server.engine.planner import Motion
 from hli_server.scene import build_scene, round_mm
 from schemas.events import AlarmRaised, AlarmsCleared, AreasChanged, Event, ProgramStateChanged
+from schemas.results import CollisionPair, ProgramEntry, Scene
 
 __all__ = [
     "AHEAD_POINTS",
@@ -178,14 +179,14 @@ def path_ahead(ch: Channel, limit: int = AHEAD_POINTS) -> list[tuple[float, ...]
     return out
 
 
-def live_scene(machine: Machine, recorder: TrailRecorder, number: int) -> dict[str, Any]:
+def live_scene(machine: Machine, recorder: TrailRecorder, number: int) -> Scene:
     """The scene (:mod:`hli_server.scene`) of channel ``number`` now."""
     ch = machine.channel(number)
     areas: list[dict[str, Any]] = []
     if machine.has_monitor(AreaMonitor):
         areas = machine.monitor(AreaMonitor).areas_json(ch)
     alarms = [a.to_json() for a in machine.active_alarms if a.channel == number]
-    return build_scene(
+    scene = build_scene(
         areas,
         recorder.trails[number].polyline(),
         axis_names=ch.axis_names,
@@ -196,6 +197,7 @@ def live_scene(machine: Machine, recorder: TrailRecorder, number: int) -> dict[s
         ahead=path_ahead(ch),
         tolerance=0.0,  # the trail is simplified as it is recorded, the path ahead sampled within it
     )
+    return cast(Scene, scene)
 
 
 def scene_key(machine: Machine, recorder: TrailRecorder, number: int) -> tuple[object, ...]:
@@ -214,7 +216,7 @@ def scene_key(machine: Machine, recorder: TrailRecorder, number: int) -> tuple[o
     )
 
 
-def collision_pairs(machine: Machine) -> list[dict[str, Any]]:
+def collision_pairs(machine: Machine) -> list[CollisionPair]:
     """The FCT-C3 pairs now, lengths in mm: distance ``d`` in the master's coordinates, the minimum
     distance (coll_offset), each axis' braking distance with its collision deceleration (C3-07), and
     whether the pair is monitored (both referenced, C3-06), stopped (P-ERR-70092) or latched (C3-02)."""
@@ -222,7 +224,7 @@ def collision_pairs(machine: Machine) -> list[dict[str, Any]]:
         return []
     monitor = machine.monitor(CollisionMonitor)
     t = machine.t_a
-    out = []
+    out: list[CollisionPair] = []
     for pair in monitor.pairs:
         m, p = pair.master, pair.partner
 
@@ -246,5 +248,5 @@ def collision_pairs(machine: Machine) -> list[dict[str, Any]]:
     return out
 
 
-def program_table(ch: Channel) -> list[dict[str, Any]]:
+def program_table(ch: Channel) -> list[ProgramEntry]:
     return [{"number": p.number, "name": p.name} for p in ch.config.programs]
