@@ -13,7 +13,7 @@ from hli_server.commands.check import check_program, scene_of
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine
 from hli_server.runtime import Runtime
-from hli_server.runtime.live import TRAIL_TOLERANCE
+from hli_server.runtime.dashboard import TRAIL_TOLERANCE
 
 PROGRAM = (
     "N10 G01 X0 Y0 F3000\nN20 #CONTOUR MODE [DEV PATH_DEV=5]\nN30 G261 X100\nN40 Y100\nN50 G260 X0\nN60 M30\n"
