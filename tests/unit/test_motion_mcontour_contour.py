@@ -621,21 +621,27 @@ def test_the_geometry_batch_checks_the_blended_path_while_contouring_is_on() -> 
 def test_a_measuring_move_after_a_contoured_block_comes_after_it_uncontoured() -> None:
     """G100 with contouring on: the held block runs first, to its programmed end (no transition into a
     measuring move), then the measuring move; M30 in a contoured block ends at its end point."""
+    from tests.unit.areas.helpers import areas
     from tests.unit.areas.test_area_measuring import make_machine as measuring_machine
-    from tests.unit.areas.test_area_measuring import run_with_probe_at
+    from tests.unit.areas.test_area_measuring import start
 
     m = measuring_machine()
     seen: list[tuple[float, float]] = []
     ch = m.channel(1)
     program = "N10 G01 X0 Y0 F6000\nN15 G261\nN20 Y10\nN30 G100 X50\nN40 G01 Y20\nN50 G260 M30\n"
-    step = m.step
-
-    def stepped(cycles: int = 1) -> None:
-        step(cycles)
+    # as run_with_probe_at, with every cycle's setpoints kept (the compiled Machine's step is read-only)
+    start(m, program)
+    fired = False
+    for _ in range(100_000):
+        if ch.state not in (ProgramState.RUNNING, ProgramState.HELD):
+            break
+        if not fired and ch.axis("X").setpoint >= 30.0:
+            fired = True
+            areas(m).request_probe(True)
+        m.step(1)
         seen.append((ch.axis("X").setpoint, ch.axis("Y").setpoint))
-
-    m.step = stepped  # type: ignore[method-assign]
-    run_with_probe_at(m, program, 30.0)
+    else:
+        raise AssertionError("program did not end")
     assert min(math.dist(p, (0.0, 10.0)) for p in seen) < 0.02  # the corner before G100: exact
     assert all(abs(p[0]) < 1e-9 for p in seen if p[1] < 9.99)  # N20 ran first, along X0
     assert errors(m) == []

@@ -39,7 +39,7 @@ def go(program: str) -> tuple[Machine, list[float]]:
     return m, ch.setpoints()
 
 
-@pytest.mark.req("M-19")
+@pytest.mark.req("M-19", "N-09")
 def test_path_check_under_rotated_cs() -> None:
     head = SQUARE + "G01 X10 Y10 F5000\n#CONTROL AREA ON [ID1]\n"
     # (80, 10) is inside the square in machine coordinates ...
@@ -193,3 +193,19 @@ def test_contouring_with_a_frame_or_a_tool_is_refused_by_name(transform: str, co
     assert [a for a in alarm_ids(m) if a != 911040] == [910110]  # 911040: #HSC/#SPLINE simulated as DEV
     assert "contouring" in message
     assert "not simulated" in message
+
+
+@pytest.mark.req("M-27", "M-20")
+def test_the_motion_benchmarks_program_runs_contoured_and_faster() -> None:
+    """``benchmarks/bench_motion.py``'s comparison, small: the same program with contouring on runs to
+    its end without an alarm, contours its corners and takes fewer cycles (a contoured corner is not a
+    stop)."""
+    from benchmarks.bench_engine import long_program
+    from benchmarks.bench_motion import _run_to_end, contoured
+
+    text = long_program(40)
+    plain_cycles, _, plain_corners = _run_to_end(text)
+    cycles, _, corners = _run_to_end(contoured(text))
+    assert plain_corners == 0
+    assert corners > 20
+    assert cycles < plain_cycles
