@@ -308,11 +308,28 @@ def doors_main(plan: DoorsPlan, link: socket.socket, conn: Connection) -> None:
 
 
 async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -> None:
-    parent = os.getppid()
     loop = asyncio.get_running_loop()
     terminated = asyncio.Event()
+    handled = False
     with contextlib.suppress(NotImplementedError, RuntimeError):
         loop.add_signal_handler(signal.SIGTERM, terminated.set)
+        handled = True
+    try:
+        await _serve_doors_until(plan, sock, conn, terminated)
+    finally:
+        # before the loop closes: asyncio's close shuts the signal wake-up pipe first and removes the
+        # handler after, so a SIGTERM from the clock's process in between printed "Exception ignored
+        # ... signal wakeup fd ... Bad file descriptor" (seen when a door cannot listen and the clock's
+        # process stops this one); from here on SIGTERM just ends the process
+        if handled:
+            loop.remove_signal_handler(signal.SIGTERM)
+
+
+async def _serve_doors_until(
+    plan: DoorsPlan, sock: socket.socket, conn: Connection, terminated: asyncio.Event
+) -> None:
+    parent = os.getppid()
+    loop = asyncio.get_running_loop()
     try:
         image = AttachedImage.attach(plan.image_name, timeout=5.0)
     except Exception as exc:
