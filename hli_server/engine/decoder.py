@@ -749,13 +749,12 @@ class Decoder:
         for piece in pieces:
             if piece.segment.length <= 1e-12:
                 continue
-            for check in self.path_checks:
-                err = check(piece.segment, piece.block)
-                if err is not None:
-                    self.contour.reset()
-                    self.position = list(piece.segment.start)  # the path stops where the piece starts
-                    items.append(Marker(MarkerKind.ERROR, piece.block, payload=err))
-                    return items
+            err = self._check(piece.segment, piece.block)
+            if err is not None:
+                self.contour.reset()
+                self.position = list(piece.segment.start)  # the path stops where the piece starts
+                items.append(Marker(MarkerKind.ERROR, piece.block, payload=err))
+                return items
             v_max, accel = self._limits(piece.segment, piece.rapid, feed=piece.feed)
             items.append(
                 Motion(
