@@ -44,8 +44,6 @@ if TYPE_CHECKING:
     from schemas.config import MachineConfig
 
 __all__ = [
-    "DEFAULT_API_MAX_CYCLES",
-    "DEFAULT_TIMEOUT_S",
     "MAX_TIMEOUT_S",
     "MAX_WAITING",
     "ProgramChecker",
@@ -53,8 +51,6 @@ __all__ = [
     "run_check",
 ]
 
-DEFAULT_API_MAX_CYCLES = CHECK_MAX_CYCLES
-DEFAULT_TIMEOUT_S = CHECK_TIMEOUT_S
 MAX_TIMEOUT_S = CHECK_MAX_TIMEOUT_S
 _START_TIMEOUT_S = 60.0
 MAX_WAITING = 4
@@ -93,7 +89,7 @@ def run_check(
     name: str = "program",
     channel: int = 1,
     geometry_only: bool = False,
-    max_cycles: int = DEFAULT_API_MAX_CYCLES,
+    max_cycles: int = CHECK_MAX_CYCLES,
     max_iterations: int = CHECK_MAX_ITERATIONS,
     record_path: bool = False,
 ) -> CheckResult:
@@ -261,9 +257,9 @@ class ProgramChecker:
         files: Mapping[str, str] | None = None,
         channel: int = 1,
         geometry_only: bool = False,
-        max_cycles: int = DEFAULT_API_MAX_CYCLES,
+        max_cycles: int = CHECK_MAX_CYCLES,
         max_iterations: int = CHECK_MAX_ITERATIONS,
-        timeout_s: float = DEFAULT_TIMEOUT_S,
+        timeout_s: float = CHECK_TIMEOUT_S,
     ) -> dict[str, Any]:
         """The report of ``text`` (:func:`check_report`). Errors: InvalidRequestError, NotFoundError (the
         request), UnavailableError (too many checks waiting), CheckTimeoutError (the wall-clock limit)."""
