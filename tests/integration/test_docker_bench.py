@@ -473,4 +473,11 @@ def docker_run_with_the_documented_command_answers(docker: str) -> None:
         assert "stop with Ctrl+C or SIGTERM" in logs_before_stop
     finally:
         _run([docker, "rm", "--force", name], 60)
-    assert _run([docker, "ps", "-a", "-q", "--filter", f"name={name}"], 30).stdout.strip() == ""
+    # `docker run --rm` removes the stopped container itself; while that removal is under way,
+    # `docker rm --force` answers "removal already in progress" and `ps -a` still lists it for a moment.
+    # The container must be gone, not merely going: poll for it, bounded.
+    _wait(
+        "the container removed after docker stop",
+        lambda: _run([docker, "ps", "-a", "-q", "--filter", f"name={name}"], 30).stdout.strip() == "",
+        30,
+    )
