@@ -59,7 +59,7 @@ from hli_server.engine.monitors.soft_limits import SoftLimitPathCheck
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.parser import BlockReader
 from hli_server.engine.nc.plain import COL_F, COL_G, COL_I, EMPTY, OTHER, PLAIN, PlainChunk, PlainTokenizer
-from hli_server.engine.nc.source import ProgramText
+from hli_server.engine.nc.source import ProgramText, Window
 from hli_server.engine.nc.syntax import strip_comments
 from hli_server.engine.planner import Marker, Motion
 
@@ -103,10 +103,10 @@ def _area_check(check: PathCheck) -> AreaPathCheck | None:
 class _Chunk:
     """One window of whole lines: their kinds and words, the lines themselves, the *other* lines."""
 
-    __slots__ = ("first_line", "lines_text", "others", "plain")
+    __slots__ = ("first_line", "others", "plain", "window")
 
-    def __init__(self, lines: list[str], plain: PlainChunk, first_line: int) -> None:
-        self.lines_text = lines
+    def __init__(self, window: Window, plain: PlainChunk, first_line: int) -> None:
+        self.window = window
         self.plain = plain
         self.first_line = first_line
         """Line number of the chunk's first line."""
@@ -118,7 +118,7 @@ class _Chunk:
 
     def raw(self, k: int) -> str:
         """Line ``k`` as the parser is given it."""
-        return self.lines_text[k]
+        return self.window.line(k)
 
 
 class BatchGeometryCheck:
@@ -198,12 +198,13 @@ class BatchGeometryCheck:
         if chunk is not None and chunk.first_line <= line < chunk.first_line + chunk.lines:
             return chunk
         window = source.window_of(line)
-        if window is None or not window.lines:
+        if window is None or not window.count:
             return None
-        lines = window.lines
-        data = (window.text or "\n".join(lines) + "\n").encode("utf-8", "surrogatepass")
-        plain = self._tokenizer.tokenize(data)
-        chunk = _Chunk(lines, plain, window.first)
+        # the window's own bytes and line ends: no decoding, splitting or encoding again here
+        plain = self._tokenizer.tokenize(window.data, window.ends)
+        for long_line in window.long_lines:
+            plain.kind[long_line - window.first] = OTHER  # the interpreter refuses it (LineTooLongError)
+        chunk = _Chunk(window, plain, window.first)
         self._comments_as_blank(chunk)
         self._chunk = chunk
         return chunk

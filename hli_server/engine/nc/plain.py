@@ -130,12 +130,14 @@ class PlainTokenizer:
         self._low = low
         self._high = high
 
-    def tokenize(self, data: bytes) -> PlainChunk:
-        """Classify and read the lines of ``data``: whole lines, each ending with ``\\n`` (no ``\\r``)."""
+    def tokenize(self, data: bytes, ends: Ints | None = None) -> PlainChunk:
+        """Classify and read the lines of ``data``: whole lines, each ending with ``\\n`` (no ``\\r``);
+        ``ends``: where the ``\\n`` are, if the caller knows it already."""
         a = np.frombuffer(data, np.uint8)
         n = int(a.shape[0])
         c = np.frombuffer(data.translate(self._classes), np.uint8)
-        ends = np.flatnonzero(c == _NEWLINE)
+        if ends is None:
+            ends = np.flatnonzero(c == _NEWLINE)
         lines = int(ends.shape[0])
         starts = np.empty(lines, np.int64)
         if lines:

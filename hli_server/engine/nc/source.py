@@ -17,7 +17,10 @@ from __future__ import annotations
 import bisect
 from typing import TextIO
 
-__all__ = ["CHUNK_CHARS", "MAX_LINE_CHARS", "LineTooLongError", "ProgramText"]
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["CHUNK_CHARS", "MAX_LINE_CHARS", "LineTooLongError", "ProgramText", "Window"]
 
 CHUNK_CHARS = 1 << 20
 """Characters read at a time (about 40,000 lines of a CAM program)."""
@@ -25,6 +28,11 @@ MAX_LINE_CHARS = 1 << 16
 """The longest line read (65,536 characters); a longer one is :class:`LineTooLongError`."""
 _KEPT_WINDOWS = 4
 """Windows kept in memory: the current one, and a few a loop or a local subroutine may return to."""
+_SPLIT_AFTER = 256
+"""Lines of a window read one by one before it is split into a list of lines (cheaper from then on)."""
+_NEWLINE = ord("\n")
+
+Ints = npt.NDArray[np.int64]
 
 
 class LineTooLongError(ValueError):
@@ -61,19 +69,59 @@ class _StringStream:
         return True
 
 
-class _Window:
-    """Whole lines ``first .. first + len(lines) - 1`` and where they begin in the stream."""
+class Window:
+    """Whole lines ``first .. first + count - 1``: their text (each line ending in ``\\n``), its UTF-8
+    bytes and where each line ends in them.
 
-    __slots__ = ("first", "lines", "long_lines", "text")
+    The batch geometry check hands :attr:`data` and :attr:`ends` to its tokenizer as they are; the
+    interpreter reads single lines. A window is split into a list of lines only once it is read line by
+    line (more than :data:`_SPLIT_AFTER` lines of it): a CAM program's window, whose plain lines the
+    batch reads, is never split (docs/performance.md, "The NC language")."""
 
-    def __init__(self, first: int, lines: list[str], long_lines: dict[int, int], text: str = "") -> None:
+    __slots__ = ("_lines", "_reads", "ascii", "count", "data", "ends", "first", "long_lines", "text")
+
+    def __init__(self, first: int, text: str, long_lines: dict[int, int] | None = None) -> None:
         self.first = first
-        self.lines = lines
-        self.long_lines = long_lines
-        """Line number -> length of the lines over the limit (kept as empty strings in ``lines``)."""
         self.text = text
-        """The lines joined, each ending in ``\\n`` (the batch check tokenizes it); empty where a line is
-        over the limit."""
+        """The lines, each ending in ``\\n`` (line ends normalized)."""
+        data = text.encode("utf-8", "surrogatepass")
+        self.data = data
+        self.ascii = len(data) == len(text)
+        """Byte offsets are character offsets."""
+        ends: Ints = np.flatnonzero(np.frombuffer(data, np.uint8) == _NEWLINE)
+        self.ends = ends
+        """Offset of each line's ``\\n`` in :attr:`data`."""
+        self.count = int(ends.shape[0])
+        self.long_lines: dict[int, int] = {} if long_lines is None else long_lines
+        """Line number -> length of the lines over the limit (reading one raises LineTooLongError)."""
+        if self.count and long_lines is None:
+            lengths = np.diff(ends, prepend=-1) - 1
+            for k in np.flatnonzero(lengths > MAX_LINE_CHARS).tolist():  # rare: bytes >= characters
+                length = len(self._slice(k))
+                if length > MAX_LINE_CHARS:
+                    self.long_lines[first + k] = length
+        self._lines: list[str] | None = None
+        self._reads = 0
+
+    def _slice(self, k: int) -> str:
+        end = int(self.ends[k])
+        start = int(self.ends[k - 1]) + 1 if k else 0
+        if self.ascii:
+            return self.text[start:end]
+        return self.data[start:end].decode("utf-8", "surrogatepass")
+
+    def line(self, k: int) -> str:
+        """Line ``first + k`` (``0 <= k < count``) without its line end."""
+        lines = self._lines
+        if lines is not None:
+            return lines[k]
+        self._reads += 1
+        if self._reads > _SPLIT_AFTER:
+            lines = self.text.split("\n")
+            lines.pop()  # after the last line end
+            self._lines = lines
+            return lines[k]
+        return self._slice(k)
 
 
 class ProgramText:
@@ -96,11 +144,11 @@ class ProgramText:
         # per window: (stream position to seek to, characters to skip after it, first line)
         self._starts: list[tuple[int, int, int]] = [(base, 0, 1)]
         self._firsts: list[int] = [1]
-        self._windows: dict[int, _Window] = {}
+        self._windows: dict[int, Window] = {}
         self._order: list[int] = []
         self._last_line: int | None = None
         """The number of the last line, once the end of the text was read."""
-        self._current: _Window | None = None
+        self._current: Window | None = None
         """The window read last (a program is mostly read line after line)."""
 
     @property
@@ -113,16 +161,16 @@ class ProgramText:
         window = self._current
         if window is not None:
             k = number - window.first
-            if 0 <= k < len(window.lines) and not window.long_lines:
-                return window.lines[k]
+            if 0 <= k < window.count and not window.long_lines:
+                return window.line(k)
         window = self.window_of(number)
         if window is None:
             return None
         if window.long_lines and number in window.long_lines:
             raise LineTooLongError(number, window.long_lines[number])
-        return window.lines[number - window.first]
+        return window.line(number - window.first)
 
-    def window_of(self, number: int) -> _Window | None:
+    def window_of(self, number: int) -> Window | None:
         """The window holding line ``number`` (None past the end of the text)."""
         if number < 1:
             return None
@@ -132,7 +180,7 @@ class ProgramText:
         k = bisect.bisect_right(self._firsts, number) - 1
         while True:
             window = self._load(k)
-            if number < window.first + len(window.lines):
+            if number < window.first + window.count:
                 self._current = window
                 return window
             if self._last_line is not None and k + 1 >= len(self._starts):
@@ -140,7 +188,7 @@ class ProgramText:
             k += 1
 
     # --- reading ---------------------------------------------------------------------------------
-    def _load(self, k: int) -> _Window:
+    def _load(self, k: int) -> Window:
         cached = self._windows.get(k)
         if cached is not None:
             return cached
@@ -170,7 +218,7 @@ class ProgramText:
             if len(data) > 2 * MAX_LINE_CHARS:
                 # far over the limit: served as the last line (reading it raises LineTooLongError);
                 # nothing after it can run anyway
-                window = _Window(first, [""], {first: len(data)})
+                window = Window(first, "\n", {first: len(data)})
                 if k + 1 == len(self._starts):
                     self._last_line = first
                 self._keep(k, window)
@@ -183,29 +231,20 @@ class ProgramText:
         text = data[:cut]
         if "\r" in text:
             text = text.replace("\r\n", "\n").replace("\r", "\n")
-        lines = text.split("\n")
-        if lines and lines[-1] == "":
-            lines.pop()
-        long_lines: dict[int, int] = {}
-        if lines and max(map(len, lines)) > MAX_LINE_CHARS:  # rare: look line by line only then
-            for i, line in enumerate(lines):
-                if len(line) > MAX_LINE_CHARS:
-                    long_lines[first + i] = len(line)
-                    lines[i] = ""
-        joined = text if text.endswith("\n") else text + "\n"
-        if long_lines or not lines:
-            joined = ""
-        window = _Window(first, lines, long_lines, joined)
+        if text and not text.endswith("\n"):
+            text += "\n"  # the last line of the text without its line end
+        window = Window(first, text)
+        lines = window.count
         if k + 1 == len(self._starts):
             if at_end:
-                self._last_line = first + len(lines) - 1
+                self._last_line = first + lines - 1
             else:
-                self._starts.append((base, cut, first + len(lines)))
-                self._firsts.append(first + len(lines))
+                self._starts.append((base, cut, first + lines))
+                self._firsts.append(first + lines)
         self._keep(k, window)
         return window
 
-    def _keep(self, k: int, window: _Window) -> None:
+    def _keep(self, k: int, window: Window) -> None:
         self._windows[k] = window
         self._order.append(k)
         while len(self._order) > _KEPT_WINDOWS:
