@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import TextIO
 
 import numpy as np
@@ -56,7 +56,7 @@ from hli_server.engine.channel import Channel
 from hli_server.engine.decoder import Decoder, PathCheck
 from hli_server.engine.monitors.collision import MoveApartCheck
 from hli_server.engine.monitors.soft_limits import SoftLimitPathCheck
-from hli_server.engine.nc.blocks import Block
+from hli_server.engine.nc.blocks import Block, NcError
 from hli_server.engine.nc.parser import BlockReader
 from hli_server.engine.nc.plain import COL_F, COL_G, COL_I, EMPTY, OTHER, PLAIN, PlainChunk, PlainTokenizer
 from hli_server.engine.nc.source import ProgramText, Window
@@ -121,6 +121,132 @@ class _Chunk:
         return self.window.line(k)
 
 
+class _StoppedError(Exception):
+    """A kept block failed its check while the interpreter was in the middle of a statement: the check
+    ends there, as the exact path would have ended before the statement."""
+
+
+_ROW_G_CODES = frozenset((0, 1, 2, 3, 90, 91))
+_ROW_M_CODES = frozenset((17, 29))
+
+
+class _Rows:
+    """Blocks built by the interpreter that only move (a loop's or a subroutine's ``G91 X[..] Y[..]``),
+    kept to be checked as a batch: per block its end point (as :meth:`Decoder._target` computes it, the
+    same floats), the modal motion, feed and G90/G91 after it, whether an axis is given, its I/J/K.
+    Everything is computed from the decoder's state when the first block is kept; nothing else can
+    change that state before they are flushed (any other block or directive flushes them first)."""
+
+    __slots__ = (
+        "_abs",
+        "_feed",
+        "_motion",
+        "_position",
+        "absolute",
+        "blocks",
+        "centre",
+        "decoder",
+        "ends",
+        "feed",
+        "motion",
+        "offsets",
+        "origin",
+        "present",
+    )
+
+    def __init__(self, decoder: Decoder) -> None:
+        self.decoder = decoder
+        self.blocks: list[Block] = []
+        self.ends: list[list[float]] = []
+        self.motion: list[float] = []
+        self.feed: list[float] = []
+        self.absolute: list[bool] = []
+        self.present: list[bool] = []
+        self.centre: list[tuple[float, float, float]] = []
+        self.origin: list[float] = []
+        self.offsets: dict[str, float] = {}
+        self._position: list[float] = []
+        self._motion = 0
+        self._feed = math.nan
+        self._abs = True
+
+    def clear(self) -> None:
+        self.blocks = []
+        self.ends = []
+        self.motion = []
+        self.feed = []
+        self.absolute = []
+        self.present = []
+        self.centre = []
+
+    def takes(self, block: Block) -> bool:
+        """Does ``block`` only move (G0..G3, G90/G91, axes, I/J/K, a positive F, an M17/M29 that ends a
+        subroutine), so that the batch can check it?"""
+        if block.extra or block.area is not None or block.two_path:
+            return False
+        for g in block.g_codes:
+            if g not in _ROW_G_CODES:
+                return False
+        for m in block.m_codes:
+            if m not in _ROW_M_CODES:
+                return False
+        feed = block.feed
+        if feed is not None and not feed > 0.0:
+            return False
+        index = self.decoder.index
+        return all(name in index for name, _ in block.axes)
+
+    def add(self, block: Block, decoder: Decoder) -> None:
+        """Keep ``block``: its row, from the state after the blocks kept before it."""
+        if not self.blocks:
+            modal = decoder.modal
+            self.origin = list(decoder.position)
+            self._position = self.origin
+            self._motion = modal.motion
+            self._feed = modal.feed if modal.feed is not None else math.nan
+            self._abs = modal.absolute
+            self.offsets = {}
+        for g in block.g_codes:
+            if g <= 3:
+                self._motion = g
+            elif g == 90:
+                self._abs = True
+            else:
+                self._abs = False
+        if block.feed is not None:
+            self._feed = block.feed
+        target = list(self._position)
+        if block.axes:
+            index = decoder.index
+            absolute = self._abs
+            for name, value in block.axes:
+                i = index[name]
+                if absolute:
+                    offset = self.offsets.get(name)
+                    if offset is None:
+                        offset = decoder.modal.offset(name)
+                        self.offsets[name] = offset
+                    target[i] = value + offset
+                else:
+                    target[i] += value
+        self._position = target
+        self.blocks.append(block)
+        self.ends.append(target)
+        self.motion.append(float(self._motion))
+        self.feed.append(self._feed)
+        self.absolute.append(self._abs)
+        self.present.append(bool(block.axes))
+        i = j = k = math.nan
+        for letter, value in block.centre:
+            if letter == "I":
+                i = value
+            elif letter == "J":
+                j = value
+            elif letter == "K":
+                k = value
+        self.centre.append((i, j, k))
+
+
 class BatchGeometryCheck:
     """Decodes a program for ``check --geometry-only`` on ``channel`` (see the module's description).
 
@@ -145,6 +271,10 @@ class BatchGeometryCheck:
         column = {letter: 6 + k for k, letter in enumerate(letters)}
         self._axis_column: list[int] = [column.get(name.upper(), -1) for name in decoder.axes]
         self._chunk: _Chunk | None = None
+        self._rows = _Rows(decoder)
+        """Blocks the interpreter built in loops and subroutines, kept to be checked as a batch."""
+        self._outbox: list[list[Item]] = []
+        """What the decoder gave for kept blocks flushed in the middle of a statement (yielded next)."""
         self.line = 0
         self.batched_blocks = 0
         """Blocks the batch decoded without the exact decoder (for the tests and the benchmark)."""
@@ -163,6 +293,8 @@ class BatchGeometryCheck:
         interpreter.budget = 1  # one statement at a time: back here whenever it goes straight on
         interpreter.iteration_cap = iteration_cap
         self._chunk = None
+        self._rows.clear()
+        interpreter.before_effect = self._before_effect
         try:
             while not self._finished():
                 if interpreter.at_main_level:
@@ -173,6 +305,9 @@ class BatchGeometryCheck:
                         at = bisect.bisect_left(chunk.others, i)
                         o = chunk.others[at] if at < len(chunk.others) else chunk.lines
                         if o > i:
+                            if self._rows.blocks:
+                                yield from self._flush_rows()
+                                continue
                             yield from self._plain_lines(chunk, i, o)
                             if self._finished():
                                 return
@@ -181,13 +316,141 @@ class BatchGeometryCheck:
                             if o >= chunk.lines:
                                 yield []
                             continue
-                interpreter.refill()
-                if not decoder.waiting:
-                    self.exact_blocks += 1
-                yield decoder.next_items()
+                yield from self._step()
                 self.line = interpreter.main_line
         finally:
+            interpreter.before_effect = None
             interpreter.budget, interpreter.iteration_cap = saved
+            self._rows.clear()
+            self._outbox.clear()
+
+    # --- what the interpreter runs: blocks of loops and subroutines ------------------------------------
+    def _step(self) -> Iterator[list[Item]]:
+        """Statements of the interpreter up to its next block or directive that is not kept, or until it is
+        back in the main program. A block it builds that only moves (:meth:`_Rows.takes`) is kept in
+        :attr:`_rows` and checked with the next ones as a batch; anything else first flushes them, then
+        goes to the decoder as :meth:`Decoder.next_items` would hand it."""
+        decoder = self.decoder
+        interpreter = self.channel.interpreter
+        interpreter.refill()
+        rows = self._rows
+        if decoder.waiting or not self._rows_allowed():
+            if rows.blocks:
+                yield from self._flush_rows()
+                return
+            if not decoder.waiting:
+                self.exact_blocks += 1
+            yield decoder.next_items()
+            return
+        # no pause after each statement here: the interpreter returns at its next block or directive
+        interpreter.budget = None
+        try:
+            while True:
+                try:
+                    out = interpreter.next()
+                except _StoppedError:
+                    yield from self._drain()
+                    return
+                except NcError as exc:
+                    yield from self._drain()
+                    yield from self._flush_rows()
+                    if not decoder.finished:
+                        yield decoder.syntax_error(exc)
+                    return
+                except Exception:
+                    # the iteration cap: the blocks before it are checked first (one may fail)
+                    yield from self._drain()
+                    yield from self._flush_rows()
+                    if decoder.finished:
+                        return
+                    raise
+                if self._outbox:
+                    yield from self._drain()
+                if isinstance(out, Block) and rows.takes(out):
+                    rows.add(out, decoder)
+                    if interpreter.at_main_level:
+                        return
+                    continue
+                break
+        finally:
+            interpreter.budget = 1
+        if rows.blocks:
+            yield from self._flush_rows()
+            if decoder.finished:
+                return
+        if out is None:
+            yield decoder.end_of_program()
+        elif isinstance(out, Block):
+            self.exact_blocks += 1
+            yield decoder.decode_block(out)
+        else:
+            yield decoder.directive(out)
+
+    def _rows_allowed(self) -> bool:
+        """May blocks be kept for a batch: the decoder's state is one the batch knows (as for plain lines:
+        no contouring, no area being defined, no G70/G95, no frame, tool or compensation)."""
+        decoder = self.decoder
+        modal = decoder.modal
+        return not (
+            decoder.contour.holding
+            or modal.blend(()) is not None
+            or modal.in_area_definition
+            or modal.inch
+            or modal.feed_per_rev
+            or decoder.transforms_active
+        )
+
+    def _drain(self) -> Iterator[list[Item]]:
+        outbox = self._outbox
+        while outbox:
+            yield outbox.pop(0)
+
+    def _before_effect(self) -> None:
+        """The interpreter is about to do what others see or to read the decoder's state (a message, a
+        warning, a V.E. write, V.A./V.G.): the kept blocks are decoded first, as the exact path would have;
+        if one of them fails, the statement does not run (:class:`_StoppedError`)."""
+        if not self._rows.blocks:
+            return
+        self._outbox.extend(self._flush_rows())
+        if self.decoder.finished:
+            raise _StoppedError
+
+    def _flush_rows(self) -> Iterator[list[Item]]:
+        """The kept blocks: one by one if few, else as a batch."""
+        rows = self._rows
+        blocks = rows.blocks
+        count = len(blocks)
+        if not count:
+            return
+        decoder = self.decoder
+        groups, all_exact = self._checks()
+        areas = sum(len(g.works) + len(g.prots) for g in groups)
+        if count < SMALL_RUN + SMALL_RUN_PER_AREA * areas or all_exact:
+            kept = list(blocks)
+            rows.clear()
+            for block in kept:
+                self.exact_blocks += 1
+                yield decoder.decode_block(block)
+                if decoder.finished:
+                    return
+            return
+        n_axes = len(decoder.axes)
+        start = np.empty((n_axes, count))
+        start[:, 0] = rows.origin
+        end = np.array(rows.ends).T.reshape(n_axes, count)
+        start[:, 1:] = end[:, :-1]
+        motion = np.array(rows.motion, np.float64)
+        feed = np.array(rows.feed, np.float64)
+        present = np.array(rows.present, np.bool_)
+        centre = np.array(rows.centre, np.float64).T.reshape(3, count)
+        absolute = rows.absolute[:]
+        kept = list(blocks)
+        rows.clear()
+        yield from self._settle(
+            start, end, present, motion, feed, centre, groups, False, kept.__getitem__, None, absolute
+        )
+        if not decoder.finished:
+            decoder.current_block = kept[-1]
 
     def _finished(self) -> bool:
         return self.decoder.finished
@@ -279,8 +542,56 @@ class BatchGeometryCheck:
             motion = _fill(values[COL_G], float(modal.motion))
             feed = _fill(values[COL_F], modal.feed if modal.feed is not None else math.nan)
             start, end, present = self._targets(values, count)
+        first_line = chunk.first_line
+
+        def exact_block(k: int) -> Block:
+            return self._exact(chunk, int(idx[k]))
+
+        def line_of(k: int) -> int:
+            return first_line + int(idx[k])
+
+        yield from self._settle(
+            start,
+            end,
+            present,
+            motion,
+            feed,
+            values[COL_I : COL_I + 3],
+            groups,
+            all_exact,
+            exact_block,
+            line_of,
+            None,
+        )
+        if decoder.finished:
+            return
+        self.line = first_line + int(idx[count - 1])
+
+    def _settle(
+        self,
+        start: Floats,
+        end: Floats,
+        present: Bools,
+        motion: Floats,
+        feed: Floats,
+        centre_words: Floats,
+        groups: list[Group],
+        all_exact: bool,
+        exact_block: Callable[[int], Block],
+        line_of: Callable[[int], int] | None,
+        absolute: list[bool] | None,
+    ) -> Iterator[list[Item]]:
+        """Checks ``count`` blocks at once (rows: start and end points, whether an axis is given, the
+        modal motion and feed after each, the I/J/K words): the blocks that might fail go to the exact
+        decoder (``exact_block(k)`` is block ``k``; ``line_of(k)`` its main program line, None: leave
+        :attr:`line` alone), with the decoder's state set to what it is before them; the others only
+        move the position. ``absolute``: G90 (True) or G91 after each block, where blocks change it."""
+        decoder = self.decoder
+        modal = decoder.modal
+        count = int(motion.shape[0])
+        with np.errstate(all="ignore"):
             arc = motion >= 2.0
-            centre_given = ~np.isnan(values[COL_I : COL_I + 3]).all(axis=0)
+            centre_given = ~np.isnan(centre_words).all(axis=0)
             moving = present | (arc & centre_given)
             arc &= moving
             # blocks the exact decoder must see: no feed, too short to be sure it is a move
@@ -289,7 +600,7 @@ class BatchGeometryCheck:
             exact |= moving & ~arc & ((d * d).sum(axis=0) < 1e-12)
             lo = np.minimum(start, end)
             hi = np.maximum(start, end)
-            arcs = self._arcs(values, motion, start, end, arc, exact, lo, hi)
+            arcs = self._arcs(centre_words, motion, start, end, arc, exact, lo, hi)
             exact |= self._outside_limits(lo, hi) & moving
             if all_exact:
                 exact |= moving
@@ -311,7 +622,6 @@ class BatchGeometryCheck:
                 exact[sel[~clear_of_areas(groups, paths)]] = True
         flagged: list[int] = np.flatnonzero(exact).tolist()
         last = -1
-        first_line = chunk.first_line
         for k in flagged:
             decoder.blocks_decoded += k - last - 1
             self.batched_blocks += k - last - 1
@@ -320,12 +630,16 @@ class BatchGeometryCheck:
                 modal.motion = int(motion[k - 1])
                 before = float(feed[k - 1])
                 modal.feed = None if math.isnan(before) else before
-            line = int(idx[k])
-            self.line = first_line + line
+                if absolute is not None:
+                    modal.absolute = absolute[k - 1]
+            if line_of is not None:
+                self.line = line_of(k)
             self.exact_blocks += 1
-            items = decoder.decode_block(self._exact(chunk, line))
+            items = decoder.decode_block(exact_block(k))
             if not decoder.finished and (
-                decoder.position != end[:, k].tolist() or modal.motion != int(motion[k])
+                decoder.position != end[:, k].tolist()
+                or modal.motion != int(motion[k])
+                or (absolute is not None and modal.absolute != absolute[k])
             ):
                 raise RuntimeError(
                     f"batch geometry check out of step with the decoder at line {self.line}: "
@@ -342,10 +656,15 @@ class BatchGeometryCheck:
         modal.motion = int(motion[count - 1])
         final_feed = float(feed[count - 1])
         modal.feed = None if math.isnan(final_feed) else final_feed
-        line = int(idx[count - 1])
-        self.line = first_line + line
-        if last != count - 1:
-            decoder.current_block = self._exact(chunk, line)
+        if absolute is not None:
+            modal.absolute = absolute[count - 1]
+        arcs_at = np.flatnonzero(arc)
+        if arcs_at.shape[0] and int(arcs_at[-1]) > last:
+            # V.G.I/J/K read the last circle's centre words, as the decoder keeps them
+            words = centre_words[:, int(arcs_at[-1])].tolist()
+            decoder.last_centre = {c: v for c, v in zip("IJK", words, strict=True) if not math.isnan(v)}
+        if last != count - 1 and line_of is not None:
+            decoder.current_block = exact_block(count - 1)
 
     def _targets(self, values: Floats, count: int) -> tuple[Floats, Floats, Bools]:
         """Start and end points (one row per channel axis) and whether any axis word is given."""
@@ -386,7 +705,7 @@ class BatchGeometryCheck:
 
     def _arcs(
         self,
-        values: Floats,
+        centre_words: Floats,
         motion: Floats,
         start: Floats,
         end: Floats,
@@ -412,7 +731,7 @@ class BatchGeometryCheck:
         modal = decoder.modal
         first, second = _PLANE_AXES[modal.plane]
         i, j = plane
-        wi, wj = values[COL_I + first], values[COL_I + second]
+        wi, wj = centre_words[first], centre_words[second]
         given = ~np.isnan(wi) | ~np.isnan(wj)
         exact |= arc & ~given
         ci = np.where(np.isnan(wi), 0.0, wi)

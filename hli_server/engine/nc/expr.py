@@ -189,7 +189,9 @@ class Unary(Expr):
         self.operand = operand
 
     def evaluate(self, env: Env) -> Value:
-        value = as_number(self.operand.evaluate(env), "the sign '-'" if self.negate else "the sign '+'")
+        value = self.operand.evaluate(env)
+        if not isinstance(value, float):
+            value = as_number(value, "the sign '-'" if self.negate else "the sign '+'")
         return -value if self.negate else value
 
     def is_constant(self) -> bool:
@@ -227,6 +229,24 @@ class BinOp(Expr):
             )
         a = self.left.evaluate(env)
         b = self.right.evaluate(env)
+        if isinstance(a, float) and isinstance(b, float):
+            # the fast path of two numbers: + - * and the comparisons (what the general path gives)
+            if op <= OP_MUL:
+                result = a + b if op == OP_ADD else (a - b if op == OP_SUB else a * b)
+                if math.isfinite(result):
+                    return result
+            elif OP_EQ <= op <= OP_GE:
+                if op == OP_EQ:
+                    return 1.0 if a == b else 0.0
+                if op == OP_NE:
+                    return 1.0 if a != b else 0.0
+                if op == OP_LT:
+                    return 1.0 if a < b else 0.0
+                if op == OP_LE:
+                    return 1.0 if a <= b else 0.0
+                if op == OP_GT:
+                    return 1.0 if a > b else 0.0
+                return 1.0 if a >= b else 0.0
         if op in (OP_EQ, OP_NE):
             if isinstance(a, str) != isinstance(b, str):
                 raise EvalError(

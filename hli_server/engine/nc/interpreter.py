@@ -614,6 +614,10 @@ class Interpreter(Env):
         self._globals: dict[str, _Units] = {}
         """Global subprograms and cycles called in this program, compiled once (a pocket calls one
         cycle thousands of times)."""
+        self.before_effect: Callable[[], None] | None = None
+        """Called before the interpreter does what others see (a message, a warning, a V.E. write) or
+        reads the decoder's state (V.A., V.G.): the batch geometry check decodes the blocks it kept first
+        (hli_server/engine/batch.py)."""
 
     # --- program control -------------------------------------------------------------------------------
     def start(self, text: str | TextIO | ProgramText, name: str = "program") -> None:
@@ -665,6 +669,11 @@ class Interpreter(Env):
     def advance_to(self, line: int) -> None:
         """The batch geometry check ran the main program's lines up to ``line`` (exclusive) itself."""
         self._frames[0].line = line
+
+    def _effect(self) -> None:
+        hook = self.before_effect
+        if hook is not None:
+            hook()
 
     # --- the loop --------------------------------------------------------------------------------------
     def next(self) -> Block | Directive | None:
@@ -762,7 +771,10 @@ class Interpreter(Env):
 
     def _number(self, stmt: Stmt, expr: Expr, what: str) -> float:
         try:
-            return as_number(expr.evaluate(self), what)
+            value = expr.evaluate(self)
+            if isinstance(value, float):
+                return value
+            return as_number(value, what)
         except EvalError as exc:
             raise stmt.error(exc.alarm, exc.message) from None
 
@@ -814,14 +826,16 @@ class Interpreter(Env):
         if words:
             block = self._build(frame, stmt, words)
             self._pending.append(block)
-        place = block if block is not None else self._place_block(frame, stmt)
-        for action in syncs:
-            self._pending.append(SyncAction(place, action))
+        if syncs:
+            place = block if block is not None else self._place_block(frame, stmt)
+            for action in syncs:
+                self._pending.append(SyncAction(place, action))
         if block is not None and block.m_codes:
             self._program_flow(frame, block)
             if (frame.returning or self._ended) and (stmt.call is not None or stmt.goto is not None):
                 raise stmt.error(A_CONTROL, "a block that ends the program or subroutine calls or jumps")
         if stmt.call is not None:
+            place = block if block is not None else self._place_block(frame, stmt)
             self._call(frame, stmt, stmt.call, place)
         elif stmt.goto is not None:
             self._goto(frame, stmt, stmt.goto)
@@ -848,6 +862,7 @@ class Interpreter(Env):
         place = block.label
         if 30 in m or 2 in m:
             if frame.kind != "main":
+                self._effect()
                 self.host.warn(
                     A_SUB_END,
                     f"M{30 if 30 in m else 2:02d} in {frame.kind} subroutine {frame.name}: it ends the whole "
@@ -874,6 +889,7 @@ class Interpreter(Env):
         """Warning 20375: control blocks still open where a program level ends."""
         if frame.open:
             top = frame.open[-1]
+            self._effect()
             self.host.warn(
                 A_OPEN_VALID,
                 f"{len(frame.open)} control block(s) still open at the end of {frame.kind} program "
@@ -942,6 +958,10 @@ class Interpreter(Env):
 
     def read(self, ref: Ref) -> Value:
         kind = ref.kind
+        if kind == KIND_VP and not ref.indices:  # V.P.NAME: the fast path of a scalar
+            found_var = self._program_vars.get(ref.name)
+            if found_var is not None and not found_var.dims:
+                return found_var.values[0]
         fixed = ref.fixed
         if fixed >= 0:  # P3, @P2: a constant number, no index
             if kind == KIND_P and fixed < P_COUNT:
@@ -995,6 +1015,7 @@ class Interpreter(Env):
         if kind == KIND_VG:
             if ref.indices:
                 raise EvalError(A_NOT_SIMULATED, f"{ref.text} is not simulated: see docs/nc-language.md")
+            self._effect()
             value = self.host.global_value(ref.name)
             if value is None:
                 raise EvalError(
@@ -1025,6 +1046,7 @@ class Interpreter(Env):
                 raise EvalError(
                     A_UNDECLARED, f"{ref.text}: write V.A.<variable>.<axis> or V.A.<variable>[index]"
                 )
+        self._effect()
         value = self.host.axis_value(variable, axis)
         if value is None:
             raise EvalError(
@@ -1090,8 +1112,18 @@ class Interpreter(Env):
     def _assign(self, frame: _Frame, stmt: Stmt, ref: Ref, value: Value) -> Callable[[], None] | None:
         """Write ``value`` to ``ref``; returns the action of a synchronous V.E. write (done when the
         path gets there) or None."""
+        kind = ref.kind
+        if isinstance(value, float) and math.isfinite(value) and not ref.indices:
+            # the fast paths of P3 = .. and V.P.NAME = .. (a REAL64 scalar): what the general path does
+            if kind == KIND_P and 0 <= ref.fixed < P_COUNT:
+                self._params[ref.fixed] = value
+                return None
+            if kind == KIND_VP:
+                var = self._program_vars.get(ref.name)
+                if var is not None and not var.dims and var.type_name == "REAL64":
+                    var.values[0] = value
+                    return None
         try:
-            kind = ref.kind
             if kind in (KIND_P, KIND_PP):
                 p = self._p_number(ref)
                 if ref.indices:
@@ -1154,6 +1186,7 @@ class Interpreter(Env):
             raise EvalError(A_INDEX, str(exc)) from None
         name = ref.name
         if not spec.synchronous:
+            self._effect()
             external.write(name, channel, number, index)
             return None
 
@@ -1353,10 +1386,12 @@ class Interpreter(Env):
         if "SYN" in stmt.options or "SYN_ACK" in stmt.options:
 
             def emit() -> None:
+                self._effect()
                 host.message(text, save, file, program, line, label)
 
             self._pending.append(SyncAction(self._place_block(frame, stmt), emit))
             return
+        self._effect()
         host.message(text, save, file, program, line, label)
 
     def _format(self, stmt: Stmt, values: list[Value]) -> str:
