@@ -2484,7 +2484,11 @@ def build_block(
     centre: dict[str, float] = {}
     extra: dict[str, float] = {}
     feed: float | None = None
-    weights = any(w.letter == "G" and v == int(v) and int(v) in AXIS_VALUE_G_CODES for w, v, _ in words)
+    weights = False
+    for w, v, _ in words:
+        if w.letter == "G" and v == int(v) and int(v) in AXIS_VALUE_G_CODES:
+            weights = True
+            break
     for word, value, more in words:
         letter = word.letter
         if letter == "AXIS":
