@@ -239,15 +239,15 @@ class _Rows:
         self.feed.append(self._feed)
         self.absolute.append(self._abs)
         self.present.append(bool(block.axes))
-        i = j = k = math.nan
+        ci = cj = ck = math.nan
         for letter, value in block.centre:
             if letter == "I":
-                i = value
+                ci = value
             elif letter == "J":
-                j = value
+                cj = value
             elif letter == "K":
-                k = value
-        self.centre.append((i, j, k))
+                ck = value
+        self.centre.append((ci, cj, ck))
 
 
 class BatchGeometryCheck:
