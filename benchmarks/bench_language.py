@@ -4,7 +4,10 @@
    full machine, ``check --geometry-only`` as a batch), by this checkout and by another git revision
    (``--reference main``: the code before the language), each in a process of its own, interleaved round
    by round, best of ``--rounds``. Both processes run the same engine kind: pure Python unless the
-   reference checkout is compiled too (``HLI_PURE_PYTHON`` is set for both where it is not).
+   reference checkout is compiled too (``HLI_PURE_PYTHON`` is set for both where it is not): a ``git
+   archive`` is not; ``--reference-dir DIR`` takes a checkout of the reference that may be (compiled in
+   place: ``python setup.py build_ext --inplace`` there), and with this checkout compiled (``make
+   compile``) both run compiled.
 2. A program with loops, subroutines and variables (a pocket cleared by a ``$FOR`` over depths and
    a ``$WHILE`` over passes, each pass a global subroutine with ``@P`` parameters, variables for the
    step and the direction) against the exact path (block by block, ``HLI_BATCH_CHECK=0``) of the same
@@ -15,6 +18,7 @@
    in one cycle: 800,000 such blocks stalled the clock 3.9 s), and a ``$WHILE`` without motion.
 
     .venv/bin/python -m benchmarks.bench_language [--blocks N] [--rounds R] [--reference REV]
+        [--reference-dir DIR]
 """
 
 from __future__ import annotations
@@ -178,6 +182,11 @@ def _reference_checkout(rev: str, into: Path) -> Path | None:
     return target
 
 
+def _compiled_checkout(checkout: Path) -> bool:
+    """Has ``checkout`` its engine compiled in place (mypyc's modules beside the sources)?"""
+    return any((checkout / "hli_server" / "engine").glob("native__mypyc*.so"))
+
+
 def _unrolled(language: Path, files: dict[str, str], out: Path) -> tuple[int, int]:
     """The language program's moves written out as plain lines (G90 absolute targets, exact floats):
     how many moves, and how many NC blocks (statements) the language program runs for them."""
@@ -225,16 +234,23 @@ def main() -> None:
     )
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--reference", default="main", help="git revision of the code before the language")
+    ap.add_argument(
+        "--reference-dir",
+        type=Path,
+        default=None,
+        help="a checkout of the reference (compiled in place or not) instead of a git archive of --reference",
+    )
     args = ap.parse_args()
     env = dict(os.environ)
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         near = d / "near.nc"
         write_lines(near, near_area_lines(args.blocks))
-        reference = _reference_checkout(args.reference, d)
-        compiled_here = ENGINE_COMPILED
-        if reference is not None:
-            # the reference copy is not compiled: both run pure Python, so that the figures compare
+        reference = args.reference_dir or _reference_checkout(args.reference, d)
+        compiled_here = ENGINE_COMPILED and not os.environ.get(PURE_ENV)
+        if reference is not None and not (compiled_here and _compiled_checkout(reference)):
+            # the reference copy is not compiled (or this one is not): both run pure Python, so that the
+            # figures compare
             env[PURE_ENV] = "1"
         best = {"ours": 0.0, "reference": 0.0}
         blocks = 0

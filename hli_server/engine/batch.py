@@ -13,11 +13,11 @@ of a CAM program:
    G0..G3, F, I/J/K and one-letter axes), *empty*, or *other* - and reads the plain lines' numbers, bit for
    bit as the parser does.
 2. Every *other* line (comments, ``#`` commands, control statements, variables, calls, M codes, G90/G91,
-   ``X2=..``, anything unusual or wrong) goes to the interpreter and the decoder, exactly as in a run;
-   so do plain lines inside loops and subroutines (the interpreter runs them), plain lines while an area
-   is being defined, plain lines under G70 (inch) or G95 (feed per revolution), and short stretches of
-   plain lines (fewer than :data:`SMALL_RUN` plus :data:`SMALL_RUN_PER_AREA` for each active area). A
-   line with only a comment does not end a stretch.
+   ``X2=..``, anything unusual or wrong) goes to the interpreter, and what it gives to the decoder,
+   exactly as in a run (but see 4.); so do plain lines inside loops and subroutines (the interpreter runs
+   them), plain lines while an area is being defined, plain lines under G70 (inch) or G95 (feed per
+   revolution), and short stretches of plain lines (fewer than :data:`SMALL_RUN` plus
+   :data:`SMALL_RUN_PER_AREA` for each active area). A line with only a comment does not end a stretch.
 3. A stretch of plain lines ahead of the interpreter is decoded at once: the modal motion and feed, the
    targets (G90 with the zero offset, G91 summed in program order: the same floats), the segments' boxes;
    then the blocks that might fail a check are picked, conservatively: a line shorter than 1 µm (the
@@ -29,10 +29,20 @@ of a CAM program:
    stretch's end. The interpreter then goes on after the stretch. While contouring is on (issue 24,
    docs/nc-language.md "Contouring") every line is decoded exactly: the transitions are segments of
    their own.
+4. The blocks the interpreter builds - in loops, subroutines and cycles (``G91 X[@P3 * V.P.DIR]``), or
+   from an *other* line of the main program - that only move (G0..G3, G90/G91, axes, I/J/K, a positive F,
+   an M17/M29; :meth:`_Rows.takes`) are kept, their end points computed as the decoder computes them,
+   and checked as a stretch of plain lines is (3.) when the interpreter gives anything else (a block with
+   other words, a directive, the end) or is back before plain lines of the main program. Before the
+   interpreter does what others see or reads the decoder's state - a ``#MSG``, a warning, a V.E. write,
+   V.A./V.G. (:attr:`Interpreter.before_effect`) - and before an error or the iteration cap is reported,
+   the kept blocks are checked first; if one fails, the check ends there, before that statement, as the
+   exact path would (``tests/unit/test_batch_language.py``).
 
 An error stops at the same block with the same alarm, because the block that raises it is decoded
-exactly; a block the batch clears cannot fail a check. ``tests/unit/test_batch_check.py`` holds the
-batch to the exact path on random programs (same alarms, points, line and block numbers, final position).
+exactly; a block the batch clears cannot fail a check. ``tests/unit/test_batch_check.py`` and
+``tests/unit/test_batch_language.py`` hold the batch to the exact path on random programs (same alarms,
+points, line and block numbers, messages, final position).
 
 The batch runs only where it knows every path check of the channel (soft limits, areas, the collision
 check while no pair is latched); with any other check installed (a user's monitor), ``check`` decodes
@@ -253,9 +263,10 @@ class _Rows:
 class BatchGeometryCheck:
     """Decodes a program for ``check --geometry-only`` on ``channel`` (see the module's description).
 
-    The channel's interpreter runs the program, one statement at a time; while it goes straight on in
-    the main program (:attr:`Interpreter.at_main_level`), the plain lines ahead of it are decoded here,
-    many at a time. :meth:`items` yields what the exact decoder would have yielded (motions, markers,
+    The channel's interpreter runs the program; while it goes straight on in the main program
+    (:attr:`Interpreter.at_main_level`), the plain lines ahead of it are decoded here, many at a time,
+    and the blocks it builds that only move are kept and checked many at a time too. :meth:`items`
+    yields what the exact decoder would have yielded (motions, markers,
     errors), in program order, and an empty list now and then (progress); the caller handles them as it
     handles :meth:`Decoder.next_items` (running action markers at once). :attr:`line` is the main
     program's line reached."""
@@ -293,7 +304,8 @@ class BatchGeometryCheck:
         interpreter.start(source, source.name)
         decoder.start(interpreter, self.channel.setpoints())
         saved = (interpreter.budget, interpreter.iteration_cap)
-        interpreter.budget = 1  # one statement at a time: back here whenever it goes straight on
+        interpreter.budget = 1  # one statement at a time: back here whenever it goes straight on (the
+        # kept blocks' loop in _step lifts it while it runs)
         interpreter.iteration_cap = iteration_cap
         self._chunk = None
         self._rows.clear()
