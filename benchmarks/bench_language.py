@@ -1,7 +1,8 @@
 """Issue 20: the NC language's front end against what it replaced and what it must not be slower than.
 
-1. The geometry check of a plain program (``near_area_lines``: lines and arcs close to 20 areas on the
-   full machine, ``check --geometry-only`` as a batch), by this checkout and by another git revision
+1. The geometry check of plain programs (``check --geometry-only`` as a batch, the full machine): plain
+   lines without areas, arcs near 20 areas (``near_area_arcs``), lines and arcs near 20 areas
+   (``near_area_lines``), by this checkout and by another git revision
    (``--reference main``: the code before the language), each in a process of its own, interleaved round
    by round, best of ``--rounds``. Both processes run the same engine kind: pure Python unless the
    reference checkout is compiled too (``HLI_PURE_PYTHON`` is set for both where it is not): a ``git
@@ -31,7 +32,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from benchmarks.programs import FULL_MACHINE, near_area_lines, write_lines
+from benchmarks.programs import FULL_MACHINE, near_area_arcs, near_area_lines, write_lines
 from hli_server._compiled import ENGINE_COMPILED, PURE_ENV
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -252,30 +253,16 @@ def main() -> None:
             # the reference copy is not compiled (or this one is not): both run pure Python, so that the
             # figures compare
             env[PURE_ENV] = "1"
-        best = {"ours": 0.0, "reference": 0.0}
-        blocks = 0
-        for _ in range(args.rounds):
-            out = _run(ROOT, near, FULL_MACHINE, True, env)
-            blocks = int(out["blocks"])
-            best["ours"] = max(best["ours"], blocks / out["elapsed"])
-            if reference is not None:
-                # the reference's own machine file: the configuration's rules may differ between the two
-                ref_machine = reference / FULL_MACHINE.relative_to(ROOT)
-                ref = _run(reference, near, ref_machine, True, env)
-                best["reference"] = max(best["reference"], ref["blocks"] / ref["elapsed"])
         kind = "pure Python" if env.get(PURE_ENV) else ("compiled" if compiled_here else "pure Python")
-        print(
-            f"plain program, check --geometry-only, 20 areas ({kind}): {best['ours']:,.0f} blocks/s "
-            f"({blocks:,} blocks, best of {args.rounds})"
-        )
-        if best["reference"]:
-            print(
-                f"reference: {args.reference} (before the language), same program, same run: "
-                f"{best['reference']:,.0f} blocks/s; ratio this / {args.reference}: "
-                f"{best['ours'] / best['reference']:.2f}"
-            )
-        else:
-            print(f"reference {args.reference}: skipped (git archive failed)")
+        programs = {
+            "plain lines (no areas)": d / "lines.nc",
+            "arcs near 20 areas (near_area_arcs)": d / "arcs.nc",
+            "lines and arcs near 20 areas (near_area_lines)": near,
+        }
+        write_lines(programs["plain lines (no areas)"], near_area_lines(args.blocks, with_areas=False))
+        write_lines(programs["arcs near 20 areas (near_area_arcs)"], near_area_arcs(args.blocks))
+        for title, program in programs.items():
+            _versus_reference(title, program, reference, env, args, kind)
 
         if args.still_blocks:
             _still(d, args, reference, env)
@@ -319,6 +306,40 @@ def main() -> None:
             f"its plain twin {figures['full_plain']:,.0f} cycles/s; "
             f"ratio {figures['full_language'] / figures['full_plain']:.2f}"
         )
+
+
+def _versus_reference(
+    title: str,
+    program: Path,
+    reference: Path | None,
+    env: dict[str, str],
+    args: argparse.Namespace,
+    kind: str,
+) -> None:
+    """``check --geometry-only`` of ``program`` here and by the reference, interleaved, best of the rounds."""
+    best = {"ours": 0.0, "reference": 0.0}
+    blocks = 0
+    for _ in range(args.rounds):
+        out = _run(ROOT, program, FULL_MACHINE, True, env)
+        blocks = int(out["blocks"])
+        best["ours"] = max(best["ours"], blocks / out["elapsed"])
+        if reference is not None:
+            # the reference's own machine file: the configuration's rules may differ between the two
+            ref_machine = reference / FULL_MACHINE.relative_to(ROOT)
+            ref = _run(reference, program, ref_machine, True, env)
+            best["reference"] = max(best["reference"], ref["blocks"] / ref["elapsed"])
+    line = (
+        f"{title}, check --geometry-only ({kind}): {best['ours']:,.0f} blocks/s ({blocks:,} blocks, best of "
+        f"{args.rounds})"
+    )
+    if best["reference"]:
+        line += (
+            f"; reference {args.reference}, same program, same run: {best['reference']:,.0f} blocks/s; "
+            f"ratio this / {args.reference}: {best['ours'] / best['reference']:.2f}"
+        )
+    else:
+        line += f"; reference {args.reference}: skipped (git archive failed)"
+    print(line)
 
 
 def _still(d: Path, args: argparse.Namespace, reference: Path | None, env: dict[str, str]) -> None:

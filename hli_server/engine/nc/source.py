@@ -202,7 +202,11 @@ class ProgramText:
         data = stream.read(chunk)
         at_end = len(data) < chunk
         cut = len(data)
-        while not at_end:
+        has_cr = "\r" in data
+        if not at_end and not has_cr:
+            # the common case: no "\r" in the piece, so it ends after its last "\n" (no look further)
+            cut = data.rfind("\n") + 1
+        while not at_end and (has_cr or cut == 0):
             # a line end "\r" may be the first half of "\r\n": look one character further
             more = stream.read(1)
             if not more:
@@ -228,8 +232,8 @@ class ProgramText:
             data += piece
             if at_end:
                 cut = len(data)
-        text = data[:cut]
-        if "\r" in text:
+        text = data if cut == len(data) else data[:cut]
+        if (has_cr or len(data) > chunk) and "\r" in text:  # data grew over a long line: look again
             text = text.replace("\r\n", "\n").replace("\r", "\n")
         if text and not text.endswith("\n"):
             text += "\n"  # the last line of the text without its line end
