@@ -30,7 +30,7 @@ import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 from hli_server.adapters.faults import CommFaults
 from schemas.events import Event
@@ -39,13 +39,18 @@ from schemas.results import (
     AlarmList,
     AreaTable,
     AxisFaults,
+    CheckReport,
     CollisionPair,
     MachineState,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
+    ReadinessJson,
+    RecorderStatus,
+    RecordingFile,
     Scene,
     SoftLimits,
+    Timing,
 )
 from schemas.wire import Mode
 
@@ -195,12 +200,17 @@ class Readiness:
     ``state`` is ``starting``, ``running`` or ``stopping``; ``ready`` is ``running`` with every door up."""
 
     ready: bool
-    state: str
+    state: Literal["starting", "running", "stopping"]
     doors: Mapping[str, bool]
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> ReadinessJson:
         waiting = [name for name, up in self.doors.items() if not up]
-        return {"ready": self.ready, "state": self.state, "doors": dict(self.doors), "waiting_for": waiting}
+        return {
+            "ready": self.ready,
+            "state": self.state,
+            "doors": dict(self.doors),
+            "waiting_for": waiting,
+        }
 
 
 class Trace:
@@ -422,7 +432,7 @@ class OperatorPort(Protocol):
         """The channel's area table (FCT-C14) as ``check`` lists it."""
         ...
 
-    def timing(self) -> dict[str, Any]:
+    def timing(self) -> Timing:
         """Pacing statistics of the clock (``GET /api/timing``)."""
         ...
 
@@ -469,7 +479,7 @@ class CheckPort(Protocol):
         max_cycles: int = CHECK_MAX_CYCLES,
         max_iterations: int = CHECK_MAX_ITERATIONS,
         timeout_s: float = CHECK_TIMEOUT_S,
-    ) -> dict[str, Any]:
+    ) -> CheckReport:
         """``check --format json``'s report with ``program``, ``status`` (``ok``, ``stopped``, ``capped``)
         and ``exit_code``. NotFoundError (channel), InvalidRequestError (files), UnavailableError (busy),
         CheckTimeoutError (the wall-clock limit)."""
@@ -480,19 +490,19 @@ class RecorderPort(Protocol):
     """Recording the session (docs/record-replay.md): one recording at a time, by name in the
     server's recording directory. Errors are :class:`OperatorError` subclasses."""
 
-    def status(self) -> dict[str, Any]:
+    def status(self) -> RecorderStatus:
         """``{"recording", "file", "name", "started_cycle", "cycles", "bytes_written", ...}``."""
         ...
 
-    def start(self, name: str | None = None) -> dict[str, Any]:
+    def start(self, name: str | None = None) -> RecorderStatus:
         """Start recording into ``<dir>/<name>.jsonl.gz`` (None: a name from the time); the status."""
         ...
 
-    def stop(self) -> dict[str, Any]:
+    def stop(self) -> RecorderStatus:
         """End the recording (flushed, closed); its final status."""
         ...
 
-    def files(self) -> list[dict[str, Any]]:
+    def files(self) -> list[RecordingFile]:
         """The recordings in the directory: ``[{"name", "bytes", "modified", "recording"}]``."""
         ...
 

@@ -76,6 +76,7 @@ from hli_server.codecs.event_json import (
     wall_time_text,
 )
 from schemas.events import Event
+from schemas.results import CommFaultChange
 
 if TYPE_CHECKING:
     import aiomqtt
@@ -432,7 +433,7 @@ class MqttAdapter:
             return
         self._queue(event, time.time())
 
-    def _on_fault(self, _change: dict[str, Any]) -> None:
+    def _on_fault(self, _change: CommFaultChange) -> None:
         """A communication fault changed: a ``disconnect`` cuts the session now (docs/record-replay.md)."""
         if self._faults.door_down(Door.MQTT):
             self._cut.set()
