@@ -53,6 +53,7 @@ __all__ = [
     "SlowCycleJson",
     "SoftLimits",
     "Timing",
+    "TraceJson",
 ]
 
 _OPEN = ConfigDict(extra="allow")
@@ -429,3 +430,11 @@ class CheckReport(TypedDict):
         list[dict[str, Any]] | None,
         Field(description="the channel's work and protection areas at the end (FCT-C14); null: none defined"),
     ]
+
+
+class TraceJson(TypedDict):
+    """``POST /api/step``'s trace (H-07): the cycles and, per traced ST path, its value in each of them."""
+
+    signals: list[str]
+    cycles: list[int]
+    values: dict[str, list[bool | int | float]]

@@ -51,6 +51,7 @@ from schemas.results import (
     Scene,
     SoftLimits,
     Timing,
+    TraceJson,
 )
 from schemas.wire import Mode
 
@@ -179,6 +180,8 @@ class LoggedEvent:
     event: Event
 
     def to_json(self) -> dict[str, Any]:
+        """The event's fields (they differ per event type: ``schemas.events`` and docs/api.md list them)
+        with its ``seq``."""
         return {"seq": self.seq, **self.event.to_json()}
 
 
@@ -274,7 +277,7 @@ class Trace:
         k = int(found[0])
         return {path: self._columns[path][k].item() for path in self.signals}
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> TraceJson:
         return {"signals": list(self.signals), "cycles": self.cycles, "values": self.values}
 
     def json_chunks(self, slice_size: int = 65_536) -> Iterator[bytes]:
@@ -303,7 +306,7 @@ class Trace:
         return f"Trace({len(self)} cycles of {', '.join(self.signals)})"
 
 
-def _finite_or_name(value: Any) -> Any:
+def _finite_or_name(value: Value) -> Value | str:
     if isinstance(value, float) and not math.isfinite(value):
         return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
     return value

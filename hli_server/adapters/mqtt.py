@@ -54,7 +54,7 @@ import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final, cast
+from typing import TYPE_CHECKING, Any, Final, TypedDict, cast
 
 from pydantic import (
     BaseModel,
@@ -89,6 +89,7 @@ __all__ = [
     "STATE_KINDS",
     "MqttAdapter",
     "MqttOptions",
+    "MqttStats",
     "topic_safe",
 ]
 
@@ -253,6 +254,21 @@ class _BrokerGoneError(Exception):
     """The connection to the broker ended (detected by the watcher task)."""
 
 
+class MqttStats(TypedDict):
+    """:meth:`MqttAdapter.stats`: the adapter's counters since it started."""
+
+    connected: bool
+    published: int
+    queued: int
+    inflight: int
+    dropped: int
+    unencodable: int
+    connects: int
+    connect_failures: int
+    seq: int
+    last_error: str | None
+
+
 class MqttAdapter:
     """Publishes the machine's events to an MQTT broker (H-05); a client, it listens on nothing.
 
@@ -338,7 +354,7 @@ class MqttAdapter:
             + (f"; {state})" if state else ")")
         ]
 
-    def stats(self) -> dict[str, Any]:
+    def stats(self) -> MqttStats:
         """Counters: published, queued (waiting + in flight), dropped, unencodable, connects."""
         return {
             "connected": self._connected,

@@ -251,7 +251,8 @@ def check_options(name: str, options: Mapping[str, Any]) -> dict[str, Any]:
     is wrong, with a did-you-mean for misspelled options and the list of the adapter's options."""
     model = options_model(name)
     known = sorted(model.model_fields)
-    unknown = sorted(set(options) - set(known))
+    renamed = getattr(model, "RENAMED", {})  # former names: the model takes them, with a warning
+    unknown = sorted(set(options) - set(known) - set(renamed))
     if unknown:
         hints = []
         for key in unknown:
