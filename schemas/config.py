@@ -551,7 +551,9 @@ class AdapterEntry(_Strict):
 
     name: str = Field(pattern=r"^[a-z][a-z0-9_]*$", description="adapter name (modbus, ...)")
     options: dict[str, str | int | float | bool] = Field(
-        default_factory=dict, description="the adapter's options, as for --adapter NAME:key=value"
+        default_factory=dict,
+        description="the adapter's options, as for --adapter NAME:key=value (seconds end in _s; each door's "
+        "options: docs/api.md, modbus.md, ads.md, mqtt.md)",
     )
 
 

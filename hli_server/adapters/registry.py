@@ -49,6 +49,7 @@ __all__ = [
     "create_adapter",
     "door_guards",
     "options_model",
+    "options_table_markdown",
     "parse_adapter_spec",
     "plan_adapters",
     "register_adapter",
@@ -244,6 +245,38 @@ def options_model(name: str) -> type[BaseModel]:
     """The options model of adapter ``name`` (its fields are its options, with defaults and help)."""
     model: type[BaseModel] = _load(_kind(name).options)
     return model
+
+
+def options_table_markdown(name: str) -> str:
+    """The options of adapter ``name`` as a Markdown table (option, default, range, meaning), from its options
+    model, and its former option names (docs/api.md has the HTTP door's: a test keeps it current)."""
+    model = options_model(name)
+    lines = ["| option | default | range | meaning |", "|---|---|---|---|"]
+    for field_name, info in model.model_fields.items():
+        if info.default_factory is not None:
+            default = repr(info.default_factory()).replace("'", '"')  # type: ignore[call-arg]
+        elif info.is_required():
+            default = "required"
+        else:
+            default = "none" if info.default is None else str(info.default)
+        low = high = None
+        for bound in info.metadata:
+            low = getattr(bound, "ge", getattr(bound, "gt", low))
+            high = getattr(bound, "le", getattr(bound, "lt", high))
+        span = f"{low} .. {high}" if low is not None and high is not None else "-"
+        lines.append(f"| `{field_name}` | {default} | {span} | {info.description or ''} |")
+    renamed: Mapping[str, str | None] = getattr(model, "RENAMED", {})
+    if renamed:
+        former = ", ".join(
+            f"`{old}` (now `{new}`)" if new is not None else f"`{old}` (no effect)"
+            for old, new in renamed.items()
+        )
+        lines += [
+            "",
+            "Former names, still loaded with a DeprecationWarning and a warning in the log until the next "
+            f"minor version (an old and a new name together are refused): {former}.",
+        ]
+    return "\n".join(lines) + "\n"
 
 
 def check_options(name: str, options: Mapping[str, Any]) -> dict[str, Any]:

@@ -6,6 +6,7 @@ and a log line for one minor version, through the model, a machine file's ``[[ad
 from __future__ import annotations
 
 import logging
+import re
 from importlib import resources
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from pydantic import ValidationError
 from hli_server.adapters.http.options import HttpOptions
 from hli_server.adapters.modbus import ModbusOptions
 from hli_server.adapters.options import RenamedOptions
-from hli_server.adapters.registry import AdapterError, check_options, plan_adapters
+from hli_server.adapters.registry import AdapterError, check_options, options_table_markdown, plan_adapters
 from hli_server.adapters.tcp import TcpDoorOptions
 from hli_server.configuration import load_machine
 
@@ -122,3 +123,19 @@ def test_a_machine_file_with_the_old_http_names_loads_with_a_warning(tmp_path: P
         plan = dict(plan_adapters(configured))
     assert plan["http"]["keep_alive_s"] == 9
     assert plan["http"]["graceful_timeout_s"] == 1
+
+
+def test_the_docs_list_the_http_door_options_as_the_model_has_them() -> None:
+    """docs/api.md, "Options of the door", is generated from the model
+    (``options_table_markdown("http")``)."""
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "api.md").read_text(encoding="utf-8")
+    match = re.search(
+        r"<!-- BEGIN GENERATED: http options -->\n(.*)<!-- END GENERATED: http options -->", doc, re.S
+    )
+    assert match, "docs/api.md lost its generated HTTP options markers"
+    assert match[1] == options_table_markdown("http"), (
+        "docs/api.md is out of date: paste hli_server.adapters.registry.options_table_markdown('http') "
+        "between the GENERATED markers"
+    )
+    for old, new in HttpOptions.RENAMED.items():
+        assert f"`{old}` (now `{new}`)" in match[1]
