@@ -468,7 +468,7 @@ CHECK_MAX_TIMEOUT_S = 600.0
 
 class CheckPort(Protocol):
     """Checking a program offline on a fresh machine of the server's machine file, as ``hli-server check``
-    does (issue 20; ``POST /api/check``): the engine's ``ProgramCheck``, in a process of its own, so that
+    does (N-10; ``POST /api/check``): the engine's ``ProgramCheck``, in a process of its own, so that
     the running machine is never touched and its clock never waits."""
 
     async def check(
@@ -626,7 +626,7 @@ class AdapterHost(Protocol):
 
     @property
     def checker(self) -> CheckPort:
-        """Checking programs offline (issue 20, ``POST /api/check``)."""
+        """Checking programs offline (N-10, ``POST /api/check``)."""
         ...
 
     @property

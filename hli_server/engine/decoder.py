@@ -768,7 +768,7 @@ class Decoder:
             )
         return items
 
-    # --- frames, tools, radius compensation (issue 24; hli_server/engine/path) -------------------------
+    # --- frames, tools, radius compensation (M-10..M-18; hli_server/engine/path) -----------------------
     @property
     def transforms_active(self) -> bool:
         """A frame, a tool or the radius compensation is active: blocks take the framed path."""

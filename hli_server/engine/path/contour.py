@@ -1,5 +1,5 @@
-"""Polynomial contouring: the corner between two motion blocks replaced by a smooth transition (issue 24,
-item 3; M-20..M-24).
+"""Polynomial contouring: the corner between two motion blocks replaced by a smooth transition
+(M-20..M-24).
 
 The kernel's polynomial contouring (G61 non-modal, G261/G260 modal, ``#CONTOUR MODE [...]``;
 programming manual "Polynomial contouring (G61/G261/G260)",

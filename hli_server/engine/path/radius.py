@@ -1,4 +1,4 @@
-"""Tool radius compensation G40/G41/G42 (issue 24 item 4, M-16..M-18).
+"""Tool radius compensation G40/G41/G42 (M-16..M-18).
 
 Works in program coordinates, in the active plane, before the frames (docs/nc-language.md "Tools").
 Programming manual: "Tool radius compensation (TRC)"

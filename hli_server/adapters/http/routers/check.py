@@ -1,4 +1,4 @@
-"""``POST /api/check``: check a program offline, as ``hli-server check`` does (issue 20).
+"""``POST /api/check``: check a program offline, as ``hli-server check`` does (N-10).
 
 The engine's ``ProgramCheck`` runs on a fresh machine of the server's machine file, in a worker process
 (``runtime/checks.py``): the running machine, its programs and its V.E. variables are not touched, and the
