@@ -855,7 +855,7 @@ def test_docs_nc_language_names_every_alarm_of_the_language():
 
 @pytest.mark.req("N-08")
 def test_a_motion_function_not_simulated_says_so_and_where_to_read_more():
-    """The refusal names the construct and the page that lists what is not simulated, not a project's issue."""
+    """The refusal names the construct and the page listing what is not simulated, not a project issue."""
     err = error("#TRC [LIMIT_ANGLE=10]\nM30\n")
     assert err.alarm == 910110
     assert err.message.startswith("#TRC: tool radius compensation options (#TRC) is not simulated (N-08)")
