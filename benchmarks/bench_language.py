@@ -1,4 +1,4 @@
-"""Issue 20: the NC language's front end against what it replaced and what it must not be slower than.
+"""The NC language's front end (N-01..N-08) against what it replaced and what it must not be slower than.
 
 1. The geometry check of a plain program (``near_area_lines``: lines and arcs close to 20 areas on the
    full machine, ``check --geometry-only`` as a batch), by this checkout and by another git revision

@@ -1,4 +1,4 @@
-"""Cost of polynomial contouring (issue 24, M-27): the same program with contouring active against without.
+"""Cost of polynomial contouring (M-27): the same program with contouring active against without.
 
 The program is ``bench_engine``'s: squares of lines and quarter arcs, as a CAM system emits them
 (line-line, line-arc and arc-line corners). With ``#CONTOUR MODE [DEV PATH_DEV=0.5]`` and G261 every

@@ -1,4 +1,4 @@
-"""Machines set up and running as the benchmarks and the recorded-scenario tests use them (issue 16).
+"""Machines set up and running as the benchmarks and the recorded-scenario tests use them.
 
 * :func:`full_machine`: the full machine (``machines/full.toml``) with its 16 dynamic position limits
   enabled inside the software limits, the pocket running in channel 1 and the carriages shuttling in
@@ -51,7 +51,8 @@ def enable_dyn_limits(machine: Machine, limits: dict[str, tuple[float, float]]) 
 def full_machine(
     *, levels: int = 12, shuttles: int = 4000, limits: dict[str, tuple[float, float]] | None = None
 ) -> Machine:
-    """The full machine of issue 16, the dynamic limits active, both programs started at the next cycle."""
+    """The full machine (``machines/full.toml``), the dynamic limits active, both programs started at the
+    next cycle."""
     machine = Machine(load_machine(FULL_MACHINE))
     enable_dyn_limits(machine, DYN_LIMITS if limits is None else limits)
     machine.step(2)  # enable -> adopted
