@@ -126,7 +126,9 @@ def run_check(
 
 # --- the worker process ---------------------------------------------------------------------------
 class _Pipes:
-    """Two one-way :class:`Connection` ends as one (send on one pipe, receive on the other)."""
+    """Two one-way :class:`Connection` ends as one (send on one pipe, receive on the other). What crosses is
+    ``Any`` here (a request's dictionary, a ``(kind, payload)`` answer); :meth:`ProgramChecker.check` types it
+    (:class:`~schemas.results.CheckReport`)."""
 
     def __init__(self, inbound: Connection, outbound: Connection) -> None:
         self.inbound, self.outbound = inbound, outbound

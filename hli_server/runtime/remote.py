@@ -22,6 +22,10 @@ What crosses the socket (frames: a 4-byte length, then a pickle; both ends are t
                       ("events", [(seq, event), ...])          every engine event, numbered, in order
                       ("faults", table)                        the communication faults, on every change
 
+The messages are typed ``Any`` inside this module (a frame holds whatever the method called takes and
+answers); the answers are typed where they leave it: each :class:`RemoteOperator`, :class:`RemoteRecorder`
+and :class:`RemoteFaults` method names its result's shape (``schemas.results``), as the ports do.
+
 The doors process keeps its own copy of the event log (``GET /api/events`` and the streams read it there),
 answers what never changes from a cache (channels, axes, program tables, the machine's name), reads cycle
 and time from the image it attached, and sorts the timing samples itself: a read, however large its

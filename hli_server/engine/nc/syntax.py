@@ -1608,8 +1608,7 @@ class _BlockParser:
         if name in MOTION_FUNCTIONS:
             self.fail(
                 A_NOT_SIMULATED,
-                f"#{name}: {MOTION_FUNCTIONS[name]} is not simulated (N-08): "
-                "see docs/nc-language.md",
+                f"#{name}: {MOTION_FUNCTIONS[name]} is not simulated (N-08): see docs/nc-language.md",
             )
         if name in KERNEL_HASH_COMMANDS:
             self.fail(
@@ -2517,8 +2516,7 @@ def build_block(
                     A_NOT_SIMULATED,
                     line,
                     number,
-                    f"G{g}: {MOTION_G_CODES[g]} is not simulated (N-08): see "
-                    "docs/nc-language.md",
+                    f"G{g}: {MOTION_G_CODES[g]} is not simulated (N-08): see docs/nc-language.md",
                 )
             if g not in KNOWN_G:
                 known = " ".join(f"G{c}" for c in sorted(KNOWN_G))
