@@ -69,7 +69,7 @@ RUN_OPTIONS = {
     "pytest": "a python block that is a test file: run with pytest (it must pass)",
     "node": "a js block: run with node, ads-client from tests/interop/node (npm ci; else the session skips)",
     "file": "a block that is a file: written as this name into the session's directory, not run",
-    "req": "requirement IDs (docs/requirements.md) the session proves, comma-separated: its test carries them",
+    "req": "the session's requirement IDs (docs/requirements.md), comma-separated: its test carries them",
 }
 """What a ``doc-run`` marker may say (a flag, or ``key=value`` with shell quoting)."""
 

@@ -210,14 +210,14 @@ def test_every_block_is_run_or_says_why_not() -> None:
     assert all(b.reason for b in skipped), [b.where for b in skipped if not b.reason]
 
 
-@pytest.mark.slow
-@pytest.mark.timeout(300)
 def _with_requirements(session: Session) -> Any:
     """The session as a parameter carrying the requirement IDs its blocks name (``req=H-06,C43-10``)."""
     ids = [r for b in session.blocks for r in b.options.get("req", "").split(",") if r]
     return pytest.param(session, id=session.name, marks=[pytest.mark.req(*ids)] if ids else [])
 
 
+@pytest.mark.slow
+@pytest.mark.timeout(300)
 @pytest.mark.parametrize("session", [_with_requirements(s) for s in sessions()])
 def test_the_doc_runs_as_written(session: Session) -> None:
     command = _namespace_command()
