@@ -711,7 +711,7 @@ class LayoutSignal(TypedDict):
     ads_port: int
     ads_group: int
     ads_offset: int
-    limits: list[float] | None
+    limits: list[int | float] | None  # as written (an int stays an int: the hash sees -128 and -128.0 apart)
     size: int
     access: str
     symbol: str
