@@ -131,6 +131,11 @@ class Piece:
     """The programmed block's length (the corner distances are limited to half of it)."""
     transition: bool = False
     """A chord of a contouring curve."""
+    tip_start: float = 0.0
+    """mm: the tool length in the tool axis's position at the segment's start (the area checks see the
+    segment less it: the tool tip); :attr:`tip_end` at its end. A corner is contoured only where the
+    length is the same along both blocks (the curve's support points then carry that one length)."""
+    tip_end: float = 0.0
 
 
 # --- geometry helpers ---------------------------------------------------------------------------------
@@ -251,7 +256,12 @@ class Contour:
         pre = self._held
         self._held = None
         if pre is not None:
-            if pre.blend is None or piece.rapid or piece.exact_stop:
+            if (
+                pre.blend is None
+                or piece.rapid
+                or piece.exact_stop
+                or not (pre.tip_start == pre.tip_end == piece.tip_start == piece.tip_end)
+            ):
                 out.append(pre)
             else:
                 blended = self._blend(pre, piece, pre.blend)
@@ -339,6 +349,8 @@ class Contour:
                 feed=pre.feed,
                 full_length=math.dist(a, b),
                 transition=True,
+                tip_start=pre.tip_end,
+                tip_end=pre.tip_end,
             )
             for a, b in itertools.pairwise(chords)
             if math.dist(a, b) > 1e-12
