@@ -49,6 +49,8 @@ A_RADIUS_TOO_LARGE = 90017
 A_RADIUS_CIRCLE_CIRCLE = 90031
 A_CONTOUR_VIOLATION = 916000
 _EPS = 1e-9
+_CHECKED = frozenset({"block", "approach", "departure"})
+"""The kinds of compensated elements the gouge check tests against their programmed direction."""
 
 V2 = tuple[float, float]
 
@@ -239,16 +241,21 @@ class RadiusCompensation:
         return min(cands, key=lambda p: math.hypot(*_sub(p, near)))
 
     def _check_direction(self, prog: Element, comp: Element) -> None:
-        """A compensated line must keep its direction (else the tool path crosses itself)."""
-        if prog.centre is not None or comp.kind != "block":
+        """The gouge check (PM 207844107, "Limits of TRC"): a compensated line must keep its programmed
+        direction, else the tool would cut into the contour (a slot narrower than the tool, a block
+        shorter than the corner needs, an approach or a departure too short for the radius). Checked for
+        each element once both its corners are known: its own block and its two neighbours, the kernel's
+        window of three relevant blocks."""
+        if prog.centre is not None or comp.kind not in _CHECKED:
             return
         t = self._tangent(prog, False)
         if _dot(_sub(self._p(comp.end), self._p(comp.start)), t) < -1e-9:
+            what = {"approach": "approach block", "departure": "departure block (G40)"}.get(comp.kind, "block")
             raise TrcError(
                 A_CONTOUR_VIOLATION,
                 f"tool radius compensation: with radius {self.radius:g} mm the compensated path of this "
-                "block "
-                "runs against its programmed direction (the tool path crosses itself: contour violation)",
+                f"{what} runs against its programmed direction (the tool would cut into the contour: "
+                "contour violation)",
                 prog.block,
             )
 
@@ -379,8 +386,9 @@ class RadiusCompensation:
             dep_off = self._offset(e)
             pair = self._corner(self._held, dep_off, self._p(e.start), self._held_prog, e)
             out += pair[:-1]
-            last = pair[-1]
-            out.append(replace(last, end=e.end, kind="departure"))
+            departure = replace(pair[-1], end=e.end, kind="departure")
+            self._check_direction(e, departure)
+            out.append(departure)
             self._held = self._held_prog = None
             self._last_out = e.end
             self.side = 0
