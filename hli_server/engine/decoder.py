@@ -598,7 +598,7 @@ class Decoder:
             self._trc_prog = None
             if items and isinstance(items[-1], Marker):
                 return items
-        ends = [
+        ends: list[Motion | Marker] = [
             Marker(MarkerKind.END, block, payload=f"M{code:02d}") for code in block.m_codes if code in (2, 30)
         ]
         if ends:

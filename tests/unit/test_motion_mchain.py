@@ -111,7 +111,15 @@ def program(
     return "\n".join(line for line in lines if line) + "\n"
 
 
-SQUARE_MILL = [(-20.0, -20.0), (0.0, 0.0), (100.0, 0.0), (100.0, 60.0), (0.0, 60.0), (0.0, 10.0), (-20.0, 10.0)]
+SQUARE_MILL = [
+    (-20.0, -20.0),
+    (0.0, 0.0),
+    (100.0, 0.0),
+    (100.0, 60.0),
+    (0.0, 60.0),
+    (0.0, 10.0),
+    (-20.0, 10.0),
+]
 
 
 # --- what chains now ----------------------------------------------------------------------------------
@@ -122,7 +130,9 @@ SQUARE_MILL = [(-20.0, -20.0), (0.0, 0.0), (100.0, 0.0), (100.0, 60.0), (0.0, 60
 @pytest.mark.parametrize(
     "contouring", ["G261", "#CONTOUR MODE [DEV PATH_DEV=0.5]\nG261", "#HSC ON", "#SPLINE ON", "G64"]
 )
-def test_contouring_with_a_frame_a_tool_or_compensation_runs_contoured(transform: str, contouring: str) -> None:
+def test_contouring_with_a_frame_a_tool_or_compensation_runs_contoured(
+    transform: str, contouring: str
+) -> None:
     """What was refused with 910110 until the stages were chained: every contouring function under a
     coordinate system, a rotation, a tool or the radius compensation runs, and its corners are blended."""
     text = f"%t\nG01 X10 Y10 F5000\n{contouring}\n{transform}\nX20 Y10\nX20 Y20\nX30 Y25\nG40 X40 Y25\nM30\n"
@@ -138,7 +148,9 @@ def test_contouring_with_a_frame_a_tool_or_compensation_runs_contoured(transform
 
 
 @pytest.mark.req("M-30", "M-31")
-def test_stepped_g41_contouring_under_a_rotated_cs_stays_within_the_deviation_of_the_compensated_path() -> None:
+def test_stepped_g41_contouring_under_a_rotated_cs_stays_within_the_deviation_of_the_compensated_path() -> (
+    None
+):
     """The everyday milling program: a #CS turned by 30°, a tool with length and radius, G41, contouring
     with PATH_DEV 1 mm. Cycle by cycle, every setpoint lies within PATH_DEV of the compensated path with
     sharp corners (machine coordinates), and within PATH_DEV + r·√2 of the programmed path."""
@@ -151,6 +163,7 @@ def test_stepped_g41_contouring_under_a_rotated_cs_stays_within_the_deviation_of
     blended, errs, corners = decode(text)
     assert errs == []
     assert corners >= 5  # the approach corner, the four corners of the contour, the departure corner
+    assert departure(blended, compensated) <= dev + 1e-6
     pts, m = trace(text)
     assert errors(m) == []
     assert m.channel(1).state == ProgramState.FINISHED
@@ -205,7 +218,9 @@ def test_property_the_chained_path_stays_within_the_deviation_of_the_compensated
     assume(not errs)  # a random contour the compensation refuses (916000) is not this property's case
     programmed, errs, _ = decode(program(points, contour=None, compensate=False, **kw))
     assert errs == []
-    blended, errs, corners = decode(program(points, contour=f"#CONTOUR MODE [DEV PATH_DEV={dev:.6f}]\nG261", **kw))
+    blended, errs, corners = decode(
+        program(points, contour=f"#CONTOUR MODE [DEV PATH_DEV={dev:.6f}]\nG261", **kw)
+    )
     assert errs == []
     assert corners >= len(points) - 2
     assert departure(blended, compensated) <= dev * (1 + 1e-6) + 1e-6
@@ -248,7 +263,7 @@ def _corner_points() -> tuple[tuple[float, ...], tuple[float, ...]]:
 
 @pytest.mark.req("M-32", "M-24", "M-19", "C14-15")
 def test_protection_area_missed_by_the_compensated_corner_is_hit_by_the_blended_one_under_a_cs() -> None:
-    corner, interim = _corner_points()
+    _, interim = _corner_points()
     area = _square(interim, 1.0)  # 3.5 mm from the sharp compensated path, on the blended one
     pts, m = trace(area + program(CORNER, contour=None).replace("%chain\n", ""))
     assert errors(m) == []
@@ -256,6 +271,11 @@ def test_protection_area_missed_by_the_compensated_corner_is_hit_by_the_blended_
     pts, m = trace(area + program(CORNER, contour=BLEND).replace("%chain\n", ""))
     (err,) = errors(m)
     assert m.channel(1).state == ProgramState.ABORTED
+    # the transition carries its pre-block N30; the area sees the tool tip (Z 0, the axis at 100 mm)
+    assert err.number == 912001
+    assert "N30" in err.message
+    assert err.params["area"] == 7
+    assert err.params["intersection"][2] == pytest.approx(0.0)
     # refused before the tool enters it: the path stops at the start of the refused support-point chord
     assert all(not (abs(p[0] - interim[0]) <= 1.0 and abs(p[1] - interim[1]) <= 1.0) for p in pts)
     assert 1.0 < math.dist(pts[-1][:2], interim[:2]) < 6.0

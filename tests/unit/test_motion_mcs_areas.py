@@ -9,7 +9,7 @@ import pytest
 from hli_server.engine.machine import Machine
 from schemas.config import AxisConfig, ChannelConfig, MachineConfig
 from schemas.wire import Mode, ProgramState
-from tests.unit.areas.helpers import alarm_ids, only_alarm, run
+from tests.unit.areas.helpers import alarm_ids, run
 
 TOOLS = [{"number": 1, "length": 1_000_000, "radius": 50_000}]
 

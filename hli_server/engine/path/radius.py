@@ -250,7 +250,9 @@ class RadiusCompensation:
             return
         t = self._tangent(prog, False)
         if _dot(_sub(self._p(comp.end), self._p(comp.start)), t) < -1e-9:
-            what = {"approach": "approach block", "departure": "departure block (G40)"}.get(comp.kind, "block")
+            what = {"approach": "approach block", "departure": "departure block (G40)"}.get(
+                comp.kind, "block"
+            )
             raise TrcError(
                 A_CONTOUR_VIOLATION,
                 f"tool radius compensation: with radius {self.radius:g} mm the compensated path of this "
