@@ -429,3 +429,20 @@ def test_a_slot_as_wide_as_the_tool_and_a_long_enough_approach_pass_the_gouge_ch
     ok = "%t\nG01 X0 Y-30 Z0 F6000 D1\nG41 X0 Y0\nX-50\nY50\nG40 X-70 Y50\nM30\n"
     _, errs, _ = decode(ok)
     assert errs == []
+
+
+@pytest.mark.req("M-30", "M-27")
+def test_the_chained_benchmark_program_runs_contoured_and_faster() -> None:
+    """``benchmarks/bench_motion.py``'s chained case, small: with #CS, D1, G41 and contouring together the
+    program runs to its end without an alarm, contours its corners and takes fewer cycles than the exact
+    path without them."""
+    from benchmarks.bench_engine import long_program
+    from benchmarks.bench_motion import _run_to_end, chained
+    from benchmarks.bench_motion_tools import machine as tools_machine
+
+    text = long_program(40)
+    plain_cycles, _, plain_corners = _run_to_end(text, tools_machine())
+    cycles, _, corners = _run_to_end(chained(text), tools_machine())
+    assert plain_corners == 0
+    assert corners > 20
+    assert cycles < plain_cycles
