@@ -38,7 +38,12 @@ ordinary line segments: the area checks test exactly the path the axes then foll
 
 No contouring (the corner is kept, as the kernel suppresses it, 475086859): where either block is a
 rapid (G00: it ends in exact stop in this simulator), an exact-stop block (G60), a measuring move, or
-where the transition is tangential or a reversal.
+where the transition is tangential or a reversal; and where the tool length in the axis position changes
+along either block (``Piece.tip_start``/``tip_end``: the support points then carry one length).
+
+In the chain (docs/nc-language.md, "The chained path"), the pieces come from the radius compensation and
+the frames: compensated segments in machine coordinates, each with its block's feed, contouring and tool
+length.
 
 Interface: :meth:`Contour.push` takes a :class:`Piece` (a segment in machine coordinates with its block
 and its contouring request) and returns the pieces ready for the path checks; a piece that asks for
