@@ -197,8 +197,6 @@ class ModalState:
 
 
 _PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}
-_FRAME_CODES = frozenset({17, 18, 19, 53, 54, 55, 56, 57, 58, 59, 92})
-"""G codes that change the frame or the plane: the radius compensation's held block is finished first."""
 """Indices into the main axes (first, second, third) of the plane's first and second axis."""
 _CENTRE_WORDS = {0: "I", 1: "J", 2: "K"}
 """Circle centre word for the first, second, third main axis."""
@@ -400,7 +398,7 @@ class Decoder:
 
     def _decode(self, block: Block) -> list[Motion | Marker]:
         before: list[Motion | Marker] = []
-        if self.trc.active and not _FRAME_CODES.isdisjoint(block.g_codes):
+        if self.trc.active and self._changes_frame(block):
             # a zero offset, G92 or a plane change: the block the compensation holds is finished in the
             # frame it was programmed in (it ends perpendicular to its end point)
             before = self._trc_flush()
@@ -414,6 +412,18 @@ class Decoder:
             if not any(isinstance(item, Motion) for item in items[first:]):
                 return items[:first] + self._flushed(items[first:])
         return items
+
+    def _changes_frame(self, block: Block) -> bool:
+        """The block programs G92, another zero offset (G53..G59) or another plane (G17/G18/G19)."""
+        m = self.modal
+        for g in block.g_codes:
+            if g == 92 or (g in (17, 18, 19) and g != m.plane):
+                return True
+            if g == 53 and m.zero_offset is not None:
+                return True
+            if 54 <= g <= 59 and m.zero_offset != f"G{g}":
+                return True
+        return False
 
     def _flushed(self, items: list[Motion | Marker]) -> list[Motion | Marker]:
         """A flush point: the stages emptied in pipeline order (the radius compensation's held block

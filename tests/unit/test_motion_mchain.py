@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import itertools
 import math
+import random
 from typing import Any
 
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
+from hli_server.engine.alarms import ALARMS
 from hli_server.engine.decoder import DecodeError
 from hli_server.engine.geometry import LineSegment, Segment
 from hli_server.engine.machine import Machine
@@ -22,6 +24,7 @@ from hli_server.engine.path.contour import distance_to_path
 from hli_server.engine.planner import Marker, MarkerKind, Motion
 from schemas.config import AxisConfig, ChannelConfig, MachineConfig
 from schemas.wire import ProgramState
+from tests import fuzz
 from tests.unit.areas.helpers import alarm_ids, errors
 
 TOOLS = [
@@ -39,10 +42,10 @@ def machine(**channel: Any) -> Machine:
     return Machine(MachineConfig(axes=axes, channels=[ChannelConfig(axes=names, tools=TOOLS, **channel)]))
 
 
-def decode(text: str) -> tuple[list[Segment], list[DecodeError], int]:
+def decode(text: str, m: Machine | None = None) -> tuple[list[Segment], list[DecodeError], int]:
     """The program through the decoder alone (no stepping): the motions' segments in machine
     coordinates, the errors, the corners the contouring stage blended."""
-    m = machine()
+    m = m if m is not None else machine()
     ch = m.channel(1)
     source = ProgramText(text, "t")
     ch.interpreter.start(source, "t")
@@ -350,6 +353,7 @@ def test_manual_path_milling_example_with_contouring_compensation_and_a_cs() -> 
         ("#FLUSH", False),
         ("#CS ON [1, 0, 0, 0, 0, 0]", False),
         ("G54", False),
+        ("G17 G53", True),  # the plane and the zero offset in effect already: no frame change
     ],
 )
 def test_flush_points_empty_the_compensation_then_the_contouring(between: str, contoured: bool) -> None:
@@ -432,6 +436,7 @@ def test_a_slot_as_wide_as_the_tool_and_a_long_enough_approach_pass_the_gouge_ch
 
 
 @pytest.mark.req("M-30", "M-27")
+@pytest.mark.slow
 def test_the_chained_benchmark_program_runs_contoured_and_faster() -> None:
     """``benchmarks/bench_motion.py``'s chained case, small: with #CS, D1, G41 and contouring together the
     program runs to its end without an alarm, contours its corners and takes fewer cycles than the exact
@@ -446,3 +451,65 @@ def test_the_chained_benchmark_program_runs_contoured_and_faster() -> None:
     assert plain_corners == 0
     assert corners > 20
     assert cycles < plain_cycles
+
+
+CHAIN_SEEDS = [
+    "#CS ON [10, 20, 0, 0, 0, 30]",
+    "#CS OFF",
+    "#ROTATION ON [ANGLE=45]",
+    "#CONTOUR MODE [DEV PATH_DEV=0.5]",
+    "#CONTOUR MODE [DIST PRE_DIST=2 POST_DIST=1]",
+    "G261",
+    "G260",
+    "G61 X20 Y5",
+    "#HSC ON",
+    "#HSC OFF",
+    "D1 G41",
+    "G42 D2",
+    "G40 X0 Y0",
+    "G26",
+    "G02 X30 Y0 I5 J0",
+    "G01 X40 Y40 Z-2",
+    "G91 X10 Y-5",
+    "G90",
+    "G54",
+    "M08",
+    "#FLUSH",
+    "X0.001 Y0",
+]
+
+
+@pytest.mark.fuzz
+@pytest.mark.req("M-30", "M-33")
+def test_fuzzed_chained_programs_never_crash_and_the_next_program_runs() -> None:
+    """Random mixes of frames, tools, G41/G42/G40, contouring and flush points, one line mutated: only
+    numbered alarms of the table, a continuous finite path, and the next program on the same machine runs
+    as before."""
+    seed = fuzz.seed_for("test_fuzzed_chained_programs_never_crash_and_the_next_program_runs")
+    rng = random.Random(seed)
+    m = machine()
+    clean = program(SQUARE_MILL)
+    reference, errs, _ = decode(clean, m)
+    assert errs == []
+    for example in range(fuzz.count(150)):
+        lines = [rng.choice(CHAIN_SEEDS) for _ in range(rng.randint(2, 12))]
+        moves = [f"X{rng.uniform(-80, 80):.3f} Y{rng.uniform(-80, 80):.3f}" for _ in range(rng.randint(1, 6))]
+        lines = [*lines, *moves]
+        rng.shuffle(lines)
+        if rng.random() < 0.5:
+            k = rng.randrange(len(lines))
+            lines[k] = fuzz.mutate(rng, lines[k])
+        text = "%t\nG01 X0 Y0 Z0 F3000\n" + "\n".join(lines) + "\nM30\n"
+        try:
+            segments, errs, _ = decode(text, m)
+        except Exception as exc:  # pragma: no cover - the failure report
+            raise AssertionError(f"crash (seed {seed}, example {example}): {text!r}") from exc
+        for err in errs:
+            assert err.alarm in ALARMS, (err, text)
+            assert err.message
+        for a, b in itertools.pairwise(segments):
+            assert math.dist(a.end, b.start) < 1e-6, text
+            assert all(math.isfinite(v) for v in b.end)
+    again, errs, _ = decode(clean, m)
+    assert errs == []
+    assert [v for s in again for v in s.end] == pytest.approx([v for s in reference for v in s.end])
