@@ -51,7 +51,7 @@ def assert_clock_kept_pace(clock: dict[str, Any]) -> None:
 
 @pytest.mark.req("E-01", "H-01", "H-05")
 def test_reads_of_the_whole_event_log_cost_the_clock_no_cycle() -> None:
-    """Four clients read ``GET /api/events?since=0&limit=10000`` (about 1.4 MB each) back to back for three
+    """Four clients read ``GET /api/events?since=0&limit=10000`` (about 1.4 MB each) back to back for two
     seconds. Before: the answers were built on the clock's loop, 140-250 ms each; 15,058 cycles dropped in
     20 s. Now they are built in the doors process from its copy of the log."""
     with server() as srv:
@@ -63,7 +63,7 @@ def test_reads_of_the_whole_event_log_cost_the_clock_no_cycle() -> None:
         async def attack() -> None:
             stop = asyncio.Event()
             tasks = [asyncio.create_task(event_log_reader(srv, stop, got)) for _ in range(4)]
-            await asyncio.sleep(3.0)
+            await asyncio.sleep(2.0)
             stop.set()
             await asyncio.gather(*tasks)
 
@@ -71,7 +71,7 @@ def test_reads_of_the_whole_event_log_cost_the_clock_no_cycle() -> None:
         clock = clock_since(before, srv.timing())
     assert got[0] >= 4, got
     assert got[1] / got[0] > 1_000_000  # whole logs: over a megabyte each
-    assert clock["cycles"] > 2_000
+    assert clock["cycles"] > 1_500
     assert_clock_kept_pace(clock)
 
 
