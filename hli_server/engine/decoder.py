@@ -594,7 +594,7 @@ class Decoder:
             return before + self._measuring_move(block)
         moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre))
         if moves and (self.transforms_active or 40 in block.g_codes) and not m.in_area_definition:
-            # radius compensation -> frames and tool length -> contouring -> checks (M-28)
+            # radius compensation -> frames and tool length -> contouring -> checks (M-30)
             items = self._motion_framed(block)
             if items and isinstance(items[-1], Marker):
                 return items
@@ -1027,7 +1027,7 @@ class Decoder:
         """Compensated elements (program coordinates) -> machine segments (frames, the tool length of each
         element) -> the contouring stage -> the path checks and the planner's items (:meth:`_emit_pieces`).
         The stages are rigid, so the contouring stage blends the compensated path in machine coordinates
-        with the deviation it was programmed with (M-28)."""
+        with the deviation it was programmed with (M-30)."""
         items: list[Motion | Marker] = []
         for e in elements:
             block = e.block
