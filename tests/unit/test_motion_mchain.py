@@ -305,7 +305,7 @@ G90 G54 S6000 M03 F5000
 #CS ON [40, 30, 0, 0, 0, 15]
 G0 Z10
 ; polynomial contouring for smooth movements (the cycle example's own line)
-#CONTOUR MODE [DEV, PATH_DEV = [V.G.WZ_AKT.R / 100]]
+#CONTOUR MODE [DEV, PATH_DEV = V.G.WZ_AKT.R / 100]
 G261
 G01 X0 Y0 Z-5
 G41 X25 Y25
