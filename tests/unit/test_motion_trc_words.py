@@ -20,7 +20,8 @@ SQUARE = "N20 G41 G01 X10 Y0\nN30 X30\nN40 Y20\nN50 X10\nN60 G40 Y-10\nN70 M30\n
 def test_g139_and_g140_are_the_initial_states_and_change_nothing() -> None:
     plain, plain_errors, _ = decode("N10 D1 G17 G90 G01 F3000\n" + SQUARE)
     stated, stated_errors, _ = decode("N10 D1 G17 G90 G139 G140 G01 F3000\n" + SQUARE)
-    assert plain_errors == [] and stated_errors == []
+    assert plain_errors == []
+    assert stated_errors == []
     assert stated == plain
 
 
@@ -29,7 +30,8 @@ def test_the_other_trc_modes_are_refused_by_name(g: int) -> None:
     _, errs, _ = decode(f"N10 D1 G17 G90 G01 F3000\nN15 G{g:02d}\n" + SQUARE)
     assert errs, f"G{g} was accepted"
     assert errs[0].alarm == 910110, errs[0]
-    assert f"G{g}" in errs[0].message and "TRC" in errs[0].message
+    assert f"G{g}" in errs[0].message
+    assert "TRC" in errs[0].message
 
 
 @pytest.mark.req("M-20")
