@@ -324,7 +324,15 @@ MOTION_FUNCTIONS: Final[dict[str, str]] = {
     "TRC": "tool radius compensation options (#TRC)",
 }
 """Motion functions not simulated (N-08): refused by name with 910110 (docs/nc-language.md)."""
-MOTION_G_CODES: Final[dict[int, str]] = {}
+MOTION_G_CODES: Final[dict[int, str]] = {
+    5: "tangential TRC selection/deselection",
+    138: "direct TRC selection/deselection",
+    141: "TRC contour masking",
+    236: "direct TRC selection/deselection on the path",
+    237: "perpendicular TRC selection/deselection",
+    238: "TRC selection at an inside corner",
+    239: "TRC selection/deselection without a block",
+}
 """G codes of motion functions not simulated (N-08), refused by name with 910110."""
 VALUE_G_CODES: Final = frozenset((131, 231, 133, 134, 233, 334, 339))
 """G functions programmed with a value, ``G131=50`` (acceleration and ramp-time weightings)."""
@@ -340,7 +348,12 @@ per revolution, G08/G09/G900/G901 acceleration at block start / deceleration at 
 CONTOUR_G_CODES: Final = frozenset((61, 64, 150, 151, 260, 261))
 """Polynomial contouring G61/G261/G260 (G64 as G261), spline interpolation G151/G150 (simulated as
 contouring): M-20..M-23, docs/nc-language.md "Contouring"."""
-KNOWN_G: Final = word_parser.KNOWN_G_CODES | EXTRA_G_CODES | UNIT_G_CODES | CONTOUR_G_CODES
+INITIAL_STATE_G_CODES: Final = frozenset((139, 140))
+"""G139 (indirect TRC selection/deselection, PM 207729163) and G140 (no contour masking, PM 206480651):
+the kernel's initial states, the ones simulated; programmed, they change nothing."""
+KNOWN_G: Final = (
+    word_parser.KNOWN_G_CODES | EXTRA_G_CODES | UNIT_G_CODES | CONTOUR_G_CODES | INITIAL_STATE_G_CODES
+)
 REFUSED_HASH: Final[dict[str, str]] = {
     "KIN": "kinematic transformations (#KIN)",
     "TRAFO": "kinematic transformations (#TRAFO)",
@@ -1888,7 +1901,9 @@ class _BlockParser:
                 saved = self.depth
                 self.depth = 0
                 try:
-                    params[key] = self.expression(stop_at_blank=True)
+                    # inside the brackets a value is a whole expression, blanks and all (the manual's
+                    # ``[DEV, PATH_DEV = V.G.WZ_AKT.R / 100]``); it ends at a word that is no operator
+                    params[key] = self.expression(stop_at_blank=not inside)
                 finally:
                     self.depth = saved
             else:
