@@ -1,4 +1,4 @@
-"""Build: the engine compiled with mypyc where it can be, plain Python everywhere else (issue 16).
+"""Build: the engine compiled with mypyc where it can be, plain Python everywhere else.
 
 Everything about the package is in ``pyproject.toml``; this file only adds the extension modules. The
 modules of ``hli_server/engine`` (all but ``_compiled.NOT_COMPILED``) are compiled with mypyc, the way

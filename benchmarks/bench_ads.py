@@ -18,13 +18,13 @@ The client is pyads 3.6 (Beckhoff's AdsLib) in a separate process, one call in f
 
 Two more servers, the **floors**, answer every request with a canned reply (no decoding): one on the door's
 own transport stack (an ``asyncio.Protocol`` on asyncio's default loop, as the doors process serves: the
-reference of issue 22's "within 5 % of a canned-reply server", since it differs from the door only in
+reference of the goal "within 5 % of a canned-reply server", since it differs from the door only in
 what the door does per request), and one with a blocking thread per connection (``sendall`` right after
 ``recv``: what the pyads client itself allows, shown for comparison, a different stack).
 
 Printed: calls/s, latency p50/p99 per server and mode, the CPU time the serving process spent per call
 (user + system from ``/proc``, the client excluded: the figure a shared machine disturbs least), the
-ratio hli-server / reference (issue 22's goal: >= 1.0x on both) and hli-server / floor (goal: within
+ratio hli-server / reference (the goal: >= 1.0x on both) and hli-server / floor (goal: within
 5 %, >= 0.95), and how the realtime clock fared under the load.
 
     .venv/bin/python -m benchmarks.bench_ads [--seconds 2] [--rounds 2]
@@ -49,9 +49,9 @@ from typing import Any
 from benchmarks._servers import CTX, Server, print_lateness
 
 GOAL = 1.0
-"""hli-server / pyads.testserver, raw reads and read_by_name (issue 22)."""
+"""hli-server / pyads.testserver, raw reads and read_by_name (the goal)."""
 FLOOR_GOAL = 0.95
-"""hli-server / the canned-reply floor: within 5 % (issue 22)."""
+"""hli-server / the canned-reply floor: within 5 % (the goal)."""
 SYMBOL = "gpAx[0]^ipo_state.cmd_pos_r"
 """A DINT of the CNC->PLC half; the reference holds a variable of the same name and address."""
 SERVER_NET_ID = "127.0.0.1.1.1"

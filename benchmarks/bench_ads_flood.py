@@ -1,4 +1,4 @@
-"""ADS door under a flood: the engine's lateness and an honest client's latency (H-04, issue 12).
+"""ADS door under a flood: the engine's lateness and an honest client's latency (H-04).
 
 Each phase starts a fresh server process (the runtime with the demo machine, realtime clock,
 T_A = 1 ms, the ``ads`` adapter with its default limits, the event loop ``hli-server run`` uses)

@@ -1,4 +1,4 @@
-"""Issue 16, P2: ``check --geometry-only`` on a program that runs close to 20 areas, against its references.
+"""``check --geometry-only`` (N-10) on a program that runs close to 20 areas, against its references.
 
 The program (``benchmarks/programs.py``, ``near_area_lines``): lines and G02/G03 arcs round every one of
 the 19 protection areas 0.5..2 mm off them and along the work polygon's edges 0.5..2 mm inside it, on
@@ -26,7 +26,7 @@ References, measured in the same run, interleaved round by round (best of ``--ro
 * peak memory (``ru_maxrss``) of ``hli-server check`` processes on the program and on one twice as long:
   a streaming check stays flat.
 
-Then the hard case for arcs (issue 26, ``near_area_arcs``): a program of as many motion blocks, most of
+Then the hard case for arcs (``near_area_arcs``): a program of as many motion blocks, most of
 them arcs close to the same 20 areas (rings of G02/G03 and short chords hugging the protection circles,
 offset curves and bulging arcs round the squares, travel arcs, arcs in G18 and G19 beside the areas,
 G161/G162 tour by tour), against ``rs274 -g`` on the same moves (``near_area_arcs_rs274``), the same

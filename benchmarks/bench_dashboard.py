@@ -1,4 +1,4 @@
-"""The dashboard's cost to the cycle (issue 15): realtime lateness with the page closed, then open.
+"""The dashboard's cost to the cycle: realtime lateness with the page closed, then open.
 
 ``hli-server run`` in its own process (realtime clock at T_A = 1 ms, the select loop, the demo machine)
 runs a long program of lines and arcs next to an active protection area, so that the page has a moving

@@ -5,7 +5,7 @@
    multiple of real time.
 2. NC blocks per second of ``check --geometry-only`` on a long program. Reference, same run, same
    text: the parser alone (``iter_blocks``); the ratio shows what decoding and path checks cost on top.
-3. The same with 20 active areas (FCT-C14, issue 3): a million blocks of lines and arcs inside a work
+3. The same with 20 active areas (FCT-C14): a million blocks of lines and arcs inside a work
    polygon, past 19 protection areas (polygons and circles). ``check --geometry-only`` blocks/s,
    against the same program without areas (same run); and the program's cycles/s in the full
    simulation, against real time.

@@ -1,4 +1,4 @@
-"""Issue 16, P1: the full machine in simulated time, compiled and pure engine, against the demo machine.
+"""The full machine in simulated time, compiled and pure engine, against the demo machine.
 
 The full machine (``machines/full.toml``, ``benchmarks/scenarios.py``): 2 channels, 8 axes; channel 1
 mills a pocket (lines, G02/G03, 12 depth levels) after defining and activating 20 areas; channel 2

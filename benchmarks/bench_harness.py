@@ -2,7 +2,7 @@
 
 1. 10,000 cycles of the demo machine running a long program, each cycle one cycle of a PLC task
    (``MCV_DynPosLimitHigh`` on X and the feed-override control unit, over the shared-memory
-   transport) and one engine cycle, driven by ``Harness.run_until`` (issue 14: under 2 s). Twice:
+   transport) and one engine cycle, driven by ``Harness.run_until`` (H-07; the goal: under 2 s). Twice:
    the harness' default image (a buffer of the process) and the image in ``/dev/shm``.
    Reference, same run, same program: the bare engine stepping 10,000 cycles (``Machine.step``),
    what no harness can beat; the ratio is the harness' cost on top.
@@ -10,7 +10,7 @@
    thread: two thread hand-overs and the Modbus round trips per cycle), for comparison.
 3. The HTTP control API, cycle-exact: ``POST /api/step`` with ``trace`` (four signals, every cycle
    in one answer) against the way it had to be done before, one step request and four image reads
-   per cycle (issue 14: about 7 ms a cycle).
+   per cycle (about 7 ms a cycle).
 
     .venv/bin/python -m benchmarks.bench_harness [--cycles N]
 """

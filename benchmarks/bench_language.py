@@ -1,4 +1,4 @@
-"""Issue 20: the NC language's front end against what it replaced and what it must not be slower than.
+"""The NC language's front end (N-01..N-08) against what it replaced and what it must not be slower than.
 
 1. The geometry check of plain programs (``check --geometry-only`` as a batch, the full machine): plain
    lines without areas, arcs near 20 areas (``near_area_arcs``), lines and arcs near 20 areas

@@ -1,4 +1,4 @@
-"""The realtime clock under network load (issues 12, 26, 27): PLC pollers, a flood, large reads, dashboards.
+"""The realtime clock under network load (E-01): PLC pollers, a flood, large reads, dashboards.
 
 One ``hli-server run`` per phase (realtime clock, T_A = 1 ms, the demo machine running a program) in a
 process of its own, as users start it (the doors process: Modbus, HTTP and the dashboards' streams served
@@ -24,9 +24,9 @@ later than T_A by cause, and the five worst cycles with their cause (the trace o
 from: the operating system, garbage collection, other work on the clock's loop, requests served between
 cycles, the cycle's own work).
 
-Goals (issue 26): on a quiet multi-core machine p99 <= 300 µs idle and <= 1 ms under 200 pollers plus a
-flood, max <= 5 ms, no dropped cycle; on a 2-core machine the loaded p99 at most 1.5x the same run's idle
-p99. The last lines say which are met.
+Goals (docs/performance.md, "The clock under load"): on a quiet multi-core machine p99 <= 300 µs idle
+and <= 1 ms under 200 pollers plus a flood, max <= 5 ms, no dropped cycle; on a 2-core machine the loaded
+p99 at most 1.5x the same run's idle p99. The last lines say which are met.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ Clients are raw sockets in separate processes (pre-built request, one request in
 client: send, wait for the whole answer, repeat), 1 client and 10 concurrent clients, a few seconds
 each. The two servers take turns, ``--runs`` times (the order alternating), so that a change of the
 machine's load hits both; printed: requests/s, latency p50/p99 per server and run, the ratio hli-server /
-plain per run and its spread over the runs (goals: >= 1.5 with one client, >= 3 with ten, issue 26),
+plain per run and its spread over the runs (goals: >= 1.5 with one client, >= 3 with ten),
 plus how the realtime clock fared under the load (lateness, dropped cycles).
 
     .venv/bin/python -m benchmarks.bench_modbus [--seconds 3] [--clients 1 10] [--count 6] [--runs 3]
@@ -41,7 +41,7 @@ from benchmarks._servers import CTX, Server, print_lateness
 HOLDING_ADDRESS = 0
 """Channel 1's holding registers: override.command_w, mode_w, program_select_w (6 registers)."""
 GOALS = {1: 1.5, 10: 3.0}
-"""hli-server / plain pymodbus, requests per second, by number of clients (issue 26: 3x with ten)."""
+"""hli-server / plain pymodbus, requests per second, by number of clients (the goals)."""
 IN_PROCESS = [False]
 
 

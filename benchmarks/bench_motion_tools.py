@@ -1,5 +1,5 @@
-"""Issue 24 (mcs): decoding and checking a pocket with a rotated #CS and tool radius compensation, against
-the same programmed path without them.
+"""Coordinate systems and tools (M-10..M-18): decoding and checking a pocket with a rotated #CS and tool
+radius compensation, against the same programmed path without them.
 
 The program: ``--blocks`` motion blocks of a zig-zag pocket (lines and G02/G03 half circles) inside a
 work area that is active (so every block goes through the area path check). Two runs, interleaved round by

@@ -1,6 +1,6 @@
-"""Issue 25: the full machine recorded for 10 minutes of machine time: file size, overhead, replay speed.
+"""Recording (B-02): the full machine recorded for 10 minutes of machine time: size, overhead, replay speed.
 
-The full machine of issue 16 (``machines/full.toml``: 2 channels, 8 axes, 20 areas, 16 dynamic limits
+The full machine (``machines/full.toml``: 2 channels, 8 axes, 20 areas, 16 dynamic limits
 written by the PLC through the image, 3 collision pairs; a channel's program is started again whenever it
 finished) runs in a :class:`~hli_server.runtime.Runtime` on the stepped clock (image in memory, no
 doors), in two worker processes side by side: one records the session, one does not. They step in

@@ -1,4 +1,4 @@
-"""The programs of issue 16's benchmarks, generated (``python -m benchmarks.programs --out DIR`` writes them).
+"""The benchmarks' programs, generated (``python -m benchmarks.programs --out DIR`` writes them).
 
 * :func:`area_header`: defines and activates 20 areas in channel 1 of ``machines/full.toml``: one work
   polygon (an octagon, circumradius 280 mm) and 19 protection areas on a ring of radius 180 mm around
@@ -15,7 +15,7 @@
   along the work polygon's edges 0.5..2 mm inside; streamed line by line, as long as asked.
   :func:`near_area_lines_rs274` gives the same moves in LinuxCNC's dialect without the areas (the
   reference ``rs274`` interprets them, docs/performance.md).
-* :func:`near_area_arcs`: a program of mostly arcs close to the same 20 areas (issue 26): rings of
+* :func:`near_area_arcs`: a program of mostly arcs close to the same 20 areas (the hard case): rings of
   G02/G03 round every protection circle 0.5..2 mm off it (a whole circle, then twelve arcs one way and
   eight the other a little farther out, over the +-180 degree seam) and twelve short chords hugging it;
   round every protection square its offset curve (sides and quarter arcs about the corners), arcs along
@@ -48,7 +48,7 @@ __all__ = [
 ]
 
 FULL_MACHINE = Path(__file__).with_name("machines") / "full.toml"
-"""The full machine of issue 16 (2 channels, 8 axes, 3 collision pairs, FCT_DYN_POS_LIMIT in both)."""
+"""The full machine (2 channels, 8 axes, 3 collision pairs, FCT_DYN_POS_LIMIT in both)."""
 
 WORK_RADIUS = 280.0
 WORK_POLYGON = [
@@ -273,7 +273,7 @@ def near_area_lines_rs274(blocks: int) -> Iterator[str]:
     yield "M2"
 
 
-# --- mostly arcs (issue 26) -------------------------------------------------------------------------
+# --- mostly arcs ----------------------------------------------------------------------------------
 _PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}
 """A plane's first and second axis (X=0, Y=1, Z=2), as the decoder's: G18 is Z-X, G19 Y-Z."""
 _AXIS = "XYZ"

@@ -363,7 +363,7 @@ class ZeroOffset(_Strict):
 
 
 class ToolEntry(_Strict):
-    """One tool compensation data block of the tool table (issue 24): selected by ``D<number>``."""
+    """One tool compensation data block of the tool table (M-14): selected by ``D<number>``."""
 
     number: int = Field(ge=1, le=32767, description="the D number that selects this data block")
     tool: int | None = Field(
@@ -454,7 +454,7 @@ class ChannelConfig(_Strict):
     )
     zero_offsets: list[ZeroOffset] = Field(default_factory=list)
     tools: list[ToolEntry] = Field(
-        default_factory=list, description="tool table: D blocks with length and radius (issue 24)"
+        default_factory=list, description="tool table: D blocks with length and radius (M-14)"
     )
     programs: list[ProgramEntry] = Field(default_factory=list)
 
@@ -551,7 +551,9 @@ class AdapterEntry(_Strict):
 
     name: str = Field(pattern=r"^[a-z][a-z0-9_]*$", description="adapter name (modbus, ...)")
     options: dict[str, str | int | float | bool] = Field(
-        default_factory=dict, description="the adapter's options, as for --adapter NAME:key=value"
+        default_factory=dict,
+        description="the adapter's options, as for --adapter NAME:key=value (seconds end in _s; each door's "
+        "options: docs/api.md, modbus.md, ads.md, mqtt.md)",
     )
 
 

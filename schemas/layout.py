@@ -48,9 +48,10 @@ from dataclasses import dataclass
 from enum import StrEnum
 from functools import cached_property
 from struct import Struct
-from typing import TYPE_CHECKING, Any, Final
+from typing import TYPE_CHECKING, Any, Final, cast
 
 import construct as cs
+from typing_extensions import TypedDict
 
 from schemas.units import DINT_MAX, DINT_MIN, UDINT_MAX
 from schemas.wire import DynPosLimitState, HoldSource, Mode, ProgramState, describe
@@ -82,7 +83,11 @@ __all__ = [
     "ChannelInfo",
     "Direction",
     "Layout",
+    "LayoutAxis",
+    "LayoutChannel",
     "LayoutError",
+    "LayoutJson",
+    "LayoutSignal",
     "ModbusTable",
     "ReadOnlySignalError",
     "Scope",
@@ -671,6 +676,65 @@ _SIGNAL_KEYS: Final = (
     "limits",
 )
 
+
+class LayoutChannel(TypedDict):
+    index: int
+    number: int
+    name: str
+    axes: list[str]
+
+
+class LayoutAxis(TypedDict):
+    index: int
+    number: int
+    name: str
+    axis_type: str
+
+
+class LayoutSignal(TypedDict):
+    """One field of the image (:class:`Signal`): where it is in the halves, in the Modbus tables, over ADS."""
+
+    name: str
+    st_path: str
+    scope: str
+    index: int
+    path: str
+    type: str
+    direction: str
+    unit: str
+    description: str
+    reqs: list[str]
+    origin: str
+    offset: int
+    modbus_table: str
+    modbus_address: int
+    ads_port: int
+    ads_group: int
+    ads_offset: int
+    limits: list[int | float] | None  # as written (an int stays an int: the hash sees -128 and -128.0 apart)
+    size: int
+    access: str
+    symbol: str
+    modbus_count: int
+    modbus_reference: str
+    image_ads_group: int
+
+
+class LayoutJson(TypedDict):
+    """:meth:`Layout.to_dict`: the machine-readable contract (H-08), ``hli-server map --format json`` and
+    ``GET /api/layout``."""
+
+    format: str
+    layout_version: int
+    layout_hash: str
+    machine: str
+    sizes: dict[str, int]
+    addressing: dict[str, int]
+    channels: list[LayoutChannel]
+    axes: list[LayoutAxis]
+    signals: list[LayoutSignal]
+
+
 _HASHED_KEYS: Final = (
     "st_path",
     "type",
@@ -896,7 +960,7 @@ class Layout:
         text = json.dumps(content, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
         return hashlib.sha256(text.encode("ascii")).hexdigest()
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> LayoutJson:
         """The machine-readable contract (H-08): everything needed to rebuild this layout."""
         return {
             "format": LAYOUT_FORMAT,
@@ -927,7 +991,7 @@ class Layout:
             "signals": [self._signal_dict(s) for s in self.signals],
         }
 
-    def _signal_dict(self, s: Signal) -> dict[str, Any]:
+    def _signal_dict(self, s: Signal) -> LayoutSignal:
         d: dict[str, Any] = {k: _plain(getattr(s, k)) for k in _SIGNAL_KEYS}
         d.update(
             size=s.size,
@@ -937,7 +1001,7 @@ class Layout:
             modbus_reference=self.modbus_reference(s),
             image_ads_group=s.image_ads_group,
         )
-        return d
+        return cast(LayoutSignal, d)
 
     def to_json(self, indent: int | None = 1) -> str:
         return json.dumps(self.to_dict(), indent=indent, ensure_ascii=False)

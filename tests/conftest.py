@@ -48,6 +48,19 @@ def _no_leaked_shared_memory():
 
 
 # --------------------------------------------------------------------------------------------
+# The order: modules with slow tests first, so that pytest-xdist starts the long ones early and the
+# many short unit tests fill both workers to the end (no worker idles while the other ends a 20 s test)
+# --------------------------------------------------------------------------------------------
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """A stable sort: each module stays in one piece and in its order (module fixtures are set up once),
+    the modules that hold a test marked ``slow`` before the others."""
+    slow_modules = {item.module.__name__ for item in items if item.module and item.get_closest_marker("slow")}
+    items.sort(key=lambda item: 0 if item.module and item.module.__name__ in slow_modules else 1)
+
+
+# --------------------------------------------------------------------------------------------
 # Requirement coverage: which IDs of docs/requirements.md the collected tests prove
 # --------------------------------------------------------------------------------------------
 

@@ -60,7 +60,8 @@ RUN_OPTIONS = {
     "before it printed",
     "status": "the exit status every command of the block must end with (default 0)",
     "json": "whitespace does not count (long JSON wrapped for the page)",
-    "numbers": "every number of the expected output stands for any number (timings, counters)",
+    "numbers": "every number of the expected output stands for any number (timings, counters); "
+    "numbers=REGEX: only in the expected lines the regular expression finds",
     "head": "the expected output is the beginning of what the command prints",
     "any-order": "the expected lines in any order (several event sources)",
     "ignore": "a regular expression: printed lines it finds are not compared (a loaded machine's warnings)",
@@ -68,6 +69,7 @@ RUN_OPTIONS = {
     "pytest": "a python block that is a test file: run with pytest (it must pass)",
     "node": "a js block: run with node, ads-client from tests/interop/node (npm ci; else the session skips)",
     "file": "a block that is a file: written as this name into the session's directory, not run",
+    "req": "the session's requirement IDs (docs/requirements.md), comma-separated: its test carries them",
 }
 """What a ``doc-run`` marker may say (a flag, or ``key=value`` with shell quoting)."""
 

@@ -55,12 +55,13 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
-from typing import Any, Final, Literal
+from typing import Any, Final, Literal, TypedDict
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from hli_server.codecs.ads import AmsPacket, encode_response, error_reply_payload
 from hli_server.codecs.modbus_frames import ExceptionCode, Frame, encode_adu, encode_exception
+from schemas.results import CommFault, CommFaultChange, CommFaultLogged
 
 __all__ = [
     "MAX_ACTIVE",
@@ -70,6 +71,7 @@ __all__ = [
     "Door",
     "FaultError",
     "FaultKind",
+    "FaultMirror",
     "FaultSpec",
 ]
 
@@ -306,14 +308,14 @@ class ActiveFault:
     used: int = 0
     ended: str | None = None
 
-    def to_json(self, now: float | None = None) -> dict[str, Any]:
+    def to_json(self, now: float | None = None) -> CommFault:
         now = time.monotonic() if now is None else now
         spec = self.spec
         left_ms = None if self.expires_at is None else max(0, round((self.expires_at - now) * 1000))
         count = spec.count if spec.kind is not FaultKind.DROP else (spec.count or 1)
-        return {
+        out: CommFault = {
             "id": self.id,
-            **spec.model_dump(mode="json", exclude_none=True),
+            **spec.model_dump(mode="json", exclude_none=True),  # type: ignore[typeddict-item]  # the spec's keys
             "door": str(spec.door),
             "description": spec.describe(),
             "started_cycle": self.started_cycle,
@@ -322,8 +324,9 @@ class ActiveFault:
             "used": self.used,
             "left": None if count is None else max(0, count - self.used),
         }
+        return out
 
-    def mirror(self) -> dict[str, Any]:
+    def mirror(self) -> FaultMirror:
         """What a mirror in another process needs (:meth:`CommFaults.load`)."""
         return {
             "id": self.id,
@@ -335,7 +338,19 @@ class ActiveFault:
         }
 
 
-Listener = Callable[[dict[str, Any]], None]
+class FaultMirror(TypedDict):
+    """A fault as the mirror in another process takes it (:meth:`CommFaults.load`): the spec's fields given,
+    and the times in ``time.monotonic()`` seconds."""
+
+    id: int
+    spec: dict[str, Any]  # FaultSpec.model_dump(mode="json"): validated again by the mirror
+    started_cycle: int
+    started_at: float
+    expires_at: float | None
+    used: int
+
+
+Listener = Callable[[CommFaultChange], None]
 
 
 class CommFaults:
@@ -353,10 +368,10 @@ class CommFaults:
         """True while any fault is in effect: the doors' fast path reads only this."""
         self._by_door: dict[Door, tuple[ActiveFault, ...]] = {}
         self._cycle_bound = False
-        self.history: deque[dict[str, Any]] = deque(maxlen=200)
+        self.history: deque[CommFaultLogged] = deque(maxlen=200)
 
     # --- what users do --------------------------------------------------------------------------
-    def add(self, spec: FaultSpec | dict[str, Any]) -> ActiveFault:
+    def add(self, spec: FaultSpec | dict[str, Any]) -> ActiveFault:  # a dict: JSON that FaultSpec validates
         """Set a fault now (FaultError when :data:`MAX_ACTIVE` are in effect); returns it."""
         spec = spec if isinstance(spec, FaultSpec) else FaultSpec.model_validate(spec)
         self._expire(time.monotonic())
@@ -398,7 +413,7 @@ class CommFaults:
             self.end(fault_id, reason)
         return len(ids)
 
-    def table(self) -> list[dict[str, Any]]:
+    def table(self) -> list[CommFault]:
         now = time.monotonic()
         self._expire(now)
         return [f.to_json(now) for f in self._faults.values()]
@@ -417,10 +432,10 @@ class CommFaults:
         return unsubscribe
 
     # --- a mirror in the doors process -----------------------------------------------------------
-    def export(self) -> list[dict[str, Any]]:
+    def export(self) -> list[FaultMirror]:
         return [f.mirror() for f in self._faults.values()]
 
-    def load(self, table: list[dict[str, Any]]) -> None:
+    def load(self, table: list[FaultMirror]) -> None:
         """Take the table of the process that owns the faults (keeps the counts of faults it has)."""
         faults: dict[int, ActiveFault] = {}
         for entry in table:
@@ -512,7 +527,7 @@ class CommFaults:
 
         self._timers[fault.id] = loop.call_later(delay, expire)
 
-    def _tell(self, change: dict[str, Any]) -> None:
+    def _tell(self, change: CommFaultChange) -> None:
         self.history.append({**change, "cycle": self._cycle()})
         for listener in list(self._listeners):
             try:

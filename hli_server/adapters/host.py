@@ -30,7 +30,7 @@ import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 from hli_server.adapters.faults import CommFaults
 from schemas.events import Event
@@ -39,13 +39,19 @@ from schemas.results import (
     AlarmList,
     AreaTable,
     AxisFaults,
+    CheckReport,
     CollisionPair,
     MachineState,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
+    ReadinessJson,
+    RecorderStatus,
+    RecordingFile,
     Scene,
     SoftLimits,
+    Timing,
+    TraceJson,
 )
 from schemas.wire import Mode
 
@@ -174,6 +180,8 @@ class LoggedEvent:
     event: Event
 
     def to_json(self) -> dict[str, Any]:
+        """The event's fields (they differ per event type: ``schemas.events`` and docs/api.md list them)
+        with its ``seq``."""
         return {"seq": self.seq, **self.event.to_json()}
 
 
@@ -195,12 +203,17 @@ class Readiness:
     ``state`` is ``starting``, ``running`` or ``stopping``; ``ready`` is ``running`` with every door up."""
 
     ready: bool
-    state: str
+    state: Literal["starting", "running", "stopping"]
     doors: Mapping[str, bool]
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> ReadinessJson:
         waiting = [name for name, up in self.doors.items() if not up]
-        return {"ready": self.ready, "state": self.state, "doors": dict(self.doors), "waiting_for": waiting}
+        return {
+            "ready": self.ready,
+            "state": self.state,
+            "doors": dict(self.doors),
+            "waiting_for": waiting,
+        }
 
 
 class Trace:
@@ -264,7 +277,7 @@ class Trace:
         k = int(found[0])
         return {path: self._columns[path][k].item() for path in self.signals}
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> TraceJson:
         return {"signals": list(self.signals), "cycles": self.cycles, "values": self.values}
 
     def json_chunks(self, slice_size: int = 65_536) -> Iterator[bytes]:
@@ -293,7 +306,7 @@ class Trace:
         return f"Trace({len(self)} cycles of {', '.join(self.signals)})"
 
 
-def _finite_or_name(value: Any) -> Any:
+def _finite_or_name(value: Value) -> Value | str:
     if isinstance(value, float) and not math.isfinite(value):
         return "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
     return value
@@ -422,7 +435,7 @@ class OperatorPort(Protocol):
         """The channel's area table (FCT-C14) as ``check`` lists it."""
         ...
 
-    def timing(self) -> dict[str, Any]:
+    def timing(self) -> Timing:
         """Pacing statistics of the clock (``GET /api/timing``)."""
         ...
 
@@ -455,7 +468,7 @@ CHECK_MAX_TIMEOUT_S = 600.0
 
 class CheckPort(Protocol):
     """Checking a program offline on a fresh machine of the server's machine file, as ``hli-server check``
-    does (issue 20; ``POST /api/check``): the engine's ``ProgramCheck``, in a process of its own, so that
+    does (N-10; ``POST /api/check``): the engine's ``ProgramCheck``, in a process of its own, so that
     the running machine is never touched and its clock never waits."""
 
     async def check(
@@ -469,7 +482,7 @@ class CheckPort(Protocol):
         max_cycles: int = CHECK_MAX_CYCLES,
         max_iterations: int = CHECK_MAX_ITERATIONS,
         timeout_s: float = CHECK_TIMEOUT_S,
-    ) -> dict[str, Any]:
+    ) -> CheckReport:
         """``check --format json``'s report with ``program``, ``status`` (``ok``, ``stopped``, ``capped``)
         and ``exit_code``. NotFoundError (channel), InvalidRequestError (files), UnavailableError (busy),
         CheckTimeoutError (the wall-clock limit)."""
@@ -480,19 +493,19 @@ class RecorderPort(Protocol):
     """Recording the session (docs/record-replay.md): one recording at a time, by name in the
     server's recording directory. Errors are :class:`OperatorError` subclasses."""
 
-    def status(self) -> dict[str, Any]:
+    def status(self) -> RecorderStatus:
         """``{"recording", "file", "name", "started_cycle", "cycles", "bytes_written", ...}``."""
         ...
 
-    def start(self, name: str | None = None) -> dict[str, Any]:
+    def start(self, name: str | None = None) -> RecorderStatus:
         """Start recording into ``<dir>/<name>.jsonl.gz`` (None: a name from the time); the status."""
         ...
 
-    def stop(self) -> dict[str, Any]:
+    def stop(self) -> RecorderStatus:
         """End the recording (flushed, closed); its final status."""
         ...
 
-    def files(self) -> list[dict[str, Any]]:
+    def files(self) -> list[RecordingFile]:
         """The recordings in the directory: ``[{"name", "bytes", "modified", "recording"}]``."""
         ...
 
@@ -613,7 +626,7 @@ class AdapterHost(Protocol):
 
     @property
     def checker(self) -> CheckPort:
-        """Checking programs offline (issue 20, ``POST /api/check``)."""
+        """Checking programs offline (N-10, ``POST /api/check``)."""
         ...
 
     @property

@@ -54,7 +54,7 @@ import time
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final, cast
+from typing import TYPE_CHECKING, Any, Final, TypedDict, cast
 
 from pydantic import (
     BaseModel,
@@ -76,6 +76,7 @@ from hli_server.codecs.event_json import (
     wall_time_text,
 )
 from schemas.events import Event
+from schemas.results import CommFaultChange
 
 if TYPE_CHECKING:
     import aiomqtt
@@ -88,6 +89,7 @@ __all__ = [
     "STATE_KINDS",
     "MqttAdapter",
     "MqttOptions",
+    "MqttStats",
     "topic_safe",
 ]
 
@@ -252,6 +254,21 @@ class _BrokerGoneError(Exception):
     """The connection to the broker ended (detected by the watcher task)."""
 
 
+class MqttStats(TypedDict):
+    """:meth:`MqttAdapter.stats`: the adapter's counters since it started."""
+
+    connected: bool
+    published: int
+    queued: int
+    inflight: int
+    dropped: int
+    unencodable: int
+    connects: int
+    connect_failures: int
+    seq: int
+    last_error: str | None
+
+
 class MqttAdapter:
     """Publishes the machine's events to an MQTT broker (H-05); a client, it listens on nothing.
 
@@ -337,7 +354,7 @@ class MqttAdapter:
             + (f"; {state})" if state else ")")
         ]
 
-    def stats(self) -> dict[str, Any]:
+    def stats(self) -> MqttStats:
         """Counters: published, queued (waiting + in flight), dropped, unencodable, connects."""
         return {
             "connected": self._connected,
@@ -432,7 +449,7 @@ class MqttAdapter:
             return
         self._queue(event, time.time())
 
-    def _on_fault(self, _change: dict[str, Any]) -> None:
+    def _on_fault(self, _change: CommFaultChange) -> None:
         """A communication fault changed: a ``disconnect`` cuts the session now (docs/record-replay.md)."""
         if self._faults.door_down(Door.MQTT):
             self._cut.set()

@@ -43,12 +43,14 @@ __all__ = [
     "Adapter",
     "AdapterError",
     "AdapterKind",
+    "AdapterOptions",
     "CliAlias",
     "DoorGuard",
     "available_adapters",
     "create_adapter",
     "door_guards",
     "options_model",
+    "options_table_markdown",
     "parse_adapter_spec",
     "plan_adapters",
     "register_adapter",
@@ -226,7 +228,12 @@ def available_adapters() -> list[str]:
     return [name for name, kind in ADAPTERS.items() if _module_exists(kind.target)]
 
 
-def _load(target: str) -> Any:
+AdapterOptions = dict[str, Any]
+"""An adapter's options by name. Their values are arbitrary here (TOML values, ``--adapter`` text converted):
+each adapter's own model (:func:`options_model`) says what they are and checks them."""
+
+
+def _load(target: str) -> Any:  # a class or an options model, by its "module:attr" name
     module, attr = target.split(":")
     return getattr(importlib.import_module(module), attr)
 
@@ -246,12 +253,45 @@ def options_model(name: str) -> type[BaseModel]:
     return model
 
 
-def check_options(name: str, options: Mapping[str, Any]) -> dict[str, Any]:
+def options_table_markdown(name: str) -> str:
+    """The options of adapter ``name`` as a Markdown table (option, default, range, meaning), from its options
+    model, and its former option names (docs/api.md has the HTTP door's: a test keeps it current)."""
+    model = options_model(name)
+    lines = ["| option | default | range | meaning |", "|---|---|---|---|"]
+    for field_name, info in model.model_fields.items():
+        if info.default_factory is not None:
+            default = repr(info.default_factory()).replace("'", '"')  # type: ignore[call-arg]
+        elif info.is_required():
+            default = "required"
+        else:
+            default = "none" if info.default is None else str(info.default)
+        low = high = None
+        for bound in info.metadata:
+            low = getattr(bound, "ge", getattr(bound, "gt", low))
+            high = getattr(bound, "le", getattr(bound, "lt", high))
+        span = f"{low} .. {high}" if low is not None and high is not None else "-"
+        lines.append(f"| `{field_name}` | {default} | {span} | {info.description or ''} |")
+    renamed: Mapping[str, str | None] = getattr(model, "RENAMED", {})
+    if renamed:
+        former = ", ".join(
+            f"`{old}` (now `{new}`)" if new is not None else f"`{old}` (no effect)"
+            for old, new in renamed.items()
+        )
+        lines += [
+            "",
+            "Former names, still loaded with a DeprecationWarning and a warning in the log until the next "
+            f"minor version (an old and a new name together are refused): {former}.",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def check_options(name: str, options: Mapping[str, Any]) -> AdapterOptions:
     """``options`` validated by the adapter's model (defaults filled in), or AdapterError saying what
     is wrong, with a did-you-mean for misspelled options and the list of the adapter's options."""
     model = options_model(name)
     known = sorted(model.model_fields)
-    unknown = sorted(set(options) - set(known))
+    renamed = getattr(model, "RENAMED", {})  # former names: the model takes them, with a warning
+    unknown = sorted(set(options) - set(known) - set(renamed))
     if unknown:
         hints = []
         for key in unknown:
@@ -282,7 +322,7 @@ def plan_adapters(
     configured: Sequence[tuple[str, Mapping[str, Any]]] = (),
     specs: Sequence[str] = (),
     aliases: Mapping[str, Any] | None = None,
-) -> list[tuple[str, dict[str, Any]]]:
+) -> list[tuple[str, AdapterOptions]]:
     """What ``hli-server run`` starts, in order, with which options (each checked by its model).
 
     1. every adapter whose kind is ``default`` (HTTP, Modbus), with its own defaults;
@@ -291,7 +331,7 @@ def plan_adapters(
     4. the short flags (``aliases``: flag -> value, None or absent = not given) set one option of
        their adapter, adding it if needed; a switch off (``--no-modbus``) removes it.
     """
-    plan: dict[str, dict[str, Any]] = {name: {} for name, kind in ADAPTERS.items() if kind.default}
+    plan: dict[str, AdapterOptions] = {name: {} for name, kind in ADAPTERS.items() if kind.default}
     for name, options in configured:
         _kind(name)
         plan[name] = dict(options)
@@ -396,7 +436,7 @@ def door_guards(plan: Sequence[tuple[str, Mapping[str, Any]]], policy: AccessPol
     return out
 
 
-def parse_adapter_spec(spec: str) -> tuple[str, dict[str, Any]]:
+def parse_adapter_spec(spec: str) -> tuple[str, AdapterOptions]:
     """``"modbus:port=5020,word_order=CDAB"`` -> ``("modbus", {"port": 5020, "word_order": "CDAB"})``.
 
     Values that look like integers become ``int``, ``true``/``false`` become ``bool``; the rest stay text.
@@ -405,7 +445,7 @@ def parse_adapter_spec(spec: str) -> tuple[str, dict[str, Any]]:
     name = name.strip()
     if not name:
         raise AdapterError(f"adapter spec {spec!r}: give a name, e.g. 'modbus' or 'modbus:port=5020'")
-    options: dict[str, Any] = {}
+    options: AdapterOptions = {}
     for item in filter(None, (part.strip() for part in rest.split(","))):
         key, eq, raw = item.partition("=")
         if not eq or not key.strip():
@@ -414,7 +454,7 @@ def parse_adapter_spec(spec: str) -> tuple[str, dict[str, Any]]:
     return name, options
 
 
-def _option_value(raw: str) -> Any:
+def _option_value(raw: str) -> bool | int | str:
     lowered = raw.lower()
     if lowered in ("true", "false"):
         return lowered == "true"

@@ -23,12 +23,13 @@ import contextlib
 import ipaddress
 import logging
 import time
-import warnings
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator
 from enum import Enum
-from typing import Any, ClassVar, Generic, Protocol, TypeVar
+from typing import ClassVar, Generic, Protocol, TypeVar
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator
+
+from hli_server.adapters.options import RenamedOptions
 
 __all__ = [
     "AddressAllowlist",
@@ -225,7 +226,7 @@ async def close(server: asyncio.Server | None, slots: ConnectionSlots[C]) -> Non
             await server.wait_closed()
 
 
-class TcpDoorOptions(BaseModel):
+class TcpDoorOptions(RenamedOptions):
     """The options every TCP door (Modbus, ADS) has, under one set of names: ``port``, ``max_connections``,
     ``idle_timeout_s``, ``frame_timeout_s`` and ``allow``. A door's model derives from this one and sets its
     own defaults and ranges (``--adapter modbus:idle_timeout_s=60`` and ``ads:idle_timeout_s=60`` mean the
@@ -236,9 +237,6 @@ class TcpDoorOptions(BaseModel):
     option; they go in the next minor version. An old name that has no effect any more maps to None.
     """
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-    RENAMED: ClassVar[Mapping[str, str | None]] = {}
     DOOR: ClassVar[str] = "TCP"
 
     port: int = Field(default=0, ge=0, le=65535, description="TCP port (0: any free port)")
@@ -261,29 +259,6 @@ class TcpDoorOptions(BaseModel):
         default_factory=list,
         description="peers allowed in: IP addresses, networks (10.0.0.0/8) or 'loopback'; empty: everybody",
     )
-
-    @model_validator(mode="before")
-    @classmethod
-    def _renamed_options(cls, data: Any) -> Any:
-        if not isinstance(data, Mapping) or not cls.RENAMED.keys() & data.keys():
-            return data
-        out = dict(data)
-        for old, new in cls.RENAMED.items():
-            if old not in out:
-                continue
-            value = out.pop(old)
-            if new is None:
-                text = f"{cls.DOOR} option {old!r} has no effect any more and goes in the next minor version"
-            elif new in out:
-                raise ValueError(f"{old!r} is the old name of {new!r}: give one of them")
-            else:
-                out[new] = value
-                text = (
-                    f"{cls.DOOR} option {old!r} is now {new!r}; the old name goes in the next minor version"
-                )
-            warnings.warn(text, DeprecationWarning, stacklevel=2)
-            logger.warning("%s", text)
-        return out
 
     @field_validator("allow", mode="before")
     @classmethod

@@ -52,7 +52,7 @@ _SECTIONS: tuple[tuple[str, type[BaseModel], frozenset[str]], ...] = (
     ("Drive model `[axes.drive]` (project's own, E-02)", DriveModel, frozenset()),
     ("Channel `[[channels]]`", ChannelConfig, frozenset({"zero_offsets", "tools", "programs"})),
     ("Zero offsets `[[channels.zero_offsets]]`", ZeroOffset, frozenset()),
-    ("Tool table `[[channels.tools]]` (D blocks, issue 24)", ToolEntry, frozenset()),
+    ("Tool table `[[channels.tools]]` (D blocks, M-14)", ToolEntry, frozenset()),
     ("Programs `[[channels.programs]]` (project's own program table)", ProgramEntry, frozenset()),
     ("Manual mode `[manual]`", ManualConfig, frozenset()),
     ("Adapters `[[adapters]]` (project's own; `hli-server run`)", AdapterEntry, frozenset()),

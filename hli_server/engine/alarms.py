@@ -1,6 +1,6 @@
 """The one table of alarms: number, severity, reaction, text, where the number comes from.
 
-The kernel's own numbers are used wherever the kernel documents one (B-04, issue 21): the numbers the
+The kernel's own numbers are used wherever the kernel documents one (B-04): the numbers the
 function descriptions give (FCT-C14: 120484, 120486, 120499, 50961, 50962, 50706; FCT-C3: 70092,
 70162; FCT-A3: 70082) and the IDs of the kernel's diagnosis pages (TF5200 / ISG kernel: software
 limit switches 120002/120003 and 70021/70022, the ``#CONTROL AREA`` errors 21286, 21288, 21292,
@@ -404,7 +404,7 @@ _TABLE: tuple[AlarmDef, ...] = (
     _w(912004, "Manual motion stopped at a work/protection area boundary", "project (FCT-C14, P-MANU-00014)"),
     _e(912010, "Measuring move (G100) ended without a probe signal", "project (FCT-C14, C14-23)"),
     _e(912011, "Measuring move (G100) invalid", "project (FCT-C14, C14-23)"),
-    # --- the kernel's IDs: coordinate systems and tool radius compensation (issue 24) ----------
+    # --- the kernel's IDs: coordinate systems and tool radius compensation (M-10..M-18) ----
     _e(20821, "(A)CS not defined", "kernel", page=_DIAG + "252664971.html"),
     _e(20676, "Invalid angle", "kernel", page=_DIAG + "252190603.html"),
     _e(
@@ -446,16 +446,16 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(
         914017, "Unexpected ENDDO, UNTIL, #ELSE or #ENDIF: does not match the current block", "project (N-06)"
     ),
-    _e(914020, "NC input over its bound (line, expression, string, message)", "project (issue 20)"),
+    _e(914020, "NC input over its bound (line, expression, string, message)", "project (N-08)"),
     _e(914021, "Counting loop with step 0", "project (N-06)"),
     _w(914030, "M30/M02 in a subroutine ends the whole program", "project (N-01)"),
     _e(914031, "Malformed #MSG text or values", "project (N-07)"),
     _e(914032, "M17/M29 in the main program (it ends with M30 or M02)", "project (N-01)"),
-    _w(914050, "Check stopped at its cycle cap: the program did not end", "project (issue 20)"),
+    _w(914050, "Check stopped at its cycle cap: the program did not end", "project (N-10)"),
     _w(
         914051,
         "Geometry check stopped at its cap of loop iterations: the program did not end",
-        "project (issue 20)",
+        "project (N-10)",
     ),
     # --- project's own: the simulator itself (919xxx) -----------------------------------------
     _e(919000, "Internal error: a cycle failed; the axes were stopped", "project", Reaction.AXIS_STOP),

@@ -26,7 +26,7 @@ of a CAM program:
    soft limit, a path the area prefilter (:mod:`hli_server.engine.areas.prefilter`) cannot clear. Those
    blocks - and only those - are parsed and decoded exactly, in order, with the decoder's state set to
    what it is before them; every other block only moves the position, which is committed at the
-   stretch's end. The interpreter then goes on after the stretch. While contouring is on (issue 24,
+   stretch's end. The interpreter then goes on after the stretch. While contouring is on (M-20..M-23,
    docs/nc-language.md "Contouring") every line is decoded exactly: the transitions are segments of
    their own.
 4. The blocks the interpreter builds - in loops, subroutines and cycles (``G91 X[@P3 * V.P.DIR]``), or

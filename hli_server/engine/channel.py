@@ -150,7 +150,7 @@ class ChannelHost:
 
 
 def _tool_and_frame_value(decoder: Decoder, name: str) -> float | None:
-    """V.G. of issue 24: the active tool's data (WZ_AKT.R/.L/.NR, WZR, WZL) and #ROTATION's (ROT_ACTIVE,
+    """V.G. (M-12, M-14): the active tool's data (WZ_AKT.R/.L/.NR, WZR, WZL) and #ROTATION's (ROT_ACTIVE,
     ROT_ANGLE, ROT_CENTER1, ROT_CENTER2), as the decoder has them at the block being decoded."""
     tools = decoder.tools
     rotation = decoder.frames.rotation
@@ -345,7 +345,7 @@ class Channel:
 
     def tool_tip(self, point: Sequence[float]) -> Point:
         """The tool tip (the TCP the areas monitor) for the axis positions ``point``: less the tool length
-        the decoder has put into the tool axis (issue 24, M-15)."""
+        the decoder has put into the tool axis (M-15)."""
         decoder = self.decoder
         if decoder.tools.applied_length == 0.0:
             return tuple(point)

@@ -244,10 +244,9 @@ class Decoder:
         """G40/G41/G42 (:mod:`hli_server.engine.path.radius`)."""
         self._main_index = tuple(self.index[a] for a in main_axes)
         self._trc_prog: list[float] | None = None
-        self._redo: Directive | None = None
-        self._length_before = 0.0
-        """The tool length included in :attr:`position` before the block being emitted."""
         """The programmed end point (program coordinates) while the radius compensation holds a block."""
+        self._position_length = 0.0
+        """The tool length included in :attr:`position` (the end of the last element emitted)."""
         self.contour = Contour()
         """Polynomial contouring (M-20): may hold the last motion back to blend it with the next."""
         self.warn: Callable[[int, str, int, str], None] | None = None
@@ -267,6 +266,7 @@ class Decoder:
         self.tools.reset()
         self.trc.reset()
         self._trc_prog = None
+        self._position_length = 0.0
         self.contour.reset()
 
     def resume(self, position: list[float]) -> None:
@@ -280,6 +280,8 @@ class Decoder:
         self.frames.reset()
         self.tools.reset()
         self.trc.reset()
+        self._trc_prog = None
+        self._position_length = 0.0
         self.contour.reset()
         self.blocks = None
         self.finished = True
@@ -292,9 +294,6 @@ class Decoder:
             return []
         feed = self.blocks
         while True:
-            if self._redo is not None:
-                redo, self._redo = self._redo, None
-                return self.directive(redo)
             try:
                 out = feed.next()
             except NcError as exc:
@@ -309,15 +308,26 @@ class Decoder:
             return self.directive(out)
 
     def directive(self, out: Directive) -> list[Motion | Marker]:
-        """The planner's item for an interpreter's directive (see :mod:`hli_server.engine.nc.interpreter`)."""
+        """The planner's item for an interpreter's directive (see :mod:`hli_server.engine.nc.interpreter`).
+
+        ``#MEAS MODE`` and ``#CONTOUR MODE``/``#HSC``/``#SPLINE`` only set modal state: the blocks held
+        back by the radius compensation and the contouring keep their corner (they took their own
+        settings when they were decoded). Every other directive is a flush point: the stages are emptied
+        in pipeline order (:meth:`_flushed`) before it takes effect."""
         if out is PAUSE:
             return []
         block = out.block
         if block is not None:
             self.current_block = block
-        held = self._trc_flush()
-        if held and isinstance(held[-1], Marker):
-            return held
+        if isinstance(out, MeasMode):
+            self.modal.meas_type = out.meas_type  # modal, decoded in order (the G100 blocks after it)
+            return []
+        if isinstance(out, ContourDirective):
+            self._contour_directive(out)
+            return []
+        items = self._flushed([])
+        if self.finished:
+            return items  # a held block failed its path check: its error ends decoding
         if isinstance(out, ToolWrite):
             if out.what == "radius":
                 self.tools.radius_written = out.value
@@ -325,40 +335,28 @@ class Decoder:
                     self.trc.radius = abs(out.value)
             else:
                 self.tools.length_written = out.value
-            return self._flushed(held)
+            return items
         if isinstance(out, CoordinateCommand):
             error = self._coordinates(out)
             if error is not None:
-                return self._flushed([*held, Marker(MarkerKind.ERROR, block, payload=error)])
-            return self._flushed(held)
-        if held:
-            # the held block goes first; the directive comes again next time (the feed re-delivers it)
-            self._redo = out
-            return held
-        if isinstance(out, SyncAction):
-            return self._flushed([Marker(MarkerKind.SYNC, block, payload=out.action)])
-        if isinstance(out, FlushWait):
-            items = self._flushed([Marker(MarkerKind.ACTION, block, payload=self._end_wait)])
-            if not self.finished:
-                self.waiting = True
+                return [*items, Marker(MarkerKind.ERROR, block, payload=error)]
             return items
+        if isinstance(out, SyncAction):
+            return [*items, Marker(MarkerKind.SYNC, block, payload=out.action)]
+        if isinstance(out, FlushWait):
+            self.waiting = True
+            return [*items, Marker(MarkerKind.ACTION, block, payload=self._end_wait)]
         if isinstance(out, FlushStop):
-            return self._flushed([Marker(MarkerKind.ACTION, block, payload=_nothing)])
+            return [*items, Marker(MarkerKind.ACTION, block, payload=_nothing)]
         if isinstance(out, Slope):
             # #SLOPE (M-02): the path comes to rest here and the axes with it, then the profile
             # changes (the filter of the new profile starts at rest; docs/nc-language.md)
             handler = self.slope_handler
             if handler is None:
-                return self._flushed([])
+                return items
             profile = out.profile
-            return self._flushed([Marker(MarkerKind.ACTION, block, payload=lambda: handler(profile))])
-        if isinstance(out, MeasMode):
-            self.modal.meas_type = out.meas_type  # modal, decoded in order (the G100 blocks after it)
-            return []
-        if isinstance(out, ContourDirective):
-            self._contour_directive(out)
-            return []
-        return []  # pragma: no cover - every directive is handled above
+            return [*items, Marker(MarkerKind.ACTION, block, payload=lambda: handler(profile))]
+        return items  # pragma: no cover - every directive is handled above
 
     def _end_wait(self) -> None:
         """The path reached a ``#FLUSH WAIT``: decoding goes on."""
@@ -379,11 +377,7 @@ class Decoder:
 
     def end_of_program(self) -> list[Motion | Marker]:
         """The text ended (without M30/M02 when decoding gets here): the end marker of the last block."""
-        held = self._trc_flush()
-        if held and isinstance(held[-1], Marker):
-            self.finished = True
-            return held
-        items = self._flushed([*held, Marker(MarkerKind.END, self.current_block, payload="eof")])
+        items = self._flushed([Marker(MarkerKind.END, self.current_block, payload="eof")])
         self.finished = True
         return items
 
@@ -403,7 +397,14 @@ class Decoder:
         return [Marker(MarkerKind.ERROR, block, payload=DecodeError(alarm, message, params))]
 
     def _decode(self, block: Block) -> list[Motion | Marker]:
-        items = self._decode_block(block)
+        before: list[Motion | Marker] = []
+        if self.trc.active and self._changes_frame(block):
+            # a zero offset, G92 or a plane change: the block the compensation holds is finished in the
+            # frame it was programmed in (it ends perpendicular to its end point)
+            before = self._trc_flush()
+            if before and isinstance(before[-1], Marker):
+                return before
+        items = before + self._decode_block(block)
         if items and self.contour.holding and isinstance(items[-1], Marker):
             # a marker of this block (an error, an area command, the program's end, a G100 move) comes
             # after the held motion: the corner before it is not contoured
@@ -412,15 +413,33 @@ class Decoder:
                 return items[:first] + self._flushed(items[first:])
         return items
 
+    def _changes_frame(self, block: Block) -> bool:
+        """The block programs G92, another zero offset (G53..G59) or another plane (G17/G18/G19)."""
+        m = self.modal
+        for g in block.g_codes:
+            if g == 92 or (g in (17, 18, 19) and g != m.plane):
+                return True
+            if g == 53 and m.zero_offset is not None:
+                return True
+            if 54 <= g <= 59 and m.zero_offset != f"G{g}":
+                return True
+        return False
+
     def _flushed(self, items: list[Motion | Marker]) -> list[Motion | Marker]:
-        """The held-back motion of the contouring stage (if any), then ``items``; if the held motion fails
-        its path check, its error marker replaces ``items``."""
-        if not self.contour.holding:
-            return items
-        out = self._emit_pieces(self.contour.flush())
-        if out and isinstance(out[-1], Marker) and out[-1].kind is MarkerKind.ERROR:
-            self.finished = True
-            return out
+        """A flush point: the stages emptied in pipeline order (the radius compensation's held block
+        through the frames into the contouring stage, then the contouring stage's held piece), then
+        ``items``; if a held motion fails its check, its error marker replaces ``items`` (decoding ends)."""
+        out: list[Motion | Marker] = []
+        if self.trc.active:
+            out = self._trc_flush()
+            if out and isinstance(out[-1], Marker):
+                self.finished = True
+                return out
+        if self.contour.holding:
+            out += self._emit_pieces(self.contour.flush())
+            if out and isinstance(out[-1], Marker):
+                self.finished = True
+                return out
         return out + items
 
     def _contour_directive(self, out: ContourDirective) -> None:
@@ -568,21 +587,15 @@ class Decoder:
                 m.g92[name] = self.position[i] - base - value
             return items
         if measuring:
-            # a corner held for contouring is not contoured into a measuring move: it goes first
+            # a corner held back is not contoured into a measuring move: the stages are emptied first
             before = self._flushed([])
             if self.finished:
                 return before
             return before + self._measuring_move(block)
         moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre))
         if moves and (self.transforms_active or 40 in block.g_codes) and not m.in_area_definition:
-            if m.blend(block.g_codes) is not None:
-                return self._error(
-                    block,
-                    910110,
-                    "contouring (G261/G64/#HSC/#SPLINE) together with a coordinate system, a tool or tool "
-                    "radius compensation is not simulated (docs/nc-language.md)",
-                )
-            items = self._flushed(self._motion_framed(block))
+            # radius compensation -> frames and tool length -> contouring -> checks (M-30)
+            items = self._motion_framed(block)
             if items and isinstance(items[-1], Marker):
                 return items
         elif moves:
@@ -595,15 +608,15 @@ class Decoder:
             self._trc_prog = None
             if items and isinstance(items[-1], Marker):
                 return items
-        ends = [
+        ends: list[Motion | Marker] = [
             Marker(MarkerKind.END, block, payload=f"M{code:02d}") for code in block.m_codes if code in (2, 30)
         ]
-        if block.m_codes:
-            held = self._trc_flush()  # an M function empties the held block (it is not a contour block)
-            if held and isinstance(held[-1], Marker):
-                return [*items, *held]
-            items += held
-        return items + ends
+        if ends:
+            # the program's end: every stage emptied first (an error of a held block replaces the end)
+            return items + self._flushed(ends)
+        # another M function is a "non-relevant block" to the compensation and the contouring: both keep
+        # their corner across it (PM 207844107; it has no effect on the path here)
+        return items
 
     def _dwell(self, block: Block) -> list[Motion | Marker]:
         """``G04 <first main axis><s>`` (M-09, PM 206132747): the path rests for the time, then goes on
@@ -718,17 +731,9 @@ class Decoder:
             return []
         rapid = m.motion == 0
         if not rapid:
-            if m.feed_per_rev:
-                if m.feed_rev is None:
-                    return self._error(block, 911000, "G95: no feed per revolution (F word) programmed")
-                if not m.spindle_on or m.spindle_speed <= 0.0:
-                    return self._error(
-                        block,
-                        60131,
-                        "G95 feed per revolution with the spindle stopped: program M3/M4 and S first",
-                    )
-            elif m.feed is None:
-                return self._error(block, 911000, "no feed (F word) programmed for a feed move")
+            feed_error = self._feed_error(block)
+            if feed_error is not None:
+                return feed_error
         piece = Piece(
             segment=segment,
             block=block,
@@ -740,7 +745,24 @@ class Decoder:
         items = self._emit_pieces(self.contour.push(piece))
         if not (items and isinstance(items[-1], Marker)):
             self.position = target
+            self._position_length = 0.0
         return items
+
+    def _feed_error(self, block: Block) -> list[Motion | Marker] | None:
+        """The error of a feed move without a usable feed (no F; G95 without F or a turning spindle)."""
+        m = self.modal
+        if m.feed_per_rev:
+            if m.feed_rev is None:
+                return self._error(block, 911000, "G95: no feed per revolution (F word) programmed")
+            if not m.spindle_on or m.spindle_speed <= 0.0:
+                return self._error(
+                    block,
+                    60131,
+                    "G95 feed per revolution with the spindle stopped: program M3/M4 and S first",
+                )
+        elif m.feed is None:
+            return self._error(block, 911000, "no feed (F word) programmed for a feed move")
+        return None
 
     def _emit_pieces(self, pieces: list[Piece]) -> list[Motion | Marker]:
         """The path checks and the planner's items for the pieces the contouring stage gives out; the
@@ -749,7 +771,7 @@ class Decoder:
         for piece in pieces:
             if piece.segment.length <= 1e-12:
                 continue
-            err = self._check(piece.segment, piece.block)
+            err = self._check(piece.segment, piece.block, piece.tip_start, piece.tip_end)
             if err is not None:
                 self.contour.reset()
                 self.position = list(piece.segment.start)  # the path stops where the piece starts
@@ -768,7 +790,7 @@ class Decoder:
             )
         return items
 
-    # --- frames, tools, radius compensation (issue 24; hli_server/engine/path) -------------------------
+    # --- frames, tools, radius compensation (M-10..M-18; hli_server/engine/path) -----------------------
     @property
     def transforms_active(self) -> bool:
         """A frame, a tool or the radius compensation is active: blocks take the framed path."""
@@ -921,7 +943,6 @@ class Decoder:
         """Empty the radius compensation's held block (before a marker, a directive, the end)."""
         if not self.trc.active:
             return []
-        self._length_before = self.tools.applied_length
         elements = self.trc.flush()
         if self.trc.side == 0:
             self._trc_prog = None
@@ -969,9 +990,21 @@ class Decoder:
                     f"end radius differs by {mismatch:.4f} mm",
                 )
         rapid = m.motion == 0
-        if not rapid and m.feed is None:
-            return self._error(block, 911000, "no feed (F word) programmed for a feed move")
-        element = Element(tuple(prog_start), tuple(prog_end), block, rapid, centre, cw)
+        if not rapid:
+            feed_error = self._feed_error(block)
+            if feed_error is not None:
+                return feed_error
+        element = Element(
+            tuple(prog_start),
+            tuple(prog_end),
+            block,
+            rapid,
+            centre,
+            cw,
+            feed=None if rapid else self.path_feed(),
+            blend=None if rapid else m.blend(block.g_codes),
+            length=length,
+        )
         deselect = 40 in block.g_codes
         if self.trc.active or deselect:
             plane_idx = _PLANE_AXES[m.plane]
@@ -983,21 +1016,23 @@ class Decoder:
             self._trc_prog = prog_end if self.trc.active else None
         else:
             elements = [element]
-        self._length_before = self.tools.applied_length
         self.tools.applied_length = length
         items = self._emit(elements)
         if not elements and not self.trc.active:
             self.position = self.to_machine(prog_end, length)
+            self._position_length = length
         return items
 
     def _emit(self, elements: list[Element]) -> list[Motion | Marker]:
-        """Compensated elements (program coordinates) -> machine segments, checked, as motions."""
+        """Compensated elements (program coordinates) -> machine segments (frames, the tool length of each
+        element) -> the contouring stage -> the path checks and the planner's items (:meth:`_emit_pieces`).
+        The stages are rigid, so the contouring stage blends the compensated path in machine coordinates
+        with the deviation it was programmed with (M-30)."""
         items: list[Motion | Marker] = []
-        length = self.tools.applied_length
         for e in elements:
             block = e.block
             start = tuple(self.position)
-            end = tuple(self.to_machine(e.end, length))
+            end = tuple(self.to_machine(e.end, e.length))
             segment: Segment
             if e.centre is None:
                 segment = LineSegment(start, end)
@@ -1020,35 +1055,36 @@ class Decoder:
                     return items
                 c_prog = list(e.start)
                 c_prog[i], c_prog[j] = e.centre
-                c_m = self.to_machine(c_prog, length)
+                c_m = self.to_machine(c_prog, e.length)
                 cw = e.cw if sense > 0 else not e.cw
                 segment, _ = arc_from_centre(start, end, (i, j), (c_m[i], c_m[j]), cw)
-            if segment.length <= 1e-12:
-                self.position = list(end)
-                continue
-            err = self._check(segment, block, self._length_before)
-            if err is not None:
-                items.append(Marker(MarkerKind.ERROR, block, payload=err))
-                return items
-            v_max, accel = self._limits(segment, e.rapid)
+            length_at_start = self._position_length
             self.position = list(end)
-            self._length_before = length
-            items.append(
-                Motion(
-                    segment=segment,
-                    block=block,
-                    v_max=v_max,
-                    accel=accel,
-                    rapid=e.rapid,
-                    exact_stop=60 in block.g_codes,
-                )
+            self._position_length = e.length
+            if segment.length <= 1e-12:
+                continue
+            piece = Piece(
+                segment=segment,
+                block=block,
+                rapid=e.rapid,
+                exact_stop=60 in block.g_codes,
+                feed=e.feed,
+                blend=e.blend,
+                tip_start=length_at_start,
+                tip_end=e.length,
             )
+            items += self._emit_pieces(self.contour.push(piece))
+            if items and isinstance(items[-1], Marker):
+                return items
         return items
 
-    def tip_segment(self, segment: Segment, length_at_start: float | None = None) -> Segment:
+    def tip_segment(
+        self, segment: Segment, length_at_start: float | None = None, length_at_end: float | None = None
+    ) -> Segment:
         """The path of the tool tip (the monitored tool centre point): the segment less the tool length
-        (``length_at_start``: the length in the start point's axis position when it changes on the way)."""
-        length = self.tools.applied_length
+        (``length_at_start``/``length_at_end``: the lengths in the end points' axis positions where they
+        differ from the one applied now, as for a piece the contouring stage held back)."""
+        length = self.tools.applied_length if length_at_end is None else length_at_end
         l0 = length if length_at_start is None else length_at_start
         if length == 0.0 and l0 == 0.0:
             return segment
@@ -1064,10 +1100,14 @@ class Decoder:
         return dataclasses.replace(segment, start=shift(segment.start, l0), end=shift(segment.end, length))
 
     def _check(
-        self, segment: Segment, block: Block, length_at_start: float | None = None
+        self,
+        segment: Segment,
+        block: Block,
+        length_at_start: float | None = None,
+        length_at_end: float | None = None,
     ) -> DecodeError | None:
         """Every path check; the area checks see the tool tip (``monitors_tcp``)."""
-        tip = self.tip_segment(segment, length_at_start)
+        tip = self.tip_segment(segment, length_at_start, length_at_end)
         for check in self.path_checks:
             tcp = getattr(getattr(check, "__self__", check), "monitors_tcp", False)
             err = check(tip if tcp else segment, block)
@@ -1161,10 +1201,11 @@ class Decoder:
         return max(weight, 1e-3)
 
     def _area(self, block: Block, cmd: AreaCommand) -> list[Motion | Marker]:
-        held = self._trc_flush()
-        if held:
-            return held + self._area_command(block, cmd)
-        return self._area_command(block, cmd)
+        """An area command is a flush point: the held blocks first, then the command (FCT-C14 2.3)."""
+        before = self._flushed([])
+        if self.finished:
+            return before
+        return before + self._area_command(block, cmd)
 
     def _area_command(self, block: Block, cmd: AreaCommand) -> list[Motion | Marker]:
         m = self.modal

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import datetime
 import importlib.metadata
 import logging
@@ -66,12 +67,16 @@ from schemas.results import (
     AreaTable,
     AxisFaults,
     CollisionPair,
+    CommFaultChange,
     MachineState,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
+    RecorderStatus,
+    RecordingFile,
     Scene,
     SoftLimits,
+    Timing,
 )
 from schemas.wire import Mode
 
@@ -242,7 +247,7 @@ class RecordingStatus:
     error: str | None = None
     directory: str | None = None
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> RecorderStatus:
         return {
             "recording": self.recording,
             "file": self.file,
@@ -401,7 +406,7 @@ class SessionTap:
         text = None if error is None else f"{type(error).__name__}: {error}"
         self.note({"op": name, "args": args, "error": text})
 
-    def note_fault(self, change: dict[str, Any]) -> None:
+    def note_fault(self, change: CommFaultChange) -> None:
         """A communication fault set or ended (``CommFaults.subscribe``)."""
         self.note(dict(change))
 
@@ -541,9 +546,7 @@ class SessionTap:
         logger.info(
             "recording %s ended at cycle %d (%s): %d bytes", writer.path, last, reason, writer.bytes_written
         )
-        return RecordingStatus(
-            **{**status.to_json(), "recording": False, "bytes_written": writer.bytes_written}
-        )
+        return dataclasses.replace(status, recording=False, bytes_written=writer.bytes_written)
 
     def _stop_listening(self) -> None:
         if self._listening:
@@ -894,7 +897,7 @@ class JournaledOperator(OperatorPort):
     def areas(self, channel: int) -> AreaTable:
         return self.panel.areas(channel)
 
-    def timing(self) -> dict[str, Any]:
+    def timing(self) -> Timing:
         return self.panel.timing()
 
     def scene(self, channel: int) -> Scene:
@@ -933,10 +936,10 @@ class SessionRecorderPort:
     def __init__(self, tap: SessionTap) -> None:
         self._tap = tap
 
-    def status(self) -> dict[str, Any]:
+    def status(self) -> RecorderStatus:
         return self._tap.status().to_json()
 
-    def start(self, name: str | None = None) -> dict[str, Any]:
+    def start(self, name: str | None = None) -> RecorderStatus:
         tap = self._tap
         try:
             path = tap.resolve(name)
@@ -948,18 +951,18 @@ class SessionRecorderPort:
         except RecordingError as exc:
             raise _operator_error(exc) from None
 
-    def stop(self) -> dict[str, Any]:
+    def stop(self) -> RecorderStatus:
         try:
             return self._tap.stop().to_json()
         except RecordingError as exc:
             raise ConflictError(str(exc)) from None
 
-    def files(self) -> list[dict[str, Any]]:
+    def files(self) -> list[RecordingFile]:
         directory = self._tap.directory
         if directory is None or not directory.is_dir():
             return []
         running = self._tap.status().file
-        out = []
+        out: list[RecordingFile] = []
         for path in sorted(directory.glob(f"*{SUFFIX}")):
             with contextlib.suppress(OSError):
                 stat = path.stat()

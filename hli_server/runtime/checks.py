@@ -25,7 +25,7 @@ import subprocess
 import sys
 from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Connection
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 from hli_server.adapters.host import (
     CHECK_MAX_CYCLES,
@@ -38,6 +38,7 @@ from hli_server.adapters.host import (
     UnavailableError,
 )
 from hli_server.runtime.programs import RuntimeLibrary
+from schemas.results import CheckReport
 
 if TYPE_CHECKING:
     from hli_server.engine.program_check import CheckResult
@@ -67,17 +68,19 @@ def _exit_code(result: CheckResult) -> int:
     return 0 if result.completed else 1
 
 
-def check_report(result: CheckResult, program: str) -> dict[str, Any]:
+def check_report(result: CheckResult, program: str) -> CheckReport:
     """The JSON report of ``hli-server check --format json`` with the program's name and the verdict:
     ``status`` is ``ok``, ``stopped`` (an error alarm, or the program did not end) or ``capped``, and
     ``exit_code`` is what ``check`` would exit with."""
     code = _exit_code(result)
-    return {
+    report = {
         "program": program,
         "status": {0: "ok", 1: "stopped", 3: "capped"}[code],
         "exit_code": code,
+        "areas": None,  # a machine without areas: the key is there, null
         **result.to_json(),
     }
+    return cast(CheckReport, report)
 
 
 def run_check(
@@ -123,7 +126,9 @@ def run_check(
 
 # --- the worker process ---------------------------------------------------------------------------
 class _Pipes:
-    """Two one-way :class:`Connection` ends as one (send on one pipe, receive on the other)."""
+    """Two one-way :class:`Connection` ends as one (send on one pipe, receive on the other). What crosses is
+    ``Any`` here (a request's dictionary, a ``(kind, payload)`` answer); :meth:`ProgramChecker.check` types it
+    (:class:`~schemas.results.CheckReport`)."""
 
     def __init__(self, inbound: Connection, outbound: Connection) -> None:
         self.inbound, self.outbound = inbound, outbound
@@ -260,7 +265,7 @@ class ProgramChecker:
         max_cycles: int = CHECK_MAX_CYCLES,
         max_iterations: int = CHECK_MAX_ITERATIONS,
         timeout_s: float = CHECK_TIMEOUT_S,
-    ) -> dict[str, Any]:
+    ) -> CheckReport:
         """The report of ``text`` (:func:`check_report`). Errors: InvalidRequestError, NotFoundError (the
         request), UnavailableError (too many checks waiting), CheckTimeoutError (the wall-clock limit)."""
         numbers = [c.number for c in self.config.channels]
@@ -290,7 +295,7 @@ class ProgramChecker:
         finally:
             self._waiting -= 1
 
-    async def _ask(self, request: dict[str, Any], timeout_s: float) -> dict[str, Any]:
+    async def _ask(self, request: dict[str, Any], timeout_s: float) -> CheckReport:
         loop = asyncio.get_running_loop()
         conn = await loop.run_in_executor(None, self._ensure_worker)
         await loop.run_in_executor(None, conn.send, request)
@@ -312,7 +317,7 @@ class ProgramChecker:
             raise UnavailableError("the checker's worker process ended during the check") from None
         self.checks += 1
         if kind == "ok":
-            report: dict[str, Any] = payload
+            report: CheckReport = payload
             return report
         if kind in _ERRORS:
             raise _ERRORS[kind](payload)

@@ -29,7 +29,7 @@ import os
 import signal
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 from hli_server._compiled import stale_notice
 from hli_server.adapters.faults import CommFaults
@@ -61,6 +61,7 @@ from hli_server.runtime.pacing import (
     STEP_BATCH,
     Clock,
     ClockError,
+    PacingRaw,
     PacingStats,
     ask_for_low_latency,
     raise_priority,
@@ -69,6 +70,7 @@ from hli_server.runtime.pacing import (
     summarize_timing,
 )
 from hli_server.runtime.programs import RuntimeLibrary, read_program_file
+from schemas.results import Timing
 
 if TYPE_CHECKING:
     from types import TracebackType
@@ -276,6 +278,7 @@ class Runtime:
             inner = getattr(adapter, "doors", None)  # the doors process: the doors it serves
             for name in inner if isinstance(inner, dict) else (adapter.name,):
                 doors[name] = True
+        state: Literal["starting", "running", "stopping"]
         if self.stopped or self.stop_requested:
             state = "stopping"
         elif self.started and self.stats.started_at is not None:
@@ -722,11 +725,11 @@ class Runtime:
         return self.machine.cycle
 
     # --- reporting ------------------------------------------------------------------------
-    def timing(self) -> dict[str, Any]:
+    def timing(self) -> Timing:
         """Pacing statistics (``GET /api/timing``)."""
         return summarize_timing(self.timing_raw())
 
-    def timing_raw(self) -> dict[str, Any]:
+    def timing_raw(self) -> PacingRaw:
         """:meth:`timing` before its percentiles are sorted out (cheap: the doors process sorts)."""
         raw = self.stats.raw(self.clock, self.machine.cycle)
         raw["failed_cycles"] = self.failed_cycles

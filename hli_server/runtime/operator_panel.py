@@ -9,7 +9,7 @@ engine rule.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any, cast
+from typing import cast
 
 from hli_server.adapters.host import (
     Accepted,
@@ -36,6 +36,7 @@ from schemas.results import (
     ProgramSelected,
     Scene,
     SoftLimits,
+    Timing,
 )
 from schemas.units import increments_from_mm, mm_from_increments
 from schemas.wire import Mode
@@ -47,7 +48,7 @@ class OperatorPanel(OperatorPort):
     """:class:`~hli_server.adapters.host.OperatorPort` on a :class:`Machine`."""
 
     def __init__(
-        self, machine: Machine, timing: Callable[[], dict[str, Any]], *, library: RuntimeLibrary | None = None
+        self, machine: Machine, timing: Callable[[], Timing], *, library: RuntimeLibrary | None = None
     ) -> None:
         self._m = machine
         self._library = library
@@ -293,7 +294,7 @@ class OperatorPanel(OperatorPort):
             return {"channel": ch.number, "axes": list(ch.axis_names), "areas": []}
         return cast(AreaTable, self._m.monitor(AreaMonitor).handler(ch.number).to_json())
 
-    def timing(self) -> dict[str, Any]:
+    def timing(self) -> Timing:
         return self._timing()
 
     # --- the dashboard (docs/dashboard.md): hli_server/runtime/dashboard.py ------------------------------

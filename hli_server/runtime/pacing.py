@@ -37,7 +37,9 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Any
+from typing import NotRequired, TypedDict
+
+from schemas.results import Lateness, PacingSummary, SlowCycleJson, Timing
 
 __all__ = [
     "CAUSES",
@@ -48,6 +50,7 @@ __all__ = [
     "Clock",
     "ClockError",
     "GcProbe",
+    "PacingRaw",
     "PacingStats",
     "PreciseEpollSelector",
     "ProbedEpollSelector",
@@ -288,7 +291,7 @@ class GcProbe:
         """collections per generation since install."""
         self._began = 0.0
 
-    def __call__(self, phase: str, info: dict[str, Any]) -> None:
+    def __call__(self, phase: str, info: dict[str, int]) -> None:
         if phase == "start":
             self._began = time.monotonic()
             return
@@ -344,7 +347,7 @@ class SlowCycle:
     wake: int = 0
     """the clock's wake-up it ran in (the five worst are of five different wake-ups)"""
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> SlowCycleJson:
         return {
             "cycle": self.cycle,
             "lateness_us": _us(self.lateness),
@@ -360,6 +363,31 @@ class SlowCycle:
             return f"garbage collection of generation {self.gc_generation}: {part:.2f} ms"
         text = CAUSES.get(self.cause, self.cause)
         return f"{text}: {part:.2f} ms"
+
+
+class PacingRaw(TypedDict):
+    """:meth:`PacingStats.raw`: the pacing before its percentiles are sorted out (the samples as the bytes of
+    an ``array("d")``, seconds); what the clock's process hands the doors process (``runtime/remote.py``).
+    The runtime adds ``failed_cycles`` (``Runtime.timing_raw``)."""
+
+    clock: str
+    t_a: float
+    samples: bytes
+    next: int
+    measured: int
+    max: float
+    cycles: int
+    simulated_s: float
+    wall_s: float
+    late_cycles: int
+    late_causes: dict[str, int]
+    worst: list[SlowCycleJson]
+    gc_collections: list[int]
+    wakeups: int
+    catch_up_wakeups: int
+    max_catch_up: int
+    slipped_cycles: int
+    failed_cycles: NotRequired[int]
 
 
 class PacingStats:
@@ -527,7 +555,7 @@ class PacingStats:
         """The newest lateness samples [s], oldest first."""
         return _ordered(self._samples, self._next, self.measured)
 
-    def raw(self, clock: Clock, machine_cycle: int) -> dict[str, Any]:
+    def raw(self, clock: Clock, machine_cycle: int) -> PacingRaw:
         """What :func:`summarize` needs, taken without sorting anything (a copy of the samples' bytes):
         the clock's process hands this to the doors process, which does the sorting for ``GET
         /api/timing`` (``runtime/remote.py``)."""
@@ -552,7 +580,7 @@ class PacingStats:
             "slipped_cycles": self.slipped_cycles,
         }
 
-    def summary(self, clock: Clock, machine_cycle: int) -> dict[str, Any]:
+    def summary(self, clock: Clock, machine_cycle: int) -> PacingSummary:
         """Times in µs; percentiles over the newest ``window`` cycles; ``rate`` = simulated / wall time."""
         return summarize(self.raw(clock, machine_cycle))
 
@@ -563,12 +591,12 @@ def _ordered(samples: array[float], next_index: int, measured: int) -> list[floa
     return samples[next_index:].tolist() + samples[:next_index].tolist()
 
 
-def summarize(raw: dict[str, Any]) -> dict[str, Any]:
+def summarize(raw: PacingRaw) -> PacingSummary:
     """``GET /api/timing`` from :meth:`PacingStats.raw` (see docs/runtime.md for the fields)."""
     samples = array("d")
     samples.frombytes(raw["samples"])
     data = sorted(_ordered(samples, raw["next"], raw["measured"]))
-    lateness: dict[str, float] | None = None
+    lateness: Lateness | None = None
     if data:
         lateness = {
             "p50": _us(_percentile(data, 50)),
@@ -597,11 +625,9 @@ def summarize(raw: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def summarize_timing(raw: dict[str, Any]) -> dict[str, Any]:
+def summarize_timing(raw: PacingRaw) -> Timing:
     """``GET /api/timing`` from the runtime's ``timing_raw()`` (the pacing figures and the failed cycles)."""
-    out = summarize(raw)
-    out["failed_cycles"] = raw.get("failed_cycles", 0)
-    return out
+    return {**summarize(raw), "failed_cycles": raw.get("failed_cycles", 0)}
 
 
 def _percentile(sorted_data: Sequence[float], q: float) -> float:

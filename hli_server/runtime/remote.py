@@ -22,6 +22,10 @@ What crosses the socket (frames: a 4-byte length, then a pickle; both ends are t
                       ("events", [(seq, event), ...])          every engine event, numbered, in order
                       ("faults", table)                        the communication faults, on every change
 
+The messages are typed ``Any`` inside this module (a frame holds whatever the method called takes and
+answers); the answers are typed where they leave it: each :class:`RemoteOperator`, :class:`RemoteRecorder`
+and :class:`RemoteFaults` method names its result's shape (``schemas.results``), as the ports do.
+
 The doors process keeps its own copy of the event log (``GET /api/events`` and the streams read it there),
 answers what never changes from a cache (channels, axes, program tables, the machine's name), reads cycle
 and time from the image it attached, and sorts the timing samples itself: a read, however large its
@@ -53,7 +57,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
-from hli_server.adapters.faults import ActiveFault, CommFaults, FaultError, FaultSpec
+from hli_server.adapters.faults import ActiveFault, CommFaults, FaultError, FaultMirror, FaultSpec
 from hli_server.adapters.host import (
     Accepted,
     AdapterHost,
@@ -68,19 +72,23 @@ from hli_server.adapters.host import (
     UnavailableError,
 )
 from hli_server.runtime.event_log import EventLog
-from hli_server.runtime.pacing import summarize_timing
+from hli_server.runtime.pacing import PacingRaw, summarize_timing
 from schemas.events import Event
 from schemas.results import (
     AlarmList,
     AreaTable,
     AxisFaults,
     CollisionPair,
+    CommFaultChange,
     MachineState,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
+    RecorderStatus,
+    RecordingFile,
     Scene,
     SoftLimits,
+    Timing,
 )
 from schemas.wire import Mode
 
@@ -206,7 +214,7 @@ class EngineSide(Protocol):
     @property
     def host(self) -> AdapterHost: ...
 
-    def timing_raw(self) -> dict[str, Any]: ...
+    def timing_raw(self) -> PacingRaw: ...
 
     def readiness(self) -> Readiness: ...
 
@@ -269,7 +277,7 @@ class OperatorService(asyncio.Protocol):
     def _on_event(self, event: Event) -> None:
         self._outbox.append((self._rt.event_log.latest, event))
 
-    def _on_fault(self, _change: dict[str, Any]) -> None:
+    def _on_fault(self, _change: CommFaultChange) -> None:
         self._faults_changed = True  # sent with the next flush (a change may come inside the cycle)
 
     def flush(self) -> None:
@@ -411,7 +419,7 @@ class RemoteLink:
         sock.setblocking(False)
         self._sock = sock
         self._on_events = on_events
-        self.on_faults: Callable[[list[dict[str, Any]]], None] | None = None
+        self.on_faults: Callable[[list[FaultMirror]], None] | None = None
         """Takes the engine's table of communication faults (:class:`RemoteFaults`)."""
         self._reader = FrameReader()
         self._ids = itertools.count(1)
@@ -689,8 +697,9 @@ class RemoteOperator(OperatorPort):
         out: AreaTable = self._call("areas", channel)
         return out
 
-    def timing(self) -> dict[str, Any]:
-        return summarize_timing(self._link.call("timing"))
+    def timing(self) -> Timing:
+        raw: PacingRaw = self._link.call("timing")
+        return summarize_timing(raw)
 
     def scene(self, channel: int) -> Scene:
         out: Scene = self._call("scene", channel)
@@ -727,11 +736,11 @@ class RemoteFaults(CommFaults):
         link.on_faults = self.take
         self.subscribe(self._report)
 
-    def _report(self, change: dict[str, Any]) -> None:
+    def _report(self, change: CommFaultChange) -> None:
         if change["fault"] == "end" and not self._taking and change.get("reason") in ("count", "duration"):
             self._link.tell("fault-ended", change["id"], change["reason"])
 
-    def take(self, table: list[dict[str, Any]]) -> None:
+    def take(self, table: list[FaultMirror]) -> None:
         """The engine's table: load it and tell the listeners what was set and what ended."""
         before = self.get_ids()
         self._taking = True
@@ -790,20 +799,20 @@ class RemoteRecorder(RecorderPort):
     def __init__(self, link: RemoteLink) -> None:
         self._link = link
 
-    def status(self) -> dict[str, Any]:
-        out: dict[str, Any] = self._link.call("recorder", "status", ())
+    def status(self) -> RecorderStatus:
+        out: RecorderStatus = self._link.call("recorder", "status", ())
         return out
 
-    def start(self, name: str | None = None) -> dict[str, Any]:
-        out: dict[str, Any] = self._link.call("recorder", "start", (name,))
+    def start(self, name: str | None = None) -> RecorderStatus:
+        out: RecorderStatus = self._link.call("recorder", "start", (name,))
         return out
 
-    def stop(self) -> dict[str, Any]:
-        out: dict[str, Any] = self._link.call("recorder", "stop", ())
+    def stop(self) -> RecorderStatus:
+        out: RecorderStatus = self._link.call("recorder", "stop", ())
         return out
 
-    def files(self) -> list[dict[str, Any]]:
-        out: list[dict[str, Any]] = self._link.call("recorder", "files", ())
+    def files(self) -> list[RecordingFile]:
+        out: list[RecordingFile] = self._link.call("recorder", "files", ())
         return out
 
     def file(self, name: str) -> Path:

@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, Any, Literal, TypeVar, cast
 
 from hli_server.testing.transports import open_transport
 from schemas.layout import Direction, Layout
-from schemas.results import ProgramLoaded
+from schemas.results import CommFault, ProgramLoaded
 
 if TYPE_CHECKING:
     from hli_server.adapters.host import OperatorPort, Value
@@ -207,10 +207,10 @@ class CommFaultsView:
     def __init__(self, harness: Harness) -> None:
         self._harness = harness
 
-    def add(self, **spec: Any) -> dict[str, Any]:
+    def add(self, **spec: Any) -> CommFault:
         """Set a fault (the fields of ``POST /api/comm/faults``); returns it with its ``id``."""
         faults = self._harness.runtime.comm_faults
-        result: dict[str, Any] = self._harness._call_soon(lambda: faults.add(spec).to_json())
+        result: CommFault = self._harness._call_soon(lambda: faults.add(spec).to_json())
         return result
 
     def end(self, fault_id: int) -> None:
@@ -222,13 +222,13 @@ class CommFaultsView:
         ended: int = self._harness._call_soon(lambda: faults.reset("reset"))
         return ended
 
-    def table(self) -> list[dict[str, Any]]:
+    def table(self) -> list[CommFault]:
         faults = self._harness.runtime.comm_faults
-        table: list[dict[str, Any]] = self._harness._call_soon(faults.table)
+        table: list[CommFault] = self._harness._call_soon(faults.table)
         return table
 
     @contextlib.contextmanager
-    def fault(self, **spec: Any) -> Iterator[dict[str, Any]]:
+    def fault(self, **spec: Any) -> Iterator[CommFault]:
         fault = self.add(**spec)
         try:
             yield fault

@@ -202,10 +202,10 @@ async def test_streams_beyond_the_bound_get_503_and_a_freed_slot_is_reused() -> 
 
 
 async def test_an_open_stream_outlives_the_idle_timeout() -> None:
-    """The door closes connections silent for idle_timeout; a stream is a request in progress."""
+    """The door closes connections silent for idle_timeout_s; a stream is a request in progress."""
     async with (
         Runtime(
-            load_machine(None), clock="stepped", adapters=[("http", {"port": 0, "idle_timeout": 0.3})]
+            load_machine(None), clock="stepped", adapters=[("http", {"port": 0, "idle_timeout_s": 0.3})]
         ) as rt,
         httpx.AsyncClient(base_url=rt.http_url, timeout=10) as c,
         c.stream("GET", "/api/live") as r,
@@ -221,7 +221,7 @@ async def test_an_open_stream_outlives_the_idle_timeout() -> None:
 
 async def test_an_open_stream_does_not_hold_the_shutdown() -> None:
     rt = Runtime(
-        load_machine(None), clock="realtime", adapters=[("http", {"port": 0, "graceful_timeout": 5})]
+        load_machine(None), clock="realtime", adapters=[("http", {"port": 0, "graceful_timeout_s": 5})]
     )
     await rt.start()
     async with httpx.AsyncClient(base_url=rt.http_url, timeout=10) as c, c.stream("GET", "/api/live") as r:

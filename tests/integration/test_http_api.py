@@ -658,3 +658,98 @@ async def test_openapi_says_what_the_state_routes_answer(client: httpx.AsyncClie
     assert set(served["axes"]["X"]) == set(schemas["AxisState"]["properties"])
     faults = (await client.get("/api/axes/X/faults")).json()
     assert set(faults) == set(schemas["AxisFaults"]["properties"])
+
+
+async def test_openapi_says_what_the_timing_image_recording_and_fault_routes_answer(
+    hli: Harness, client: httpx.AsyncClient, tmp_path: Path
+) -> None:
+    """The typed seam, the rest (schemas/results.py, schemas/layout.py): ``/api/timing``, ``/api/ready``, the
+    image by ST path and its layout, the recorder's routes and the communication faults each name their
+    answer's schema in the OpenAPI description, with its fields; the answers served have exactly those
+    fields (none declared and missing, none served and dropped)."""
+    hli.runtime.session.directory = tmp_path  # what --record-dir sets
+    spec = (await client.get("/openapi.json")).json()
+    schemas = spec["components"]["schemas"]
+
+    def answer(path: str, method: str = "get", status: str = "200") -> dict[str, Any]:
+        ok: dict[str, Any] = spec["paths"][path][method]["responses"][status]["content"]["application/json"]
+        return ok["schema"]
+
+    def fields(name: str) -> set[str]:
+        return set(schemas[name]["properties"])
+
+    def required(name: str) -> set[str]:
+        return set(schemas[name].get("required", ()))
+
+    for path, method, status, name in (
+        ("/api/timing", "get", "200", "Timing"),
+        ("/api/ready", "get", "200", "ReadinessJson"),
+        ("/api/ready", "get", "503", "ReadinessJson"),
+        ("/api/layout", "get", "200", "LayoutJson"),
+        ("/api/image/{st_path}", "get", "200", "ImageField"),
+        ("/api/image/{st_path}", "put", "200", "ImageField"),
+        ("/api/recording", "get", "200", "RecorderStatus"),
+        ("/api/recording/start", "post", "201", "RecorderStatus"),
+        ("/api/recording/stop", "post", "200", "RecorderStatus"),
+        ("/api/comm/faults", "get", "200", "CommFaultTable"),
+        ("/api/comm/faults", "post", "201", "CommFault"),
+        ("/api/comm/faults/{fault_id}", "delete", "200", "CommFault"),
+        ("/api/comm/faults", "delete", "200", "CommFaultsEnded"),
+    ):
+        assert answer(path, method, status)["$ref"].endswith("/" + name), (path, method, status)
+    assert answer("/api/recordings")["items"]["$ref"].endswith("/RecordingFile")
+
+    hli.step(5)
+    timing = (await client.get("/api/timing")).json()
+    assert set(timing) == fields("Timing") == required("Timing")
+    assert fields("Timing") >= {"lateness_us", "worst", "late_causes", "failed_cycles", "rate"}
+    assert fields("SlowCycleJson") == {"cycle", "lateness_us", "cause", "detail", "parts_us", "at_s"}
+    assert fields("Lateness") == {"p50", "p99", "p999", "max"}
+    ready = await client.get("/api/ready")
+    assert set(ready.json()) == fields("ReadinessJson") == {"ready", "state", "doors", "waiting_for"}
+
+    layout = (await client.get("/api/layout")).json()
+    assert set(layout) == fields("LayoutJson")
+    assert set(layout["signals"][0]) == fields("LayoutSignal")
+    assert set(layout["channels"][0]) == fields("LayoutChannel")
+    assert set(layout["axes"][0]) == fields("LayoutAxis")
+    path = "gpCh[0]^bahn_mc_control.override.command_w"
+    read = (await client.get(f"/api/image/{path}")).json()
+    assert set(read) == fields("ImageField") - {"effective_cycle"} == required("ImageField")
+    written = (await client.put(f"/api/image/{path}", json={"value": 500})).json()
+    assert set(written) == fields("ImageField")
+    assert written["value"] == 500
+    assert isinstance(written["value"], int)
+
+    status = (await client.get("/api/recording")).json()
+    assert set(status) == fields("RecorderStatus") == required("RecorderStatus")
+    started = await client.post("/api/recording/start", json={"name": "typed"})
+    assert started.status_code == 201, started.text
+    hli.step(3)
+    assert set((await client.post("/api/recording/stop")).json()) == fields("RecorderStatus")
+    listed = (await client.get("/api/recordings")).json()
+    assert [set(entry) for entry in listed] == [fields("RecordingFile")]
+
+    fault = await client.post(
+        "/api/comm/faults", json={"kind": "delay", "door": "modbus", "delay_ms": 5, "count": 3}
+    )
+    assert fault.status_code == 201, fault.text
+    body = fault.json()
+    assert required("CommFault") <= set(body) <= fields("CommFault")
+    assert body["delay_ms"] == 5
+    assert "code" not in body
+    assert set(schemas["CommFault"]["properties"]["kind"]["enum"]) == {
+        "delay",
+        "drop",
+        "error",
+        "stall",
+        "disconnect",
+    }
+    table = (await client.get("/api/comm/faults")).json()
+    assert set(table) == fields("CommFaultTable")
+    assert [entry["id"] for entry in table["faults"]] == [body["id"]]
+    assert required("CommFaultLogged") <= set(table["history"][-1]) <= fields("CommFaultLogged")
+    ended = (await client.delete(f"/api/comm/faults/{body['id']}")).json()
+    assert ended["id"] == body["id"]
+    assert required("CommFault") <= set(ended)
+    assert (await client.delete("/api/comm/faults")).json() == {"ended": 0}

@@ -658,10 +658,10 @@ async def _realtime_run(demo: MachineConfig, adapters: list[Any], seconds: float
 
 @pytest.mark.slow
 async def test_a_dead_broker_does_not_slow_the_cycle(demo: MachineConfig, silent_listener: int) -> None:
-    baseline = await _realtime_run(demo, [], 2.0)
+    baseline = await _realtime_run(demo, [], 1.5)
     refused = MqttAdapter(broker=f"127.0.0.1:{_closed_port()}", queue_size=100, reconnect_max_s=0.2)
     hanging = MqttAdapter(broker=f"127.0.0.1:{silent_listener}", queue_size=100, reconnect_max_s=0.2)
-    dead = await _realtime_run(demo, [refused, hanging], 2.0)
+    dead = await _realtime_run(demo, [refused, hanging], 1.5)
     print(
         f"\nlateness µs without MQTT: {baseline['lateness_us']}\nwith two dead brokers: {dead['lateness_us']}"
     )

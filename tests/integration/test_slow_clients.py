@@ -51,7 +51,7 @@ def assert_clock_kept_pace(clock: dict[str, Any]) -> None:
 
 @pytest.mark.req("E-01", "H-01", "H-05")
 def test_reads_of_the_whole_event_log_cost_the_clock_no_cycle() -> None:
-    """Four clients read ``GET /api/events?since=0&limit=10000`` (about 1.4 MB each) back to back for three
+    """Four clients read ``GET /api/events?since=0&limit=10000`` (about 1.4 MB each) back to back for two
     seconds. Before: the answers were built on the clock's loop, 140-250 ms each; 15,058 cycles dropped in
     20 s. Now they are built in the doors process from its copy of the log."""
     with server() as srv:
@@ -63,7 +63,7 @@ def test_reads_of_the_whole_event_log_cost_the_clock_no_cycle() -> None:
         async def attack() -> None:
             stop = asyncio.Event()
             tasks = [asyncio.create_task(event_log_reader(srv, stop, got)) for _ in range(4)]
-            await asyncio.sleep(3.0)
+            await asyncio.sleep(2.0)
             stop.set()
             await asyncio.gather(*tasks)
 
@@ -71,7 +71,7 @@ def test_reads_of_the_whole_event_log_cost_the_clock_no_cycle() -> None:
         clock = clock_since(before, srv.timing())
     assert got[0] >= 4, got
     assert got[1] / got[0] > 1_000_000  # whole logs: over a megabyte each
-    assert clock["cycles"] > 2_000
+    assert clock["cycles"] > 1_500
     assert_clock_kept_pace(clock)
 
 
@@ -83,8 +83,8 @@ def test_a_stalled_body_is_timed_out_and_stalled_heads_lock_nobody_out() -> None
     """256 POST heads announce a body and send nothing (the door holds 256 connections). Before: every
     other client got 503 for as long as they stayed, and a stalled POST was still open after 45 s. Now a
     newcomer is served at once (a stalled sender makes room), and every stalled request gets 408 after
-    ``request_timeout`` (2 s here)."""
-    with server("--adapter", "http:request_timeout=2") as srv:
+    ``request_timeout_s`` (2 s here)."""
+    with server("--adapter", "http:request_timeout_s=2") as srv:
         before = srv.timing()
         closed = [0]
         answers: list[int] = []
@@ -100,7 +100,7 @@ def test_a_stalled_body_is_timed_out_and_stalled_heads_lock_nobody_out() -> None
                 assert time.monotonic() - began < 2.0  # not after the timeout: at once
                 r = await c.post("/api/channels/1/program", content=PROGRAM)
                 answers.append(r.status_code)
-            await asyncio.sleep(3.0)  # past request_timeout: every stalled one was ended
+            await asyncio.sleep(3.0)  # past request_timeout_s: every stalled one was ended
             stop.set()
             await posts
 
@@ -115,7 +115,7 @@ def test_a_stalled_body_is_timed_out_and_stalled_heads_lock_nobody_out() -> None
     assert answers == [200, 200]
     assert closed[0] >= 250, closed  # a few made room for the honest requests, the rest timed out
     assert answer.startswith(b"HTTP/1.1 408"), answer
-    assert b"request_timeout" in answer
+    assert b"request_timeout_s" in answer
     assert 1.5 <= waited < 6.0
     assert_clock_kept_pace(clock)
 
@@ -157,8 +157,8 @@ def test_modbus_connections_that_trickle_are_closed_and_lock_nobody_out() -> Non
 def test_dashboards_that_never_read_give_up_their_slots() -> None:
     """All 16 stream slots taken by pages that never read (and event-log readers on top). Before: the slots
     were held for ever and the clock slipped 22-144 cycles. Now a page that reads takes the slot of the one
-    stalled longest, and the door drops connections that leave their answers unread (``write_timeout``)."""
-    with server("--adapter", "http:live_rate_hz=100,write_timeout=3") as srv:
+    stalled longest, and the door drops connections that leave their answers unread (``write_timeout_s``)."""
+    with server("--adapter", "http:live_rate_hz=100,write_timeout_s=3") as srv:
         fill_event_log(srv.image, srv.url, wanted=3_000)
         before = srv.timing()
         hellos: list[dict[str, Any]] = []
@@ -431,7 +431,7 @@ def test_soak_slow_clients_and_large_reads_at_once() -> None:
     rng = random.Random(seed_for("slow-clients-soak"))
     seconds = min(300.0, 3.0 * FUZZ_SCALE)
     with server(
-        "--adapter", "http:request_timeout=2,write_timeout=3", "--adapter", "modbus:frame_timeout_s=1"
+        "--adapter", "http:request_timeout_s=2,write_timeout_s=3", "--adapter", "modbus:frame_timeout_s=1"
     ) as srv:
         fill_event_log(srv.image, srv.url, wanted=10_000)
         before = srv.timing()

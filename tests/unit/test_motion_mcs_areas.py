@@ -9,7 +9,7 @@ import pytest
 from hli_server.engine.machine import Machine
 from schemas.config import AxisConfig, ChannelConfig, MachineConfig
 from schemas.wire import Mode, ProgramState
-from tests.unit.areas.helpers import alarm_ids, only_alarm, run
+from tests.unit.areas.helpers import alarm_ids, run
 
 TOOLS = [{"number": 1, "length": 1_000_000, "radius": 50_000}]
 
@@ -175,24 +175,6 @@ def test_check_geometry_only_batch_agrees_with_the_exact_path_under_a_cs() -> No
     batched, exact = _count_batched(cfg, text, small=None)
     assert exact >= 400  # the stretch under the CS
     assert batched >= 350  # the stretch after #CS OFF is batched again
-
-
-@pytest.mark.req("M-26")
-@pytest.mark.parametrize(
-    "transform", ["#CS ON [5, 5, 0, 0, 0, 10]", "#ROTATION ON [ANGLE=30]", "D1", "D1 G41 X5 Y5"]
-)
-@pytest.mark.parametrize(
-    "contouring", ["G261", "#CONTOUR MODE [DEV PATH_DEV=0.5]\nG261", "#HSC ON", "#SPLINE ON"]
-)
-def test_contouring_with_a_frame_or_a_tool_is_refused_by_name(transform: str, contouring: str) -> None:
-    """The contouring stage and the frames/tools stages are not chained yet: a contoured move under a
-    coordinate system, a rotation, a tool or radius compensation is refused with 910110 on its own
-    block, never run with the corners silently sharp (docs/nc-language.md)."""
-    m, _ = go(f"G01 X10 Y10 F5000\n{contouring}\n{transform}\nX20 Y10\nX20 Y20\n")
-    message = only_alarm(m, 910110).message
-    assert [a for a in alarm_ids(m) if a != 911040] == [910110]  # 911040: #HSC/#SPLINE simulated as DEV
-    assert "contouring" in message
-    assert "not simulated" in message
 
 
 @pytest.mark.req("M-27", "M-20")

@@ -790,7 +790,8 @@ def test_flush_stops_the_path_flush_wait_waits_flush_continue_neither():
         ("#SET SLOPE PROFIL[1]", 910110, "#SET"),
         ("#FILE DELETE", 910110, "#FILE"),
         ("#FOO", 910109, "#FOO"),
-        ("G5 X1", 910102, "G5"),
+        ("G5 X1", 910110, "G5"),
+        ("G77 X1", 910102, "G77"),
         ('#MSG INFO ["x"]', 910110, "INFO"),
         ("X[V.TLM.X]", 910110, "V.TLM."),
     ],
@@ -851,3 +852,13 @@ def test_docs_nc_language_names_every_alarm_of_the_language():
     assert len(language) > 40
     missing = [n for n in language if str(n) not in doc]
     assert missing == [], f"docs/nc-language.md does not name {missing}"
+
+
+@pytest.mark.req("N-08")
+def test_a_motion_function_not_simulated_says_so_and_where_to_read_more():
+    """The refusal names the construct and the page listing what is not simulated, not a project issue."""
+    err = error("#TRC [LIMIT_ANGLE=10]\nM30\n")
+    assert err.alarm == 910110
+    assert err.message.startswith("#TRC: tool radius compensation options (#TRC) is not simulated (N-08)")
+    assert "see docs/nc-language.md" in err.message
+    assert "issue" not in err.message

@@ -188,21 +188,22 @@ def test_blocks_without_motion_spend_a_budget_per_cycle_and_go_on_next_cycle():
 
 @pytest.mark.slow
 @pytest.mark.req("N-08")
-def test_the_issues_800000_blocks_without_motion_never_stall_a_cycle():
-    """Issue 20, "Bad input": 800,000 such blocks were decoded inside one cycle (a 3.9 s stall of the
-    realtime clock); now no cycle runs more than the budget's statements and the program goes on."""
+def test_a_long_run_of_blocks_without_motion_never_stalls_a_cycle():
+    """800,000 blocks without motion were once decoded inside one cycle (a 3.9 s stall of the realtime
+    clock); now no cycle runs more than the budget's statements and the program goes on. 200,000 of them
+    here: the bound is per cycle, so a quarter proves it as well (1,500 cycles at the budget)."""
     machine = machine_with()
     ch = machine.channel(1)
-    start(machine, "N10 G01 X1 Y1 F1000\n" * 800_000 + "M30\n")
+    start(machine, "N10 G01 X1 Y1 F1000\n" * 200_000 + "M30\n")
     most = 0
     while ch.state in RUNNING:
         before = ch.interpreter.statements
         machine.step(1)
         most = max(most, ch.interpreter.statements - before)
     assert ch.state == ProgramState.FINISHED
-    assert ch.decoder.blocks_decoded >= 800_000 - 1
+    assert ch.decoder.blocks_decoded >= 200_000 - 1
     assert most <= STATEMENTS_PER_CYCLE
-    assert machine.cycle >= 800_000 // STATEMENTS_PER_CYCLE
+    assert machine.cycle >= 200_000 // STATEMENTS_PER_CYCLE
 
 
 @pytest.mark.req("N-08")

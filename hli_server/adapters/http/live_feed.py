@@ -25,7 +25,7 @@ happens in the streams' own tasks. Without an open stream nothing runs: no liste
 Bounds: at most :attr:`LiveFeed.max_streams` streams at once (16 by default). A page that does not read
 what it is sent holds nothing for long (reliability.md, round 2, finding 4): when every slot is taken, a
 newcomer takes the slot of the stream that has waited longest (at least :data:`STALL_EVICT_S`) for its page to
-take a message; and the door drops a connection whose client leaves an answer unread for ``write_timeout``
+take a message; and the door drops a connection whose client leaves an answer unread for ``write_timeout_s``
 seconds (``protocol.py``). Only when every open page reads is a newcomer refused (503). At shutdown
 :meth:`LiveFeed.close` ends every stream, so none holds the server's graceful shutdown.
 
@@ -226,7 +226,7 @@ class LiveFeed:
 
     def _evict_stalled(self) -> bool:
         """Release the stream whose page has not taken a message the longest, if that is at least
-        :data:`STALL_EVICT_S`; its connection is dropped by the door's ``write_timeout``."""
+        :data:`STALL_EVICT_S`; its connection is dropped by the door's ``write_timeout_s``."""
         now = asyncio.get_running_loop().time()
         stalled = [
             s for s in self.streams if s.sending_since is not None and now - s.sending_since >= STALL_EVICT_S

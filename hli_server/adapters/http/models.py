@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, model_validator
 
@@ -19,11 +19,7 @@ __all__ = [
     "MAX_TRACE_SIGNALS",
     "MAX_TRACE_VALUES",
     "AcceptedBody",
-    "CheckAlarm",
     "CheckBody",
-    "CheckCap",
-    "CheckMessage",
-    "CheckReport",
     "FaultsBody",
     "FeedholdBody",
     "ImageWriteBody",
@@ -90,56 +86,6 @@ class CheckBody(ProgramBody):
         gt=0,
         le=CHECK_MAX_TIMEOUT_S,
         description="wall-clock limit [s]: past it the check is ended and the answer is 504",
-    )
-
-
-class CheckAlarm(BaseModel):
-    id: int = Field(description="the alarm number (the kernel's error ID where it has one; docs/alarms.md)")
-    severity: str
-    line: int | None = Field(description="line of the program (or of the subprogram named in the message)")
-    block: str | None = Field(description="the block's label (N10) or `line N`")
-    message: str
-    params: dict[str, Any]
-    cycle: int
-
-
-class CheckMessage(BaseModel):
-    cycle: int
-    text: str = Field(description="the #MSG text, formatted")
-    save: bool = Field(description="#MSG SAVE (a check writes no file)")
-    program: str
-    line: int
-    block: str
-
-
-class CheckCap(BaseModel):
-    by: Literal["cycles", "iterations"]
-    cap: int
-
-
-class CheckReport(BaseModel):
-    """What ``hli-server check --format json`` prints, with the program's name and the verdict."""
-
-    program: str
-    status: Literal["ok", "stopped", "capped"] = Field(
-        description="ok: ran to its end without an error alarm; stopped: an error alarm stopped it (or it "
-        "ended without M30/M02 where that is an error); capped: it did not end within max_cycles / "
-        "max_iterations"
-    )
-    exit_code: int = Field(description="what `hli-server check` would exit with: 0 ok, 1 stopped, 3 capped")
-    completed: bool
-    mode: Literal["full", "geometry"]
-    channel: int
-    cycles: int
-    simulated_time_s: float
-    blocks: int
-    alarms: list[CheckAlarm]
-    messages: list[CheckMessage]
-    capped: CheckCap | None
-    final_position: dict[str, float] = Field(description="mm (degrees for rotary axes), rounded to 0.1 µm")
-    elapsed_s: float = Field(description="wall-clock time of the check [s]")
-    areas: list[dict[str, Any]] | None = Field(
-        default=None, description="the channel's work and protection areas at the end (FCT-C14)"
     )
 
 

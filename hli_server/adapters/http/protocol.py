@@ -15,16 +15,16 @@ subclass of uvicorn's ``H11Protocol`` that
   not read its answer (paused longest). A connection whose request the server is working on is never
   closed for a newcomer; only if every connection is such, the newcomer gets ``503`` with ``Connection:
   close`` before it is registered with the event loop (it costs one descriptor for a moment);
-* gives a request ``request_timeout`` seconds from its first byte to the end of its body: a client that
+* gives a request ``request_timeout_s`` seconds from its first byte to the end of its body: a client that
   announces a body and never sends it (or sends it a byte at a time) gets ``408 Request Timeout`` and the
   connection is closed; the application sees the client go away;
-* gives a client ``write_timeout`` seconds to take an answer the server is waiting to send (the
+* gives a client ``write_timeout_s`` seconds to take an answer the server is waiting to send (the
   transport's buffer is full because the client does not read): then the connection is dropped, and
   what was buffered for it with it (a dashboard's stream that never reads, a large answer nobody takes).
   The kernel's send buffer of a connection is held to :data:`SEND_BUFFER` bytes (Linux doubles it, and
   grows it to 4 MB otherwise, which a stream of 60 kB/s takes a minute to fill before anyone can tell
   that its page does not read); that is still as much as a local network needs in flight;
-* closes a connection that sends nothing for ``idle_timeout`` seconds while no request of it is in
+* closes a connection that sends nothing for ``idle_timeout_s`` seconds while no request of it is in
   progress (uvicorn's own keep-alive timeout closes idle connections between requests sooner).
 """
 
@@ -61,15 +61,17 @@ _REFUSAL = _raw_answer(
 )
 SEND_BUFFER = 64 * 1024
 """``SO_SNDBUF`` of every connection of the door (see the module docstring)."""
-_TIMEOUT_DETAIL = "the request did not arrive within the request_timeout of this door; send it whole, at once"
+_TIMEOUT_DETAIL = (
+    "the request did not arrive within the request_timeout_s of this door; send it whole, at once"
+)
 _TIMEOUT = _raw_answer(408, "Request Timeout", _TIMEOUT_DETAIL)
 
 
 class _BoundedH11Protocol(H11Protocol):
     max_connections: ClassVar[int] = 256
-    idle_timeout: ClassVar[float] = 30.0
-    request_timeout: ClassVar[float] = 10.0
-    write_timeout: ClassVar[float] = 10.0
+    idle_timeout_s: ClassVar[float] = 30.0
+    request_timeout_s: ClassVar[float] = 10.0
+    write_timeout_s: ClassVar[float] = 10.0
     counters: ClassVar[dict[str, int]] = {}
     """refused, evicted, timed_out (408), write_stalled, idle_closed: for the tests and the docs."""
 
@@ -142,7 +144,7 @@ class _BoundedH11Protocol(H11Protocol):
     # --- the timer ----------------------------------------------------------------------------------
     def _arm_check(self) -> None:
         period = min(
-            t for t in (self.idle_timeout, self.request_timeout, self.write_timeout, 3600.0) if t > 0
+            t for t in (self.idle_timeout_s, self.request_timeout_s, self.write_timeout_s, 3600.0) if t > 0
         )
         self._check_handle = self.loop.call_later(max(period / 4, 0.05), self._check)
 
@@ -153,10 +155,10 @@ class _BoundedH11Protocol(H11Protocol):
             return
         now = time.monotonic()
         paused = self._write_paused_at
-        if self.write_timeout > 0 and paused is not None and now - paused >= self.write_timeout:
+        if self.write_timeout_s > 0 and paused is not None and now - paused >= self.write_timeout_s:
             self._count("write_stalled")
             logger.info(
-                "HTTP: dropping %s: it did not read its answer for %.0f s", self.client, self.write_timeout
+                "HTTP: dropping %s: it did not read its answer for %.0f s", self.client, self.write_timeout_s
             )
             self.transport.abort()
             return
@@ -164,11 +166,11 @@ class _BoundedH11Protocol(H11Protocol):
             self._arm_check()
             return
         began = self._request_began
-        if self.request_timeout > 0 and began is not None and now - began >= self.request_timeout:
+        if self.request_timeout_s > 0 and began is not None and now - began >= self.request_timeout_s:
             self._time_out_request()
             return
         quiet = self._request_began is None and (self.cycle is None or self.cycle.response_complete)
-        if self.idle_timeout > 0 and quiet and now - self._last_active >= self.idle_timeout:
+        if self.idle_timeout_s > 0 and quiet and now - self._last_active >= self.idle_timeout_s:
             self._count("idle_closed")
             self.transport.close()
             return
@@ -178,7 +180,7 @@ class _BoundedH11Protocol(H11Protocol):
         """408 and close: the request did not arrive in time (a stalled body or head)."""
         self._count("timed_out")
         logger.info(
-            "HTTP: %s did not send its request within %.0f s (408)", self.client, self.request_timeout
+            "HTTP: %s did not send its request within %.0f s (408)", self.client, self.request_timeout_s
         )
         cycle = self.cycle
         if cycle is not None and not cycle.response_complete:
@@ -245,7 +247,10 @@ def abort_stalled(connections: Iterable[object]) -> int:
 
 
 def bounded_protocol(
-    max_connections: int, idle_timeout: float, request_timeout: float = 10.0, write_timeout: float = 10.0
+    max_connections: int,
+    idle_timeout_s: float,
+    request_timeout_s: float = 10.0,
+    write_timeout_s: float = 10.0,
 ) -> type[Any]:
     """A protocol class for ``uvicorn.Config(http=...)`` with these bounds (one class per adapter)."""
     return type(
@@ -253,9 +258,9 @@ def bounded_protocol(
         (_BoundedH11Protocol,),
         {
             "max_connections": max_connections,
-            "idle_timeout": idle_timeout,
-            "request_timeout": request_timeout,
-            "write_timeout": write_timeout,
+            "idle_timeout_s": idle_timeout_s,
+            "request_timeout_s": request_timeout_s,
+            "write_timeout_s": write_timeout_s,
             "counters": {},
         },
     )

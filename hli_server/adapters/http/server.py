@@ -45,7 +45,7 @@ class HttpApiAdapter:
         self.bind = bind
         self.requested_port = self.options.port
         self.port: int | None = None
-        self.graceful_timeout = self.options.graceful_timeout
+        self.graceful_timeout_s = self.options.graceful_timeout_s
         self._server: _Server | None = None
         self._task: asyncio.Task[None] | None = None
         self._socket: socket.socket | None = None
@@ -81,10 +81,13 @@ class HttpApiAdapter:
             lifespan="off",
             ws="none",
             http=bounded_protocol(
-                options.max_connections, options.idle_timeout, options.request_timeout, options.write_timeout
+                options.max_connections,
+                options.idle_timeout_s,
+                options.request_timeout_s,
+                options.write_timeout_s,
             ),
-            timeout_keep_alive=options.keep_alive,
-            timeout_graceful_shutdown=self.graceful_timeout,
+            timeout_keep_alive=options.keep_alive_s,
+            timeout_graceful_shutdown=self.graceful_timeout_s,
         )
         self._server = server = _Server(config)
         self._task = task = asyncio.create_task(server.serve(sockets=[sock]), name="hli-http-api")
@@ -108,7 +111,7 @@ class HttpApiAdapter:
         if server is not None and task is not None:
             server.should_exit = True
             try:
-                await asyncio.wait_for(asyncio.shield(task), self.graceful_timeout + 3.0)
+                await asyncio.wait_for(asyncio.shield(task), self.graceful_timeout_s + 3.0)
             except TimeoutError:
                 logger.warning("HTTP control API did not stop in time; closing its connections")
                 server.force_exit = True

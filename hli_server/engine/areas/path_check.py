@@ -35,7 +35,7 @@ class AreaPathCheck(AreaRole):
     start and end point and the exact intersection point."""
 
     monitors_tcp = True
-    """The areas monitor the tool centre point (the tool tip, less the tool length): issue 24, M-15."""
+    """The areas monitor the tool centre point (the tool tip, less the tool length): M-15."""
 
     # --- path check (C14-15) ---------------------------------------------------------------
     def path_check(self, segment: Segment, block: Block) -> DecodeError | None:

@@ -267,7 +267,7 @@ class Slope(Directive):
 
 
 class CoordinateCommand(Directive):
-    """``#CS``, ``#ACS``, ``#ROTATION`` (issue 24): the decoder changes its frames in program order.
+    """``#CS``, ``#ACS``, ``#ROTATION`` (M-10..M-13): the decoder changes its frames in program order.
 
     ``kind`` CS, ACS or ROTATION; ``op`` DEF, ON, OFF, ADD, SET, DEL; ``ident`` the (A)CS ID where
     programmed; ``name`` a #CS ADD/SET/DEL name; ``values`` the components [v1, v2, v3, φ1, φ2, φ3];
@@ -295,7 +295,7 @@ class CoordinateCommand(Directive):
 
 
 TOOL_WRITES: Final = {"WZR": "radius", "WZ_AKT.R": "radius", "WZL": "length", "WZ_AKT.L": "length"}
-"""V.G. variables a program may write: the active tool's radius and length (issue 24)."""
+"""V.G. variables a program may write: the active tool's radius and length (M-14)."""
 
 
 class ToolWrite(Directive):
@@ -308,7 +308,7 @@ class ToolWrite(Directive):
 
 
 class ContourDirective(Directive):
-    """``#CONTOUR MODE``, ``#HSC``, ``#SPLINE`` / ``#SET SPLINE`` (issue 24, M-20..M-23): ``function`` is
+    """``#CONTOUR MODE``, ``#HSC``, ``#SPLINE`` / ``#SET SPLINE`` (M-20..M-23): ``function`` is
     ``"CONTOUR"``, ``"HSC"`` or ``"SPLINE"``; ``on`` True (ON), False (OFF) or None (parameters only);
     ``mode`` the contouring type (``DEV``, ``DIST``, ...), the HSC variant (``OPMODE 1``, ``BSPLINE``) or
     the spline type, None where not programmed; ``values`` the numeric parameters (mm)."""

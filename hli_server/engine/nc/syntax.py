@@ -323,9 +323,17 @@ SLOPE_TYPES: Final = ("STEP", "TRAPEZ", "SIN2", "HSC")
 MOTION_FUNCTIONS: Final[dict[str, str]] = {
     "TRC": "tool radius compensation options (#TRC)",
 }
-"""The motion functions issue 24 adds (N-09): refused by name until then."""
-MOTION_G_CODES: Final[dict[int, str]] = {}
-"""G codes of the motion functions of issue 24 (N-09), refused by name with 910110."""
+"""Motion functions not simulated (N-08): refused by name with 910110 (docs/nc-language.md)."""
+MOTION_G_CODES: Final[dict[int, str]] = {
+    5: "tangential TRC selection/deselection",
+    138: "direct TRC selection/deselection",
+    141: "TRC contour masking",
+    236: "direct TRC selection/deselection on the path",
+    237: "perpendicular TRC selection/deselection",
+    238: "TRC selection at an inside corner",
+    239: "TRC selection/deselection without a block",
+}
+"""G codes of motion functions not simulated (N-08), refused by name with 910110."""
 VALUE_G_CODES: Final = frozenset((131, 231, 133, 134, 233, 334, 339))
 """G functions programmed with a value, ``G131=50`` (acceleration and ramp-time weightings)."""
 AXIS_VALUE_G_CODES: Final = frozenset((130, 230, 132, 333, 338))
@@ -335,17 +343,22 @@ EXTRA_G_CODES: Final = VALUE_G_CODES | AXIS_VALUE_G_CODES
 _DWELL: Final = re.compile(r"G0*4(?![0-9.])", re.IGNORECASE)
 """A G04 block: its time may follow G04 directly (``G04 2.5``), which the word parser does not read."""
 UNIT_G_CODES: Final = frozenset((8, 9, 70, 71, 94, 95, 900, 901))
-"""Units and words of issue 24 item 5 (M-06..M-09): G70/G71 inch/metric, G94/G95 feed per minute /
+"""Units and words (M-06..M-09): G70/G71 inch/metric, G94/G95 feed per minute /
 per revolution, G08/G09/G900/G901 acceleration at block start / deceleration at block end."""
 CONTOUR_G_CODES: Final = frozenset((61, 64, 150, 151, 260, 261))
 """Polynomial contouring G61/G261/G260 (G64 as G261), spline interpolation G151/G150 (simulated as
-contouring): issue 24, M-20..M-23, docs/nc-language.md "Contouring"."""
-KNOWN_G: Final = word_parser.KNOWN_G_CODES | EXTRA_G_CODES | UNIT_G_CODES | CONTOUR_G_CODES
+contouring): M-20..M-23, docs/nc-language.md "Contouring"."""
+INITIAL_STATE_G_CODES: Final = frozenset((139, 140))
+"""G139 (indirect TRC selection/deselection, PM 207729163) and G140 (no contour masking, PM 206480651):
+the kernel's initial states, the ones simulated; programmed, they change nothing."""
+KNOWN_G: Final = (
+    word_parser.KNOWN_G_CODES | EXTRA_G_CODES | UNIT_G_CODES | CONTOUR_G_CODES | INITIAL_STATE_G_CODES
+)
 REFUSED_HASH: Final[dict[str, str]] = {
     "KIN": "kinematic transformations (#KIN)",
     "TRAFO": "kinematic transformations (#TRAFO)",
 }
-"""Refused with their own message (issue 24 item 6): docs/nc-language.md says what simulating them
+"""Refused with their own message (M-26): docs/nc-language.md says what simulating them
 would take."""
 
 _CONSTANT: Final = ConstantEnv()
@@ -871,7 +884,7 @@ class Compiler:
                 block = self._words.parse_code(raw.text, code, raw.first)
             except NcError as exc:
                 # a G code the word parser does not know may be one the interpreter takes (G130, G131
-                # ...) or refuses by name (G41, issue 24): its own parser decides
+                # ...) or refuses by name (MOTION_G_CODES): its own parser decides
                 if (exc.alarm != A_UNKNOWN_G and not _DWELL.search(code)) or _CONTROL_HEAD.match(code):
                     raise
                 return self._parsed(raw, code)
@@ -1608,8 +1621,7 @@ class _BlockParser:
         if name in MOTION_FUNCTIONS:
             self.fail(
                 A_NOT_SIMULATED,
-                f"#{name}: {MOTION_FUNCTIONS[name]} is not simulated yet (issue 24, N-09): "
-                "see docs/nc-language.md",
+                f"#{name}: {MOTION_FUNCTIONS[name]} is not simulated (N-08): see docs/nc-language.md",
             )
         if name in KERNEL_HASH_COMMANDS:
             self.fail(
@@ -1889,7 +1901,9 @@ class _BlockParser:
                 saved = self.depth
                 self.depth = 0
                 try:
-                    params[key] = self.expression(stop_at_blank=True)
+                    # inside the brackets a value is a whole expression, blanks and all (the manual's
+                    # ``[DEV, PATH_DEV = V.G.WZ_AKT.R / 100]``); it ends at a word that is no operator
+                    params[key] = self.expression(stop_at_blank=not inside)
                 finally:
                     self.depth = saved
             else:
@@ -2477,7 +2491,7 @@ def build_block(
 ) -> Block:
     """The decoder's :class:`Block` from evaluated words, with the word parser's rules (E-04): known G
     codes, one G per group, a word once per block, the ranges of positions, feeds, centres and S/T/D/H
-    (alarms 910101..910111); the motion functions of issue 24 refused by name (910110)."""
+    (alarms 910101..910111); the motion functions not simulated refused by name (910110)."""
     g_codes: list[int] = []
     m_codes: list[int] = []
     axes: dict[str, float] = {}
@@ -2521,8 +2535,7 @@ def build_block(
                     A_NOT_SIMULATED,
                     line,
                     number,
-                    f"G{g}: {MOTION_G_CODES[g]} is not simulated yet (issue 24, N-09): see "
-                    "docs/nc-language.md",
+                    f"G{g}: {MOTION_G_CODES[g]} is not simulated (N-08): see docs/nc-language.md",
                 )
             if g not in KNOWN_G:
                 known = " ".join(f"G{c}" for c in sorted(KNOWN_G))

@@ -1,4 +1,4 @@
-"""The stages of the path pipeline between the interpreter and the planner (issue 24; see
+"""The stages of the path pipeline between the interpreter and the planner (M-10..M-24; see
 docs/architecture.md).
 
 programmed block -> tool radius compensation (:mod:`.radius`) -> frames: #ROTATION, #CS, zero offsets,

@@ -1,5 +1,5 @@
-"""Polynomial contouring: the corner between two motion blocks replaced by a smooth transition (issue 24,
-item 3; M-20..M-24).
+"""Polynomial contouring: the corner between two motion blocks replaced by a smooth transition
+(M-20..M-24).
 
 The kernel's polynomial contouring (G61 non-modal, G261/G260 modal, ``#CONTOUR MODE [...]``;
 programming manual "Polynomial contouring (G61/G261/G260)",
@@ -38,7 +38,12 @@ ordinary line segments: the area checks test exactly the path the axes then foll
 
 No contouring (the corner is kept, as the kernel suppresses it, 475086859): where either block is a
 rapid (G00: it ends in exact stop in this simulator), an exact-stop block (G60), a measuring move, or
-where the transition is tangential or a reversal.
+where the transition is tangential or a reversal; and where the tool length in the axis position changes
+along either block (``Piece.tip_start``/``tip_end``: the support points then carry one length).
+
+In the chain (docs/nc-language.md, "The chained path"), the pieces come from the radius compensation and
+the frames: compensated segments in machine coordinates, each with its block's feed, contouring and tool
+length.
 
 Interface: :meth:`Contour.push` takes a :class:`Piece` (a segment in machine coordinates with its block
 and its contouring request) and returns the pieces ready for the path checks; a piece that asks for
@@ -131,6 +136,11 @@ class Piece:
     """The programmed block's length (the corner distances are limited to half of it)."""
     transition: bool = False
     """A chord of a contouring curve."""
+    tip_start: float = 0.0
+    """mm: the tool length in the tool axis's position at the segment's start (the area checks see the
+    segment less it: the tool tip); :attr:`tip_end` at its end. A corner is contoured only where the
+    length is the same along both blocks (the curve's support points then carry that one length)."""
+    tip_end: float = 0.0
 
 
 # --- geometry helpers ---------------------------------------------------------------------------------
@@ -251,7 +261,12 @@ class Contour:
         pre = self._held
         self._held = None
         if pre is not None:
-            if pre.blend is None or piece.rapid or piece.exact_stop:
+            if (
+                pre.blend is None
+                or piece.rapid
+                or piece.exact_stop
+                or not (pre.tip_start == pre.tip_end == piece.tip_start == piece.tip_end)
+            ):
                 out.append(pre)
             else:
                 blended = self._blend(pre, piece, pre.blend)
@@ -339,6 +354,8 @@ class Contour:
                 feed=pre.feed,
                 full_length=math.dist(a, b),
                 transition=True,
+                tip_start=pre.tip_end,
+                tip_end=pre.tip_end,
             )
             for a, b in itertools.pairwise(chords)
             if math.dist(a, b) > 1e-12

@@ -1,4 +1,4 @@
-"""Coordinate frames: program coordinates to machine coordinates (issue 24 item 2, M-10..M-13).
+"""Coordinate frames: program coordinates to machine coordinates (M-10..M-13).
 
 The chain a programmed point of the three main axes goes through, in this order (programming manual,
 https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/207442315.html (#ROTATION),
@@ -10,7 +10,7 @@ https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/207442315.ht
    (φ1, φ2, φ3) relative to the one below it (the lowest relative to the workpiece coordinates); rotation
    sequence ZYX (P-CHAN-00394's default): ``R = Rz(φ3) Ry(φ2) Rx(φ1)``, a point ``p`` of the CS is
    ``v + R p`` in the system below. ``#CS ADD [name]`` builds the same kind of stack by name.
-3. The zero offsets G54..G59 and G92 (per axis, as before issue 24).
+3. The zero offsets G54..G59 and G92 (per axis).
 4. The fixture systems ``#ACS``: the same as a CS, below the zero offsets (they compensate a skewed
    workpiece or pallet in the machine's coordinates).
 

@@ -1,5 +1,5 @@
 """Acceleration profiles: ``#SLOPE [TYPE=STEP|TRAPEZ|SIN2|HSC]``, ``#SLOPE DEFAULT``, P-CHAN-00071
-(issue 24 item 1, M-01..M-05).
+(M-01..M-05).
 
 The kernel's profiles (programming manual "Selecting operating mode (#SLOPE, #SLOPE DEFAULT)",
 https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/207190411.html; P-CHAN-00071

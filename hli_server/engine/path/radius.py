@@ -1,4 +1,4 @@
-"""Tool radius compensation G40/G41/G42 (issue 24 item 4, M-16..M-18).
+"""Tool radius compensation G40/G41/G42 (M-16..M-18).
 
 Works in program coordinates, in the active plane, before the frames (docs/nc-language.md "Tools").
 Programming manual: "Tool radius compensation (TRC)"
@@ -32,6 +32,8 @@ import math
 from dataclasses import dataclass, replace
 from typing import Any
 
+from hli_server.engine.path.contour import ContourSettings
+
 __all__ = [
     "A_CONTOUR_VIOLATION",
     "A_RADIUS_CIRCLE_CIRCLE",
@@ -47,6 +49,8 @@ A_RADIUS_TOO_LARGE = 90017
 A_RADIUS_CIRCLE_CIRCLE = 90031
 A_CONTOUR_VIOLATION = 916000
 _EPS = 1e-9
+_CHECKED = frozenset({"block", "approach", "departure"})
+"""The kinds of compensated elements the gouge check tests against their programmed direction."""
 
 V2 = tuple[float, float]
 
@@ -71,6 +75,18 @@ class Element:
     cw: bool = False
     kind: str = "block"
     """``block`` (programmed), ``approach``, ``departure``, ``transition``, ``connect``."""
+    feed: float | None = None
+    """mm/min: the path feed of the element's block (taken when the block is decoded: a held block keeps
+    its own feed when the next block programs another)."""
+    blend: ContourSettings | None = None
+    """The contouring at the element's end (the block's, when it was decoded; None: an exact corner)."""
+    length: float = 0.0
+    """mm: the tool length in the tool axis's position at the element's end (the block's)."""
+
+
+def _part(of: Element, start: tuple[float, ...], end: tuple[float, ...], kind: str) -> Element:
+    """A straight element the compensation inserts for ``of``'s block (with its feed, contouring, tool)."""
+    return replace(of, start=start, end=end, centre=None, cw=False, kind=kind)
 
 
 def _sub(a: V2, b: V2) -> V2:
@@ -225,16 +241,23 @@ class RadiusCompensation:
         return min(cands, key=lambda p: math.hypot(*_sub(p, near)))
 
     def _check_direction(self, prog: Element, comp: Element) -> None:
-        """A compensated line must keep its direction (else the tool path crosses itself)."""
-        if prog.centre is not None or comp.kind != "block":
+        """The gouge check (PM 207844107, "Limits of TRC"): a compensated line must keep its programmed
+        direction, else the tool would cut into the contour (a slot narrower than the tool, a block
+        shorter than the corner needs, an approach or a departure too short for the radius). Checked for
+        each element once both its corners are known: its own block and its two neighbours, the kernel's
+        window of three relevant blocks."""
+        if prog.centre is not None or comp.kind not in _CHECKED:
             return
         t = self._tangent(prog, False)
         if _dot(_sub(self._p(comp.end), self._p(comp.start)), t) < -1e-9:
+            what = {"approach": "approach block", "departure": "departure block (G40)"}.get(
+                comp.kind, "block"
+            )
             raise TrcError(
                 A_CONTOUR_VIOLATION,
                 f"tool radius compensation: with radius {self.radius:g} mm the compensated path of this "
-                "block "
-                "runs against its programmed direction (the tool path crosses itself: contour violation)",
+                f"{what} runs against its programmed direction (the tool would cut into the contour: "
+                "contour violation)",
                 prog.block,
             )
 
@@ -274,15 +297,7 @@ class RadiusCompensation:
         # outer corner: a transition
         mid = a.end
         if self.transition == 26:
-            arc = Element(
-                start=mid,
-                end=b.start,
-                block=b.block,
-                rapid=b.rapid,
-                centre=corner,
-                cw=self.side > 0,
-                kind="transition",
-            )
+            arc = replace(b, start=mid, end=b.start, centre=corner, cw=self.side > 0, kind="transition")
             return [a, arc, b]
         delta = math.acos(max(-1.0, min(1.0, dot)))
         if delta <= math.pi / 2 + 1e-12 and a.centre is None and b.centre is None:
@@ -295,8 +310,8 @@ class RadiusCompensation:
             pt = self._with(a.end, p)
             return [
                 a,
-                Element(a.end, pt, b.block, b.rapid, kind="transition"),
-                Element(pt, b.start, b.block, b.rapid, kind="transition"),
+                _part(b, a.end, pt, "transition"),
+                _part(b, pt, b.start, "transition"),
                 b,
             ]
         k = self.radius * math.tan(delta / 4)
@@ -306,12 +321,12 @@ class RadiusCompensation:
         if a.centre is None:
             out.append(replace(a, end=pa))
         else:
-            out += [a, Element(a.end, pa, b.block, b.rapid, kind="transition")]
-        out.append(Element(pa, pb, b.block, b.rapid, kind="transition"))
+            out += [a, _part(b, a.end, pa, "transition")]
+        out.append(_part(b, pa, pb, "transition"))
         if b.centre is None:
             out.append(replace(b, start=pb))
         else:
-            out += [Element(pb, b.start, b.block, b.rapid, kind="transition"), b]
+            out += [_part(b, pb, b.start, "transition"), b]
         return out
 
     def _check_arc(self, prog: Element, comp: Element, at_end: bool) -> None:
@@ -352,7 +367,7 @@ class RadiusCompensation:
             if self._last_out is None:
                 return [e]
             end = self._with(e.end, self._p(self._last_out))
-            out.append(Element(self._last_out, end, e.block, e.rapid))
+            out.append(_part(e, self._last_out, end, "block"))
             self._last_out = end
             return out
         if deselect or self.side == 0:
@@ -373,8 +388,9 @@ class RadiusCompensation:
             dep_off = self._offset(e)
             pair = self._corner(self._held, dep_off, self._p(e.start), self._held_prog, e)
             out += pair[:-1]
-            last = pair[-1]
-            out.append(replace(last, end=e.end, kind="departure"))
+            departure = replace(pair[-1], end=e.end, kind="departure")
+            self._check_direction(e, departure)
+            out.append(departure)
             self._held = self._held_prog = None
             self._last_out = e.end
             self.side = 0
@@ -396,7 +412,7 @@ class RadiusCompensation:
         off = self._offset(e)
         if self._held is None:
             if self._last_out is not None and self._last_out != off.start:
-                out.append(Element(self._last_out, off.start, e.block, e.rapid, kind="connect"))
+                out.append(_part(e, self._last_out, off.start, "connect"))
             self._check_direction(e, off)
             self._held, self._held_prog = off, e
             return out

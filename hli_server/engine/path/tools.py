@@ -1,13 +1,13 @@
-"""Tool data: the tool table of the machine file, D/T words and tool length compensation (issue 24 item 4,
-M-14, M-15).
+"""Tool data: the tool table of the machine file, D/T words and tool length compensation
+(M-14, M-15).
 
 The machine file's channel lists ``tools``: compensation data blocks with a number (the D word that selects
 them), optionally the tool number T, a length and a radius (programming manual, "Tool geometry
 compensation", https://infosys.beckhoff.com/content/1033/tccncprogramming/15557086347.html). ``D<n>``
 selects block n, ``D0`` deselects (length and radius 0). A ``T`` word is accepted and recorded (the tool
 change is the PLC's technology function); it does not select geometry data (``D`` does). Where the machine
-file has no tool table at all, every D selects zero data (programs written for a real machine run as before
-issue 24); with a table, a D it does not hold is alarm 916001.
+file has no tool table at all, every D selects zero data (programs written for a real machine without
+tool data run as they are); with a table, a D it does not hold is alarm 916001.
 
 Tool length compensation: the length acts in the third main axis of the active plane in + direction
 (``#TLAX`` default: G17 Z, G18 Y, G19 X; https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/

@@ -1,4 +1,4 @@
-"""``POST /api/check``: check a program offline, as ``hli-server check`` does (issue 20).
+"""``POST /api/check``: check a program offline, as ``hli-server check`` does (N-10).
 
 The engine's ``ProgramCheck`` runs on a fresh machine of the server's machine file, in a worker process
 (``runtime/checks.py``): the running machine, its programs and its V.E. variables are not touched, and the
@@ -14,7 +14,8 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 
 from hli_server.adapters.http.deps import HostDep
-from hli_server.adapters.http.models import CheckBody, CheckReport
+from hli_server.adapters.http.models import CheckBody
+from schemas.results import CheckReport
 
 __all__ = ["router"]
 
@@ -54,7 +55,7 @@ async def post_check(
     max_cycles: Annotated[int | None, Query(ge=1, le=50_000_000)] = None,
     max_iterations: Annotated[int | None, Query(ge=1, le=100_000_000)] = None,
     timeout_s: Annotated[float | None, Query(gt=0, le=600)] = None,
-) -> dict[str, Any]:
+) -> CheckReport:
     raw = await request.body()
     content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if content_type == "application/json":

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 from fastapi import APIRouter, HTTPException
 
-from hli_server.adapters.host import AdapterHost
+from hli_server.adapters.host import AdapterHost, Value
 from hli_server.adapters.http.deps import HostDep
 from hli_server.adapters.http.models import ImageWriteBody
-from schemas.layout import ReadOnlySignalError, Signal, SignalValueError, UnknownSignalError
+from schemas.layout import LayoutJson, ReadOnlySignalError, Signal, SignalValueError, UnknownSignalError
+from schemas.results import ImageField
 
 __all__ = ["router"]
 
@@ -19,9 +18,8 @@ ST_PATH_EXAMPLE = "gpCh[0]^bahn_mc_control.override.command_w"
 
 
 @router.get("/api/layout", summary="The image layout (as `hli-server map --format json`)")
-async def get_layout(host: HostDep) -> dict[str, Any]:
-    layout: dict[str, Any] = host.image.layout.to_dict()
-    return layout
+async def get_layout(host: HostDep) -> LayoutJson:
+    return host.image.layout.to_dict()
 
 
 @router.get(
@@ -29,7 +27,7 @@ async def get_layout(host: HostDep) -> dict[str, Any]:
     summary=f"Read an image field by ST path, e.g. {ST_PATH_EXAMPLE}",
     responses={404: {"description": "unknown ST path"}},
 )
-async def get_image(host: HostDep, st_path: str) -> dict[str, Any]:
+async def get_image(host: HostDep, st_path: str) -> ImageField:
     signal = _signal_or_404(host, st_path)
     return _field_json(host, signal, host.image.read(signal.st_path))
 
@@ -43,7 +41,7 @@ async def get_image(host: HostDep, st_path: str) -> dict[str, Any]:
         422: {"description": "the value does not fit the field's type"},
     },
 )
-async def put_image(host: HostDep, st_path: str, body: ImageWriteBody) -> dict[str, Any]:
+async def put_image(host: HostDep, st_path: str, body: ImageWriteBody) -> ImageField:
     signal = _signal_or_404(host, st_path)
     try:
         signal.check_plc_write()
@@ -79,7 +77,7 @@ def _signal_or_404(host: AdapterHost, st_path: str) -> Signal:
         raise HTTPException(404, str(exc)) from None
 
 
-def _field_json(host: AdapterHost, signal: Signal, value: object) -> dict[str, Any]:
+def _field_json(host: AdapterHost, signal: Signal, value: Value) -> ImageField:
     return {
         "st_path": signal.st_path,
         "value": value,

@@ -7,8 +7,6 @@ faults: set one (``POST``, a :class:`~hli_server.adapters.faults.FaultSpec`), li
 
 from __future__ import annotations
 
-from typing import Any
-
 from fastapi import APIRouter
 from fastapi.responses import FileResponse
 from pydantic import BaseModel, ConfigDict, Field
@@ -16,6 +14,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from hli_server.adapters.faults import FaultError, FaultSpec
 from hli_server.adapters.host import ConflictError, NotFoundError
 from hli_server.adapters.http.deps import HostDep
+from schemas.results import CommFault, CommFaultsEnded, CommFaultTable, RecorderStatus, RecordingFile
 
 __all__ = ["router"]
 
@@ -34,7 +33,7 @@ class RecordingStartBody(BaseModel):
 
 
 @router.get("/api/recording", summary="Whether a recording runs, into which file, how far")
-async def get_recording(host: HostDep) -> dict[str, Any]:
+async def get_recording(host: HostDep) -> RecorderStatus:
     return host.recorder.status()
 
 
@@ -44,7 +43,7 @@ async def get_recording(host: HostDep) -> dict[str, Any]:
     summary="Start recording the session (every input with its cycle, the outputs beside them)",
     responses={409: {"description": "a recording runs already, or the server has no recording directory"}},
 )
-async def start_recording(host: HostDep, body: RecordingStartBody | None = None) -> dict[str, Any]:
+async def start_recording(host: HostDep, body: RecordingStartBody | None = None) -> RecorderStatus:
     return host.recorder.start(body.name if body is not None else None)
 
 
@@ -53,12 +52,12 @@ async def start_recording(host: HostDep, body: RecordingStartBody | None = None)
     summary="Stop the recording: flushed, its end line written, closed",
     responses={409: {"description": "no recording runs"}},
 )
-async def stop_recording(host: HostDep) -> dict[str, Any]:
+async def stop_recording(host: HostDep) -> RecorderStatus:
     return host.recorder.stop()
 
 
 @router.get("/api/recordings", summary="The recordings in the recording directory")
-async def list_recordings(host: HostDep) -> list[dict[str, Any]]:
+async def list_recordings(host: HostDep) -> list[RecordingFile]:
     return host.recorder.files()
 
 
@@ -74,7 +73,7 @@ async def download_recording(host: HostDep, name: str) -> FileResponse:
 
 
 @router.get("/api/comm/faults", summary="The communication faults in effect")
-async def get_comm_faults(host: HostDep) -> dict[str, Any]:
+async def get_comm_faults(host: HostDep) -> CommFaultTable:
     return {"faults": host.faults.table(), "history": list(host.faults.history)[-50:]}
 
 
@@ -84,7 +83,7 @@ async def get_comm_faults(host: HostDep) -> dict[str, Any]:
     summary="Set a communication fault: delay, drop, error (Modbus, ADS), stall (shm), disconnect (MQTT)",
     responses={409: {"description": "too many faults in effect"}, 422: {"description": "an invalid fault"}},
 )
-async def post_comm_fault(host: HostDep, body: FaultSpec) -> dict[str, Any]:
+async def post_comm_fault(host: HostDep, body: FaultSpec) -> CommFault:
     try:
         return host.faults.add(body).to_json()
     except FaultError as exc:
@@ -92,7 +91,7 @@ async def post_comm_fault(host: HostDep, body: FaultSpec) -> dict[str, Any]:
 
 
 @router.delete("/api/comm/faults/{fault_id}", summary="End one communication fault now")
-async def delete_comm_fault(host: HostDep, fault_id: int) -> dict[str, Any]:
+async def delete_comm_fault(host: HostDep, fault_id: int) -> CommFault:
     try:
         return host.faults.end(fault_id, "api").to_json()
     except FaultError as exc:
@@ -100,5 +99,5 @@ async def delete_comm_fault(host: HostDep, fault_id: int) -> dict[str, Any]:
 
 
 @router.delete("/api/comm/faults", summary="End every communication fault (reset)")
-async def reset_comm_faults(host: HostDep) -> dict[str, Any]:
+async def reset_comm_faults(host: HostDep) -> CommFaultsEnded:
     return {"ended": host.faults.reset("reset")}

@@ -3,13 +3,11 @@ page ``/`` is ``page.py``)."""
 
 from __future__ import annotations
 
-from typing import Any
-
 from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 
 from hli_server.adapters.http.deps import HostDep
-from schemas.results import AlarmList, AreaTable, MachineState
+from schemas.results import AlarmList, AreaTable, MachineState, ReadinessJson, Timing
 
 __all__ = ["router"]
 
@@ -26,14 +24,17 @@ async def get_state(host: HostDep) -> MachineState:
 
 
 @router.get("/api/timing", summary="Pacing statistics of the clock (lateness in µs)")
-async def get_timing(host: HostDep) -> dict[str, Any]:
+async def get_timing(host: HostDep) -> Timing:
     return host.operator.timing()
 
 
 @router.get(
     "/api/ready",
     summary="Readiness: 200 when the clock runs and every door asked for listens, else 503",
-    responses={503: {"description": "starting (a door does not listen yet) or stopping"}},
+    response_model=ReadinessJson,
+    responses={
+        503: {"description": "starting (a door does not listen yet) or stopping", "model": ReadinessJson}
+    },
 )
 async def get_ready(host: HostDep) -> JSONResponse:
     """The health checks of the image and the compose bench ask this, and an orchestrator's readiness
