@@ -225,6 +225,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--blocks", type=int, default=200_000, help="motion blocks of the plain program")
     ap.add_argument(
+        "--arc-blocks",
+        type=int,
+        default=20_000,
+        help="motion blocks of the arcs program (the reference decodes most arcs one by one: slow)",
+    )
+    ap.add_argument(
         "--language-blocks", type=int, default=50_000, help="motion blocks of the language program"
     )
     ap.add_argument(
@@ -260,7 +266,7 @@ def main() -> None:
             "lines and arcs near 20 areas (near_area_lines)": near,
         }
         write_lines(programs["plain lines (no areas)"], near_area_lines(args.blocks, with_areas=False))
-        write_lines(programs["arcs near 20 areas (near_area_arcs)"], near_area_arcs(args.blocks))
+        write_lines(programs["arcs near 20 areas (near_area_arcs)"], near_area_arcs(args.arc_blocks))
         for title, program in programs.items():
             _versus_reference(title, program, reference, env, args, kind)
 
