@@ -84,6 +84,10 @@ SMALL_RUN_PER_AREA = 1
 numpy passes, so its set-up per stretch hardly grows with their number (docs/performance.md, "Batch
 thresholds")."""
 
+ROWS_KEPT = 40_000
+"""The most blocks of loops and subroutines kept before they are checked (memory stays flat under a loop
+that only moves: about a window of plain lines)."""
+
 _TAU = 2.0 * math.pi
 _PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}
 """As the decoder's: indices into the main axes of the plane's first and second axis."""
@@ -385,6 +389,10 @@ class BatchGeometryCheck:
                     rows.add(out, decoder)
                     if interpreter.at_main_level:
                         return
+                    if len(rows.blocks) >= ROWS_KEPT:
+                        yield from self._flush_rows()
+                        if decoder.finished:
+                            return
                     continue
                 break
         finally:

@@ -17,6 +17,7 @@ import pytest
 
 from hli_server.commands.check import CheckResult, check_program
 from hli_server.engine import Machine
+from hli_server.engine import batch as batch_module
 from hli_server.engine.alarms import Severity
 from hli_server.engine.batch import BatchGeometryCheck
 from hli_server.engine.programs import MemoryLibrary
@@ -173,6 +174,22 @@ def test_the_iteration_cap_after_kept_blocks_checks_them_first(config: MachineCo
     batched = run_language(config, endless, exact=False, max_iterations=500)
     assert exact.capped == "iterations"
     assert full_report(batched) == full_report(exact)
+
+
+@pytest.mark.req("C14-15", "N-10")
+def test_a_long_loop_is_checked_a_bounded_number_of_blocks_at_a_time(
+    config: MachineConfig, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A loop that only moves is checked ROWS_KEPT blocks at a time (memory stays flat), with the exact
+    path's result, also where the violation lies beyond the first of those batches."""
+    monkeypatch.setattr(batch_module, "ROWS_KEPT", 50)
+    text = (
+        "%MAIN\n" + AREAS + "G90 G01 X-30 Y-40\nP1 = 0\n$WHILE P1 < 200\n  G91 X60 Y0.1\n  X-60 Y0.1\n"
+        "  P1 = P1 + 1\n$ENDWHILE\nG90 X20 Y0\nP1 = 0\n$WHILE P1 < 300\n  G91 X0.1\n  P1 = P1 + 1\n"
+        '$ENDWHILE\n#MSG ["after"]\nM30\n'
+    )
+    result = assert_same(config, text, small=4)
+    assert [a.number for a in result.alarms if a.severity == Severity.ERROR] == [912001]
 
 
 def test_a_pocket_with_loops_and_a_cycle_is_mostly_batched(config: MachineConfig) -> None:
