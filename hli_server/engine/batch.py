@@ -67,6 +67,7 @@ from hli_server.engine.decoder import Decoder, PathCheck
 from hli_server.engine.monitors.collision import MoveApartCheck
 from hli_server.engine.monitors.soft_limits import SoftLimitPathCheck
 from hli_server.engine.nc.blocks import Block, NcError
+from hli_server.engine.nc.interpreter import PAUSE
 from hli_server.engine.nc.parser import BlockReader
 from hli_server.engine.nc.plain import COL_F, COL_G, COL_I, EMPTY, OTHER, PLAIN, PlainChunk, PlainTokenizer
 from hli_server.engine.nc.source import ProgramText, Window
@@ -84,6 +85,8 @@ SMALL_RUN_PER_AREA = 1
 numpy passes, so its set-up per stretch hardly grows with their number (docs/performance.md, "Batch
 thresholds")."""
 
+STEP_STATEMENTS = 4096
+"""Statements the interpreter runs for the batch before it hands back (progress), where it runs on."""
 ROWS_KEPT = 40_000
 """The most blocks of loops and subroutines kept before they are checked (memory stays flat under a loop
 that only moves: about a window of plain lines)."""
@@ -351,9 +354,9 @@ class BatchGeometryCheck:
         goes to the decoder as :meth:`Decoder.next_items` would hand it."""
         decoder = self.decoder
         interpreter = self.channel.interpreter
-        interpreter.refill()
         rows = self._rows
         if decoder.waiting or not self._rows_allowed():
+            interpreter.refill()
             if rows.blocks:
                 yield from self._flush_rows()
                 return
@@ -361,8 +364,10 @@ class BatchGeometryCheck:
                 self.exact_blocks += 1
             yield decoder.next_items()
             return
-        # no pause after each statement here: the interpreter returns at its next block or directive
-        interpreter.budget = None
+        # no pause after each statement here: the interpreter returns at its next block or directive, or
+        # after STEP_STATEMENTS statements (the caller's progress goes on under a loop that only computes)
+        interpreter.budget = STEP_STATEMENTS
+        interpreter.refill()
         try:
             while True:
                 try:
@@ -385,6 +390,9 @@ class BatchGeometryCheck:
                     raise
                 if self._outbox:
                     yield from self._drain()
+                if out is PAUSE:
+                    yield []
+                    return
                 if isinstance(out, Block) and rows.takes(out):
                     rows.add(out, decoder)
                     if interpreter.at_main_level:
