@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
-from hli_server.engine.geometry import LineSegment, Point, Segment, arc_from_centre
+from hli_server.engine.geometry import ArcSegment, LineSegment, Point, Segment, arc_from_centre
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
 from hli_server.engine.nc.interpreter import (
     PAUSE,
@@ -708,17 +708,10 @@ class Decoder:
                 centre = (ci_val + m.offset(first), cj_val + m.offset(second))
             else:
                 centre = (start[i] + ci_val, start[j] + cj_val)
-            arc, mismatch = arc_from_centre(start, tuple(target), (i, j), centre, cw)
-            if arc.radius <= 1e-9:
-                return self._error(block, 911001, "circle with radius 0")
-            if mismatch > ARC_RADIUS_TOLERANCE:
-                return self._error(
-                    block,
-                    911001,
-                    f"circle end point not on the circle: start radius {arc.radius:.4f} mm, "
-                    f"end radius differs by {mismatch:.4f} mm",
-                )
-            segment = arc
+            checked = self._checked_arc(block, start, tuple(target), (i, j), centre, cw)
+            if isinstance(checked, list):
+                return checked
+            segment = checked
         if m.in_area_definition:
             if self.area_handler is not None:
                 err = self.area_handler.contour(segment, block, m)
@@ -948,6 +941,29 @@ class Decoder:
             self._trc_prog = None
         return self._emit(elements)
 
+    def _checked_arc(
+        self,
+        block: Block,
+        start: tuple[float, ...],
+        end: tuple[float, ...],
+        plane: tuple[int, int],
+        centre: tuple[float, float],
+        cw: bool,
+    ) -> ArcSegment | list[Motion | Marker]:
+        """The circle from ``start`` to ``end`` around ``centre``, or the error of a circle with radius 0 or
+        an end point off the circle (911001): the one check of the plain and the framed path."""
+        arc, mismatch = arc_from_centre(start, end, plane, centre, cw)
+        if arc.radius <= 1e-9:
+            return self._error(block, 911001, "circle with radius 0")
+        if mismatch > ARC_RADIUS_TOLERANCE:
+            return self._error(
+                block,
+                911001,
+                f"circle end point not on the circle: start radius {arc.radius:.4f} mm, "
+                f"end radius differs by {mismatch:.4f} mm",
+            )
+        return arc
+
     def _motion_framed(self, block: Block) -> list[Motion | Marker]:
         """A motion block with frames, tools or radius compensation active (program coordinates ->
         radius compensation -> frames -> checks)."""
@@ -979,16 +995,9 @@ class Decoder:
             centre = (
                 (ci_val, cj_val) if m.centre_absolute else (prog_start[i] + ci_val, prog_start[j] + cj_val)
             )
-            arc, mismatch = arc_from_centre(tuple(prog_start), tuple(prog_end), (i, j), centre, cw)
-            if arc.radius <= 1e-9:
-                return self._error(block, 911001, "circle with radius 0")
-            if mismatch > ARC_RADIUS_TOLERANCE:
-                return self._error(
-                    block,
-                    911001,
-                    f"circle end point not on the circle: start radius {arc.radius:.4f} mm, "
-                    f"end radius differs by {mismatch:.4f} mm",
-                )
+            checked = self._checked_arc(block, tuple(prog_start), tuple(prog_end), (i, j), centre, cw)
+            if isinstance(checked, list):
+                return checked
         rapid = m.motion == 0
         if not rapid:
             feed_error = self._feed_error(block)
