@@ -1269,6 +1269,58 @@ def test_the_prefilter_clears_most_arcs_beside_the_areas() -> None:
         assert cleared > 0.6 * allowed, (planes, cleared, allowed)
 
 
+@pytest.mark.req("C14-15")
+@pytest.mark.parametrize("shape", ["circle", "12-gon", "triangle", "square"])
+def test_a_work_areas_core_disc_clears_only_paths_inside(shape: str) -> None:
+    """A path whose box lies within the disc inscribed in a convex work area (or its circle), less
+    MARGIN, is cleared without a region test. The disc touches the edges: short lines and arcs at its
+    radius times 1 - 1e-9 .. 1 + 1e-6 and at the height band's ends graze the area; every cleared one
+    passes the exact check, and those well inside the disc are cleared."""
+    from hli_server.engine.areas import prefilter
+
+    size, cx, cy = 80.0, 7.0, -3.0
+    if shape == "circle":
+        region: Circle | Polygon = Circle(cx, cy, size)
+        touch = [k * math.pi / 8 for k in range(16)]
+    else:
+        corners = {
+            "12-gon": [(math.cos(k * math.pi / 6), math.sin(k * math.pi / 6)) for k in range(12)],
+            "triangle": [(-1.0, -1.0), (1.0, -1.0), (0.0, 1.0)],
+            "square": [(-1.0, 1.0), (1.0, 1.0), (1.0, -1.0), (-1.0, -1.0)],  # clockwise
+        }[shape]
+        region = Polygon([(cx + size * x, cy + size * y) for x, y in corners])
+        touch = [k * math.pi / 16 for k in range(32)]
+    group = Group(frozenset((0, 1, 2)), [Prism(region, 0, 1, 2, -50.0, 50.0, protection=False)], [])
+    core = prefilter._stacks(group).works
+    ox, oy, radius = float(core.core_x[0, 0]), float(core.core_y[0, 0]), math.sqrt(float(core.core_r2[0, 0]))
+    paths: list[Segment] = []
+    deep: list[int] = []
+    for phi in touch:
+        ux, uy = math.cos(phi), math.sin(phi)
+        for scale in (0.5, 1.0 - 1e-9, 1.0 + 1e-9, 1.0 + 1e-6):
+            rho = radius * scale
+            px, py = ox + rho * ux, oy + rho * uy
+            for z0, z1 in ((0.0, 0.0), (-50.0 + 2e-5, 10.0), (0.0, 50.0 - 1e-7), (0.0, 50.0 + 1e-7)):
+                if scale == 0.5 and z0 == 0.0 and z1 == 0.0:
+                    deep.append(len(paths))
+                paths.append(LineSegment((px - 5.0 * ux, py - 5.0 * uy, z0, 0, 0), (px, py, z1, 0, 0)))
+        # an arc of radius 2 inside the disc that reaches its rim at phi
+        r = 2.0 * (1.0 - 1e-9)
+        centre = (ox + (radius - r) * ux, oy + (radius - r) * uy)
+        start = (centre[0] - r * uy, centre[1] + r * ux, 0.0, 0, 0)
+        end = (centre[0] + r * uy, centre[1] - r * ux, 0.0, 0, 0)
+        a0 = math.atan2(start[1] - centre[1], start[0] - centre[0])
+        paths.append(ArcSegment(start, end, (0, 1), centre, r, a0, -math.pi))
+    batch = prefilter._swept_boxes(_path_batch(paths, (0, 1)))
+    in_core = prefilter._in_cores(core, batch, np.ones(len(paths), np.bool_))
+    clear = clear_of_areas([group], _path_batch(paths, (0, 1)))
+    for k in np.flatnonzero(clear).tolist():
+        assert first_violation([group], paths[k]) is None, (k, paths[k])
+    assert in_core[deep].all()
+    assert clear[deep].all()
+    assert not in_core.all()  # the paths beyond the rim or the band are left to the region tests
+
+
 # --- the tokenizer of plain lines against the parser ------------------------------------------------
 _DECIMAL = st.tuples(st.floats(-300000, 300000, allow_nan=False), st.integers(0, 9))
 _NUM = st.one_of(

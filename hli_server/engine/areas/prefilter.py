@@ -14,6 +14,9 @@ of active areas (C14-14),
   height band and box around the path's box, and the path more than :data:`MARGIN` inside its base region
   (a circle: both ends or the arc's whole circle inside; a polygon: no edge within :data:`MARGIN` of the
   path and its start (and an arc's end) inside).
+  First, and cheaply (one test per path, not per edge): the path's box within the disc inscribed in
+  the prism's base region less :data:`MARGIN` (a circle's own; a convex polygon's about its corners'
+  mean) and within its height band holds the path, whatever its shape.
 
 Why that is enough: the exact check finds an event only where the path comes within
 :data:`~hli_server.engine.areas.geometry.EPS` (1e-9 mm) of a boundary, and classifies the pieces between
@@ -188,6 +191,9 @@ class _Stack:
     __slots__ = (
         "axes",
         "circle",
+        "core_r2",
+        "core_x",
+        "core_y",
         "cx",
         "cy",
         "lower",
@@ -218,6 +224,11 @@ class _Stack:
         self.r: Floats = np.zeros(m)
         self.table: Ints = np.full(m, -1, np.int64)
         self.row: Ints = np.zeros(m, np.int64)
+        self.core_x: Floats = np.zeros((m, 1))
+        self.core_y: Floats = np.zeros((m, 1))
+        self.core_r2: Floats = np.full((m, 1), -1.0)
+        """Per prism a disc inside its base region with :data:`MARGIN` to spare (centre, squared
+        radius; -1 where none is known: a polygon that is not convex)."""
         keys: list[tuple[bool, int]] = []
         members: list[list[Polygon]] = []
         for k, q in enumerate(prisms):
@@ -234,9 +245,16 @@ class _Stack:
                 self.cx[k] = region.cx
                 self.cy[k] = region.cy
                 self.r[k] = region.r
+                self._core(k, region.cx, region.cy, region.r - MARGIN)
                 continue
+            halves = _half_planes(region)
+            if halves is not None:
+                # the disc about the corners' mean that every half-plane (less MARGIN) holds
+                nx, ny, off = halves
+                mx, my = np.mean(np.array(region.points, dtype=np.float64), axis=0)
+                self._core(k, float(mx), float(my), float(np.min(off - (nx * mx + ny * my))))
             key = (
-                _half_planes(region) is not None,
+                halves is not None,
                 1 << (len(region.points) - 1).bit_length(),
             )
             if key not in keys:
@@ -249,6 +267,10 @@ class _Stack:
         self.lower: Floats = lower
         self.upper: Floats = upper
         self.tables = [_Table(key[0], key[1], polygons) for key, polygons in zip(keys, members, strict=True)]
+
+    def _core(self, k: int, x: float, y: float, radius: float) -> None:
+        if radius > 0.0:
+            self.core_x[k, 0], self.core_y[k, 0], self.core_r2[k, 0] = x, y, radius * radius
 
 
 class _Stacks:
@@ -329,7 +351,6 @@ def _group_clear(group: Group, p: PathBatch, clear: Bools) -> Bools:
     (prisms x paths) box test, then the region tests on the (prism, path) pairs whose boxes meet."""
     stacks = _stacks(group)
     plane = stacks.plane(p.plane)
-    n = clear.shape[0]
     ok = clear.copy()
     prots = stacks.prots
     if prots.size:
@@ -339,13 +360,35 @@ def _group_clear(group: Group, p: PathBatch, clear: Bools) -> Bools:
             ok[path[~apart]] = False
     works = stacks.works
     if works.size:
-        inside = np.zeros(n, np.bool_)
-        prism, path = _box_pairs(works, p, ok, protection=False)
+        # arcs the exact check cuts into chords are never cleared inside a work area
+        inside = _in_cores(works, p, ok & ~p.arc if plane.chords else ok)
+        rest = ok & ~inside
+        prism, path = _box_pairs(works, p, rest, protection=False)
         if path.shape[0]:
             held = _pairs(works, p, prism, path, plane.work, plane.chords, False)
             inside[path[held]] = True
         ok &= inside
     return ok
+
+
+def _in_cores(st: _Stack, p: PathBatch, ok: Bools) -> Bools:
+    """The paths among ``ok`` whose box lies within some work prism's core disc (:attr:`_Stack.core_r2`)
+    and height band (less MARGIN): inside that prism whatever their shape, for a path lies within its
+    box - no region test (a path inside the disc is more than MARGIN from every edge)."""
+    far: list[Floats] = []
+    for row, centre in ((0, st.core_x), (1, st.core_y)):
+        axis = st.shared[row]
+        lo: Floats = p.lo[axis] if axis >= 0 else p.lo[st.axes[row]]
+        hi: Floats = p.hi[axis] if axis >= 0 else p.hi[st.axes[row]]
+        far.append(np.maximum(np.abs(lo - centre), np.abs(hi - centre)))
+    axis = st.shared[2]
+    lo = p.lo[axis] if axis >= 0 else p.lo[st.axes[2]]
+    hi = p.hi[axis] if axis >= 0 else p.hi[st.axes[2]]
+    within: Bools = (
+        (far[0] * far[0] + far[1] * far[1] < st.core_r2) & (lo >= st.lower[2]) & (hi <= st.upper[2])
+    )
+    held: Bools = ok & within.any(axis=0)
+    return held
 
 
 def _box_pairs(st: _Stack, p: PathBatch, ok: Bools, protection: bool) -> tuple[Ints, Ints]:
