@@ -178,22 +178,22 @@ class PlainTokenizer:
         length = end - body
         padded = data + bytes(16)
         eight = np.ndarray((n + 8,), dtype="<u8", buffer=padded, strides=(1,))
-        dot = _first_byte(eight[body], _DOTS)
+        dot = _first_byte(eight.take(body), _DOTS)
         far = np.flatnonzero((dot == 8) & (length > 8))
         if far.shape[0]:
-            dot[far] = 8 + _first_byte(eight[body[far] + 8], _DOTS)
+            dot[far] = 8 + _first_byte(eight.take(body[far] + 8), _DOTS)
         has_dot = dot < length
         whole = np.where(has_dot, dot, length)
         decimals = np.clip(np.where(has_dot, length - dot - 1, 0), 0, 16)
         digits = whole + decimals
         low_count = np.minimum(whole, 8)
-        number, ok = _digits(eight[body + whole - low_count] - _ZEROS, low_count)
+        number, ok = _digits(eight.take(body + whole - low_count) - _ZEROS, low_count)
         big = np.flatnonzero(whole > 8)
         if big.shape[0]:
-            high, high_ok = _digits(eight[body[big]] - _ZEROS, whole[big] - 8)
+            high, high_ok = _digits(eight.take(body[big]) - _ZEROS, whole[big] - 8)
             number[big] += high * _POW10_INT[8]
             ok[big] &= high_ok
-        frac, frac_ok = _digits(eight[body + whole + 1] - _ZEROS, np.minimum(decimals, 8))
+        frac, frac_ok = _digits(eight.take(body + whole + 1) - _ZEROS, np.minimum(decimals, 8))
         mantissa = number * _POW10_INT[decimals] + frac
         value = mantissa.astype(np.float64) / _POW10[decimals]
         value = np.where(negative, -value, value)
@@ -225,7 +225,10 @@ class PlainTokenizer:
             twice = np.add.reduceat(bits, firsts) != np.bitwise_or.reduceat(bits, firsts)
             other[line[firsts[twice]]] = True
         good = ~other[line]
-        values[column[good], line[good]] = value[good]
+        if good.all():
+            values[column, line] = value
+        else:
+            values[column[good], line[good]] = value[good]
         has_words = np.zeros(lines, np.bool_)
         has_words[line] = True
         kind[:] = np.where(other, OTHER, np.where(has_words, PLAIN, EMPTY))
@@ -234,12 +237,12 @@ class PlainTokenizer:
 
 def _first_byte(x: npt.NDArray[np.uint64], byte: np.uint64) -> Ints:
     """Index (0..7) of the first byte of each ``x`` (little-endian) equal to ``byte``'s, 8 if none: the
-    zero-byte test ``(y - 0x01..) & ~y & 0x80..`` is exact at the lowest zero byte of ``y = x ^ byte``."""
+    zero-byte test ``(y - 0x01..) & ~y & 0x80..`` is exact at the lowest zero byte of ``y = x ^ byte``;
+    the bits below its lowest mark number 8 k + 7 for byte k (64 where there is none)."""
     y = x ^ byte
     found = (y - _ONES) & ~y & _HIGHS
-    lowest = found & (~found + np.uint64(1))
-    _, exponent = np.frexp(lowest.astype(np.float64))
-    index: Ints = np.where(found == 0, 8, (exponent.astype(np.int64) - 1) // 8)
+    below = ~found & (found - np.uint64(1))
+    index: Ints = (np.bitwise_count(below) >> 3).astype(np.int64)
     return index
 
 
