@@ -240,7 +240,11 @@ def main() -> None:
         "--still-blocks", type=int, default=800_000, help="blocks without motion on the running machine"
     )
     ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--reference", default="main", help="git revision of the code before the language")
+    ap.add_argument(
+        "--reference",
+        default="main",
+        help="git revision of the code before the language (with --reference-dir: its name in the output)",
+    )
     ap.add_argument(
         "--reference-dir",
         type=Path,
