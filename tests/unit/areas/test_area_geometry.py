@@ -15,7 +15,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 import shapely
-from hypothesis import assume, event, given, settings
+from hypothesis import assume, event, example, given, settings
 from hypothesis import strategies as st
 from shapely.geometry import LineString
 from shapely.geometry import Point as ShapelyPoint
@@ -187,10 +187,12 @@ def make_allowed(
     works: list[ShapelyPolygon | tuple[float, float, float]],
     prots: list[ShapelyPolygon | tuple[float, float, float]],
 ) -> Callable[[np.ndarray], np.ndarray]:
-    def inside(region: ShapelyPolygon | tuple[float, float, float], pts: np.ndarray) -> np.ndarray:
+    def inside(
+        region: ShapelyPolygon | tuple[float, float, float], pts: np.ndarray, slack: float = 0.0
+    ) -> np.ndarray:
         if isinstance(region, tuple):
             cx, cy, r = region
-            return np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) <= r
+            return np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) <= r + slack
         return np.asarray(shapely.covers(region, shapely.points(pts)))
 
     def allowed(pts: np.ndarray) -> np.ndarray:
@@ -198,7 +200,9 @@ def make_allowed(
         if works:
             in_any = np.zeros(len(pts), dtype=bool)
             for w in works:
-                in_any |= inside(w, pts)
+                # a point of an arc along a work circle's rim may lie 4e-16 outside it: the floats'
+                # rounding, not a violation (the exact check's EPS is 1e-9)
+                in_any |= inside(w, pts, slack=1e-9)
             ok &= in_any
         for p in prots:
             ok &= ~inside(p, pts)
@@ -249,10 +253,26 @@ def paths(draw: st.DrawFn) -> LineSegment | ArcSegment:
     return ArcSegment(start, end, (0, 1), (cx, cy), r, a0, sweep)
 
 
+_DEGREE = math.pi / 180
+_ALONG_THE_CIRCLE = ArcSegment(
+    (3.0, 0.0, 0.0),
+    (3.0 * math.cos(_DEGREE), 3.0 * math.sin(_DEGREE), 0.0),
+    (0, 1),
+    (0.0, 0.0),
+    3.0,
+    0.0,
+    _DEGREE,
+)
+"""One degree along the rim of a work circle of radius 3 (found by a random run: the oracle's samples
+lay 4e-16 outside it)."""
+
+
 @pytest.mark.slow
 @pytest.mark.req("C14-14", "C14-15")
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=200, deadline=None, derandomize=True)
 @given(st.lists(regions, min_size=0, max_size=2), st.lists(regions, min_size=0, max_size=2), paths())
+@example(works=[(0.0, 0.0, 3.0)], prots=[], seg=_ALONG_THE_CIRCLE)  # on its boundary: allowed
+@example(works=[(0.0, 0.0, 3.0)], prots=[[(2.0, 0.0), (8.0, 0.14), (24.98, 0.87)]], seg=_ALONG_THE_CIRCLE)
 def test_line_and_arc_entry_points_match_the_sampling_oracle(
     works: list[list[tuple[float, float]] | tuple[float, float, float]],
     prots: list[list[tuple[float, float]] | tuple[float, float, float]],
