@@ -76,7 +76,7 @@ bench: $(TEST_STAMP)
 SOAK_SCALE ?= 100
 soak: $(TEST_STAMP)
 	@seed=$${HLI_FUZZ_SEED:-$$(date +%s)}; echo "soak: HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed"; \
-	HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed $(BIN)/python -m pytest -m fuzz -p no:cacheprovider \
+	HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed HLI_HYPOTHESIS_PROFILE=explore $(BIN)/python -m pytest -m fuzz -p no:cacheprovider \
 		--timeout=0 --durations=0 -q -rP $(PYTEST_ARGS)
 
 clean:
