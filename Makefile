@@ -58,14 +58,19 @@ format: $(TEST_STAMP)
 	$(BIN)/ruff check --fix .
 
 # the suite on one worker per core (pytest-xdist): every test binds port 0 and names its own shared
-# memory, so workers never meet (issue 16: 3.5 min on one worker, about 1.5 on two cores)
-XDIST ?= -n auto
+# memory, so workers never meet. --maxschedchunk 2: a worker takes two tests at a time, in the order
+# tests/conftest.py gives (modules with slow tests first), so the long ones spread over every worker
+# (xdist's default hands each worker a quarter of its share at once: one worker got every slow module
+# and ran 700 s while the other idled). Bytecode is written even where the environment says not to
+# (PYTHONDONTWRITEBYTECODE): else every worker rewrites every test module's assertions (11 s instead of
+# 3) and every server a test starts compiles our sources again (1.7 s to its banner instead of 1.1).
+XDIST ?= -n auto --maxschedchunk 2
 test: $(TEST_STAMP) node-deps lint
-	$(BIN)/python -m pytest $(XDIST) $(PYTEST_ARGS)
+	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest $(XDIST) $(PYTEST_ARGS)
 
 # the edit-test loop: no lint, no test marked `slow` (subprocess servers, xdist, long property runs)
 test-fast: $(TEST_STAMP) node-deps
-	$(BIN)/python -m pytest -m "not slow" $(PYTEST_ARGS)
+	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -m "not slow" $(PYTEST_ARGS)
 
 bench: $(TEST_STAMP)
 	$(BIN)/python -m benchmarks $(ARGS)
