@@ -62,7 +62,9 @@ def _no_leaked_shared_memory():
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """A stable sort: each module stays in one piece and in its order (module fixtures are set up once),
-    the modules that hold a test marked ``slow`` before the others."""
+    the modules that hold a test marked ``slow`` before the others: under ``make test`` xdist hands out
+    two tests at a time in this order (``--maxschedchunk 2``), so every worker starts on the long ones
+    and the short unit tests fill the end."""
     slow_modules = {item.module.__name__ for item in items if item.module and item.get_closest_marker("slow")}
     items.sort(key=lambda item: 0 if item.module and item.module.__name__ in slow_modules else 1)
 
