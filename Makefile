@@ -57,16 +57,16 @@ format: $(TEST_STAMP)
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
 
-# the suite on one worker per core and one more (pytest-xdist): every test binds port 0 and names its
-# own shared memory, so workers never meet; many tests wait on servers and time-outs, so the extra worker
-# fills the cores (2 cores: 4 min 30 s with three workers, 5 min 0 s with two). --maxschedchunk 2: a worker takes two tests at a time, in the order
+# the suite on one worker per core (pytest-xdist): every test binds port 0 and names its own shared
+# memory, so workers never meet. (A worker more than cores gave 4 min 0 s - 4 min 40 s on 2 cores instead
+# of 5 min 0 s, but the clock's realtime bounds of the attack tests then failed now and then: the cores
+# oversubscribed, docs/performance.md.) --maxschedchunk 2: a worker takes two tests at a time, in the order
 # tests/conftest.py gives (modules with slow tests first), so the long ones spread over every worker
 # (xdist's default hands each worker a quarter of its share at once: one worker got every slow module
 # and ran 700 s while the other idled). Bytecode is written even where the environment says not to
 # (PYTHONDONTWRITEBYTECODE): else every worker rewrites every test module's assertions (11 s instead of
 # 3) and every server a test starts compiles our sources again (1.7 s to its banner instead of 1.1).
-WORKERS ?= $(shell $(BIN)/python -c "import os; print(len(os.sched_getaffinity(0)) + 1)" 2>/dev/null || echo 3)
-XDIST ?= -n $(WORKERS) --maxschedchunk 2
+XDIST ?= -n auto --maxschedchunk 2
 test: $(TEST_STAMP) node-deps lint
 	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest $(XDIST) $(PYTEST_ARGS)
 
