@@ -15,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from benchmarks.bench_language import POCKET_SUB
 from hli_server.commands.check import CheckResult, check_program
 from hli_server.engine import Machine
 from hli_server.engine import batch as batch_module
@@ -26,7 +27,8 @@ from tests.unit.test_batch_check import AREAS, _batch_settings, config, report
 
 __all__ = ["config"]
 
-# the zigzag of a pass: a local subroutine, a global one and a cycle with @P parameters
+# the zigzag of a pass (the pocket benchmark's global cycle, pass.nc, with @P parameters), a local
+# subroutine and a global one
 ZIG_LOCAL = """%L ZIG
 N100 G90 G01 X[P11] Y[P12] F6000
 N110 $FOR P10 = 1, P13
@@ -36,15 +38,6 @@ N140 $ENDFOR
 N150 G90
 N160 M17
 """
-ZIG_CYCLE = """%zig
-N10 G90 G01 X[@P1] Y[@P2] F6000
-N20 $FOR P20 = 1, @P5
-N30   G91 X[@P3 * V.P.DIR] Y[@P4]
-N40   V.P.DIR = -V.P.DIR
-N50 $ENDFOR
-N60 G90
-N70 M17
-"""
 ARC_SUB = """%arcs
 N10 G91 G02 X[2 * P30] Y0 I[P30] J0
 N20 G03 X[-2 * P30] Y0 I[-P30] J0
@@ -53,7 +46,7 @@ N40 M29
 """
 
 
-FILES = {"zig.nc": ZIG_CYCLE, "arcs.nc": ARC_SUB}
+FILES = {"pass.nc": POCKET_SUB, "arcs.nc": ARC_SUB}
 
 
 def run_language(
@@ -93,7 +86,7 @@ def _pass(rng: random.Random, k: int) -> list[str]:
     if kind == 0:
         return [f"P11 = {x0}", f"P12 = {y0}", f"P13 = {n}", f"P14 = {dx}", f"P15 = {dy}", "LL ZIG"]
     if kind == 1:
-        return [f"L CYCLE [NAME=zig.nc @P1={x0} @P2={y0} @P3={dx} @P4={dy} @P5={n}]"]
+        return [f"L CYCLE [NAME=pass.nc @P1={x0} @P2={y0} @P3={dx} @P4={dy} @P5={n}]"]
     if kind == 2:
         return [f"G90 G01 X{x0} Y{y0}", f"P30 = {rng.choice((1.0, 5.0, 12.5))}", "L arcs.nc"]
     if kind == 3:
@@ -196,7 +189,7 @@ def test_a_pocket_with_loops_and_a_cycle_is_mostly_batched(config: MachineConfig
     """The kept blocks are checked as a batch: far fewer blocks go to the exact decoder than are run."""
     text = (
         "%MAIN\n" + AREAS + "#VAR\n  V.P.DIR = 1\n#ENDVAR\nG90 G01 X30 Y-45 F6000\n$FOR P1 = 0, 9\n"
-        "  L CYCLE [NAME=zig.nc @P1=-30 @P2=-45 + P1 @P3=60 @P4=0.5 @P5=30]\n$ENDFOR\nM30\n"
+        "  L CYCLE [NAME=pass.nc @P1=-30 @P2=-45 + P1 @P3=60 @P4=0.5 @P5=30]\n$ENDFOR\nM30\n"
     )
     result = assert_same(config, text)
     assert not result.alarms

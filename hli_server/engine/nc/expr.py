@@ -230,23 +230,13 @@ class BinOp(Expr):
         a = self.left.evaluate(env)
         b = self.right.evaluate(env)
         if isinstance(a, float) and isinstance(b, float):
-            # the fast path of two numbers: + - * and the comparisons (what the general path gives)
+            # the fast path of two numbers: + - * and < <= > >= (what the general path gives)
             if op <= OP_MUL:
                 result = a + b if op == OP_ADD else (a - b if op == OP_SUB else a * b)
                 if math.isfinite(result):
                     return result
-            elif OP_EQ <= op <= OP_GE:
-                if op == OP_EQ:
-                    return 1.0 if a == b else 0.0
-                if op == OP_NE:
-                    return 1.0 if a != b else 0.0
-                if op == OP_LT:
-                    return 1.0 if a < b else 0.0
-                if op == OP_LE:
-                    return 1.0 if a <= b else 0.0
-                if op == OP_GT:
-                    return 1.0 if a > b else 0.0
-                return 1.0 if a >= b else 0.0
+            elif OP_LT <= op <= OP_GE:
+                return _ordered(op, a, b)
         if op in (OP_EQ, OP_NE):
             if isinstance(a, str) != isinstance(b, str):
                 raise EvalError(
@@ -266,6 +256,17 @@ class BinOp(Expr):
                 ALARM_DOMAIN, f"{format_value(x)} {name} {format_value(y)} is not a finite number (overflow)"
             )
         return result
+
+
+def _ordered(op: int, x: float, y: float) -> float:
+    """``<``, ``<=``, ``>``, ``>=`` of two numbers: 1.0 or 0.0."""
+    if op == OP_LT:
+        return 1.0 if x < y else 0.0
+    if op == OP_LE:
+        return 1.0 if x <= y else 0.0
+    if op == OP_GT:
+        return 1.0 if x > y else 0.0
+    return 1.0 if x >= y else 0.0  # OP_GE
 
 
 def _arith(op: int, x: float, y: float) -> float:
@@ -296,14 +297,8 @@ def _arith(op: int, x: float, y: float) -> float:
         if y == 0.0:
             raise EvalError(ALARM_DIVISION, f"division by zero: {format_value(x)} MOD 0")
         return math.fmod(x, y)
-    if op == OP_LT:
-        return 1.0 if x < y else 0.0
-    if op == OP_LE:
-        return 1.0 if x <= y else 0.0
-    if op == OP_GT:
-        return 1.0 if x > y else 0.0
-    if op == OP_GE:
-        return 1.0 if x >= y else 0.0
+    if OP_LT <= op <= OP_GE:
+        return _ordered(op, x, y)
     if op == OP_XOR:
         return 1.0 if (x != 0.0) != (y != 0.0) else 0.0
     name = OPERATOR_TEXT[op]
