@@ -377,18 +377,24 @@ def _in_cores(st: _Stack, p: PathBatch, ok: Bools) -> Bools:
     box - no region test (a path inside the disc is more than MARGIN from every edge)."""
     far: list[Floats] = []
     for row, centre in ((0, st.core_x), (1, st.core_y)):
-        axis = st.shared[row]
-        lo: Floats = p.lo[axis] if axis >= 0 else p.lo[st.axes[row]]
-        hi: Floats = p.hi[axis] if axis >= 0 else p.hi[st.axes[row]]
+        lo, hi = _box_rows(st, p, row)
         far.append(np.maximum(np.abs(lo - centre), np.abs(hi - centre)))
-    axis = st.shared[2]
-    lo = p.lo[axis] if axis >= 0 else p.lo[st.axes[2]]
-    hi = p.hi[axis] if axis >= 0 else p.hi[st.axes[2]]
+    lo, hi = _box_rows(st, p, 2)
     within: Bools = (
         (far[0] * far[0] + far[1] * far[1] < st.core_r2) & (lo >= st.lower[2]) & (hi <= st.upper[2])
     )
     held: Bools = ok & within.any(axis=0)
     return held
+
+
+def _box_rows(st: _Stack, p: PathBatch, row: int) -> tuple[Floats, Floats]:
+    """The paths' box bounds on the prisms' axis of ``row`` (a, b, c): the row as it is where every prism
+    has that axis (no copy per prism), else one row per prism."""
+    axis = st.shared[row]
+    if axis >= 0:
+        return p.lo[axis], p.hi[axis]
+    axes = st.axes[row]
+    return p.lo[axes], p.hi[axes]
 
 
 def _box_pairs(st: _Stack, p: PathBatch, ok: Bools, protection: bool) -> tuple[Ints, Ints]:
@@ -399,9 +405,7 @@ def _box_pairs(st: _Stack, p: PathBatch, ok: Bools, protection: bool) -> tuple[I
     n = ok.shape[0]
     hit = ok
     for row in range(3):
-        axis = st.shared[row]
-        lo: Floats = p.lo[axis] if axis >= 0 else p.lo[st.axes[row]]
-        hi: Floats = p.hi[axis] if axis >= 0 else p.hi[st.axes[row]]
+        lo, hi = _box_rows(st, p, row)
         if protection:
             hit = hit & (lo <= st.upper[row]) & (hi >= st.lower[row])
         else:
