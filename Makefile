@@ -66,13 +66,14 @@ format: $(TEST_STAMP)
 # and ran 700 s while the other idled). Bytecode is written even where the environment says not to
 # (PYTHONDONTWRITEBYTECODE): else every worker rewrites every test module's assertions (11 s instead of
 # 3) and every server a test starts compiles our sources again (1.7 s to its banner instead of 1.1).
+PYTEST := PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest
 XDIST ?= -n auto --maxschedchunk 2
 test: $(TEST_STAMP) node-deps lint
-	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest $(XDIST) $(PYTEST_ARGS)
+	$(PYTEST) $(XDIST) $(PYTEST_ARGS)
 
 # the edit-test loop: no lint, no test marked `slow` (subprocess servers, xdist, long property runs)
 test-fast: $(TEST_STAMP) node-deps
-	PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest -m "not slow" $(PYTEST_ARGS)
+	$(PYTEST) -m "not slow" $(PYTEST_ARGS)
 
 bench: $(TEST_STAMP)
 	$(BIN)/python -m benchmarks $(ARGS)
@@ -83,7 +84,7 @@ bench: $(TEST_STAMP)
 SOAK_SCALE ?= 100
 soak: $(TEST_STAMP)
 	@seed=$${HLI_FUZZ_SEED:-$$(date +%s)}; echo "soak: HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed"; \
-	HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed HLI_HYPOTHESIS_PROFILE=explore $(BIN)/python -m pytest -m fuzz -p no:cacheprovider \
+	HLI_FUZZ_SCALE=$(SOAK_SCALE) HLI_FUZZ_SEED=$$seed HLI_HYPOTHESIS_PROFILE=explore $(PYTEST) -m fuzz -p no:cacheprovider \
 		--timeout=0 --durations=0 -q -rP $(PYTEST_ARGS)
 
 clean:
