@@ -23,7 +23,7 @@ from __future__ import annotations
 import struct
 from typing import TYPE_CHECKING, Final
 
-from hli_server.adapters.ads.notifications import Watch
+from hli_server.adapters.ads.session import Watch
 from hli_server.adapters.ads.symbols import VIEW_GROUP, Symbol, SymbolTable
 from hli_server.codecs.ads import AdsError, ErrorCode, decode_name
 from schemas.layout import (
@@ -40,7 +40,7 @@ from schemas.layout import (
 )
 
 if TYPE_CHECKING:
-    from hli_server.adapters.ads.device import DeviceLimits, Session
+    from hli_server.adapters.ads.session import DeviceLimits, Session
     from hli_server.adapters.host import ImagePort
 
 __all__ = ["DataService"]

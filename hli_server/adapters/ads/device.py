@@ -9,8 +9,10 @@ Dispatch is data, as h11 keeps its state machine in tables: :data:`COMMANDS` map
 the service method that answers it, and one :class:`PortTable` per AMS port maps each index group to
 the service that reads, writes, read-writes or watches it. A group a port does not list in the table
 asked for is refused from the tables alone: 0x701 when the port serves it with another command ("takes
-Read and Write, not ReadWrite"), 0x702 when the port does not know it. The services, one module each::
+Read and Write, not ReadWrite"), 0x702 when the port does not know it. The services, one module each,
+stand on :mod:`.session` (the :class:`Session`, the limits, the port table) and never import this module::
 
+    session.py        what the services read: Session, DeviceLimits, DeviceStats, PortTable, Watch
     system.py         ReadDeviceInfo, ReadState, WriteControl; port 10000 (TwinCAT system service)
     data.py           the halves 0xF020/0xF030, the structured view 0x4040, handles 0xF003/0xF005/0xF006,
                       value by name 0xF004, the CNC objects of port 551 (0x120300)
@@ -28,25 +30,25 @@ from __future__ import annotations
 import logging
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Final
 
 from hli_server.adapters.ads.data import DataService
-from hli_server.adapters.ads.notifications import (
-    MAX_PENDING_SAMPLES,
-    NotificationService,
-    Subscription,
-    Watch,
+from hli_server.adapters.ads.notifications import MAX_PENDING_SAMPLES, NotificationService
+from hli_server.adapters.ads.session import (
+    DeviceLimits,
+    DeviceStats,
+    PortTable,
+    ReadWriteHandler,
+    Session,
 )
 from hli_server.adapters.ads.sums import SumService
 from hli_server.adapters.ads.symbol_info import SymbolInfoService
-from hli_server.adapters.ads.symbols import VIEW_GROUP, Symbol, SymbolTable
+from hli_server.adapters.ads.symbols import VIEW_GROUP, SymbolTable
 from hli_server.adapters.ads.system import GROUP_SYSTEM_STATE, SYSTEM_SERVICE_PORT, SystemService
 from hli_server.codecs.ads import (
     AddDeviceNotificationRequest,
     AddDeviceNotificationResponse,
     AdsError,
-    AmsAddress,
     AmsHeader,
     AmsPacket,
     CommandId,
@@ -55,14 +57,10 @@ from hli_server.codecs.ads import (
     ErrorCode,
     IndexGroup,
     NetId,
-    NotificationSample,
-    NotificationStamp,
     ReadRequest,
     ReadWriteRequest,
     WriteRequest,
     encode_error_response,
-    encode_notification,
-    encode_request,
     encode_response,
     error_reply_payload,
 )
@@ -77,17 +75,7 @@ from schemas.layout import (
 if TYPE_CHECKING:
     from hli_server.adapters.host import ImagePort
 
-__all__ = [
-    "COMMANDS",
-    "MAX_PENDING_SAMPLES",
-    "SERVED_PORTS",
-    "AdsDevice",
-    "DeviceLimits",
-    "DeviceStats",
-    "PortTable",
-    "Session",
-    "Subscription",
-]
+__all__ = ["COMMANDS", "MAX_PENDING_SAMPLES", "SERVED_PORTS", "AdsDevice"]
 
 logger = logging.getLogger(__name__)
 
@@ -104,176 +92,6 @@ _RESPONSE_FLAGS: Final = 0x0005
 _NO_HEADER: Final = AmsHeader(NetId(bytes(6)), 0, NetId(bytes(6)), 0, 0, 0, 0, 0, 0)
 """The header argument of the data commands in :meth:`AdsDevice.handle_frame` (Read, Write, ReadWrite do
 not read it: they answer from their payload)."""
-
-
-ReadHandler = Callable[["Session", int, int], bytes]
-"""(session, index offset, length) -> the bytes read"""
-WriteHandler = Callable[["Session", int, bytes], None]
-"""(session, index offset, data)"""
-ReadWriteHandler = Callable[["Session", int, int, bytes], bytes]
-"""(session, index offset, read length, write data) -> the bytes read"""
-WatchHandler = Callable[["Session", int, int], Watch]
-"""(session, index offset, length) -> what a notification watches"""
-
-
-@dataclass(slots=True)
-class PortTable:
-    """What one AMS port serves: its device name and, per command, index group -> service method."""
-
-    port: int
-    name: str
-    """ReadDeviceInfo's device name"""
-    read: dict[int, ReadHandler] = field(default_factory=dict)
-    write: dict[int, WriteHandler] = field(default_factory=dict)
-    read_write: dict[int, ReadWriteHandler] = field(default_factory=dict)
-    watch: dict[int, WatchHandler] = field(default_factory=dict)
-    refuse_writes: WriteHandler | None = None
-    """answers every Write of the port (port 551: read-only)"""
-    hint: str = ""
-    """what the port serves, for the 0x702 message"""
-
-    def missing(self, command: str, group: int) -> AdsError:
-        """The error for a group this port does not serve with ``command`` (0x701 or 0x702)."""
-        served = [
-            name
-            for name, table in (
-                ("Read", self.read),
-                ("Write", self.write),
-                ("ReadWrite", self.read_write),
-            )
-            if group in table
-        ]
-        if served:
-            what = "cannot be watched by a notification" if command == "notification" else f"is no {command}"
-            return AdsError(
-                ErrorCode.SERVICE_NOT_SUPPORTED,
-                f"index group 0x{group:X} {what}: it takes {' and '.join(served)}",
-            )
-        return AdsError(
-            ErrorCode.INVALID_INDEX_GROUP, f"port {self.port}: no index group 0x{group:X}; {self.hint}"
-        )
-
-
-@dataclass(frozen=True, slots=True)
-class DeviceLimits:
-    """Per-session, per-client and server-wide bounds (the adapter's options)."""
-
-    max_handles: int = 2048
-    max_notifications: int = 256
-    max_notifications_per_net_id: int = 512
-    max_notifications_per_host: int = 1024
-    max_notifications_total: int = 2048
-    max_sum_items: int = 500
-
-
-@dataclass(slots=True)
-class DeviceStats:
-    """Counters since start (logs, tests, docs/reliability.md)."""
-
-    requests: int = 0
-    errors: dict[int, int] = field(default_factory=dict)
-    notifications_sent: int = 0
-    samples_sent: int = 0
-    samples_skipped: int = 0
-    """samples not evaluated because the client's output queue was full (it does not read)."""
-    failures: int = 0
-    """unexpected exceptions while serving a request (answered 0x700 and logged)."""
-
-    def count_error(self, code: int) -> None:
-        self.errors[code] = self.errors.get(code, 0) + 1
-
-
-class Session:
-    """One client connection's state: symbol handles, notifications, queued samples.
-
-    ``send`` writes bytes to the client; ``backlogged`` says whether its output queue is full. The server
-    sets both; the defaults (a list and False) serve unit tests. ``remote_host`` is the peer's address when
-    it is not a loopback one (the notification budget per host).
-    """
-
-    def __init__(
-        self,
-        send: Callable[[bytes], None] | None = None,
-        backlogged: Callable[[], bool] | None = None,
-        name: str = "session",
-        remote_host: str | None = None,
-    ) -> None:
-        self.name = name
-        self.remote_host = remote_host
-        self.sent: list[bytes] = []
-        self.send: Callable[[bytes], None] = send if send is not None else self.sent.append
-        self.backlogged: Callable[[], bool] = backlogged if backlogged is not None else (lambda: False)
-        self.handles: dict[int, Symbol] = {}
-        self._next_handle = 0x1000_0001
-        self.notifications: dict[int, Subscription] = {}
-        self._next_notification = 0x100
-        self._pending: dict[tuple[AmsAddress, AmsAddress], list[tuple[int, list[NotificationSample]]]] = {}
-        self.pending_samples = 0
-        self.closed = False
-
-    def new_handle(self, symbol: Symbol) -> int:
-        while self._next_handle in self.handles or self._next_handle == 0:
-            self._next_handle = (self._next_handle + 1) & 0xFFFF_FFFF
-        handle = self._next_handle
-        self._next_handle = (handle + 1) & 0xFFFF_FFFF
-        self.handles[handle] = symbol
-        return handle
-
-    def new_notification_handle(self) -> int:
-        while self._next_notification in self.notifications or self._next_notification == 0:
-            self._next_notification = (self._next_notification + 1) & 0xFFFF_FFFF
-        handle = self._next_notification
-        self._next_notification = (handle + 1) & 0xFFFF_FFFF
-        return handle
-
-    @property
-    def has_pending(self) -> bool:
-        return bool(self._pending)
-
-    def queue(self, sub: Subscription, filetime: int, data: bytes) -> None:
-        """One sample; samples of one time share a stamp (TwinCAT packs them so)."""
-        stamps = self._pending.get((sub.client, sub.server))
-        if stamps is None:
-            stamps = self._pending[(sub.client, sub.server)] = []
-        self.pending_samples += 1
-        if stamps and stamps[-1][0] == filetime:
-            stamps[-1][1].append(NotificationSample(sub.handle, data))
-        else:
-            stamps.append((filetime, [NotificationSample(sub.handle, data)]))
-
-    def drop_samples_of(self, handle: int) -> None:
-        """A released notification sends nothing more, not even what waits (DeleteDeviceNotification)."""
-        for key, stamps in list(self._pending.items()):
-            kept = []
-            for filetime, batch in stamps:
-                rest = [s for s in batch if s.handle != handle]
-                self.pending_samples -= len(batch) - len(rest)
-                if rest:
-                    kept.append((filetime, rest))
-            if kept:
-                self._pending[key] = kept
-            else:
-                del self._pending[key]
-
-    def discard_pending(self) -> None:
-        self._pending.clear()
-        self.pending_samples = 0
-
-    def flush(self) -> tuple[int, int]:
-        """Write the queued samples, one DeviceNotification per (client, server) address pair;
-        returns (frames, samples)."""
-        self.pending_samples = 0
-        if not self._pending or self.closed:
-            self._pending.clear()
-            return 0, 0
-        pending, self._pending = self._pending, {}
-        frames = samples = 0
-        for (client, server), stamps in pending.items():
-            payload = encode_notification([NotificationStamp(t, tuple(batch)) for t, batch in stamps])
-            self.send(encode_request(client, server, CommandId.DEVICE_NOTIFICATION, 0, payload))
-            frames += 1
-            samples += sum(len(batch) for _, batch in stamps)
-        return frames, samples
 
 
 class AdsDevice:
@@ -300,7 +118,7 @@ class AdsDevice:
         self.data = DataService(image, self.symbols, self.limits, read_only=read_only)
         self.info = SymbolInfoService(self.symbols, self.data)
         self.system = SystemService()
-        self.sums = SumService(self, self.limits.max_sum_items)
+        self.sums = SumService(self.stats, self.limits.max_sum_items)
         self.notifications = NotificationService(
             image,
             self.data.half,
@@ -479,21 +297,21 @@ class AdsDevice:
         if len(data) != 12:
             ReadRequest.decode(data)  # raises the codec's 0x705, naming the sizes
         group, offset, length = _U32x3.unpack(data)
-        value = self.read(session, table, group, offset, length)
+        value = table.read_group(session, group, offset, length)
         return _RESULT_AND_LENGTH.pack(0, len(value)) + value
 
     def write_command(self, session: Session, table: PortTable, header: AmsHeader, data: bytes) -> bytes:
         if len(data) < 12 or _U32x3.unpack_from(data)[2] != len(data) - 12:
             WriteRequest.decode(data)  # raises the codec's 0x705
         group, offset, _ = _U32x3.unpack_from(data)
-        self.write(session, table, group, offset, data[12:])
+        table.write_group(session, group, offset, data[12:])
         return _OK
 
     def read_write_command(self, session: Session, table: PortTable, header: AmsHeader, data: bytes) -> bytes:
         if len(data) < 16 or _U32x4.unpack_from(data)[3] != len(data) - 16:
             ReadWriteRequest.decode(data)  # raises the codec's 0x705
         group, offset, read_length, _ = _U32x4.unpack_from(data)
-        value = self.read_write(session, table, group, offset, read_length, data[16:])
+        value = table.read_write_group(session, group, offset, read_length, data[16:])
         if len(value) > read_length:
             raise AdsError(
                 ErrorCode.SIZE_WRONG,
@@ -524,29 +342,6 @@ class AdsDevice:
         request = DeleteDeviceNotificationRequest.decode(data)
         self.notifications.delete(session, request.handle)
         return DeleteDeviceNotificationResponse(0).encode()
-
-    # --- one index group, through the tables (also the sum commands' sub-requests) ---------------
-    def read(self, session: Session, table: PortTable, group: int, offset: int, length: int) -> bytes:
-        serve = table.read.get(group)
-        if serve is None:
-            raise table.missing("Read", group)
-        return serve(session, offset, length)
-
-    def write(self, session: Session, table: PortTable, group: int, offset: int, data: bytes) -> None:
-        if table.refuse_writes is not None:
-            table.refuse_writes(session, offset, data)
-        serve = table.write.get(group)
-        if serve is None:
-            raise table.missing("Write", group)
-        serve(session, offset, data)
-
-    def read_write(
-        self, session: Session, table: PortTable, group: int, offset: int, read_length: int, data: bytes
-    ) -> bytes:
-        serve = table.read_write.get(group)
-        if serve is None:
-            raise table.missing("ReadWrite", group)
-        return serve(session, offset, read_length, data)
 
     # =========================================================================================
     # Notifications and sessions

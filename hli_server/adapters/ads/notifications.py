@@ -37,13 +37,12 @@ from __future__ import annotations
 import heapq
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from functools import partial
 from typing import TYPE_CHECKING, Final
 
+from hli_server.adapters.ads.session import Subscription
 from hli_server.codecs.ads import (
     AdsError,
-    AmsAddress,
     AmsHeader,
     ErrorCode,
     TransmissionMode,
@@ -52,11 +51,10 @@ from hli_server.codecs.ads import (
 from schemas.layout import Direction
 
 if TYPE_CHECKING:
-    from hli_server.adapters.ads.device import DeviceLimits, DeviceStats, Session
-    from hli_server.adapters.ads.symbols import Piece
+    from hli_server.adapters.ads.session import DeviceLimits, DeviceStats, Session, Watch
     from hli_server.adapters.host import ImagePort
 
-__all__ = ["MAX_PENDING_SAMPLES", "NotificationService", "Subscription", "Watch"]
+__all__ = ["MAX_PENDING_SAMPLES", "NotificationService"]
 
 MAX_PENDING_SAMPLES: Final = 8192
 """Samples queued for one connection between two flushes (a long ``step(n)`` runs many cycles without a
@@ -73,42 +71,6 @@ _SERVER_MODES: Final = frozenset(
 _ON_CHANGE: Final = frozenset(
     {TransmissionMode.SERVER_ON_CHANGE, TransmissionMode.SERVER_ON_CHANGE_IN_CONTEXT}
 )
-
-
-@dataclass(frozen=True, slots=True)
-class Watch:
-    """Bytes a notification watches: slices of the halves (a value, a structure), or a constant (symbol
-    version, ADS state)."""
-
-    pieces: tuple[Piece, ...]
-    constant: bytes = b""
-
-    @classmethod
-    def of_constant(cls, value: bytes) -> Watch:
-        return cls((), value)
-
-
-@dataclass(slots=True, eq=False)
-class Subscription:
-    """One device notification of one session."""
-
-    session: Session
-    handle: int
-    watch: Watch
-    on_change: bool
-    period: int
-    """cycles between checks (on change) or samples (cyclic); at least 1."""
-    max_delay: float
-    """seconds a sample may wait to go out with later ones (0: the next turn of the loop)."""
-    client: AmsAddress
-    """where the samples go: the AddDeviceNotification's source."""
-    server: AmsAddress
-    """the samples' AMS source: the address the client subscribed to (AdsLib dispatches by it)."""
-    net_id: bytes
-    host: str | None
-    """the remote host it counts against (None: a loopback peer)"""
-    last: bytes | None = None
-    deleted: bool = False
 
 
 class _Budget:

@@ -56,9 +56,10 @@ from typing import TYPE_CHECKING, Any, Final
 
 from pydantic import ValidationError
 
-from hli_server.adapters.ads.device import AdsDevice, DeviceLimits, Session
+from hli_server.adapters.ads.device import AdsDevice
 from hli_server.adapters.ads.options import AdsOptions, is_loopback
 from hli_server.adapters.ads.routes import RouteError, Routes
+from hli_server.adapters.ads.session import DeviceLimits, Session
 from hli_server.adapters.ads.udp import UdpDoor
 from hli_server.adapters.faults import CommFaults, Door
 from hli_server.adapters.tcp import listen

@@ -23,14 +23,14 @@ from hli_server.codecs.ads import (
 )
 
 if TYPE_CHECKING:
-    from hli_server.adapters.ads.device import AdsDevice, PortTable, Session
+    from hli_server.adapters.ads.session import DeviceStats, PortTable, Session
 
 __all__ = ["SumService"]
 
 
 class SumService:
-    def __init__(self, device: AdsDevice, max_items: int) -> None:
-        self.device = device
+    def __init__(self, stats: DeviceStats, max_items: int) -> None:
+        self.stats = stats
         self.max_items = max_items
 
     def _count(self, count: int, what: str) -> None:
@@ -48,15 +48,15 @@ class SumService:
                 ErrorCode.SIZE_WRONG,
                 f"sum read of {count}: the reply is {request.reply_length} bytes, read length {read_length}",
             )
-        device = self.device
+        stats = self.stats
         results: list[tuple[int, bytes]] = []
         for item in request.items:
             try:
                 results.append(
-                    (0, device.read(session, table, item.index_group, item.index_offset, item.length))
+                    (0, table.read_group(session, item.index_group, item.index_offset, item.length))
                 )
             except AdsError as exc:
-                device.stats.count_error(exc.code)
+                stats.count_error(exc.code)
                 results.append((int(exc.code), b""))
         return encode_sum_read_reply(request, results)
 
@@ -65,14 +65,14 @@ class SumService:
         request = SumWrite.decode(count, data)
         if read_length < 4 * count:
             raise AdsError(ErrorCode.SIZE_WRONG, f"sum write of {count}: the reply is {4 * count} bytes")
-        device = self.device
+        stats = self.stats
         results: list[int] = []
         for item in request.items:
             try:
-                device.write(session, table, item.index_group, item.index_offset, item.data)
+                table.write_group(session, item.index_group, item.index_offset, item.data)
                 results.append(0)
             except AdsError as exc:
-                device.stats.count_error(exc.code)
+                stats.count_error(exc.code)
                 results.append(int(exc.code))
         return encode_sum_write_reply(results)
 
@@ -81,16 +81,16 @@ class SumService:
     ) -> bytes:
         self._count(count, "sum read/write 0xF082")
         request = SumReadWrite.decode(count, data)
-        device = self.device
+        stats = self.stats
         results: list[tuple[int, bytes]] = []
         for item in request.items:
             try:
-                value = device.read_write(
-                    session, table, item.index_group, item.index_offset, item.read_length, item.data
+                value = table.read_write_group(
+                    session, item.index_group, item.index_offset, item.read_length, item.data
                 )
                 results.append((0, value))
             except AdsError as exc:
-                device.stats.count_error(exc.code)
+                stats.count_error(exc.code)
                 results.append((int(exc.code), b""))
         reply = encode_sum_read_write_reply(results)
         if read_length < len(reply):

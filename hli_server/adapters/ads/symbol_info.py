@@ -20,12 +20,12 @@ from __future__ import annotations
 import struct
 from typing import TYPE_CHECKING, Final
 
-from hli_server.adapters.ads.notifications import Watch
+from hli_server.adapters.ads.session import Watch
 from hli_server.codecs.ads import AdsError, AdsState, ErrorCode, IndexGroup, decode_name
 
 if TYPE_CHECKING:
     from hli_server.adapters.ads.data import DataService
-    from hli_server.adapters.ads.device import Session
+    from hli_server.adapters.ads.session import Session
     from hli_server.adapters.ads.symbols import SymbolTable
 
 __all__ = ["SymbolInfoService"]

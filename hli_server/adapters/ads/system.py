@@ -36,7 +36,7 @@ from hli_server.codecs.ads import (
 )
 
 if TYPE_CHECKING:
-    from hli_server.adapters.ads.device import PortTable, Session
+    from hli_server.adapters.ads.session import PortTable, Session
     from hli_server.codecs.ads import AmsHeader
 
 __all__ = [
