@@ -22,6 +22,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from schemas.layout import check_external_fits
 from schemas.units import ACCELERATION_LIMIT, DINT_MAX, DINT_MIN, UDINT_MAX, VELOCITY_LIMIT_MM_PER_MIN
 
 __all__ = [
@@ -682,8 +683,6 @@ class MachineConfig(_Strict):
                 )
             seen_vars.add(key)
         if not issues:
-            from schemas.layout import check_external_fits
-
             too_much = check_external_fits(self)
             if too_much is not None:
                 issues.append(ParameterIssue(too_much, field="external_variables"))

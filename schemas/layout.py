@@ -2,9 +2,10 @@
 
 Every signal of the PLC interface (HLI) is listed once here, as a *template* per channel
 (:data:`CHANNEL_TEMPLATES`, ``gpCh[i]^...``) and per axis (:data:`AXIS_TEMPLATES`, ``gpAx[i]^...``).
-:func:`build_layout` expands the templates for the channels and axes of a
-:class:`~schemas.config.MachineConfig`; everything else is derived from the result and never
-written down a second time:
+:func:`build_layout` expands the templates for the channels and axes of a machine (a
+:class:`MachineShape`: what the layout reads of a :class:`~schemas.config.MachineConfig`; this module does
+not import the configuration, the configuration imports it to check that its V.E. variables fit the
+Modbus map); everything else is derived from the result and never written down a second time:
 
 * the byte layout of the two halves of the shared-memory image (``struct`` format and
   ``construct`` description, :meth:`Layout.struct` / :meth:`Layout.construct`);
@@ -48,16 +49,13 @@ from dataclasses import dataclass
 from enum import StrEnum
 from functools import cached_property
 from struct import Struct
-from typing import TYPE_CHECKING, Any, Final, cast
+from typing import Any, Final, Protocol, cast
 
 import construct as cs
 from typing_extensions import TypedDict
 
 from schemas.units import DINT_MAX, DINT_MIN, UDINT_MAX
 from schemas.wire import DynPosLimitState, HoldSource, Mode, ProgramState, describe
-
-if TYPE_CHECKING:
-    from schemas.config import ExternalVariableConfig, MachineConfig
 
 __all__ = [
     "ADS_GROUP_CNC_TO_PLC",
@@ -80,14 +78,18 @@ __all__ = [
     "MODBUS_SNAPSHOT_REGISTER",
     "REAL32_MAX",
     "AxisInfo",
+    "AxisShape",
     "ChannelInfo",
+    "ChannelShape",
     "Direction",
+    "ExternalVariableShape",
     "Layout",
     "LayoutAxis",
     "LayoutChannel",
     "LayoutError",
     "LayoutJson",
     "LayoutSignal",
+    "MachineShape",
     "ModbusTable",
     "ReadOnlySignalError",
     "Scope",
@@ -1138,7 +1140,58 @@ def _resolve_unit(unit: str, axis_type: str) -> str:
     )
 
 
-def build_layout(config: MachineConfig) -> Layout:
+class ChannelShape(Protocol):
+    """What the layout reads of a channel (:class:`~schemas.config.ChannelConfig`)."""
+
+    @property
+    def number(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def axes(self) -> Sequence[str]: ...
+
+
+class AxisShape(Protocol):
+    """What the layout reads of an axis (:class:`~schemas.config.AxisConfig`)."""
+
+    @property
+    def number(self) -> int: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def axis_type(self) -> StrEnum: ...
+
+
+class ExternalVariableShape(Protocol):
+    """What the layout reads of a V.E. variable (:class:`~schemas.config.ExternalVariableConfig`)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def type(self) -> str: ...
+    @property
+    def dims(self) -> Sequence[int]: ...
+    @property
+    def channel(self) -> int | None: ...
+    @property
+    def description(self) -> str: ...
+
+
+class MachineShape(Protocol):
+    """What the layout reads of a machine: :class:`~schemas.config.MachineConfig` is one. The layout does
+    not import the configuration (the configuration imports the layout: :func:`check_external_fits`)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def channels(self) -> Sequence[ChannelShape]: ...
+    @property
+    def axes(self) -> Sequence[AxisShape]: ...
+    @property
+    def external_variables(self) -> Sequence[ExternalVariableShape]: ...
+
+
+def build_layout(config: MachineShape) -> Layout:
     """Expand the templates for the channels and axes of ``config`` (H-01, H-08).
 
     Channel ``i`` and axis ``j`` are the positions in ``config.channels`` / ``config.axes``
@@ -1256,10 +1309,10 @@ def _signal(
 # --------------------------------------------------------------------------------------------
 
 
-def _external_order(config: MachineConfig) -> list[tuple[int | None, ExternalVariableConfig]]:
+def _external_order(config: MachineShape) -> list[tuple[int | None, ExternalVariableShape]]:
     """(channel index or None, variable): the global area first, then each channel's area in the
     order of ``config.channels``; inside an area the order of the machine file."""
-    ordered: list[tuple[int | None, ExternalVariableConfig]] = [
+    ordered: list[tuple[int | None, ExternalVariableShape]] = [
         (None, v) for v in config.external_variables if v.channel is None
     ]
     for i, ch in enumerate(config.channels):
@@ -1267,7 +1320,7 @@ def _external_order(config: MachineConfig) -> list[tuple[int | None, ExternalVar
     return ordered
 
 
-def external_modbus_use(config: MachineConfig) -> dict[ModbusTable, int]:
+def external_modbus_use(config: MachineShape) -> dict[ModbusTable, int]:
     """How far the V.E. variables reach in the coils and in the holding registers (one past the
     last address), without expanding their elements: the check of the machine file uses it."""
     cursor = {ModbusTable.COIL: MODBUS_EXTERNAL_BASE, ModbusTable.HOLDING_REGISTER: MODBUS_EXTERNAL_BASE}
@@ -1279,7 +1332,7 @@ def external_modbus_use(config: MachineConfig) -> dict[ModbusTable, int]:
     return cursor
 
 
-def check_external_fits(config: MachineConfig) -> str | None:
+def check_external_fits(config: MachineShape) -> str | None:
     """None when the V.E. variables fit the Modbus area reserved for them, else what is too much."""
     for table, end in external_modbus_use(config).items():
         if end > MODBUS_EXTERNAL_END:
@@ -1305,7 +1358,7 @@ def _element_indices(dims: Sequence[int]) -> Iterator[tuple[int, ...]]:
     yield from itertools.product(*(range(d) for d in dims))
 
 
-def _external_signals(config: MachineConfig, start: int) -> tuple[list[Signal], int]:
+def _external_signals(config: MachineShape, start: int) -> tuple[list[Signal], int]:
     """Place every element of every V.E. variable after the axis blocks of the PLC->CNC half
     (natural alignment) and in the V.E. area of the coils / holding registers."""
     problem = check_external_fits(config)
