@@ -186,7 +186,7 @@ def main() -> None:
         wall = time.perf_counter() - began
         size = path.stat().st_size
 
-        from hli_server.recording.replay import replay_sync
+        from hli_server.replay import replay_sync
 
         t0 = time.process_time()
         report = replay_sync(path)

@@ -161,7 +161,7 @@ def replay_command(
     """
     from hli_server.configuration import ConfigError, ConfigFileError, load_machine
     from hli_server.recording.format import read_header
-    from hli_server.recording.replay import EXIT_STATUS, Verdict, replay_sync
+    from hli_server.replay import EXIT_STATUS, Verdict, replay_sync
 
     config = None
     if config_path is not None:

@@ -1,2 +1,4 @@
-"""Session recording and replay (docs/record-replay.md): the tap that journals a run, the file format, its
-inspection and the replay that checks a build against a recording."""
+"""Session recording (docs/record-replay.md): the tap that journals a run at the runtime's latch boundary
+(:mod:`.tap`), the file format (:mod:`.format`) and its inspection (:mod:`.inspect`). The package sits
+below the runtime, which holds the tap; the replay that checks a build against a recording drives a
+runtime and so sits above it, beside the plots: :mod:`hli_server.replay`."""

@@ -502,12 +502,12 @@ class Harness:
     def replay(self, path: str | os.PathLike[str], **options: Any) -> Any:
         """Replay a recording as a test: raises :class:`ReplayFailedError` (an AssertionError, with the
         report: the first difference's cycle, signal, expected and actual value) unless it passes;
-        returns the :class:`~hli_server.recording.replay.ReplayReport`. Options: ``until``, ``signals``,
+        returns the :class:`~hli_server.replay.ReplayReport`. Options: ``until``, ``signals``,
         ``events``, ``all_differences``, ``config``, ``same_version`` (as ``hli-server replay``). The
         replay runs on a machine of its own, built from the recording; this harness' machine is left
         as it is."""
         __tracebackhide__ = True
-        from hli_server.recording.replay import Verdict, replay
+        from hli_server.replay import Verdict, replay
 
         self._loop_or_raise()
         report = self._call(replay(Path(os.fspath(path)), **options))

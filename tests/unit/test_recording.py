@@ -16,8 +16,8 @@ import pytest
 from hli_server.configuration import load_machine
 from hli_server.recording.format import FORMAT_VERSION, RecordingError, Records, read_header, read_records
 from hli_server.recording.inspect import summarize, write_csv, write_plot, write_vcd
-from hli_server.recording.replay import Verdict, replay
 from hli_server.recording.tap import RecordingOptions
+from hli_server.replay import Verdict, replay
 from hli_server.runtime import Runtime, memory_image
 from schemas.config import MachineConfig, ProgramEntry
 
@@ -424,7 +424,7 @@ async def test_subprograms_the_library_found_are_recorded_and_found_again_by_the
     tmp_path: Path,
 ) -> None:
     from hli_server.engine.programs import MemoryLibrary
-    from hli_server.recording.replay import Feeder, ReplayReport
+    from hli_server.replay import Feeder, ReplayReport
 
     path = tmp_path / "sub.jsonl.gz"
     async with Runtime(

@@ -2,7 +2,9 @@
 ``hli.replay(path)``.
 
 The replay builds the recorded machine from the recorded configuration and runs it on the stepped clock
-(a :class:`~hli_server.runtime.Runtime` with its image in memory and no doors). Its tap slot holds a
+(a :class:`~hli_server.runtime.Runtime` with its image in memory and no doors): a driver of the runtime,
+so it sits above it, below the commands and the test harness that call it; the recording it reads
+(:mod:`hli_server.recording`) sits below the runtime. Its tap slot holds a
 :class:`Feeder` instead of the recorder: before each cycle it writes the PLC->CNC half recorded for that
 cycle into the image and repeats the operator's requests stamped with it (program texts and the files
 the engine read come from the recording); after the cycle it compares the CNC->PLC half the engine
