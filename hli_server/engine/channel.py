@@ -23,8 +23,8 @@ from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import LineSegment, Point
 from hli_server.engine.hli import AxisHli, ChannelHli
 from hli_server.engine.nc.blocks import Block
+from hli_server.engine.nc.compiler import Compiler
 from hli_server.engine.nc.interpreter import Interpreter
-from hli_server.engine.nc.syntax import Compiler
 from hli_server.engine.path.profiles import SlopeProfile, SlopeType
 from hli_server.engine.path.tools import ToolData
 from hli_server.engine.planner import Marker, MarkerKind, Planner

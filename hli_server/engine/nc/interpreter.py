@@ -32,7 +32,9 @@ from typing import Final, Protocol, TextIO
 
 from hli_server.engine.external import ExternalVariableError, ExternalVariables
 from hli_server.engine.nc import parser as word_parser
+from hli_server.engine.nc.block_builder import build_block
 from hli_server.engine.nc.blocks import Block, NcError
+from hli_server.engine.nc.compiler import Compiler
 from hli_server.engine.nc.expr import (
     ALARM_DOMAIN,
     ALARM_EXPRESSION,
@@ -56,8 +58,7 @@ from hli_server.engine.nc.expr import (
     as_number,
     format_value,
 )
-from hli_server.engine.nc.source import LineTooLongError, ProgramText
-from hli_server.engine.nc.syntax import (
+from hli_server.engine.nc.language import (
     A_CONTROL_SYNTAX,
     A_NOT_SIMULATED,
     A_RANGE,
@@ -82,9 +83,12 @@ from hli_server.engine.nc.syntax import (
     C_SWITCH,
     C_UNTIL,
     C_WHILE,
+)
+from hli_server.engine.nc.reader import read_block, strip_comments
+from hli_server.engine.nc.source import LineTooLongError, ProgramText
+from hli_server.engine.nc.statements import (
     Assign,
     Call,
-    Compiler,
     ConstBlock,
     Control,
     Empty,
@@ -96,9 +100,6 @@ from hli_server.engine.nc.syntax import (
     VarBlock,
     Word,
     Words,
-    build_block,
-    read_block,
-    strip_comments,
 )
 from hli_server.engine.nc.variables import P_COUNT, Variable, coerce
 from hli_server.engine.programs import ProgramFile
