@@ -67,7 +67,7 @@ from hli_server.engine.decoder import Decoder, PathCheck
 from hli_server.engine.monitors.collision import MoveApartCheck
 from hli_server.engine.monitors.soft_limits import SoftLimitPathCheck
 from hli_server.engine.nc.blocks import Block, NcError
-from hli_server.engine.nc.interpreter import PAUSE
+from hli_server.engine.nc.directives import PAUSE
 from hli_server.engine.nc.parser import BlockReader
 from hli_server.engine.nc.plain import COL_F, COL_G, COL_I, EMPTY, OTHER, PLAIN, PlainChunk, PlainTokenizer
 from hli_server.engine.nc.reader import strip_comments

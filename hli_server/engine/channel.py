@@ -63,7 +63,7 @@ class JogGuard(Protocol):
 
 
 class ChannelHost:
-    """What the interpreter asks of its channel (:class:`~hli_server.engine.nc.interpreter.Host`):
+    """What the interpreter asks of its channel (:class:`~hli_server.engine.nc.directives.Host`):
     programs, V.E. variables, messages, warnings, and the system variables it simulates (V.A., V.G.)."""
 
     def __init__(self, channel: Channel) -> None:

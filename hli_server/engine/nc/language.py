@@ -71,6 +71,10 @@ MAX_NAME: Final = 83
 """Characters of a program name in ``L name`` (the manual: "max 83 characters")."""
 MAX_VAR_LINES: Final = 10_000
 """Lines of one ``#VAR ... #ENDVAR`` block or one ``#COMMENT`` block before it counts as unclosed."""
+MAX_CALL_DEPTH: Final = 20
+"""Program levels (main program, subroutines, cycles) nested at most; deeper is ID 20360 (a recursion)."""
+MAX_OPEN_BLOCKS: Final = 64
+"""Control blocks open at once in one program level (the kernel's limit is not public)."""
 MEAS_TYPES: Final = 7
 """Measuring types of ``#MEAS MODE`` (P-CHAN-00057: 1 .. 7)."""
 MAX_MESSAGE: Final = 255
