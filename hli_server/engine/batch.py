@@ -67,11 +67,11 @@ from hli_server.engine.decoder import Decoder, PathCheck
 from hli_server.engine.monitors.collision import MoveApartCheck
 from hli_server.engine.monitors.soft_limits import SoftLimitPathCheck
 from hli_server.engine.nc.blocks import Block, NcError
-from hli_server.engine.nc.interpreter import PAUSE
+from hli_server.engine.nc.directives import PAUSE
 from hli_server.engine.nc.parser import BlockReader
 from hli_server.engine.nc.plain import COL_F, COL_G, COL_I, EMPTY, OTHER, PLAIN, PlainChunk, PlainTokenizer
+from hli_server.engine.nc.reader import strip_comments
 from hli_server.engine.nc.source import ProgramText, Window
-from hli_server.engine.nc.syntax import strip_comments
 from hli_server.engine.planner import Marker, Motion
 
 __all__ = ["SMALL_RUN", "SMALL_RUN_PER_AREA", "BatchGeometryCheck", "unsupported"]

@@ -23,8 +23,8 @@ from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import LineSegment, Point
 from hli_server.engine.hli import AxisHli, ChannelHli
 from hli_server.engine.nc.blocks import Block
+from hli_server.engine.nc.compiler import Compiler
 from hli_server.engine.nc.interpreter import Interpreter
-from hli_server.engine.nc.syntax import Compiler
 from hli_server.engine.path.profiles import SlopeProfile, SlopeType
 from hli_server.engine.path.tools import ToolData
 from hli_server.engine.planner import Marker, MarkerKind, Planner
@@ -63,7 +63,7 @@ class JogGuard(Protocol):
 
 
 class ChannelHost:
-    """What the interpreter asks of its channel (:class:`~hli_server.engine.nc.interpreter.Host`):
+    """What the interpreter asks of its channel (:class:`~hli_server.engine.nc.directives.Host`):
     programs, V.E. variables, messages, warnings, and the system variables it simulates (V.A., V.G.)."""
 
     def __init__(self, channel: Channel) -> None:

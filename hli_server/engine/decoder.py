@@ -20,7 +20,7 @@ from typing import Any, Protocol
 
 from hli_server.engine.geometry import ArcSegment, LineSegment, Point, Segment, arc_from_centre
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
-from hli_server.engine.nc.interpreter import (
+from hli_server.engine.nc.directives import (
     PAUSE,
     ContourDirective,
     CoordinateCommand,
@@ -308,7 +308,7 @@ class Decoder:
             return self.directive(out)
 
     def directive(self, out: Directive) -> list[Motion | Marker]:
-        """The planner's item for an interpreter's directive (see :mod:`hli_server.engine.nc.interpreter`).
+        """The planner's item for an interpreter's directive (see :mod:`hli_server.engine.nc.directives`).
 
         ``#MEAS MODE`` and ``#CONTOUR MODE``/``#HSC``/``#SPLINE`` only set modal state: the blocks held
         back by the radius compensation and the contouring keep their corner (they took their own

@@ -28,7 +28,7 @@ from hli_server.engine.batch import BatchGeometryCheck, unsupported
 from hli_server.engine.channel import Channel
 from hli_server.engine.geometry import ArcSegment, Segment
 from hli_server.engine.machine import Machine
-from hli_server.engine.nc.interpreter import IterationCapError
+from hli_server.engine.nc.directives import IterationCapError
 from hli_server.engine.nc.source import ProgramText
 from hli_server.engine.planner import Marker, MarkerKind, Motion
 from schemas.events import Event, NcMessage

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 from hli_server.engine.external import ExternalType, ExternalVariables, ExternalVarSpec
 from hli_server.engine.nc import Block, Compiler, Interpreter, NcError
-from hli_server.engine.nc.interpreter import Directive, FlushStop, FlushWait, SyncAction
+from hli_server.engine.nc.directives import Directive, FlushStop, FlushWait, SyncAction
 from hli_server.engine.programs import MemoryLibrary, ProgramFile
 
 AXES = ("X", "Y", "Z")

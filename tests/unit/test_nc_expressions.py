@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from hli_server.engine.nc import NcError
 from hli_server.engine.nc.expr import ConstantEnv, EvalError
-from hli_server.engine.nc.syntax import parse_expression
+from hli_server.engine.nc.expr_parser import parse_expression
 
 ENV = ConstantEnv()
 NUMBERS = st.one_of(

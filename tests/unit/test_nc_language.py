@@ -11,7 +11,8 @@ import pytest
 
 from hli_server.engine.alarms import ALARMS
 from hli_server.engine.nc import STATEMENTS_PER_CYCLE, Compiler, Interpreter
-from hli_server.engine.nc.interpreter import MAX_CALL_DEPTH, PAUSE, FlushStop, FlushWait
+from hli_server.engine.nc.directives import PAUSE, FlushStop, FlushWait
+from hli_server.engine.nc.language import MAX_CALL_DEPTH
 from hli_server.engine.programs import ProgramFile
 from tests.unit.nc_helpers import FakeHost, error, interpret, real
 

@@ -13,10 +13,12 @@ from hli_server.engine.nc.blocks import (
     Block,
     NcError,
 )
-from hli_server.engine.nc.interpreter import STATEMENTS_PER_CYCLE, Interpreter, IterationCapError
+from hli_server.engine.nc.compiler import Compiler
+from hli_server.engine.nc.directives import IterationCapError
+from hli_server.engine.nc.interpreter import Interpreter
 from hli_server.engine.nc.parser import KNOWN_G_CODES, iter_blocks, parse_line, parse_program
 from hli_server.engine.nc.source import ProgramText
-from hli_server.engine.nc.syntax import Compiler
+from hli_server.engine.nc.state import STATEMENTS_PER_CYCLE
 
 __all__ = [
     "KNOWN_G_CODES",

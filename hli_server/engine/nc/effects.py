@@ -1,0 +1,275 @@
+"""Effects (N-05, N-08, M-10..M-23): the interpreter's layer that runs the ``#`` commands - what others see
+(``#MSG`` now or when the path passes, ``#FILE NAME``) and the directives it hands the decoder.
+"""
+
+from __future__ import annotations
+
+import math
+
+from hli_server.engine.nc import parser as word_parser
+from hli_server.engine.nc.directives import (
+    ContourDirective,
+    CoordinateCommand,
+    FlushStop,
+    FlushWait,
+    MeasMode,
+    Slope,
+    SyncAction,
+)
+from hli_server.engine.nc.expr import (
+    Value,
+    format_value,
+)
+from hli_server.engine.nc.language import (
+    A_CONTROL_SYNTAX,
+    A_CORNER_DEVIATION,
+    A_INDEX,
+    A_MESSAGE,
+    A_RANGE,
+    CONTOUR_KEYS,
+    CONTOUR_TYPES,
+    CONTOUR_WORDS,
+    DEVIATION_KEYS,
+    HSC_KEYS,
+    HSC_WORDS,
+    MAX_MESSAGE,
+    MEAS_TYPES,
+    SPLINE_WORDS,
+)
+from hli_server.engine.nc.levels import (
+    Frame,
+)
+from hli_server.engine.nc.statements import (
+    Hash,
+    Stmt,
+)
+from hli_server.engine.nc.variable_access import VariableAccess
+
+__all__ = ["Effects"]
+
+
+class Effects(VariableAccess):
+    """Runs the ``#`` commands (N-05, N-08, M-10..M-23): ``#MSG`` (the channel's message events),
+    ``#FILE NAME``, ``#FLUSH``, and the directives of ``#MEAS MODE``, ``#SLOPE``, ``#CS``/``#ACS``/
+    ``#ROTATION``, ``#CONTOUR MODE``/``#HSC``/``#SPLINE`` (which ``#`` commands exist is
+    ``nc/language.py``'s ``HASH_COMMANDS``)."""
+
+    # --- # commands ------------------------------------------------------------------------------------
+    def _hash(self, frame: Frame, stmt: Hash) -> None:
+        command = stmt.command
+        if command == "FLUSH":
+            place = self._place_block(frame, stmt)
+            if "WAIT" in stmt.options:
+                self._pending.append(FlushWait(place))
+            elif "CONTINUE" not in stmt.options:
+                self._pending.append(FlushStop(place))
+            return
+        if command == "MEAS MODE":
+            meas_type: int | None = None
+            if stmt.args:
+                value = self._number(stmt, stmt.args[0], "the measuring type of #MEAS MODE")
+                if value != int(value) or not 1 <= value <= MEAS_TYPES:
+                    raise stmt.error(
+                        A_INDEX,
+                        f"#MEAS MODE [{format_value(value)}]: the measuring types are 1 .. {MEAS_TYPES}",
+                    )
+                meas_type = int(value)
+            self._pending.append(MeasMode(self._place_block(frame, stmt), meas_type))
+            return
+        if command == "SLOPE":
+            profile: int | None = None
+            for option in stmt.options:
+                if option.startswith("TYPE="):
+                    profile = ("STEP", "TRAPEZ", "SIN2", "HSC").index(option[5:])
+            self._pending.append(Slope(self._place_block(frame, stmt), profile))
+            return
+        if command.startswith(("CS ", "ACS ", "ROTATION ")):
+            kind, op = command.split(" ", 1)
+            numbers = [self._number(stmt, a, f"a value of #{command}") for a in stmt.args]
+            ident: int | None = None
+            name: str | None = None
+            rotation: dict[str, float] = {}
+            if kind == "ROTATION":
+                rotation = dict(zip(stmt.options, numbers, strict=True))
+                numbers = []
+            elif "ID" in stmt.options:
+                value = numbers.pop(0)
+                if value != int(value) or value < 1:
+                    raise stmt.error(
+                        A_INDEX, f"#{command} [{format_value(value)}]: the ID is a whole number >= 1"
+                    )
+                ident = int(value)
+            for option in stmt.options:
+                if option.startswith("NAME:"):
+                    name = option[5:]
+            self._pending.append(
+                CoordinateCommand(
+                    self._place_block(frame, stmt),
+                    kind,
+                    op,
+                    ident,
+                    name,
+                    tuple(numbers),
+                    rotation,
+                    all_="ALL" in stmt.options,
+                )
+            )
+            return
+        if command == "FILE NAME":
+            self._message_file = stmt.files.get("MSG", self._message_file)
+            return
+        if command in ("CONTOUR MODE", "HSC", "SPLINE"):
+            self._pending.append(self._contour(frame, stmt))
+            return
+        # MSG
+        if self._needs_flush(frame, stmt, stmt.args):
+            self._flush_wait(frame, stmt)
+            return
+        values = [self._evaluate(stmt, a) for a in stmt.args]
+        text = self._format(stmt, values)
+        save = "SAVE" in stmt.options
+        file = self._message_file
+        host = self.host
+        program = frame.program or self.program_name
+        line = stmt.first
+        label = stmt.place
+        if "SYN" in stmt.options or "SYN_ACK" in stmt.options:
+
+            def emit() -> None:
+                self._effect()
+                host.message(text, save, file, program, line, label)
+
+            self._pending.append(SyncAction(self._place_block(frame, stmt), emit))
+            return
+        self._effect()
+        host.message(text, save, file, program, line, label)
+
+    def _format(self, stmt: Stmt, values: list[Value]) -> str:
+        """The message text: the format string's ``%d``, ``%f``, ``%s``, ... filled in (printf, as the
+        manual says)."""
+        fmt = values[0]
+        if not isinstance(fmt, str):
+            raise stmt.error(A_MESSAGE, '#MSG: the message text is a string in quotes: #MSG ["text"]')
+        args = values[1:]
+        out: list[str] = []
+        i = 0
+        n = len(fmt)
+        used = 0
+        while i < n:
+            c = fmt[i]
+            if c != "%":
+                out.append(c)
+                i += 1
+                continue
+            j = i + 1
+            while j < n and fmt[j] in "-+ #0":
+                j += 1
+            while j < n and fmt[j].isdigit():
+                j += 1
+            if j < n and fmt[j] == ".":
+                j += 1
+                while j < n and fmt[j].isdigit():
+                    j += 1
+            while j < n and fmt[j] in "lh":
+                j += 1
+            if j >= n:
+                raise stmt.error(A_MESSAGE, f"#MSG: incomplete format {fmt[i:]!r}")
+            conversion = fmt[j]
+            spec = fmt[i:j].replace("l", "").replace("h", "")
+            if conversion == "%":
+                out.append("%")
+                i = j + 1
+                continue
+            if conversion not in "diufFeEgGxXos":
+                raise stmt.error(A_MESSAGE, f"#MSG: unknown format {fmt[i : j + 1]!r} (%d, %f, %s, ...)")
+            if used >= len(args):
+                raise stmt.error(
+                    A_MESSAGE, f"#MSG: the text has more formats than values ({len(args)} given)"
+                )
+            value = args[used]
+            used += 1
+            if len(spec) > 12:
+                raise stmt.error(A_MESSAGE, f"#MSG: format {fmt[i : j + 1]!r} too wide")
+            try:
+                if conversion == "s":
+                    out.append((spec + "s") % (value if isinstance(value, str) else format_value(value)))
+                elif isinstance(value, str):
+                    raise stmt.error(A_MESSAGE, f"#MSG: {fmt[i : j + 1]!r} needs a number, got a string")
+                elif conversion in "diuxXo":
+                    conv = "d" if conversion in "iu" else conversion
+                    out.append((spec + conv) % math.trunc(value))
+                else:
+                    out.append((spec + conversion) % value)
+            except (ValueError, OverflowError) as exc:
+                raise stmt.error(A_MESSAGE, f"#MSG: cannot format {format_value(value)}: {exc}") from None
+            i = j + 1
+        if used < len(args):
+            raise stmt.error(A_MESSAGE, f"#MSG: {len(args)} values for {used} format(s) in the text")
+        text = "".join(out)
+        if len(text) > MAX_MESSAGE:
+            raise stmt.error(914020, f"#MSG: the message has {len(text)} characters, at most {MAX_MESSAGE}")
+        return text
+
+    def _contour(self, frame: Frame, stmt: Hash) -> ContourDirective:
+        """Checks and evaluates ``#CONTOUR MODE``, ``#HSC``, ``#SPLINE`` (M-20..M-23)."""
+        command = stmt.command
+        name = {"CONTOUR MODE": "CONTOUR", "HSC": "HSC", "SPLINE": "SPLINE"}[command]
+        words, keys = {
+            "CONTOUR": (CONTOUR_WORDS, CONTOUR_KEYS),
+            "HSC": (HSC_WORDS, HSC_KEYS),
+            "SPLINE": (SPLINE_WORDS, frozenset[str]()),
+        }[name]
+        for word in stmt.options:
+            if word not in words:
+                known = ", ".join(sorted(words | keys))
+                raise stmt.error(A_CONTROL_SYNTAX, f"#{command}: unknown word {word!r} (known: {known})")
+        for key in stmt.params:
+            if key not in keys:
+                known = ", ".join(sorted(words | keys)) or "none"
+                raise stmt.error(A_CONTROL_SYNTAX, f"#{command}: unknown parameter {key!r} (known: {known})")
+        if "ON" in stmt.options and "OFF" in stmt.options:
+            raise stmt.error(A_CONTROL_SYNTAX, f"#{command}: ON and OFF in one command")
+        on = True if "ON" in stmt.options else False if "OFF" in stmt.options else None
+        values: dict[str, float] = {}
+        for key, expr in stmt.params.items():
+            value = self._number(stmt, expr, f"{key} of #{command}")
+            if key in DEVIATION_KEYS and value < 0.0:
+                raise stmt.error(
+                    A_CORNER_DEVIATION,
+                    f"#{command}: {key}={format_value(value)} is smaller than the least permitted value 0 "
+                    "(a corner deviation in mm)",
+                )
+            if key in ("PRE_DIST", "POST_DIST") and value < 0.0:
+                raise stmt.error(A_RANGE, f"#{command}: {key}={format_value(value)} must not be negative")
+            if key in DEVIATION_KEYS | {"PRE_DIST", "POST_DIST"} and value > word_parser._POSITION_MAX:
+                raise stmt.error(A_RANGE, f"#{command}: {key} is out of range: {word_parser._POSITION_RANGE}")
+            values[key] = value
+        mode: str | None = None
+        if name == "CONTOUR":
+            types = [w for w in stmt.options if w in CONTOUR_TYPES]
+            if len(types) > 1:
+                raise stmt.error(
+                    A_CONTROL_SYNTAX, f"#{command}: two contouring types {types[0]} and {types[1]}"
+                )
+            mode = types[0] if types else None
+        elif name == "HSC":
+            if "BSPLINE" in stmt.options:
+                mode = "BSPLINE"
+            elif "OPMODE" in values:
+                opmode = values["OPMODE"]
+                if opmode not in (1.0, 2.0):
+                    raise stmt.error(
+                        A_RANGE, f"#HSC: OPMODE {format_value(opmode)}: the operation modes are 1, 2"
+                    )
+                mode = f"OPMODE {int(opmode)}"
+        else:
+            for word in ("AKIMA", "BSPLINE"):
+                if word in stmt.options:
+                    mode = word
+            if "TYPE" in stmt.options and mode is None:
+                raise stmt.error(A_CONTROL_SYNTAX, "#SPLINE TYPE: AKIMA or BSPLINE expected")
+            if mode is not None and "TYPE" not in stmt.options:
+                raise stmt.error(A_CONTROL_SYNTAX, f"#SPLINE {mode}: write #SPLINE TYPE {mode}")
+            if mode is None and on is None:
+                raise stmt.error(A_CONTROL_SYNTAX, "#SPLINE: ON, OFF or TYPE AKIMA|BSPLINE expected")
+        return ContourDirective(self._place_block(frame, stmt), name, on, mode, values)

@@ -1,0 +1,420 @@
+"""The ``#`` commands' statements (N-05..N-08, M-10..M-23): ``#MSG``, ``#FILE NAME``, ``#FLUSH``,
+``#MEAS MODE``, ``#SLOPE``, ``#CONTOUR MODE``, ``#HSC``, ``#SPLINE``, ``#CS``/``#ACS``/``#ROTATION`` and the
+conditional interpretation ``#IF``/``#ELSE``/``#ENDIF``.
+
+Which ``#`` words exist, and which are simulated or refused with which alarm, is the table
+:data:`~hli_server.engine.nc.language.HASH_COMMANDS`; :meth:`HashParser.hash_command` looks the word up
+there and hands a simulated one to its reader here (:meth:`HashParser.read_hash`). The interpreter runs the
+statements (``nc/effects.py``, ``nc/control_flow.py`` for ``#IF``).
+"""
+
+from __future__ import annotations
+
+from hli_server.engine.nc import parser as word_parser
+from hli_server.engine.nc.expr import Const, Expr
+from hli_server.engine.nc.expr_parser import NAME_CHARS, ExpressionParser
+from hli_server.engine.nc.language import (
+    A_COMMENT_OPEN,
+    A_COND_FIRST,
+    A_CONTROL_SYNTAX,
+    A_LIMIT,
+    A_NOT_SIMULATED,
+    A_UNKNOWN_HASH,
+    HASH_COMMANDS,
+    MAX_NAME,
+    MSG_OPTIONS,
+    SLOPE_TYPES,
+    UNKNOWN_HASH_HINT,
+)
+from hli_server.engine.nc.statements import Control, Hash, Stmt
+
+__all__ = ["HashParser"]
+
+
+class HashParser(ExpressionParser):
+    """Reads a ``#`` command's statement (the statement parser, ``nc/statement_parser.py``, builds on it)."""
+
+    def hash_command(self) -> Stmt:
+        start = self.pos
+        self.pos += 1
+        self.blanks()
+        name = self.name()
+        rule = HASH_COMMANDS.get(name)
+        if rule is None:
+            raise self.failure(
+                A_UNKNOWN_HASH, f"unknown # command #{word_parser._short(name)}; {UNKNOWN_HASH_HINT}"
+            )
+        for form in rule.forms:
+            if not form:
+                return self.read_hash(name, start)
+            if self.keyword(form):
+                return self.read_hash(f"{name} {form}", start)
+        raise self.failure(rule.alarm, rule.message)
+
+    def read_hash(self, command: str, start: int) -> Stmt:
+        """The statement of a simulated ``command`` (a form of :data:`HASH_COMMANDS`): its reader."""
+        if command in ("IF", "ELSE", "ENDIF"):
+            return self.conditional(command, start)
+        if command == "MSG":
+            return self.message()
+        if command in ("FILE", "FILENAME"):
+            return self.file_name(named=command == "FILENAME")
+        if command == "FLUSH":
+            return self.flush()
+        if command == "MEAS MODE":
+            return self.meas_mode()
+        if command == "SLOPE":
+            return self.slope()
+        if command in ("CONTOUR MODE", "HSC", "SPLINE"):
+            return self.motion_options(command)
+        if command == "SET SPLINE":
+            return self.motion_options("SPLINE")  # the older spelling of #SPLINE ON/OFF (207209611)
+        if command == "SET SPLINETYPE":
+            return self.motion_options("SPLINE", prefix=["TYPE"])
+        if command in ("CS", "ACS", "ROTATION"):
+            return self.coordinates(command)
+        if command == "COMMENT":
+            self.fail(
+                A_COMMENT_OPEN,
+                "#COMMENT END without #COMMENT BEGIN"
+                if self.keyword("END")
+                else "#COMMENT: BEGIN or END expected",
+            )
+        raise AssertionError(f"#{command}: simulated in HASH_COMMANDS, but no reader")  # pragma: no cover
+
+    def conditional(self, name: str, start: int) -> Stmt:
+        """``#IF <condition>``, ``#ELSE``, ``#ENDIF`` (conditional interpretation)."""
+        if self.number is not None or start != len(self.u) - len(self.u.lstrip()):
+            self.fail(
+                A_COND_FIRST,
+                f"#{name} must stand at the very start of its block, without a block number",
+            )
+        keyword = "#" + name
+        exprs: list[Expr] = []
+        if name == "IF":
+            if self.at_end():
+                self.fail(A_CONTROL_SYNTAX, "#IF without its condition")
+            exprs.append(self.expression(stop_at_blank=False))
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{name}")
+        return Control(self.raw, self.number, keyword, exprs)
+
+    def flush(self) -> Stmt:
+        """``#FLUSH``, ``#FLUSH WAIT``, ``#FLUSH CONTINUE``."""
+        options: list[str] = []
+        for word in ("WAIT", "CONTINUE"):
+            if self.keyword(word):
+                options.append(word)
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"#FLUSH: unexpected {self.word_at(self.pos)!r} (WAIT, CONTINUE)")
+        return Hash(self.raw, self.number, "FLUSH", options, [])
+
+    def message(self) -> Stmt:
+        """``#MSG [SAVE] [SYN|SYN_ACK|ACK] [receiver] ["format", args]`` (207145355, 207171211)."""
+        options: list[str] = []
+        progress = True
+        while progress:
+            progress = False
+            for word in MSG_OPTIONS:
+                if self.keyword(word):
+                    if word in options:
+                        self.fail(A_CONTROL_SYNTAX, f"#MSG: {word} given twice")
+                    options.append(word)
+                    progress = True
+        if "INFO" in options:
+            self.fail(
+                A_NOT_SIMULATED,
+                "#MSG INFO (message information for a receiver) is not simulated: see docs/nc-language.md",
+            )
+        self.expect("[", "before the message text")
+        self.depth += 1
+        self.blanks()
+        args = [self.expression(stop_at_blank=False)]
+        while True:
+            self.blanks()
+            if self.peek() == ",":
+                self.pos += 1
+                args.append(self.expression(stop_at_blank=False))
+                continue
+            break
+        self.expect("]", "after the message and its values")
+        self.depth -= 1
+        if not self.at_end():
+            self.fail(
+                A_CONTROL_SYNTAX,
+                f"{self.word_at(self.pos)!r} after #MSG [..]: a message stands alone in its block",
+            )
+        return Hash(self.raw, self.number, "MSG", options, args)
+
+    def coordinates(self, name: str) -> Stmt:
+        """``#CS|#ACS DEF|ON [[<id>]] [[v1,v2,v3,φ1,φ2,φ3]]``, ``#CS|#ACS OFF [ALL]``, ``#CS ADD|SET [<name>]
+        [..]``, ``#CS DEL [<name>]|ALL``, ``#ROTATION ON [[ANGLE= CENTER1= CENTER2=]]``, ``#ROTATION OFF``
+        (programming manual 208480907, 208491403, 1037259147, 1048407819, 207442315). The Hash's command is
+        ``"CS ON"`` etc.; ``options`` holds ``ALL``, ``ID`` (the first bracket is the ID), a ``#CS ADD`` name,
+        or the #ROTATION keywords in the order of ``args``."""
+        ops: tuple[str, ...] = ("DEF", "ON", "OFF", "ADD", "SET", "DEL")
+        if name == "ROTATION":
+            ops = ("ON", "OFF")
+        elif name == "ACS":
+            ops = ("DEF", "ON", "OFF")
+        op = next((o for o in ops if self.keyword(o)), None)
+        if op is None:
+            rest = self.word_at(self.pos) if self.pos < self.n else "nothing"
+            self.fail(
+                A_NOT_SIMULATED,
+                f"#{name} {rest}: simulated are #{name} " + "/".join(ops) + " (docs/nc-language.md)",
+            )
+        options: list[str] = []
+        args: list[Expr] = []
+        if name == "ROTATION":
+            if op == "ON" and not self.at_end():
+                self.expect("[", "after #ROTATION ON")
+                self.depth += 1
+                while True:
+                    self.blanks()
+                    if self.peek() == "]":
+                        self.pos += 1
+                        break
+                    key = self.name()
+                    if key not in ("ANGLE", "CENTER1", "CENTER2") or key in options:
+                        self.fail(
+                            A_CONTROL_SYNTAX,
+                            f"#ROTATION ON [..]: {key or self.word_at(self.pos)!r}: "
+                            "ANGLE=, CENTER1=, CENTER2= (each once)",
+                        )
+                    self.blanks()
+                    if self.peek() == "=":
+                        self.pos += 1
+                    options.append(key)
+                    args.append(self.expression(stop_at_blank=True))
+                self.depth -= 1
+        elif op == "OFF":
+            if self.keyword("ALL"):
+                options.append("ALL")
+        elif op in ("ADD", "SET", "DEL"):
+            if op == "DEL" and self.keyword("ALL"):
+                options.append("ALL")
+            else:
+                self.expect("[", f"after #CS {op}")
+                self.blanks()
+                cs_name = self.name()
+                if not cs_name or len(cs_name) > 8:
+                    self.fail(A_CONTROL_SYNTAX, f"#CS {op} [<name>]: a name of 1 to 8 characters")
+                self.expect("]", f"after #CS {op} [<name>")
+                options.append("NAME:" + cs_name)
+                if op != "DEL":
+                    args = self.components(f"#CS {op}")
+        else:
+            self.blanks()
+            if self.peek() == "[":
+                first = self.components(f"#{name} {op}")
+                self.blanks()
+                if self.peek() == "[":
+                    if len(first) != 1:
+                        self.fail(A_CONTROL_SYNTAX, f"#{name} {op} [<id>] [..]: the ID is one value")
+                    options.append("ID")
+                    args = first + self.components(f"#{name} {op}")
+                elif len(first) == 1:
+                    options.append("ID")
+                    args = first
+                else:
+                    args = first
+        if not self.at_end():
+            self.fail(
+                A_CONTROL_SYNTAX,
+                f"{self.word_at(self.pos)!r} after #{name} {op}: the command stands alone in its block",
+            )
+        return Hash(self.raw, self.number, f"{name} {op}", options, args)
+
+    def components(self, what: str) -> list[Expr]:
+        """``[a, , c]``: up to six values, a gap is 0."""
+        self.expect("[", f"after {what}")
+        self.depth += 1
+        out: list[Expr] = []
+        while True:
+            self.blanks()
+            if self.peek() in (",", "]"):
+                out.append(Const(0.0))
+            else:
+                out.append(self.expression(stop_at_blank=False))
+            self.blanks()
+            if self.peek() == ",":
+                self.pos += 1
+                continue
+            self.expect("]", f"after the values of {what}")
+            break
+        self.depth -= 1
+        if len(out) > 6:
+            self.fail(
+                A_CONTROL_SYNTAX, f"{what} [..]: at most 6 values (v1, v2, v3, φ1, φ2, φ3), got {len(out)}"
+            )
+        return out
+
+    def meas_mode(self) -> Stmt:
+        """``#MEAS MODE [ [<meas_type>] ]`` (207084683): the measuring type of G100 from here to the
+        program's end; without a value the channel's default (P-CHAN-00057)."""
+        self.blanks()
+        args: list[Expr] = []
+        if self.peek() == "[":
+            self.pos += 1
+            self.depth += 1
+            self.blanks()
+            args.append(self.expression(stop_at_blank=False))
+            self.blanks()
+            self.expect("]", "after #MEAS MODE [<type>")
+            self.depth -= 1
+        if not self.at_end():
+            self.fail(
+                A_CONTROL_SYNTAX,
+                f"{self.word_at(self.pos)!r} after #MEAS MODE: #MEAS MODE [<type>] stands alone in its block",
+            )
+        return Hash(self.raw, self.number, "MEAS MODE", [], args)
+
+    def slope(self) -> Stmt:
+        """``#SLOPE [TYPE=<ident> [NO_OPT=..]]`` and ``#SLOPE DEFAULT`` (207190411): the acceleration
+        profile of the path from here on. ``options`` holds ``TYPE=<ident>`` (STEP, TRAPEZ, SIN2,
+        HSC), ``NO_OPT=<0|1>`` or ``DEFAULT``."""
+        options: list[str] = []
+        if self.keyword("DEFAULT"):
+            options.append("DEFAULT")
+        else:
+            self.expect("[", "after #SLOPE: #SLOPE [TYPE=STEP|TRAPEZ|SIN2|HSC] or #SLOPE DEFAULT")
+            self.depth += 1
+            while True:
+                self.blanks()
+                if self.peek() == "]":
+                    self.pos += 1
+                    self.depth -= 1
+                    break
+                if self.peek() == ",":
+                    self.pos += 1
+                    continue
+                if self.keyword("TYPE"):
+                    self.expect("=", "after #SLOPE [TYPE")
+                    self.blanks()
+                    start = self.pos
+                    while self.pos < self.n and self.u[self.pos] in NAME_CHARS:
+                        self.pos += 1
+                    ident = self.u[start : self.pos]
+                    if ident not in SLOPE_TYPES:
+                        self.fail(
+                            A_CONTROL_SYNTAX,
+                            f"#SLOPE [TYPE={ident}]: the profiles are {', '.join(SLOPE_TYPES)}",
+                        )
+                    options.append(f"TYPE={ident}")
+                elif self.keyword("NO_OPT"):
+                    self.expect("=", "after #SLOPE [.. NO_OPT")
+                    self.blanks()
+                    if self.peek() not in ("0", "1") or (self.peek(1) not in ("", " ", "\t", "]", ",")):
+                        self.fail(A_CONTROL_SYNTAX, "#SLOPE [.. NO_OPT=<0|1>]: 0 or 1")
+                    options.append(f"NO_OPT={self.peek()}")
+                    self.pos += 1
+                else:
+                    got = self.word_at(self.pos) if self.pos < self.n else "the end of the block"
+                    self.fail(A_CONTROL_SYNTAX, f"#SLOPE [..]: unexpected {got!r} (TYPE=.., NO_OPT=..)")
+            if not any(o.startswith("TYPE=") for o in options):
+                self.fail(A_CONTROL_SYNTAX, "#SLOPE [..] without TYPE=STEP|TRAPEZ|SIN2|HSC")
+        if not self.at_end():
+            self.fail(
+                A_CONTROL_SYNTAX,
+                f"{self.word_at(self.pos)!r} after #SLOPE: #SLOPE [..] stands alone in its block",
+            )
+        return Hash(self.raw, self.number, "SLOPE", options, [])
+
+    def motion_options(self, command: str, prefix: list[str] | None = None) -> Stmt:
+        """``#CONTOUR MODE [ON|OFF] [<type> KEY=<expr> ...]``, ``#HSC [ON|OFF] [OPMODE 1 CONTERROR 0.1]``,
+        ``#SPLINE ON|OFF|TYPE AKIMA``: the words (``options``) and the values (``params``), checked and
+        evaluated by the interpreter. A value follows ``=`` or, inside the brackets, a blank (``#HSC``'s
+        ``OPMODE 1``); commas between the entries are allowed (the manual's ``[DEV, PATH_DEV=5]``)."""
+        options: list[str] = list(prefix or [])
+        params: dict[str, Expr] = {}
+        inside = False
+        while True:
+            self.blanks()
+            if self.at_end():
+                break
+            char = self.peek()
+            if char == "[" and not inside:
+                self.pos += 1
+                inside = True
+                continue
+            if char == "]" and inside:
+                self.pos += 1
+                inside = False
+                continue
+            if char == "," and inside:
+                self.pos += 1
+                continue
+            start = self.pos
+            key = self.name()
+            if not key:
+                self.fail(A_CONTROL_SYNTAX, f"#{command}: unexpected {self.word_at(start)!r}")
+            if key in params or key in options:
+                self.fail(A_CONTROL_SYNTAX, f"#{command}: {key} given twice")
+            self.blanks()
+            nxt = self.peek()
+            if nxt == "=" or (inside and nxt != "" and (nxt.isdigit() or nxt in "+-.")):
+                if nxt == "=":
+                    self.pos += 1
+                    self.blanks()
+                if self.at_end() or self.peek() in ("]", ","):
+                    self.fail(A_CONTROL_SYNTAX, f"#{command}: {key}= without a value")
+                saved = self.depth
+                self.depth = 0
+                try:
+                    # inside the brackets a value is a whole expression, blanks and all (the manual's
+                    # ``[DEV, PATH_DEV = V.G.WZ_AKT.R / 100]``); it ends at a word that is no operator
+                    params[key] = self.expression(stop_at_blank=not inside)
+                finally:
+                    self.depth = saved
+            else:
+                options.append(key)
+        if inside:
+            self.fail(A_CONTROL_SYNTAX, f"#{command}: ']' missing")
+        return Hash(self.raw, self.number, command, options, [], params=params)
+
+    def file_name(self, named: bool = False) -> Stmt:
+        """``#FILE NAME [MSG="report.txt"]`` (207504523; older ``#FILENAME``): the file ``#MSG SAVE``
+        writes to."""
+        if not named and not self.keyword("NAME"):
+            rest = self.word_at(self.pos) if self.pos < self.n else ""
+            self.fail(
+                A_NOT_SIMULATED,
+                f"#FILE {rest}: only #FILE NAME is simulated (the engine does no file operations): "
+                "see docs/nc-language.md",
+            )
+        self.expect("[", "after #FILE NAME")
+        files: dict[str, str] = {}
+        while True:
+            self.blanks()
+            if self.peek() == "]":
+                self.pos += 1
+                break
+            if self.pos >= self.n:
+                self.fail(A_CONTROL_SYNTAX, "#FILE NAME [: ']' missing")
+            key = self.name()
+            if not key:
+                self.fail(A_CONTROL_SYNTAX, f"#FILE NAME: unexpected {self.word_at(self.pos)!r}")
+            self.blanks()
+            if self.peek() == "=":
+                self.pos += 1
+                self.blanks()
+            if self.peek() != '"':
+                self.fail(A_CONTROL_SYNTAX, f'#FILE NAME: {key}= needs a file name in quotes ({key}="name")')
+            close = self.code.find('"', self.pos + 1)
+            if close < 0:
+                self.fail(A_CONTROL_SYNTAX, "#FILE NAME: quote not closed")
+            value = self.code[self.pos + 1 : close]
+            self.pos = close + 1
+            if key != "MSG":
+                self.fail(
+                    A_NOT_SIMULATED,
+                    f"#FILE NAME [{key}=..]: implicit subroutine calls are not simulated; only MSG= (the "
+                    "file of #MSG SAVE) is",
+                )
+            if not value or len(value) > MAX_NAME:
+                self.fail(A_LIMIT, f'#FILE NAME [MSG=".."]: a file name has 1 to {MAX_NAME} characters')
+            files[key] = value
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #FILE NAME [..]")
+        return Hash(self.raw, self.number, "FILE NAME", [], [], files)
