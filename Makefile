@@ -11,15 +11,19 @@ $(BIN)/python:
 	@$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# `make run` needs only the runtime dependencies
-$(RUNTIME_STAMP): pyproject.toml | $(BIN)/python
+# `make run` needs only the runtime dependencies. The install compiles the engine (setup.py), or copies it
+# from the build cache where these engine sources were compiled before (~/.cache/hli-server/engine)
+$(RUNTIME_STAMP): pyproject.toml setup.py | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e .
 	@touch $(RUNTIME_STAMP)
 
-# tests, lint and benchmarks need the test and lint tool chain too
-$(TEST_STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e '.[test]'
-	@touch $(TEST_STAMP) $(RUNTIME_STAMP)
+# tests, lint and benchmarks need the test and lint tool chain too: the test extras alone, on top of the
+# runtime's install (`pip install -e '.[test]'` would build the package again, issue 37)
+TEST_REQUIREMENTS := $(VENV)/test-requirements.txt
+$(TEST_STAMP): $(RUNTIME_STAMP)
+	$(BIN)/python -c 'import tomllib; print("\n".join(tomllib.load(open("pyproject.toml", "rb"))["project"]["optional-dependencies"]["test"]))' > $(TEST_REQUIREMENTS)
+	$(BIN)/python -m pip install --quiet -r $(TEST_REQUIREMENTS)
+	@touch $(TEST_STAMP)
 
 venv: $(TEST_STAMP)
 

@@ -41,6 +41,8 @@ __all__ = [
     "ImageField",
     "Lateness",
     "LimitValues",
+    "MachineChannel",
+    "MachineInfo",
     "MachineState",
     "PacingSummary",
     "ProgramEntry",
@@ -102,6 +104,20 @@ class ExternalVariable(TypedDict):
     type: str
     dims: list[int]
     value: Any  # BOOLEAN, a number or a row-major list of them, after the variable's type and dims
+
+
+class MachineChannel(TypedDict):
+    number: int
+    axes: list[str]
+
+
+class MachineInfo(TypedDict):
+    """``GET /api/machine``: what the machine is and how its clock runs (what never changes while it runs)."""
+
+    name: str
+    t_a_us: int
+    clock: str
+    channels: list[MachineChannel]
 
 
 class MachineState(TypedDict):
@@ -367,6 +383,8 @@ class ReadinessJson(TypedDict):
     state: Literal["starting", "running", "stopping"]
     doors: dict[str, bool]
     waiting_for: list[str]
+    ports: dict[str, int]
+    """the TCP port of each door that listens (``http``, ``modbus``, ``ads``)"""
 
 
 # --- a program check (N-10; ``POST /api/check``, ``hli-server check --format json``) ---------------------

@@ -28,7 +28,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
@@ -200,11 +200,14 @@ class Readiness:
 
     ``doors`` maps each adapter asked for (``http``, ``modbus``, ``ads``, ``mqtt``, ...) to whether it
     has started: a listening door listens, MQTT has its client task (it never waits for the broker).
-    ``state`` is ``starting``, ``running`` or ``stopping``; ``ready`` is ``running`` with every door up."""
+    ``state`` is ``starting``, ``running`` or ``stopping``; ``ready`` is ``running`` with every door up.
+    ``ports`` maps each door that listens on TCP to its port (what a client that knows only the HTTP
+    address needs to reach the others: the pytest plugin's ``--hli-url``)."""
 
     ready: bool
     state: Literal["starting", "running", "stopping"]
     doors: Mapping[str, bool]
+    ports: Mapping[str, int] = field(default_factory=dict)
 
     def to_json(self) -> ReadinessJson:
         waiting = [name for name, up in self.doors.items() if not up]
@@ -213,6 +216,7 @@ class Readiness:
             "state": self.state,
             "doors": dict(self.doors),
             "waiting_for": waiting,
+            "ports": dict(self.ports),
         }
 
 
@@ -578,6 +582,9 @@ class DoorView:
     async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
         return await self._host.step_traced(cycles, signals)
 
+    async def restart(self) -> int:
+        return await self._host.restart()
+
     def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
         return self._host.on_cycle(listener)
 
@@ -643,6 +650,12 @@ class AdapterHost(Protocol):
     async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
         """:meth:`step`, and the value of each of ``signals`` (ST paths) in every one of those
         cycles. An unknown path raises the layout's ``UnknownSignalError`` before any cycle runs."""
+        ...
+
+    async def restart(self) -> int:
+        """Power the machine off and on (stepped clock only, no recording running; else
+        :class:`StepRefusedError`): the machine file's machine at cycle 0, between two steps. Returns the
+        cycle counter."""
         ...
 
     def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:

@@ -332,6 +332,25 @@ class SessionTap:
     def bind(self, machine: Machine) -> None:
         self.machine = machine
 
+    def restart(self) -> None:
+        """The machine was powered off and on (``Runtime.restart_machine``; :meth:`bind` follows with the
+        new one): the input journal begins anew, as at the server's start, so that a recording started from
+        now on replays from the new machine's first cycle. Refused while a recording runs."""
+        if self._writer is not None:
+            raise RecordingError(f"a recording runs: {self._writer.path}; stop it first")
+        self._pending.clear()
+        self._events.clear()
+        self._journal.clear()
+        self._journal_text.clear()
+        self._journal_text_len = 0
+        self.journal_bytes = 0
+        self.journal_lost_at = None
+        self._last_in = b""
+        self._enc_in = self._enc_out = None
+        self._last_out = None
+        self._in_cycle = None
+        self._last_cycle = 0
+
     def attach(self, image: ProcessImage | Any) -> None:
         """The image exists: the halves' codecs; the encoder task starts in the running loop; with
         ``RecordingOptions.file`` the recording starts (before the first cycle)."""

@@ -182,11 +182,9 @@ class Runtime:
         self.session = SessionTap(config, recording)
         """Records the session (docs/record-replay.md): the input journal always, a recording file on
         demand."""
-        self.machine = Machine(
-            config, read_program=self.session.wrap_reader(read_program), programs=self.programs
-        )
-        self.session.bind(self.machine)
-        self.machine.programs = self.session.wrap_library(self.machine.programs)
+        self._read_program = read_program
+        self.event_log = EventLog()
+        self.machine = self._power_on()
         self.nc_files = NcFileWriter(self.machine, nc_output_dir)
         """Carries out the programs' ``#MSG SAVE`` writes inside its output directory (N-07)."""
         self.machine.event_listeners.append(self.nc_files)
@@ -196,8 +194,6 @@ class Runtime:
         self.recorder_port = SessionRecorderPort(self.session)
         self.t_a = self.machine.t_a
         self.stats = PacingStats(self.t_a)
-        self.event_log = EventLog()
-        self.machine.event_listeners.append(self.event_log)
         self._cycle_listeners: list[Callable[[int], None]] = []
         self._services: list[RequestService] = []
         self._recorders: list[SignalRecorder] = []
@@ -227,6 +223,52 @@ class Runtime:
         self._serving = False
         self.stop_requested = False
         """Set by :meth:`request_stop`, also before :meth:`start` (a signal during start-up)."""
+
+    def _power_on(self) -> Machine:
+        """A machine as the machine file starts it, wired to the session recorder and the event log."""
+        machine = Machine(
+            self.config, read_program=self.session.wrap_reader(self._read_program), programs=self.programs
+        )
+        self.session.bind(machine)
+        machine.programs = self.session.wrap_library(machine.programs)
+        machine.event_listeners.append(self.event_log)
+        return machine
+
+    async def restart_machine(self) -> int:
+        """Power the machine off and on (stepped clock only; ``POST /api/machine/restart``): a new machine
+        from the machine file, as at start, with cycle 0, the PLC's half of the image as at start, no files
+        uploaded with programs, no communication fault, and the input journal begun anew. What stays: the
+        doors and their connections, the event log (its numbers go on), files ``#MSG SAVE`` wrote. A test
+        harness that drives a server it did not start (``pytest --hli-url``) restarts it between two tests,
+        so that no test's state reaches the next. Returns the cycle counter (0)."""
+        if self.clock is not Clock.STEPPED:
+            raise ClockError(
+                f"a restart of the machine needs the stepped clock; this runtime runs the {self.clock} clock "
+                "(a test bench's server runs --clock stepped)"
+            )
+        self._running_or_raise()
+        if self.session.recording:
+            raise RuntimeStateError("a recording runs: stop it first (POST /api/recording/stop)")
+        assert self._step_lock is not None
+        async with self._step_lock:  # between two steps, never inside one
+            old = self.machine
+            for listener in (self.event_log, self.nc_files):
+                with contextlib.suppress(ValueError):
+                    old.event_listeners.remove(listener)
+            self.comm_faults.reset("restart")
+            self.programs.clear_uploads()
+            self.session.restart()
+            machine = self._power_on()
+            machine.event_listeners.append(self.nc_files)
+            self.nc_files.rebind(machine)
+            self.panel.rebind(machine)
+            self.machine = machine
+            self.image.init_from(machine.hli, machine.cycle, machine.external)
+            self.stats.cycles_at_start = machine.cycle
+            if self.stop_after_cycles is not None:
+                self._stop_cycle = machine.cycle + self.stop_after_cycles
+            logger.info("the machine was restarted (power off and on): cycle %d", machine.cycle)
+        return machine.cycle
 
     # --- properties -----------------------------------------------------------------------
     @property
@@ -274,10 +316,14 @@ class Runtime:
         """Ready: the clock runs and every adapter asked for has started (``GET /api/ready``). The doors
         of the doors process count once that process reports them listening."""
         doors = {_spec_name(spec): False for spec in self._adapter_specs}
+        ports: dict[str, int] = {}
         for adapter in self._started_adapters:
             inner = getattr(adapter, "doors", None)  # the doors process: the doors it serves
-            for name in inner if isinstance(inner, dict) else (adapter.name,):
+            served = inner if isinstance(inner, dict) else {adapter.name: (getattr(adapter, "port", None),)}
+            for name, door in served.items():
                 doors[name] = True
+                if isinstance(door[0], int):
+                    ports[name] = door[0]
         state: Literal["starting", "running", "stopping"]
         if self.stopped or self.stop_requested:
             state = "stopping"
@@ -285,7 +331,9 @@ class Runtime:
             state = "running"
         else:
             state = "starting"
-        return Readiness(ready=state == "running" and all(doors.values()), state=state, doors=doors)
+        return Readiness(
+            ready=state == "running" and all(doors.values()), state=state, doors=doors, ports=ports
+        )
 
     # --- events and cycle listeners --------------------------------------------------------
     def events_since(self, since: int = 0, limit: int = 1000) -> tuple[list[LoggedEvent], int]:
@@ -844,6 +892,12 @@ class RuntimeHost:
 
     def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
         return self._rt.on_cycle(listener)
+
+    async def restart(self) -> int:
+        try:
+            return await self._rt.restart_machine()
+        except (ClockError, RuntimeStateError) as exc:
+            raise StepRefusedError(str(exc)) from None
 
     def readiness(self) -> Readiness:
         return self._rt.readiness()

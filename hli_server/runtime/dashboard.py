@@ -128,10 +128,16 @@ class TrailRecorder:
     changes of what a channel's scene shows (areas, alarms, program state: :meth:`on_event`)."""
 
     def __init__(self, machine: Machine, every: int = TRAIL_EVERY) -> None:
-        self._m = machine
         self._every = every
+        self.revisions: dict[int, int] = {}
+        self.rebind(machine)
+
+    def rebind(self, machine: Machine) -> None:
+        """Follow ``machine`` (at start, and when the runtime restarted its machine): new trails; the
+        scenes' revisions go on, so that a client that watched the old machine draws the new one."""
+        self._m = machine
         self.trails = {ch.number: Trail() for ch in machine.channels}
-        self.revisions = dict.fromkeys(self.trails, 0)
+        self.revisions = {n: self.revisions[n] + 1 if n in self.revisions else 0 for n in self.trails}
         self._channels = [(ch, self.trails[ch.number]) for ch in machine.channels]
         for ch, trail in self._channels:
             trail.restart(tuple(ch.setpoints()))

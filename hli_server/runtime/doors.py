@@ -225,6 +225,10 @@ class DoorsHost(AdapterHost):
     async def step_traced(self, cycles: int, signals: Sequence[str]) -> Trace:
         return await self._operator.step_traced(cycles, signals)
 
+    async def restart(self) -> int:
+        cycle: int = await self._link.call_async("restart")
+        return cycle
+
     def on_cycle(self, listener: Callable[[int], None]) -> Callable[[], None]:
         self._listeners.append(listener)
         if self._watch is None:

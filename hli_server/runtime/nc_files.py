@@ -100,6 +100,11 @@ class NcFileWriter:
             self.directory.mkdir(parents=True, exist_ok=True)
         self._made = True
 
+    def rebind(self, machine: Machine) -> None:
+        """Serve ``machine`` from now on (the runtime restarted its machine): the same directory, the
+        files written so far stay and count."""
+        self._machine = machine
+
     def __call__(self, event: Event) -> None:
         if isinstance(event, NcFileWrite):
             self.write(event)

@@ -58,6 +58,12 @@ class OperatorPanel(OperatorPort):
         """The trails and scene revisions; fed by the runtime host (a cycle listener, an event listener)."""
         self._scenes: dict[int, tuple[tuple[object, ...], Scene]] = {}
 
+    def rebind(self, machine: Machine) -> None:
+        """The panel of ``machine`` from now on (the runtime restarted its machine: the same doors)."""
+        self._m = machine
+        self.recorder.rebind(machine)
+        self._scenes.clear()
+
     # --- what and where -------------------------------------------------------------------
     @property
     def cycle(self) -> int:

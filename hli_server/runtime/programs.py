@@ -193,6 +193,11 @@ class RuntimeLibrary:
         self._order: list[int] = []
         """channels, the newest upload last"""
 
+    def clear_uploads(self) -> None:
+        """Forget every channel's uploaded files (the machine was restarted)."""
+        self._uploads.clear()
+        self._order.clear()
+
     def set_uploads(self, channel: int, files: Mapping[str, str]) -> None:
         """The files uploaded with channel ``channel``'s program; they replace its previous ones.
         Every name is checked (:class:`ProgramNameError`), at most :data:`MAX_UPLOADED_FILES`, each

@@ -14,6 +14,7 @@ What crosses the socket (frames: a 4-byte length, then a pickle; both ends are t
                       ("timing", id)                           the clock's statistics, unsorted
                       ("readiness", id)                        the server's readiness (GET /api/ready)
                       ("step", id, cycles, signals | None)     the stepped clock (async at the doors)
+                      ("restart", id)                          power the machine off and on (stepped clock)
                       ("cancel", id)                           the client of that step went away
                       ("recorder", id, method, args)           the session recorder (docs/record-replay.md)
                       ("faults", id, op, args)                 set, end or reset communication faults
@@ -53,7 +54,7 @@ import socket
 import struct
 import time
 from collections import deque
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Coroutine, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -328,9 +329,10 @@ class OperatorService(asyncio.Protocol):
                 self._answer(ident, self._rt.readiness())
             elif kind == "step":
                 _, _, cycles, signals = message
-                self._steps[ident] = asyncio.get_running_loop().create_task(
-                    self._step(ident, cycles, signals), name=f"hli-remote-step-{ident}"
-                )
+                host = self._rt.host
+                self._run(ident, host.step(cycles) if signals is None else host.step_traced(cycles, signals))
+            elif kind == "restart":
+                self._run(ident, self._rt.host.restart())
             elif kind == "cancel":
                 task = self._steps.pop(ident, None)
                 if task is not None:
@@ -378,12 +380,15 @@ class OperatorService(asyncio.Protocol):
         member = getattr(self._panel, name)
         return member(*args, **kwargs) if callable(member) else member
 
-    async def _step(self, ident: int, cycles: int, signals: Sequence[str] | None) -> None:
+    def _run(self, ident: int, work: Coroutine[Any, Any, Any]) -> None:
+        """A step or a restart of the machine: a task of its own (its client may cancel it)."""
+        self._steps[ident] = asyncio.get_running_loop().create_task(
+            self._answer_when_done(ident, work), name=f"hli-remote-step-{ident}"
+        )
+
+    async def _answer_when_done(self, ident: int, work: Coroutine[Any, Any, Any]) -> None:
         try:
-            if signals is None:
-                result: Any = await self._rt.host.step(cycles)
-            else:
-                result = await self._rt.host.step_traced(cycles, signals)
+            result = await work
         except asyncio.CancelledError:
             return  # its client went away (or the link closed): nobody waits for an answer
         except Exception as exc:

@@ -108,6 +108,34 @@ def _relative_to(path: Path, base: Path | None) -> Path:
     return path
 
 
+ProgramFiles = Mapping[str, str | os.PathLike[str]] | Iterable[str | os.PathLike[str]]
+"""Subprograms of :meth:`Harness.load_program`: paths (found by ``L`` under their file name), or
+``{name: text or path}``."""
+
+
+def program_files(
+    program: str | os.PathLike[str], files: ProgramFiles, name: str | None, base: Path | None
+) -> tuple[str, str, dict[str, str], list[Path]]:
+    """(text, name, uploaded files, the program file's directory if it is one) of a program given as NC text
+    or a path (relative to ``base``, the test file's directory) and its subprograms."""
+    directories: list[Path] = []
+    if isinstance(program, os.PathLike):
+        path = _relative_to(Path(program), base)
+        text, name = path.read_text(encoding="utf-8"), name or path.name
+        directories.append(path.parent)
+    else:
+        text, name = program, name or "program"
+    uploads: dict[str, str] = {}
+    items = files.items() if isinstance(files, Mapping) else ((None, f) for f in files)
+    for key, value in items:
+        if isinstance(value, os.PathLike) or key is None:
+            file = _relative_to(Path(os.fspath(value)), base)
+            uploads[key or file.name] = file.read_text(encoding="utf-8")
+        else:
+            uploads[key] = value
+    return text, name, uploads, directories
+
+
 def load_machine_spec(machine: Any, base: Path | None = None) -> MachineConfig:
     """A :class:`MachineConfig` from a configuration, a machine file (relative paths against
     ``base``, else the working directory) or None (the built-in demo machine, loaded once)."""
@@ -526,7 +554,7 @@ class Harness:
         channel: int,
         program: str | os.PathLike[str],
         *,
-        files: Mapping[str, str | os.PathLike[str]] | Iterable[str | os.PathLike[str]] = (),
+        files: ProgramFiles = (),
         name: str | None = None,
     ) -> ProgramLoaded:
         """Load a program into ``channel`` with the subprograms and cycles it calls.
@@ -537,26 +565,14 @@ class Harness:
         program directories, as files uploaded with the program (``POST /api/channels/{n}/program``).
         Raises the operator's errors (a program runs: ConflictError; a name with ``..``:
         InvalidRequestError)."""
-        if isinstance(program, os.PathLike):
-            path = _relative_to(Path(program), self._base)
-            text, name = path.read_text(encoding="utf-8"), name or path.name
-        else:
-            text, name = program, name or "program"
-        uploads: dict[str, str] = {}
-        items = files.items() if isinstance(files, Mapping) else ((None, f) for f in files)
-        for key, value in items:
-            if isinstance(value, os.PathLike) or key is None:
-                file = _relative_to(Path(os.fspath(value)), self._base)
-                uploads[key or file.name] = file.read_text(encoding="utf-8")
-            else:
-                uploads[key] = value
+        text, name, uploads, _ = program_files(program, files, name, self._base)
         return self.operator.load_program(channel, text, name, uploads)
 
     def check(
         self,
         program: str | os.PathLike[str],
         *,
-        files: Mapping[str, str | os.PathLike[str]] | Iterable[str | os.PathLike[str]] = (),
+        files: ProgramFiles = (),
         name: str | None = None,
         channel: int = 1,
         geometry_only: bool = False,
@@ -575,21 +591,7 @@ class Harness:
         ``capped``; ``to_json()`` is ``check --format json``'s report."""
         from hli_server.runtime.checks import run_check
 
-        directories: list[str | os.PathLike[str]] = []
-        if isinstance(program, os.PathLike):
-            path = _relative_to(Path(program), self._base)
-            text, name = path.read_text(encoding="utf-8"), name or path.name
-            directories.append(path.parent)
-        else:
-            text, name = program, name or "program"
-        uploads: dict[str, str] = {}
-        items = files.items() if isinstance(files, Mapping) else ((None, f) for f in files)
-        for key, value in items:
-            if isinstance(value, os.PathLike) or key is None:
-                file = _relative_to(Path(os.fspath(value)), self._base)
-                uploads[key or file.name] = file.read_text(encoding="utf-8")
-            else:
-                uploads[key] = value
+        text, name, uploads, directories = program_files(program, files, name, self._base)
         rt = self.runtime
         return run_check(
             rt.config,

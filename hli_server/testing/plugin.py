@@ -18,9 +18,16 @@ Fixtures:
   are not installed is skipped with the reason). Narrow it with
   ``@pytest.mark.parametrize("plc_transport", ["shm"], indirect=True)``.
 * ``hli_machine``: the machine of ``hli`` (see above).
+* ``hli_url``: the remote CNC this process drives (``--hli-url``), or None.
 
 Nothing is shared between tests or between pytest-xdist workers: every ``hli`` has its own image
 (named after the worker's pid) and its own free ports, so a suite runs under ``-n auto`` unchanged.
+
+**A fleet of CNCs** (``--hli-url``): ``hli`` is then a :class:`~hli_server.testing.remote.RemoteHarness`
+that drives a server running elsewhere (``hli-server run --clock stepped``: a container, a pod of
+deploy/kubernetes) over its HTTP API, restarted at the start of every test; under pytest-xdist each worker
+takes one CNC of the list (``--hli-url`` once per CNC, ``@FILE`` with one per line, or a pattern with
+``{n}``, the worker's number). docs/testing.md, "A fleet of CNCs", says what differs.
 """
 
 from __future__ import annotations
@@ -48,6 +55,22 @@ _IMAGE_KINDS = ("memory", "shm")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("hli-server", "hli-server's pytest plugin (docs/testing.md)")
+    group.addoption(
+        "--hli-url",
+        action="append",
+        default=[],
+        metavar="URL",
+        help="drive the hli-server at URL (its HTTP API; it runs --clock stepped) instead of one in-process: "
+        "repeat it once per CNC, or @FILE (one URL a line), or a pattern with {n}; each pytest-xdist "
+        "worker takes one CNC (gwN the N-th)",
+    )
+    group.addoption(
+        "--hli-token",
+        default=None,
+        metavar="TOKEN",
+        help="the API token of the --hli-url servers (default: the environment variable HLI_API_TOKEN)",
+    )
     parser.addini(
         "hli_machine",
         "machine file of the `hli` fixture (hli-server), relative to the rootdir; default: the demo machine",
@@ -69,6 +92,40 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", _MARKER)
+
+
+def _urls(config: pytest.Config) -> list[str]:
+    urls: list[str] = []
+    for value in config.getoption("hli_url", default=None) or []:
+        if value.startswith("@"):
+            lines = Path(value[1:]).read_text(encoding="utf-8").splitlines()
+            urls.extend(line.strip() for line in lines if line.strip() and not line.lstrip().startswith("#"))
+        else:
+            urls.append(value)
+    return urls
+
+
+def pytest_report_header(config: pytest.Config) -> str | None:
+    urls = _urls(config)
+    if not urls:
+        return None
+    shown = ", ".join(urls[:3]) + (f" and {len(urls) - 3} more" if len(urls) > 3 else "")
+    return f"hli-server: remote CNCs (--hli-url): {shown}"
+
+
+@pytest.fixture(scope="session")
+def hli_url(pytestconfig: pytest.Config) -> str | None:
+    """The remote CNC this process drives (``--hli-url``; under pytest-xdist the worker's own), or None
+    where ``hli`` runs the server in-process."""
+    urls = _urls(pytestconfig)
+    if not urls:
+        return None
+    from hli_server.testing.remote import worker_url
+
+    try:
+        return worker_url(urls, os.environ.get("PYTEST_XDIST_WORKER"))
+    except ValueError as exc:
+        raise pytest.UsageError(str(exc)) from None
 
 
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
@@ -118,8 +175,9 @@ def hli_machine(request: pytest.FixtureRequest) -> Any:
 
 
 @pytest.fixture
-def hli(request: pytest.FixtureRequest, hli_machine: Any) -> Iterator[Harness]:
-    """An in-process hli-server with the stepped clock, started for this test and stopped after it."""
+def hli(request: pytest.FixtureRequest, hli_machine: Any, hli_url: str | None) -> Iterator[Harness]:
+    """An in-process hli-server with the stepped clock, started for this test and stopped after it; with
+    ``--hli-url`` the remote CNC of this worker, its machine restarted for this test."""
     from hli_server.testing.harness import Harness
 
     options = _hli_marker(request)
@@ -132,6 +190,9 @@ def hli(request: pytest.FixtureRequest, hli_machine: Any) -> Iterator[Harness]:
         dirs = [request.config.rootpath / d for d in request.config.getini("hli_program_dirs")]
     elif isinstance(dirs, str | os.PathLike):
         dirs = [dirs]
+    if hli_url is not None:
+        yield from _remote(request, hli_url, hli_machine, base, dirs, options)
+        return
     harness = Harness(
         hli_machine,
         image=image,  # type: ignore[arg-type]
@@ -144,6 +205,34 @@ def hli(request: pytest.FixtureRequest, hli_machine: Any) -> Iterator[Harness]:
         yield harness
 
 
+def _remote(
+    request: pytest.FixtureRequest,
+    url: str,
+    machine: Any,
+    base: Path | None,
+    dirs: Any,
+    options: dict[str, Any],
+) -> Iterator[Any]:
+    """``hli`` of a remote CNC: a test for another machine than the CNC's, or for a door it does not
+    serve, is skipped, saying why."""
+    from hli_server.testing.harness import load_machine_spec
+    from hli_server.testing.remote import RemoteHarness
+
+    token = request.config.getoption("hli_token", default=None) or os.environ.get("HLI_API_TOKEN") or None
+    harness = RemoteHarness(url, token=token, machine=machine, base=base, program_dirs=dirs or ())
+    with harness:
+        expected = load_machine_spec(machine, base).name
+        if harness.machine["name"] != expected:
+            pytest.skip(
+                f"the test is for machine {expected!r}; the CNC at {url} runs {harness.machine['name']!r}"
+            )
+        for spec in options.get("adapters", ()):
+            name = spec if isinstance(spec, str) else spec[0]
+            if name not in harness.ports:
+                pytest.skip(f"the test wants the {name} door; the CNC at {url} does not serve it")
+        yield harness
+
+
 @pytest.fixture
 def plc_transport(request: pytest.FixtureRequest, hli: Harness) -> Iterator[Transport]:
     """A synchronous PLC transport to ``hli``'s server, once per door (shm, modbus, ads)."""
@@ -151,6 +240,11 @@ def plc_transport(request: pytest.FixtureRequest, hli: Harness) -> Iterator[Tran
 
     name = getattr(request, "param", "shm")
     reason = unavailable(name)
+    if reason is None and getattr(hli, "remote", False):
+        if name == "shm":
+            reason = f"the shm door: the CNC at {hli.http_url} is remote, its image is not in this memory"
+        elif name not in getattr(hli, "ports", {}):
+            reason = f"the {name} door: the CNC at {hli.http_url} does not serve it"
     if reason is not None:
         pytest.skip(reason)
     transport = open_transport(hli, name)

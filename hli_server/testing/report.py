@@ -28,7 +28,7 @@ from schemas.wire import ProgramState
 if TYPE_CHECKING:
     from plc_clients.task import PlcTask
 
-__all__ = ["MAX_ROWS", "cycle_report", "format_value"]
+__all__ = ["MAX_ROWS", "cycle_report", "format_value", "frames_report"]
 
 MAX_ROWS = 24
 """Rows of changed signals shown; the others are named after the table."""
@@ -61,11 +61,39 @@ def cycle_report(
     plc: PlcTask | None = None,
 ) -> str:
     """The report (see the module docstring); ``history`` holds ``(cycle, CNC->PLC, PLC->CNC)``."""
+    frames = [
+        (cycle, {**layout.unpack(_C2P, c2p), **layout.unpack(_P2C, p2c)}) for cycle, c2p, p2c in history
+    ]
+    return frames_report(
+        what=what,
+        max_cycles=max_cycles,
+        first_cycle=first_cycle,
+        layout=layout,
+        frames=frames,
+        show=show,
+        alarms=alarms,
+        plc=plc,
+    )
+
+
+def frames_report(
+    *,
+    what: str,
+    max_cycles: int,
+    first_cycle: int,
+    layout: Layout,
+    frames: Sequence[tuple[int, Mapping[str, Any]]],
+    show: Sequence[Signal] = (),
+    alarms: Sequence[Mapping[str, Any]] = (),
+    plc: PlcTask | None = None,
+) -> str:
+    """The report of :func:`cycle_report` from the signals' values of the last cycles (``(cycle, {ST path:
+    value})``; a remote CNC's harness knows only the signals it traced)."""
     last = first_cycle + max_cycles - 1
     lines = [f"condition not met within {max_cycles} cycles (cycles {first_cycle}..{last}):", f"    {what}"]
-    if history:
-        lines.append(f"the last {len(history)} cycles: the channels' state and the signals that changed")
-        lines.extend(_table(layout, history, show))
+    if frames:
+        lines.append(f"the last {len(frames)} cycles: the channels' state and the signals that changed")
+        lines.extend(_table(layout, frames, show))
     if alarms:
         lines.append("active alarms:")
         lines.extend(
@@ -94,25 +122,28 @@ def _where(alarm: Mapping[str, Any]) -> str:
     return ", ".join(parts) or "machine"
 
 
-def _table(layout: Layout, history: Sequence[tuple[int, bytes, bytes]], show: Sequence[Signal]) -> list[str]:
-    frames = [{**layout.unpack(_C2P, c2p), **layout.unpack(_P2C, p2c)} for _cycle, c2p, p2c in history]
+def _table(
+    layout: Layout, history: Sequence[tuple[int, Mapping[str, Any]]], show: Sequence[Signal]
+) -> list[str]:
+    frames = [values for _cycle, values in history]
     fixed: list[Signal] = []
     for index in range(len(layout.channels)):
         for leaf in ("program_state_r", "error_id_r"):
             path = f"gpCh[{index}]^bahn_state.{leaf}"
-            if path in layout:
+            if path in layout and path in frames[0]:
                 fixed.append(layout.signal(path))
-    rows = list(dict.fromkeys([*fixed, *show]))
+    rows = list(dict.fromkeys([*fixed, *(s for s in show if s.st_path in frames[0])]))
     changed = [
         s
         for s in layout.signals
         if s not in rows
+        and s.st_path in frames[0]
         and not s.st_path.endswith("cycle_r")
         and any(f[s.st_path] != frames[0][s.st_path] for f in frames[1:])
     ]
     hidden = changed[MAX_ROWS:]
     rows += changed[:MAX_ROWS]
-    header = ["cycle", *(str(cycle) for cycle, _, _ in history)]
+    header = ["cycle", *(str(cycle) for cycle, _ in history)]
     body = [[s.st_path, *(format_value(s, f[s.st_path]) for f in frames)] for s in rows]
     widths = [max(len(r[k]) for r in [header, *body]) for k in range(len(header))]
     out = []

@@ -706,7 +706,7 @@ async def test_openapi_says_what_the_timing_image_recording_and_fault_routes_ans
     assert fields("SlowCycleJson") == {"cycle", "lateness_us", "cause", "detail", "parts_us", "at_s"}
     assert fields("Lateness") == {"p50", "p99", "p999", "max"}
     ready = await client.get("/api/ready")
-    assert set(ready.json()) == fields("ReadinessJson") == {"ready", "state", "doors", "waiting_for"}
+    assert set(ready.json()) == fields("ReadinessJson") == {"ready", "state", "doors", "waiting_for", "ports"}
 
     layout = (await client.get("/api/layout")).json()
     assert set(layout) == fields("LayoutJson")

@@ -59,6 +59,7 @@ async def test_ready_only_when_every_door_listens_and_not_while_stopping() -> No
             "state": "running",
             "doors": {"http": True, "modbus": True},
             "waiting_for": [],
+            "ports": {name: getattr(rt.adapter(name), "port") for name in ("http", "modbus")},  # noqa: B009
         }
         rt.request_stop()
         assert not rt.readiness().ready

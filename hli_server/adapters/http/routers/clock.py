@@ -1,4 +1,4 @@
-"""``/api/step``: the stepped clock.
+"""``/api/step``: the stepped clock; ``/api/machine/restart``: the machine powered off and on (stepped).
 
 One step at a time per server: a second ``POST /api/step`` while one runs is refused (409) rather than
 queued behind it, and a step whose client goes away (closes its connection) is cancelled between two
@@ -94,3 +94,20 @@ async def post_step(host: HostDep, request: Request, body: StepBody | None = Non
         yield b"}"
 
     return StreamingResponse(chunks(), media_type="application/json")
+
+
+@router.post(
+    "/api/machine/restart",
+    summary="Power the machine off and on (stepped clock only): the machine file's machine at cycle 0",
+    responses={409: {"description": "the runtime does not run the stepped clock, or a recording runs"}},
+)
+async def post_machine_restart(host: HostDep) -> Response:
+    """A new machine from the machine file, as at the server's start: cycle 0, the axes where the file puts
+    them, the PLC's half of the image as at start, no alarm, no injected or communication fault, no file
+    uploaded with a program; the input journal begins anew. The doors stay open and their connections too;
+    the event log goes on. After a step that runs, never inside one. What a test bench does between two
+    tests on a server it did not start (``pytest --hli-url``, docs/testing.md): ``{"cycle": 0}``."""
+    cycle = await host.restart()
+    return Response(
+        json_bytes({"cycle": cycle, "time_s": host.operator.time_s}), media_type="application/json"
+    )

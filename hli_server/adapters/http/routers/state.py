@@ -7,7 +7,7 @@ from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 
 from hli_server.adapters.http.deps import HostDep
-from schemas.results import AlarmList, AreaTable, MachineState, ReadinessJson, Timing
+from schemas.results import AlarmList, AreaTable, MachineInfo, MachineState, ReadinessJson, Timing
 
 __all__ = ["router"]
 
@@ -21,6 +21,17 @@ async def get_state(host: HostDep) -> MachineState:
     snap = host.operator.snapshot()
     snap["clock"] = host.clock
     return snap
+
+
+@router.get("/api/machine", summary="The machine: its name, T_A, the clock, the channels and their axes")
+async def get_machine(host: HostDep) -> MachineInfo:
+    operator = host.operator
+    return {
+        "name": operator.machine_name,
+        "t_a_us": operator.t_a_us,
+        "clock": host.clock,
+        "channels": [{"number": n, "axes": operator.axis_names(n)} for n in operator.channel_numbers()],
+    }
 
 
 @router.get("/api/timing", summary="Pacing statistics of the clock (lateness in µs)")
