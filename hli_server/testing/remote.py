@@ -630,7 +630,9 @@ class RemoteHarness:
         if cycles == 1:  # the condition's signals too: its next reads need no request
             traced = list(dict.fromkeys([*traced, *self.image.watched]))[:MAX_TRACED]
         try:
-            answer = self._api.post("/api/step", {"cycles": cycles, "trace": traced or None})
+            answer = self._api.post(
+                "/api/step", {"cycles": cycles, "trace": traced} if traced else {"cycles": cycles}
+            )
         except ConflictError as exc:
             raise StepRefusedError(str(exc)) from None
         self._cycle = int(answer["cycle"])
