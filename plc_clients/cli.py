@@ -29,6 +29,7 @@ import argparse
 import importlib
 import json
 import logging
+import os
 import signal
 import sys
 import time
@@ -172,9 +173,11 @@ def _run_once(args: argparse.Namespace, transport: Transport, run: int | None) -
 
 def _http(url: str, body: dict[str, Any] | None = None) -> dict[str, Any]:
     data = None if body is None else json.dumps(body).encode("utf-8")
-    request = urllib.request.Request(
-        url, data=data, method="POST", headers={"Content-Type": "application/json"}
-    )
+    headers = {"Content-Type": "application/json"}
+    token = os.environ.get("HLI_API_TOKEN")
+    if token:  # a server started with --api-token (deploy/kubernetes): its changes need the token
+        headers["Authorization"] = f"Bearer {token}"
+    request = urllib.request.Request(url, data=data, method="POST", headers=headers)
     with urllib.request.urlopen(request, timeout=5.0) as response:
         answer: dict[str, Any] = json.loads(response.read() or b"{}")
         return answer
