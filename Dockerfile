@@ -16,7 +16,8 @@ COPY pyproject.toml setup.py README.md ./
 COPY schemas ./schemas
 COPY hli_server ./hli_server
 COPY plc_clients ./plc_clients
-RUN pip wheel --no-cache-dir --wheel-dir /wheels .
+# (the engine build cache of setup.py is of no use in a throw-away stage: off)
+RUN HLI_BUILD_CACHE=off pip wheel --no-cache-dir --wheel-dir /wheels .
 
 FROM python:3.11-slim
 ENV PYTHONDONTWRITEBYTECODE=1 \
