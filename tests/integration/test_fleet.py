@@ -206,3 +206,21 @@ def test_a_restart_is_refused_while_recording(tmp_path: Any) -> None:
             assert refused.status_code == 409
             assert "a recording runs" in refused.json()["detail"]
         assert client.post("/api/machine/restart").status_code == 200
+
+
+def test_a_recording_made_after_a_restart_replays(tmp_path: Any) -> None:
+    """The input journal begins anew with the new machine: a recording started later replays from the new
+    machine's first cycle and passes (one that carried the old machine's inputs would not)."""
+    with Harness(adapters=["http"]) as hli, httpx.Client(base_url=hli.http_url) as client:
+        hli.load_program(1, "N10 G01 X30 F60000\nN20 M30\n")
+        hli.operator.start(1)
+        hli.step(200)
+        hli.image[OVERRIDE] = 500
+        hli.step(10)
+        assert client.post("/api/machine/restart").status_code == 200
+        hli.load_program(1, "N10 G01 Y20 F30000\nN20 G01 X-10\nN30 M30\n")
+        hli.operator.start(1)
+        hli.step(50)
+        with hli.record(tmp_path / "after.jsonl.gz", outputs_every=1):
+            hli.step(400)
+        assert hli.replay(tmp_path / "after.jsonl.gz").verdict.name == "PASS"
