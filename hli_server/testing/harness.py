@@ -288,7 +288,78 @@ class _OperatorInLoop:
         return f"<operator panel of {self._harness!r}>"
 
 
-class Harness:
+class _Programs:
+    """``load_program`` and ``check``, the same for the in-process harness and the remote one
+    (``remote.py``): each says how a program is loaded and which machine a check runs on."""
+
+    _base: Path | None
+
+    def _load(self, channel: int, text: str, name: str, files: dict[str, str]) -> ProgramLoaded:
+        raise NotImplementedError
+
+    def _check_machine(self) -> tuple[MachineConfig, list[str | os.PathLike[str]]]:
+        """The configuration a check runs on, and the program directories after the program's own."""
+        raise NotImplementedError
+
+    def load_program(
+        self,
+        channel: int,
+        program: str | os.PathLike[str],
+        *,
+        files: ProgramFiles = (),
+        name: str | None = None,
+    ) -> ProgramLoaded:
+        """Load a program into ``channel`` with the subprograms and cycles it calls.
+
+        ``program`` is NC text, or the path of a program file (a :class:`~pathlib.Path`, relative to
+        the test file's directory for the plugin's ``hli``). ``files`` are its subprograms: paths
+        (found by ``L`` under their file name), or ``{name: text or path}``. They are found before the
+        program directories, as files uploaded with the program (``POST /api/channels/{n}/program``).
+        Raises the operator's errors (a program runs: ConflictError; a name with ``..``:
+        InvalidRequestError)."""
+        text, name, uploads, _ = program_files(program, files, name, self._base)
+        return self._load(channel, text, name, uploads)
+
+    def check(
+        self,
+        program: str | os.PathLike[str],
+        *,
+        files: ProgramFiles = (),
+        name: str | None = None,
+        channel: int = 1,
+        geometry_only: bool = False,
+        max_cycles: int = 10_000_000,
+        max_iterations: int = 1_000_000,
+        record_path: bool = False,
+    ) -> CheckResult:
+        """Check a program offline, as ``hli-server check`` and ``POST /api/check`` do: the engine's
+        :class:`~hli_server.engine.program_check.ProgramCheck` on a fresh machine of this server's machine
+        file (the running machine, its programs and V.E. variables are not touched; no cycle is stepped).
+
+        ``program`` and ``files`` as for :meth:`load_program`; subprograms are found among ``files``, then
+        in the directory of a program given by path, then in the server's program directories. Returns
+        the :class:`~hli_server.engine.program_check.CheckResult`: ``completed``, ``alarms`` (each with
+        ``number``, ``line``, ``block``, ``message``), ``messages`` (``#MSG``), ``final_position``,
+        ``capped``; ``to_json()`` is ``check --format json``'s report."""
+        from hli_server.runtime.checks import run_check
+
+        text, name, uploads, directories = program_files(program, files, name, self._base)
+        config, searched = self._check_machine()
+        return run_check(
+            config,
+            text,
+            directories=[*directories, *searched],
+            files=uploads,
+            name=name,
+            channel=channel,
+            geometry_only=geometry_only,
+            max_cycles=max_cycles,
+            max_iterations=max_iterations,
+            record_path=record_path,
+        )
+
+
+class Harness(_Programs):
     """An in-process hli-server with the stepped clock (H-07); see the module docstring.
 
     ``machine``: a :class:`MachineConfig`, a machine file or None (the demo machine). ``image``:
@@ -548,63 +619,12 @@ class Harness:
         """Faults in the PLC's communication on demand (docs/record-replay.md)."""
         return CommFaultsView(self)
 
-    # --- programs (N-02, N-07) -----------------------------------------------------------------
-    def load_program(
-        self,
-        channel: int,
-        program: str | os.PathLike[str],
-        *,
-        files: ProgramFiles = (),
-        name: str | None = None,
-    ) -> ProgramLoaded:
-        """Load a program into ``channel`` with the subprograms and cycles it calls.
+    # --- programs (N-02, N-07): load_program and check of _Programs -------------------------------
+    def _load(self, channel: int, text: str, name: str, files: dict[str, str]) -> ProgramLoaded:
+        return self.operator.load_program(channel, text, name, files)
 
-        ``program`` is NC text, or the path of a program file (a :class:`~pathlib.Path`, relative to
-        the test file's directory for the plugin's ``hli``). ``files`` are its subprograms: paths
-        (found by ``L`` under their file name), or ``{name: text or path}``. They are found before the
-        program directories, as files uploaded with the program (``POST /api/channels/{n}/program``).
-        Raises the operator's errors (a program runs: ConflictError; a name with ``..``:
-        InvalidRequestError)."""
-        text, name, uploads, _ = program_files(program, files, name, self._base)
-        return self.operator.load_program(channel, text, name, uploads)
-
-    def check(
-        self,
-        program: str | os.PathLike[str],
-        *,
-        files: ProgramFiles = (),
-        name: str | None = None,
-        channel: int = 1,
-        geometry_only: bool = False,
-        max_cycles: int = 10_000_000,
-        max_iterations: int = 1_000_000,
-        record_path: bool = False,
-    ) -> CheckResult:
-        """Check a program offline, as ``hli-server check`` and ``POST /api/check`` do: the engine's
-        :class:`~hli_server.engine.program_check.ProgramCheck` on a fresh machine of this server's machine
-        file (the running machine, its programs and V.E. variables are not touched; no cycle is stepped).
-
-        ``program`` and ``files`` as for :meth:`load_program`; subprograms are found among ``files``, then
-        in the directory of a program given by path, then in the server's program directories. Returns
-        the :class:`~hli_server.engine.program_check.CheckResult`: ``completed``, ``alarms`` (each with
-        ``number``, ``line``, ``block``, ``message``), ``messages`` (``#MSG``), ``final_position``,
-        ``capped``; ``to_json()`` is ``check --format json``'s report."""
-        from hli_server.runtime.checks import run_check
-
-        text, name, uploads, directories = program_files(program, files, name, self._base)
-        rt = self.runtime
-        return run_check(
-            rt.config,
-            text,
-            directories=[*directories, *rt.checker.directories],
-            files=uploads,
-            name=name,
-            channel=channel,
-            geometry_only=geometry_only,
-            max_cycles=max_cycles,
-            max_iterations=max_iterations,
-            record_path=record_path,
-        )
+    def _check_machine(self) -> tuple[MachineConfig, list[str | os.PathLike[str]]]:
+        return self.runtime.config, list(self.runtime.checker.directories)
 
     @property
     def nc_files(self) -> Path:

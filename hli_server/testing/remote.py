@@ -50,11 +50,10 @@ from hli_server.testing.harness import (
     CommFaultsView,
     ConditionNotMetError,
     HarnessError,
-    ProgramFiles,
     ReplayFailedError,
+    _Programs,
     describe,
     load_machine_spec,
-    program_files,
 )
 from hli_server.testing.transports import open_transport
 from schemas.layout import Direction, Layout, Signal
@@ -76,7 +75,6 @@ from schemas.wire import Mode
 
 if TYPE_CHECKING:
     from hli_server.adapters.host import Value
-    from hli_server.engine.program_check import CheckResult
     from plc_clients.task import PlcTask
     from plc_clients.transports import Transport
     from schemas.config import MachineConfig
@@ -466,7 +464,7 @@ class _RemoteRecording:
         self.stop()
 
 
-class RemoteHarness:
+class RemoteHarness(_Programs):
     """A hli-server running elsewhere (``hli-server run --clock stepped``), driven over its HTTP API with the
     :class:`~hli_server.testing.Harness`'s calls (module docstring). ``url``: its HTTP address; ``token``:
     its API token (``--api-token``), if it has one; ``machine``: the machine file the tests expect (for
@@ -710,49 +708,14 @@ class RemoteHarness:
                     paths.append(path)
         return paths
 
-    # --- programs ---------------------------------------------------------------------------------
-    def load_program(
-        self,
-        channel: int,
-        program: str | os.PathLike[str],
-        *,
-        files: ProgramFiles = (),
-        name: str | None = None,
-    ) -> ProgramLoaded:
-        """Load a program with its subprograms, as :meth:`Harness.load_program` (they go with the request)."""
-        text, name, uploads, _ = program_files(program, files, name, self._base)
-        return self.operator.load_program(channel, text, name, uploads)
+    # --- programs: load_program and check of _Programs --------------------------------------------
+    def _load(self, channel: int, text: str, name: str, files: dict[str, str]) -> ProgramLoaded:
+        return self.operator.load_program(channel, text, name, files)  # the files go with the request
 
-    def check(
-        self,
-        program: str | os.PathLike[str],
-        *,
-        files: ProgramFiles = (),
-        name: str | None = None,
-        channel: int = 1,
-        geometry_only: bool = False,
-        max_cycles: int = 10_000_000,
-        max_iterations: int = 1_000_000,
-        record_path: bool = False,
-    ) -> CheckResult:
-        """Check a program offline as :meth:`Harness.check` does, here, on the machine file the test names
-        (``machine``; the remote server is not asked and not touched)."""
-        from hli_server.runtime.checks import run_check
-
-        config: MachineConfig = load_machine_spec(self._machine_spec, self._base)
-        text, name, uploads, directories = program_files(program, files, name, self._base)
-        return run_check(
-            config,
-            text,
-            directories=[*directories, *self.program_dirs, *config.program_directories],
-            files=uploads,
-            name=name,
-            channel=channel,
-            geometry_only=geometry_only,
-            max_cycles=max_cycles,
-            max_iterations=max_iterations,
-            record_path=record_path,
-        )
+    def _check_machine(self) -> tuple[MachineConfig, list[str | os.PathLike[str]]]:
+        """A check runs here, on the machine file the test names (the remote server is not asked)."""
+        config = load_machine_spec(self._machine_spec, self._base)
+        return config, [*self.program_dirs, *config.program_directories]
 
     # --- recording and replay -------------------------------------------------------------------------
     def record(self, path: str | os.PathLike[str], **options: Any) -> Any:
