@@ -5,7 +5,9 @@
 * ``plugin.py``: the pytest plugin (``hli`` and ``plc_transport`` fixtures), registered by the
   package's ``pytest11`` entry point;
 * ``transports.py``: the PLC doors by name (shared memory, Modbus, ADS), a small registry;
-* ``report.py``: the report of a condition that never came.
+* ``report.py``: the report of a condition that never came;
+* ``remote.py``: :class:`~hli_server.testing.remote.RemoteHarness`, the same calls for a server that runs
+  elsewhere (``pytest --hli-url``: a fleet of CNCs, docs/testing.md).
 
 docs/testing.md shows a complete test.
 """
