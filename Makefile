@@ -42,7 +42,8 @@ $(NODE_STAMP): $(NODE_DIR)/package-lock.json
 node-deps: $(NODE_STAMP)
 
 # rebuild the compiled engine after editing it (an edited engine runs as pure Python until then:
-# hli_server/_compiled.py says so once); HLI_PURE_PYTHON=1 make compile removes the compiled modules
+# hli_server/_compiled.py says so once; sources compiled before come from the build cache, setup.py);
+# HLI_PURE_PYTHON=1 make compile removes the compiled modules
 compile: $(TEST_STAMP)
 	find hli_server/engine -name '*.so' -delete
 	rm -rf build *__mypyc*.so
