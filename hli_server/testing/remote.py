@@ -173,7 +173,7 @@ class _Api:
         status = response.status
         if status >= 400 and status not in ok:
             detail = answer.get("detail", answer) if isinstance(answer, dict) else answer
-            if status in (401, 403):
+            if status == 401:
                 detail = f"{detail} (the server wants its API token: --hli-token or HLI_API_TOKEN)"
             raise _ERRORS.get(status, OperatorError)(f"{method} {path}: {status} {detail}")
         return status, answer
@@ -356,7 +356,8 @@ class RemoteImage:
     def __setitem__(self, st_path: str, value: Value) -> None:
         self.write(st_path, value)
 
-    def read(self, st_path: str) -> Value:
+    def read(self, st_path: str, *, watch: bool = True) -> Value:
+        """The field's value (CNC->PLC: of the newest publish); ``watch``: trace it in the next steps."""
         signal = self._signal(st_path)
         path = signal.st_path
         if signal.direction is _C2P and self._cycle == self._h.cycle and path in self._values:
@@ -368,7 +369,7 @@ class RemoteImage:
                 self._values = {}
                 self._cycle = answer["cycle"]
             self._values[path] = value
-            if len(self.watched) < MAX_TRACED:
+            if watch and len(self.watched) < MAX_TRACED:
                 self.watched[path] = None
         return value
 
@@ -384,13 +385,15 @@ class RemoteImage:
 
     def snapshot(self) -> dict[str, Value]:
         """Every CNC->PLC field of the newest publish (and ``"cycle"``): one request per field."""
-        values: dict[str, Value] = {s.st_path: self.read(s.st_path) for s in self.layout.half(_C2P)}
+        values: dict[str, Value] = {
+            s.st_path: self.read(s.st_path, watch=False) for s in self.layout.half(_C2P)
+        }
         values["cycle"] = self._h.cycle
         return values
 
     def outputs(self) -> dict[str, Value]:
         """Every PLC->CNC field as it is now: one request per field."""
-        return {s.st_path: self.read(s.st_path) for s in self.layout.half(Direction.PLC_TO_CNC)}
+        return {s.st_path: self.read(s.st_path, watch=False) for s in self.layout.half(Direction.PLC_TO_CNC)}
 
     def __repr__(self) -> str:
         return f"RemoteImage({self._h.url!r})"

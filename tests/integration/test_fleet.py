@@ -19,7 +19,8 @@ from typing import Any
 import httpx
 import pytest
 
-from hli_server.testing import Harness, HarnessError, unavailable
+from hli_server.adapters.host import ConflictError
+from hli_server.testing import ConditionNotMetError, Harness, HarnessError, unavailable
 from hli_server.testing.remote import RemoteHarness, worker_url
 from tests.doc_blocks import DOCS, marked_block
 from tests.integration.servers import read_banner, start_server, stop_server
@@ -151,6 +152,27 @@ def test_the_complete_test_of_the_docs_passes_against_a_remote_cnc(
     result.stdout.fnmatch_lines(["*the shm door: the CNC at http://127.0.0.1:* is remote*"])
     for door in network:
         result.stdout.fnmatch_lines([f"*test_the_limit_holds_x_at_50_mm?{door}? PASSED*"])
+
+
+def test_the_remote_harness_traces_reports_and_raises_as_the_in_process_one(fleet: list[str]) -> None:
+    with RemoteHarness(fleet[2]) as hli:
+        hli.load_program(1, "N10 G01 X10 F60000\nN20 M30\n")
+        hli.operator.start(1)
+        with hli.trace(X, "gpCh[0]^bahn_state.program_state_r") as recording:
+            hli.step(20)
+            ran = hli.run_until(lambda: hli.image[X] >= 100_000, max_cycles=2000)
+        trace = recording.trace()
+        assert trace.cycles == list(range(1, 21 + ran))  # every cycle, the long step's and the single ones
+        assert trace[X][-1] == 100_000
+        assert (trace[X][1:] >= trace[X][:-1]).all()
+        with pytest.raises(ConflictError):  # a program runs (the same error as in-process)
+            hli.operator.load_program(1, "N10 M30\n")
+        with pytest.raises(ConditionNotMetError) as failed:
+            hli.run_until(lambda: hli.image[X] < 0, max_cycles=30, show=["gpAx[1]^ipo_state.cmd_pos_r"])
+        report = str(failed.value)
+        assert "condition not met within 30 cycles" in report
+        assert "gpAx[1]^ipo_state.cmd_pos_r" in report
+        assert hli.image.snapshot()["cycle"] == hli.cycle
 
 
 def test_a_server_on_the_realtime_clock_is_refused_with_the_reason() -> None:
