@@ -12,8 +12,9 @@ test before it left behind.
 
 **Cost.** A cycle of :meth:`RemoteHarness.run_until` is one request: the step traces the signals the
 condition read (``POST /api/step`` with ``trace``), and their values answer the condition's next reads
-without a request of their own. Over loopback that is about a millisecond a cycle; across a cluster the
-network's round trip. A long stretch without a condition is one :meth:`RemoteHarness.step`.
+without a request of their own: 4.5 ms a cycle over loopback on the shared, loaded 2-core development
+machine; across a cluster a round trip more. A long stretch without a condition is one
+:meth:`RemoteHarness.step`.
 
 What differs from the in-process harness (docs/testing.md, "A fleet of CNCs"): no ``runtime`` (the server
 is another process), no shared-memory door, no ``record`` (the server's recorder is its HTTP API's),
