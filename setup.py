@@ -146,6 +146,18 @@ def _mypyc_extensions() -> list[Any]:
         return []
 
 
+_BUILDS = frozenset(
+    {"build", "build_ext", "bdist_wheel", "editable_wheel", "bdist", "bdist_egg", "install", "develop"}
+)
+
+
+def _building() -> bool:
+    """Whether this run of setup.py builds (``bdist_wheel``, ``editable_wheel``, ``build_ext``, ...). pip
+    first asks it for metadata in runs of their own (``egg_info``, ``dist_info``), where the file list of
+    ``sdist`` finalizes ``build_ext`` too: there the engine is neither looked up nor compiled."""
+    return any(arg in _BUILDS for arg in sys.argv[1:])
+
+
 class EngineBuildExt(build_ext):
     """``build_ext`` for the engine: the compiled modules from the cache when their key is there, else
     compiled by mypyc and put into the cache. The extensions are decided here, when the command runs."""
@@ -157,7 +169,7 @@ class EngineBuildExt(build_ext):
             entry: Path | None = None
             hit: dict[str, str] | None = None
             root = cache_root()
-            if dist.ext_modules:
+            if dist.ext_modules and _building():
                 if root is not None:
                     entry = root / build_key()
                     hit = _cached(entry)
