@@ -731,7 +731,7 @@ class RemoteHarness(_Programs):
     def replay(self, path: str | os.PathLike[str], **options: Any) -> Any:
         """Replay a recording as a test, here (a machine of its own, built from the recording)."""
         __tracebackhide__ = True
-        from hli_server.recording.replay import Verdict, replay
+        from hli_server.replay import Verdict, replay
 
         report = asyncio.run(replay(Path(os.fspath(path)), **options))
         if report.verdict is not Verdict.PASS:
