@@ -36,6 +36,9 @@ __all__ = [
     "AxisType",
     "ChannelConfig",
     "DriveModel",
+    "ExternalElementConfig",
+    "ExternalStructureConfig",
+    "ExternalVariableConfig",
     "InterpolatorFunction",
     "MachineConfig",
     "ManualConfig",
@@ -65,6 +68,8 @@ class ParameterIssue:
     field: str | None = None
     axis: str | None = None
     channel: int | None = None
+    at: tuple[str | int, ...] = ()
+    """Below ``field``: the entry of a list and its key (``(2, "type")`` of ``external_variables``)."""
 
 
 class ParameterIssues(ValueError):  # noqa: N818 - a ValueError, so that pydantic reports it
@@ -558,9 +563,17 @@ class AdapterEntry(_Strict):
     )
 
 
-ExternalTypeName = Literal[
-    "BOOLEAN", "SGN08", "UNS08", "SGN16", "UNS16", "SGN32", "UNS32", "REAL32", "REAL64"
-]
+_V_E_NAME = r"^[A-Za-z_][A-Za-z0-9_]{0,19}$"
+"""A V.E. name, and each name of a structure's element: at most 20 characters, as the kernel allows."""
+_ACCESS_RIGHTS = Literal["READ_WRITE", "READ_ONLY", "WRITE_ONLY"]
+
+
+def _type_name(value: str) -> str:
+    """The kernel's type names in upper case (``sgn32`` is SGN32); a structure's name as written."""
+    from schemas.external_types import ELEMENTARY_TYPES, STRING_TYPES
+
+    upper = value.upper()
+    return upper if upper in ELEMENTARY_TYPES or upper in STRING_TYPES else value
 
 
 class ExternalVariableConfig(_Strict):
@@ -568,12 +581,23 @@ class ExternalVariableConfig(_Strict):
     external variables, reduced to what the simulator needs (project's own shape; docs/nc-language.md)."""
 
     name: str = Field(
-        pattern=r"^[A-Za-z_][A-Za-z0-9_]{0,19}$",
+        pattern=_V_E_NAME,
         description="name without the prefix V.E. (at most 20 characters, as the kernel allows)",
     )
-    type: ExternalTypeName = Field(default="REAL64", description="data type (the kernel's names)")
+    type: str = Field(
+        default="REAL64",
+        pattern=r"^[A-Za-z_][A-Za-z0-9_]{0,31}$",
+        description="data type (the kernel's names: elementary, STRING, VSTRING, or a structure of "
+        "external_structures)",
+    )
     dims: list[Annotated[int, Field(ge=1, le=65535)]] = Field(
         default_factory=list, max_length=4, description="array dimensions; empty for a scalar"
+    )
+    size: int | None = Field(
+        default=None,
+        ge=1,
+        le=800,
+        description="VSTRING only: bytes of the string with its terminating NUL (default 128: 127 characters)",
     )
     channel: int | None = Field(
         default=None, ge=1, le=12, description="the channel whose own area holds it; none: the global area"
@@ -581,13 +605,136 @@ class ExternalVariableConfig(_Strict):
     synchronous: bool = Field(
         default=False, description="read by the interpolator (reading it empties the channel first)"
     )
-    access_rights: Literal["READ_WRITE", "READ_ONLY", "WRITE_ONLY"] = Field(
+    access_rights: _ACCESS_RIGHTS = Field(
         default="READ_WRITE",
         description="what an NC program may do with it (the PLC may always read and write)",
     )
     description: str = Field(
         default="", max_length=200, description="what it means (shown by `hli-server map` and the dashboard)"
     )
+
+    @field_validator("type")
+    @classmethod
+    def _kernel_type_name(cls, value: str) -> str:
+        return _type_name(value)
+
+    @model_validator(mode="after")
+    def _size_of_vstring(self) -> ExternalVariableConfig:
+        if self.size is not None and self.type != "VSTRING":
+            raise ValueError(
+                f"V.E.{self.name}: size is the length of a VSTRING (P-EXTV-00008); a {self.type} has its "
+                "type's size (a STRING's follows use_extended_string_var)"
+            )
+        return self
+
+
+class ExternalElementConfig(_Strict):
+    """One element of a V.E. structure (``struct[i].element[j].*``, P-EXTV-00016 .. 00021)."""
+
+    name: str = Field(pattern=_V_E_NAME, description="the element's name (V.E.variable.name)")
+    type: str = Field(
+        default="REAL64",
+        pattern=r"^[A-Za-z_][A-Za-z0-9_]{0,31}$",
+        description="data type: elementary, STRING, VSTRING or another structure",
+    )
+    dims: list[Annotated[int, Field(ge=1, le=65535)]] = Field(
+        default_factory=list, max_length=4, description="array dimensions; empty for a scalar"
+    )
+    size: int | None = Field(
+        default=None,
+        ge=1,
+        le=800,
+        description="VSTRING only: bytes of the string with its terminating NUL (default 128: 127 characters)",
+    )
+    synchronous: bool | None = Field(
+        default=None, description="none: the variable's synchronisation (inherited)"
+    )
+    access_rights: _ACCESS_RIGHTS | None = Field(
+        default=None, description="none: the variable's access rights (inherited)"
+    )
+
+    @field_validator("type")
+    @classmethod
+    def _kernel_type_name(cls, value: str) -> str:
+        return _type_name(value)
+
+    @model_validator(mode="after")
+    def _size_of_vstring(self) -> ExternalElementConfig:
+        if self.size is not None and self.type != "VSTRING":
+            raise ValueError(
+                f"element {self.name}: size is the length of a VSTRING (P-EXTV-00021); a {self.type} has "
+                "its type's size"
+            )
+        return self
+
+
+class ExternalStructureConfig(_Strict):
+    """A structure type of V.E. variables (``struct[i].*``, P-EXTV-00015): its elements in memory order."""
+
+    name: str = Field(
+        pattern=r"^[A-Za-z_][A-Za-z0-9_]{0,31}$",
+        description="the type's name (what a variable's type names; the ADS type of its symbols)",
+    )
+    elements: list[ExternalElementConfig] = Field(
+        min_length=1, max_length=256, description="the elements, in memory order"
+    )
+    description: str = Field(default="", max_length=200, description="what it means")
+
+    @model_validator(mode="after")
+    def _unique_elements(self) -> ExternalStructureConfig:
+        seen: set[str] = set()
+        for element in self.elements:
+            if element.name.upper() in seen:
+                raise ValueError(
+                    f"structure {self.name}: element {element.name} is declared twice (names are "
+                    "case-insensitive)"
+                )
+            seen.add(element.name.upper())
+        return self
+
+
+def _check_external_types(config: MachineConfig) -> list[ParameterIssue]:
+    """The V.E. structures: unique names, no clash with the kernel's types, every type known, no structure
+    that contains itself (schemas/external_types.py resolves them)."""
+    from schemas.external_types import (
+        ELEMENTARY_TYPES,
+        STRING_TYPES,
+        ExternalTypeError,
+        resolve_structures,
+        variable_type,
+    )
+
+    issues: list[ParameterIssue] = []
+    seen: set[str] = set()
+    for structure in config.external_structures:
+        key = structure.name.upper()
+        if key in ELEMENTARY_TYPES or key in STRING_TYPES:
+            issues.append(
+                ParameterIssue(
+                    f"structure {structure.name}: the name of one of the kernel's types",
+                    field="external_structures",
+                )
+            )
+        elif key in seen:
+            issues.append(
+                ParameterIssue(
+                    f"structure {structure.name} is declared twice (names are case-insensitive)",
+                    field="external_structures",
+                )
+            )
+        seen.add(key)
+    if issues:
+        return issues
+    try:
+        structures = resolve_structures(config.external_structures, extended=config.use_extended_string_var)
+    except ExternalTypeError as exc:
+        return [ParameterIssue(str(exc), field="external_structures")]
+    for index, variable in enumerate(config.external_variables):
+        try:
+            variable_type(variable, structures, extended=config.use_extended_string_var)
+        except ExternalTypeError as exc:
+            issues.append(ParameterIssue(str(exc), field="external_variables", at=(index, "type")))
+    return issues
 
 
 class MachineConfig(_Strict):
@@ -602,6 +749,13 @@ class MachineConfig(_Strict):
     )
     external_variables: list[ExternalVariableConfig] = Field(
         default_factory=list, max_length=1024, description="V.E. variables shared by NC programs and the PLC"
+    )
+    external_structures: list[ExternalStructureConfig] = Field(
+        default_factory=list, max_length=256, description="structure types of V.E. variables"
+    )
+    use_extended_string_var: bool = Field(
+        default=False,
+        description="P-EXTV-00022 a V.E. STRING holds 127 characters (128 bytes) instead of 20 (21 bytes)",
     )
     program_directories: list[Annotated[str, Field(min_length=1, max_length=4096)]] = Field(
         default_factory=list,
@@ -682,6 +836,7 @@ class MachineConfig(_Strict):
                     )
                 )
             seen_vars.add(key)
+        issues += _check_external_types(self)
         if not issues:
             too_much = check_external_fits(self)
             if too_much is not None:

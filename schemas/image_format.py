@@ -75,6 +75,7 @@ from typing import Final
 
 from schemas.layout import (
     LAYOUT_VERSION,
+    STRING_ENCODING,
     Direction,
     Layout,
     LayoutError,
@@ -110,6 +111,7 @@ __all__ = [
     "plan_segment",
     "read_c2p",
     "read_c2p_field",
+    "decode_field",
     "read_field",
     "read_header",
     "read_u64",
@@ -135,8 +137,9 @@ FLAG_CLOSED: Final = 0x1
 _ALIGN: Final = 64
 _U64: Final = struct.Struct("@Q")
 """Native 8-byte access: CPython copies it with one memcpy of 8 bytes (a single load/store)."""
-_NATIVE: Final = {t: struct.Struct("@" + t.struct_char) for t in SignalType}
-"""Single-store access per type (1, 2, 4 or 8 bytes)."""
+_NATIVE: Final = {t: struct.Struct("@" + t.struct_char) for t in SignalType if t is not SignalType.STRING}
+"""Single-store access per type (1, 2, 4 or 8 bytes). A STRING field is copied byte by byte (no single
+store: a reader may see a string half written, docs/process-image.md)."""
 
 if HEADER.size != HEADER_SIZE:  # pragma: no cover - a typo in the format
     raise RuntimeError(f"header format is {HEADER.size} bytes, expected {HEADER_SIZE}")
@@ -356,8 +359,13 @@ def write_u64(buf: memoryview, offset: int, value: int) -> None:
     _U64.pack_into(buf, offset, value)
 
 
-def write_field(buf: memoryview, half_offset: int, signal: Signal, value: bool | int | float) -> None:
-    """One store of the field's size (PLC->CNC single-field write). ``value`` must be coerced."""
+def write_field(buf: memoryview, half_offset: int, signal: Signal, value: bool | int | float | str) -> None:
+    """One store of the field's size (PLC->CNC single-field write). ``value`` must be coerced. A STRING
+    is copied with NUL after its last character to the end of its field."""
+    if isinstance(value, str):
+        start = half_offset + signal.offset
+        buf[start : start + signal.size] = value.encode(STRING_ENCODING).ljust(signal.size, b"\0")
+        return
     _NATIVE[signal.type].pack_into(buf, half_offset + signal.offset, value)
 
 
@@ -366,22 +374,32 @@ def write_p2c_bytes(buf: memoryview, plan: SegmentPlan, layout: Layout, offset: 
     checked before any is written (a refused write changes nothing); padding bytes in the range are
     ignored. Raises the layout's errors (SignalValueError, a range that cuts a field)."""
     signals = layout.signals_in_range(Direction.PLC_TO_CNC, offset, len(data))
-    values: list[tuple[Signal, bool | int | float]] = []
+    values: list[tuple[Signal, bool | int | float | str]] = []
     for s in signals:
         raw = data[s.offset - offset : s.offset - offset + s.size]
-        if s.type is SignalType.BOOL:
-            if raw[0] > 1:
-                raise SignalValueError(f"{s.st_path}: BOOL byte must be 0 or 1, got {raw[0]}")
-            value: bool | int | float = bool(raw[0])
-        else:
-            value = struct.unpack("<" + s.type.struct_char, raw)[0]
-        values.append((s, s.coerce(value)))
+        values.append((s, s.coerce(decode_field(s, raw))))
     for s, v in values:
         write_field(buf, plan.p2c_offset, s, v)
 
 
-def read_field(buf: memoryview, half_offset: int, signal: Signal) -> bool | int | float:
-    """One load of the field's size."""
+def decode_field(signal: Signal, raw: bytes) -> bool | int | float | str:
+    """A field's value from its bytes as a PLC wrote them; :class:`SignalValueError` for bytes no value
+    has: a BOOL byte other than 0/1, a STRING without its NUL or with a byte that is no Windows-1252
+    character (the value's range is :meth:`Signal.coerce`'s)."""
+    if signal.type is SignalType.BOOL:
+        if raw[0] > 1:
+            raise SignalValueError(f"{signal.st_path}: BOOL byte must be 0 or 1, got {raw[0]}")
+        return bool(raw[0])
+    return signal.decode(struct.unpack("<" + signal.struct_char, raw)[0])
+
+
+def read_field(buf: memoryview, half_offset: int, signal: Signal) -> bool | int | float | str:
+    """One load of the field's size (a STRING: its bytes up to the first NUL, as text)."""
+    if signal.string_size:
+        start = half_offset + signal.offset
+        raw = bytes(buf[start : start + signal.size])
+        text = raw.partition(b"\0")[0]
+        return text.decode(STRING_ENCODING, "replace")
     value: bool | int | float = _NATIVE[signal.type].unpack_from(buf, half_offset + signal.offset)[0]
     return value
 

@@ -57,6 +57,8 @@ from typing_extensions import TypedDict
 from schemas.units import DINT_MAX, DINT_MIN, UDINT_MAX
 from schemas.wire import DynPosLimitState, HoldSource, Mode, ProgramState, describe
 
+from schemas.external_types import ExternalShape, TypeNode, VariableShape, machine_types
+
 __all__ = [
     "ADS_GROUP_CNC_TO_PLC",
     "ADS_GROUP_GEO_AXIS",
@@ -103,7 +105,7 @@ __all__ = [
     "external_modbus_use",
 ]
 
-LAYOUT_VERSION: Final = 3
+LAYOUT_VERSION: Final = 4
 """Bumped whenever the templates or the addressing rules change (the hash changes with any config)."""
 
 LAYOUT_FORMAT: Final = "hli-layout"
@@ -165,21 +167,32 @@ class SignalValueError(ValueError):
 
 
 class SignalType(StrEnum):
-    """IEC 61131-3 elementary types used in the image. BOOL is one byte (0 or 1)."""
+    """IEC 61131-3 types used in the image. BOOL is one byte (0 or 1). STRING is a V.E. variable's
+    (N-05): ``STRING(n)`` of TwinCAT, n characters in Windows-1252 and a NUL, n + 1 bytes; its length
+    is its signal's (:attr:`Signal.string_size`), so the type itself has no size."""
 
     BOOL = "BOOL"
     DINT = "DINT"
     UDINT = "UDINT"
     LREAL = "LREAL"
+    STRING = "STRING"
 
     @property
     def size(self) -> int:
-        return _TYPE_SIZE[self]
+        """Bytes of a value (not of a STRING: :attr:`Signal.size`)."""
+        try:
+            return _TYPE_SIZE[self]
+        except KeyError:
+            raise ValueError("a STRING's size is its signal's (Signal.size)") from None
 
     @property
     def struct_char(self) -> str:
-        """The ``struct`` format character (with ``<`` in a layout format, ``@`` for single stores)."""
-        return _TYPE_CHAR[self]
+        """The ``struct`` format character (with ``<`` in a layout format, ``@`` for single stores);
+        a STRING's is its signal's (:attr:`Signal.struct_char`)."""
+        try:
+            return _TYPE_CHAR[self]
+        except KeyError:
+            raise ValueError("a STRING's format is its signal's (Signal.struct_char)") from None
 
     @property
     def modbus_count(self) -> int:
@@ -190,6 +203,9 @@ class SignalType(StrEnum):
 _TYPE_SIZE: Final = {SignalType.BOOL: 1, SignalType.DINT: 4, SignalType.UDINT: 4, SignalType.LREAL: 8}
 _TYPE_CHAR: Final = {SignalType.BOOL: "?", SignalType.DINT: "i", SignalType.UDINT: "I", SignalType.LREAL: "d"}
 _INT_RANGE: Final = {SignalType.DINT: (DINT_MIN, DINT_MAX), SignalType.UDINT: (0, UDINT_MAX)}
+
+STRING_ENCODING: Final = "cp1252"
+"""The bytes of a STRING field: Windows-1252, as TwinCAT's STRING (and the ADS upload info announces)."""
 
 REAL32_MAX: Final = 3.4028234663852886e38
 """The largest finite REAL32 (IEEE 754 single)."""
@@ -552,13 +568,36 @@ class Signal:
     limits: tuple[float, float] | None = None
     """The values a V.E. variable takes, where its kernel type is narrower than the field (an SGN16 in
     a DINT) or a real must be finite; None: the field type's own range."""
+    string_size: int = 0
+    """A STRING field's bytes, the terminating NUL included (``STRING(n)``: n + 1); 0 for the others."""
+    structures: tuple[str, ...] = ()
+    """A V.E. variable's element inside structures: the structure type of each level of its path but
+    the last (``("typcurve", "typ_pos")`` for ``curve[2].point[5].X``); the ADS door names its types
+    so."""
 
     @property
     def size(self) -> int:
-        return self.type.size
+        return self.string_size or _TYPE_SIZE[self.type]
+
+    @property
+    def alignment(self) -> int:
+        """A number is aligned to its size, a STRING to one byte."""
+        return 1 if self.string_size else _TYPE_SIZE[self.type]
+
+    @property
+    def struct_char(self) -> str:
+        """The ``struct`` format of the field: ``i``, ``d``, ..., ``21s`` for a STRING(20)."""
+        return f"{self.string_size}s" if self.string_size else _TYPE_CHAR[self.type]
+
+    @property
+    def type_name(self) -> str:
+        """The IEC type as the PLC declares it: ``DINT``, ``STRING(20)``."""
+        return f"STRING({self.string_size - 1})" if self.string_size else self.type.value
 
     @property
     def modbus_count(self) -> int:
+        if self.string_size:
+            return (self.string_size + 1) // 2
         return self.type.modbus_count
 
     @property
@@ -587,25 +626,34 @@ class Signal:
 
     @property
     def external_element(self) -> tuple[str, tuple[int, ...]]:
-        """A V.E. signal's variable name and element index: ``("POS", (1, 2))`` for ``POS[1,2]``."""
+        """A V.E. signal's leaf name and element index: ``("POS", (1, 2))`` for ``POS[1,2]``,
+        ``("curve.point.X", (2, 5))`` for ``curve[2].point[5].X`` (schemas/external_types.py)."""
         if not self.scope.external:
             raise ValueError(f"{self.st_path} is no V.E. variable")
-        name, _, rest = self.path.partition("[")
-        index = tuple(int(i) for i in rest.rstrip("]").split(",")) if rest else ()
-        return name, index
+        names: list[str] = []
+        index: list[int] = []
+        for part in self.path.split("."):
+            name, _, rest = part.partition("[")
+            names.append(name)
+            if rest:
+                index += (int(i) for i in rest.rstrip("]").split(","))
+        return ".".join(names), tuple(index)
 
     @property
     def image_ads_group(self) -> int:
         """Index group of the signal's half on :data:`ADS_PORT_HLI` (raw reads of a half cover it)."""
         return ADS_GROUP_PLC_TO_CNC if self.plc_writable else ADS_GROUP_CNC_TO_PLC
 
-    def coerce(self, value: object) -> bool | int | float:
+    def coerce(self, value: object) -> bool | int | float | str:
         """Check a value for this signal and return it in the signal's Python type.
 
         BOOL takes ``bool`` or the integers 0/1; DINT/UDINT take integers in range (no bool,
-        no float); LREAL takes int or float.
+        no float); LREAL takes int or float; STRING a ``str`` of at most ``string_size - 1``
+        Windows-1252 characters without NUL.
         """
         t = self.type
+        if t is SignalType.STRING:
+            return self._coerce_string(value)
         if t is SignalType.BOOL:
             if isinstance(value, bool):
                 return value
@@ -629,6 +677,51 @@ class Signal:
             what = "the V.E. variable" if self.limits else str(t)
             raise SignalValueError(f"{self.st_path}: {value} is out of range for {what} [{low}, {high}]")
         return value
+
+    def _coerce_string(self, value: object) -> str:
+        if not isinstance(value, str):
+            raise SignalValueError(f"{self.st_path}: {self.type_name} takes a string, got {value!r}")
+        try:
+            raw = value.encode(STRING_ENCODING)
+        except UnicodeEncodeError as exc:
+            raise SignalValueError(
+                f"{self.st_path}: {value[exc.start : exc.end]!r} is no Windows-1252 character "
+                f"({self.type_name} holds Windows-1252 text)"
+            ) from None
+        if b"\0" in raw:
+            raise SignalValueError(f"{self.st_path}: a {self.type_name} ends at its first NUL; none inside")
+        if len(raw) >= self.string_size:
+            raise SignalValueError(
+                f"{self.st_path}: {len(raw)} characters, a {self.type_name} holds at most "
+                f"{self.string_size - 1}"
+            )
+        return value
+
+    def encode(self, value: bool | int | float | str) -> bool | int | float | bytes:
+        """A coerced value as ``struct`` packs it with :attr:`struct_char` (a STRING's bytes, which the
+        pack pads with NUL to the field)."""
+        if isinstance(value, str):
+            return value.encode(STRING_ENCODING)
+        return value
+
+    def decode(self, raw: object) -> bool | int | float | str:
+        """A value as ``struct`` unpacked it with :attr:`struct_char`, in the signal's Python type: a
+        STRING's bytes up to the first NUL as text. :class:`SignalValueError` for a STRING field
+        without a NUL (one character too many) or with a byte that is no Windows-1252 character."""
+        if not isinstance(raw, bytes):
+            return raw  # type: ignore[return-value]  # bool, int or float as unpacked
+        text, nul, _ = raw.partition(b"\0")
+        if not nul:
+            raise SignalValueError(
+                f"{self.st_path}: no NUL in the {self.string_size} bytes of the field: a {self.type_name} "
+                f"holds at most {self.string_size - 1} characters"
+            )
+        try:
+            return text.decode(STRING_ENCODING)
+        except UnicodeDecodeError as exc:
+            raise SignalValueError(
+                f"{self.st_path}: byte 0x{text[exc.start]:02X} is no Windows-1252 character"
+            ) from None
 
     def check_plc_write(self) -> None:
         """Raise :class:`ReadOnlySignalError` unless the PLC may write this field (H-02)."""
@@ -676,6 +769,8 @@ _SIGNAL_KEYS: Final = (
     "ads_group",
     "ads_offset",
     "limits",
+    "string_size",
+    "structures",
 )
 
 
@@ -714,6 +809,8 @@ class LayoutSignal(TypedDict):
     ads_group: int
     ads_offset: int
     limits: list[int | float] | None  # as written (an int stays an int: the hash sees -128 and -128.0 apart)
+    string_size: int
+    structures: list[str]
     size: int
     access: str
     symbol: str
@@ -749,6 +846,7 @@ _HASHED_KEYS: Final = (
     "ads_group",
     "ads_offset",
     "limits",
+    "string_size",
 )
 """What the layout hash covers: everything a peer relies on to read and write the right bytes.
 Names, descriptions, requirement IDs and origins are documentation and do not change it."""
@@ -904,7 +1002,7 @@ class Layout:
         for s in self.half(direction):
             if s.offset > cursor:
                 parts.append(f"{s.offset - cursor}x")
-            parts.append(s.type.struct_char)
+            parts.append(s.struct_char)
             cursor = s.offset + s.size
         if self.size(direction) > cursor:
             parts.append(f"{self.size(direction) - cursor}x")
@@ -922,9 +1020,16 @@ class Layout:
         return {d: self.struct(d) for d in Direction}
 
     def unpack(self, direction: Direction, data: bytes | bytearray | memoryview) -> dict[str, Any]:
-        """Decode a copy of one half: ST path -> value (bool, int or float)."""
+        """Decode a copy of one half: ST path -> value (bool, int, float or, for a STRING, str)."""
         values = self._structs[direction].unpack_from(data)
-        return dict(zip((s.st_path for s in self.half(direction)), values, strict=True))
+        half = self.half(direction)
+        if direction is Direction.PLC_TO_CNC and self._has_strings:
+            return {s.st_path: s.decode(v) for s, v in zip(half, values, strict=True)}
+        return dict(zip((s.st_path for s in half), values, strict=True))
+
+    @cached_property
+    def _has_strings(self) -> bool:
+        return any(s.string_size for s in self.signals)
 
     def pack(self, direction: Direction, values: Mapping[str, object]) -> bytes:
         """Encode one half from ST path -> value; missing fields are zero. Values are checked."""
@@ -932,7 +1037,7 @@ class Layout:
         if unknown:
             raise UnknownSignalError(f"not in the {direction} half: {sorted(unknown)[:5]}")
         half = self.half(direction)
-        args = [s.coerce(values[s.st_path]) if s.st_path in values else _ZERO[s.type] for s in half]
+        args = [s.encode(s.coerce(values[s.st_path]) if s.st_path in values else _ZERO[s.type]) for s in half]
         packed: bytes = self._structs[direction].pack(*args)
         return packed
 
@@ -943,7 +1048,8 @@ class Layout:
         for s in self.half(direction):
             if s.offset > cursor:
                 fields.append(cs.Padding(s.offset - cursor))
-            fields.append(s.st_path / _CONSTRUCT_TYPE[s.type])
+            kind = cs.PaddedString(s.size, STRING_ENCODING) if s.string_size else _CONSTRUCT_TYPE[s.type]
+            fields.append(s.st_path / kind)
             cursor = s.offset + s.size
         if self.size(direction) > cursor:
             fields.append(cs.Padding(self.size(direction) - cursor))
@@ -1034,6 +1140,8 @@ class Layout:
                     ads_group=int(d["ads_group"]),
                     ads_offset=int(d["ads_offset"]),
                     limits=_limits(d.get("limits")),
+                    string_size=int(d.get("string_size", 0)),
+                    structures=tuple(str(n) for n in d.get("structures", ())),
                 )
                 for d in data["signals"]
             ]
@@ -1084,7 +1192,7 @@ class Layout:
         for d in Direction:
             end = 0
             for s in self.half(d):
-                if s.offset < end or s.offset % s.size:
+                if s.offset < end or s.offset % s.alignment:
                     raise LayoutError(f"{s.st_path}: offset {s.offset} overlaps or is misaligned")
                 end = s.offset + s.size
             if end > self._sizes[d]:
@@ -1101,11 +1209,12 @@ class Layout:
             raise LayoutError("two signals share an ADS address")
 
 
-_ZERO: Final[dict[SignalType, bool | int | float]] = {
+_ZERO: Final[dict[SignalType, bool | int | float | str]] = {
     SignalType.BOOL: False,
     SignalType.DINT: 0,
     SignalType.UDINT: 0,
     SignalType.LREAL: 0.0,
+    SignalType.STRING: "",
 }
 
 _CONSTRUCT_TYPE: Final[dict[SignalType, Any]] = {
@@ -1162,24 +1271,15 @@ class AxisShape(Protocol):
     def axis_type(self) -> StrEnum: ...
 
 
-class ExternalVariableShape(Protocol):
-    """What the layout reads of a V.E. variable (:class:`~schemas.config.ExternalVariableConfig`)."""
-
-    @property
-    def name(self) -> str: ...
-    @property
-    def type(self) -> str: ...
-    @property
-    def dims(self) -> Sequence[int]: ...
-    @property
-    def channel(self) -> int | None: ...
-    @property
-    def description(self) -> str: ...
+ExternalVariableShape = VariableShape
+"""What the layout reads of a V.E. variable (:class:`~schemas.config.ExternalVariableConfig`): its
+declaration (schemas/external_types.py)."""
 
 
-class MachineShape(Protocol):
+class MachineShape(ExternalShape, Protocol):
     """What the layout reads of a machine: :class:`~schemas.config.MachineConfig` is one. The layout does
-    not import the configuration (the configuration imports the layout: :func:`check_external_fits`)."""
+    not import the configuration (the configuration imports the layout: :func:`check_external_fits`). Its
+    V.E. declarations (variables, structures, the STRING length) are an :class:`ExternalShape`."""
 
     @property
     def name(self) -> str: ...
@@ -1187,8 +1287,6 @@ class MachineShape(Protocol):
     def channels(self) -> Sequence[ChannelShape]: ...
     @property
     def axes(self) -> Sequence[AxisShape]: ...
-    @property
-    def external_variables(self) -> Sequence[ExternalVariableShape]: ...
 
 
 def build_layout(config: MachineShape) -> Layout:
@@ -1309,14 +1407,18 @@ def _signal(
 # --------------------------------------------------------------------------------------------
 
 
-def _external_order(config: MachineShape) -> list[tuple[int | None, ExternalVariableShape]]:
-    """(channel index or None, variable): the global area first, then each channel's area in the
-    order of ``config.channels``; inside an area the order of the machine file."""
-    ordered: list[tuple[int | None, ExternalVariableShape]] = [
-        (None, v) for v in config.external_variables if v.channel is None
+def _external_order(
+    config: MachineShape,
+) -> list[tuple[int | None, VariableShape, TypeNode]]:
+    """(channel index or None, variable, its type): the global area first, then each channel's area in
+    the order of ``config.channels``; inside an area the order of the machine file."""
+    _, types = machine_types(config)
+    typed = list(zip(config.external_variables, types, strict=True))
+    ordered: list[tuple[int | None, VariableShape, TypeNode]] = [
+        (None, v, t) for v, t in typed if v.channel is None
     ]
     for i, ch in enumerate(config.channels):
-        ordered += [(i, v) for v in config.external_variables if v.channel == ch.number]
+        ordered += [(i, v, t) for v, t in typed if v.channel == ch.number]
     return ordered
 
 
@@ -1324,11 +1426,12 @@ def external_modbus_use(config: MachineShape) -> dict[ModbusTable, int]:
     """How far the V.E. variables reach in the coils and in the holding registers (one past the
     last address), without expanding their elements: the check of the machine file uses it."""
     cursor = {ModbusTable.COIL: MODBUS_EXTERNAL_BASE, ModbusTable.HOLDING_REGISTER: MODBUS_EXTERNAL_BASE}
-    for _, var in _external_order(config):
-        sig_type, _ = EXTERNAL_TYPES[var.type]
-        table = _modbus_table(sig_type, Direction.PLC_TO_CNC)
-        count = sig_type.modbus_count
-        cursor[table] = _round_up(cursor[table], count) + count * math.prod(var.dims or [1])
+    for _, var, node in _external_order(config):
+        count = math.prod(var.dims or [1])
+        _, cursor[ModbusTable.COIL] = node.coils.place(cursor[ModbusTable.COIL], count)
+        _, cursor[ModbusTable.HOLDING_REGISTER] = node.registers.place(
+            cursor[ModbusTable.HOLDING_REGISTER], count
+        )
     return cursor
 
 
@@ -1338,14 +1441,14 @@ def check_external_fits(config: MachineShape) -> str | None:
         if end > MODBUS_EXTERNAL_END:
             room = MODBUS_EXTERNAL_END - MODBUS_EXTERNAL_BASE
             what = (
-                "coils for their BOOLEAN"
+                "coils for their BOOLEAN elements"
                 if table is ModbusTable.COIL
-                else "holding registers for their numeric"
+                else "holding registers for their numbers and strings"
             )
             return (
-                f"the V.E. variables need {end - MODBUS_EXTERNAL_BASE} Modbus {what} elements; the map "
+                f"the V.E. variables need {end - MODBUS_EXTERNAL_BASE} Modbus {what}; the map "
                 f"reserves {room} ({MODBUS_EXTERNAL_BASE}..{MODBUS_EXTERNAL_END - 1}) for them: declare "
-                "fewer or smaller arrays"
+                "fewer or smaller arrays, or shorter strings"
             )
     return None
 
@@ -1358,19 +1461,39 @@ def _element_indices(dims: Sequence[int]) -> Iterator[tuple[int, ...]]:
     yield from itertools.product(*(range(d) for d in dims))
 
 
+@dataclass(slots=True)
+class _Cursor:
+    """Where the next V.E. element goes: byte offset in the PLC->CNC half, coil, holding register."""
+
+    byte: int
+    coil: int = MODBUS_EXTERNAL_BASE
+    register: int = MODBUS_EXTERNAL_BASE
+
+    def align(self, node: TypeNode) -> None:
+        self.byte, _ = node.image.place(self.byte)
+        self.coil, _ = node.coils.place(self.coil)
+        self.register, _ = node.registers.place(self.register)
+
+
+@dataclass(frozen=True, slots=True)
+class _Area:
+    scope: Scope
+    index: int
+    head: str
+    prefix: str
+    text: str
+
+
 def _external_signals(config: MachineShape, start: int) -> tuple[list[Signal], int]:
     """Place every element of every V.E. variable after the axis blocks of the PLC->CNC half
-    (natural alignment) and in the V.E. area of the coils / holding registers."""
+    and in the V.E. area of the coils / holding registers: each element at its alignment, a structure
+    at its most aligned element's and each of its elements in order (schemas/external_types.py)."""
     problem = check_external_fits(config)
     if problem is not None:
         raise LayoutError(problem)
     signals: list[Signal] = []
-    byte_cursor = start
-    modbus = {ModbusTable.COIL: MODBUS_EXTERNAL_BASE, ModbusTable.HOLDING_REGISTER: MODBUS_EXTERNAL_BASE}
-    for ch_index, var in _external_order(config):
-        sig_type, limits = EXTERNAL_TYPES[var.type]
-        table = _modbus_table(sig_type, Direction.PLC_TO_CNC)
-        count = sig_type.modbus_count
+    cursor = _Cursor(start)
+    for ch_index, var, node in _external_order(config):
         if ch_index is None:
             scope, index, head, prefix = Scope.VE_GLOBAL, 0, "gpVEGlob^", ""
             area = "global area"
@@ -1379,38 +1502,76 @@ def _external_signals(config: MachineShape, start: int) -> tuple[list[Signal], i
             scope, index, head, prefix = Scope.VE_CHANNEL, ch_index, f"gpVECh[{ch_index}]^", f"ch{number}."
             area = f"area of channel {number}"
         dims = "".join(f"[{d}]" for d in var.dims)
+        type_text = var.type + (f"({node.string_size - 1})" if node.is_string else "")
         text = (
-            f"V.E.{var.name} ({var.type}{dims}, {area}): read and written by NC programs and the PLC "
+            f"V.E.{var.name} ({type_text}{dims}, {area}): read and written by NC programs and the PLC "
             "(last writer wins)"
         )
         if var.description:
             text = f"{var.description}. {text}"
+        where = _Area(scope, index, head, prefix, text)
         for element in _element_indices(var.dims):
             path = var.name + (f"[{','.join(map(str, element))}]" if element else "")
-            offset = _round_up(byte_cursor, sig_type.size)
-            byte_cursor = offset + sig_type.size
-            address = _round_up(modbus[table], count)
-            modbus[table] = address + count
-            signals.append(
-                Signal(
-                    name=f"{prefix}V.E.{path}",
-                    st_path=head + path,
-                    scope=scope,
-                    index=index,
-                    path=path,
-                    type=sig_type,
-                    direction=Direction.PLC_TO_CNC,
-                    unit="-",
-                    description=text,
-                    reqs=("N-05",),
-                    origin="machine file",
-                    offset=offset,
-                    modbus_table=table,
-                    modbus_address=address,
-                    ads_port=ADS_PORT_HLI,
-                    ads_group=ADS_GROUP_PLC_TO_CNC,
-                    ads_offset=offset,
-                    limits=limits,
-                )
-            )
-    return signals, byte_cursor
+            _place_external(signals, cursor, where, path, node, ())
+    return signals, cursor.byte
+
+
+def _place_external(
+    signals: list[Signal],
+    cursor: _Cursor,
+    area: _Area,
+    path: str,
+    node: TypeNode,
+    structures: tuple[str, ...],
+) -> None:
+    """One element of type ``node`` at ``path`` (``curve[2].point[5]``): a leaf's signal, or a
+    structure's elements in order."""
+    cursor.align(node)
+    if node.is_structure:
+        start = _Cursor(cursor.byte, cursor.coil, cursor.register)
+        for member in node.members:
+            for element in _element_indices(member.dims):
+                sub = f"{path}.{member.name}" + (f"[{','.join(map(str, element))}]" if element else "")
+                _place_external(signals, cursor, area, sub, member.type, (*structures, node.name))
+        # the structure's size is a multiple of its alignment (an array's elements share one shape)
+        cursor.byte = start.byte + node.image.size
+        cursor.coil = start.coil + node.coils.size
+        cursor.register = start.register + node.registers.size
+        return
+    if node.is_string:
+        sig_type, limits = SignalType.STRING, None
+    else:
+        sig_type, limits = EXTERNAL_TYPES[node.name]
+    table = _modbus_table(sig_type, Direction.PLC_TO_CNC)
+    offset = cursor.byte
+    address = cursor.coil if table is ModbusTable.COIL else cursor.register
+    size = node.image.size
+    cursor.byte += size
+    if table is ModbusTable.COIL:
+        cursor.coil += 1
+    else:
+        cursor.register += node.registers.size
+    signals.append(
+        Signal(
+            name=f"{area.prefix}V.E.{path}",
+            st_path=area.head + path,
+            scope=area.scope,
+            index=area.index,
+            path=path,
+            type=sig_type,
+            direction=Direction.PLC_TO_CNC,
+            unit="-",
+            description=area.text,
+            reqs=("N-05",),
+            origin="machine file",
+            offset=offset,
+            modbus_table=table,
+            modbus_address=address,
+            ads_port=ADS_PORT_HLI,
+            ads_group=ADS_GROUP_PLC_TO_CNC,
+            ads_offset=offset,
+            limits=limits,
+            string_size=node.string_size,
+            structures=structures,
+        )
+    )

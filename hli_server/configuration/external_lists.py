@@ -21,18 +21,22 @@ A ``[[channels]]`` table of the machine file names such a list with ``external_v
 CHANNEL variables belong to that channel, its GLOBAL ones to the global area (two channels' lists may
 both declare a global variable, identically). What is read:
 
-* ``var[i].name`` (P-EXTV-00001, required), ``.type`` (P-EXTV-00003, default UNS32),
-  ``.scope`` (P-EXTV-00004, GLOBAL or CHANNEL, default CHANNEL), ``.synchronisation`` (P-EXTV-00005,
-  default TRUE as in the kernel), ``.access_rights`` (P-EXTV-00006, default READ_WRITE),
-  ``.array_elements`` (P-EXTV-00007; ``.array_size`` of the older syntax, 0 = no array);
+* ``var[i].name`` (P-EXTV-00001, required), ``.type`` (P-EXTV-00003, default UNS32: an elementary
+  type, STRING, VSTRING or a structure of a ``struct[i]``), ``.scope`` (P-EXTV-00004, GLOBAL or
+  CHANNEL, default CHANNEL), ``.synchronisation`` (P-EXTV-00005, default TRUE as in the kernel),
+  ``.access_rights`` (P-EXTV-00006, default READ_WRITE), ``.array_elements`` (P-EXTV-00007;
+  ``.array_size`` of the older syntax, 0 = no array), ``.size`` of a VSTRING (P-EXTV-00008: its bytes
+  with the NUL, default 128);
+* the structures (P-EXTV-00015 .. 00021): ``struct[i].name`` and per element ``struct[i].element[j].``
+  ``name``, ``.type`` (default UNS32), ``.synchronisation`` and ``.access_rights`` (default: the
+  variable's), ``.array_elements``, ``.size`` (a VSTRING's); into ``external_structures``;
+* ``use_extended_string_var`` (P-EXTV-00022): a STRING of 127 characters instead of 20, for the whole
+  machine here (lists that disagree are refused);
 * ``number_used_variables`` (P-EXTV-00010; ``anzahl_belegt`` of the older syntax): every ``var[i]``
   must lie below it;
-* accepted without effect, with a warning: ``var[i].byte_offset``, ``.index``, ``.size``,
-  ``.create_hmi_interface`` and the general ``check_overlapping_variables``, ``auto_memory_mode``,
-  ``init``, ``use_extended_string_var`` (the image places the variables itself,
-  docs/process-image.md);
-* refused by name: the type STRING and user-defined types, the ``struct[i].*`` type definitions (not
-  simulated, docs/configuration.md).
+* accepted without effect, with a warning: ``var[i].byte_offset``, ``.index``, ``.size`` (of a type
+  other than VSTRING), ``.create_hmi_interface`` and the general ``check_overlapping_variables``,
+  ``auto_memory_mode``, ``init`` (the image places the variables itself, docs/process-image.md).
 
 Comments: ``#`` to the end of the line, and a ``( ...)`` after the value (the kernel's own examples
 write them so). Every finding names file, line and key.
@@ -45,14 +49,16 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from hli_server.configuration.errors import Origin
+from schemas.external_types import ELEMENTARY_TYPES, STRING_TYPES
 
 __all__ = ["ExternalList", "parse_external_list"]
 
 _VAR_KEY = re.compile(r"^var\[(\d+)\]\.([A-Za-z_]+)$")
-_TYPES = ("BOOLEAN", "SGN08", "UNS08", "SGN16", "UNS16", "SGN32", "UNS32", "REAL32", "REAL64")
-_NOT_SIMULATED_TYPES = ("STRING", "VSTRING")
+_STRUCT_KEY = re.compile(r"^struct\[(\d+)\]\.(?:element\[(\d+)\]\.)?([A-Za-z_]+)$")
+_TYPE_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
 _IGNORED_VAR = ("byte_offset", "index", "size", "create_hmi_interface")
-_IGNORED_GENERAL = ("check_overlapping_variables", "auto_memory_mode", "init", "use_extended_string_var")
+_IGNORED_GENERAL = ("check_overlapping_variables", "auto_memory_mode", "init")
+_EXTENDED_KEY = "use_extended_string_var"
 _COUNT_KEYS = ("number_used_variables", "anzahl_belegt")
 _MAX_INDEX = 214
 """``var[i]``, i = 0 .. 214 (the kernel's range)."""
@@ -67,6 +73,11 @@ class ExternalList:
     variables: list[dict[str, Any]] = field(default_factory=list)
     origins: list[dict[str, Origin]] = field(default_factory=list)
     """Per variable: field name -> where it was set (``name`` always)."""
+    structures: list[dict[str, Any]] = field(default_factory=list)
+    """``external_structures`` entries (``struct[i]``), with ``structure_origins[k]`` where each was set."""
+    structure_origins: list[Origin] = field(default_factory=list)
+    extended: tuple[bool, Origin] | None = None
+    """``use_extended_string_var`` where the list sets it."""
     errors: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
 
@@ -97,6 +108,7 @@ def parse_external_list(text: str, *, source: str, channel: int) -> ExternalList
     """Read one list of external variables of channel ``channel`` (its CHANNEL variables)."""
     result = ExternalList(source)
     records: dict[int, dict[str, tuple[str, Origin]]] = {}
+    structs: dict[int, dict[int | None, dict[str, tuple[str, Origin]]]] = {}
     count: tuple[int, Origin] | None = None
     seen: dict[str, int] = {}
     lines = text.splitlines()
@@ -136,15 +148,26 @@ def parse_external_list(text: str, *, source: str, channel: int) -> ExternalList
             else:
                 count = (int(raw), origin)
             continue
+        struct_match = _STRUCT_KEY.match(key)
+        if struct_match:
+            index, element = int(struct_match[1]), struct_match[2]
+            if max(index, int(element or 0)) > _MAX_INDEX:
+                result.errors.append(f"{origin.where()}: the kernel numbers them 0 to {_MAX_INDEX}")
+                continue
+            structs.setdefault(index, {}).setdefault(None if element is None else int(element), {})[
+                struct_match[3]
+            ] = (raw, origin)
+            continue
+        if key == _EXTENDED_KEY:
+            flag = _bool(raw)
+            if flag is None:
+                result.errors.append(f"{origin.where()}: {raw!r} is not TRUE or FALSE")
+            else:
+                result.extended = (flag, origin)
+            continue
         if key in _IGNORED_GENERAL:
             result.warnings.append(
                 f"{origin.where()}: accepted without effect here (the image places the variables itself)"
-            )
-            continue
-        if key.startswith("struct["):
-            result.errors.append(
-                f"{origin.where()}: V.E. structures (user-defined types, P-EXTV-00015..21) are not "
-                "simulated; declare elementary variables (docs/configuration.md)"
             )
             continue
         result.errors.append(f"{origin.where()}: unknown entry of a list of external variables")
@@ -160,7 +183,114 @@ def parse_external_list(text: str, *, source: str, channel: int) -> ExternalList
             continue
         result.variables.append(variable[0])
         result.origins.append(variable[1])
+    for index in sorted(structs):
+        structure = _structure(index, structs[index], result)
+        if structure is not None:
+            result.structures.append(structure[0])
+            result.structure_origins.append(structure[1])
     return result
+
+
+def _type_entry(raw: str, where: str, result: ExternalList) -> str | None:
+    """A ``.type`` value: the kernel's names in upper case, a structure's name as written."""
+    if not _TYPE_NAME.match(raw):
+        result.errors.append(
+            f"{where}: {raw!r} is no type: an elementary type (BOOLEAN, SGN08 .. UNS32, REAL32, REAL64), "
+            "STRING, VSTRING or the name of a struct[i]"
+        )
+        return None
+    upper = raw.upper()
+    return upper if upper in ELEMENTARY_TYPES or upper in STRING_TYPES else raw
+
+
+def _array_entry(raw: str, where: str, result: ExternalList) -> list[int] | None:
+    if not raw.isdigit():
+        result.errors.append(f"{where}: {raw!r} is not a number of elements")
+        return None
+    return [int(raw)] if int(raw) > 0 else []
+
+
+def _size_entry(raw: str, where: str, result: ExternalList) -> int | None:
+    if not raw.isdigit():
+        result.errors.append(f"{where}: {raw!r} is not a size in bytes")
+        return None
+    return int(raw)
+
+
+def _structure(
+    index: int, entries: dict[int | None, dict[str, tuple[str, Origin]]], result: ExternalList
+) -> tuple[dict[str, Any], Origin] | None:
+    """One ``struct[i]`` as an ``external_structures`` entry (None when it is refused)."""
+    own = entries.get(None, {})
+    first = min((o for e in entries.values() for _, o in e.values()), key=lambda o: o.line)
+    ok = True
+    for key, (_, origin) in own.items():
+        if key != "name":
+            result.errors.append(f"{origin.where()}: unknown parameter of struct[{index}]")
+            ok = False
+    if "name" not in own:
+        result.errors.append(f"{first.file}:{first.line}: struct[{index}] has no struct[{index}].name")
+        return None
+    name, origin = own["name"]
+    elements: list[dict[str, Any]] = []
+    for number in sorted(k for k in entries if k is not None):
+        element = _structure_element(index, number, entries[number], result)
+        if element is None:
+            ok = False
+        else:
+            elements.append(element)
+    if not elements and ok:
+        result.errors.append(f"{origin.where()}: struct[{index}] {name} has no elements")
+        ok = False
+    return ({"name": name, "elements": elements}, origin) if ok else None
+
+
+def _structure_element(
+    index: int, number: int, entries: dict[str, tuple[str, Origin]], result: ExternalList
+) -> dict[str, Any] | None:
+    label = f"struct[{index}].element[{number}]"
+    if "name" not in entries:
+        first = min((o for _, o in entries.values()), key=lambda o: o.line)
+        result.errors.append(f"{first.file}:{first.line}: {label} has no {label}.name")
+        return None
+    element: dict[str, Any] = {"name": entries["name"][0], "type": "UNS32"}
+    ok = True
+    for key, (raw, origin) in entries.items():
+        where = origin.where()
+        value: Any
+        if key == "name":
+            continue
+        if key == "type":
+            value = _type_entry(raw, where, result)
+        elif key == "synchronisation":
+            value = _bool(raw)
+            if value is None:
+                result.errors.append(f"{where}: {raw!r} is not TRUE or FALSE")
+        elif key == "access_rights":
+            value = raw.upper() if raw.upper() in _ACCESS else None
+            if value is None:
+                result.errors.append(f"{where}: {raw!r}: use READ_WRITE, READ_ONLY or WRITE_ONLY")
+        elif key == "array_elements":
+            value = _array_entry(raw, where, result)
+        elif key == "size":
+            value = _size_entry(raw, where, result)
+        else:
+            result.errors.append(f"{where}: unknown parameter of {label}")
+            value = None
+        if value is None:
+            ok = False
+            continue
+        element[_ELEMENT_FIELDS.get(key, key)] = value
+    if ok and "size" in element and element["type"] != "VSTRING":
+        result.warnings.append(
+            f"{entries['size'][1].where()}: accepted without effect here (a size is a VSTRING's length)"
+        )
+        del element["size"]
+    return element if ok else None
+
+
+_ACCESS = ("READ_WRITE", "READ_ONLY", "WRITE_ONLY")
+_ELEMENT_FIELDS = {"synchronisation": "synchronous", "array_elements": "dims"}
 
 
 def _record(
@@ -180,20 +310,11 @@ def _record(
         if key == "name":
             continue
         if key == "type":
-            typed = raw.upper()
-            if typed in _TYPES:
-                variable["type"], origins["type"] = typed, origin
-            elif typed in _NOT_SIMULATED_TYPES:
-                result.errors.append(
-                    f"{where}: V.E. variables of type {typed} are not simulated (docs/configuration.md)"
-                )
+            typed = _type_entry(raw, where, result)
+            if typed is None:
                 ok = False
             else:
-                result.errors.append(
-                    f"{where}: {raw!r}: user-defined V.E. types are not simulated; use one of "
-                    f"{', '.join(_TYPES)}"
-                )
-                ok = False
+                variable["type"], origins["type"] = typed, origin
         elif key == "scope":
             if raw.upper() not in ("GLOBAL", "CHANNEL"):
                 result.errors.append(f"{where}: {raw!r}: the scope is GLOBAL or CHANNEL")
@@ -214,11 +335,17 @@ def _record(
             else:
                 variable["access_rights"], origins["access_rights"] = raw.upper(), origin
         elif key in ("array_elements", "array_size"):
-            if not raw.isdigit():
-                result.errors.append(f"{where}: {raw!r} is not a number of elements")
+            dims = _array_entry(raw, where, result)
+            if dims is None:
                 ok = False
-            elif int(raw) > 0:
-                variable["dims"], origins["dims"] = [int(raw)], origin
+            elif dims:
+                variable["dims"], origins["dims"] = dims, origin
+        elif key == "size" and entries.get("type", ("",))[0].upper() == "VSTRING":
+            size = _size_entry(raw, where, result)
+            if size is None:
+                ok = False
+            else:
+                variable["size"], origins["size"] = size, origin
         elif key in _IGNORED_VAR:
             result.warnings.append(
                 f"{where}: accepted without effect here (the image places the variables itself)"

@@ -208,6 +208,43 @@ class _Loader:
             for field_name, origin in origins.items():
                 self.origins[("external_variables", position, field_name)] = origin
             self.origins.setdefault(("external_variables", position), origins["name"])
+        self._merge_external_structures(parsed.structures, parsed.structure_origins)
+        if parsed.extended is not None:
+            flag, origin = parsed.extended
+            given = self.data.get("use_extended_string_var")
+            if given is None:
+                self.data["use_extended_string_var"] = flag
+                self.origins[("use_extended_string_var",)] = origin
+            elif given != flag:
+                first = self._origin(("use_extended_string_var",)).where()
+                self.errors.append(
+                    f"{origin.where()}: {flag} differs from {given} ({first}); one STRING length per machine "
+                    "here"
+                )
+
+    def _merge_external_structures(self, structures: list[dict[str, Any]], origins: list[Origin]) -> None:
+        """A list's ``struct[i]`` into ``external_structures``: two lists may define a structure, identically."""
+        known = self.data.setdefault("external_structures", [])
+        if not isinstance(known, list):
+            return  # the machine file's own error says why
+        for structure, origin in zip(structures, origins, strict=True):
+            same = next(
+                (
+                    k
+                    for k in known
+                    if isinstance(k, dict) and str(k.get("name", "")).upper() == structure["name"].upper()
+                ),
+                None,
+            )
+            if same is not None:
+                if same != structure:
+                    where = self._origin(("external_structures", known.index(same))).where()
+                    self.errors.append(
+                        f"{origin.where()}: structure {structure['name']} is declared differently in {where}"
+                    )
+                continue
+            self.origins[("external_structures", len(known))] = origin
+            known.append(structure)
 
     def _import_list(self, entry: dict[str, Any], loc: Loc, kind: ListKind) -> None:
         if _LIST_KEY not in entry:
@@ -318,7 +355,7 @@ class _Loader:
                         index = self._index_of("channels", "number", issue.channel, default=1)
                         target = ("channels", index) if index is not None else loc
                     if issue.field is not None:
-                        target = (*target, issue.field)
+                        target = (*target, issue.field, *issue.at)
                     found.append((self._origin(target), issue.message))
                 continue
             if self._is_failed(loc):

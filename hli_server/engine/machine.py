@@ -32,7 +32,7 @@ from hli_server.engine.alarms import ALARMS, Reaction, Severity
 from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis, AxisFaults, check_fault_value
 from hli_server.engine.channel import Channel
-from hli_server.engine.external import ExternalType, ExternalVariables, ExternalVarSpec
+from hli_server.engine.external import ExternalVariables, external_specs
 from hli_server.engine.hli import AxisHli, ChannelHli, MachineHli
 from hli_server.engine.monitors.base import Monitor, MonitorFactory
 from hli_server.engine.monitors.collision import CollisionMonitor
@@ -101,14 +101,7 @@ class Machine:
         self.config = config
         self.read_program = read_program
         self.programs: ProgramLibrary = MemoryLibrary() if programs is None else programs
-        self.external = ExternalVariables(
-            [
-                ExternalVarSpec(
-                    v.name, ExternalType(v.type), tuple(v.dims), v.channel, v.synchronous, v.access_rights
-                )
-                for v in config.external_variables
-            ]
-        )
+        self.external = ExternalVariables(external_specs(config))
         self.t_a = s_from_us(config.cycle_time_us)
         self.cycle = 0
         self.axes = [Axis(cfg, i) for i, cfg in enumerate(config.axes)]

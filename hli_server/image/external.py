@@ -28,7 +28,6 @@ element work only where something changed.
 
 from __future__ import annotations
 
-import itertools
 import logging
 import struct
 from typing import Any
@@ -40,7 +39,7 @@ from hli_server.engine.external import (
     ExternalVarSpec,
 )
 from schemas import image_format as fmt
-from schemas.layout import Layout, Scope, Signal
+from schemas.layout import Layout, Scope, Signal, SignalValueError
 
 __all__ = ["ExternalSync"]
 
@@ -48,20 +47,19 @@ log = logging.getLogger(__name__)
 
 
 class _Variable:
-    """One variable of the store with its run of elements in the layout (consecutive signals)."""
+    """One variable of the store (a leaf of a structured one) with its elements' signals."""
 
-    __slots__ = ("first", "seen", "signals", "spec", "values")
+    __slots__ = ("elements", "seen", "spec", "values")
 
-    def __init__(
-        self, spec: ExternalVarSpec, values: list[ExternalValue], first: int, signals: list[Signal]
-    ) -> None:
+    def __init__(self, spec: ExternalVarSpec, values: list[ExternalValue]) -> None:
         self.spec = spec
         self.values = values
         """The store's live list (``ExternalVariables.values``)."""
         self.seen = list(values)
         """The values the image and the store last agreed on."""
-        self.first = first
-        self.signals = signals
+        self.elements = [-1] * spec.size
+        """flat index -> the element's signal (its index in :attr:`ExternalSync.signals`); a structured
+        variable's leaves interleave in the image, so they are not one run."""
 
 
 class ExternalSync:
@@ -80,7 +78,7 @@ class ExternalSync:
         for k, s in enumerate(self.signals):
             for b in range(s.offset - self._start, s.offset - self._start + s.size):
                 self._element_of_byte[b] = k
-        self._formats = [struct.Struct("<" + s.type.struct_char) for s in self.signals]
+        self._formats = [struct.Struct("<" + s.struct_char) for s in self.signals]
         self._raw = bytearray(self._end - self._start)
         """The V.E. area's bytes as the image last saw or wrote them."""
         self._store: ExternalVariables | None = None
@@ -88,32 +86,41 @@ class ExternalSync:
         self._slot: list[tuple[_Variable, int]] = []
         """element (signal index) -> (its variable, its flat index)"""
         self.refused = 0
-        """PLC values the store refused (outside the kernel type, NaN), counted."""
+        """PLC values the store refused (outside the kernel type, NaN, a STRING too long), counted."""
 
     # --- binding ---------------------------------------------------------------------------
     def _bind(self, store: ExternalVariables) -> None:
         """Match the layout's elements with the store's variables (the same machine file made both)."""
-        variables: list[_Variable] = []
+        variables: dict[tuple[int | None, str], _Variable] = {}
         slot: list[tuple[_Variable, int]] = []
-        first = 0
-        for (scope, index, name), group in itertools.groupby(
-            self.signals, key=lambda s: (s.scope, s.index, s.external_element[0])
-        ):
-            members = list(group)
-            channel = None if scope is Scope.VE_GLOBAL else self._layout.channels[index].number
+        for k, signal in enumerate(self.signals):
+            name, index = signal.external_element
+            channel = None if signal.scope is Scope.VE_GLOBAL else self._layout.channels[signal.index].number
             spec = store.spec(name, channel)
-            if spec is None or spec.channel != channel or spec.size != len(members):
+            try:
+                if spec is None or spec.channel != channel:
+                    raise ExternalVariableError(f"V.E.{name} is not in the store")
+                flat = spec.flat_index(index)
+            except ExternalVariableError as exc:
                 where = "the global area" if channel is None else f"channel {channel}"
                 raise ValueError(
-                    f"V.E.{name} of {where}: the engine's store and the image layout differ; build both "
-                    "from the same machine file"
-                )
-            variable = _Variable(spec, store.values(spec), first, members)
-            variables.append(variable)
-            slot += [(variable, k) for k in range(spec.size)]
-            first += len(members)
+                    f"{signal.st_path} of {where}: the engine's store and the image layout differ ({exc}); "
+                    "build both from the same machine file"
+                ) from None
+            key = (channel, spec.name.upper())
+            variable = variables.get(key)
+            if variable is None:
+                variable = variables[key] = _Variable(spec, store.values(spec))
+            variable.elements[flat] = k
+            slot.append((variable, flat))
+        missing = [v.spec.path for v in variables.values() if -1 in v.elements]
+        if missing or len(variables) != len(store):
+            raise ValueError(
+                f"the engine's store and the image layout differ ({', '.join(missing) or 'other variables'}); "
+                "build both from the same machine file"
+            )
         self._store = store
-        self._variables = variables
+        self._variables = list(variables.values())
         self._slot = slot
 
     def _store_field(self, buf: memoryview, k: int, value: ExternalValue) -> None:
@@ -121,7 +128,7 @@ class ExternalSync:
         signal = self.signals[k]
         fmt.write_field(buf, self._p2c, signal, value)
         at = signal.offset - self._start
-        self._formats[k].pack_into(self._raw, at, value)
+        self._formats[k].pack_into(self._raw, at, signal.encode(value))
 
     # --- the cycle -------------------------------------------------------------------------
     def init(self, buf: memoryview, store: ExternalVariables) -> None:
@@ -129,7 +136,7 @@ class ExternalSync:
         self._bind(store)
         for variable in self._variables:
             for flat, value in enumerate(variable.values):
-                self._store_field(buf, variable.first + flat, value)
+                self._store_field(buf, variable.elements[flat], value)
             variable.seen = list(variable.values)
 
     def latch(self, half: bytes, buf: memoryview) -> None:
@@ -155,17 +162,20 @@ class ExternalSync:
             changed &= ~((1 << (end * 8)) - 1)  # this element done
             self._take(buf, k, self._formats[k].unpack_from(raw, signal.offset - self._start)[0])
 
-    def _take(self, buf: memoryview, k: int, value: ExternalValue) -> None:
+    def _take(self, buf: memoryview, k: int, raw: bool | int | float | bytes) -> None:
         variable, flat = self._slot[k]
+        shown: object = raw
         try:
+            value = self.signals[k].decode(raw)
+            shown = value
             taken = variable.spec.coerce(value)
-        except ExternalVariableError as exc:
+        except (ExternalVariableError, SignalValueError) as exc:
             self.refused += 1
             kept = variable.values[flat]
             log.warning(
                 "%s: the PLC wrote %r, refused (%s); the field keeps %r",
                 self.signals[k].st_path,
-                value,
+                shown,
                 exc,
                 kept,
             )
@@ -182,16 +192,15 @@ class ExternalSync:
             seen = variable.seen
             if values == seen:
                 continue
-            first = variable.first
+            elements = variable.elements
             for flat, value in enumerate(values):
                 if value != seen[flat]:
-                    self._store_field(buf, first + flat, value)
+                    self._store_field(buf, elements[flat], value)
             variable.seen = list(values)
 
     def values(self) -> dict[str, Any]:
         """ST path -> value as the store holds it (diagnostics and tests)."""
         out: dict[str, Any] = {}
-        for variable in self._variables:
-            for signal, value in zip(variable.signals, variable.values, strict=True):
-                out[signal.st_path] = value
+        for k, (variable, flat) in enumerate(self._slot):
+            out[self.signals[k].st_path] = variable.values[flat]
         return out

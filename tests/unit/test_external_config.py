@@ -130,11 +130,41 @@ def test_list_and_toml_variables_together(tmp_path: Path) -> None:
     ("lines", "expected"),
     [
         (
-            "var[0].name S\nvar[0].type STRING\n",
-            "ch1_ve.lis:2: var[0].type: V.E. variables of type STRING are not simulated",
+            "var[0].name S\nvar[0].type VECTOR_T\n",
+            "ch1_ve.lis:2: var[0].type: V.E.S: unknown type 'VECTOR_T'",
         ),
-        ("var[0].name S\nvar[0].type VECTOR_T\n", "'VECTOR_T': user-defined V.E. types are not simulated"),
-        ("struct[0].name VECTOR_T\n", "ch1_ve.lis:1: struct[0].name: V.E. structures"),
+        ("var[0].name S\nvar[0].type 7UP\n", "ch1_ve.lis:2: var[0].type: '7UP' is no type"),
+        ("struct[0].name VECTOR_T\n", "ch1_ve.lis:1: struct[0].name: struct[0] VECTOR_T has no elements"),
+        ("struct[0].element[0].name X\n", "ch1_ve.lis:1: struct[0] has no struct[0].name"),
+        (
+            "struct[0].name T\nstruct[0].element[0].type SGN32\n",
+            "ch1_ve.lis:2: struct[0].element[0] has no struct[0].element[0].name",
+        ),
+        (
+            "struct[0].name T\nstruct[0].element[0].name X\nstruct[0].element[0].colour RED\n",
+            "ch1_ve.lis:3: struct[0].element[0].colour: unknown parameter of struct[0].element[0]",
+        ),
+        (
+            "struct[0].name T\nstruct[0].element[0].name X\nstruct[0].element[0].type U\n"
+            "struct[1].name U\nstruct[1].element[0].name Y\nstruct[1].element[0].type T\n",
+            "structure T contains itself (T -> U -> T)",
+        ),
+        (
+            "struct[0].name T\nstruct[0].element[0].name X\nstruct[0].element[0].type REAL46\n",
+            "structure T, element X: unknown type 'REAL46'",
+        ),
+        (
+            "var[0].name S\nvar[0].type VSTRING\nvar[0].size 801\n",
+            "ch1_ve.lis:3: var[0].size: 801 is out of range",
+        ),
+        (
+            "use_extended_string_var SOMETIMES\n",
+            "ch1_ve.lis:1: use_extended_string_var: 'SOMETIMES' is not TRUE",
+        ),
+        (
+            "var[0].name LONG\nvar[0].type VSTRING\nvar[0].size 800\nvar[0].array_elements 2\n",
+            "need 800 Modbus holding registers for their numbers and strings",
+        ),
         ("var[0].type SGN32\n", "ch1_ve.lis:1: var[0] has no var[0].name"),
         ("var[0].name A\nvar[0].scope LOCAL\n", "'LOCAL': the scope is GLOBAL or CHANNEL"),
         ("var[0].name A\nvar[0].synchronisation MAYBE\n", "'MAYBE' is not TRUE or FALSE"),
@@ -156,6 +186,108 @@ def test_list_and_toml_variables_together(tmp_path: Path) -> None:
 def test_every_mistake_names_file_line_and_key(tmp_path: Path, lines: str, expected: str) -> None:
     errors = errors_of(machine(tmp_path, lines))
     assert any(expected in e for e in errors), errors
+
+
+# the kernel's example of V.E. structures (tf5200_external_variables 321583243), cut to one curve: a
+# structure with an array of structures and a STRING, extended strings
+KERNEL_STRUCTURES = """
+use_extended_string_var                        1
+struct[0].name                                  typcurve
+struct[0].element[0].name                       point
+struct[0].element[0].type                       typ_pos
+struct[0].element[0].array_elements             12
+struct[0].element[1].name                       curve_name
+struct[0].element[1].type                       STRING
+struct[1].name                                  typ_pos
+struct[1].element[0].name                       X
+struct[1].element[0].type                       REAL64
+struct[1].element[1].name                       Y
+struct[1].element[1].type                       REAL64
+struct[1].element[2].name                       Z
+struct[1].element[2].type                       REAL64
+struct[1].element[3].name                       pos_is_valid
+struct[1].element[3].type                       BOOLEAN
+var[0].name                                     curve
+var[0].type                                     typcurve
+var[0].scope                                    GLOBAL
+var[1].name                                     TEXT
+var[1].type                                     STRING
+var[1].array_elements                           2
+var[2].name                                     NOTE
+var[2].type                                     VSTRING
+var[2].size                                     41
+"""
+
+
+def test_the_kernels_structure_example_is_read_and_placed(tmp_path: Path) -> None:
+    config, warnings = load_machine_with_warnings(machine(tmp_path, KERNEL_STRUCTURES))
+    assert not warnings
+    assert config.use_extended_string_var
+    assert [s.name for s in config.external_structures] == ["typcurve", "typ_pos"]
+    curve, text, note = config.external_variables
+    assert (curve.type, curve.channel, text.type, text.dims, note.type, note.size) == (
+        "typcurve", None, "STRING", [2], "VSTRING", 41,
+    )  # fmt: skip
+    layout = build_layout(config)
+    name = layout.signal("gpVEGlob^curve.curve_name")
+    assert (name.type_name, name.size, name.structures) == ("STRING(127)", 128, ("typcurve",))
+    x = layout.signal("gpVEGlob^curve.point[11].X")
+    assert (x.type.value, x.structures, x.external_element) == (
+        "LREAL",
+        ("typcurve", "typ_pos"),
+        ("curve.point.X", (11,)),
+    )
+    assert layout.signal("gpVECh[0]^TEXT[1]").type_name == "STRING(127)"
+    assert layout.signal("gpVECh[0]^NOTE").type_name == "STRING(40)"
+    # 12 points of 3 LREAL and a BOOL (32 bytes each), then the string: the structure is one block
+    assert name.offset - layout.signal("gpVEGlob^curve.point[0].X").offset == 12 * 32
+
+
+def test_two_lists_share_a_structure_and_the_string_length(tmp_path: Path) -> None:
+    lis = "use_extended_string_var 1\nstruct[0].name T\nstruct[0].element[0].name A\nvar[0].name V\nvar[0].type T\n"
+    write(tmp_path, "ch2_ve.lis", lis)
+    config, _ = load_machine_with_warnings(
+        machine(tmp_path, lis, ch2='external_variables_list = "ch2_ve.lis"')
+    )
+    assert [s.name for s in config.external_structures] == ["T"]
+    write(tmp_path, "ch2_ve.lis", lis.replace("element[0].name A", "element[0].name B"))
+    errors = errors_of(machine(tmp_path, lis, ch2='external_variables_list = "ch2_ve.lis"'))
+    assert any("ch2_ve.lis:2: struct[0].name: structure T is declared differently in" in e for e in errors), (
+        errors
+    )
+    write(tmp_path, "ch2_ve.lis", lis.replace("use_extended_string_var 1", "use_extended_string_var 0"))
+    errors = errors_of(machine(tmp_path, lis, ch2='external_variables_list = "ch2_ve.lis"'))
+    assert any("ch2_ve.lis:1: use_extended_string_var: False differs from True" in e for e in errors), errors
+
+
+def test_structures_in_the_machine_file(tmp_path: Path) -> None:
+    extra = """
+        [[external_structures]]
+        name = "UserInteractionType"
+        elements = [
+            { name = "Message", type = "string" },
+            { name = "Answer", type = "SGN32", synchronous = true },
+        ]
+        [[external_variables]]
+        name = "UserInteraction"
+        type = "UserInteractionType"
+    """
+    path = write(
+        tmp_path,
+        "ve.toml",
+        MACHINE.format(ch2="", extra=extra).replace('external_variables_list = "ch1_ve.lis"', ""),
+    )
+    config, _ = load_machine_with_warnings(path)
+    (structure,) = config.external_structures
+    assert [(e.name, e.type, e.synchronous) for e in structure.elements] == [
+        ("Message", "STRING", None), ("Answer", "SGN32", True),
+    ]  # fmt: skip
+    layout = build_layout(config)
+    assert layout.signal("gpVEGlob^UserInteraction.Message").type_name == "STRING(20)"
+    bad = extra.replace('type = "UserInteractionType"', 'type = "UserInteractonType"')
+    path.write_text(MACHINE.format(ch2="", extra=bad).replace('external_variables_list = "ch1_ve.lis"', ""))
+    errors = errors_of(path)
+    assert any("did you mean UserInteractionType?" in e and "external_variables" in e for e in errors), errors
 
 
 def test_a_missing_list_is_named_where_the_machine_file_names_it(tmp_path: Path) -> None:
