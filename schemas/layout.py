@@ -1048,7 +1048,7 @@ class Layout:
         for s in self.half(direction):
             if s.offset > cursor:
                 fields.append(cs.Padding(s.offset - cursor))
-            kind = cs.PaddedString(s.size, STRING_ENCODING) if s.string_size else _CONSTRUCT_TYPE[s.type]
+            kind = _construct_string(s.size) if s.string_size else _CONSTRUCT_TYPE[s.type]
             fields.append(s.st_path / kind)
             cursor = s.offset + s.size
         if self.size(direction) > cursor:
@@ -1223,6 +1223,16 @@ _CONSTRUCT_TYPE: Final[dict[SignalType, Any]] = {
     SignalType.UDINT: cs.Int32ul,
     SignalType.LREAL: cs.Float64l,
 }
+
+
+def _construct_string(size: int) -> Any:
+    """A STRING field for ``construct``: Windows-1252 up to the first NUL, NUL-padded (construct's own
+    string types know no Windows-1252)."""
+    return cs.ExprAdapter(
+        cs.Bytes(size),
+        lambda raw, _: bytes(raw).partition(b"\0")[0].decode(STRING_ENCODING),
+        lambda text, _: text.encode(STRING_ENCODING).ljust(size, b"\0"),
+    )
 
 
 def _limits(raw: Any) -> tuple[float, float] | None:

@@ -9,10 +9,17 @@ from __future__ import annotations
 
 from typing import Any
 
-from schemas.config import AxisConfig, ChannelConfig, ExternalVariableConfig, MachineConfig
+from schemas.config import (
+    AxisConfig,
+    ChannelConfig,
+    ExternalElementConfig,
+    ExternalStructureConfig,
+    ExternalVariableConfig,
+    MachineConfig,
+)
 from schemas.layout import Direction, Layout, SignalType
 
-__all__ = ["EXTERNAL_VARIABLES", "demo_config", "distinct_values"]
+__all__ = ["EXTERNAL_STRUCTURES", "EXTERNAL_VARIABLES", "demo_config", "distinct_values"]
 
 
 EXTERNAL_VARIABLES: tuple[ExternalVariableConfig, ...] = (
@@ -26,8 +33,33 @@ EXTERNAL_VARIABLES: tuple[ExternalVariableConfig, ...] = (
     ExternalVariableConfig(name="R32", type="REAL32", dims=[2], channel=2),
     ExternalVariableConfig(name="POS", type="REAL64", dims=[2, 3], channel=2),
     ExternalVariableConfig(name="FLAGS", type="BOOLEAN", dims=[4], channel=2),
+    ExternalVariableConfig(name="TEACH_FILE_NAME", type="STRING", description="the robot's teach file"),
+    ExternalVariableConfig(name="UserInteraction", type="UserInteractionType", channel=1),
+    ExternalVariableConfig(name="NOTES", type="VSTRING", size=9, dims=[2], channel=2),
+    ExternalVariableConfig(name="TRACK", type="Point", dims=[2], channel=2),
 )
-"""One V.E. variable of every kernel type, global and in both channels, scalars and arrays (N-05)."""
+"""One V.E. variable of every kernel type, global and in both channels, scalars and arrays (N-05):
+the elementary types, STRING, VSTRING, a structure with a STRING (as RegenHU's HMI message) and an
+array of structures."""
+
+EXTERNAL_STRUCTURES: tuple[ExternalStructureConfig, ...] = (
+    ExternalStructureConfig(
+        name="UserInteractionType",
+        elements=[
+            ExternalElementConfig(name="Message", type="STRING"),
+            ExternalElementConfig(name="Answer", type="SGN32"),
+            ExternalElementConfig(name="Done", type="BOOLEAN"),
+        ],
+    ),
+    ExternalStructureConfig(
+        name="Point",
+        elements=[
+            ExternalElementConfig(name="X", type="REAL64"),
+            ExternalElementConfig(name="VALID", type="BOOLEAN"),
+            ExternalElementConfig(name="LABEL", type="VSTRING", size=6),
+        ],
+    ),
+)
 
 
 def demo_config(extra_axes: int = 0, *, external: bool = False) -> MachineConfig:
@@ -40,7 +72,10 @@ def demo_config(extra_axes: int = 0, *, external: bool = False) -> MachineConfig
         ChannelConfig(number=2, name="gantry", axes=["X1", "X2", "Z1"], main_axes=("X1", "X2", "Z1")),
     ]
     variables = list(EXTERNAL_VARIABLES) if external else []
-    return MachineConfig(name="demo", axes=axes, channels=channels, external_variables=variables)
+    structures = list(EXTERNAL_STRUCTURES) if external else []
+    return MachineConfig(
+        name="demo", axes=axes, channels=channels, external_variables=variables, external_structures=structures
+    )
 
 
 def distinct_values(layout: Layout, direction: Direction, salt: int) -> dict[str, Any]:
@@ -49,6 +84,8 @@ def distinct_values(layout: Layout, direction: Direction, salt: int) -> dict[str
     for i, s in enumerate(layout.half(direction)):
         if s.type is SignalType.BOOL:
             values[s.st_path] = (i + salt) % 3 != 0
+        elif s.type is SignalType.STRING:
+            values[s.st_path] = f"s{i}.{salt}"[: s.string_size - 1]
         elif s.limits is not None and s.type is not SignalType.LREAL:  # a V.E. SGN08 .. UNS16
             low, high = int(s.limits[0]), int(s.limits[1])
             values[s.st_path] = low + (37 * i + salt) % (high - low + 1)

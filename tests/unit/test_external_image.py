@@ -15,6 +15,7 @@ import sys
 import pytest
 from pydantic import ValidationError
 
+from hli_server.engine.external import ExternalVariableError
 from hli_server.engine.machine import Machine
 from hli_server.image import ProcessImage
 from plc_clients import ImageClient
@@ -31,6 +32,7 @@ from schemas.layout import (
     ModbusTable,
     Scope,
     SignalType,
+    SignalValueError,
     build_layout,
 )
 from tests.machines import EXTERNAL_VARIABLES, demo_config
@@ -97,12 +99,13 @@ def test_elements_are_plc_writable_shared_fields_with_their_own_addresses(layout
         assert s.access == "read/write"
         assert s.scope in (Scope.VE_GLOBAL, Scope.VE_CHANNEL)
         assert s.offset >= hli_end
-        assert s.offset % s.size == 0
+        assert s.offset % s.alignment == 0  # a number at a multiple of its size, a STRING anywhere
         assert (s.ads_group, s.ads_offset) == (ADS_GROUP_PLC_TO_CNC, s.offset)
         assert MODBUS_EXTERNAL_BASE <= s.modbus_address < MODBUS_EXTERNAL_END
         table = ModbusTable.COIL if s.type is SignalType.BOOL else ModbusTable.HOLDING_REGISTER
         assert s.modbus_table is table
-        assert s.modbus_address % s.modbus_count == 0  # 2- and 4-register values aligned
+        if s.type is not SignalType.STRING:
+            assert s.modbus_address % s.modbus_count == 0  # 2- and 4-register values aligned
         assert s.reqs == ("N-05",)
         assert "last writer wins" in s.description
     assert layout.signal("gpVEGlob^PLC_READY").description.startswith("the PLC is ready. V.E.PLC_READY")
@@ -133,12 +136,18 @@ def test_the_json_layout_carries_the_variables(layout: Layout) -> None:
 
 
 def test_construct_and_struct_agree_on_the_v_e_area(layout: Layout) -> None:
-    values = {s.st_path: 0 for s in layout.half(P2C)}
+    values = {s.st_path: "" if s.type is SignalType.STRING else 0 for s in layout.half(P2C)}
     values["gpVECh[0]^S16"] = -2
     values["gpVECh[1]^R32[1]"] = 0.5
+    values["gpVECh[0]^UserInteraction.Message"] = "Camera at A1"
     packed = layout.pack(P2C, values)
-    assert layout.construct(P2C).parse(packed)["gpVECh[0]^S16"] == -2
-    assert layout.unpack(P2C, packed)["gpVECh[1]^R32[1]"] == 0.5
+    parsed = layout.construct(P2C).parse(packed)
+    assert (parsed["gpVECh[0]^S16"], parsed["gpVECh[0]^UserInteraction.Message"]) == (-2, "Camera at A1")
+    unpacked = layout.unpack(P2C, packed)
+    assert (unpacked["gpVECh[1]^R32[1]"], unpacked["gpVECh[0]^UserInteraction.Message"]) == (
+        0.5,
+        "Camera at A1",
+    )
 
 
 def test_every_door_refuses_what_the_kernel_type_cannot_hold(layout: Layout) -> None:
@@ -361,6 +370,7 @@ def test_every_kernel_type_round_trips_through_plc_and_nc(rig: Rig) -> None:
 def test_the_variables_the_test_machine_declares_cover_every_kernel_type() -> None:
     assert {v.type for v in EXTERNAL_VARIABLES} == {
         "BOOLEAN", "SGN08", "UNS08", "SGN16", "UNS16", "SGN32", "UNS32", "REAL32", "REAL64",
+        "STRING", "VSTRING", "UserInteractionType", "Point",
     }  # fmt: skip
 
 
@@ -376,4 +386,105 @@ def test_bytes_between_the_fields_are_not_taken_for_a_write(rig: Rig) -> None:
     assert (rig.machine.external.read("PLC_READY", None), rig.machine.external.read("S8", None)) == (
         False,
         -5,
+    )
+
+
+# --- STRING and structures ---------------------------------------------------------------------
+
+
+def test_strings_and_structures_are_fields_of_their_own_size(layout: Layout) -> None:
+    teach = layout.signal("gpVEGlob^TEACH_FILE_NAME")
+    assert (teach.type, teach.type_name, teach.size, teach.modbus_count) == (
+        SignalType.STRING,
+        "STRING(20)",
+        21,
+        11,
+    )
+    note = layout.signal("gpVECh[1]^NOTES[1]")
+    assert (note.type_name, note.size, note.modbus_count) == ("STRING(8)", 9, 5)
+    # a structure's elements in order, each at its alignment; the structure at its most aligned one's
+    message = layout.signal("gpVECh[0]^UserInteraction.Message")
+    answer = layout.signal("gpVECh[0]^UserInteraction.Answer")
+    done = layout.signal("gpVECh[0]^UserInteraction.Done")
+    assert message.offset % 4 == 0
+    assert (answer.offset - message.offset, done.offset - answer.offset) == (24, 4)
+    assert message.structures == ("UserInteractionType",)
+    # an array of structures: every element of the same shape (X 8, VALID 1, LABEL 6, padded to 16)
+    x0, x1 = layout.signal("gpVECh[1]^TRACK[0].X"), layout.signal("gpVECh[1]^TRACK[1].X")
+    assert x1.offset - x0.offset == 16
+    label = layout.signal("gpVECh[1]^TRACK[1].LABEL")
+    assert (label.type_name, label.external_element) == ("STRING(5)", ("TRACK.LABEL", (1,)))
+    # Modbus: strings two bytes to a register, numbers at their alignment, the BOOLs in the coils
+    assert answer.modbus_address == message.modbus_address + 12  # 11, then an even address
+    assert done.modbus_table is ModbusTable.COIL
+
+
+def test_a_string_goes_both_ways_and_the_last_writer_wins(rig: Rig) -> None:
+    ext = rig.machine.external
+    rig.plc.write("gpVEGlob^TEACH_FILE_NAME", "teach_01.dat")
+    rig.plc.write("gpVECh[1]^TRACK[1].LABEL", "P7")
+    rig.latch()
+    assert ext.read("TEACH_FILE_NAME", 1) == "teach_01.dat"
+    assert ext.read("TRACK.LABEL", 2, (1,)) == "P7"
+    ext.write("UserInteraction.Message", 1, "Camera at A1 - click")
+    ext.write("TEACH_FILE_NAME", None, "a.dat")  # shorter than before: the rest of the field is NUL
+    rig.publish()
+    assert rig.plc.read("gpVECh[0]^UserInteraction.Message") == "Camera at A1 - click"
+    assert rig.plc.read("gpVEGlob^TEACH_FILE_NAME") == "a.dat"
+    field = rig.image.layout.signal("gpVEGlob^TEACH_FILE_NAME")
+    start = rig.image.plan.p2c_offset + field.offset
+    assert bytes(rig.image.buffer[start : start + field.size]) == b"a.dat".ljust(21, b"\0")
+    rig.plc.write("gpVECh[0]^UserInteraction.Message", "")
+    rig.cycle()
+    assert ext.read("UserInteraction.Message", 1) == ""
+
+
+def test_a_string_without_its_nul_stored_into_shared_memory_is_not_taken(rig: Rig) -> None:
+    """Every door refuses a 21st character; a PLC on shared memory that stores one all the same (no NUL
+    in the field) gets the store's value back, as for a NaN."""
+    with pytest.raises(SignalValueError, match="holds at most 20"):
+        rig.plc.write("gpVEGlob^TEACH_FILE_NAME", "x" * 21)
+    rig.plc.write("gpVEGlob^TEACH_FILE_NAME", "ok")
+    rig.latch()
+    field = rig.image.layout.signal("gpVEGlob^TEACH_FILE_NAME")
+    start = rig.image.plan.p2c_offset + field.offset
+    rig.image.buffer[start : start + 21] = b"y" * 21
+    rig.latch()
+    assert rig.machine.external.read("TEACH_FILE_NAME", None) == "ok"
+    assert rig.plc.read("gpVEGlob^TEACH_FILE_NAME") == "ok"
+    rig.image.buffer[start : start + 3] = b"\x81a\0"  # 0x81 is no Windows-1252 character
+    rig.latch()
+    assert rig.plc.read("gpVEGlob^TEACH_FILE_NAME") == "ok"
+
+
+def test_a_string_too_long_or_of_the_wrong_kind_is_refused_by_the_store() -> None:
+    ext = Machine(demo_config(external=True)).external
+    with pytest.raises(ExternalVariableError, match="holds at most 8 characters") as info:
+        ext.write("NOTES", 2, "123456789", (0,))
+    assert info.value.alarm == 21462
+    with pytest.raises(ExternalVariableError, match="is a number") as info:
+        ext.write("UserInteraction.Answer", 1, "yes")
+    assert info.value.alarm == 914006
+    with pytest.raises(ExternalVariableError, match="is a STRING") as info:
+        ext.write("TEACH_FILE_NAME", 1, 5)
+    with pytest.raises(ExternalVariableError, match="no Windows-1252 character"):
+        ext.write("TEACH_FILE_NAME", 1, "\u4e2d")
+    ext.write("TEACH_FILE_NAME", 1, "Zürich €")
+    assert ext.read("TEACH_FILE_NAME", 1) == "Zürich €"
+
+
+def test_the_store_names_a_structures_elements() -> None:
+    ext = Machine(demo_config(external=True)).external
+    assert ext.elements("UserInteraction", 1) == ["Message", "Answer", "Done"]
+    assert ext.elements("UserInteraction", 2) is None  # channel 1's own
+    assert "name one of its elements (Message, Answer, Done)" in str(ext.unknown("userinteraction", 1))
+    assert "has no element Mesage" in str(ext.unknown("UserInteraction.Mesage", 1))
+    assert "did you mean Message?" in str(ext.unknown("UserInteraction.Mesage", 1))
+    assert "did you mean V.E.TEACH_FILE_NAME?" in str(ext.unknown("TEACH_FILENAME", 1))
+    spec = ext.spec("track.label", 2)
+    assert spec is not None
+    assert (spec.path, spec.element_path((1,)), spec.declared) == (
+        "V.E.TRACK[].LABEL",
+        "V.E.TRACK[1].LABEL",
+        "VSTRING",
     )
