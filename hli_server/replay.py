@@ -38,7 +38,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
 from hli_server.adapters.host import OperatorError
-from hli_server.recording.format import RecordingError, Records, decode_value, read_records, signal_pattern
+from hli_server.recording.format import (
+    RecordingError,
+    Records,
+    decode_value,
+    read_records,
+    signal_pattern,
+    text_bytes,
+)
 from hli_server.recording.tap import CYCLE_MODULUS, OPERATOR_REQUESTS, _finite, server_info
 from schemas.layout import Direction, Signal, SignalType
 from schemas.wire import Mode
@@ -355,8 +362,8 @@ class Feeder:
                 out.append(None)
                 continue
             signal = layout.signal(path)
-            if signal.direction is not direction or signal.type.value != kind:
-                missing.append(f"{path} (was {kind}, is {signal.type.value})")
+            if signal.direction is not direction or signal.type_name != kind:
+                missing.append(f"{path} (was {kind}, is {signal.type_name})")
                 out.append(None)
                 continue
             out.append(signal)
@@ -444,6 +451,8 @@ class Feeder:
                 if kind is SignalType.BOOL
                 else float(value)
                 if kind is SignalType.LREAL
+                else text_bytes(value)
+                if kind is SignalType.STRING
                 else int(value)
             )
             struct_for(signal).pack_into(buf, signal.offset, plain)
@@ -599,7 +608,7 @@ class Feeder:
 
 
 def struct_for(signal: Signal) -> struct.Struct:
-    return _struct("<" + signal.type.struct_char)
+    return _struct("<" + signal.struct_char)
 
 
 @functools.lru_cache(maxsize=16)

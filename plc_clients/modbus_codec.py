@@ -28,7 +28,7 @@ from typing import Final
 
 from hli_server.codecs import modbus_words
 from hli_server.codecs.modbus_words import WORD_ORDERS
-from schemas.layout import Layout, ModbusTable, Signal, SignalType
+from schemas.layout import STRING_ENCODING, Layout, ModbusTable, Signal, SignalType
 
 __all__ = [
     "MAX_READ_BITS",
@@ -44,7 +44,7 @@ MAX_READ_BITS: Final = 2000
 """FC 1/2: at most 2000 bits per request."""
 _BIT_TABLES: Final = (ModbusTable.COIL, ModbusTable.DISCRETE_INPUT)
 
-Value = bool | int | float
+Value = bool | int | float | str
 
 
 @dataclass(frozen=True, slots=True)
@@ -135,19 +135,26 @@ class ModbusCodec:
             out[s.st_path] = self.value(s, payload[k : k + s.modbus_count])
         return out
 
-    def value(self, signal: Signal, registers: Sequence[int]) -> int | float:
-        """One DINT/UDINT/LREAL from its registers in this codec's word order."""
+    def value(self, signal: Signal, registers: Sequence[int]) -> int | float | str:
+        """One DINT/UDINT/LREAL from its registers in this codec's word order; a STRING's text up to
+        its NUL (docs/modbus.md)."""
         words = list(registers)
         if len(words) != signal.modbus_count:
             raise ValueError(f"{signal.st_path}: {len(words)} registers, expected {signal.modbus_count}")
-        return modbus_words.value(signal.type.struct_char, words, self.word_order)
+        if signal.type is SignalType.STRING:
+            text = modbus_words.text_data(words)[: signal.size].partition(b"\0")[0]
+            return text.decode(STRING_ENCODING, "replace")
+        return modbus_words.value(signal.struct_char, words, self.word_order)
 
     # --- writes ------------------------------------------------------------------------------
-    def registers(self, signal: Signal, value: int | float) -> list[int]:
-        """The registers of a (coerced) DINT/UDINT/LREAL value in this codec's word order."""
+    def registers(self, signal: Signal, value: int | float | str) -> list[int]:
+        """The registers of a (coerced) DINT/UDINT/LREAL value in this codec's word order, or of a
+        STRING's text (NUL-padded to all its registers)."""
         if signal.type is SignalType.BOOL:
             raise ValueError(f"{signal.st_path} is a BOOL: it is a coil, not registers")
-        return modbus_words.registers(signal.type.struct_char, value, self.word_order)
+        if isinstance(value, str):
+            return modbus_words.text_registers(value.encode(STRING_ENCODING), signal.modbus_count)
+        return modbus_words.registers(signal.struct_char, value, self.word_order)
 
 
 def _address(s: Signal) -> int:

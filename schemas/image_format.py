@@ -390,6 +390,8 @@ def decode_field(signal: Signal, raw: bytes) -> bool | int | float | str:
         if raw[0] > 1:
             raise SignalValueError(f"{signal.st_path}: BOOL byte must be 0 or 1, got {raw[0]}")
         return bool(raw[0])
+    if signal.type is SignalType.STRING:  # its bytes up to the NUL (a write may give fewer than the field)
+        return signal.decode(bytes(raw))
     return signal.decode(struct.unpack("<" + signal.struct_char, raw)[0])
 
 

@@ -16,7 +16,10 @@ input registers     4 read                DINT/UDINT/LREAL CNC->PLC             
 
 The V.E. variables (N-05) are written by the NC as well: a read returns the value last stored by
 either side (hli_server/image/external.py); a write outside the range of the variable's kernel type
-(an SGN16 carried in a DINT) is refused with exception 0x03.
+(an SGN16 carried in a DINT) is refused with exception 0x03. A V.E. STRING is its bytes two to a
+register (``hli_server/codecs/modbus_words.py``; no word order), read and written whole; a write whose
+bytes hold no NUL within the field (a character too many) or a byte that is no Windows-1252 character
+is refused with exception 0x03.
 
 * **Live.** A read of coils or holding registers returns the PLC->CNC half as it is now (what any
   PLC door, shared memory, ADS or Modbus, wrote last); a read of discrete inputs or input registers
@@ -106,6 +109,7 @@ from hli_server.codecs.modbus_frames import (
     encode_write_multiple,
 )
 from hli_server.codecs.modbus_words import WORD_ORDERS, check_word_order, decode_value, swap_words
+from schemas.image_format import decode_field
 from schemas.layout import (
     MODBUS_SNAPSHOT_REGISTER,
     Direction,
@@ -317,10 +321,12 @@ class RegisterMap:
             s = signals[i]
             if s.offset > cursor:
                 fmt.append(f"{s.offset - cursor}x")
-            fmt.append(s.type.struct_char)
+            fmt.append(s.struct_char)
             cursor = s.offset + s.size
         unpack_from = struct.Struct("".join(fmt)).unpack_from
-        chars = "".join(s.type.struct_char for s in signals)
+        # a STRING's bytes go out as they are, NUL-padded to its registers (``Ns`` packs so)
+        chars = "".join(f"{2 * s.modbus_count}s" if s.string_size else s.struct_char for s in signals)
+        texts = [i for i, s in enumerate(signals) if s.string_size]
         order = [by_offset.index(i) for i in range(len(signals))]
         permute = None if order == sorted(order) else itemgetter(*order)
         nbytes = 2 * sum(s.modbus_count for s in signals)
@@ -336,6 +342,18 @@ class RegisterMap:
 
             return read_abcd
         pack_le = struct.Struct("<" + chars).pack
+        if texts:  # CDAB swaps the bytes of every word after the pack: a STRING's are swapped before
+            widths = {i: 2 * signals[i].modbus_count for i in texts}
+
+            def read_cdab_texts() -> bytes:
+                values = list(unpack_from(half(), start))
+                if permute is not None:
+                    values = list(permute(values))
+                for i in texts:
+                    values[i] = swap_words(values[i].ljust(widths[i], b"\0"))
+                return head + swap_words(pack_le(*values))
+
+            return read_cdab_texts
 
         def read_cdab() -> bytes:
             values = unpack_from(half(), start)
@@ -362,8 +380,13 @@ class RegisterMap:
         return f"read of {count} at {address} refused"  # pragma: no cover - spans() raised before
 
     # --- writes ------------------------------------------------------------------------------
-    def _decode_register_value(self, signal: Signal, data: bytes) -> int | float:
-        return decode_value(signal.type.struct_char, data, self.word_order)
+    def _decode_register_value(self, signal: Signal, data: bytes) -> int | float | str:
+        if signal.string_size:
+            try:
+                return decode_field(signal, data[: signal.size])
+            except SignalValueError as exc:
+                raise ModbusError(ExceptionCode.ILLEGAL_DATA_VALUE, str(exc)) from None
+        return decode_value(signal.struct_char, data, self.word_order)
 
     def _commit(self, fc: int, writes: list[tuple[Signal, object]]) -> None:
         """Check every value first, then write them all: a refused request changes nothing."""
@@ -371,7 +394,7 @@ class RegisterMap:
             raise ModbusError(
                 ExceptionCode.ILLEGAL_FUNCTION, f"FC {fc}: the server runs --read-only, writes are refused"
             )
-        checked: list[tuple[Signal, bool | int | float]] = []
+        checked: list[tuple[Signal, bool | int | float | str]] = []
         for signal, value in writes:
             try:
                 signal.check_plc_write()

@@ -9,6 +9,10 @@ The server's Modbus view (``hli_server.adapters.modbus``) and the PLC-side trans
   ``[0xFFFE, 0xFFFF]``; an LREAL's four words are fully reversed.
 
 Register data is the bytes of the registers as they travel (each register big-endian).
+
+A V.E. STRING (N-05) is its bytes two to a register, in the order of the characters: register k holds
+bytes 2k (high byte) and 2k + 1 (low byte), as pymodbus' string payloads and most devices lay text out;
+the word order does not apply to it. ``"AB"`` of a STRING(3) is ``[0x4142, 0x0000]``.
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ __all__ = [
     "encode_value",
     "registers",
     "swap_words",
+    "text_data",
+    "text_registers",
     "value",
 ]
 
@@ -60,6 +66,16 @@ def decode_value(struct_char: str, data: bytes, word_order: str) -> int | float:
     else:
         result = struct.unpack("<" + struct_char, swap_words(data))[0]
     return result
+
+
+def text_registers(data: bytes, count: int) -> list[int]:
+    """The ``count`` registers of a STRING's bytes (NUL-padded to them), two characters to a register."""
+    return list(struct.unpack(f">{count}H", data.ljust(2 * count, b"\0")))
+
+
+def text_data(words: Sequence[int]) -> bytes:
+    """The bytes of a STRING's registers (all of them: the field is the first ``size`` bytes)."""
+    return struct.pack(f">{len(words)}H", *words)
 
 
 def registers(struct_char: str, value: int | float, word_order: str) -> list[int]:

@@ -31,7 +31,8 @@ it. The first ``i`` and the first ``o`` line hold every signal; later ones what 
 recorded from the header's ``window_start`` on; inputs always from cycle 1 (a recording started in a
 running server carries the server's input journal from its start, so that a replay can reach the same
 state). BOOL values are ``true``/``false``, DINT/UDINT integers, LREAL numbers (``"NaN"``,
-``"Infinity"``, ``"-Infinity"`` for the values JSON has no number for). The outputs the header lists in
+``"Infinity"``, ``"-Infinity"`` for the values JSON has no number for), a V.E. STRING its text in a
+list of one (``["teach_01.dat"]``; version 3). The outputs the header lists in
 ``follow_cycle`` (the ``cycle_r`` counters) equal the cycle mod 2**31 unless a line lists them.
 """
 
@@ -48,6 +49,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any, Final
 
+from schemas.layout import STRING_ENCODING
+
 __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
@@ -57,15 +60,17 @@ __all__ = [
     "RecordingWriter",
     "Records",
     "decode_value",
+    "encode_text",
     "encode_value",
     "gzip_member",
     "read_header",
     "read_records",
     "signal_pattern",
+    "text_bytes",
 ]
 
 FORMAT: Final = "hli-recording"
-FORMAT_VERSION: Final = 2
+FORMAT_VERSION: Final = 3
 """Raised when a reader of this version could not read the new files; readers refuse newer versions."""
 SUFFIX: Final = ".jsonl.gz"
 COMPRESS_LEVEL: Final = 1
@@ -94,8 +99,23 @@ def encode_value(value: bool | int | float) -> bool | int | float | str:
 _NON_FINITE: Final = {"NaN": math.nan, "Infinity": math.inf, "-Infinity": -math.inf}
 
 
+def encode_text(raw: bytes) -> list[str]:
+    """A STRING field's value for JSON: its bytes up to the first NUL as Windows-1252 text, in a list of
+    one (so that no text is taken for a number's name); a byte that is no Windows-1252 character is
+    kept as an escape (``surrogateescape``), so the replay writes the very bytes back."""
+    return [raw.partition(b"\0")[0].decode(STRING_ENCODING, "surrogateescape")]
+
+
+def text_bytes(text: str) -> bytes:
+    """The bytes of a STRING value :func:`decode_value` read (the inverse of :func:`encode_text`)."""
+    return text.encode(STRING_ENCODING, "surrogateescape")
+
+
 def decode_value(value: Any) -> Any:
-    """The inverse of :func:`encode_value` (a string a number has no other meaning in a recording)."""
+    """The inverse of :func:`encode_value` and :func:`encode_text` (a string a number has no other
+    meaning in a recording; a STRING's text comes as a list of one)."""
+    if isinstance(value, list) and len(value) == 1 and isinstance(value[0], str):
+        return value[0]
     if isinstance(value, str):
         try:
             return _NON_FINITE[value]

@@ -58,6 +58,7 @@ from hli_server.recording.format import (
     RecordingWriter,
     dumps,
     encode_json,
+    encode_text,
     encode_value,
     gzip_member,
 )
@@ -164,12 +165,14 @@ class HalfCodec:
         for s in self.signals:
             if s.offset > cursor:
                 parts.append(f"{s.offset - cursor}x")
-            parts.append(s.type.struct_char)
+            parts.append(s.struct_char)
             cursor = s.offset + s.size
         if self.size > cursor:
             parts.append(f"{self.size - cursor}x")
         self.struct = struct.Struct("".join(parts))
-        self.unpack = self.struct.unpack
+        self.texts = [k for k, s in enumerate(self.signals) if s.type is SignalType.STRING]
+        """The V.E. STRING fields: their bytes are recorded as text (format.encode_text)."""
+        self.unpack = self._unpack_texts if self.texts else self.struct.unpack
         self.starts = np.array([s.offset for s in self.signals], dtype=np.intp)
         self.floats = frozenset(k for k, s in enumerate(self.signals) if s.type is SignalType.LREAL)
         self.index = {s.st_path: k for k, s in enumerate(self.signals)}
@@ -181,8 +184,14 @@ class HalfCodec:
             and s.type is not SignalType.LREAL
         ]
 
+    def _unpack_texts(self, row: bytes) -> list[Any]:
+        values = list(self.struct.unpack(row))
+        for k in self.texts:
+            values[k] = encode_text(values[k])
+        return values
+
     def header(self) -> list[list[str]]:
-        return [[s.st_path, s.type.value] for s in self.signals]
+        return [[s.st_path, s.type_name] for s in self.signals]
 
     def changes(
         self, rows: Sequence[bytes], previous: bytes | None, cycles: Sequence[int] = ()

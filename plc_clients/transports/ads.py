@@ -53,7 +53,7 @@ from plc_clients.transports.base import (
     _CycleCounter,
     load_layout,
 )
-from schemas.layout import Direction, Layout, LayoutError, Signal, SignalType
+from schemas.layout import STRING_ENCODING, Direction, Layout, LayoutError, Signal, SignalType
 
 __all__ = [
     "DEFAULT_AMS_PORT",
@@ -79,7 +79,6 @@ _CHECK_CHUNK: Final = 50
 _TAKE_IT: Final = (
     "take it from this server (`hli-server map --format json` of its machine file, or its HTTP API)"
 )
-_FORMAT = {SignalType.BOOL: "<?", SignalType.DINT: "<i", SignalType.UDINT: "<I", SignalType.LREAL: "<d"}
 _ROUTER_IN_USE: Final = 1286
 
 _NO_ENTRY: Final = SymbolEntry(0, 0, 0, 0, "", "")
@@ -322,13 +321,12 @@ class AdsTransport(ClosesOnExit):
     def read(self, st_path: str) -> Value:
         s = self.layout.signal(st_path)
         raw = self._read_raw(f"reading {st_path}", _GROUP[s.direction], s.offset, s.size)
-        value: Value = struct.unpack(_FORMAT[s.type], raw)[0]
-        return value
+        return _value(s, raw)
 
     @staticmethod
     def _encode(s: Signal, value: Value) -> bytes:
         s.check_plc_write()
-        return struct.pack(_FORMAT[s.type], s.coerce(value))
+        return struct.pack("<" + s.struct_char, s.encode(s.coerce(value)))
 
     def write(self, st_path: str, value: Value) -> None:
         s = self.layout.signal(st_path)
@@ -348,7 +346,7 @@ class AdsTransport(ClosesOnExit):
             return
         if len(fields) == 1:
             s, data = fields[0]
-            self.write(s.st_path, struct.unpack(_FORMAT[s.type], data)[0])
+            self.write(s.st_path, _value(s, data))
             return
         heads = b"".join(struct.pack("<III", _GROUP[_P2C], s.offset, s.size) for s, _ in fields)
         payload = heads + b"".join(data for _, data in fields)
@@ -377,6 +375,14 @@ class AdsTransport(ClosesOnExit):
 
     def __repr__(self) -> str:
         return f"AdsTransport({self.host!r}, {self.port}, {self.ams_net_id}:{self.ams_port})"
+
+
+def _value(s: Signal, raw: bytes) -> Value:
+    """A field's value from its bytes (a STRING's text up to its NUL)."""
+    if s.type is SignalType.STRING:
+        return raw.partition(b"\0")[0].decode(STRING_ENCODING, "replace")
+    value: Value = struct.unpack("<" + s.struct_char, raw)[0]
+    return value
 
 
 class AsyncAdsTransport:

@@ -25,7 +25,8 @@ __all__ = [
     "load_layout",
 ]
 
-Value = bool | int | float
+Value = bool | int | float | str
+"""A field's value: BOOL, a number, or the text of a V.E. STRING."""
 
 CYCLE_SIGNAL: Final = "gpCh[0]^bahn_state.cycle_r"
 """The CNC's interpolation cycle counter as the Modbus transports see it (channel 1's copy)."""
@@ -38,6 +39,7 @@ _ZERO: Final[dict[SignalType, Value]] = {
     SignalType.DINT: 0,
     SignalType.UDINT: 0,
     SignalType.LREAL: 0.0,
+    SignalType.STRING: "",
 }
 
 

@@ -12,7 +12,10 @@ What each index group serves (``docs/ads.md`` has the table for users)::
                   C3-10); every Write on port 551 = 0x704
 
 Writes change nothing unless every value is acceptable (a BOOL byte other than 0/1 is 0x706) and every
-range covers whole fields. A structure written as a whole (ads-client ``writeValue`` of a control unit,
+range covers whole fields. A V.E. STRING read by handle or by name answers its own bytes to a longer
+read (pyads reads a STRING with a read length of 1024 and takes what comes, as TwinCAT answers) and takes
+a shorter write up to its NUL (pyads writes the text and one NUL): the rest of the field is then NUL; a
+STRING's bytes without a NUL within the field (a character too many) are 0x706. A structure written as a whole (ads-client ``writeValue`` of a control unit,
 pyads ``write_structure_by_name``) sets its ``_w`` members; its ``_r`` members are the CNC's, which
 overwrites them every cycle in the kernel, so their bytes in the write are ignored here. A write that
 covers no ``_w`` member at all is refused with 0x704, as a write of a ``_r`` field by name is.
@@ -26,6 +29,7 @@ from typing import TYPE_CHECKING, Final
 from hli_server.adapters.ads.session import Watch
 from hli_server.adapters.ads.symbols import VIEW_GROUP, Symbol, SymbolTable
 from hli_server.codecs.ads import AdsError, ErrorCode, decode_name
+from schemas.image_format import decode_field
 from schemas.layout import (
     ADS_GROUP_CNC_TO_PLC,
     ADS_GROUP_GEO_AXIS,
@@ -221,6 +225,9 @@ class DataService:
             if not s.plc_writable:
                 raise AdsError(ErrorCode.READ_WRITE_NOT_PERMITTED, _read_only_text(s))
             self._refuse_if_read_only()
+            if len(data) < s.size:  # a STRING's text and its NUL (_check_size let nothing else through)
+                _check_value(s, data)
+                data = data.partition(b"\0")[0].ljust(s.size, b"\0")
             self._write_bytes(s.offset, data)
             return
         start = symbol.view_offset
@@ -321,24 +328,28 @@ class DataService:
 
 
 def _check_size(symbol: Symbol, length: int, what: str) -> None:
-    if length != symbol.size:
+    if length != symbol.size and not _string_size_fits(symbol, length, what):
         raise AdsError(
             ErrorCode.SIZE_WRONG,
             f"{symbol.name} is {symbol.type_name} ({symbol.size} bytes): the {what} has {length} bytes",
         )
 
 
+def _string_size_fits(symbol: Symbol, length: int, what: str) -> bool:
+    """A STRING symbol's read may ask more (it gets the field), its write may give less (its text and
+    the NUL, at least one byte)."""
+    s = symbol.signal
+    if s is None or s.type is not SignalType.STRING:
+        return False
+    return length > s.size if what == "read" else 0 < length < s.size
+
+
 def _check_value(s: Signal, raw: bytes) -> None:
     """Refuse (0x706) bytes the field cannot take, before anything is written: a BOOL byte other than
-    0/1, and whatever the signal's own check refuses (a V.E. variable's kernel range, for one)."""
-    if s.type is SignalType.BOOL:
-        if raw[0] > 1:
-            raise AdsError(ErrorCode.INVALID_VALUE, f"{s.st_path}: BOOL byte must be 0 or 1, got {raw[0]}")
-        value: bool | int | float = bool(raw[0])
-    else:
-        value = struct.unpack("<" + s.type.struct_char, raw)[0]
+    0/1, a STRING without its NUL, and whatever the signal's own check refuses (a V.E. variable's kernel
+    range, for one)."""
     try:
-        s.coerce(value)
+        s.coerce(decode_field(s, raw))
     except SignalValueError as exc:
         raise AdsError(ErrorCode.INVALID_VALUE, str(exc)) from None
 

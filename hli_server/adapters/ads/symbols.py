@@ -11,14 +11,18 @@ Names are matched as TwinCAT matches them, without regard to case; the dereferen
 pointers may be spelt as PLC programmers write it: ``gpAx[0]^ipo_mc_control...`` (the layout's),
 ``gpAx[0]^.ipo_mc_control...`` and ``gpAx[0].ipo_mc_control...``.
 
-**Types.** A leaf has its IEC base type (BOOL, DINT, UDINT, LREAL, ...). A structure whose members
+**Types.** A leaf has its IEC base type (BOOL, DINT, UDINT, LREAL, ...); a V.E. STRING is TwinCAT's
+``STRING(n)`` (ADS data type 30, n + 1 bytes, Windows-1252, NUL-terminated). A structure whose members
 are ``request_r, enable_w, command_w, state_r`` is a control unit of the kernel and gets the
 kernel's type name from its ``command_w`` type: ``MC_CONTROL_BOOL_UNIT``, ``MC_CONTROL_SGN32_UNIT``,
 ``MC_CONTROL_UNS32_UNIT``, ``MC_CONTROL_REAL64_UNIT`` (FCT-C43 3.1.1: "Data type
 MC_CONTROL_SGN32_UNIT", https://infosys.beckhoff.com/content/1033/tf5200_dynposlimit/174766219.html;
 the unit's members in the kernel's order, https://infosys.beckhoff.com/content/1033/tf5200_hli_interface/174725259.html).
-Other structures are named by their place: ``HLI_AX`` for an element of ``gpAx``, ``HLI_AX_IPO_STATE``
-for its member ``ipo_state`` (the project's names: the kernel library's are not public). Indexed
+A V.E. structure (N-05) has the type name its declaration gives (``struct[i].name``: the kernel's
+export to the PLC names the types so, "Section 2: type declaration from the V.E. variable list",
+https://infosys.beckhoff.com/content/1033/expextvar/15424453899.html). Other structures are named by their
+place: ``HLI_AX`` for an element of ``gpAx``, ``HLI_AX_IPO_STATE`` for its member ``ipo_state`` (the
+project's names: the kernel library's are not public). Indexed
 levels whose elements share one type are arrays, ``ARRAY [0..4] OF HLI_AX``; the kernel's ``gpAx`` is
 an array of pointers, here it is the array of what they point to, so ``gpAx[0]`` and ``gpAx[0]^`` are
 the same structure. Elements of differing types cannot form an array: they become symbols of their
@@ -62,7 +66,7 @@ from hli_server.codecs.ads import (
     ads_type_name,
     decode_name,
 )
-from schemas.layout import Direction, Layout, Signal
+from schemas.layout import Direction, Layout, Scope, Signal
 
 __all__ = [
     "MAX_SYMBOL_INFO",
@@ -107,6 +111,9 @@ Piece = tuple[Direction, int, int]
 
 Step = str | int
 """One step of a path: a member name (lower case) or an index."""
+
+_STRING_TYPE: Final = re.compile(r"^STRING\((\d{1,5})\)$", re.IGNORECASE)
+"""TwinCAT's ``STRING(n)``: n characters and the NUL."""
 
 _TOKEN: Final = re.compile(r"\s*(?:([A-Za-z_][A-Za-z0-9_]*)|\[([0-9 ,]+)\]|(\^)|(\.))")
 
@@ -172,7 +179,10 @@ def _key_text(key: tuple[Step, ...]) -> str:
 
 def ads_data_type(type_name: str) -> tuple[AdsDataType, int]:
     """The ADS data type id and size of a base type name (``DINT`` -> INT32, 4; the kernel's ``SGN32``
-    too)."""
+    too; ``STRING(20)`` -> STRING, 21)."""
+    string = _STRING_TYPE.match(type_name)
+    if string is not None:
+        return AdsDataType.STRING, int(string[1]) + 1
     found = BASE_TYPES.get(ads_type_name(type_name))
     if found is None:
         raise ValueError(f"{type_name!r} is no IEC base type the ADS door knows ({', '.join(BASE_TYPES)})")
@@ -339,7 +349,7 @@ class SymbolTable:
         for child in node.children.values():
             self._resolve(child)
         if node.signal is not None:
-            node.type = self._base(node.signal.type.value, node.signal.size)
+            node.type = self._base(node.signal.type_name, node.signal.size)
             return node.type
         kids = list(node.children.values())
         if not kids or any(k.type is None for k in kids):
@@ -391,6 +401,9 @@ class SymbolTable:
         command = next((t for name, t, _ in members if name.lower() == "command_w"), None)
         if names == _UNIT_MEMBERS and command is not None and command.name in _UNIT_KINDS:
             return f"MC_CONTROL_{_UNIT_KINDS[command.name]}_UNIT"
+        declared = _declared_structure(node)
+        if declared is not None:
+            return declared
         words = [str(s) for s in node.key if not isinstance(s, int)]
         root = re.sub(r"^g?p?(?=[A-Z])", "", node.name.split("[", 1)[0].split("^", 1)[0].split(".", 1)[0])
         words[0] = root or words[0]
@@ -575,6 +588,22 @@ class SymbolTable:
                 f"index group 0x{VIEW_GROUP:X} (structured view, {self.view_size} bytes): {length} bytes "
                 f"from offset {offset} run past its end",
             )
+
+
+def _declared_structure(node: _Node) -> str | None:
+    """The declared type of a V.E. structure's node (``gpVEGlob^curve[2].point[5]`` -> ``typ_pos``): its
+    leaves name the structure of every level of their path (``Signal.structures``)."""
+    leaf = node
+    while leaf.signal is None:
+        if not leaf.children:
+            return None
+        leaf = next(iter(leaf.children.values()))
+    signal = leaf.signal
+    if not signal.scope.external or not signal.structures:
+        return None
+    area = 1 if signal.scope is Scope.VE_GLOBAL else 2  # gpVEGlob / gpVECh, [i]
+    depth = sum(1 for step in node.key[area:] if not isinstance(step, int))
+    return signal.structures[depth - 1] if 1 <= depth <= len(signal.structures) else None
 
 
 def _handle_tail(size: int, type_name: str) -> bytes:
