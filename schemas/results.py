@@ -103,7 +103,7 @@ class ExternalVariable(TypedDict):
     symbol: str
     type: str
     dims: list[int]
-    value: Any  # BOOLEAN, a number or a row-major list of them, after the variable's type and dims
+    value: Any  # BOOLEAN, a number, a string or a row-major list of them, after the variable's type and dims
 
 
 class MachineChannel(TypedDict):
@@ -367,7 +367,7 @@ class ImageField(TypedDict):
     type, direction and the cycle; a write adds the cycle that latches it (``effective_cycle``)."""
 
     st_path: str
-    value: bool | int | float
+    value: bool | int | float | str
     type: str
     direction: str
     access: str

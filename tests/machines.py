@@ -74,7 +74,11 @@ def demo_config(extra_axes: int = 0, *, external: bool = False) -> MachineConfig
     variables = list(EXTERNAL_VARIABLES) if external else []
     structures = list(EXTERNAL_STRUCTURES) if external else []
     return MachineConfig(
-        name="demo", axes=axes, channels=channels, external_variables=variables, external_structures=structures
+        name="demo",
+        axes=axes,
+        channels=channels,
+        external_variables=variables,
+        external_structures=structures,
     )
 
 

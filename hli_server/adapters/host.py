@@ -87,7 +87,7 @@ __all__ = [
     "door_host",
 ]
 
-Value = bool | int | float
+Value = bool | int | float | str
 
 
 LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "::1", "[::1]"})

@@ -265,9 +265,12 @@ class OperatorPanel(OperatorPort):
         return snap
 
     def external_variables(self) -> list[ExternalVariable]:
-        """The V.E. variables and their values now (N-05): ``name`` (``V.E.MODE``), ``channel`` (None:
-        the global area), ``symbol`` (the image's ST path, ``gpVECh[0]^MODE``; an array's elements add
-        ``[i]``), ``type`` (the kernel's), ``dims``, ``value`` (a list, row-major, for an array)."""
+        """The V.E. variables and their values now (N-05): ``name`` (``V.E.MODE``; a structure's
+        elements each, ``V.E.UserInteraction.Message``), ``channel`` (None: the global area), ``symbol``
+        (the image's ST path, ``gpVECh[0]^MODE``; an array's elements add ``[i]``, and ``[]`` marks where
+        an array of structures takes its index: ``gpVECh[1]^TRACK[].LABEL``), ``type`` (the kernel's:
+        ``SGN32``, ``STRING``, ``VSTRING``), ``dims`` (of every level in a row), ``value`` (a list,
+        row-major, for an array)."""
         m = self._m
         index_of = {ch.number: i for i, ch in enumerate(m.channels)}
         out: list[ExternalVariable] = []
@@ -276,10 +279,10 @@ class OperatorPanel(OperatorPort):
             head = "gpVEGlob^" if spec.channel is None else f"gpVECh[{index_of[spec.channel]}]^"
             out.append(
                 {
-                    "name": spec.path,
+                    "name": f"V.E.{spec.name}",
                     "channel": spec.channel,
-                    "symbol": head + spec.name,
-                    "type": spec.type.value,
+                    "symbol": head + spec.path.removeprefix("V.E."),
+                    "type": spec.declared,
                     "dims": list(spec.dims),
                     "value": list(values) if spec.dims else values[0],
                 }

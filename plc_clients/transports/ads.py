@@ -269,7 +269,7 @@ class AdsTransport(ClosesOnExit):
                         f"{self.where}: the server has no symbol {s.st_path} (ADS error 0x{code:X}): "
                         f"the layout is not the server's; {_TAKE_IT}"
                     )
-                ours = (s.st_path, s.image_ads_group, s.offset, s.size, ads_type_name(s.type.value))
+                ours = (s.st_path, s.image_ads_group, s.offset, s.size, ads_type_name(s.type_name))
                 theirs = (entry.name, entry.index_group, entry.index_offset, entry.size, entry.type_name)
                 if ours != theirs:
                     raise LayoutError(

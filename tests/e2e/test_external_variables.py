@@ -94,3 +94,34 @@ def test_a_channel_variable_shadows_a_global_one_of_the_same_name() -> None:
         hli.step(1)
         store = hli.runtime.machine.external
         assert (store.read("MODE", 1), store.read("MODE", 2), store.read("MODE", None)) == (1, 2, 1)
+
+
+def test_strings_and_structures_through_every_door(hli: Harness, plc_transport: Transport) -> None:
+    """RegenHU's HMI message (a structure with a STRING), ISG's teach file name (a STRING), an array of
+    VSTRINGs and an array of structures: both ways, through shared memory, Modbus and ADS."""
+    store = hli.runtime.machine.external
+    plc_transport.write("gpVEGlob^TEACH_FILE_NAME", "teach_0815.dat")
+    plc_transport.write_many(
+        [("gpVECh[1]^NOTES[1]", "Zürich"), ("gpVECh[1]^TRACK[1].LABEL", "P2"), ("gpVECh[1]^TRACK[1].X", 2.5)]
+    )
+    plc_transport.write("gpVECh[0]^UserInteraction.Answer", 1)
+    hli.step(1)
+    assert store.read("TEACH_FILE_NAME", 1) == "teach_0815.dat"
+    assert store.read("NOTES", 2, (1,)) == "Zürich"
+    assert (store.read("TRACK.LABEL", 2, (1,)), store.read("TRACK.X", 2, (1,))) == ("P2", 2.5)
+    assert store.read("UserInteraction.Answer", 1) == 1
+    store.write("UserInteraction.Message", 1, "Camera at A1 - OK?")  # 18 of the 20 characters
+    store.write("TEACH_FILE_NAME", None, "")
+    hli.step(1)
+    assert plc_transport.read("gpVECh[0]^UserInteraction.Message") == "Camera at A1 - OK?"
+    assert plc_transport.read("gpVEGlob^TEACH_FILE_NAME") == ""
+    assert plc_transport.read("gpVECh[1]^NOTES[0]") == ""
+
+
+def test_every_door_refuses_a_string_longer_than_its_variable(hli: Harness, plc_transport: Transport) -> None:
+    plc_transport.write("gpVECh[1]^NOTES[0]", "12345678")  # a VSTRING of 9 bytes: 8 characters
+    with pytest.raises((TransportError, ValueError), match=r"at most 8|exception|refused"):
+        plc_transport.write("gpVECh[1]^NOTES[0]", "123456789")
+    hli.step(1)
+    assert hli.runtime.machine.external.read("NOTES", 2, (0,)) == "12345678"
+    assert plc_transport.read("gpVECh[1]^NOTES[0]") == "12345678"

@@ -182,3 +182,60 @@ async def test_ads_client_with_its_default_settings_connects_as_to_a_twincat(run
             break
         await asyncio.sleep(0.02)
     assert (adapter.connection_count, adapter.device.notification_count) == (0, 0)
+
+
+@pytest.mark.req("N-05")
+async def test_ads_client_reads_and_writes_v_e_strings_and_structures() -> None:
+    """A second client on the V.E. STRING and structure symbols (issue 33): ads-client reads the types
+    from 0xF011 (``STRING(20)``, ``UserInteractionType`` with its members, ``ARRAY [0..1] OF Point``),
+    decodes the strings, and writes a string (one too long it cuts itself) and a whole structure."""
+    from tests.machines import demo_config
+
+    rt = Runtime(
+        demo_config(external=True),
+        clock="realtime",
+        http_port=None,
+        image_name=f"hli_test_node_ve_{os.getpid()}_{time.monotonic_ns() % 1_000_000}",
+        adapters=[("ads", {"port": 0})],
+    )
+    async with rt:
+        store = rt.machine.external
+        store.write("UserInteraction.Message", 1, "Camera at A1 - OK?")
+        store.write("TRACK.LABEL", 2, "P2", (1,))
+        result = await node(
+            rt,
+            [
+                {"op": "readValue", "path": "gpVECh[0]^UserInteraction"},
+                {"op": "getDataType", "name": "UserInteractionType"},
+                {"op": "writeValue", "path": "gpVEGlob^TEACH_FILE_NAME", "value": "teach_0815.dat"},
+                {"op": "readValue", "path": "gpVECh[1]^TRACK"},
+                {
+                    "op": "writeValue",
+                    "path": "gpVECh[0]^UserInteraction",
+                    "value": {"Message": "Load part", "Answer": 7, "Done": True},
+                },
+                {"op": "writeValue", "path": "gpVEGlob^TEACH_FILE_NAME", "value": "x" * 21},
+            ],
+            script="defaults.js",
+        )
+        read, ui_type, written, track, whole, too_long = result["results"]
+        assert read["type"] == "UserInteractionType"
+        assert read["value"] == {"Message": "Camera at A1 - OK?", "Answer": 0, "Done": False}
+        assert ui_type["subItems"] == [
+            ["Message", "STRING(20)", 0, 21],
+            ["Answer", "DINT", 21, 4],
+            ["Done", "BOOL", 25, 1],
+        ]
+        assert "error" not in written, written
+        assert [p["LABEL"] for p in track["value"]] == ["", "P2"]
+        assert "error" not in whole, whole
+        assert "error" not in too_long  # ads-client cuts a text to the STRING(20), as TwinCAT does
+        for _ in range(100):  # the realtime clock latches the writes within a cycle or two
+            if store.read("UserInteraction.Answer", 1) == 7:
+                break
+            await asyncio.sleep(0.01)
+        assert store.read("TEACH_FILE_NAME", 1) == "x" * 20
+        assert (store.read("UserInteraction.Message", 1), store.read("UserInteraction.Done", 1)) == (
+            "Load part",
+            True,
+        )

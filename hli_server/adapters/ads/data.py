@@ -13,7 +13,8 @@ What each index group serves (``docs/ads.md`` has the table for users)::
 
 Writes change nothing unless every value is acceptable (a BOOL byte other than 0/1 is 0x706) and every
 range covers whole fields. A V.E. STRING read by handle or by name answers its own bytes to a longer
-read (pyads reads a STRING with a read length of 1024 and takes what comes, as TwinCAT answers) and takes
+read (pyads reads a STRING with a read length of 1024 and takes what comes, as TwinCAT answers; a read at
+its address in 0xF030 gets the bytes up to the end of the half) and takes
 a shorter write up to its NUL (pyads writes the text and one NUL): the rest of the field is then NUL; a
 STRING's bytes without a NUL within the field (a character too many) are 0x706. A structure written as a whole (ads-client ``writeValue`` of a control unit,
 pyads ``write_structure_by_name``) sets its ``_w`` members; its ``_r`` members are the CNC's, which
@@ -73,6 +74,9 @@ class DataService:
             s.ads_offset: s for s in self.layout.signals if s.ads_port == ADS_PORT_GEO
         }
         self._p2c_inside = _interior(self.layout.half(_P2C))
+        self._p2c_strings = frozenset(s.offset for s in self.layout.half(_P2C) if s.type is SignalType.STRING)
+        """Where a V.E. STRING starts: a read from there may ask more than the half has left (pyads'
+        ``AdsSymbol.read`` of a STRING asks 1024 bytes at its address) and gets the bytes to the end."""
 
     # --- the halves -------------------------------------------------------------------------------
     def c2p(self) -> bytes:
@@ -109,6 +113,8 @@ class DataService:
         return self.c2p()[offset : offset + length]
 
     def read_p2c(self, session: Session, offset: int, length: int) -> bytes:
+        if offset in self._p2c_strings:  # a STRING read the pyads way (1024 bytes): up to the half's end
+            length = min(length, self.sizes[_P2C] - offset)
         self._check_range(_P2C, ADS_GROUP_PLC_TO_CNC, offset, length)
         return self.p2c()[offset : offset + length]
 

@@ -4,7 +4,16 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, StrictBool, StrictFloat, StrictInt, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    StrictFloat,
+    StrictInt,
+    StrictStr,
+    model_validator,
+)
 
 from hli_server.adapters.host import (
     CHECK_MAX_CYCLES,
@@ -166,8 +175,9 @@ class AxisRecordBody(_Body):
 class ImageWriteBody(_Body):
     # strict: "yes" or "300" are refused (422), not read as true or 300; the field's type is checked
     # by the layout afterwards (Signal.coerce), with its own one-line message
-    value: StrictBool | StrictInt | StrictFloat = Field(
-        description="BOOL: true/false or 0/1; DINT/UDINT: integer; LREAL: number"
+    value: StrictBool | StrictInt | StrictFloat | StrictStr = Field(
+        description="BOOL: true/false or 0/1; DINT/UDINT: integer; LREAL: number; STRING(n) (a V.E. "
+        "variable's): text of at most n Windows-1252 characters"
     )
 
 

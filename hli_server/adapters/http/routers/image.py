@@ -81,7 +81,7 @@ def _field_json(host: AdapterHost, signal: Signal, value: Value) -> ImageField:
     return {
         "st_path": signal.st_path,
         "value": value,
-        "type": str(signal.type),
+        "type": signal.type_name,
         "direction": str(signal.direction),
         "access": signal.access,
         "unit": signal.unit,

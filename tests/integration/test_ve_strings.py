@@ -1,0 +1,159 @@
+"""V.E. STRING variables and structures through each door with the clients PLC programmers use (N-05).
+
+The e2e test (tests/e2e/test_external_variables.py) carries values both ways through ``plc_clients``; here
+each door is met by its own ordinary client, which checks nothing before it sends: pyads as a TwinCAT
+programmer calls it (``read_by_name`` of a STRING and of a structure's member, ``read_structure_by_name``,
+``write_by_name``, ``get_symbol``), pymodbus with raw registers (both word orders) and the HTTP image API.
+The machine is the test machine with its V.E. variables (``tests.machines``): ``gpVEGlob^TEACH_FILE_NAME``
+a STRING(20), ``gpVECh[0]^UserInteraction`` a structure ``UserInteractionType`` (Message STRING(20),
+Answer DINT, Done BOOL), ``gpVECh[1]^NOTES`` two VSTRINGs of 9 bytes.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterator
+from typing import Any
+
+import httpx
+import pyads
+import pytest
+from pymodbus.client import ModbusTcpClient
+
+from hli_server.testing import Harness
+from plc_clients.ads import close_pyads, open_pyads
+from schemas.config import MachineConfig
+from tests.machines import demo_config
+
+pytestmark = [pytest.mark.req("N-05"), pytest.mark.timeout(60)]
+
+TEACH = "gpVEGlob^TEACH_FILE_NAME"
+MESSAGE = "gpVECh[0]^UserInteraction.Message"
+USER_INTERACTION = "gpVECh[0]^UserInteraction"
+
+
+@pytest.fixture
+def hli_machine() -> MachineConfig:
+    return demo_config(external=True)
+
+
+@pytest.fixture
+def plc(hli: Harness) -> Iterator[Any]:
+    conn = open_pyads("127.0.0.1.1.1", 851, f"127.0.0.1:{hli.port('ads')}")
+    try:
+        yield conn
+    finally:
+        close_pyads(conn)
+
+
+@pytest.mark.req("H-04")
+def test_pyads_reads_and_writes_a_string_and_a_structures_member_by_name(hli: Harness, plc: Any) -> None:
+    store = hli.runtime.machine.external
+    store.write("TEACH_FILE_NAME", None, "teach_0815.dat")
+    store.write("UserInteraction.Message", 1, "Camera at A1 - OK?")
+    store.write("UserInteraction.Answer", 1, -3)
+    hli.step(1)
+    assert plc.read_by_name(TEACH, pyads.PLCTYPE_STRING) == "teach_0815.dat"
+    assert plc.read_by_name(MESSAGE, pyads.PLCTYPE_STRING) == "Camera at A1 - OK?"
+    assert plc.read_by_name("gpVECh[0].UserInteraction.Answer", pyads.PLCTYPE_DINT) == -3
+    symbol = plc.get_symbol(MESSAGE)
+    assert (symbol.symbol_type, symbol.index_group) == ("STRING(20)", 0xF030)
+    assert symbol.read() == "Camera at A1 - OK?"
+    structure = (
+        ("Message", pyads.PLCTYPE_STRING, 1, 20),
+        ("Answer", pyads.PLCTYPE_DINT, 1),
+        ("Done", pyads.PLCTYPE_BOOL, 1),
+    )
+    assert plc.read_structure_by_name(USER_INTERACTION, structure) == {
+        "Message": "Camera at A1 - OK?",
+        "Answer": -3,
+        "Done": False,
+    }
+    assert plc.get_symbol(USER_INTERACTION).symbol_type == "UserInteractionType"
+    plc.write_by_name(TEACH, "robot.tch", pyads.PLCTYPE_STRING)  # pyads sends the text and one NUL
+    plc.write_by_name("gpVECh[0]^UserInteraction.Done", True, pyads.PLCTYPE_BOOL)
+    hli.step(1)
+    assert store.read("TEACH_FILE_NAME", None) == "robot.tch"
+    assert store.read("UserInteraction.Done", 1) is True
+    assert plc.read_by_name(TEACH, pyads.PLCTYPE_STRING) == "robot.tch"  # the rest of the field is NUL
+
+
+@pytest.mark.req("H-04")
+def test_the_ads_door_refuses_a_string_without_its_nul(hli: Harness, plc: Any) -> None:
+    field = hli.layout.signal(TEACH)
+    with pytest.raises(pyads.ADSError) as info:  # 21 characters into a STRING(20): no room for the NUL
+        plc.write(0xF030, field.offset, b"x" * 21, pyads.PLCTYPE_BYTE * 21)
+    assert info.value.err_code == 0x706
+    with pytest.raises(pyads.ADSError) as info:
+        plc.write_by_name(TEACH, "x" * 21, pyads.PLCTYPE_STRING)  # by handle: 22 bytes for 21
+    assert info.value.err_code == 0x705
+    plc.write(0xF030, field.offset, b"ok".ljust(21, b"\0"), pyads.PLCTYPE_BYTE * 21)
+    hli.step(1)
+    assert hli.runtime.machine.external.read("TEACH_FILE_NAME", None) == "ok"
+
+
+@pytest.mark.req("H-03")
+@pytest.mark.parametrize("word_order", ["ABCD", "CDAB"])
+def test_modbus_carries_a_string_two_characters_to_a_register(
+    word_order: str, hli_machine: MachineConfig
+) -> None:
+    with Harness(hli_machine, adapters=[("modbus", {"word_order": word_order})]) as hli:
+        field = hli.layout.signal(TEACH)
+        assert field.modbus_count == 11
+        client = ModbusTcpClient("127.0.0.1", port=hli.port("modbus"), timeout=2, retries=0)
+        assert client.connect()
+        try:
+            hli.runtime.machine.external.write("TEACH_FILE_NAME", None, "ABC")
+            hli.step(1)
+            read = client.read_holding_registers(field.modbus_address, count=11)
+            assert read.registers == [0x4142, 0x4300] + [0] * 9  # whatever the word order
+            words = list(struct.unpack(">11H", b"teach.dat".ljust(22, b"\0")))
+            assert not client.write_registers(field.modbus_address, words).isError()
+            hli.step(1)
+            assert hli.runtime.machine.external.read("TEACH_FILE_NAME", None) == "teach.dat"
+            # 21 characters leave no NUL in the field's 21 bytes: exception 0x03, nothing written
+            full = list(struct.unpack(">11H", b"y" * 22))
+            refused = client.write_registers(field.modbus_address, full)
+            assert refused.isError() and refused.exception_code == 0x03
+            # a string is read and written whole: a range that cuts it is 0x02
+            cut = client.write_register(field.modbus_address + 3, 0x4142)
+            assert cut.isError() and cut.exception_code == 0x02
+            # its neighbour of the structure, a DINT, keeps the word order
+            answer = hli.layout.signal("gpVECh[0]^UserInteraction.Answer")
+            hli.runtime.machine.external.write("UserInteraction.Answer", 1, 100_000)
+            hli.step(1)
+            regs = client.read_holding_registers(answer.modbus_address, count=2).registers
+            assert regs == ([0x0001, 0x86A0] if word_order == "ABCD" else [0x86A0, 0x0001])
+            hli.step(1)
+            assert hli.runtime.machine.external.read("TEACH_FILE_NAME", None) == "teach.dat"
+        finally:
+            client.close()
+
+
+@pytest.mark.req("H-05")
+def test_the_http_image_api_reads_and_writes_strings_and_members(hli: Harness) -> None:
+    with httpx.Client(base_url=hli.http_url, timeout=10) as client:
+        r = client.put("/api/image/gpVECh[0].UserInteraction.Message", json={"value": "Load part"})
+        assert r.status_code == 200, r.text
+        assert r.json()["st_path"] == MESSAGE
+        r = client.put("/api/image/gpVEGlob.TEACH_FILE_NAME", json={"value": "x" * 21})
+        assert r.status_code == 422
+        assert "holds at most 20" in r.json()["detail"]
+        r = client.put("/api/image/gpVEGlob.TEACH_FILE_NAME", json={"value": 5})
+        assert r.status_code == 422
+        hli.step(1)
+        assert hli.runtime.machine.external.read("UserInteraction.Message", 1) == "Load part"
+        r = client.get("/api/image/gpVECh[0].UserInteraction.Message")
+        assert r.status_code == 200, r.text
+        assert r.json()["value"] == "Load part"
+        external = {v["name"]: v for v in client.get("/api/state").json()["external"]}
+        assert external["V.E.UserInteraction.Message"] == {
+            "name": "V.E.UserInteraction.Message",
+            "channel": 1,
+            "symbol": MESSAGE,
+            "type": "STRING",
+            "dims": [],
+            "value": "Load part",
+        }
+        assert external["V.E.TRACK.LABEL"]["symbol"] == "gpVECh[1]^TRACK[].LABEL"
+        assert external["V.E.NOTES"]["type"] == "VSTRING"
