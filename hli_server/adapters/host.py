@@ -190,6 +190,7 @@ _DTYPE = {
     SignalType.DINT: "int32",
     SignalType.UDINT: "uint32",
     SignalType.LREAL: "float64",
+    SignalType.STRING: "object",
 }
 
 
@@ -224,7 +225,7 @@ class Trace:
     """Chosen signals in every cycle of a run (H-07): the per-cycle record of a scenario.
 
     ``trace[st_path]`` is the column as a numpy array (``bool``, ``int32``, ``uint32`` or ``float64``
-    after the signal's type, read-only), ready for ``argmax``, ``diff`` and friends; ``cycles[k]`` is the
+    after the signal's type, ``object`` holding ``str`` for a V.E. STRING; read-only), ready for ``argmax``, ``diff`` and friends; ``cycles[k]`` is the
     cycle of the ``k``-th published cycle and ``values[st_path][k]`` the signal's value in it (CNC->PLC as
     published, PLC->CNC as latched), as Python lists made when asked for. The columns are kept as arrays
     (a value takes its own width, not a Python object): :meth:`json_chunks` writes ``POST /api/step``'s
@@ -279,7 +280,7 @@ class Trace:
             first, last = (int(self._cycles[0]), int(self._cycles[-1])) if len(self._cycles) else (None, None)
             raise KeyError(f"cycle {cycle} is not in the trace (cycles {first}..{last})")
         k = int(found[0])
-        return {path: self._columns[path][k].item() for path in self.signals}
+        return {path: self._columns[path].item(k) for path in self.signals}
 
     def to_json(self) -> TraceJson:
         return {"signals": list(self.signals), "cycles": self.cycles, "values": self.values}

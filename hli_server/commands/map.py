@@ -90,7 +90,7 @@ def _row(layout: Layout, s: Signal) -> dict[str, str]:
         "ads_group": f"0x{s.ads_group:X}",
         "ads_offset": f"0x{s.ads_offset:X}",
         "symbol": s.symbol,
-        "type": s.type.value,
+        "type": s.type_name,
         "size": str(s.size),
         "access": s.access,
         "unit": s.unit,
@@ -152,7 +152,9 @@ def _markdown(layout: Layout, rows: list[dict[str, str]]) -> str:
         f"from {MODBUS_EXTERNAL_BASE} to {MODBUS_EXTERNAL_END - 1}; ADS group 0x{ADS_GROUP_PLC_TO_CNC:X} "
         "after the axis blocks (their offsets follow the number of axes: use the symbols). A kernel "
         "type narrower than its field (SGN08/16 in a DINT, UNS08/16 in a UDINT, REAL32 in an LREAL) "
-        "keeps its range: every door refuses a value outside it.",
+        "keeps its range: every door refuses a value outside it. A STRING is `STRING(n)` (n characters "
+        "and a NUL, Windows-1252; two bytes to a holding register, no word order); a structure's "
+        "elements are `NAME.ELEMENT`, an array of structures' `NAME[j].ELEMENT`.",
         "",
     ]
     columns = [c for c in COLUMNS if c not in ("symbol", "reqs")]  # symbol = ST path; reqs in CSV/JSON

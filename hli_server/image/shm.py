@@ -55,7 +55,7 @@ from hli_server.engine.hli import MachineHli
 from hli_server.image.external import ExternalSync
 from hli_server.image.projection import Projection, compile_projection, diagnose
 from schemas import image_format as fmt
-from schemas.layout import Direction, Layout, Signal, SignalType, SignalValueError
+from schemas.layout import STRING_ENCODING, Direction, Layout, Signal, SignalType, SignalValueError
 
 __all__ = [
     "IMAGE_NAME_PREFIX",
@@ -510,12 +510,29 @@ def _field_struct(signals: list[Signal], head: str = "") -> struct.Struct:
     for s in signals:
         if s.offset > cursor:
             parts.append(f"{s.offset - cursor}x")
-        parts.append(s.type.struct_char)
+        parts.append(s.struct_char)
         cursor = s.offset + s.size
     return struct.Struct("".join(parts))
 
 
 _NUMPY_TYPE = {"?": "?", "i": "<i4", "I": "<u4", "d": "<f8", "Q": "<u8"}
+
+
+def _numpy_type(char: str) -> str:
+    """The numpy type of a field's ``struct`` format: ``21s`` (a STRING) is ``S21``."""
+    return f"S{char[:-1]}" if char.endswith("s") else _NUMPY_TYPE[char]
+
+
+def _column(values: Any, char: str) -> Any:
+    """One recorded column: a STRING's as ``str`` objects (its bytes up to the NUL), the others as they are."""
+    import numpy as np
+
+    if not char.endswith("s"):
+        return np.array(values, copy=True)
+    texts = [raw.partition(b"\0")[0].decode(STRING_ENCODING, "replace") for raw in values.tolist()]
+    column = np.empty(len(texts), dtype=object)
+    column[:] = texts
+    return column
 
 
 class SignalRecorder:
@@ -559,11 +576,11 @@ class SignalRecorder:
         c2p = sorted((s for s in signals if s.direction is _C2P), key=lambda s: s.offset)
         p2c = sorted((s for s in signals if s.direction is _P2C), key=lambda s: s.offset)
         self._c2p = _field_struct(c2p, "Q").unpack_from
-        self._c2p_types = "Q" + "".join(s.type.struct_char for s in c2p)
-        self._c2p_pack = struct.Struct("<" + self._c2p_types).pack
+        self._c2p_types = ["Q", *(s.struct_char for s in c2p)]
+        self._c2p_pack = struct.Struct("<" + "".join(self._c2p_types)).pack
         self._p2c = _field_struct(p2c).unpack_from if p2c else None
-        self._p2c_types = "".join(s.type.struct_char for s in p2c)
-        self._p2c_pack = struct.Struct("<" + self._p2c_types).pack
+        self._p2c_types = [s.struct_char for s in p2c]
+        self._p2c_pack = struct.Struct("<" + "".join(self._p2c_types)).pack
         self._p2c_off = image.plan.p2c_offset
         recorded = [s.st_path for s in c2p] + [s.st_path for s in p2c]
         self._order = [recorded.index(p) for p in paths]
@@ -585,7 +602,8 @@ class SignalRecorder:
 
     def columns(self) -> tuple[Any, dict[str, Any]]:
         """``(cycles, {st_path: values})`` as numpy arrays (``uint64``; ``bool``, ``int32``, ``uint32``,
-        ``float64`` after each signal's type): one value per sample, in the order sampled."""
+        ``float64`` after each signal's type, ``object`` holding ``str`` for a STRING): one value per
+        sample, in the order sampled."""
         import numpy as np
 
         count = self._count
@@ -593,10 +611,10 @@ class SignalRecorder:
         for data, types in ((self._c2p_data, self._c2p_types), (self._p2c_data, self._p2c_types)):
             if not types:
                 continue
-            dtype = np.dtype([(f"f{i}", _NUMPY_TYPE[c]) for i, c in enumerate(types)])
+            dtype = np.dtype([(f"f{i}", _numpy_type(c)) for i, c in enumerate(types)])
             with memoryview(data) as view:  # no copy of the packed rows; released before the next sample
                 rows = np.frombuffer(view, dtype=dtype, count=count)
-                cols += [np.array(rows[f"f{i}"], copy=True) for i in range(len(types))]
+                cols += [_column(rows[f"f{i}"], c) for i, c in enumerate(types)]
                 del rows
         cycles = cols[0]
         values = cols[1:]

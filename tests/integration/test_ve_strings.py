@@ -157,3 +157,42 @@ def test_the_http_image_api_reads_and_writes_strings_and_members(hli: Harness) -
         }
         assert external["V.E.TRACK.LABEL"]["symbol"] == "gpVECh[1]^TRACK[].LABEL"
         assert external["V.E.NOTES"]["type"] == "VSTRING"
+
+
+@pytest.mark.req("H-07")
+def test_a_trace_holds_a_strings_text_cycle_by_cycle(hli: Harness) -> None:
+    with hli.trace(TEACH, "gpVECh[0]^UserInteraction.Answer") as recording:
+        hli.image[TEACH] = "a.dat"
+        hli.step(2)
+        hli.runtime.machine.external.write("TEACH_FILE_NAME", None, "Zürich €.dat")
+        hli.step(2)
+    trace = recording.trace()
+    assert trace[TEACH].tolist() == ["a.dat", "a.dat", "Zürich €.dat", "Zürich €.dat"]
+    assert trace.at(trace.cycles[-1])[TEACH] == "Zürich €.dat"
+    assert b'"Z\\u00fcrich \\u20ac.dat"' in b"".join(trace.json_chunks())
+
+
+@pytest.mark.req("B-02")
+def test_a_session_with_string_writes_records_and_replays(hli: Harness, tmp_path: Any) -> None:
+    """The PLC's STRING writes are inputs like any: recorded as their text (format 3) and written back
+    byte for byte by the replay, which then agrees cycle for cycle."""
+    from hli_server.recording.format import read_records
+
+    path = tmp_path / "strings.jsonl.gz"
+    with hli.record(path, outputs_every=1):
+        hli.image[TEACH] = "teach_0815.dat"
+        hli.step(2)
+        hli.image[MESSAGE] = "Zürich"
+        hli.image["gpVECh[1]^NOTES[1]"] = ""
+        hli.step(2)
+    records = list(read_records(path))
+    header = records[0]
+    kinds = dict(map(tuple, header["inputs"]))
+    assert kinds[TEACH] == "STRING(20)"
+    index = [p for p, _ in header["inputs"]].index(TEACH)
+    texts = [
+        r["i"][k + 1] for r in records if "i" in r for k in range(0, len(r["i"]), 2) if r["i"][k] == index
+    ]
+    assert ["teach_0815.dat"] in texts
+    report = hli.replay(path)
+    assert report.verdict.name == "PASS"

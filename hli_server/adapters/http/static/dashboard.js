@@ -568,15 +568,17 @@ function externalTable(variables) {
   body.replaceChildren();
   if (!variables.length) body.append(el("tr", {}, el("td", { colspan: 5, text: "no V.E. variables configured" })));
   for (const v of variables) {
-    let value = v.value;
-    if (Array.isArray(value)) {
-      const shown = value.slice(0, EXTERNAL_ELEMENTS_SHOWN).map((x) => String(x)).join(", ");
-      value = `[${shown}${value.length > EXTERNAL_ELEMENTS_SHOWN ? `, … (${value.length})` : ""}]`;
+    // a STRING's text in quotes, so that "" and "12" are not taken for nothing and a number
+    const shownValue = (x) => (typeof x === "string" ? JSON.stringify(x) : String(x));
+    let value = shownValue(v.value);
+    if (Array.isArray(v.value)) {
+      const shown = v.value.slice(0, EXTERNAL_ELEMENTS_SHOWN).map(shownValue).join(", ");
+      value = `[${shown}${v.value.length > EXTERNAL_ELEMENTS_SHOWN ? `, … (${v.value.length})` : ""}]`;
     }
     const dims = v.dims.length ? `[${v.dims.join(",")}]` : "";
     body.append(el("tr", { "data-variable": v.name },
       el("th", { text: v.name }), el("td", { text: v.channel === null ? "global" : `channel ${v.channel}` }),
-      el("td", { text: `${v.type}${dims}` }), el("td", { class: "value", text: String(value) }),
+      el("td", { text: `${v.type}${dims}` }), el("td", { class: "value", text: value }),
       el("td", { text: v.symbol })));
   }
 }
