@@ -1175,6 +1175,7 @@ EXTERNAL_VARIABLE_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
             "the kernel's default is UNS32 (a list without var[i].type reads so); REAL64 here",
         ),
         ("var[0].array_elements", "dims", "P-EXTV-00007", "-", _EXTV + "307199243.html", ""),
+        ("var[0].size", "size", "P-EXTV-00008", "byte", _EXTV + "112465803.html", ""),
         (
             "var[0].scope",
             "channel",
@@ -1196,3 +1197,58 @@ EXTERNAL_VARIABLE_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
 )
 """The kernel's list of external variables (``external_variables_list``; ``var[i]`` stands for the
 variable's index): which entry gives which field of :class:`ExternalVariableConfig` (N-05)."""
+
+EXTERNAL_STRUCTURE_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        ("struct[0].name", "name", "P-EXTV-00015", "-", _EXTV + "307199243.html", ""),
+        ("struct[0].element[j]", "elements", "P-EXTV-00016", "-", _EXTV + "307199243.html", ""),
+    )
+)
+"""A list's ``struct[i]`` entries: :class:`ExternalStructureConfig` (N-05)."""
+
+MACHINE_EXTERNAL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        (
+            "use_extended_string_var",
+            "use_extended_string_var",
+            "P-EXTV-00022",
+            "-",
+            _EXTV + "112451979.html",
+            "",
+        ),
+    )
+)
+"""The general entry of a list of external variables that is a machine-wide field here (N-05)."""
+
+EXTERNAL_ELEMENT_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        ("struct[0].element[j].name", "name", "P-EXTV-00016", "-", _EXTV + "307199243.html", ""),
+        (
+            "struct[0].element[j].type",
+            "type",
+            "P-EXTV-00017",
+            "-",
+            _EXTV + "112444299.html",
+            "the kernel's default is UNS32 (a list without the entry reads so); REAL64 here",
+        ),
+        (
+            "struct[0].element[j].synchronisation",
+            "synchronous",
+            "P-EXTV-00018",
+            "-",
+            _EXTV + "112445835.html",
+            "",
+        ),
+        (
+            "struct[0].element[j].access_rights",
+            "access_rights",
+            "P-EXTV-00019",
+            "-",
+            _EXTV + "307199243.html",
+            "",
+        ),
+        ("struct[0].element[j].array_elements", "dims", "P-EXTV-00020", "-", _EXTV + "307199243.html", ""),
+        ("struct[0].element[j].size", "size", "P-EXTV-00021", "byte", _EXTV + "112450443.html", ""),
+    )
+)
+"""A list's ``struct[i].element[j]`` entries: :class:`ExternalElementConfig` (N-05)."""

@@ -11,11 +11,16 @@ from pydantic.fields import FieldInfo
 from hli_server.configuration.fields import _range_text
 from hli_server.configuration.tables import _PARAMETERS_OF_MODEL
 from schemas.config import (
+    EXTERNAL_ELEMENT_PARAMETERS,
+    EXTERNAL_STRUCTURE_PARAMETERS,
     EXTERNAL_VARIABLE_PARAMETERS,
+    MACHINE_EXTERNAL_PARAMETERS,
     AdapterEntry,
     AxisConfig,
     ChannelConfig,
     DriveModel,
+    ExternalElementConfig,
+    ExternalStructureConfig,
     ExternalVariableConfig,
     MachineConfig,
     ManualConfig,
@@ -57,18 +62,34 @@ _SECTIONS: tuple[tuple[str, type[BaseModel], frozenset[str]], ...] = (
     ("Manual mode `[manual]`", ManualConfig, frozenset()),
     ("Adapters `[[adapters]]` (project's own; `hli-server run`)", AdapterEntry, frozenset()),
     ("V.E. variables `[[external_variables]]` (N-05)", ExternalVariableConfig, frozenset()),
+    ("V.E. structures `[[external_structures]]` (N-05)", ExternalStructureConfig, frozenset()),
+    ("Elements of a V.E. structure `elements = [{...}]` (N-05)", ExternalElementConfig, frozenset()),
 )
 _LIST_PATHS: dict[type[BaseModel], tuple[ParameterInfo, ...]] = {
-    ExternalVariableConfig: EXTERNAL_VARIABLE_PARAMETERS
+    ExternalVariableConfig: EXTERNAL_VARIABLE_PARAMETERS,
+    ExternalStructureConfig: EXTERNAL_STRUCTURE_PARAMETERS,
+    ExternalElementConfig: EXTERNAL_ELEMENT_PARAMETERS,
+    MachineConfig: MACHINE_EXTERNAL_PARAMETERS,
 }
 """Fields that come from a list of their own (not a parameter list of the table's kind)."""
 
 _RANGE_NOTES: dict[tuple[type[BaseModel], str], str] = {
     (ExternalVariableConfig, "name"): "`[A-Za-z_][A-Za-z0-9_]{0,19}`, unique in its area (any case)",
-    (ExternalVariableConfig, "type"): "BOOLEAN, SGN08, UNS08, SGN16, UNS16, SGN32, UNS32, REAL32, REAL64",
+    (ExternalVariableConfig, "type"): "BOOLEAN, SGN08, UNS08, SGN16, UNS16, SGN32, UNS32, REAL32, REAL64, "
+    "STRING, VSTRING, or the name of an `[[external_structures]]`",
     (ExternalVariableConfig, "dims"): "at most 4 dimensions of 1..65535; all V.E. elements fit the Modbus "
     "area 1200..1899",
+    (ExternalVariableConfig, "size"): "VSTRING only: 1 ≤ value ≤ 800 (the NUL included)",
     (ExternalVariableConfig, "access_rights"): "READ_WRITE, READ_ONLY, WRITE_ONLY",
+    (ExternalStructureConfig, "name"): "`[A-Za-z_][A-Za-z0-9_]{0,31}`, unique (any case), no kernel type's",
+    (ExternalStructureConfig, "elements"): "1 to 256 elements, unique names (any case); no structure "
+    "containing itself, nested at most 8 deep",
+    (ExternalElementConfig, "name"): "`[A-Za-z_][A-Za-z0-9_]{0,19}`",
+    (ExternalElementConfig, "type"): "as a variable's `type`",
+    (ExternalElementConfig, "dims"): "at most 4 dimensions of 1..65535",
+    (ExternalElementConfig, "size"): "VSTRING only: 1 ≤ value ≤ 800 (the NUL included)",
+    (ExternalElementConfig, "synchronous"): "0/1; none: the variable's",
+    (ExternalElementConfig, "access_rights"): "READ_WRITE, READ_ONLY, WRITE_ONLY; none: the variable's",
     (AxisConfig, "name"): "`[A-Z][A-Z0-9]{0,7}`, unique",
     (AxisConfig, "number"): "1 ≤ value ≤ MAX(UNS32), unique",
     (AxisConfig, "axis_type"): "T or R",
