@@ -55,7 +55,9 @@ __all__ = [
     "attach_untracked",
 ]
 
-_LE = {t: struct.Struct("<" + t.struct_char) for t in SignalType if t is not SignalType.STRING}
+_LE: dict[SignalType, struct.Struct] = {
+    t: struct.Struct("<" + t.struct_char) for t in SignalType if t is not SignalType.STRING
+}
 """The CNC->PLC fields' formats (a STRING is a V.E. variable's, PLC->CNC: ``read`` reads it)."""
 
 

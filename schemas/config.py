@@ -597,7 +597,8 @@ class ExternalVariableConfig(_Strict):
         default=None,
         ge=1,
         le=800,
-        description="VSTRING only: bytes of the string with its terminating NUL (default 128: 127 characters)",
+        description="VSTRING only: bytes of the string with its terminating NUL (default 128: 127 "
+        "characters)",
     )
     channel: int | None = Field(
         default=None, ge=1, le=12, description="the channel whose own area holds it; none: the global area"
@@ -644,7 +645,8 @@ class ExternalElementConfig(_Strict):
         default=None,
         ge=1,
         le=800,
-        description="VSTRING only: bytes of the string with its terminating NUL (default 128: 127 characters)",
+        description="VSTRING only: bytes of the string with its terminating NUL (default 128: 127 "
+        "characters)",
     )
     synchronous: bool | None = Field(
         default=None, description="none: the variable's synchronisation (inherited)"

@@ -107,11 +107,11 @@ __all__ = [
     "check_host",
     "check_layout",
     "check_segment",
+    "decode_field",
     "header_construct",
     "plan_segment",
     "read_c2p",
     "read_c2p_field",
-    "decode_field",
     "read_field",
     "read_header",
     "read_u64",
@@ -137,7 +137,9 @@ FLAG_CLOSED: Final = 0x1
 _ALIGN: Final = 64
 _U64: Final = struct.Struct("@Q")
 """Native 8-byte access: CPython copies it with one memcpy of 8 bytes (a single load/store)."""
-_NATIVE: Final = {t: struct.Struct("@" + t.struct_char) for t in SignalType if t is not SignalType.STRING}
+_NATIVE: Final[dict[SignalType, struct.Struct]] = {
+    t: struct.Struct("@" + t.struct_char) for t in SignalType if t is not SignalType.STRING
+}
 """Single-store access per type (1, 2, 4 or 8 bytes). A STRING field is copied byte by byte (no single
 store: a reader may see a string half written, docs/process-image.md)."""
 
@@ -439,7 +441,9 @@ def read_c2p(buf: memoryview, plan: SegmentPlan, name: str = "?") -> tuple[int, 
     )
 
 
-def read_c2p_field(buf: memoryview, plan: SegmentPlan, signal: Signal, name: str = "?") -> bool | int | float:
+def read_c2p_field(
+    buf: memoryview, plan: SegmentPlan, signal: Signal, name: str = "?"
+) -> bool | int | float | str:
     """One CNC->PLC field, consistent with the cycle it was published in (seqlock-protected)."""
     for _ in range(_RETRY_LIMIT):
         newest = read_u64(buf, OFF_PUBLISH_COUNT) & 1

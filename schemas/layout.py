@@ -54,10 +54,9 @@ from typing import Any, Final, Protocol, cast
 import construct as cs
 from typing_extensions import TypedDict
 
+from schemas.external_types import ExternalShape, TypeNode, VariableShape, machine_types
 from schemas.units import DINT_MAX, DINT_MIN, UDINT_MAX
 from schemas.wire import DynPosLimitState, HoldSource, Mode, ProgramState, describe
-
-from schemas.external_types import ExternalShape, TypeNode, VariableShape, machine_types
 
 __all__ = [
     "ADS_GROUP_CNC_TO_PLC",
@@ -704,12 +703,12 @@ class Signal:
             return value.encode(STRING_ENCODING)
         return value
 
-    def decode(self, raw: object) -> bool | int | float | str:
+    def decode(self, raw: bool | int | float | bytes) -> bool | int | float | str:
         """A value as ``struct`` unpacked it with :attr:`struct_char`, in the signal's Python type: a
         STRING's bytes up to the first NUL as text. :class:`SignalValueError` for a STRING field
         without a NUL (one character too many) or with a byte that is no Windows-1252 character."""
         if not isinstance(raw, bytes):
-            return raw  # type: ignore[return-value]  # bool, int or float as unpacked
+            return raw
         text, nul, _ = raw.partition(b"\0")
         if not nul:
             raise SignalValueError(

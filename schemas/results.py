@@ -455,4 +455,4 @@ class TraceJson(TypedDict):
 
     signals: list[str]
     cycles: list[int]
-    values: dict[str, list[bool | int | float]]
+    values: dict[str, list[bool | int | float | str]]

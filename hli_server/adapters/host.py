@@ -225,9 +225,10 @@ class Trace:
     """Chosen signals in every cycle of a run (H-07): the per-cycle record of a scenario.
 
     ``trace[st_path]`` is the column as a numpy array (``bool``, ``int32``, ``uint32`` or ``float64``
-    after the signal's type, ``object`` holding ``str`` for a V.E. STRING; read-only), ready for ``argmax``, ``diff`` and friends; ``cycles[k]`` is the
-    cycle of the ``k``-th published cycle and ``values[st_path][k]`` the signal's value in it (CNC->PLC as
-    published, PLC->CNC as latched), as Python lists made when asked for. The columns are kept as arrays
+    after the signal's type, ``object`` holding ``str`` for a V.E. STRING; read-only), ready for
+    ``argmax``, ``diff`` and friends; ``cycles[k]`` is the cycle of the ``k``-th published cycle and
+    ``values[st_path][k]`` the signal's value in it (CNC->PLC as published, PLC->CNC as latched), as
+    Python lists made when asked for. The columns are kept as arrays
     (a value takes its own width, not a Python object): :meth:`json_chunks` writes ``POST /api/step``'s
     answer from them a slice at a time, :meth:`to_json` is the same as one dictionary.
     """

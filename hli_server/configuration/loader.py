@@ -223,7 +223,8 @@ class _Loader:
                 )
 
     def _merge_external_structures(self, structures: list[dict[str, Any]], origins: list[Origin]) -> None:
-        """A list's ``struct[i]`` into ``external_structures``: two lists may define a structure, identically."""
+        """A list's ``struct[i]`` into ``external_structures``: two lists may define a structure,
+        identically."""
         known = self.data.setdefault("external_structures", [])
         if not isinstance(known, list):
             return  # the machine file's own error says why

@@ -302,7 +302,7 @@ class ExternalVariables:
                     ALARM_UNDECLARED,
                 )
         known = {spec.name.split(".")[0].upper(): spec.name.split(".")[0] for spec in self._specs.values()}
-        close = difflib.get_close_matches(name.split(".")[0].upper(), list(known), n=1)
+        close = difflib.get_close_matches(name.split(".", maxsplit=1)[0].upper(), list(known), n=1)
         hint = f"; did you mean V.E.{known[close[0]]}?" if close else ""
         return ExternalVariableError(
             f"V.E.{name} is not declared in the machine file{hint}", ALARM_UNDECLARED

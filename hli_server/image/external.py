@@ -116,8 +116,8 @@ class ExternalSync:
         missing = [v.spec.path for v in variables.values() if -1 in v.elements]
         if missing or len(variables) != len(store):
             raise ValueError(
-                f"the engine's store and the image layout differ ({', '.join(missing) or 'other variables'}); "
-                "build both from the same machine file"
+                "the engine's store and the image layout differ "
+                f"({', '.join(missing) or 'other variables'}); build both from the same machine file"
             )
         self._store = store
         self._variables = list(variables.values())

@@ -524,7 +524,8 @@ def _numpy_type(char: str) -> str:
 
 
 def _column(values: Any, char: str) -> Any:
-    """One recorded column: a STRING's as ``str`` objects (its bytes up to the NUL), the others as they are."""
+    """One recorded column: a STRING's as ``str`` objects (its bytes up to the NUL), the others as
+    they are."""
     import numpy as np
 
     if not char.endswith("s"):

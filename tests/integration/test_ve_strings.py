@@ -114,10 +114,12 @@ def test_modbus_carries_a_string_two_characters_to_a_register(
             # 21 characters leave no NUL in the field's 21 bytes: exception 0x03, nothing written
             full = list(struct.unpack(">11H", b"y" * 22))
             refused = client.write_registers(field.modbus_address, full)
-            assert refused.isError() and refused.exception_code == 0x03
+            assert refused.isError()
+            assert refused.exception_code == 0x03
             # a string is read and written whole: a range that cuts it is 0x02
             cut = client.write_register(field.modbus_address + 3, 0x4142)
-            assert cut.isError() and cut.exception_code == 0x02
+            assert cut.isError()
+            assert cut.exception_code == 0x02
             # its neighbour of the structure, a DINT, keeps the word order
             answer = hli.layout.signal("gpVECh[0]^UserInteraction.Answer")
             hli.runtime.machine.external.write("UserInteraction.Answer", 1, 100_000)

@@ -244,7 +244,10 @@ def test_the_kernels_structure_example_is_read_and_placed(tmp_path: Path) -> Non
 
 
 def test_two_lists_share_a_structure_and_the_string_length(tmp_path: Path) -> None:
-    lis = "use_extended_string_var 1\nstruct[0].name T\nstruct[0].element[0].name A\nvar[0].name V\nvar[0].type T\n"
+    lis = (
+        "use_extended_string_var 1\nstruct[0].name T\nstruct[0].element[0].name A\n"
+        "var[0].name V\nvar[0].type T\n"
+    )
     write(tmp_path, "ch2_ve.lis", lis)
     config, _ = load_machine_with_warnings(
         machine(tmp_path, lis, ch2='external_variables_list = "ch2_ve.lis"')

@@ -14,12 +14,13 @@ What each index group serves (``docs/ads.md`` has the table for users)::
 Writes change nothing unless every value is acceptable (a BOOL byte other than 0/1 is 0x706) and every
 range covers whole fields. A V.E. STRING read by handle or by name answers its own bytes to a longer
 read (pyads reads a STRING with a read length of 1024 and takes what comes, as TwinCAT answers; a read at
-its address in 0xF030 gets the bytes up to the end of the half) and takes
-a shorter write up to its NUL (pyads writes the text and one NUL): the rest of the field is then NUL; a
-STRING's bytes without a NUL within the field (a character too many) are 0x706. A structure written as a whole (ads-client ``writeValue`` of a control unit,
-pyads ``write_structure_by_name``) sets its ``_w`` members; its ``_r`` members are the CNC's, which
-overwrites them every cycle in the kernel, so their bytes in the write are ignored here. A write that
-covers no ``_w`` member at all is refused with 0x704, as a write of a ``_r`` field by name is.
+its address in 0xF030 gets the bytes up to the end of the half) and takes a shorter write up to its NUL
+(pyads writes the text and one NUL): the rest of the field is then NUL; a STRING's bytes without a NUL
+within the field (a character too many) are 0x706. A structure written as a whole (ads-client
+``writeValue`` of a control unit, pyads ``write_structure_by_name``) sets its ``_w`` members; its ``_r``
+members are the CNC's, which overwrites them every cycle in the kernel, so their bytes in the write are
+ignored here. A write that covers no ``_w`` member at all is refused with 0x704, as a write of a ``_r``
+field by name is.
 """
 
 from __future__ import annotations
