@@ -763,8 +763,10 @@ def test_the_kernels_type_names_are_served_as_their_iec_names() -> None:
     ]
     assert ads_data_type("SGN16") == (AdsDataType.INT16, 2)
     assert ads_data_type("REAL32") == (AdsDataType.REAL32, 4)
+    assert ads_data_type("STRING(80)") == (AdsDataType.STRING, 81)  # a V.E. STRING (issue 33)
+    assert ads_data_type("string(20)") == (AdsDataType.STRING, 21)
     with pytest.raises(ValueError, match="no IEC base type"):
-        ads_data_type("STRING(80)")
+        ads_data_type("WSTRING(80)")
 
 
 # ================================================================================================
