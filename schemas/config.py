@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, ClassVar, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
@@ -576,13 +576,16 @@ def _type_name(value: str) -> str:
     return upper if upper in ELEMENTARY_TYPES or upper in STRING_TYPES else value
 
 
-class ExternalVariableConfig(_Strict):
-    """A ``V.E.`` variable shared by NC programs and the PLC (N-05): the kernel's configuration list of
-    external variables, reduced to what the simulator needs (project's own shape; docs/nc-language.md)."""
+class _ExternalTyped(_Strict):
+    """What a V.E. variable and an element of a structure both declare: name, type, dimensions, size."""
+
+    _what: ClassVar[str] = "V.E."
+    _size_parameter: ClassVar[str] = "P-EXTV-00008"
 
     name: str = Field(
         pattern=_V_E_NAME,
-        description="name without the prefix V.E. (at most 20 characters, as the kernel allows)",
+        description="name without the prefix V.E. (an element's: V.E.variable.element; at most 20 "
+        "characters, as the kernel allows)",
     )
     type: str = Field(
         default="REAL64",
@@ -600,6 +603,26 @@ class ExternalVariableConfig(_Strict):
         description="VSTRING only: bytes of the string with its terminating NUL (default 128: 127 "
         "characters)",
     )
+
+    @field_validator("type")
+    @classmethod
+    def _kernel_type_name(cls, value: str) -> str:
+        return _type_name(value)
+
+    @model_validator(mode="after")
+    def _size_of_vstring(self) -> Self:
+        if self.size is not None and self.type != "VSTRING":
+            raise ValueError(
+                f"{self._what}{self.name}: size is the length of a VSTRING ({self._size_parameter}); a "
+                f"{self.type} has its type's size (a STRING's follows use_extended_string_var)"
+            )
+        return self
+
+
+class ExternalVariableConfig(_ExternalTyped):
+    """A ``V.E.`` variable shared by NC programs and the PLC (N-05): the kernel's configuration list of
+    external variables, reduced to what the simulator needs (project's own shape; docs/nc-language.md)."""
+
     channel: int | None = Field(
         default=None, ge=1, le=12, description="the channel whose own area holds it; none: the global area"
     )
@@ -614,60 +637,19 @@ class ExternalVariableConfig(_Strict):
         default="", max_length=200, description="what it means (shown by `hli-server map` and the dashboard)"
     )
 
-    @field_validator("type")
-    @classmethod
-    def _kernel_type_name(cls, value: str) -> str:
-        return _type_name(value)
 
-    @model_validator(mode="after")
-    def _size_of_vstring(self) -> ExternalVariableConfig:
-        if self.size is not None and self.type != "VSTRING":
-            raise ValueError(
-                f"V.E.{self.name}: size is the length of a VSTRING (P-EXTV-00008); a {self.type} has its "
-                "type's size (a STRING's follows use_extended_string_var)"
-            )
-        return self
-
-
-class ExternalElementConfig(_Strict):
+class ExternalElementConfig(_ExternalTyped):
     """One element of a V.E. structure (``struct[i].element[j].*``, P-EXTV-00016 .. 00021)."""
 
-    name: str = Field(pattern=_V_E_NAME, description="the element's name (V.E.variable.name)")
-    type: str = Field(
-        default="REAL64",
-        pattern=r"^[A-Za-z_][A-Za-z0-9_]{0,31}$",
-        description="data type: elementary, STRING, VSTRING or another structure",
-    )
-    dims: list[Annotated[int, Field(ge=1, le=65535)]] = Field(
-        default_factory=list, max_length=4, description="array dimensions; empty for a scalar"
-    )
-    size: int | None = Field(
-        default=None,
-        ge=1,
-        le=800,
-        description="VSTRING only: bytes of the string with its terminating NUL (default 128: 127 "
-        "characters)",
-    )
+    _what: ClassVar[str] = "element "
+    _size_parameter: ClassVar[str] = "P-EXTV-00021"
+
     synchronous: bool | None = Field(
         default=None, description="none: the variable's synchronisation (inherited)"
     )
     access_rights: _ACCESS_RIGHTS | None = Field(
         default=None, description="none: the variable's access rights (inherited)"
     )
-
-    @field_validator("type")
-    @classmethod
-    def _kernel_type_name(cls, value: str) -> str:
-        return _type_name(value)
-
-    @model_validator(mode="after")
-    def _size_of_vstring(self) -> ExternalElementConfig:
-        if self.size is not None and self.type != "VSTRING":
-            raise ValueError(
-                f"element {self.name}: size is the length of a VSTRING (P-EXTV-00021); a {self.type} has "
-                "its type's size"
-            )
-        return self
 
 
 class ExternalStructureConfig(_Strict):
