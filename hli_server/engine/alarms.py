@@ -345,6 +345,19 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(20839, "The character after $GOTO is not permitted", "kernel", page=_DIAG + "252734603.html"),
     _e(21382, "Impermissible write/read access to cycle parameters", "kernel", page=_DIAG + "254440587.html"),
     _e(
+        20097,
+        "Variable read not permitted (a V.E. variable WRITE_ONLY for the NC)",
+        "kernel",
+        page=_DIAG + "250750091.html",
+    ),
+    _e(
+        20100,
+        "Write access to variable denied (a V.E. variable READ_ONLY for the NC)",
+        "kernel",
+        page=_DIAG + "250758795.html",
+    ),
+    _e(21462, "String for variable too long", "kernel", page=_DIAG + "254771339.html"),
+    _e(
         21500,
         "Invalid control blocks pending at local subroutine end",
         "kernel",

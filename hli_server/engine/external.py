@@ -240,6 +240,8 @@ class ExternalVariables:
         self._values: dict[tuple[int | None, str], list[ExternalValue]] = {}
         self._structures: dict[tuple[int | None, str], dict[str, str]] = {}
         """(area, upper-case path of a structure level) -> its elements (upper case -> as declared)"""
+        self._declared: dict[tuple[int | None, str], str] = {}
+        """(area, upper-case path of a structure level) -> the path as declared"""
         for spec in specs:
             key = (spec.channel, spec.name.upper())
             if key in self._specs:
@@ -251,8 +253,10 @@ class ExternalVariables:
             if spec.type is ExternalType.STRING and spec.string_size < 1:
                 raise ExternalVariableError(f"{spec.path}: a STRING has a size of at least 1 byte")
             for depth in range(1, len(names)):
-                level = (spec.channel, ".".join(names[:depth]).upper())
+                path = ".".join(names[:depth])
+                level = (spec.channel, path.upper())
                 self._structures.setdefault(level, {})[names[depth].upper()] = names[depth]
+                self._declared[level] = path
             self._specs[key] = spec
             self._values[key] = [spec.zero()] * spec.size
 
@@ -275,32 +279,37 @@ class ExternalVariables:
     def elements(self, name: str, channel: int | None) -> list[str] | None:
         """The element names of the structure ``V.E.name`` (``UserInteraction`` -> ``["Message",
         "Answer"]``), as ``channel``'s programs see it; None when ``name`` is no structure."""
+        level = self._level(name, channel)
+        return None if level is None else list(self._structures[level].values())
+
+    def _level(self, name: str, channel: int | None) -> tuple[int | None, str] | None:
         key = name.upper()
         if channel is not None and (channel, key) in self._structures:
-            return list(self._structures[(channel, key)].values())
-        found = self._structures.get((None, key))
-        return None if found is None else list(found.values())
+            return channel, key
+        return (None, key) if (None, key) in self._structures else None
 
     def unknown(self, name: str, channel: int | None) -> ExternalVariableError:
         """The error for ``V.E.name``, which :meth:`spec` does not know: a structure without an element
         named, an element the structure does not have, or an undeclared name (with a did-you-mean)."""
-        members = self.elements(name, channel)
-        if members is not None:
+        level = self._level(name, channel)
+        if level is not None:
+            members = list(self._structures[level].values())
+            declared = self._declared[level]
             return ExternalVariableError(
-                f"V.E.{name} is a structure: name one of its elements ({', '.join(members)}), "
-                f"e.g. V.E.{name}.{members[0]}",
+                f"V.E.{declared} is a structure: name one of its elements ({', '.join(members)}), "
+                f"e.g. V.E.{declared}.{members[0]}",
                 ALARM_UNDECLARED,
             )
         head, dot, last = name.rpartition(".")
-        if dot:
-            members = self.elements(head, channel)
-            if members is not None:
-                close = difflib.get_close_matches(last.upper(), [m.upper() for m in members], n=1)
-                hint = "".join(f"; did you mean {m}?" for m in members if close and m.upper() == close[0])
-                return ExternalVariableError(
-                    f"V.E.{head} has no element {last} (its elements: {', '.join(members)}){hint}",
-                    ALARM_UNDECLARED,
-                )
+        level = self._level(head, channel) if dot else None
+        if level is not None:
+            members = list(self._structures[level].values())
+            close = difflib.get_close_matches(last.upper(), [m.upper() for m in members], n=1)
+            hint = "".join(f"; did you mean {m}?" for m in members if close and m.upper() == close[0])
+            return ExternalVariableError(
+                f"V.E.{self._declared[level]} has no element {last} (its elements: {', '.join(members)}){hint}",
+                ALARM_UNDECLARED,
+            )
         known = {spec.name.split(".")[0].upper(): spec.name.split(".")[0] for spec in self._specs.values()}
         close = difflib.get_close_matches(name.split(".", maxsplit=1)[0].upper(), list(known), n=1)
         hint = f"; did you mean V.E.{known[close[0]]}?" if close else ""

@@ -409,7 +409,7 @@ M30
         ("X[V.L.NOPE]", 914003, "V.L.NOPE"),
         ("#VAR\nV.P.A : UNS08\n#ENDVAR\nV.P.A = 256", 914002, "0 .. 255"),
         ("#VAR\nV.P.A : UNS08\n#ENDVAR\nV.P.A = -1", 914002, "UNS08"),
-        ('#VAR\nV.P.S : STRING[2]\n#ENDVAR\nV.P.S = "abc"', 914020, "at most 2"),
+        ('#VAR\nV.P.S : STRING[2]\n#ENDVAR\nV.P.S = "abc"', 21462, "at most 2"),
         ("#VAR\nV.P.A[3]\n#ENDVAR\nX[V.P.A[3]]", 914005, "allowed 0 to 2"),
         ("#VAR\nV.P.A[3]\n#ENDVAR\nX[V.P.A]", 914005, "index"),
         ("#VAR\nV.P.A\nV.P.A\n#ENDVAR", 914008, "twice"),

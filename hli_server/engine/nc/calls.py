@@ -7,7 +7,11 @@ from __future__ import annotations
 
 from hli_server.engine.nc.blocks import Block, NcError
 from hli_server.engine.nc.control_flow import ControlFlow
+from hli_server.engine.nc.expr import ALARM_TYPE as A_TYPE
+from hli_server.engine.nc.expr import Expr, format_value
 from hli_server.engine.nc.language import (
+    A_CONTROL_SYNTAX,
+    A_LIMIT,
     A_MAIN_RETURN,
     A_OPEN_INVALID_GLOBAL,
     A_OPEN_INVALID_LOCAL,
@@ -17,6 +21,7 @@ from hli_server.engine.nc.language import (
     A_SUB_END,
     END_OF,
     MAX_CALL_DEPTH,
+    MAX_NAME,
 )
 from hli_server.engine.nc.levels import (
     SEEK_LABEL,
@@ -45,9 +50,29 @@ class ProgramLevels(ControlFlow):
         params: dict[int, float] | None = None
         if call.cycle:
             params = {k: self._number(stmt, v, f"@P{k}") for k, v in call.params}
+        if call.variable is not None:
+            call = call.named(self._program_name(stmt, call, call.variable))
         new = self._resolver.resolve(call, stmt, frame, place)
         new.params = params
         self._frames.append(new)
+
+    def _program_name(self, stmt: Stmt, call: Call, variable: Expr) -> str:
+        """The program ``L V.E.name`` names: the V.E. STRING's text, blanks around it dropped."""
+        value = self._evaluate(stmt, variable)
+        if not isinstance(value, str):
+            raise stmt.error(
+                A_TYPE,
+                f"{call.text}: the program's name comes from a V.E. STRING; this one holds the number "
+                f"{format_value(value)}",
+            )
+        name = value.strip()
+        if not name:
+            raise stmt.error(
+                A_CONTROL_SYNTAX, f"{call.text}: the V.E. STRING that names the program is empty"
+            )
+        if len(name) > MAX_NAME:
+            raise stmt.error(A_LIMIT, f"{call.text}: a program name has at most {MAX_NAME} characters")
+        return name
 
     def _return(self, frame: Frame) -> None:
         self._frames.pop()

@@ -66,6 +66,7 @@ from hli_server.engine.nc.language import (
     MAX_STRING,
 )
 from hli_server.engine.nc.reader import RawBlock, nc_error
+from schemas.external_types import MAX_NESTING
 
 __all__ = [
     "CONSTANT",
@@ -83,6 +84,8 @@ UPPER: Final = str.maketrans("abcdefghijklmnopqrstuvwxyz", "ABCDEFGHIJKLMNOPQRST
 """ASCII letters to upper case, every other character kept: indices stay aligned with the text."""
 NAME_CHARS: Final = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_")
 DIGITS: Final = frozenset("0123456789")
+MAX_EXTERNAL_INDICES: Final = 4 * (MAX_NESTING + 1)
+"""Indices of one V.E. element: 4 per level, the variable and its structures nested 8 deep."""
 LETTERS: Final = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZ")
 
 
@@ -542,6 +545,14 @@ class ExpressionParser:
             self.pos += 1
         name = sign + self.var_name()
         indices = self.indices()
+        if kind == KIND_VE:  # a structure's element after an array's index: V.E.curve[2].point[5].X
+            while indices and self.peek() == "." and self.peek(1) in NAME_CHARS:
+                self.pos += 1
+                name += "." + self.var_name()
+                more = self.indices()
+                if len(indices) + len(more) > MAX_EXTERNAL_INDICES:
+                    self.fail(ALARM_EXPRESSION, f"more than {MAX_EXTERNAL_INDICES} indices")
+                indices += more
         return Ref(kind, name, indices, text=self.u[start : self.pos])
 
     def parameter(self) -> Ref:

@@ -253,6 +253,8 @@ class Interpreter(ProgramLevels):
                 exprs.extend(item.target.indices)
             elif isinstance(item, Call):
                 exprs.extend(v for _, v in item.params)
+                if item.variable is not None:  # L V.E.name: a synchronous V.E. is read after the flush
+                    exprs.append(item.variable)
         return exprs
 
     # --- the block for the decoder ---------------------------------------------------------------------

@@ -49,6 +49,10 @@ A_OPEN_INVALID_LOCAL: Final = 21500
 A_OPEN_INVALID_MAIN: Final = 21501
 A_OPEN_INVALID_GLOBAL: Final = 21502
 A_CYCLE_PARAMETER: Final = 21382
+A_VE_READ_DENIED: Final = 20097
+"""A read of a V.E. variable that is WRITE_ONLY for NC programs (P-EXTV-00006)."""
+A_VE_WRITE_DENIED: Final = 20100
+"""A write of a V.E. variable that is READ_ONLY for NC programs (P-EXTV-00006)."""
 A_UNDECLARED: Final = 914003
 A_READ_ONLY: Final = 914004
 A_INDEX: Final = 914005

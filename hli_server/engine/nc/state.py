@@ -132,8 +132,14 @@ class InterpreterState(Env):
     # --- flush: a synchronous read waits for the path --------------------------------------------------
     def _needs_flush(self, frame: Frame, stmt: Stmt, exprs: list[Expr]) -> bool:
         """Does the statement read a synchronous variable (V.E. declared synchronous, V.A.ACT_POS)?
-        Then decoding first waits for the path (``#FLUSH WAIT``), once, and the statement runs again."""
-        if frame.synced == stmt.first or stmt.sync_reads == 0:
+        Then decoding first waits for the path (``#FLUSH WAIT``), once, and the statement runs again.
+        Every run of the statement waits (a loop's every pass): the run after the wait takes the mark
+        (``frame.synced``) away, so that the next run sees what the path did since, a synchronous
+        V.E. write of the pass before included (issue 33: a count in a loop read its stale value)."""
+        if stmt.sync_reads == 0:
+            return False
+        if frame.synced == stmt.first:
+            frame.synced = -1
             return False
         if stmt.sync_reads < 0:
             stmt.sync_reads = 1 if self._reads_synchronous(exprs) else 0

@@ -390,13 +390,10 @@ class StatementParser(HashParser):
                 self.fail(A_UNKNOWN_WORD, f"{self.word_at(start)}: quote not closed")
             name = self.code[self.pos + 1 : close]
             self.pos = close + 1
+        elif u.startswith("V.E.", self.pos):  # the name in a V.E. STRING (PM 15556852875)
+            variable = self.variable()
+            return Call(u[start : self.pos].strip(), local, "", False, [], variable)
         else:
-            if u.startswith("V.E.", self.pos):
-                self.fail(
-                    A_NOT_SIMULATED,
-                    f"{self.word_at(start)}: calls by the name in a V.E. string variable are not simulated "
-                    "(V.E. variables here are numbers): see docs/nc-language.md",
-                )
             begin = self.pos
             while self.pos < self.n and self.code[self.pos] not in _PROG_DELIMITERS:
                 self.pos += 1

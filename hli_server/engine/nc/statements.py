@@ -139,16 +139,29 @@ class Assign(Item):
 
 class Call(Item):
     """``L name`` (global), ``LL name`` (local), ``L CYCLE [NAME=.. @P1=..]`` (``cycle``): the last
-    item of its block. ``params`` are the cycle's ``@P`` numbers and values."""
+    item of its block. ``params`` are the cycle's ``@P`` numbers and values. ``L V.E.name`` and ``LL
+    V.E.name`` name the program by a V.E. STRING (``variable``; ``name`` is empty until the call runs:
+    :meth:`named`)."""
 
     def __init__(
-        self, text: str, local: bool, name: str, cycle: bool, params: list[tuple[int, Expr]]
+        self,
+        text: str,
+        local: bool,
+        name: str,
+        cycle: bool,
+        params: list[tuple[int, Expr]],
+        variable: Expr | None = None,
     ) -> None:
         super().__init__(text)
         self.local = local
         self.name = name
         self.cycle = cycle
         self.params = params
+        self.variable = variable
+
+    def named(self, name: str) -> Call:
+        """This call of the program ``name`` (what ``L V.E.name`` calls when it runs)."""
+        return Call(self.text, self.local, name, self.cycle, self.params)
 
 
 class Goto(Item):

@@ -8,7 +8,7 @@ import math
 from collections.abc import Callable
 from typing import Final
 
-from hli_server.engine.external import ExternalVariableError
+from hli_server.engine.external import ExternalVariableError, ExternalVarSpec
 from hli_server.engine.nc.blocks import NcError
 from hli_server.engine.nc.directives import (
     ToolWrite,
@@ -40,6 +40,8 @@ from hli_server.engine.nc.language import (
     A_NOT_WRITTEN,
     A_READ_ONLY,
     A_UNDECLARED,
+    A_VE_READ_DENIED,
+    A_VE_WRITE_DENIED,
     TOOL_WRITES,
 )
 from hli_server.engine.nc.levels import (
@@ -158,16 +160,7 @@ class VariableAccess(InterpreterState):
                 )
             return var.get(self._indices(ref))
         if kind == KIND_VE:
-            try:
-                return float(
-                    self.host.external.read(
-                        ref.name,
-                        self.host.channel_number,
-                        [int(i) if i == int(i) else -1 for i in self._indices(ref)],
-                    )
-                )
-            except ExternalVariableError as exc:
-                raise EvalError(A_UNDECLARED, str(exc)) from None
+            return self._read_external(ref)
         if kind == KIND_AT_P:
             return self._cycle_param(ref)
         if kind == KIND_VA:
@@ -329,29 +322,59 @@ class VariableAccess(InterpreterState):
         except EvalError as exc:
             raise stmt.error(exc.alarm, exc.message) from None
 
-    def _write_external(self, ref: Ref, value: Value) -> Callable[[], None] | None:
+    # --- V.E. (N-05): elementary, STRING, a structure's elements ----------------------------------------
+    def _external_spec(self, ref: Ref) -> ExternalVarSpec:
         external = self.host.external
-        channel = self.host.channel_number
-        spec = external.spec(ref.name, channel)
+        spec = external.spec(ref.name, self.host.channel_number)
         if spec is None:
+            raise EvalError(A_UNDECLARED, str(external.unknown(ref.name, self.host.channel_number)))
+        return spec
+
+    def _external_index(self, ref: Ref) -> list[int]:
+        return [int(i) if i == int(i) else -1 for i in self._indices(ref)]
+
+    def _read_external(self, ref: Ref) -> Value:
+        """A V.E. element's value: a STRING's text, a number (a BOOLEAN as 1.0 or 0.0)."""
+        spec = self._external_spec(ref)
+        if spec.access_rights == "WRITE_ONLY":
             raise EvalError(
-                A_UNDECLARED, f"V.E.{ref.name} is not declared in the machine file (external_variables)"
+                A_VE_READ_DENIED,
+                f"{ref.text}: {spec.path} is WRITE_ONLY for NC programs (access_rights, P-EXTV-00006); "
+                "only the PLC reads it",
             )
-        number = as_number(value, ref.text)
-        index = [int(i) if i == int(i) else -1 for i in self._indices(ref)]
+        try:
+            value = self.host.external.read(ref.name, self.host.channel_number, self._external_index(ref))
+        except ExternalVariableError as exc:
+            raise EvalError(exc.alarm, str(exc)) from None
+        return value if isinstance(value, str) else float(value)
+
+    def _write_external(self, ref: Ref, value: Value) -> Callable[[], None] | None:
+        """Write a V.E. element now (asynchronous), or return the write the path makes when it passes the
+        block (synchronous). A STRING takes a text of at most its length (else the kernel's 21462), a
+        number a number in its type's range (914005); the other kind is 914006."""
+        spec = self._external_spec(ref)
+        if spec.access_rights == "READ_ONLY":
+            raise EvalError(
+                A_VE_WRITE_DENIED,
+                f"{ref.text}: {spec.path} is READ_ONLY for NC programs (access_rights, P-EXTV-00006); "
+                "only the PLC writes it",
+            )
+        index = self._external_index(ref)
         try:
             spec.flat_index(index)
-            spec.coerce(number)
+            stored = spec.coerce(value)
         except ExternalVariableError as exc:
-            raise EvalError(A_INDEX, str(exc)) from None
+            raise EvalError(exc.alarm, str(exc)) from None
+        external = self.host.external
+        channel = self.host.channel_number
         name = ref.name
         if not spec.synchronous:
             self._effect()
-            external.write(name, channel, number, index)
+            external.write(name, channel, stored, index)
             return None
 
         def write() -> None:
-            external.write(name, channel, number, index)
+            external.write(name, channel, stored, index)
 
         return write
 

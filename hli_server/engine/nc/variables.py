@@ -50,8 +50,8 @@ def coerce(value: Value, type_name: str, string_size: int, what: str) -> Value:
     if type_name == "STRING":
         if not isinstance(value, str):
             raise EvalError(ALARM_TYPE, f"{what} is a STRING: {format_value(value)} is a number")
-        if len(value) > string_size:
-            raise EvalError(914020, f"{what} holds at most {string_size} characters, {len(value)} given")
+        if len(value) > string_size:  # the kernel's "String for variable too long" (V.E. STRINGs too)
+            raise EvalError(21462, f"{what} holds at most {string_size} characters, {len(value)} given")
         return value
     if isinstance(value, str):
         raise EvalError(ALARM_TYPE, f"{what} is a number ({type_name}): {format_value(value)} is a string")
