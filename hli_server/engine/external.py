@@ -307,7 +307,8 @@ class ExternalVariables:
             close = difflib.get_close_matches(last.upper(), [m.upper() for m in members], n=1)
             hint = "".join(f"; did you mean {m}?" for m in members if close and m.upper() == close[0])
             return ExternalVariableError(
-                f"V.E.{self._declared[level]} has no element {last} (its elements: {', '.join(members)}){hint}",
+                f"V.E.{self._declared[level]} has no element {last} "
+                f"(its elements: {', '.join(members)}){hint}",
                 ALARM_UNDECLARED,
             )
         known = {spec.name.split(".")[0].upper(): spec.name.split(".")[0] for spec in self._specs.values()}
