@@ -22,7 +22,12 @@ from pymodbus.client import ModbusTcpClient
 
 from hli_server.testing import Harness
 from plc_clients.ads import close_pyads, open_pyads
-from schemas.config import MachineConfig
+from schemas.config import (
+    ExternalElementConfig,
+    ExternalStructureConfig,
+    ExternalVariableConfig,
+    MachineConfig,
+)
 from tests.machines import demo_config
 
 pytestmark = [pytest.mark.req("N-05"), pytest.mark.timeout(60)]
@@ -198,3 +203,55 @@ def test_a_session_with_string_writes_records_and_replays(hli: Harness, tmp_path
     assert ["teach_0815.dat"] in texts
     report = hli.replay(path)
     assert report.verdict.name == "PASS"
+
+
+HMI_PROGRAM = """\
+N10 G90 G01 X10 F6000
+N20 V.E.UserInteraction.Message = "Camera at A1 - trigger imaging, then click OK"
+N30 G01 X20
+N40 V.E.UserInteraction.Message = "Camera at B3 - trigger imaging, then click OK"
+N50 G01 X30
+N60 V.E.UserInteraction.Message = ""
+N70 M30
+"""
+
+
+def test_an_hmi_message_a_program_writes_reaches_the_plc_when_the_path_gets_there() -> None:
+    """RegenHU's programs tell the operator what to do through a structure with a STRING: declared
+    synchronous, each message reaches the PLC (here through the image, as an HMI reads it) when the path
+    has reached its block, not when the block is decoded ahead of the motion."""
+    config = demo_config().model_copy(
+        update={
+            "external_structures": [
+                ExternalStructureConfig(
+                    name="UserInteractionType",
+                    elements=[ExternalElementConfig(name="Message", type="VSTRING")],
+                )
+            ],
+            "external_variables": [
+                ExternalVariableConfig(name="UserInteraction", type="UserInteractionType", synchronous=True)
+            ],
+        }
+    )
+    message, x = "gpVEGlob^UserInteraction.Message", "gpAx[0]^ipo_state.cmd_pos_r"
+    with Harness(config) as hli:
+        for axis in range(len(config.axes)):
+            hli.image[f"gpAx[{axis}]^manual.reference_w"] = True
+        hli.run_until(lambda: all(hli.image[f"gpAx[{a}]^ipo_state.referenced_r"] for a in range(3)), 50_000)
+        hli.load_program(1, HMI_PROGRAM)
+        with hli.trace(message, x) as recording:
+            hli.operator.start(1)
+            hli.run_until(lambda: hli.image["gpCh[0]^bahn_state.program_state_r"] == 4, 20_000)
+    trace = recording.trace()
+    texts, positions = trace[message].tolist(), trace[x].tolist()
+    seen = [t for k, t in enumerate(texts) if k == 0 or t != texts[k - 1]]
+    assert seen == [
+        "",
+        "Camera at A1 - trigger imaging, then click OK",
+        "Camera at B3 - trigger imaging, then click OK",
+        "",
+    ]
+    first_a1 = texts.index(seen[1])
+    first_b3 = texts.index(seen[2])
+    assert positions[first_a1] == pytest.approx(100_000, abs=10)  # X at 10 mm (0.1 um) when A1 shows
+    assert positions[first_b3] == pytest.approx(200_000, abs=10)
