@@ -247,7 +247,7 @@ class RegisterMap:
                     ExceptionCode.ILLEGAL_DATA_ADDRESS,
                     f"{self.reference(table, address)} x {count} cuts {signal.st_path} "
                     f"({signal.type}, {width} registers from address {first}): "
-                    "read and write 32/64-bit values whole",
+                    "read and write 32/64-bit values and strings whole",
                 )
             spans.append(_Span(signal, a))
             a += width
