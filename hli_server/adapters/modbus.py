@@ -246,7 +246,7 @@ class RegisterMap:
                 raise ModbusError(
                     ExceptionCode.ILLEGAL_DATA_ADDRESS,
                     f"{self.reference(table, address)} x {count} cuts {signal.st_path} "
-                    f"({signal.type}, {width} registers from address {first}): "
+                    f"({signal.type_name}, {width} registers from address {first}): "
                     "read and write 32/64-bit values and strings whole",
                 )
             spans.append(_Span(signal, a))
