@@ -252,3 +252,57 @@ async def test_fuzz_the_shared_memory_random_plc_outputs_never_fail_a_cycle() ->
             assert rt.image.read("gpCh[0]^bahn_state.cycle_r") == rt.machine.cycle
         finally:
             client.close()
+
+
+@pytest.mark.req("N-05", "H-01", "H-03")
+async def test_fuzz_v_e_strings_raw_bytes_and_registers_never_fail_a_cycle() -> None:
+    """A PLC stores any bytes into the V.E. STRING fields (shared memory: no NUL, bytes Windows-1252 has no
+    character for) and writes any registers over them (Modbus FC 16): the latch takes only what a STRING
+    holds, the store's texts stay valid, Modbus refuses with 0x02/0x03 and never 0x04, no cycle fails."""
+    import asyncio
+
+    from tests.machines import demo_config
+
+    rng = random.Random(seed_for("ve-strings"))
+    async with Runtime(demo_config(external=True), clock="stepped", adapters=[("modbus", {"port": 0})]) as rt:
+        port: int = rt.adapter("modbus").port  # type: ignore[attr-defined]
+        strings = [s for s in rt.layout.external_signals if s.type.value == "STRING"]
+        specs = {s.st_path: s.external_element for s in strings}
+        client = ImageClient.attach(rt.image.name)
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+        try:
+            for i in range(count(600)):
+                s = rng.choice(strings)
+                if rng.random() < 0.5:
+                    raw = bytes(rng.randrange(256) for _ in range(s.size))
+                    if rng.random() < 0.5:
+                        raw = raw[: rng.randrange(s.size)].ljust(s.size, b"\0")
+                    start = client.plan.p2c_offset + s.offset
+                    client._buf[start : start + s.size] = raw
+                else:
+                    count_ = rng.randint(1, s.modbus_count + 1)
+                    data = bytes(rng.randrange(256) for _ in range(2 * count_))
+                    pdu = (
+                        struct.pack(">BHHB", 16, s.modbus_address + rng.choice([0, 0, 1]), count_, len(data))
+                        + data
+                    )
+                    writer.write(_adu(i & 0xFFFF, 1, pdu))
+                    head = await asyncio.wait_for(reader.readexactly(7), 5)
+                    (length,) = struct.unpack(">H", head[4:6])
+                    answer = await reader.readexactly(length - 1)
+                    if answer[0] & 0x80:
+                        assert answer[1] in (0x02, 0x03), (i, pdu.hex())
+                await rt.step(1)
+                for path, (name, index) in specs.items():
+                    signal = rt.layout.signal(path)
+                    channel = (
+                        None if signal.scope.value == "ve_global" else rt.layout.channels[signal.index].number
+                    )
+                    text = rt.machine.external.read(name, channel, index)
+                    assert isinstance(text, str)
+                    assert len(text.encode("cp1252")) < signal.size, (path, text)
+            assert rt.timing()["failed_cycles"] == 0
+            assert rt.adapter("modbus").server.stats.exceptions.get(4, 0) == 0  # type: ignore[attr-defined]
+        finally:
+            writer.close()
+            client.close()
