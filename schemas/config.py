@@ -452,6 +452,13 @@ class ChannelConfig(_Strict):
         description="P-CHAN-00071 acceleration profile at program start: 0 STEP, 1 TRAPEZ, 2 SIN2, 3 HSC "
         "(simulated as TRAPEZ)",
     )
+    default_feedrate: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=VELOCITY_LIMIT_MM_PER_MIN,
+        description="P-CHAN-00099 feed of a feed move (G01/G02/G03) without F at program start [mm/min]; "
+        "0: none (ID 20008)",
+    )
     feedhold_deceleration: float = Field(
         default=1000.0,
         gt=0.0,
@@ -1126,6 +1133,14 @@ CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
             "P-CHAN-00071",
             "0..3",
             "https://infosys.beckhoff.com/content/1033/tf5200_oscillating_axis/222124555.html",
+            "",
+        ),
+        (
+            "prog_start.feedrate",
+            "default_feedrate",
+            "P-CHAN-00099",
+            "mm/min",
+            _CH + "149303051.html",
             "",
         ),
         # a start-up parameter (P-STUP) that belongs to one channel; [0] stands for the channel's index

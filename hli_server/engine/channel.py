@@ -48,6 +48,8 @@ __all__ = ["LOOKAHEAD_ITEMS", "Channel", "ChannelHost", "JogGuard"]
 LOOKAHEAD_ITEMS = 64
 """Motion blocks decoded ahead of the interpolator (the look-ahead buffer, P-STUP-00070's size)."""
 
+DRIVE_CYCLE_IDENTS = ("S-0-0001", "S-0-0002")
+"""SERCOS idents of the cycle times (µs): NC cycle time TNcyc, communication cycle time tScyc."""
 ALARM_REFUSED = 911021
 """Warning: a command not allowed in this mode or state (the text says which and why)."""
 ALARM_NOT_REFERENCED = 911020
@@ -110,6 +112,13 @@ class ChannelHost:
     def axis_name(self, index: int) -> str | None:
         names = self._channel.axis_names
         return names[index] if 0 <= index < len(names) else None
+
+    def drive_value(self, axis: str, ident: str) -> float | None:
+        """``#IDENT RD``: the idents the simulated drive has of its own (S-0-0001 the NC cycle time and
+        S-0-0002 the communication cycle time, both the channel's cycle time in µs); None for any other."""
+        if ident in DRIVE_CYCLE_IDENTS and axis:
+            return float(round(self._channel.t_a * 1e6))
+        return None
 
     def axis_value(self, variable: str, axis: str) -> float | None:
         """V.A.: ABS and PROG (the end of the last block, program coordinates), ACT_POS (the axis'
@@ -210,6 +219,7 @@ class Channel:
         self.compiler = Compiler(self.axis_names, config.main_axes)
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))
         self.decoder.warn = ChannelHost(self).warn
+        self.decoder.default_feed = config.default_feedrate or None
         """Runs the NC programs of this channel ahead of the motion (N-01..N-08)."""
         self.planner = Planner(t_a=self.t_a, feedhold_decel=config.feedhold_deceleration)
         self.slope_ramp_time = max(

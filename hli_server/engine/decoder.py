@@ -60,6 +60,10 @@ ALARM_SIMULATED_AS_DEV = 911040
 """Warning: a contouring type, ``#HSC`` or a spline the simulator does not model is simulated as
 contouring with corner deviation (M-23; the project's own number: the kernel has none)."""
 
+ALARM_NO_FEED = 20008
+"""The kernel's "feed rate in motion block is 0" (DG 250515083): a feed move without F and without a
+default feed (P-CHAN-00099)."""
+
 ARC_RADIUS_TOLERANCE = 0.01
 """mm: allowed difference of start and end radius of a programmed circle (project's own)."""
 
@@ -251,12 +255,17 @@ class Decoder:
         """Polynomial contouring (M-20): may hold the last motion back to blend it with the next."""
         self.warn: Callable[[int, str, int, str], None] | None = None
         """Raises a warning of the table (alarm, message, line, block): the channel sets it."""
+        self.default_feed: float | None = None
+        """mm/min: P-CHAN-00099 (``prog_start.feedrate``), the F at a program start where no F is in
+        effect (the modal state is kept from program to program here until a reset); None for 0."""
 
     # --- program control -----------------------------------------------------------------
     def start(self, blocks: BlockFeed | Iterator[Block], position: list[float]) -> None:
         """Decode from ``blocks`` (the interpreter, or parsed blocks) starting at ``position``."""
         self.blocks = _Blocks(blocks) if isinstance(blocks, Iterator) else blocks
         self.position = list(position)
+        if self.modal.feed is None:
+            self.modal.feed = self.default_feed  # P-CHAN-00099: the F of a program start without one
         self.finished = False
         self.waiting = False
         self.blocks_decoded = 0
@@ -619,25 +628,44 @@ class Decoder:
         return items
 
     def _dwell(self, block: Block) -> list[Motion | Marker]:
-        """``G04 <first main axis><s>`` (M-09, PM 206132747): the path rests for the time, then goes on
-        (the axes at rest first). The time by the first main axis only; another axis in the block is the
-        kernel's 20685 (refused here, where the kernel warns and goes on); the bare-number form
-        ``G04 2.5``, ``G04 P1`` and the spindle form ``G04 S10`` are not simulated (910110)."""
+        """``G04 <first main axis><s>``, ``G04 <s>``, ``G04 S<revolutions>`` (M-09, PM 206132747): the path
+        rests for the time, then goes on (the axes at rest first). The time by the first main axis (the
+        interpreter reads ``G04 2.5`` and ``G04 P1`` so); another axis besides it is the kernel's warning
+        20685 (the program goes on), another axis alone its 20014 (DG 250536843); revolutions of the main
+        spindle last ``60 * S / speed`` seconds at the spindle's programmed speed (none: 20007)."""
         first = self.main[0]
         others = [name for name, _ in block.axes if name != first]
-        if others:
+        seconds = dict(block.axes).get(first)
+        place = f"N{block.number}" if block.number is not None else f"line {block.line}"
+        if seconds is None and others:
             return self._error(
                 block,
-                20685,
-                f"G04 with the axes {', '.join(others)}: the dwell time takes the first main axis only",
+                20014,
+                f"G04 {others[0]}..: the dwell time is programmed with the first main axis ({first}), "
+                f"not with {others[0]}",
             )
-        seconds = dict(block.axes).get(first)
+        if others and self.warn is not None:
+            self.warn(
+                20685,
+                f"G04 with the axes {', '.join(others)}: the dwell time takes the first main axis only "
+                f"({first}); the others are ignored",
+                block.line,
+                place,
+            )
+        revolutions = block.extra.get("S")
+        if seconds is None and revolutions is not None:
+            m = self.modal
+            if not m.spindle_on or m.spindle_speed <= 0.0:
+                return self._error(
+                    block,
+                    20007,
+                    f"G04 S{revolutions:g}: a dwell in spindle revolutions needs the spindle turning "
+                    "(M3/M4 with S)",
+                )
+            seconds = 60.0 * revolutions / m.spindle_speed
         if seconds is None:
             return self._error(
-                block,
-                910110,
-                f"G04 without {first}<seconds>: only G04 {first}<s> is simulated "
-                "(not G04 <s>, G04 P.., G04 S..)",
+                block, 20014, f"G04 without its time: write G04 {first}<s>, G04 <s> or G04 S<revolutions>"
             )
         if seconds < 0.0:
             return self._error(block, 911000, f"G04 {first}{seconds:g}: a dwell time is not negative")
@@ -746,7 +774,9 @@ class Decoder:
         m = self.modal
         if m.feed_per_rev:
             if m.feed_rev is None:
-                return self._error(block, 911000, "G95: no feed per revolution (F word) programmed")
+                return self._error(
+                    block, ALARM_NO_FEED, "G95: feed rate 0: no feed per revolution (F word) programmed"
+                )
             if not m.spindle_on or m.spindle_speed <= 0.0:
                 return self._error(
                     block,
@@ -754,7 +784,12 @@ class Decoder:
                     "G95 feed per revolution with the spindle stopped: program M3/M4 and S first",
                 )
         elif m.feed is None:
-            return self._error(block, 911000, "no feed (F word) programmed for a feed move")
+            return self._error(
+                block,
+                ALARM_NO_FEED,
+                "feed rate 0: no feed (F word) programmed for a feed move, and no default feed "
+                "(P-CHAN-00099 prog_start.feedrate)",
+            )
         return None
 
     def _emit_pieces(self, pieces: list[Piece]) -> list[Motion | Marker]:

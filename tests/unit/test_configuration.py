@@ -872,6 +872,7 @@ KERNEL_DEFAULTS: dict[str, object] = {
     "P-AXIS-00197": 50_000,
     "P-AXIS-00198": 50_000,
     "P-CHAN-00071": 0,  # STEP
+    "P-CHAN-00099": 0.0,  # prog_start.feedrate: no default feed (ID 20008)
     "P-AXIS-00043": 0,
     "P-AXIS-00044": 0,
     "P-AXIS-00045": 0,

@@ -160,7 +160,7 @@ def test_the_open_control_block_example_of_20375_warns_and_goes_on():
 @pytest.mark.req("N-06")
 @pytest.mark.parametrize(("alarm", "program"), [(k, p) for k, p in RUNS_ON_THE_MILL if k != 21542])
 def test_the_correct_programs_pass_check(alarm, program):
-    """(21542's correct example moves with G01 and no F word: the decoder's 911000, as printed.)"""
+    """(21542's correct example moves with G01 and no F word: the kernel's 20008, as printed.)"""
     machine = Machine(mill_config(), programs=MemoryLibrary(FILES))
     result = check_program(machine, program, geometry_only=True)
     assert not result.stopped_by_error, result.alarms

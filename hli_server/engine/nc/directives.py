@@ -179,3 +179,8 @@ class Host(Protocol):
     def axis_name(self, index: int) -> str | None:
         """The channel's axis number ``index`` (``V.A.ABS[0]``), or None."""
         ...
+
+    def drive_value(self, axis: str, ident: str) -> float | None:
+        """The simulated drive's own value of SERCOS ident ``ident`` (``S-0-0002``) for ``axis``, in the
+        ident's unit, or None where the simulated drive has none (``#IDENT RD``)."""
+        ...

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 from hli_server.engine.nc import parser as word_parser
+from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.directives import (
     ContourDirective,
     CoordinateCommand,
@@ -17,15 +18,21 @@ from hli_server.engine.nc.directives import (
     SyncAction,
 )
 from hli_server.engine.nc.expr import (
+    Ref,
     Value,
     format_value,
 )
 from hli_server.engine.nc.language import (
     A_CONTROL_SYNTAX,
     A_CORNER_DEVIATION,
+    A_DRIVE_READ,
+    A_DRIVE_READ_ONLY,
+    A_DWELL_RANGE,
+    A_HUEMNOS_TOOL,
     A_INDEX,
     A_MESSAGE,
     A_RANGE,
+    A_UNKNOWN_AXIS_NAME,
     CONTOUR_KEYS,
     CONTOUR_TYPES,
     CONTOUR_WORDS,
@@ -46,6 +53,9 @@ from hli_server.engine.nc.statements import (
 from hli_server.engine.nc.variable_access import VariableAccess
 
 __all__ = ["Effects"]
+
+_MAX_DWELL_S = 214748.3647
+"""s: the longest dwell (a DINT of 0.1 ms, as a position's range; ID 20751 beyond)."""
 
 
 class Effects(VariableAccess):
@@ -120,6 +130,15 @@ class Effects(VariableAccess):
             return
         if command in ("CONTOUR MODE", "HSC", "SPLINE"):
             self._pending.append(self._contour(frame, stmt))
+            return
+        if command == "TIME":
+            self._dwell(frame, stmt)
+            return
+        if command.startswith("TOOL "):
+            self._tool(frame, stmt)
+            return
+        if command.startswith("IDENT "):
+            self._ident(frame, stmt)
             return
         # MSG
         if self._needs_flush(frame, stmt, stmt.args):
@@ -273,3 +292,115 @@ class Effects(VariableAccess):
             if mode is None and on is None:
                 raise stmt.error(A_CONTROL_SYNTAX, "#SPLINE: ON, OFF or TYPE AKIMA|BSPLINE expected")
         return ContourDirective(self._place_block(frame, stmt), name, on, mode, values)
+
+    # --- #TIME, #TOOL, #IDENT ------------------------------------------------------------------------------
+    def _dwell(self, frame: Frame, stmt: Hash) -> None:
+        """``#TIME <s>`` (PM 206132747): the dwell of ``G04 <s>``, a block the decoder rests for."""
+        seconds = self._number(stmt, stmt.args[0], "the dwell time of #TIME")
+        if not 0.0 <= seconds <= _MAX_DWELL_S:
+            raise stmt.error(
+                A_DWELL_RANGE,
+                f"#TIME {format_value(seconds)}: the dwell time is 0 .. {_MAX_DWELL_S:g} s",
+            )
+        first = self.compiler.main_axes[0]
+        self._pending.append(
+            Block(stmt.first, stmt.number, stmt.text, (4,), axes=((first, seconds),), program=frame.program)
+        )
+
+    def _tool(self, frame: Frame, stmt: Hash) -> None:
+        """``#TOOL PREP [..]`` is the T word, ``#TOOL DATA [..]`` the D word (PM 208577419): the tool ID's
+        basic number selects, a sister or variant other than 0 is the kernel's 20861 (no HÜMNOS tool
+        management is simulated). ``#TOOL LIFE READ|REMOVE`` (PM 208592267): no tool life is acquired and no
+        tool management is simulated, so nothing is sent: accepted, said once (911041)."""
+        command = stmt.command
+        ident = [self._number(stmt, a, f"the tool ID of #{command}") for a in stmt.args]
+        if command == "TOOL LIFE":
+            self._approximation(
+                stmt,
+                "#TOOL LIFE",
+                f"#TOOL LIFE {stmt.options[0]}: no tool life is acquired and no tool management is "
+                "simulated; nothing is sent (docs/nc-language.md)",
+            )
+            return
+        if any(v != 0.0 for v in ident[1:]):
+            raise stmt.error(
+                A_HUEMNOS_TOOL,
+                f"#{command} [{', '.join(format_value(v) for v in ident)}]: a sister or variant tool needs a "
+                "HÜMNOS tool management; the tool table here is by the basic number only",
+            )
+        word = "T" if command == "TOOL PREP" else "D"
+        self._pending.append(
+            Block(stmt.first, stmt.number, stmt.text, extra={word: ident[0]}, program=frame.program)
+        )
+
+    def _ident(self, frame: Frame, stmt: Hash) -> None:
+        """``#IDENT WR [SYN]``, ``#IDENT RD`` (PM 207347083): drive parameters through the service channel.
+        The simulated drive keeps what is written, per axis and ident, as the integer the telegram carries
+        (``VAL`` times 10^``DEC`` in ``TYP`` bytes); a read gives that integer / 10^``DEC``. Its own idents
+        (the cycle times S-0-0001/S-0-0002) are read-only (the kernel's 50357); an ident it neither has nor
+        was given is the kernel's warning 140032 and reads 0. No ident reaches the motion or the monitors
+        (the drive model is the machine file's)."""
+        command = stmt.command
+        numbers = {key: self._number(stmt, expr, f"{key} of #{command}") for key, expr in stmt.params.items()}
+        axis = ""
+        ident = ""
+        for option in stmt.options:
+            if option.startswith("AX:"):
+                axis = option[3:]
+            elif option.startswith("ID:"):
+                ident = option[3:]
+        if axis and axis not in self.compiler.axis_names:
+            raise stmt.error(A_UNKNOWN_AXIS_NAME, f"#{command}: AX={axis} is no axis of this channel")
+        if not axis:
+            number = numbers["AXNR"]
+            if number != int(number) or number < 1:
+                raise stmt.error(
+                    A_CONTROL_SYNTAX, f"#{command}: AXNR={format_value(number)} is no axis number"
+                )
+            axis = f"#{int(number)}"
+        size = numbers["TYP"]
+        decimals = numbers["DEC"]
+        if size not in (2.0, 4.0) or decimals != int(decimals) or not 0 <= decimals <= 9:
+            raise stmt.error(
+                A_CONTROL_SYNTAX,
+                f"#{command}: TYP {format_value(size)} DEC {format_value(decimals)}: TYP is 2 or 4 (bytes), "
+                "DEC a whole number 0 .. 9",
+            )
+        mask = (1 << (8 * int(size))) - 1
+        scale = 10.0 ** int(decimals)
+        key = f"{axis}/{ident}"
+        if command == "IDENT WR":
+            if self.host.drive_value(axis, ident) is not None:
+                raise stmt.error(
+                    A_DRIVE_READ_ONLY,
+                    f"#IDENT WR: {ident} of axis {axis} is not changeable (read it with #IDENT RD)",
+                )
+            raw = round(numbers["VAL"] * scale) & mask
+            store = self._drive_parameters
+            if "SYN" in stmt.options:
+
+                def write() -> None:
+                    store[key] = raw
+
+                self._pending.append(SyncAction(self._place_block(frame, stmt), write))
+            else:
+                store[key] = raw
+            return
+        own = self.host.drive_value(axis, ident)
+        if own is not None:
+            value = float(round(own) & mask) / scale
+        elif key in self._drive_parameters:
+            value = float(self._drive_parameters[key] & mask) / scale
+        else:
+            self._effect()
+            self.host.warn(
+                A_DRIVE_READ,
+                f"#IDENT RD: error while reading ident {ident} of axis {axis}: the simulated drive has no "
+                "such value (nor was it written); 0 is read",
+                stmt.first,
+                stmt.place,
+            )
+            value = 0.0
+        target = stmt.args[0]
+        assert isinstance(target, Ref)
+        self._assign(frame, stmt, target, value)

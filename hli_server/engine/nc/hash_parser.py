@@ -21,6 +21,8 @@ from hli_server.engine.nc.language import (
     A_NOT_SIMULATED,
     A_UNKNOWN_HASH,
     HASH_COMMANDS,
+    IDENT_VALUES,
+    IDENT_WORDS,
     MAX_NAME,
     MSG_OPTIONS,
     SLOPE_TYPES,
@@ -73,6 +75,12 @@ class HashParser(ExpressionParser):
             return self.motion_options("SPLINE", prefix=["TYPE"])
         if command in ("CS", "ACS", "ROTATION"):
             return self.coordinates(command)
+        if command == "TIME":
+            return self.dwell()
+        if command in ("TOOL PREP", "TOOL DATA", "TOOL LIFE"):
+            return self.tool(command)
+        if command in ("IDENT WR", "IDENT RD"):
+            return self.ident(command)
         if command == "COMMENT":
             self.fail(
                 A_COMMENT_OPEN,
@@ -98,6 +106,130 @@ class HashParser(ExpressionParser):
         if not self.at_end():
             self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{name}")
         return Control(self.raw, self.number, keyword, exprs)
+
+    def dwell(self) -> Stmt:
+        """``#TIME <time>`` (PM 206132747): dwell time in seconds, direct or parameterised."""
+        if self.at_end():
+            self.fail(A_CONTROL_SYNTAX, "#TIME without its time: #TIME <seconds>")
+        args = [self.expression(stop_at_blank=False)]
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #TIME's time")
+        return Hash(self.raw, self.number, "TIME", [], args)
+
+    def tool(self, command: str) -> Stmt:
+        """``#TOOL PREP [<basic> [, <sister> [, <variant>]]]``, ``#TOOL DATA [..]`` (PM 208577419),
+        ``#TOOL LIFE READ [..]``, ``#TOOL LIFE REMOVE`` (PM 208592267): ``args`` the tool ID (a gap is 0),
+        ``options`` ``READ`` or ``REMOVE`` for ``#TOOL LIFE``."""
+        options: list[str] = []
+        if command == "TOOL LIFE":
+            word = next((w for w in ("READ", "REMOVE") if self.keyword(w)), None)
+            if word is None:
+                self.fail(A_CONTROL_SYNTAX, "#TOOL LIFE: READ [<basic>, ..] or REMOVE expected")
+            options.append(word)
+        args: list[Expr] = []
+        if options != ["REMOVE"]:
+            self.blanks()
+            at = self.pos
+            self.expect("[", f"after #{command}")
+            self.blanks()
+            if self.peek() in (",", "]"):
+                self.fail(A_CONTROL_SYNTAX, f"#{command} [<basic> ..]: the basic tool number is mandatory")
+            self.pos = at
+            args = self.components(f"#{command}")
+            if len(args) > 3:
+                self.fail(
+                    A_CONTROL_SYNTAX,
+                    f"#{command} [<basic> [, <sister> [, <variant>]]]: at most three values, "
+                    f"{len(args)} given",
+                )
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{command} [..]")
+        return Hash(self.raw, self.number, command, options, args)
+
+    def ident(self, command: str) -> Stmt:
+        """``#IDENT WR [SYN] [AX=<axis> | AXNR=.. ID=<ident> VAL=.. TYP=.. DEC=.. SERC|CAN [NO_WAIT]]``,
+        ``#IDENT RD [AX=.. ID=.. P=<variable> TYP=.. DEC=.. SERC|CAN]`` (PM 207352971, 207365515,
+        207359627): ``options`` the keywords, ``AX:<axis>`` and ``ID:<ident>``; ``params`` AXNR, VAL, TYP,
+        DEC; ``args`` the variable of RD."""
+        options: list[str] = []
+        if command == "IDENT WR" and self.keyword("SYN"):
+            options.append("SYN")
+        self.expect("[", f"after #{command}")
+        self.depth += 1
+        params: dict[str, Expr] = {}
+        args: list[Expr] = []
+        while True:
+            self.blanks()
+            c = self.peek()
+            if c == "]":
+                self.pos += 1
+                break
+            if c == ",":
+                self.pos += 1
+                continue
+            if not c:
+                self.fail(A_CONTROL_SYNTAX, f"#{command} [: ']' missing")
+            at = self.pos
+            key = self.name()
+            if key in IDENT_WORDS:
+                if key in options:
+                    self.fail(A_CONTROL_SYNTAX, f"#{command}: {key} given twice")
+                options.append(key)
+                continue
+            if key not in IDENT_VALUES:
+                self.fail(
+                    A_CONTROL_SYNTAX,
+                    f"#{command}: unexpected {self.word_at(at)!r} (AX=, AXNR=, ID=, VAL=, P=, TYP=, DEC=, "
+                    "SERC, CAN, NO_WAIT)",
+                )
+            if key in params or any(o.startswith(key + ":") for o in options) or (key == "P" and args):
+                self.fail(A_CONTROL_SYNTAX, f"#{command}: {key} given twice")
+            self.blanks()
+            if self.peek() == "=":
+                self.pos += 1
+                self.blanks()
+            if key in ("AX", "ID"):
+                begin = self.pos
+                while self.pos < self.n and self.u[self.pos] not in " \t,]":
+                    self.pos += 1
+                word = self.u[begin : self.pos]
+                if not word:
+                    self.fail(A_CONTROL_SYNTAX, f"#{command}: {key} without its value")
+                options.append(f"{key}:{word}")
+            elif key == "P":
+                if command != "IDENT RD":
+                    self.fail(A_CONTROL_SYNTAX, "#IDENT WR: P=<variable> belongs to #IDENT RD")
+                c = self.peek()
+                if c == "V" and self.peek(1) == ".":
+                    args.append(self.variable())
+                elif c == "P":
+                    args.append(self.parameter())
+                else:
+                    self.fail(A_CONTROL_SYNTAX, "#IDENT RD: P=<variable> (P1, V.P.NAME, V.L.NAME, V.S.NAME)")
+            else:
+                if self.at_end() or self.peek() in ("]", ","):
+                    self.fail(A_CONTROL_SYNTAX, f"#{command}: {key} without its value")
+                saved = self.depth
+                self.depth = 0
+                try:
+                    params[key] = self.expression(stop_at_blank=True)
+                finally:
+                    self.depth = saved
+        self.depth -= 1
+        missing = [k for k in ("ID", "TYP", "DEC") if k not in params and f"{k}:" not in " ".join(options)]
+        if not any(o.startswith("AX:") for o in options) and "AXNR" not in params:
+            missing.insert(0, "AX|AXNR")
+        if command == "IDENT WR" and "VAL" not in params:
+            missing.append("VAL")
+        if command == "IDENT RD" and not args:
+            missing.append("P")
+        if not ("SERC" in options or "CAN" in options):
+            missing.append("SERC|CAN")
+        if missing:
+            self.fail(A_CONTROL_SYNTAX, f"#{command} [..]: {', '.join(missing)} missing")
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{command} [..]")
+        return Hash(self.raw, self.number, command, options, args, params=params)
 
     def flush(self) -> Stmt:
         """``#FLUSH``, ``#FLUSH WAIT``, ``#FLUSH CONTINUE``."""

@@ -74,6 +74,7 @@ from hli_server.engine.nc.statements import (
     Header,
     Refused,
     Stmt,
+    Technology,
     VarBlock,
     Word,
     Words,
@@ -101,6 +102,7 @@ class Interpreter(ProgramLevels):
         self._param_arrays = {}
         self._program_vars = {}
         self._message_file = "message.txt"
+        self._approximated.clear()
         self.iterations = 0
         self.statements = 0
         self._left = self.budget if self.budget is not None else 0
@@ -220,6 +222,8 @@ class Interpreter(ProgramLevels):
                 value = self._number(stmt, item.value, item.text)
                 extra = self._number(stmt, item.extra, item.text) if item.extra is not None else None
                 words.append((item, value, extra))
+            elif isinstance(item, Technology):
+                self._technology(stmt, item, words)
         block: Block | None = None
         if words:
             block = self._build(frame, stmt, words)
@@ -255,7 +259,29 @@ class Interpreter(ProgramLevels):
                 exprs.extend(v for _, v in item.params)
                 if item.variable is not None:  # L V.E.name: a synchronous V.E. is read after the flush
                     exprs.append(item.variable)
+            elif isinstance(item, Technology):
+                exprs.extend(item.params.values())
+                exprs.extend(w.value for w in item.main)
         return exprs
+
+    def _technology(
+        self, stmt: Stmt, item: Technology, words: list[tuple[Word, float, float | None]]
+    ) -> None:
+        """``S[M3 REV500 ..]``, ``S1[MC_MoveVelocity ..]`` (PM 208178187, 208317067): the main spindle's
+        M3/M4/M5 and REV are the block's words; the rest is evaluated (its errors are the block's) and
+        accepted without effect, said once per program and spindle (warning 911041)."""
+        for word in item.main:
+            words.append((word, self._number(stmt, word.value, word.text), None))
+        for expr in item.params.values():
+            self._evaluate(stmt, expr)
+        if item.words:
+            self._approximation(
+                stmt,
+                f"spindle {item.target}",
+                f"{item.target}[{' '.join(item.words)}]: spindle-specific commands are accepted without "
+                "effect (no spindle is simulated but the main spindle's speed for G95; spindles are not "
+                "monitored): docs/nc-language.md",
+            )
 
     # --- the block for the decoder ---------------------------------------------------------------------
     def _build(self, frame: Frame, stmt: Stmt, words: list[tuple[Word, float, float | None]]) -> Block:

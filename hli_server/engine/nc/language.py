@@ -64,6 +64,19 @@ A_STEP: Final = 914021
 A_SUB_END: Final = 914030
 A_MESSAGE: Final = 914031
 A_MAIN_RETURN: Final = 914032
+A_DRIVE_READ: Final = 140032
+"""Warning: error while reading an ident (``#IDENT RD``; DG 265855883)."""
+A_DRIVE_READ_ONLY: Final = 50357
+"""SERCOS parameter: datum not changeable (``#IDENT WR``; DG 257826443)."""
+A_DWELL_RANGE: Final = 20751
+"""``#TIME``: dwell time out of range (DG 252425611)."""
+A_HUEMNOS_TOOL: Final = 20861
+"""A HÜMNOS tool (sister, variant) only with the corresponding tool management (DG 252795531)."""
+A_UNKNOWN_AXIS_NAME: Final = 20797
+"""Unknown axis designation in a command that names axes (DG 252577931)."""
+A_APPROXIMATED: Final = 911041
+"""Warning: a construct that only shapes the path runs approximated within a documented tolerance (once per
+program and construct; docs/nc-language.md, "Refusals and approximations")."""
 
 MAX_EXPRESSION_DEPTH: Final = 64
 """Brackets and operators nested deeper than this are alarm 914020 (a bounded recursion)."""
@@ -379,6 +392,9 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
     "CS": _SIMULATED,
     "ACS": _SIMULATED,
     "ROTATION": _SIMULATED,
+    "TIME": _SIMULATED,
+    "TOOL": _kernel("TOOL", ("PREP", "DATA", "LIFE")),
+    "IDENT": _kernel("IDENT", ("WR", "RD")),
     # the logical-block reader's (nc/reader.py): met here only where they are misplaced
     "VAR": HashRule(
         (), A_DECLARATION, "#VAR must stand alone on its line; the declarations follow on the next lines"
@@ -392,6 +408,11 @@ UNKNOWN_HASH_HINT: Final = (
     "the commands simulated here: #CONTROL AREA, #VAR/#ENDVAR, #MSG, #FILE NAME, #FLUSH, #IF/#ELSE/#ENDIF, "
     "#COMMENT BEGIN/END (docs/nc-language.md)"
 )
+IDENT_WORDS: Final = frozenset(("SYN", "NO_WAIT", "SERC", "CAN"))
+"""``#IDENT WR|RD [..]``'s keywords (PM 207352971, 207359627, 207365515): synchronised, no waiting, the
+drive type."""
+IDENT_VALUES: Final = frozenset(("AX", "AXNR", "ID", "VAL", "TYP", "DEC", "P"))
+"""``#IDENT``'s entries with a value (``AX=X`` or ``AX X``, ``ID S-0-0104``, ``VAL 655.35``, ``P=P1``)."""
 SLOPE_TYPES: Final = ("STEP", "TRAPEZ", "SIN2", "HSC")
 """``#SLOPE [TYPE=<ident>]``'s profiles (P-CHAN-00071's 0..3)."""
 MSG_OPTIONS: Final = (
@@ -455,6 +476,46 @@ DEVIATION_KEYS: Final = frozenset(("PATH_DEV", "CONTERROR"))
 A_CORNER_DEVIATION: Final = 120129
 """The kernel's "corner deviation of polynomial contouring smaller than permissible minimum value"
 (tf5200_diagnosis/264341387.html)."""
+
+# --- axis- and spindle-specific syntax (``X[INDP_SYN ..]``, ``S[M3 REV500]``, ``S1[MC_MoveVelocity ..]``) ---
+AXIS_FUNCTIONS: Final[dict[str, str]] = {
+    "INDP_SYN": "synchronous independent axis motion",
+    "INDP_ASYN": "asynchronous independent axis motion",
+    "INDP": "independent axis motion (realtime cycles)",
+    "OSC": "oscillating axis motion",
+    "COMP": "axis compensation",
+    "DIST_CTRL": "distance control",
+    "OVERRIDE": "programmable axis override",
+    "DYNAMIC": "programmable acceleration overload",
+    "LIFT": "lifting/lowering an axis",
+    "LIFT_START": "lifting an axis",
+    "LIFT_END": "lowering an axis",
+    "SYNC": "synchronising an axis in coordinated motion",
+    "POLY": "axis polynomial",
+}
+"""The additional axis-specific functions ``<axis>[<function> ..]`` (PM 5252363631026771979): each moves an
+axis of the path apart from the path, or changes its dynamics, so the monitors would answer for another
+motion if it were approximated: refused by name with 910110 (docs/nc-language.md)."""
+SPINDLE_WORDS: Final = frozenset(
+    (
+        "REV",
+        "POS",
+        "G74",
+        "G167",
+        "CALLAX",
+        "PUTAX",
+        "GET_DYNAMIC_DATA",
+        "GET_DYNAMIK_DATA",
+        "G130",
+        "G135",
+        "G136",
+        "G137",
+        "FEED_LINK",
+        "OVERRIDE",
+    )
+)
+"""Words of the spindle-specific syntax ``<spindle>[..]`` besides M/H functions and the PLCopen commands
+``MC_..`` (PM 208178187, 208317067)."""
 
 # --- G codes ---------------------------------------------------------------------------------------------
 MOTION_G_CODES: Final[dict[int, str]] = {

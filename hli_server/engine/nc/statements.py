@@ -32,6 +32,7 @@ __all__ = [
     "Item",
     "Refused",
     "Stmt",
+    "Technology",
     "VarBlock",
     "Word",
     "Words",
@@ -135,6 +136,23 @@ class Assign(Item):
         super().__init__(text)
         self.target = target
         self.value = value
+
+
+class Technology(Item):
+    """Spindle-specific syntax the path does not depend on (PM 208178187, 208317067): ``S[M19 POS45]``,
+    ``S2[M4 REV5000]``, ``S1[MC_MoveVelocity Velocity=1333 Direction=1]``. ``target`` is the spindle's
+    name, ``words`` its keywords and M/H functions in order, ``params`` the values by keyword (``REV``,
+    ``VELOCITY``, ...), evaluated and accepted without effect. ``main`` holds the main spindle's ``M3``/
+    ``M4``/``M5`` and ``REV`` as the block's ``M`` and ``S`` words (the speed G95 multiplies with)."""
+
+    def __init__(
+        self, text: str, target: str, words: list[str], params: dict[str, Expr], main: list[Word]
+    ) -> None:
+        super().__init__(text)
+        self.target = target
+        self.words = words
+        self.params = params
+        self.main = main
 
 
 class Call(Item):

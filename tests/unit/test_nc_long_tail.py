@@ -1,0 +1,243 @@
+"""The long tail of issue 33 (item 5): one construct after the other, each as the manual page cited in
+docs/nc-language.md describes it - block numbers from expressions, the spindle-specific syntax, #TOOL,
+#IDENT, the default feed, the dwell forms - and the messages that once named the wrong thing."""
+
+from __future__ import annotations
+
+import pytest
+
+from hli_server.engine import Machine
+from hli_server.engine.nc.directives import SyncAction
+from tests.unit.engine_helpers import mill, mill_config, positions, run
+from tests.unit.nc_helpers import FakeHost, interpret
+
+
+def alarms(machine: Machine) -> list[int]:
+    return [a.number for a in machine.alarm_history]
+
+
+# --- N<expr> (PM 206817035) ---------------------------------------------------------------------------
+@pytest.mark.req("LT-01")
+def test_a_block_number_is_an_expression_rounded_to_a_whole_number() -> None:
+    run_ = interpret("P123 = 40\nNP123 X1\n$FOR P1 = 1, 3\nN[P1*100 + 0.4] XP1\n$ENDFOR\nN[2.5] X0\nM30\n")
+    assert run_.error is None
+    assert [b.number for b in run_.blocks if b.axes] == [40, 100, 200, 300, 3]
+
+
+@pytest.mark.req("LT-01")
+def test_a_computed_block_number_names_the_block_of_an_alarm() -> None:
+    m = mill()
+    run(m, "P5 = 70\nG01 X1 F1000\nNP5 G02 X2\nM30\n")
+    [alarm] = [a for a in m.alarm_history if a.severity == "error"]
+    assert alarm.block == "N70"
+
+
+@pytest.mark.req("LT-01")
+@pytest.mark.parametrize("program", ["P1 = -1\nNP1 X1\nM30\n", "P1 = 1E12\nNP1 X1\nM30\n"])
+def test_a_computed_block_number_out_of_range_is_910108(program: str) -> None:
+    run_ = interpret(program.replace("1E12", "1000000000000"))
+    assert run_.alarm == 910108
+
+
+# --- spindle-specific syntax (PM 208178187, 208317067) -----------------------------------------------
+@pytest.mark.req("LT-02")
+def test_the_main_spindles_m3_and_rev_are_the_speed_g95_multiplies_with() -> None:
+    plain = mill()
+    run(plain, "N10 M3 S1000\nN20 G95 G01 X10 F0.5\nM30\n")
+    specific = mill()
+    run(specific, "N10 S[M3 REV1000]\nN20 G95 G01 X10 F0.5\nM30\n")
+    assert alarms(specific) == []
+    assert positions(specific)["X"] == pytest.approx(10.0)
+    assert specific.cycle == plain.cycle  # 500 mm/min either way
+
+
+@pytest.mark.req("LT-02")
+def test_other_spindles_and_plcopen_commands_are_accepted_with_one_warning_each() -> None:
+    program = (
+        "N10 S1[MC_MoveVelocity Velocity=1333 Acceleration=770 Deceleration=880 \\\n"
+        "Jerk=10000 Direction=1]\n"
+        "N20 S2[M4 REV5000] S2[M19 POS45]\n"
+        "N30 S1[MC_Stop]\n"
+        "N40 G01 X1 F1000\nM30\n"
+    )
+    run_ = interpret(program)
+    assert run_.error is None
+    warnings = run_.host.warnings
+    assert [w[0] for w in warnings] == [911041, 911041]  # once per spindle and program
+    assert "S1[MC_MOVEVELOCITY]" in warnings[0][1]
+    assert "S2[M4 REV]" in warnings[1][1]
+    assert run_.values() == [1.0]
+
+
+@pytest.mark.req("LT-02")
+def test_a_spindle_value_is_evaluated_and_its_errors_are_the_blocks() -> None:
+    run_ = interpret("N10 S2[M3 REV 1/0]\nM30\n")
+    assert run_.alarm == 914001
+
+
+@pytest.mark.req("LT-02", "N-08")
+@pytest.mark.parametrize(
+    ("block", "construct"),
+    [
+        ("X[INDP_SYN POS=10 G90 G01 FEED=1000]", "synchronous independent axis motion"),
+        ("Y[INDP_ASYN POS=10 G90 G00]", "asynchronous independent axis motion"),
+        ("Z[OSC ON]", "oscillating axis motion"),
+        ("X[MC_MoveAbsolute Position=133 Velocity=1000 Direction=2]", "PLCopen motion of a path axis"),
+    ],
+)
+def test_axis_specific_functions_are_refused_by_name(block: str, construct: str) -> None:
+    run_ = interpret(f"N10 {block}\nM30\n")
+    assert run_.alarm == 910110
+    assert run_.error is not None
+    assert construct in run_.error.message
+    assert "unknown name" not in run_.error.message
+
+
+@pytest.mark.req("N-03")
+def test_an_axis_value_in_brackets_is_still_an_expression() -> None:
+    assert interpret("P1 = 2\nX[P1 + 3] S[P1 * 100]\nM30\n").values() == [5.0]
+
+
+# --- #TIME, G04 S (PM 206132747) and the unit tests of the decoder's forms: test_motion_mslope_units --------
+
+
+# --- #TOOL (PM 208577419, 208592267) -----------------------------------------------------------------
+@pytest.mark.req("LT-03")
+def test_tool_prep_is_the_t_word_and_tool_data_the_d_word() -> None:
+    run_ = interpret("#TOOL PREP [4]\n#TOOL DATA [P1 + 2, 0, ]\nM30\n".replace("P1 + 2", "2"))
+    extras = [b.extra for b in run_.blocks if b.extra]
+    assert extras == [{"T": 4.0}, {"D": 2.0}]
+
+
+@pytest.mark.req("LT-03")
+def test_tool_data_selects_the_tool_the_areas_watch() -> None:
+    from schemas.config import ToolEntry
+
+    config = mill_config()
+    config.channels[0].tools.append(ToolEntry(number=2, length=500_000, radius=20_000))
+    m = Machine(config)
+    run(m, "N10 #TOOL DATA [2]\nN20 G01 Z100 F6000\nN30 V.P.R = V.G.WZ_AKT.R\nM30\n")
+    assert alarms(m) == []
+    assert positions(m)["Z"] == pytest.approx(150.0)  # the length in the tool axis (M-15)
+
+
+@pytest.mark.req("LT-03")
+def test_a_sister_or_variant_tool_is_the_kernels_20861() -> None:
+    assert interpret("#TOOL DATA [1, 2]\nM30\n").alarm == 20861
+    assert interpret("#TOOL PREP [1, , 3]\nM30\n").alarm == 20861
+
+
+@pytest.mark.req("LT-03")
+@pytest.mark.parametrize(
+    ("line", "alarm"),
+    [
+        ("#TOOL DATA", 914000),
+        ("#TOOL DATA [, 2]", 914015),
+        ("#TOOL PREP [1, 2, 3, 4]", 914015),
+        ("#TOOL LIFE", 914015),
+    ],
+)
+def test_malformed_tool_commands_are_refused(line: str, alarm: int) -> None:
+    assert interpret(f"{line}\nM30\n").alarm == alarm
+
+
+@pytest.mark.req("LT-03")
+def test_tool_life_is_accepted_with_one_warning() -> None:
+    run_ = interpret("#TOOL LIFE READ [1]\n#TOOL LIFE READ[2]\n#TOOL LIFE REMOVE\nG01 X1 F100\nM30\n")
+    assert run_.error is None
+    assert run_.warnings == [911041]
+    assert "#TOOL LIFE READ" in run_.host.warnings[0][1]
+
+
+# --- #IDENT (PM 207352971, 207359627, 207365515) -------------------------------------------------------
+@pytest.mark.req("LT-04")
+def test_ident_reads_back_what_was_written_as_the_telegram_carries_it() -> None:
+    program = (
+        "#IDENT WR [AX=X ID S-0-0104 VAL 655.35 TYP 2 DEC 2 SERC]\n"
+        "#IDENT RD [AX X ID S-0-0104 P=P1 TYP 2 DEC 2 SERC]\n"
+        "#IDENT RD [AX=X, ID=S-0-0104, P=P2, TYP=4, DEC=0, SERC]\n"
+        "#IDENT WR [AX=Y ID S-0-0104 VAL 655.357 TYP 2 DEC 2 SERC]\n"
+        "#IDENT RD [AX=Y ID S-0-0104 P=P3 TYP 4 DEC 2 SERC]\n"
+        "#IDENT WR SYN [AXNR=1 ID 0x6072_00 VAL -1 TYP 2 DEC 0 CAN NO_WAIT]\n"
+        "#IDENT RD [AXNR 1 ID 0x6072_00 P=V.P.V TYP 2 DEC 0 CAN]\n"
+        "X[P1] Y[P2] Z[P3] V.P.W = V.P.V\nM30\n"
+    )
+    run_ = interpret(program)
+    assert run_.error is None
+    # 655.35 with 2 decimals is the integer 65535; read with 0 decimals it is that integer; 655.357 rounds
+    # to 65536, which 2 bytes carry as 0; -1 in 2 bytes is 65535
+    assert run_.axes[-1] == {"X": 655.35, "Y": 65535.0, "Z": 0.0}
+    assert interpret(program.replace("M30", "X[V.P.W]\nM30")).values()[-1] == 65535.0
+
+
+@pytest.mark.req("LT-04")
+def test_ident_of_the_cycle_times_reads_the_channels_and_is_not_changeable() -> None:
+    run_ = interpret("#IDENT RD [AX=Y ID=S-0-0002 P=P1 TYP=2 DEC=2 SERC]\nX[P1]\nM30\n")
+    assert run_.values() == [10.0]  # 1000 µs, two decimals
+    assert interpret("#IDENT WR [AX=X ID S-0-0002 VAL 5 TYP 2 DEC 0 SERC]\nM30\n").alarm == 50357
+
+
+@pytest.mark.req("LT-04")
+def test_ident_an_unknown_ident_warns_140032_and_reads_0() -> None:
+    run_ = interpret("P1 = 7\n#IDENT RD [AX=Z ID=P-0-0129 P=P1 TYP=4 DEC=0 SERC]\nX[P1]\nM30\n")
+    assert run_.warnings == [140032]
+    assert run_.values() == [0.0]
+
+
+@pytest.mark.req("LT-04")
+def test_ident_wr_syn_writes_when_the_path_passes() -> None:
+    run_ = interpret("G01 X1 F100\n#IDENT WR SYN [AX=X ID S-0-0104 VAL 3 TYP 2 DEC 0 SERC]\nM30\n")
+    assert any(isinstance(out, SyncAction) for out in run_.outputs)
+
+
+@pytest.mark.req("LT-04")
+@pytest.mark.parametrize(
+    ("line", "alarm"),
+    [
+        ("#IDENT WR [AX=Q ID S-0-1 VAL 1 TYP 2 DEC 0 SERC]", 20797),
+        ("#IDENT WR [AX=X ID S-0-1 TYP 2 DEC 0 SERC]", 914015),
+        ("#IDENT RD [AX=X ID S-0-1 TYP 2 DEC 0 SERC]", 914015),
+        ("#IDENT WR [AX=X ID S-0-1 VAL 1 TYP 3 DEC 0 SERC]", 914015),
+        ("#IDENT WR [AX=X ID S-0-1 VAL 1 TYP 2 DEC 0]", 914015),
+        ("#IDENT WR [AX=X ID S-0-1 VAL 1 TYP 2 DEC 0 SERC FOO]", 914015),
+        ("#IDENT", 910110),
+    ],
+)
+def test_malformed_ident_commands(line: str, alarm: int) -> None:
+    assert interpret(f"{line}\nM30\n").alarm == alarm
+
+
+@pytest.mark.req("LT-04")
+def test_the_drive_keeps_what_was_written_across_programs() -> None:
+    host = FakeHost()
+    from hli_server.engine.nc import Compiler, Interpreter
+
+    it = Interpreter(Compiler(host.axes, ("X", "Y", "Z")), host, budget=None)
+    interpret("#IDENT WR [AX=X ID P-0-0001 VAL 12 TYP 4 DEC 0 SERC]\nM30\n", host=host, interpreter=it)
+    again = interpret(
+        "#IDENT RD [AX=X ID P-0-0001 P=P1 TYP 4 DEC 0 SERC]\nX[P1]\nM30\n", host=host, interpreter=it
+    )
+    assert again.values() == [12.0]
+
+
+# --- the default feed (P-CHAN-00099) and 20008 (DG 250515083) ----------------------------------------------
+@pytest.mark.req("LT-05")
+def test_a_program_without_f_runs_at_the_channels_default_feed() -> None:
+    config = mill_config()
+    config.channels[0] = config.channels[0].model_copy(update={"default_feedrate": 600.0})
+    m = Machine(config)
+    run(m, "N10 G01 X10\nM30\n")
+    assert alarms(m) == []
+    assert positions(m)["X"] == pytest.approx(10.0)
+    reference = mill()
+    run(reference, "N10 G01 X10 F600\nM30\n")
+    assert m.cycle == reference.cycle
+
+
+@pytest.mark.req("LT-05")
+def test_without_a_default_feed_a_feed_move_without_f_is_the_kernels_20008() -> None:
+    m = mill()
+    run(m, "N10 G00 X1\nN20 G01 X10\nM30\n")
+    [alarm] = m.alarm_history
+    assert (alarm.number, alarm.block) == (20008, "N20")
+    assert "P-CHAN-00099" in alarm.message
