@@ -247,6 +247,22 @@ _TABLE: tuple[AlarmDef, ...] = (
         page=_DIAG + "252425611.html",
     ),
     _e(20008, "Feed rate in motion block is 0", "kernel", page=_DIAG + "250515083.html"),
+    # --- the kernel's IDs: chamfers and roundings (G301/G302) ----------------------------------
+    _e(20012, "Radius or bevel is 0 in G301/G302", "kernel", page=_DIAG + "250528139.html"),
+    _e(
+        20130,
+        "Double-programmed chamfer/rounding selection (G301 and G302 in one block)",
+        "kernel",
+        page=_DIAG + "250885003.html",
+    ),
+    _w(
+        20351,
+        "No primary motion block for chamfer/rounding available",
+        "kernel",
+        page=_DIAG + "251381131.html",
+    ),
+    _w(20701, "Double programmed G301/G302 without motion block", "kernel", page=_DIAG + "252268939.html"),
+    _e(20800, "Chamfer value is out of data format", "kernel", page=_DIAG + "252590987.html"),
     # --- the kernel's IDs: tools and drive parameters (#TOOL, #IDENT) --------------------------
     _e(
         20861,
@@ -478,6 +494,11 @@ _TABLE: tuple[AlarmDef, ...] = (
     ),
     _e(916001, "Tool compensation data (D) not in the tool table", "project (M-14)"),
     _e(916002, "Coordinate system command invalid (#CS, #ACS, #CS ADD/SET/DEL)", "project (M-10)"),
+    _e(
+        916003,
+        "Chamfer/rounding (G301/G302) would reverse the direction of a contour element",
+        "project (issue 33)",
+    ),
     # --- project's own: axis collision and position monitoring (913xxx) ----------------------
     _e(913000, "Collision pair may only move apart after a collision stop", "project (FCT-C3, C3-02)"),
     # --- project's own: the NC language where the kernel's ID is not public (914xxx) -----------

@@ -220,6 +220,7 @@ class Channel:
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))
         self.decoder.warn = ChannelHost(self).warn
         self.decoder.default_feed = config.default_feedrate or None
+        self.decoder.corner_ahead = self.interpreter.corner_ahead
         """Runs the NC programs of this channel ahead of the motion (N-01..N-08)."""
         self.planner = Planner(t_a=self.t_a, feedhold_decel=config.feedhold_deceleration)
         self.slope_ramp_time = max(

@@ -40,6 +40,7 @@ from hli_server.engine.path.contour import (
     ContourSettings,
     Piece,
 )
+from hli_server.engine.path.corners import CHAMFER, ROUNDING, CornerError, CornerRequest
 from hli_server.engine.path.frames import FrameStack
 from hli_server.engine.path.radius import Element, RadiusCompensation, TrcError
 from hli_server.engine.path.tools import ToolData, ToolState
@@ -255,6 +256,14 @@ class Decoder:
         """Polynomial contouring (M-20): may hold the last motion back to blend it with the next."""
         self.warn: Callable[[int, str, int, str], None] | None = None
         """Raises a warning of the table (alarm, message, line, block): the channel sets it."""
+        self.corner_ahead: Callable[[Block], bool] | None = None
+        """Does the block after this one ask for a chamfer or rounding (G301/G302)? Then its motion is held
+        back for it (the interpreter looks at the program's next line: :meth:`Interpreter.corner_ahead`)."""
+        self.corner_size: float | None = None
+        """The I word of G301/G302: "the I word remains stored" (PM 206609163)."""
+        self.motion_unheld = False
+        """The last motion went to the path without being held for a chamfer or rounding (no flush point
+        since): a G301/G302 now comes too late for it (the batch geometry check sets it too)."""
         self.default_feed: float | None = None
         """mm/min: P-CHAN-00099 (``prog_start.feedrate``), the F at a program start where no F is in
         effect (the modal state is kept from program to program here until a reset); None for 0."""
@@ -266,6 +275,8 @@ class Decoder:
         self.position = list(position)
         if self.modal.feed is None:
             self.modal.feed = self.default_feed  # P-CHAN-00099: the F of a program start without one
+        self.corner_size = None
+        self.motion_unheld = False
         self.finished = False
         self.waiting = False
         self.blocks_decoded = 0
@@ -439,6 +450,7 @@ class Decoder:
         through the frames into the contouring stage, then the contouring stage's held piece), then
         ``items``; if a held motion fails its check, its error marker replaces ``items`` (decoding ends)."""
         out: list[Motion | Marker] = []
+        self.motion_unheld = False
         if self.trc.active:
             out = self._trc_flush()
             if out and isinstance(out[-1], Marker):
@@ -585,6 +597,12 @@ class Decoder:
                 m.feed_rev = block.feed
             else:
                 m.feed = block.feed
+        corner: CornerRequest | None = None
+        if CHAMFER in block.g_codes or ROUNDING in block.g_codes:
+            found = self._corner_request(block)
+            if isinstance(found, list):
+                return found
+            corner = found
         if 92 in block.g_codes and self.transforms_active:
             self._g92_framed(block)
             return items
@@ -601,7 +619,9 @@ class Decoder:
             if self.finished:
                 return before
             return before + self._measuring_move(block)
-        moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre))
+        moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre) and corner is None)
+        if corner is not None and not moves:
+            return self._corner_between(block, corner)
         if moves and (self.transforms_active or 40 in block.g_codes) and not m.in_area_definition:
             # radius compensation -> frames and tool length -> contouring -> checks (M-30)
             items = self._motion_framed(block)
@@ -617,6 +637,8 @@ class Decoder:
             self._trc_prog = None
             if items and isinstance(items[-1], Marker):
                 return items
+        if corner is not None and self.contour.holding_for_corner:
+            self.contour.request_corner(corner)  # at the end of this block's own motion
         ends: list[Motion | Marker] = [
             Marker(MarkerKind.END, block, payload=f"M{code:02d}") for code in block.m_codes if code in (2, 30)
         ]
@@ -755,6 +777,8 @@ class Decoder:
             feed_error = self._feed_error(block)
             if feed_error is not None:
                 return feed_error
+        hold = self._corner_next(block)
+        self.motion_unheld = not hold
         piece = Piece(
             segment=segment,
             block=block,
@@ -762,8 +786,9 @@ class Decoder:
             exact_stop=60 in block.g_codes,
             feed=None if rapid else self.path_feed(),
             blend=None if rapid else m.blend(block.g_codes),
+            hold=hold,
         )
-        items = self._emit_pieces(self.contour.push(piece))
+        items = self._push(piece)
         if not (items and isinstance(items[-1], Marker)):
             self.position = target
             self._position_length = 0.0
@@ -791,6 +816,88 @@ class Decoder:
                 "(P-CHAN-00099 prog_start.feedrate)",
             )
         return None
+
+    def _push(self, piece: Piece) -> list[Motion | Marker]:
+        """``piece`` through the contouring stage (contouring, chamfers and roundings) to the path checks;
+        a chamfer or rounding that cannot be inserted is the error of its G301/G302 block, and the path
+        stops where the held pre-block starts."""
+        held = self.contour.held_piece
+        try:
+            pieces = self.contour.push(piece)
+        except CornerError as exc:
+            self.contour.reset()
+            if held is not None:
+                self.position = list(held.segment.start)
+            return [Marker(MarkerKind.ERROR, piece.block, payload=DecodeError(exc.alarm, exc.message))]
+        return self._emit_pieces(pieces)
+
+    # --- chamfers and roundings (G301/G302, PM 206609163) ---------------------------------------------
+    def _corner_next(self, block: Block) -> bool:
+        """Is this block's motion held back for a chamfer or rounding at its end?"""
+        if CHAMFER in block.g_codes or ROUNDING in block.g_codes:
+            return True
+        ahead = self.corner_ahead
+        return ahead is not None and ahead(block)
+
+    def _corner_request(self, block: Block) -> CornerRequest | list[Motion | Marker]:
+        """G301/G302 with its I word (stored: a later G301/G302 may leave it out; PM 206609163): the
+        kernel's 20130 (both in one block), 20012 (no I, or I0), 20800 (a negative I); with the radius
+        compensation active: not simulated (910110)."""
+        kinds = [g for g in block.g_codes if g in (CHAMFER, ROUNDING)]
+        if len(kinds) > 1:
+            return self._error(block, 20130, "G301 and G302 in one block: a chamfer or a rounding")
+        kind = kinds[0]
+        size = dict(block.centre).get("I")
+        if size is not None and not (self.modal.motion in (2, 3) and block.axes):
+            self.corner_size = size
+        size = self.corner_size
+        if size is None or size == 0.0:
+            return self._error(
+                block, 20012, f"G{kind} without its size: program I<mm> (not 0) with the first G301/G302"
+            )
+        if size < 0.0:
+            return self._error(block, 20800, f"G{kind} I{size:g}: the size is out of range (0 < I)")
+        if self.trc.active:
+            return self._error(
+                block,
+                910110,
+                f"G{kind} with tool radius compensation active is not simulated: the kernel inserts the "
+                "element in the programmed contour, before the compensation (docs/nc-language.md)",
+            )
+        feed = None if block.feed is None else self.path_feed()
+        return CornerRequest(kind, size, feed, block)
+
+    def _corner_between(self, block: Block, corner: CornerRequest) -> list[Motion | Marker]:
+        """A G301/G302 block without motion: the element goes between the held motion and the next one.
+        Without a motion before it: the kernel's warning 20351; a second one before the next motion: its
+        warning 20701 (the second counts). A motion that went to the path unheld (the look-ahead did not
+        see this block: a control statement or a call between): not simulated (910110)."""
+        place = f"N{block.number}" if block.number is not None else f"line {block.line}"
+        if not self.contour.holding_for_corner:
+            if self.motion_unheld:
+                return self._error(
+                    block,
+                    910110,
+                    f"G{corner.kind} after the motion it belongs to was handed to the path: write G301/G302 "
+                    "in the line right after the motion block (not after a call or a jump)",
+                )
+            if self.warn is not None:
+                self.warn(
+                    20351,
+                    f"G{corner.kind}: no motion block before it to insert the element after",
+                    block.line,
+                    place,
+                )
+            return []
+        if self.contour.corner_requested and self.warn is not None:
+            self.warn(
+                20701,
+                f"G{corner.kind}: a G301/G302 without a motion block since the last one",
+                block.line,
+                place,
+            )
+        self.contour.request_corner(corner)
+        return []
 
     def _emit_pieces(self, pieces: list[Piece]) -> list[Motion | Marker]:
         """The path checks and the planner's items for the pieces the contouring stage gives out; the
@@ -1107,6 +1214,8 @@ class Decoder:
             self._position_length = e.length
             if segment.length <= 1e-12:
                 continue
+            hold = not self.trc.active and self._corner_next(block)
+            self.motion_unheld = not hold
             piece = Piece(
                 segment=segment,
                 block=block,
@@ -1116,8 +1225,9 @@ class Decoder:
                 blend=e.blend,
                 tip_start=length_at_start,
                 tip_end=e.length,
+                hold=hold,
             )
-            items += self._emit_pieces(self.contour.push(piece))
+            items += self._push(piece)
             if items and isinstance(items[-1], Marker):
                 return items
         return items

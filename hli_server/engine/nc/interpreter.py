@@ -57,12 +57,16 @@ from hli_server.engine.nc.expr import (
 from hli_server.engine.nc.language import (
     A_CONTROL_SYNTAX,
     A_UNEXPECTED,
+    CORNER_AHEAD,
+    CORNER_LOOK_AHEAD,
+    CORNER_PASSES,
 )
 from hli_server.engine.nc.levels import (
     Frame,
     Units,
 )
-from hli_server.engine.nc.source import ProgramText
+from hli_server.engine.nc.reader import strip_comments
+from hli_server.engine.nc.source import LineTooLongError, ProgramText
 from hli_server.engine.nc.state import STATEMENTS_PER_CYCLE
 from hli_server.engine.nc.statements import (
     Assign,
@@ -113,6 +117,28 @@ class Interpreter(ProgramLevels):
         self._frames = []
         self._pending.clear()
         self._ended = True
+
+    def corner_ahead(self, block: Block) -> bool:
+        """Does the next line of ``block``'s program (past blank, comment, control and ``#`` command lines)
+        ask for a chamfer or rounding (G301/G302)? The decoder then holds the block's motion back for it: the
+        kernel's decoder reads ahead; this one is asked for one block at a time."""
+        if not self._frames:
+            return False
+        frame = self._frames[-1]
+        if frame.program != block.program:
+            return False
+        text = frame.units.text
+        for k in range(block.line + 1, block.line + 1 + CORNER_LOOK_AHEAD):
+            try:
+                raw = text.line(k)
+            except LineTooLongError:
+                return False
+            if raw is None:
+                return False
+            code = strip_comments(raw)
+            if code.strip() and CORNER_PASSES.match(code) is None:
+                return "30" in code and CORNER_AHEAD.search(code.upper()) is not None
+        return False
 
     def refill(self) -> None:
         """A new cycle: a new budget."""

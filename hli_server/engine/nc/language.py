@@ -10,6 +10,7 @@ docs/nc-language.md lists what is simulated and what stays refused, with the man
 
 from __future__ import annotations
 
+import re
 from typing import Final
 
 from hli_server.engine.nc import parser as word_parser
@@ -404,6 +405,14 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
 }
 """Every ``#`` word the front end knows, by its first word (``#CONTROL AREA`` is the word parser's,
 ``nc/parser.py``); any other is alarm 910109."""
+CORNER_AHEAD: Final = re.compile(r"(?<![A-Z0-9_.])G0*30[12](?![0-9.])")
+"""A line that asks for a chamfer or rounding (G301/G302): the motion before it is held back for it."""
+CORNER_LOOK_AHEAD: Final = 16
+"""Lines the interpreter looks past for a G301/G302 after a motion block: blank, comment, control (``$..``)
+and ``#`` command lines (the flow may not go there: holding the motion back is harmless, it only waits for
+the next one)."""
+CORNER_PASSES: Final = re.compile(r"\s*(?:/[0-9]*\s*)?(?:N\s*[0-9]+\s*:?\s*)?[$#]", re.ASCII | re.IGNORECASE)
+"""A control statement or ``#`` command line the look-ahead for G301/G302 passes."""
 UNKNOWN_HASH_HINT: Final = (
     "the commands simulated here: #CONTROL AREA, #VAR/#ENDVAR, #MSG, #FILE NAME, #FLUSH, #IF/#ELSE/#ENDIF, "
     "#COMMENT BEGIN/END (docs/nc-language.md)"
@@ -543,7 +552,15 @@ contouring): M-20..M-23, docs/nc-language.md "Contouring"."""
 INITIAL_STATE_G_CODES: Final = frozenset((139, 140))
 """G139 (indirect TRC selection/deselection, PM 207729163) and G140 (no contour masking, PM 206480651):
 the kernel's initial states, the ones simulated; programmed, they change nothing."""
+CORNER_G_CODES: Final = frozenset((301, 302))
+"""Chamfers and roundings G301/G302 (PM 206609163): an element of the I word's size inserted in the corner
+(``hli_server/engine/path/corners.py``)."""
 KNOWN_G: Final = (
-    word_parser.KNOWN_G_CODES | EXTRA_G_CODES | UNIT_G_CODES | CONTOUR_G_CODES | INITIAL_STATE_G_CODES
+    word_parser.KNOWN_G_CODES
+    | EXTRA_G_CODES
+    | UNIT_G_CODES
+    | CONTOUR_G_CODES
+    | INITIAL_STATE_G_CODES
+    | CORNER_G_CODES
 )
 """Every G code simulated: the word parser's (``nc/parser.py``, ``KNOWN_G_CODES``) and the ones above."""
