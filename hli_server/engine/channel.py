@@ -221,6 +221,8 @@ class Channel:
         self.decoder.warn = ChannelHost(self).warn
         self.decoder.default_feed = config.default_feedrate or None
         self.decoder.corner_ahead = self.interpreter.corner_ahead
+        self.decoder.homing = {a.name: (a.home_position, a.jog_velocity, a.jog_acceleration) for a in axes}
+        self.decoder.referenced_handler = self._referenced_by_program
         """Runs the NC programs of this channel ahead of the motion (N-01..N-08)."""
         self.planner = Planner(t_a=self.t_a, feedhold_decel=config.feedhold_deceleration)
         self.slope_ramp_time = max(
@@ -682,6 +684,13 @@ class Channel:
             return
         axis.start_referencing()
         self.machine.referencing_changed(axis.index)
+
+    def _referenced_by_program(self, names: tuple[str, ...]) -> None:
+        """A G74 group arrived at its reference positions: its axes are referenced (E-02)."""
+        for name in names:
+            axis = self.axes[self.axis_names.index(name)]
+            axis.referenced = True
+            self.machine.referencing_changed(axis.index)
 
     def _reference(self) -> None:
         for axis in self.axes:

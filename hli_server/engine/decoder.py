@@ -61,6 +61,9 @@ ALARM_SIMULATED_AS_DEV = 911040
 """Warning: a contouring type, ``#HSC`` or a spline the simulator does not model is simulated as
 contouring with corner deviation (M-23; the project's own number: the kernel has none)."""
 
+ALARM_APPROXIMATED = 911041
+"""Warning: a construct approximated within a documented tolerance, once per program."""
+
 ALARM_NO_FEED = 20008
 """The kernel's "feed rate in motion block is 0" (DG 250515083): a feed move without F and without a
 default feed (P-CHAN-00099)."""
@@ -95,6 +98,19 @@ class _Blocks:
 
     def next(self) -> Block | Directive | None:
         return next(self._blocks, None)
+
+
+class _Referenced:
+    """The action at the end of a G74 group: its axes are referenced."""
+
+    __slots__ = ("axes", "handler")
+
+    def __init__(self, handler: Callable[[tuple[str, ...]], None], axes: tuple[str, ...]) -> None:
+        self.handler = handler
+        self.axes = axes
+
+    def __call__(self) -> None:
+        self.handler(self.axes)
 
 
 def _nothing() -> None:
@@ -201,6 +217,18 @@ class ModalState:
         return base + self.g92.get(axis, 0.0)
 
 
+_TRC_METHODS: dict[int, str] = {
+    **dict.fromkeys(
+        (5, 138, 236, 237, 238, 239),
+        "is simulated as the indirect selection G139: the approach and departure blocks differ from the "
+        "kernel's within the tool radius (the compensated contour between them is the same); a G40 without a "
+        "motion block ends at the last equidistant point, as G239 does",
+    ),
+    141: "(contour masking) is not simulated: a contour violation stops the program with 916000 where the "
+    "kernel would leave the violating blocks out",
+}
+"""The TRC selection methods and contour masking, approximated (warning 911041, docs/nc-language.md)."""
+
 _PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}
 """Indices into the main axes (first, second, third) of the plane's first and second axis."""
 _CENTRE_WORDS = {0: "I", 1: "J", 2: "K"}
@@ -264,6 +292,14 @@ class Decoder:
         self.motion_unheld = False
         """The last motion went to the path without being held for a chamfer or rounding (no flush point
         since): a G301/G302 now comes too late for it (the batch geometry check sets it too)."""
+        self._approximations: set[str] = set()
+        """Constructs approximated in this program and said so (warning 911041 once each)."""
+        self.homing: dict[str, tuple[float, float, float]] = {}
+        """axis -> (reference position mm, homing velocity mm/s, acceleration mm/s²): G74 (the channel's
+        axes' reference positions, their jog velocity and acceleration: the project's homing model)."""
+        self.referenced_handler: Callable[[tuple[str, ...]], None] | None = None
+        """Called when a G74 group has arrived at its reference positions (the channel marks them
+        referenced)."""
         self.default_feed: float | None = None
         """mm/min: P-CHAN-00099 (``prog_start.feedrate``), the F at a program start where no F is in
         effect (the modal state is kept from program to program here until a reset); None for 0."""
@@ -277,6 +313,7 @@ class Decoder:
             self.modal.feed = self.default_feed  # P-CHAN-00099: the F of a program start without one
         self.corner_size = None
         self.motion_unheld = False
+        self._approximations.clear()
         self.finished = False
         self.waiting = False
         self.blocks_decoded = 0
@@ -506,6 +543,14 @@ class Decoder:
         if announce and out.block is not None:
             self._announce(settings, out.block)
 
+    def _approximated(self, block: Block, key: str, what: str) -> None:
+        """Warning 911041 once per program and ``key``: a construct that only shapes the path, approximated
+        within the tolerance ``what`` says (docs/nc-language.md, "Refusals and approximations")."""
+        if key in self._approximations or self.warn is None:
+            return
+        self._approximations.add(key)
+        self.warn(ALARM_APPROXIMATED, f"{key} {what} (docs/nc-language.md)", block.line, block.label)
+
     def _announce(self, settings: ContourSettings, block: Block) -> None:
         """Warning 911040: ``settings.simulated_as`` is simulated as contouring with corner deviation."""
         if self.warn is not None:
@@ -532,6 +577,8 @@ class Decoder:
             m.inch = False
         if 4 in block.g_codes:
             return self._dwell(block)  # before G70's scaling: the time is in seconds
+        if 74 in block.g_codes:
+            return self._homing(block)  # the values are the order, not positions
         if m.inch:
             block = _block_in_mm(block, self.rotary_axes)
         if 95 in block.g_codes:
@@ -587,6 +634,8 @@ class Decoder:
                 m.spline = False
             elif g in (100, 200, 201, 202):
                 return self._error(block, 910110, f"G{g} is not supported in this block context")
+            elif g in _TRC_METHODS:
+                self._approximated(block, f"G{g}", _TRC_METHODS[g])
         tool_error = self._tool_words(block)
         if tool_error is not None:
             return tool_error
@@ -692,6 +741,51 @@ class Decoder:
         if seconds < 0.0:
             return self._error(block, 911000, f"G04 {first}{seconds:g}: a dwell time is not negative")
         return [Marker(MarkerKind.ACTION, block, payload=Dwell(seconds))]
+
+    def _homing(self, block: Block) -> list[Motion | Marker]:
+        """``G74 X2 Y3 Z1`` (PM 206138635): programmable homing. The values give the order (equal values
+        together); each group moves to its reference positions (P-AXIS reference point here: the axis'
+        ``reference_position``, else its start position) in machine coordinates, as one line with the
+        axes' homing velocity and acceleration (the jog values: the project's homing model), and is
+        referenced at its end. The moves go through every path check and are travelled like any block, so
+        the monitors see them. ``G74 S..`` (a spindle) has no effect here. A flush point; with the radius
+        compensation active: not simulated (910110)."""
+        if self.trc.active:
+            return self._error(
+                block, 910110, "G74 with tool radius compensation active is not simulated: G40 first"
+            )
+        if block.axes and any(name not in self.homing for name, _ in block.axes):
+            missing = [name for name, _ in block.axes if name not in self.homing]
+            return self._error(block, 910110, f"G74: no reference point known for {', '.join(missing)}")
+        items = self._flushed([])
+        if self.finished:
+            return items
+        order = sorted({value for _, value in block.axes})
+        for rank in order:
+            group = tuple(name for name, value in block.axes if value == rank)
+            start = tuple(self.position)
+            target = list(start)
+            for name in group:
+                target[self.index[name]] = self.homing[name][0]
+            segment = LineSegment(start, tuple(target))
+            if segment.length > 1e-12:
+                err = self._check(segment, block)
+                if err is not None:
+                    return [*items, Marker(MarkerKind.ERROR, block, payload=err)]
+                v = a = math.inf
+                for name in group:
+                    k = self.index[name]
+                    share = abs(target[k] - start[k]) / segment.length
+                    if share > 1e-12:
+                        v = min(v, self.homing[name][1] / share)
+                        a = min(a, self.homing[name][2] / share)
+                items.append(Motion(segment=segment, block=block, v_max=v, accel=a, exact_stop=True))
+                self.position = target
+            handler = self.referenced_handler
+            if handler is not None:
+                items.append(Marker(MarkerKind.ACTION, block, payload=_Referenced(handler, group)))
+        self._position_length = 0.0
+        return items
 
     def _weighting(self, g: int, block: Block) -> None:
         """G130/G131/G230/G231: acceleration weighting in percent of the axes' acceleration (manual

@@ -241,3 +241,94 @@ def test_without_a_default_feed_a_feed_move_without_f_is_the_kernels_20008() -> 
     [alarm] = m.alarm_history
     assert (alarm.number, alarm.block) == (20008, "N20")
     assert "P-CHAN-00099" in alarm.message
+
+
+# --- G74 programmable homing (PM 206138635) -----------------------------------------------------------------
+@pytest.mark.req("LT-07")
+def test_g74_moves_the_groups_to_their_reference_points_in_the_programmed_order() -> None:
+    from schemas.events import ReferenceChanged
+    from tests.unit.engine_helpers import record_events
+
+    m = mill()
+    events = record_events(m)
+    trail: list[tuple[float, float, float]] = []
+
+    def each(machine: Machine) -> None:
+        trail.append((machine.axes[0].setpoint, machine.axes[1].setpoint, machine.axes[2].setpoint))
+
+    run(m, "G01 X100 Y50 Z10 F6000\nN20 G74 X2 Y3 Z1\nG01 X10 Y10\nM30\n", each=each)
+    assert alarms(m) == []
+    assert positions(m) == {"X": 10.0, "Y": 10.0, "Z": 0.0}
+    # Z first (1), then X (2), then Y (3): each group alone, the others standing
+    home_z = next(k for k, p in enumerate(trail) if p[2] == 0.0)
+    home_x = next(k for k, p in enumerate(trail) if p[0] == 0.0)
+    home_y = next(k for k, p in enumerate(trail) if p[1] == 0.0)
+    assert home_z < home_x < home_y
+    assert all(p[0] == pytest.approx(100.0) and p[1] == pytest.approx(50.0) for p in trail[: home_z + 1][-5:])
+    referenced = [e.axis for e in events if isinstance(e, ReferenceChanged) and e.state == "referenced"]
+    assert referenced == ["Z", "X", "Y"]
+
+
+@pytest.mark.req("LT-07", "C14-14")
+@pytest.mark.parametrize("geometry_only", [False, True])
+def test_the_homing_move_is_checked_like_any_block(geometry_only: bool) -> None:
+    from hli_server.commands.check import check_program
+
+    area = (
+        "#CONTROL AREA BEGIN [ID=1 PROT POLY MIN_EXCUR=-100 MAX_EXCUR=100]\n"
+        "G01 X40 Y-5 F1000\nX60\nY5\nX40\nY-5\n#CONTROL AREA END\n#CONTROL AREA ON ALL\n"
+    )
+    text = "G01 X100 Y0 F6000\n" + area + "N20 G74 X1\nM30\n"
+    result = check_program(Machine(mill_config()), text, geometry_only=geometry_only)
+    [alarm] = result.alarms
+    assert (alarm.number, alarm.block) == (912001, "N20")
+    assert result.final_position["X"] == pytest.approx(100.0)
+
+
+# --- #AKIMA (PM 207222923, 207229579, 207237003) and #FILTER (TF5200 FIR filter 542033291) ----------------
+AKIMA = """N10 G01 X20 Y0 F1000
+N20 #AKIMA TRANS[START=USER END=AUTO]
+N30 # AKIMA STARTVECTOR X1 Y1 Z0
+N35 #AKIMA ENDVECTOR X=1 Y-1 Z[0]
+N40 G151
+N50 G01 X40 Y20
+N60 X60
+N70 Y0
+N80 X80
+N90 Y10
+N100 G150
+N110 X70
+N120 M30
+"""
+
+
+@pytest.mark.req("LT-09")
+def test_the_manuals_akima_example_runs_as_the_spline_with_one_warning_more() -> None:
+    with_akima = mill()
+    run(with_akima, AKIMA)
+    without = mill()
+    run(without, "".join(line + "\n" for line in AKIMA.splitlines() if "AKIMA" not in line))
+    assert alarms(with_akima) == [911041, 911040]
+    assert alarms(without) == [911040]
+    assert with_akima.cycle == without.cycle  # the path is the same: the tangents are not simulated
+    assert positions(with_akima) == positions(without)
+
+
+@pytest.mark.req("LT-09")
+@pytest.mark.parametrize(
+    "line",
+    ["#AKIMA TRANS [START=FOO]", "#AKIMA TRANS [START=AUTO START=USER]", "#AKIMA STARTVECTOR", "#AKIMA"],
+)
+def test_malformed_akima_commands_are_refused(line: str) -> None:
+    assert interpret(f"{line}\nM30\n").alarm in (914015, 910110)
+
+
+@pytest.mark.req("LT-09")
+def test_filter_runs_the_path_unfiltered_with_one_warning_naming_the_tolerance() -> None:
+    m = mill()
+    run(m, "#FILTER ON [ORDER=20 AX_DEV=0.01]\nG01 X10 Y10 F3000\nX20\n#FILTER OFF\n#FILTER ON\nM30\n")
+    assert alarms(m) == [911041]
+    assert "AX_DEV=0.01" in m.alarm_history[0].message
+    assert positions(m)["X"] == pytest.approx(20.0)
+    assert interpret("#FILTER ON [FOO=1]\nM30\n").alarm == 914015
+    assert interpret("#FILTER ON [ORDER=-1]\nM30\n").alarm == 910111

@@ -37,6 +37,7 @@ from hli_server.engine.nc.language import (
     CONTOUR_TYPES,
     CONTOUR_WORDS,
     DEVIATION_KEYS,
+    FILTER_KEYS,
     HSC_KEYS,
     HSC_WORDS,
     MAX_MESSAGE,
@@ -139,6 +140,20 @@ class Effects(VariableAccess):
             return
         if command.startswith("IDENT "):
             self._ident(frame, stmt)
+            return
+        if command == "FILTER":
+            self._filter(stmt)
+            return
+        if command.startswith(("AKIMA ", "SET ASPLINE")):
+            for arg in stmt.args:
+                self._number(stmt, arg, f"a component of #{command}")
+            self._approximation(
+                stmt,
+                "#AKIMA",
+                f"#{command}: the Akima spline's transition types and tangents are not simulated: the spline "
+                "is simulated as contouring with corner deviation 0.2 mm (warning 911040), whose transitions "
+                "into and out of it are contoured corners too (docs/nc-language.md)",
+            )
             return
         # MSG
         if self._needs_flush(frame, stmt, stmt.args):
@@ -404,3 +419,38 @@ class Effects(VariableAccess):
         target = stmt.args[0]
         assert isinstance(target, Ref)
         self._assign(frame, stmt, target, value)
+
+    def _filter(self, stmt: Hash) -> None:
+        """``#FILTER [ON|OFF] [ORDER=.. ORDER_TIME=.. SHARE=.. AX_DEV=.. FCUT=.. ACC_FACT=.. QUALITY=..]``
+        (TF5200 FIR filter, 542033291): the FIR filters of the axes' command values. Approximated: the axes
+        follow the planned path unfiltered (said once per program, 911041, at ON); the filtered path departs
+        from it in corners by at most AX_DEV where programmed (the kernel's tolerance monitoring), else by
+        at most F times the filter's time / 2."""
+        for word in stmt.options:
+            if word not in ("ON", "OFF"):
+                raise stmt.error(A_CONTROL_SYNTAX, f"#FILTER: unknown word {word!r} (ON, OFF)")
+        if "ON" in stmt.options and "OFF" in stmt.options:
+            raise stmt.error(A_CONTROL_SYNTAX, "#FILTER: ON and OFF in one command")
+        values: dict[str, float] = {}
+        for key, expr in stmt.params.items():
+            if key not in FILTER_KEYS:
+                known = ", ".join(sorted(FILTER_KEYS))
+                raise stmt.error(A_CONTROL_SYNTAX, f"#FILTER: unknown parameter {key!r} (known: {known})")
+            value = self._number(stmt, expr, f"{key} of #FILTER")
+            if value < 0.0:
+                raise stmt.error(A_RANGE, f"#FILTER: {key}={format_value(value)} must not be negative")
+            values[key] = value
+        if "ON" in stmt.options:
+            bound = (
+                f"by at most AX_DEV={format_value(values['AX_DEV'])} mm (the kernel's tolerance monitoring)"
+                if values.get("AX_DEV", 0.0) > 0.0
+                else "in corners and curves by at most the feed times half the filter's time (ORDER cycles "
+                "or ORDER_TIME)"
+            )
+            self._approximation(
+                stmt,
+                "#FILTER",
+                "#FILTER ON: the FIR filters of the axes' command values are not simulated: the axes follow "
+                f"the planned path unfiltered; the kernel's filtered path departs from it {bound} "
+                "(docs/nc-language.md)",
+            )

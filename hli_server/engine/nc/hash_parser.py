@@ -20,6 +20,7 @@ from hli_server.engine.nc.language import (
     A_LIMIT,
     A_NOT_SIMULATED,
     A_UNKNOWN_HASH,
+    AKIMA_TRANSITIONS,
     HASH_COMMANDS,
     IDENT_VALUES,
     IDENT_WORDS,
@@ -81,6 +82,10 @@ class HashParser(ExpressionParser):
             return self.tool(command)
         if command in ("IDENT WR", "IDENT RD"):
             return self.ident(command)
+        if command == "FILTER":
+            return self.motion_options("FILTER")
+        if command in ("AKIMA TRANS", "AKIMA STARTVECTOR", "AKIMA ENDVECTOR", "SET ASPLINE"):
+            return self.akima(command)
         if command == "COMMENT":
             self.fail(
                 A_COMMENT_OPEN,
@@ -144,6 +149,65 @@ class HashParser(ExpressionParser):
                 )
         if not self.at_end():
             self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{command} [..]")
+        return Hash(self.raw, self.number, command, options, args)
+
+    def akima(self, command: str) -> Stmt:
+        """``#AKIMA TRANS [START=<type> END=<type>]`` (PM 207222923), ``#AKIMA STARTVECTOR {<axis>..}``,
+        ``#AKIMA ENDVECTOR {<axis>..}`` (PM 207229579, 207237003) and the older ``#SET ASPLINE ..``: the
+        transition types and tangents of the Akima spline. ``options`` the types (``START=USER``) and the
+        tangent's axes, ``args`` its components."""
+        options: list[str] = []
+        args: list[Expr] = []
+        if command == "AKIMA TRANS":
+            self.blanks()
+            if self.peek() == "[":
+                self.pos += 1
+                while True:
+                    self.blanks()
+                    if self.peek() == ",":
+                        self.pos += 1
+                        continue
+                    if self.peek() == "]":
+                        self.pos += 1
+                        break
+                    key = self.name()
+                    if key not in ("START", "END") or any(o.startswith(key + "=") for o in options):
+                        self.fail(A_CONTROL_SYNTAX, "#AKIMA TRANS [START=<type> END=<type>] (each once)")
+                    self.expect("=", f"after #AKIMA TRANS [{key}")
+                    self.blanks()
+                    kind = self.name()
+                    if kind not in AKIMA_TRANSITIONS:
+                        self.fail(
+                            A_CONTROL_SYNTAX,
+                            f"#AKIMA TRANS [{key}={kind}]: the types are "
+                            + ", ".join(sorted(AKIMA_TRANSITIONS)),
+                        )
+                    options.append(f"{key}={kind}")
+        elif command in ("AKIMA STARTVECTOR", "AKIMA ENDVECTOR"):
+            while not self.at_end():
+                at = self.pos
+                axis = self.name()
+                if not axis or not axis[0].isalpha():
+                    self.fail(
+                        A_CONTROL_SYNTAX, f"#{command}: unexpected {self.word_at(at)!r} (<axis><value>)"
+                    )
+                self.blanks()
+                if self.peek() == "=":
+                    self.pos += 1
+                elif axis[-1].isdigit():
+                    # X1: the axis X and its component 1 (a name with digits takes '=': X2=1)
+                    letters = axis.rstrip("0123456789")
+                    options.append(letters)
+                    args.append(Const(float(axis[len(letters) :])))
+                    continue
+                options.append(axis)
+                args.append(self.expression(stop_at_blank=True))
+            if not args:
+                self.fail(A_CONTROL_SYNTAX, f"#{command} without the tangent's components (X1 Y1 Z0)")
+        else:  # #SET ASPLINE MODE [..] | STARTTANG [..] | ZIELTANG [..]: the older spellings, read whole
+            self.pos = self.n
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{command}")
         return Hash(self.raw, self.number, command, options, args)
 
     def ident(self, command: str) -> Stmt:

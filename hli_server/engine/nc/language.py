@@ -389,11 +389,13 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
     "CONTOUR": _kernel("CONTOUR", ("MODE",)),
     "HSC": _SIMULATED,
     "SPLINE": _SIMULATED,
-    "SET": _kernel("SET", ("SPLINE", "SPLINETYPE")),
+    "SET": _kernel("SET", ("SPLINETYPE", "SPLINE", "ASPLINE")),
     "CS": _SIMULATED,
     "ACS": _SIMULATED,
     "ROTATION": _SIMULATED,
     "TIME": _SIMULATED,
+    "AKIMA": _kernel("AKIMA", ("TRANS", "STARTVECTOR", "ENDVECTOR")),
+    "FILTER": _SIMULATED,
     "TOOL": _kernel("TOOL", ("PREP", "DATA", "LIFE")),
     "IDENT": _kernel("IDENT", ("WR", "RD")),
     # the logical-block reader's (nc/reader.py): met here only where they are misplaced
@@ -417,6 +419,10 @@ UNKNOWN_HASH_HINT: Final = (
     "the commands simulated here: #CONTROL AREA, #VAR/#ENDVAR, #MSG, #FILE NAME, #FLUSH, #IF/#ELSE/#ENDIF, "
     "#COMMENT BEGIN/END (docs/nc-language.md)"
 )
+FILTER_KEYS: Final = frozenset(("ORDER", "ORDER_TIME", "SHARE", "AX_DEV", "FCUT", "ACC_FACT", "QUALITY"))
+"""``#FILTER [ON|OFF] [ORDER=.. ..]``'s parameters (TF5200 FIR filter, 542033291)."""
+AKIMA_TRANSITIONS: Final = frozenset(("AUTO", "TANGENTIAL", "USER"))
+"""``#AKIMA TRANS [START=.. END=..]``'s transition types (PM 207222923)."""
 IDENT_WORDS: Final = frozenset(("SYN", "NO_WAIT", "SERC", "CAN"))
 """``#IDENT WR|RD [..]``'s keywords (PM 207352971, 207359627, 207365515): synchronised, no waiting, the
 drive type."""
@@ -527,7 +533,10 @@ SPINDLE_WORDS: Final = frozenset(
 ``MC_..`` (PM 208178187, 208317067)."""
 
 # --- G codes ---------------------------------------------------------------------------------------------
-MOTION_G_CODES: Final[dict[int, str]] = {
+MOTION_G_CODES: Final[dict[int, str]] = {}
+"""G codes of motion functions not simulated (N-08), refused by name with 910110 (none left: the TRC
+selection methods and contour masking are approximated, :data:`TRC_G_CODES`)."""
+TRC_G_CODES: Final[dict[int, str]] = {
     5: "tangential TRC selection/deselection",
     138: "direct TRC selection/deselection",
     141: "TRC contour masking",
@@ -536,7 +545,8 @@ MOTION_G_CODES: Final[dict[int, str]] = {
     238: "TRC selection at an inside corner",
     239: "TRC selection/deselection without a block",
 }
-"""G codes of motion functions not simulated (N-08), refused by name with 910110."""
+"""The TRC selection methods and contour masking (PM 207729163, 206480651): approximated by the indirect
+selection G139 and no masking, with warning 911041 once per program (docs/nc-language.md)."""
 VALUE_G_CODES: Final = frozenset((131, 231, 133, 134, 233, 334, 339))
 """G functions programmed with a value, ``G131=50`` (acceleration and ramp-time weightings)."""
 AXIS_VALUE_G_CODES: Final = frozenset((130, 230, 132, 333, 338))
@@ -562,5 +572,6 @@ KNOWN_G: Final = (
     | CONTOUR_G_CODES
     | INITIAL_STATE_G_CODES
     | CORNER_G_CODES
+    | frozenset(TRC_G_CODES)
 )
 """Every G code simulated: the word parser's (``nc/parser.py``, ``KNOWN_G_CODES``) and the ones above."""
