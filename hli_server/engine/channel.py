@@ -22,14 +22,16 @@ from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import LineSegment, Point
 from hli_server.engine.hli import AxisHli, ChannelHli
-from hli_server.engine.nc.blocks import Block
+from hli_server.engine.nc.blocks import Block, NcError
 from hli_server.engine.nc.compiler import Compiler
+from hli_server.engine.nc.directives import Realtime
 from hli_server.engine.nc.interpreter import Interpreter
 from hli_server.engine.path.profiles import SlopeProfile, SlopeType
 from hli_server.engine.path.tools import ToolData
 from hli_server.engine.planner import Marker, MarkerKind, Planner
 from hli_server.engine.ports import MachinePort
 from hli_server.engine.programs import ProgramFile
+from hli_server.engine.realtime import RealtimeCycles, RtCycle
 from schemas.config import ChannelConfig
 from schemas.events import (
     Alarm,
@@ -223,6 +225,15 @@ class Channel:
         self.decoder.corner_ahead = self.interpreter.corner_ahead
         self.decoder.homing = {a.name: (a.home_position, a.jog_velocity, a.jog_acceleration) for a in axes}
         self.decoder.referenced_handler = self._referenced_by_program
+        self.realtime = RealtimeCycles(
+            self.number,
+            machine.external,
+            self._rt_position,
+            lambda: self.override_permille / 1000.0,
+            self._rt_fail,
+        )
+        """The realtime cycles (``#RT CYCLE``, TF5261): run in every cycle before the path's step."""
+        self.decoder.realtime_handler = self._realtime
         """Runs the NC programs of this channel ahead of the motion (N-01..N-08)."""
         self.planner = Planner(t_a=self.t_a, feedhold_decel=config.feedhold_deceleration)
         self.slope_ramp_time = max(
@@ -489,6 +500,7 @@ class Channel:
             )
             return
         self.interpreter.start(self.program_text, self.program_name)
+        self.realtime.end_program()
         self.planner.clear()
         self.set_slope(None)  # P-CHAN-00071 at every program start (#SLOPE's page)
         self.decoder.start(self.interpreter, self.setpoints())
@@ -515,6 +527,7 @@ class Channel:
         self.planner.clear()
         self.decoder.reset_modal()
         self.interpreter.reset()
+        self.realtime.end_program()
         self.aborting = False
         self.jog_velocity = [0.0] * len(self.axes)
         self._jog_keys = [0] * len(self.axes)
@@ -554,6 +567,8 @@ class Channel:
         self.monitor_holds |= source
 
     def _interpolate(self) -> None:
+        if self.realtime.cycles:
+            self.realtime.run()
         holds = self.monitor_holds | (HoldSource.FEEDHOLD if self.feedhold_active else HoldSource.NONE)
         self._set_holds(holds)
         if any(a.referencing for a in self.axes):
@@ -579,7 +594,7 @@ class Channel:
             return
         self._fill()
         self.planner.feedhold = self.feedhold_active
-        self.planner.override = self.override_permille / 1000.0
+        self.planner.override = self.override_permille / 1000.0 * self.realtime.override
         point, markers = self.planner.step()
         self._apply(point)
         head = self.planner.current()
@@ -630,6 +645,7 @@ class Channel:
             marker.payload()
         elif marker.kind == MarkerKind.END:
             self.warn_missing_program_end(marker)
+            self.realtime.end_program()
             self.planner.clear()
             if self.program_running:
                 self._state.apply(Cause.END)
@@ -684,6 +700,26 @@ class Channel:
             return
         axis.start_referencing()
         self.machine.referencing_changed(axis.index)
+
+    # --- realtime cycles (#RT CYCLE) -------------------------------------------------------------------
+    def _realtime(self, command: Realtime) -> None:
+        """``#RT CYCLE`` reached by the path: a cycle defined (running unless ``DEF``) or managed."""
+        if command.op == "DEFINE":
+            block = command.block if command.block is not None else Block(0, None, "")
+            self.realtime.define(RtCycle(command.ident, command.scope, command.body, block), command.start)
+        else:
+            self.realtime.manage(command.op, command.ident)
+
+    def _rt_position(self, kind: str, axis: str) -> float | None:
+        """V.RTA.<ACS|MCS>.<kind>.<axis> in mm: the command position (ACT_POS, CMD_POS) or the actual one
+        (CUR_POS); axis and machine coordinates are the same here (no transformation below the CS)."""
+        if axis not in self.axis_names:
+            return None
+        a = self.axes[self.axis_names.index(axis)]
+        return a.actual if kind == "CUR_POS" else a.setpoint
+
+    def _rt_fail(self, error: NcError) -> None:
+        self.machine.raise_alarm(error.alarm, self, error.message, line=error.line, block=error.block)
 
     def _referenced_by_program(self, names: tuple[str, ...]) -> None:
         """A G74 group arrived at its reference positions: its axes are referenced (E-02)."""

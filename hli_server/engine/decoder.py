@@ -28,6 +28,7 @@ from hli_server.engine.nc.directives import (
     FlushStop,
     FlushWait,
     MeasMode,
+    Realtime,
     Slope,
     SyncAction,
     ToolWrite,
@@ -300,6 +301,8 @@ class Decoder:
         self.referenced_handler: Callable[[tuple[str, ...]], None] | None = None
         """Called when a G74 group has arrived at its reference positions (the channel marks them
         referenced)."""
+        self.realtime_handler: Callable[[Realtime], None] | None = None
+        """Defines and manages the channel's realtime cycles (``#RT CYCLE``) when the path passes."""
         self.default_feed: float | None = None
         """mm/min: P-CHAN-00099 (``prog_start.feedrate``), the F at a program start where no F is in
         effect (the modal state is kept from program to program here until a reset); None for 0."""
@@ -400,6 +403,11 @@ class Decoder:
             return items
         if isinstance(out, SyncAction):
             return [*items, Marker(MarkerKind.SYNC, block, payload=out.action)]
+        if isinstance(out, Realtime):
+            realtime = self.realtime_handler
+            if realtime is None:
+                return items
+            return [*items, Marker(MarkerKind.SYNC, block, payload=lambda: realtime(out))]
         if isinstance(out, FlushWait):
             self.waiting = True
             return [*items, Marker(MarkerKind.ACTION, block, payload=self._end_wait)]

@@ -791,7 +791,7 @@ def test_flush_stops_the_path_flush_wait_waits_flush_continue_neither():
         ("#SET SLOPE PROFIL[1]", 910110, "#SET"),
         ("#FILE DELETE", 910110, "#FILE"),
         ("#FOO", 910109, "#FOO"),
-        ("G5 X1", 910110, "G5"),
+        ("#ANG [5]", 910110, "#ANG"),
         ("G77 X1", 910102, "G77"),
         ('#MSG INFO ["x"]', 910110, "INFO"),
         ("X[V.TLM.X]", 910110, "V.TLM."),

@@ -332,3 +332,107 @@ def test_filter_runs_the_path_unfiltered_with_one_warning_naming_the_tolerance()
     assert positions(m)["X"] == pytest.approx(20.0)
     assert interpret("#FILTER ON [FOO=1]\nM30\n").alarm == 914015
     assert interpret("#FILTER ON [ORDER=-1]\nM30\n").alarm == 910111
+
+
+# --- realtime cycles #RT CYCLE and $IF ONCE|EDGE|ALWAYS (TF5261) ---------------------------------------------
+def _counter_machine() -> Machine:
+    from schemas.config import ExternalVariableConfig
+
+    config = mill_config()
+    config = config.model_copy(
+        update={"external_variables": [ExternalVariableConfig(name="COUNT", type="UNS32", synchronous=False)]}
+    )
+    return Machine(config)
+
+
+RT_PROGRAM = """N05 G00 X0 Y0 Z0
+#RT CYCLE [SCOPE = PROG]
+  $IF {freq} V.RTA.ACS.ACT_POS.X > 200
+    M100
+    V.E.COUNT = V.E.COUNT + 1
+  $ENDIF
+  $IF V.RTA.ACS.ACT_POS.X > 300
+    V.RTG.OVERRIDE.VEL.CYCLE = 50
+  $ELSEIF V.RTA.MCS.CMD_POS.X > 250
+    V.RTG.OVERRIDE.VEL.CYCLE = 75
+  $ELSE
+    V.RTG.OVERRIDE.VEL.CYCLE = 100
+  $ENDIF
+#RT CYCLE END
+N10 G01 X400 F6000
+N20 G01 X100
+N30 G01 X400
+M30
+"""
+
+
+@pytest.mark.req("LT-10")
+@pytest.mark.parametrize(("freq", "count"), [("ONCE", 1), ("EDGE", 2), ("ALWAYS", None)])
+def test_a_realtime_cycle_runs_every_cycle_with_its_ifs_qualified(freq: str, count: int | None) -> None:
+    """TF5261 444686091: the path passes X=200 outward twice (out, back below it, out again): ONCE counts the
+    first time only, EDGE each change to TRUE, ALWAYS every cycle from the first time on."""
+    m = _counter_machine()
+    run(m, RT_PROGRAM.format(freq=freq))
+    assert alarms(m) == []
+    value = m.external.read("COUNT", 1)
+    if count is None:
+        assert value > 5000  # every cycle from the first X > 200 on
+    else:
+        assert value == count
+
+
+@pytest.mark.req("LT-10")
+def test_the_realtime_override_slows_the_path_where_the_cycle_says() -> None:
+    slow = _counter_machine()
+    run(slow, RT_PROGRAM.format(freq="ONCE"))
+    plain = _counter_machine()
+    run(plain, RT_PROGRAM.format(freq="ONCE").replace("= 50", "= 100").replace("= 75", "= 100"))
+    # 50 mm at 75 % and 100 mm at 50 %, on each of the three passes, at 100 mm/s
+    extra = (50 / 0.75 - 50 + 100 / 0.5 - 100) * 3 / 100.0
+    assert (slow.cycle - plain.cycle) / 1000.0 == pytest.approx(extra, rel=0.05)
+
+
+@pytest.mark.req("LT-10")
+def test_realtime_cycles_are_managed_by_id_and_scope() -> None:
+    m = _counter_machine()
+    program = (
+        "#RT CYCLE DEF [ID=17 SCOPE=PROG]\n  V.E.COUNT = V.E.COUNT + 1\n#RT CYCLE END\n"
+        "G01 X10 F600\n"  # 1 s: the cycle is defined, not started
+        "#RT CYCLE START [ID=17]\nG01 X20\n#RT CYCLE HOLD [ID=17]\nG01 X30\n#RT CYCLE CONTINUE [ID=17]\n"
+        "G01 X40\n#RT CYCLE DELETE [ID=17]\nG01 X50\nM30\n"
+    )
+    run(m, program)
+    assert alarms(m) == []
+    assert 1900 <= m.external.read("COUNT", 1) <= 2100  # X10..X20 and X30..X40: 2 s
+
+
+@pytest.mark.req("LT-10")
+def test_a_block_scope_cycle_acts_on_the_next_block_only() -> None:
+    m = _counter_machine()
+    run(
+        m, "G01 X0 F600\n#RT CYCLE [SCOPE=BLOCK]\n  V.E.COUNT = V.E.COUNT + 1\n#RT CYCLE END\nX10\nX20\nM30\n"
+    )
+    assert alarms(m) == []
+    assert 950 <= m.external.read("COUNT", 1) <= 1050  # the 1 s of X0..X10
+
+
+@pytest.mark.req("LT-10")
+@pytest.mark.parametrize(
+    ("program", "alarm"),
+    [
+        ("#RT CYCLE [SCOPE=PROG]\nG01 X10 F100\n#RT CYCLE END\nM30\n", 910110),  # motion in it
+        ("#RT CYCLE [SCOPE=PROG]\nX[INDP_ASYN POS=10 G90 G00]\n#RT CYCLE END\nM30\n", 910110),
+        ("#RT CYCLE [SCOPE=PROG]\nP1 = 2\n#RT CYCLE END\nM30\n", 910110),
+        ("#RT CYCLE [SCOPE=PROG]\n$WHILE 1\n$ENDWHILE\n#RT CYCLE END\nM30\n", 910110),
+        ("#RT CYCLE [SCOPE=PROG]\n$IF ONCE 1\n$ELSE\n$ENDIF\n#RT CYCLE END\nM30\n", 914000),
+        ("#RT CYCLE DEF [SCOPE=PROG]\n#RT CYCLE END\nM30\n", 22003),  # DEF needs an ID
+        ("#RT CYCLE [SCOPE=GLOBAL]\n#RT CYCLE END\nM30\n", 22003),
+        ("#RT CYCLE [SCOPE=PROG]\nM100\n", 914015),  # no #RT CYCLE END
+        ("#RT CYCLE END\nM30\n", 914015),
+        ("$IF ONCE 1\n$ENDIF\nM30\n", 914015),
+        ("P1 = V.RTA.ACS.ACT_POS.X\nM30\n", 910110),
+        ("#RT WHILE\nM30\n", 910110),
+    ],
+)
+def test_what_a_realtime_cycle_cannot_hold_here_is_refused_by_name(program: str, alarm: int) -> None:
+    assert interpret(program).alarm == alarm

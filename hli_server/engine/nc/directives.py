@@ -17,6 +17,7 @@ from typing import Final, Protocol
 
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.nc.blocks import Block
+from hli_server.engine.nc.statements import Stmt
 from hli_server.engine.programs import ProgramFile
 
 __all__ = [
@@ -29,6 +30,7 @@ __all__ = [
     "Host",
     "IterationCapError",
     "MeasMode",
+    "Realtime",
     "Slope",
     "SyncAction",
     "ToolWrite",
@@ -131,6 +133,28 @@ class ContourDirective(Directive):
         self.on = on
         self.mode = mode
         self.values = values
+
+
+class Realtime(Directive):
+    """``#RT CYCLE`` (TF5261): ``op`` DEFINE (``body`` the cycle's statements; ``start``: it runs at once, not
+    ``DEF``), START, HOLD, CONTINUE, ABORT or DELETE; ``ident`` the cycle's ID (None: the one defined last);
+    ``scope`` BLOCK, PROG or GLOBAL. The channel runs it when the path passes this point."""
+
+    def __init__(
+        self,
+        block: Block,
+        op: str,
+        ident: int | None,
+        scope: str = "PROG",
+        body: list[Stmt] | None = None,
+        start: bool = True,
+    ) -> None:
+        super().__init__(block)
+        self.op = op
+        self.ident = ident
+        self.scope = scope
+        self.body = body or []
+        self.start = start
 
 
 class IterationCapError(Exception):

@@ -14,6 +14,7 @@ from hli_server.engine.nc.directives import (
     FlushStop,
     FlushWait,
     MeasMode,
+    Realtime,
     Slope,
     SyncAction,
 )
@@ -32,6 +33,7 @@ from hli_server.engine.nc.language import (
     A_INDEX,
     A_MESSAGE,
     A_RANGE,
+    A_RT_ID,
     A_UNKNOWN_AXIS_NAME,
     CONTOUR_KEYS,
     CONTOUR_TYPES,
@@ -143,6 +145,9 @@ class Effects(VariableAccess):
             return
         if command == "FILTER":
             self._filter(stmt)
+            return
+        if command == "RT CYCLE":
+            self._rt_cycle(frame, stmt)
             return
         if command.startswith(("AKIMA ", "SET ASPLINE")):
             for arg in stmt.args:
@@ -454,3 +459,32 @@ class Effects(VariableAccess):
                 f"the planned path unfiltered; the kernel's filtered path departs from it {bound} "
                 "(docs/nc-language.md)",
             )
+
+    def _rt_cycle(self, frame: Frame, stmt: Hash) -> None:
+        """``#RT CYCLE [DEF] [ID= SCOPE= END_ACTION=]`` starts a realtime cycle's definition (its statements
+        are collected up to ``#RT CYCLE END``, not run: ``nc/interpreter.py``); ``START``, ``HOLD``,
+        ``CONTINUE``, ``ABORT ACTION``, ``DELETE`` manage one when the path passes (TF5261)."""
+        ident: int | None = None
+        if "ID" in stmt.params:
+            value = self._number(stmt, stmt.params["ID"], "the ID of #RT CYCLE")
+            if value != int(value) or value < 0:
+                raise stmt.error(
+                    A_INDEX, f"#RT CYCLE [ID={format_value(value)}]: the ID is a whole number >= 0"
+                )
+            ident = int(value)
+        op = next((o for o in stmt.options if "=" not in o), "")
+        place = self._place_block(frame, stmt)
+        if op == "END":
+            raise stmt.error(A_CONTROL_SYNTAX, "#RT CYCLE END without #RT CYCLE")
+        if op in ("", "DEF"):
+            scope = next((o[6:] for o in stmt.options if o.startswith("SCOPE=")), "PROG")
+            if ident is None and (op == "DEF" or scope == "GLOBAL"):
+                raise stmt.error(
+                    A_RT_ID, "#RT CYCLE: an ID is needed with DEF or SCOPE=GLOBAL (#RT CYCLE [ID=.. ..])"
+                )
+            self._rt_body = []
+            self._rt_define = Realtime(place, "DEFINE", ident, scope, start=op != "DEF")
+            return
+        self._pending.append(Realtime(place, op, ident))
+        if op == "START" and ident in self._rt_block_scope:
+            self._rt_block_scope[ident] = True  # valid for the next block again (TF5261 444677387)

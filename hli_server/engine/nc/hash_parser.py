@@ -26,6 +26,8 @@ from hli_server.engine.nc.language import (
     IDENT_WORDS,
     MAX_NAME,
     MSG_OPTIONS,
+    RT_OPERATIONS,
+    RT_SCOPES,
     SLOPE_TYPES,
     UNKNOWN_HASH_HINT,
 )
@@ -84,6 +86,8 @@ class HashParser(ExpressionParser):
             return self.ident(command)
         if command == "FILTER":
             return self.motion_options("FILTER")
+        if command == "RT CYCLE":
+            return self.rt_cycle()
         if command in ("AKIMA TRANS", "AKIMA STARTVECTOR", "AKIMA ENDVECTOR", "SET ASPLINE"):
             return self.akima(command)
         if command == "COMMENT":
@@ -150,6 +154,56 @@ class HashParser(ExpressionParser):
         if not self.at_end():
             self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{command} [..]")
         return Hash(self.raw, self.number, command, options, args)
+
+    def rt_cycle(self) -> Stmt:
+        """``#RT CYCLE [DEF] [ID=.. SCOPE=BLOCK|PROG|GLOBAL END_ACTION=..]``, ``#RT CYCLE END``, ``#RT CYCLE
+        START|HOLD|CONTINUE|ABORT ACTION|DELETE [ID=..]`` (TF5261 562766219, 444681483): ``options`` the
+        keyword (``DEF``, ``END``, ``START`` ..) and ``SCOPE=..``, ``END_ACTION=..``; ``params`` the ID."""
+        options: list[str] = []
+        word = next((w for w in RT_OPERATIONS if self.keyword(w)), None)
+        if word is not None:
+            options.append(word)
+            if word == "ABORT" and not self.keyword("ACTION"):
+                self.fail(A_CONTROL_SYNTAX, "#RT CYCLE ABORT ACTION [ID=..]")
+        params: dict[str, Expr] = {}
+        self.blanks()
+        if self.peek() == "[":
+            self.pos += 1
+            while True:
+                self.blanks()
+                c = self.peek()
+                if c == "]":
+                    self.pos += 1
+                    break
+                if c == ",":
+                    self.pos += 1
+                    continue
+                if not c:
+                    self.fail(A_CONTROL_SYNTAX, "#RT CYCLE [: ']' missing")
+                key = self.name()
+                self.blanks()
+                self.expect("=", f"after #RT CYCLE [{key or self.word_at(self.pos)}")
+                self.blanks()
+                if key == "ID" and "ID" not in params:
+                    saved = self.depth
+                    self.depth = 0
+                    try:
+                        params["ID"] = self.expression(stop_at_blank=True)
+                    finally:
+                        self.depth = saved
+                elif key in ("SCOPE", "END_ACTION") and not any(o.startswith(key + "=") for o in options):
+                    ident = self.name()
+                    allowed = RT_SCOPES if key == "SCOPE" else ("MOVE_ABORT", "MOVE_CONT")
+                    if ident not in allowed:
+                        self.fail(A_CONTROL_SYNTAX, f"#RT CYCLE [{key}={ident}]: {', '.join(allowed)}")
+                    options.append(f"{key}={ident}")
+                else:
+                    self.fail(
+                        A_CONTROL_SYNTAX, f"#RT CYCLE [..]: {key!r}: ID=, SCOPE=, END_ACTION= (each once)"
+                    )
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #RT CYCLE")
+        return Hash(self.raw, self.number, "RT CYCLE", options, [], params=params)
 
     def akima(self, command: str) -> Stmt:
         """``#AKIMA TRANS [START=<type> END=<type>]`` (PM 207222923), ``#AKIMA STARTVECTOR {<axis>..}``,

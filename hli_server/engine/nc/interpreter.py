@@ -47,6 +47,7 @@ from hli_server.engine.nc.calls import ProgramLevels
 from hli_server.engine.nc.directives import (
     PAUSE,
     Directive,
+    Realtime,
     SyncAction,
 )
 from hli_server.engine.nc.expr import (
@@ -66,6 +67,7 @@ from hli_server.engine.nc.levels import (
     Units,
 )
 from hli_server.engine.nc.reader import strip_comments
+from hli_server.engine.nc.rt_cycles import check_body
 from hli_server.engine.nc.source import LineTooLongError, ProgramText
 from hli_server.engine.nc.state import STATEMENTS_PER_CYCLE
 from hli_server.engine.nc.statements import (
@@ -107,6 +109,9 @@ class Interpreter(ProgramLevels):
         self._program_vars = {}
         self._message_file = "message.txt"
         self._approximated.clear()
+        self._rt_body = None
+        self._rt_define = None
+        self._rt_block_scope.clear()
         self.iterations = 0
         self.statements = 0
         self._left = self.budget if self.budget is not None else 0
@@ -149,21 +154,26 @@ class Interpreter(ProgramLevels):
     def next(self) -> Block | Directive | None:
         """The next block or directive; None at the end of the main program's text."""
         pending = self._pending
+        out: Block | Directive | None
         if pending:
-            return pending.popleft()
-        if self._ended:
+            out = pending.popleft()
+        elif self._ended:
             return None
-        try:
-            return self._run()
-        except NcError as exc:
-            self._ended = True
-            frame = self._frames[-1] if self._frames else None
-            if frame is not None and frame.program and not exc.program:
-                exc.program = frame.program
-            raise
-        except EvalError as exc:  # pragma: no cover - every evaluation is inside a statement
-            self._ended = True
-            raise NcError(exc.alarm, 0, "line 0", exc.message) from None
+        else:
+            try:
+                out = self._run()
+            except NcError as exc:
+                self._ended = True
+                frame = self._frames[-1] if self._frames else None
+                if frame is not None and frame.program and not exc.program:
+                    exc.program = frame.program
+                raise
+            except EvalError as exc:  # pragma: no cover - every evaluation is inside a statement
+                self._ended = True
+                raise NcError(exc.alarm, 0, "line 0", exc.message) from None
+        if self._rt_block_scope and isinstance(out, Block) and out.axes:
+            self._rt_after_block(out)
+        return out
 
     def _run(self) -> Block | Directive | None:
         pending = self._pending
@@ -181,6 +191,11 @@ class Interpreter(ProgramLevels):
                     return None
                 continue
             stmt = frame.units.statement(frame.line, frame.program, frame.keep or bool(frame.open))
+            if self._rt_body is not None:
+                self._rt_collect(frame, stmt)
+                if pending:
+                    return pending.popleft()
+                continue
             if isinstance(stmt, Block):
                 frame.line += 1
                 if frame.seek is not None:
@@ -202,6 +217,59 @@ class Interpreter(ProgramLevels):
             self._execute(frame, stmt)
             if pending:
                 return pending.popleft()
+
+    # --- realtime cycles (#RT CYCLE, TF5261) ------------------------------------------------------------
+    def _rt_collect(self, frame: Frame, stmt: Stmt | Block | None) -> None:
+        """A statement between ``#RT CYCLE`` and ``#RT CYCLE END``: kept for the cycle, not run. A block of
+        M/H functions only is accepted (no effect); motion in a realtime cycle is refused by name."""
+        body = self._rt_body
+        definition = self._rt_define
+        assert body is not None
+        assert definition is not None
+        if stmt is None or isinstance(stmt, Header):
+            raise NcError(
+                A_CONTROL_SYNTAX, frame.line, f"line {frame.line}", "#RT CYCLE without its #RT CYCLE END"
+            )
+        if isinstance(stmt, (Block, ConstBlock)):
+            block = stmt if isinstance(stmt, Block) else stmt.block
+            frame.line = block.line + 1 if isinstance(stmt, Block) else stmt.last + 1
+            if (
+                block.axes
+                or block.centre
+                or block.feed is not None
+                or block.g_codes
+                or block.area is not None
+            ):
+                raise NcError(
+                    910110,
+                    block.line,
+                    block.label,
+                    f"{block.text.strip()!r}: motion in a realtime cycle (an independent axis motion) is not "
+                    "simulated: docs/nc-language.md",
+                )
+            return
+        frame.line = stmt.last + 1
+        if isinstance(stmt, Refused):
+            raise stmt.failure
+        if isinstance(stmt, Hash) and stmt.command == "RT CYCLE" and "END" in stmt.options:
+            self._rt_body = None
+            self._rt_define = None
+            error = check_body(body, stmt.place)
+            if error is not None:
+                raise error
+            definition.body = body
+            self._pending.append(definition)
+            if definition.scope == "BLOCK":
+                self._rt_block_scope[definition.ident] = not definition.start
+            return
+        body.append(stmt)
+
+    def _rt_after_block(self, block: Block) -> None:
+        """A motion block was handed out: the realtime cycles valid for it (SCOPE=BLOCK) end after it."""
+        for ident, defined in list(self._rt_block_scope.items()):
+            self._pending.appendleft(Realtime(block, "HOLD" if defined else "DELETE", ident))
+            if not defined:
+                del self._rt_block_scope[ident]
 
     # --- statements ------------------------------------------------------------------------------------
     def _execute(self, frame: Frame, stmt: Stmt) -> None:

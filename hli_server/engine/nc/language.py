@@ -75,6 +75,8 @@ A_HUEMNOS_TOOL: Final = 20861
 """A HÜMNOS tool (sister, variant) only with the corresponding tool management (DG 252795531)."""
 A_UNKNOWN_AXIS_NAME: Final = 20797
 """Unknown axis designation in a command that names axes (DG 252577931)."""
+A_RT_ID: Final = 22003
+"""A realtime cycle without its ID where DEF or SCOPE=GLOBAL needs one (TF5261 562766219)."""
 A_APPROXIMATED: Final = 911041
 """Warning: a construct that only shapes the path runs approximated within a documented tolerance (once per
 program and construct; docs/nc-language.md, "Refusals and approximations")."""
@@ -396,6 +398,7 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
     "TIME": _SIMULATED,
     "AKIMA": _kernel("AKIMA", ("TRANS", "STARTVECTOR", "ENDVECTOR")),
     "FILTER": _SIMULATED,
+    "RT": _kernel("RT", ("CYCLE",)),
     "TOOL": _kernel("TOOL", ("PREP", "DATA", "LIFE")),
     "IDENT": _kernel("IDENT", ("WR", "RD")),
     # the logical-block reader's (nc/reader.py): met here only where they are misplaced
@@ -419,6 +422,11 @@ UNKNOWN_HASH_HINT: Final = (
     "the commands simulated here: #CONTROL AREA, #VAR/#ENDVAR, #MSG, #FILE NAME, #FLUSH, #IF/#ELSE/#ENDIF, "
     "#COMMENT BEGIN/END (docs/nc-language.md)"
 )
+RT_FREQUENCIES: Final = ("ONCE", "EDGE", "ALWAYS")
+"""The qualifiers of a realtime cycle's ``$IF`` (TF5261 444686091)."""
+RT_OPERATIONS: Final = ("DEF", "END", "START", "HOLD", "CONTINUE", "ABORT", "DELETE")
+"""``#RT CYCLE``'s keywords (TF5261 562766219, 444681483)."""
+RT_SCOPES: Final = ("BLOCK", "PROG", "GLOBAL")
 FILTER_KEYS: Final = frozenset(("ORDER", "ORDER_TIME", "SHARE", "AX_DEV", "FCUT", "ACC_FACT", "QUALITY"))
 """``#FILTER [ON|OFF] [ORDER=.. ..]``'s parameters (TF5200 FIR filter, 542033291)."""
 AKIMA_TRANSITIONS: Final = frozenset(("AUTO", "TANGENTIAL", "USER"))

@@ -17,6 +17,7 @@ from hli_server.engine.nc.directives import (
     FlushWait,
     Host,
     IterationCapError,
+    Realtime,
 )
 from hli_server.engine.nc.expr import (
     KIND_VA,
@@ -78,6 +79,13 @@ class InterpreterState(Env):
         keep it across programs, as a drive does."""
         """V.S.: kept across programs and resets (the channel's lifetime)."""
         self._message_file = "message.txt"
+        self._rt_body: list[Stmt] | None = None
+        """The statements of the realtime cycle being defined (``#RT CYCLE`` .. ``#RT CYCLE END``) or None."""
+        self._rt_define: Realtime | None = None
+        """The definition those statements go to."""
+        self._rt_block_scope: dict[int | None, bool] = {}
+        """Realtime cycles valid for the next block (SCOPE=BLOCK): ID -> defined with DEF (then held after
+        the block, else deleted)."""
         self._approximated: set[str] = set()
         """Constructs approximated in this program and already said so (warning 911041, once each)."""
         self.iterations = 0

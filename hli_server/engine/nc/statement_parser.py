@@ -54,6 +54,7 @@ from hli_server.engine.nc.language import (
     CONTROL_WORDS,
     MAX_NAME,
     MAX_STRING,
+    RT_FREQUENCIES,
     SPINDLE_WORDS,
     VALUE_G_CODES,
 )
@@ -654,6 +655,13 @@ class StatementParser(HashParser):
             return Control(raw, self.number, keyword, [])
         if keyword == C_FOR:
             return self.for_loop()
+        frequency = ""
+        if keyword == C_IF:
+            frequency = next((w for w in RT_FREQUENCIES if self.keyword(w)), "")
+            if frequency:
+                self.blanks()
+                if self.peek() == "=" and self.peek(1) != "=":
+                    self.pos += 1  # $IF ONCE = <cond>: the page's "[ONCE | EDGE | ALWAYS]=.."
         # a condition (or the $CASE values)
         if self.at_end():
             what = "value" if keyword == C_CASE else "condition"
@@ -683,7 +691,7 @@ class StatementParser(HashParser):
                     f"only the {'value' if keyword == C_CASE else 'condition'} may follow ${keyword}; "
                     "move the rest to the next block",
                 )
-        return Control(raw, self.number, keyword, exprs, goto=goto)
+        return Control(raw, self.number, keyword, exprs, goto=goto, frequency=frequency)
 
     def for_loop(self) -> Stmt:
         """``$FOR P1 = <start>, <end>, <step>`` (manual "Counting loop", 206929163)."""

@@ -210,7 +210,7 @@ class Control(Stmt):
     """A control statement: ``keyword`` (``IF``, ``ENDWHILE``, ... or ``#IF`` for conditional
     interpretation) with its expressions: the condition, the ``$SWITCH`` value, the ``$CASE`` values,
     ``$FOR``'s start, end and step. ``target`` is ``$FOR``'s counter; ``goto`` the jump of
-    ``$IF cond $GOTO ..``."""
+    ``$IF cond $GOTO ..``; ``frequency`` the qualifier of ``$IF ONCE ..``."""
 
     def __init__(
         self,
@@ -220,12 +220,15 @@ class Control(Stmt):
         exprs: list[Expr],
         target: Ref | None = None,
         goto: Goto | None = None,
+        frequency: str = "",
     ) -> None:
         super().__init__(raw, number)
         self.keyword = keyword
         self.exprs = exprs
         self.target = target
         self.goto = goto
+        self.frequency = frequency
+        """``$IF ONCE|EDGE|ALWAYS``: the qualifier of an $IF of a realtime cycle (TF5261), else ""."""
 
 
 class Declaration:
