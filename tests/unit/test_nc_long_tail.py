@@ -334,7 +334,7 @@ def test_filter_runs_the_path_unfiltered_with_one_warning_naming_the_tolerance()
     assert interpret("#FILTER ON [ORDER=-1]\nM30\n").alarm == 910111
 
 
-# --- realtime cycles #RT CYCLE and $IF ONCE|EDGE|ALWAYS (TF5261) ---------------------------------------------
+# --- realtime cycles #RT CYCLE and $IF ONCE|EDGE|ALWAYS (TF5261) ----------------------------------------
 def _counter_machine() -> Machine:
     from schemas.config import ExternalVariableConfig
 
