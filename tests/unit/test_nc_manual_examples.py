@@ -320,9 +320,10 @@ M30
     run = interpret(text)
     assert run.error is None, run.error
     assert [b.m_codes for b in run.blocks] == [(52,), (12,), (10,), (63, 52, 54), (), (), (), (30,)]
-    refused = error("N40 X[M54=P1]\nM30\n")
-    assert refused.alarm == 910110
-    assert "M54" in refused.message
+    # the axis-specific form X[M54=..] (issue 33): an M function of the axis, accepted as every M function
+    axis_specific = interpret("N35 P1 = 567\nN40 X[M54=P1] Y1\nM30\n")
+    assert axis_specific.error is None
+    assert axis_specific.values("Y") == [1.0]
 
 
 @pytest.mark.req("N-06")

@@ -272,6 +272,10 @@ class StatementParser(HashParser):
                     f"{name}[{first} ..]: {what} is not simulated: the axis would leave the path the "
                     "monitors check (docs/nc-language.md, axis-specific syntax)",
                 )
+            if first[:1] in "MH" and first[1:].isdigit():
+                # X[M54=..]: the axis' own M and H functions, accepted as every M/H function is here
+                functions = self.spindle(start, name, p + 1)
+                return Technology(functions.text, name, [], functions.params, [])
             return None
         if not spindle or not (
             first in SPINDLE_WORDS or first.startswith("MC_") or (first[:1] in "MH" and first[1:].isdigit())
@@ -315,12 +319,18 @@ class StatementParser(HashParser):
                 continue
             if c in "MH" and self.peek(1) in DIGITS:
                 self.pos += 1
-                code = self.word_value(at)
-                if name == "S" and c == "M" and isinstance(code, Const) and code.value in (3.0, 4.0, 5.0):
-                    main.append(Word(self.u[at : self.pos], "M", "M", code))
+                begin = self.pos
+                while self.peek() in DIGITS:
+                    self.pos += 1
+                code = Const(float(int(self.u[begin : self.pos])))
+                self.blanks()
+                if self.peek() == "=" and self.peek(1) != "=":
+                    self.pos += 1
+                    params[f"{self.u[at:begin]}{int(code.value)}="] = self.spindle_value(name, c)
+                elif name == "S" and c == "M" and code.value in (3.0, 4.0, 5.0):
+                    main.append(Word(self.u[at : self.pos].strip(), "M", "M", code))
                     continue
-                params[f"{c}{len(words)}"] = code
-                words.append(self.u[at : self.pos])
+                words.append(self.u[at : self.pos].strip())
                 continue
             key = self.name()
             if not key:
