@@ -783,7 +783,6 @@ def test_flush_stops_the_path_flush_wait_waits_flush_continue_neither():
         ("#CS MODE ON", 910110, "#CS"),
         ("#CS SELECT [A]", 910110, "#CS"),
         ("#TLAX [Z+]", 910110, "#TLAX"),
-        ("G01 X10 E100", 910110, "E"),
         ('"STRING1" = "5"', 910110, "macros"),
         ("#TIMER", 910110, "#TIMER"),
         ("#KIN ID[1]", 910110, "#KIN"),

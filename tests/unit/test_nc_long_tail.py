@@ -436,3 +436,16 @@ def test_a_block_scope_cycle_acts_on_the_next_block_only() -> None:
 )
 def test_what_a_realtime_cycle_cannot_hold_here_is_refused_by_name(program: str, alarm: int) -> None:
     assert interpret(program).alarm == alarm
+
+
+# --- E, the feed at block end (PM 206811147) -------------------------------------------------------------------
+@pytest.mark.req("LT-08")
+def test_the_feed_at_block_end_runs_the_same_path_with_one_warning() -> None:
+    with_e = mill()
+    run(with_e, "G01 X10 F1000 E100\nX20 E[50]\nM30\n")
+    without = mill()
+    run(without, "G01 X10 F1000\nX20\nM30\n")
+    assert alarms(with_e) == [911041]
+    assert "E (the feed at the block's end)" in with_e.alarm_history[0].message
+    assert positions(with_e) == positions(without)
+    assert with_e.cycle == without.cycle

@@ -318,6 +318,15 @@ class Interpreter(ProgramLevels):
                 words.append((item, value, extra))
             elif isinstance(item, Technology):
                 self._technology(stmt, item, words)
+        if any(w.letter == "E" for w, _, _ in words):
+            words = [w for w in words if w[0].letter != "E"]
+            self._approximation(
+                stmt,
+                "E",
+                "E (the feed at the block's end) is not simulated: the path keeps the block's F up to the "
+                "look-ahead's braking; only the velocity near the block's end differs, not the path "
+                "(docs/nc-language.md)",
+            )
         block: Block | None = None
         if words:
             block = self._build(frame, stmt, words)

@@ -379,10 +379,8 @@ class StatementParser(HashParser):
             # the circle's radius (G02/G03 X.. Y.. R.., M-08)
             return Word(self.word_at(start), "R", "R", self.word_value(start))
         if letter == "E":
-            self.fail(
-                A_NOT_SIMULATED,
-                f"{self.word_at(start)}: the feed at block end (E) is not simulated: see docs/nc-language.md",
-            )
+            # the feed at block end (PM 206811147): only the velocity at the block's end; approximated
+            return Word(self.word_at(start), "E", "E", self.word_value(start))
         if letter in "FSTDIJK":
             return Word(self.word_at(start), letter, letter, self.word_value(start))
         if letter in self.c.single:
