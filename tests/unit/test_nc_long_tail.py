@@ -438,7 +438,7 @@ def test_what_a_realtime_cycle_cannot_hold_here_is_refused_by_name(program: str,
     assert interpret(program).alarm == alarm
 
 
-# --- E, the feed at block end (PM 206811147) -------------------------------------------------------------------
+# --- E, the feed at block end (PM 206811147) ----------------------------------------------------------------
 @pytest.mark.req("LT-08")
 def test_the_feed_at_block_end_runs_the_same_path_with_one_warning() -> None:
     with_e = mill()
