@@ -402,3 +402,10 @@ def test_the_batch_geometry_check_inserts_the_same_corners_as_the_exact_one(chun
     result = assert_same(config, text, chunk=chunk, small=16)
     assert result.final_position["X"] == pytest.approx(0.0)
     assert [a.number for a in result.alarms] == []
+
+
+@pytest.mark.req("LT-06")
+def test_frc_the_feed_of_the_inserted_element_is_accepted_with_one_warning() -> None:
+    m, points = _path("G01 X0 Y0 F6000\nX50\n#FRC=500\nG302 I5\nY50\nM30\n")
+    assert alarms(m) == [911041]
+    assert min(math.dist(p, (50.0, 0.0)) for p in points) == pytest.approx(5.0 * (math.sqrt(2) - 1), abs=0.01)

@@ -149,6 +149,18 @@ class Effects(VariableAccess):
         if command == "RT CYCLE":
             self._rt_cycle(frame, stmt)
             return
+        if command == "FRC":
+            feed = self._number(stmt, stmt.args[0], "the feed of #FRC")
+            if not 0.0 < feed <= word_parser._FEED_MAX:
+                raise stmt.error(A_RANGE, f"#FRC={format_value(feed)}: {word_parser._FEED_RANGE}")
+            self._approximation(
+                stmt,
+                "#FRC",
+                "#FRC (the feed of an inserted chamfer or rounding) is not simulated: the element is "
+                "travelled at the G301/G302 block's F or the pre-block's feed; the path is the same "
+                "(docs/nc-language.md)",
+            )
+            return
         if command.startswith(("AKIMA ", "SET ASPLINE")):
             for arg in stmt.args:
                 self._number(stmt, arg, f"a component of #{command}")

@@ -88,6 +88,12 @@ class HashParser(ExpressionParser):
             return self.motion_options("FILTER")
         if command == "RT CYCLE":
             return self.rt_cycle()
+        if command == "FRC":
+            self.expect("=", "after #FRC (#FRC=<feed>)")
+            args = [self.expression(stop_at_blank=True)]
+            if not self.at_end():
+                self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #FRC=..")
+            return Hash(self.raw, self.number, "FRC", [], args)
         if command in ("AKIMA TRANS", "AKIMA STARTVECTOR", "AKIMA ENDVECTOR", "SET ASPLINE"):
             return self.akima(command)
         if command == "COMMENT":

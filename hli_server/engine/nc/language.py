@@ -399,6 +399,7 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
     "AKIMA": _kernel("AKIMA", ("TRANS", "STARTVECTOR", "ENDVECTOR")),
     "FILTER": _SIMULATED,
     "RT": _kernel("RT", ("CYCLE",)),
+    "FRC": _SIMULATED,
     "TOOL": _kernel("TOOL", ("PREP", "DATA", "LIFE")),
     "IDENT": _kernel("IDENT", ("WR", "RD")),
     # the logical-block reader's (nc/reader.py): met here only where they are misplaced
