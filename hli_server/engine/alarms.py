@@ -246,6 +246,12 @@ _TABLE: tuple[AlarmDef, ...] = (
         "kernel",
         page=_DIAG + "252425611.html",
     ),
+    _e(
+        22003,
+        "Realtime cycle without its ID (needed with DEF or SCOPE=GLOBAL)",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1033/tf5261_realtime_cycles/562766219.html",
+    ),
     _e(20008, "Feed rate in motion block is 0", "kernel", page=_DIAG + "250515083.html"),
     # --- the kernel's IDs: chamfers and roundings (G301/G302) ----------------------------------
     _e(20012, "Radius or bevel is 0 in G301/G302", "kernel", page=_DIAG + "250528139.html"),

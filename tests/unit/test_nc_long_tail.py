@@ -449,3 +449,15 @@ def test_the_feed_at_block_end_runs_the_same_path_with_one_warning() -> None:
     assert "E (the feed at the block's end)" in with_e.alarm_history[0].message
     assert positions(with_e) == positions(without)
     assert with_e.cycle == without.cycle
+
+
+@pytest.mark.req("LT-08", "N-08")
+def test_every_hash_command_of_the_kernel_has_its_decision_in_the_docs() -> None:
+    """docs/nc-language.md says for every `#` command whether it runs (and how) or why it is refused."""
+    from pathlib import Path
+
+    from hli_server.engine.nc.language import HASH_COMMANDS
+
+    doc = (Path(__file__).parents[2] / "docs" / "nc-language.md").read_text(encoding="utf-8")
+    missing = [name for name in HASH_COMMANDS if f"`#{name}" not in doc]
+    assert missing == [], f"docs/nc-language.md does not name #{missing}"
