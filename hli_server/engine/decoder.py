@@ -715,7 +715,6 @@ class Decoder:
         first = self.main[0]
         others = [name for name, _ in block.axes if name != first]
         seconds = dict(block.axes).get(first)
-        place = f"N{block.number}" if block.number is not None else f"line {block.line}"
         if seconds is None and others:
             return self._error(
                 block,
@@ -729,7 +728,7 @@ class Decoder:
                 f"G04 with the axes {', '.join(others)}: the dwell time takes the first main axis only "
                 f"({first}); the others are ignored",
                 block.line,
-                place,
+                block.label,
             )
         revolutions = block.extra.get("S")
         if seconds is None and revolutions is not None:
@@ -792,7 +791,9 @@ class Decoder:
             handler = self.referenced_handler
             if handler is not None:
                 items.append(Marker(MarkerKind.ACTION, block, payload=_Referenced(handler, group)))
-        self._position_length = 0.0
+        if self.axes[self._main_index[self._tool_axis()]] in dict(block.axes):
+            self.tools.applied_length = 0.0  # the tool axis is at its reference: no tool length in it
+            self._position_length = 0.0
         return items
 
     def _weighting(self, g: int, block: Block) -> None:
@@ -973,8 +974,8 @@ class Decoder:
         """A G301/G302 block without motion: the element goes between the held motion and the next one.
         Without a motion before it: the kernel's warning 20351; a second one before the next motion: its
         warning 20701 (the second counts). A motion that went to the path unheld (the look-ahead did not
-        see this block: a control statement or a call between): not simulated (910110)."""
-        place = f"N{block.number}" if block.number is not None else f"line {block.line}"
+        see this block: a call or a jump between): not simulated (910110)."""
+        place = block.label
         if not self.contour.holding_for_corner:
             if self.motion_unheld:
                 return self._error(

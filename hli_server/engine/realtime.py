@@ -95,7 +95,8 @@ class _Env(Env):
         if kind == KIND_VE:
             try:
                 indices = [int(as_number(i.evaluate(self), ref.text)) for i in ref.indices]
-                return float(cycles.external.read(ref.name, cycles.channel, indices))
+                value = cycles.external.read(ref.name, cycles.channel, indices)
+                return value if isinstance(value, str) else float(value)
             except ExternalVariableError as exc:
                 raise EvalError(A_UNDECLARED, str(exc)) from None
         if kind == KIND_RTG:
@@ -242,7 +243,7 @@ class RealtimeCycles:
             self.override = min(max(percent, 0.0), 100.0) / 100.0
             return
         indices = [int(as_number(i.evaluate(self._env), ref.text)) for i in ref.indices]
-        self.external.write(ref.name, self.channel, as_number(value, ref.text), indices)
+        self.external.write(ref.name, self.channel, value, indices)
 
 
 def _qualified(cycle: RtCycle, k: int, frequency: str, condition: bool) -> bool:

@@ -461,3 +461,23 @@ def test_every_hash_command_of_the_kernel_has_its_decision_in_the_docs() -> None
     doc = (Path(__file__).parents[2] / "docs" / "nc-language.md").read_text(encoding="utf-8")
     missing = [name for name in HASH_COMMANDS if f"`#{name}" not in doc]
     assert missing == [], f"docs/nc-language.md does not name #{missing}"
+
+
+# --- #FILENAME [MSG=V.E.name] (PM 207504523, issue 33 item 5) ---------------------------------------------
+@pytest.mark.req("LT-04", "N-07")
+def test_the_message_file_named_by_a_string_variable() -> None:
+    from hli_server.engine.external import ExternalType, ExternalVarSpec
+
+    name = ExternalVarSpec("TEACH_FILE_NAME", ExternalType.STRING, (), None, False, string_size=64)
+    host = FakeHost(external=[name])
+    host.external.write("TEACH_FILE_NAME", None, "points.txt")
+    run_ = interpret(
+        'N10 #FILENAME [MSG=V.E.TEACH_FILE_NAME]\n#MSG SAVE ["P1"]\n#VAR\nV.L.F : STRING[20] = "other.txt"\n'
+        '#ENDVAR\n#FILE NAME [MSG=V.L.F]\n#MSG SAVE ["P2"]\nM30\n',
+        host=host,
+    )
+    assert run_.error is None
+    assert [(m[0], m[2]) for m in host.messages] == [("P1", "points.txt"), ("P2", "other.txt")]
+    assert interpret("P1 = 2\n#FILE NAME [MSG=V.P.X]\nM30\n").alarm == 914003
+    numeric = interpret("V.P.X = 2\n#FILE NAME [MSG=V.P.X]\nM30\n")
+    assert numeric.alarm == 914006

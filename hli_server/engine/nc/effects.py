@@ -19,6 +19,7 @@ from hli_server.engine.nc.directives import (
     SyncAction,
 )
 from hli_server.engine.nc.expr import (
+    ALARM_TYPE,
     Ref,
     Value,
     format_value,
@@ -31,6 +32,7 @@ from hli_server.engine.nc.language import (
     A_DWELL_RANGE,
     A_HUEMNOS_TOOL,
     A_INDEX,
+    A_LIMIT,
     A_MESSAGE,
     A_RANGE,
     A_RT_ID,
@@ -43,6 +45,7 @@ from hli_server.engine.nc.language import (
     HSC_KEYS,
     HSC_WORDS,
     MAX_MESSAGE,
+    MAX_NAME,
     MEAS_TYPES,
     SPLINE_WORDS,
 )
@@ -130,6 +133,19 @@ class Effects(VariableAccess):
             return
         if command == "FILE NAME":
             self._message_file = stmt.files.get("MSG", self._message_file)
+            if "MSG" in stmt.params:
+                file_name = self._evaluate(stmt, stmt.params["MSG"])
+                if not isinstance(file_name, str):
+                    raise stmt.error(
+                        ALARM_TYPE,
+                        f"#FILE NAME [MSG=..]: {format_value(file_name)} is no file name (a string)",
+                    )
+                if not file_name or len(file_name) > MAX_NAME:
+                    raise stmt.error(
+                        A_LIMIT,
+                        f'#FILE NAME [MSG=..]: "{file_name}": a file name has 1 to {MAX_NAME} characters',
+                    )
+                self._message_file = file_name
             return
         if command in ("CONTOUR MODE", "HSC", "SPLINE"):
             self._pending.append(self._contour(frame, stmt))

@@ -641,6 +641,7 @@ class HashParser(ExpressionParser):
             )
         self.expect("[", "after #FILE NAME")
         files: dict[str, str] = {}
+        variables: dict[str, Expr] = {}
         while True:
             self.blanks()
             if self.peek() == "]":
@@ -655,8 +656,15 @@ class HashParser(ExpressionParser):
             if self.peek() == "=":
                 self.pos += 1
                 self.blanks()
+            if key == "MSG" and self.peek() == "V" and self.peek(1) == ".":
+                # MSG=V.E.TEACH_FILE_NAME: the name in a string variable, read when the command runs
+                variables[key] = self.variable()
+                continue
             if self.peek() != '"':
-                self.fail(A_CONTROL_SYNTAX, f'#FILE NAME: {key}= needs a file name in quotes ({key}="name")')
+                self.fail(
+                    A_CONTROL_SYNTAX,
+                    f'#FILE NAME: {key}= needs a file name in quotes ({key}="name") or a string variable',
+                )
             close = self.code.find('"', self.pos + 1)
             if close < 0:
                 self.fail(A_CONTROL_SYNTAX, "#FILE NAME: quote not closed")
@@ -673,4 +681,4 @@ class HashParser(ExpressionParser):
             files[key] = value
         if not self.at_end():
             self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #FILE NAME [..]")
-        return Hash(self.raw, self.number, "FILE NAME", [], [], files)
+        return Hash(self.raw, self.number, "FILE NAME", [], [], files, params=variables)
