@@ -56,6 +56,31 @@ class HashParser(ExpressionParser):
                 return self.read_hash(f"{name} {form}", start)
         raise self.failure(rule.alarm, rule.message)
 
+    def next_entry(self, what: str, separators: str = ",") -> bool:
+        """Inside ``[..]``: past blanks and separators to the next entry (True), or past the closing
+        ``]`` (False); the end of the block first is 914015."""
+        while True:
+            self.blanks()
+            c = self.peek()
+            if c == "]":
+                self.pos += 1
+                return False
+            if c and c in separators:
+                self.pos += 1
+                continue
+            if not c:
+                self.fail(A_CONTROL_SYNTAX, f"{what} [: ']' missing")
+            return True
+
+    def bracket_value(self) -> Expr:
+        """A value inside ``[..]``: an expression up to the next blank (``ID=17 SCOPE=..``)."""
+        saved = self.depth
+        self.depth = 0
+        try:
+            return self.expression(stop_at_blank=True)
+        finally:
+            self.depth = saved
+
     def read_hash(self, command: str, start: int) -> Stmt:
         """The statement of a simulated ``command`` (a form of :data:`HASH_COMMANDS`): its reader."""
         if command in ("IF", "ELSE", "ENDIF"):
@@ -175,28 +200,13 @@ class HashParser(ExpressionParser):
         self.blanks()
         if self.peek() == "[":
             self.pos += 1
-            while True:
-                self.blanks()
-                c = self.peek()
-                if c == "]":
-                    self.pos += 1
-                    break
-                if c == ",":
-                    self.pos += 1
-                    continue
-                if not c:
-                    self.fail(A_CONTROL_SYNTAX, "#RT CYCLE [: ']' missing")
+            while self.next_entry("#RT CYCLE"):
                 key = self.name()
                 self.blanks()
                 self.expect("=", f"after #RT CYCLE [{key or self.word_at(self.pos)}")
                 self.blanks()
                 if key == "ID" and "ID" not in params:
-                    saved = self.depth
-                    self.depth = 0
-                    try:
-                        params["ID"] = self.expression(stop_at_blank=True)
-                    finally:
-                        self.depth = saved
+                    params["ID"] = self.bracket_value()
                 elif key in ("SCOPE", "END_ACTION") and not any(o.startswith(key + "=") for o in options):
                     ident = self.name()
                     allowed = RT_SCOPES if key == "SCOPE" else ("MOVE_ABORT", "MOVE_CONT")
@@ -282,17 +292,7 @@ class HashParser(ExpressionParser):
         self.depth += 1
         params: dict[str, Expr] = {}
         args: list[Expr] = []
-        while True:
-            self.blanks()
-            c = self.peek()
-            if c == "]":
-                self.pos += 1
-                break
-            if c == ",":
-                self.pos += 1
-                continue
-            if not c:
-                self.fail(A_CONTROL_SYNTAX, f"#{command} [: ']' missing")
+        while self.next_entry(f"#{command}"):
             at = self.pos
             key = self.name()
             if key in IDENT_WORDS:
@@ -333,12 +333,7 @@ class HashParser(ExpressionParser):
             else:
                 if self.at_end() or self.peek() in ("]", ","):
                     self.fail(A_CONTROL_SYNTAX, f"#{command}: {key} without its value")
-                saved = self.depth
-                self.depth = 0
-                try:
-                    params[key] = self.expression(stop_at_blank=True)
-                finally:
-                    self.depth = saved
+                params[key] = self.bracket_value()
         self.depth -= 1
         missing = [k for k in ("ID", "TYP", "DEC") if k not in params and f"{k}:" not in " ".join(options)]
         if not any(o.startswith("AX:") for o in options) and "AXNR" not in params:

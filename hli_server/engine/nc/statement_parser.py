@@ -292,17 +292,8 @@ class StatementParser(HashParser):
         words: list[str] = []
         params: dict[str, Expr] = {}
         main: list[Word] = []
-        while True:
-            self.blanks()
+        while self.next_entry(name, ",\\"):
             c = self.peek()
-            if c == "]":
-                self.pos += 1
-                break
-            if c in (",", "\\"):
-                self.pos += 1
-                continue
-            if not c:
-                self.fail(A_CONTROL_SYNTAX, f"{name}[..: ']' missing")
             at = self.pos
             key = next((k for k in _SPINDLE_VALUES if self.u.startswith(k, at)), None)
             if key is not None and self.peek(len(key)) not in LETTERS and self.peek(len(key)) != "_":
@@ -348,12 +339,7 @@ class StatementParser(HashParser):
         self.blanks()
         if self.at_end() or self.peek() in ("]", ","):
             self.fail(A_CONTROL_SYNTAX, f"{name}[.. {key}]: the value is missing")
-        saved = self.depth
-        self.depth = 0
-        try:
-            return self.expression(stop_at_blank=True)
-        finally:
-            self.depth = saved
+        return self.bracket_value()
 
     # --- address words -----------------------------------------------------------------------------------
     def address(self, start: int) -> Word:
