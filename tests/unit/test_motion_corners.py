@@ -16,6 +16,7 @@ from hli_server.engine import Machine
 from hli_server.engine.geometry import ArcSegment, LineSegment, Point, Segment, arc_from_centre
 from hli_server.engine.path.corners import CHAMFER, ROUNDING, CornerError, insert_corner
 from hli_server.engine.programs import MemoryLibrary
+from tests.unit.areas.test_area_programs import square
 from tests.unit.engine_helpers import mill, mill_config, positions, run
 from tests.unit.test_batch_check import _batch_settings
 
@@ -332,18 +333,8 @@ def test_without_a_motion_before_it_the_kernel_warns_20351_and_twice_20701() -> 
 
 
 # --- the monitors see the inserted element ------------------------------------------------------------------
-SQUARE = """#CONTROL AREA BEGIN [ID={id} {kind} POLY MIN_EXCUR=-100 MAX_EXCUR=100]
-G01 X{x0} Y{y0} F1000
-X{x1}
-Y{y1}
-X{x0}
-Y{y0}
-#CONTROL AREA END
-"""
-
-
 def _areas(kind: str, x0: float, y0: float, x1: float, y1: float) -> str:
-    return SQUARE.format(id=1, kind=kind, x0=x0, y0=y0, x1=x1, y1=y1) + "#CONTROL AREA ON ALL\n"
+    return square(1, x0, y0, x1, y1, kind) + "#CONTROL AREA ON ALL\n"
 
 
 @pytest.mark.req("LT-06", "C14-14")

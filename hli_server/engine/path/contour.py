@@ -267,31 +267,25 @@ class Contour:
         self._held = None
         request = self._corner
         self._corner = None
-        if pre is not None and request is not None:
-            inserted = self._insert(pre, piece, request)
-            if inserted is None:
-                out.append(pre)
-            else:
-                head, middle, piece = inserted
-                out.append(head)
-                out.extend(middle)
-        elif pre is not None:
-            if (
+        if pre is not None:
+            corner: tuple[Piece, list[Piece], Piece] | None = None
+            if request is not None:
+                corner = self._insert(pre, piece, request)
+            elif not (
                 pre.blend is None
                 or piece.rapid
                 or piece.exact_stop
                 or not (pre.tip_start == pre.tip_end == piece.tip_start == piece.tip_end)
             ):
+                corner = self._blend(pre, piece, pre.blend)
+                if corner is not None:
+                    self.corners += 1
+            if corner is None:
                 out.append(pre)
             else:
-                blended = self._blend(pre, piece, pre.blend)
-                if blended is None:
-                    out.append(pre)
-                else:
-                    head, chords, piece = blended
-                    out.append(head)
-                    out.extend(chords)
-                    self.corners += 1
+                head, middle, piece = corner
+                out.append(head)
+                out.extend(middle)
         if (piece.blend is not None and not piece.rapid and not piece.exact_stop) or piece.hold:
             self._held = piece
         else:
