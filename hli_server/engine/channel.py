@@ -22,6 +22,9 @@ from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import LineSegment, Point
 from hli_server.engine.hli import AxisHli, ChannelHli
+from hli_server.engine.kinematics.configured import data_sets
+from hli_server.engine.kinematics.state import KinematicState
+from hli_server.engine.kinematics.transform import Transformation
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.compiler import Compiler
 from hli_server.engine.nc.interpreter import Interpreter
@@ -202,11 +205,16 @@ class Channel:
             zero_offsets,
             {
                 t.number: ToolData(
-                    t.number, mm_from_increments(t.length), mm_from_increments(t.radius), t.tool
+                    t.number, mm_from_increments(t.length), mm_from_increments(t.radius), t.tool, t.kin_id
                 )
                 for t in config.tools
             },
+            KinematicState(data_sets(config.kinematics), config.kinematik_id, len(axes)),
         )
+        self.kinematic: Transformation | None = None
+        """The transformation the axes follow now (switched in program order, at rest): the tool tip is
+        its forward transformation of the axes (docs/kinematics.md)."""
+        self.decoder.kinematic_handler = self._kinematic_changed
         self.compiler = Compiler(self.axis_names, config.main_axes)
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))
         self.decoder.warn = ChannelHost(self).warn
@@ -344,8 +352,12 @@ class Channel:
         return [a.setpoint for a in self.axes]
 
     def tool_tip(self, point: Sequence[float]) -> Point:
-        """The tool tip (the TCP the areas monitor) for the axis positions ``point``: less the tool length
-        the decoder has put into the tool axis (M-15)."""
+        """The tool tip (the TCP the areas monitor) for the axis positions ``point``: the forward
+        transformation where one is on (K-05), else less the tool length the decoder has put into the tool
+        axis (M-15)."""
+        kinematic = self.kinematic
+        if kinematic is not None:
+            return kinematic.to_tip(point)
         decoder = self.decoder
         if decoder.tools.applied_length == 0.0:
             return tuple(point)
@@ -479,9 +491,14 @@ class Channel:
         self.planner.clear()
         self.set_slope(None)  # P-CHAN-00071 at every program start (#SLOPE's page)
         self.decoder.start(self.interpreter, self.setpoints())
+        self.kinematic = None
         self.aborting = False
         self.current_block = None
         self._state.apply(Cause.START)
+
+    def _kinematic_changed(self, trafo: Transformation | None) -> None:
+        """``#TRAFO ON``/``OFF`` reached (the path at rest): the axes follow ``trafo`` from here."""
+        self.kinematic = trafo
 
     def set_slope(self, profile: int | None) -> None:
         """The acceleration profile from now on (``#SLOPE``, M-01..M-03): 0 STEP, 1 TRAPEZ, 2 SIN2,
@@ -502,6 +519,7 @@ class Channel:
         self.planner.clear()
         self.decoder.reset_modal()
         self.interpreter.reset()
+        self.kinematic = None
         self.aborting = False
         self.jog_velocity = [0.0] * len(self.axes)
         self._jog_keys = [0] * len(self.axes)
@@ -618,6 +636,7 @@ class Channel:
         elif marker.kind == MarkerKind.END:
             self.warn_missing_program_end(marker)
             self.planner.clear()
+            self.kinematic = None  # the program's end deselects the transformation (docs/kinematics.md)
             if self.program_running:
                 self._state.apply(Cause.END)
         elif marker.kind == MarkerKind.ERROR:

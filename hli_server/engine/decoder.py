@@ -19,6 +19,10 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 from hli_server.engine.geometry import ArcSegment, LineSegment, Point, Segment, arc_from_centre
+from hli_server.engine.kinematics.chain import KinematicError
+from hli_server.engine.kinematics.path import AxisPath, SegmentMap, axis_path
+from hli_server.engine.kinematics.state import KinematicState
+from hli_server.engine.kinematics.transform import Transformation
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
 from hli_server.engine.nc.directives import (
     PAUSE,
@@ -32,6 +36,7 @@ from hli_server.engine.nc.directives import (
     SyncAction,
     ToolWrite,
 )
+from hli_server.engine.nc.kinematic_commands import KinematicCommand, KinParamWrite, KinSelect, TrafoSwitch
 from hli_server.engine.path.contour import (
     BSPLINE_PATH_DEV,
     HSC_DEFAULT,
@@ -212,6 +217,7 @@ class Decoder:
         axis_limits: dict[str, tuple[float, float, float]],
         zero_offsets: dict[str, dict[str, float]],
         tools: dict[int, ToolData] | None = None,
+        kinematics: KinematicState | None = None,
     ) -> None:
         self.axes = axes
         self.index = {a: i for i, a in enumerate(axes)}
@@ -251,6 +257,12 @@ class Decoder:
         """Polynomial contouring (M-20): may hold the last motion back to blend it with the next."""
         self.warn: Callable[[int, str, int, str], None] | None = None
         """Raises a warning of the table (alarm, message, line, block): the channel sets it."""
+        self.kin = kinematics if kinematics is not None else KinematicState({}, 0, len(axes))
+        """The kinematic data sets, the selection and the active transformation (docs/kinematics.md)."""
+        self.kin_axes: Point = ()
+        """With a transformation on: the axis positions at :attr:`position` (the tip's)."""
+        self.kinematic_handler: Callable[[Transformation | None], None] | None = None
+        """Told in program order (at rest) when a transformation goes on or off: the channel sets it."""
 
     # --- program control -----------------------------------------------------------------
     def start(self, blocks: BlockFeed | Iterator[Block], position: list[float]) -> None:
@@ -268,6 +280,7 @@ class Decoder:
         self._trc_prog = None
         self._position_length = 0.0
         self.contour.reset()
+        self.kin.reset()
 
     def resume(self, position: list[float]) -> None:
         """Continue decoding from ``position`` (after a measuring move stopped where the probe fired)."""
@@ -283,6 +296,7 @@ class Decoder:
         self._trc_prog = None
         self._position_length = 0.0
         self.contour.reset()
+        self.kin.reset()
         self.blocks = None
         self.finished = True
         self.waiting = False
@@ -325,7 +339,11 @@ class Decoder:
         if isinstance(out, ContourDirective):
             self._contour_directive(out)
             return []
+        if isinstance(out, KinParamWrite):
+            return self._kin_error(out, lambda: self.kin.write(out.kin_id, out.index, out.value))
         items = self._flushed([])
+        if isinstance(out, KinematicCommand):
+            return items if self.finished else items + self._kinematic(out)
         if self.finished:
             return items  # a held block failed its path check: its error ends decoding
         if isinstance(out, ToolWrite):
@@ -357,6 +375,110 @@ class Decoder:
             profile = out.profile
             return [*items, Marker(MarkerKind.ACTION, block, payload=lambda: handler(profile))]
         return items  # pragma: no cover - every directive is handled above
+
+    # --- kinematic transformations (docs/kinematics.md) ---------------------------------------------
+    def _kin_error(self, cmd: KinematicCommand, act: Callable[[], None]) -> list[Motion | Marker]:
+        """Run ``act``; the error marker of a :class:`KinematicError` it raises (decoding ends)."""
+        try:
+            act()
+        except KinematicError as exc:
+            self.finished = True
+            return [Marker(MarkerKind.ERROR, cmd.block, payload=DecodeError(exc.alarm, exc.message))]
+        return []
+
+    def _kinematic(self, cmd: KinematicCommand) -> list[Motion | Marker]:
+        """A kinematic command at a flush point (the stages are empty)."""
+        if isinstance(cmd, KinSelect):
+            return self._kin_error(cmd, lambda: self.kin.select(cmd.kin_id))
+        if isinstance(cmd, TrafoSwitch):
+            return self._trafo(cmd)
+        return self._error_at(cmd.block, 910110, f"{type(cmd).__name__} is not simulated")
+
+    def _error_at(self, block: Block | None, alarm: int, message: str) -> list[Motion | Marker]:
+        self.finished = True
+        return [Marker(MarkerKind.ERROR, block, payload=DecodeError(alarm, message))]
+
+    def _trafo(self, cmd: TrafoSwitch) -> list[Motion | Marker]:
+        """``#TRAFO ON``: the selected kinematic with the tool's length; the decoder's position becomes the
+        tool tip's. ``#TRAFO OFF``: back to the axes. Either is a point where the path rests (an action
+        marker tells the channel, in program order)."""
+        kin = self.kin
+        handler = self.kinematic_handler
+        if cmd.on:
+            if kin.active is not None:
+                return []
+            axes = tuple(self.position)
+            trafo: Transformation | None = None
+            try:
+                trafo = kin.switch_on(self.tools.length)
+                if trafo is not None:
+                    self.position = list(trafo.to_tip(axes, axes))
+            except KinematicError as exc:
+                kin.switch_off()
+                return self._error_at(cmd.block, exc.alarm, exc.message)
+            if trafo is None:
+                return []  # kinematic ID 0: "no kinematic is enabled, no warning or error"
+            block = cmd.block
+            if self.warn is not None and block is not None:
+                for alarm, message in kin.warnings:
+                    self.warn(alarm, message, block.line, block.label)
+            self.kin_axes = axes
+            active = trafo
+            return [Marker(MarkerKind.ACTION, block, payload=lambda: handler(active) if handler else None)]
+        if kin.active is None:
+            return []
+        kin.switch_off()
+        self.position = list(self.kin_axes)
+        self.tools.applied_length = self._position_length = self.tools.length
+        return [Marker(MarkerKind.ACTION, cmd.block, payload=lambda: handler(None) if handler else None)]
+
+    def _kin_pieces(self, piece: Piece, trafo: Transformation) -> Motion | Marker:
+        """A tip segment with the transformation on: its axes' path (:func:`axis_path`) is what the
+        checks of the axes see (software limits, collision), the tip what the areas see (``monitors_tcp``);
+        the velocity is what the axes allow along the axes' path."""
+        block = piece.block
+        try:
+            path = axis_path(trafo, piece.segment, self.kin_axes)
+        except KinematicError as exc:
+            return Marker(MarkerKind.ERROR, block, payload=DecodeError(exc.alarm, exc.message))
+        for check in self.path_checks:
+            if getattr(getattr(check, "__self__", check), "monitors_tcp", False):
+                err = check(piece.segment, block)
+            else:
+                err = next((e for e in (check(seg, block) for seg in path.segments) if e is not None), None)
+            if err is not None:
+                return Marker(MarkerKind.ERROR, block, payload=err)
+        v_max, accel = self._kin_limits(piece, path)
+        self.kin_axes = path.end
+        return Motion(
+            segment=piece.segment,
+            block=block,
+            v_max=v_max,
+            accel=accel,
+            rapid=piece.rapid,
+            exact_stop=piece.exact_stop,
+            kin=SegmentMap(trafo, path.anchor_s, path.anchors) if trafo.mode else SegmentMap(trafo),
+        )
+
+    def _kin_limits(self, piece: Piece, path: AxisPath) -> tuple[float, float]:
+        """Path velocity and acceleration [mm/s, mm/s²]: the tip path's own limits, and for every axis its
+        v_max (rapid) and a_max over the largest ratio of its travel to the tip's along the axes' path."""
+        v, a = self._limits(piece.segment, piece.rapid, feed=piece.feed)
+        if len(path.segments) == 1 and path.segments[0].length == piece.segment.length:
+            return v, a  # a shifted copy of the tip's path: the same ratios
+        ss, pts = path.anchor_s, path.anchors
+        for k, name in enumerate(self.axes):
+            share = 0.0
+            for n in range(1, len(ss)):
+                ds = ss[n] - ss[n - 1]
+                if ds > 0.0:
+                    share = max(share, abs(pts[n][k] - pts[n - 1][k]) / ds)
+            if share <= 1e-12:
+                continue
+            v_ax, v_rapid, a_ax = self.axis_limits[name]
+            v = min(v, (v_rapid if piece.rapid else v_ax) / share)
+            a = min(a, a_ax / share * self._weight(piece.segment, piece.rapid))
+        return v, a
 
     def _end_wait(self) -> None:
         """The path reached a ``#FLUSH WAIT``: decoding goes on."""
@@ -761,8 +883,17 @@ class Decoder:
         """The path checks and the planner's items for the pieces the contouring stage gives out; the
         first piece that fails a check is replaced by its error marker and the rest dropped."""
         items: list[Motion | Marker] = []
+        trafo = self.kin.active
         for piece in pieces:
             if piece.segment.length <= 1e-12:
+                continue
+            if trafo is not None:
+                item = self._kin_pieces(piece, trafo)
+                items.append(item)
+                if isinstance(item, Marker):
+                    self.contour.reset()
+                    self.position = list(piece.segment.start)
+                    return items
                 continue
             err = self._check(piece.segment, piece.block, piece.tip_start, piece.tip_end)
             if err is not None:
@@ -794,6 +925,7 @@ class Decoder:
             or self.tools.length_written is not None
             or self.trc.active
             or self._trc_prog is not None
+            or self.kin.active is not None
         )
 
     def _tool_axis(self) -> int:
@@ -813,7 +945,8 @@ class Decoder:
         mach = self.frames.fixture_to_machine(z)
         for a in range(3):
             out[mi[a]] = mach[a]
-        out[mi[self._tool_axis()]] += length
+        if self.kin.active is None:  # with a transformation the tool length is the kinematic's
+            out[mi[self._tool_axis()]] += length
         return out
 
     def to_program(self, pos: list[float] | tuple[float, ...], length: float) -> list[float]:
@@ -825,7 +958,8 @@ class Decoder:
             if k not in mi:
                 out[k] = pos[k] - m.offset(name)
         q = [pos[mi[0]], pos[mi[1]], pos[mi[2]]]
-        q[self._tool_axis()] -= length
+        if self.kin.active is None:
+            q[self._tool_axis()] -= length
         z = self.frames.machine_to_fixture((q[0], q[1], q[2]))
         w = (z[0] - m.offset(self.main[0]), z[1] - m.offset(self.main[1]), z[2] - m.offset(self.main[2]))
         p = self.frames.from_workpiece(w)
@@ -852,9 +986,22 @@ class Decoder:
                 return self._error(
                     block, 916001, f"D{d:g}: the D word takes a tool data block number 0, 1, 2, ..."
                 )
+            length = self.tools.length
             err = self.tools.select(int(d))
             if err is not None:
                 return self._error(block, 916001, err, d=int(d))
+            try:
+                self.kin.tool_kinematic(self.tools.data.kin_id)  # P-TOOL-00011
+            except KinematicError as exc:
+                return self._error(block, exc.alarm, exc.message)
+            if self.kin.active is not None and self.tools.length != length:
+                return self._error(
+                    block,
+                    910110,
+                    f"D{d:g} changes the tool length while kinematic {self.kin.active.kin_id} is on: "
+                    "not simulated; "
+                    "select the tool before #TRAFO ON (docs/kinematics.md)",
+                )
             if self.trc.side != 0:
                 self.trc.radius = abs(self.tools.radius)
         sides = [g for g in block.g_codes if g in (41, 42)]
@@ -870,7 +1017,7 @@ class Decoder:
     def _g92_framed(self, block: Block) -> None:
         """G92 with frames active: the current point gets the programmed coordinates (all frames kept)."""
         m = self.modal
-        length = self.tools.applied_length
+        length = self.tools.applied_length if self.kin.active is None else 0.0
         prog = self.to_program(self.position, length)
         for name, value in block.axes:
             prog[self.index[name]] = value
@@ -1095,7 +1242,7 @@ class Decoder:
         differ from the one applied now, as for a piece the contouring stage held back)."""
         length = self.tools.applied_length if length_at_end is None else length_at_end
         l0 = length if length_at_start is None else length_at_start
-        if length == 0.0 and l0 == 0.0:
+        if (length == 0.0 and l0 == 0.0) or self.kin.active is not None:
             return segment
         k = self._main_index[self._tool_axis()]
 
@@ -1134,6 +1281,12 @@ class Decoder:
         if self.trc.active:
             return self._error(
                 block, 910110, "G100 with tool radius compensation active is not simulated: program G40 first"
+            )
+        if self.kin.active is not None:
+            return self._error(
+                block,
+                910110,
+                "G100 with a kinematic transformation on is not simulated: program #TRAFO OFF first",
             )
         target = self._target(block)
         if self.transforms_active:

@@ -43,6 +43,7 @@ from enum import StrEnum
 from typing import Any
 
 from hli_server.engine.geometry import Point, Segment
+from hli_server.engine.kinematics.path import SegmentMap
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.path.profiles import PathFilter, SlopeProfile
 
@@ -82,6 +83,24 @@ class Motion:
     v_exit_max: float = 0.0
     """Result of the backward pass."""
     tag: Any = None
+    kin: SegmentMap | None = None
+    """With a kinematic transformation on: ``segment`` is the tool tip's path and this turns its points
+    into axis positions (docs/kinematics.md); None: the segment is the axes' path."""
+
+    def axes_at(self, s: float) -> Point:
+        """The axis positions at path coordinate ``s`` of this item (the segment's point, transformed)."""
+        kin = self.kin
+        if kin is None:
+            return self.segment.point_at(s)
+        return kin.axes(self.segment.point_at(s), s)
+
+    def axes_start(self) -> Point:
+        kin = self.kin
+        return self.segment.start if kin is None else kin.axes(self.segment.start, 0.0)
+
+    def axes_end(self) -> Point:
+        kin = self.kin
+        return self.segment.end if kin is None else kin.axes(self.segment.end, self.length)
 
 
 @dataclass(slots=True)
@@ -242,13 +261,13 @@ class Planner:
         return self.queue[0] if self.queue else None
 
     def position_at(self, s_abs: float) -> Point | None:
-        """Point of the queued path at absolute path coordinate ``s_abs`` (None beyond the queue)."""
+        """Axis positions of the queued path at absolute path coordinate ``s_abs`` (None beyond the queue)."""
         for item in self.queue:
             if (
                 isinstance(item, Motion)
                 and item.s_start - 1e-12 <= s_abs <= item.s_start + item.length + 1e-12
             ):
-                return item.segment.point_at(s_abs - item.s_start)
+                return item.axes_at(s_abs - item.s_start)
         return None
 
     def points_at(self, s_values: Sequence[float]) -> list[Point | None]:
@@ -264,7 +283,7 @@ class Planner:
             if item is None or s < item.s_start - 1e-12:
                 out.append(None)
                 continue
-            out.append(item.segment.point_at(s - item.s_start))
+            out.append(item.axes_at(s - item.s_start))
         return out
 
     def next_motion(self) -> Motion | None:
@@ -332,10 +351,10 @@ class Planner:
     def _point_out(self, s: float) -> Point | None:
         for passed in self._trail:
             if passed.s_start - 1e-9 <= s <= passed.s_start + passed.length + 1e-9:
-                return passed.segment.point_at(min(max(s - passed.s_start, 0.0), passed.length))
+                return passed.axes_at(min(max(s - passed.s_start, 0.0), passed.length))
         for item in self.queue:
             if isinstance(item, Motion) and item.s_start - 1e-9 <= s <= item.s_start + item.length + 1e-9:
-                return item.segment.point_at(min(max(s - item.s_start, 0.0), item.length))
+                return item.axes_at(min(max(s - item.s_start, 0.0), item.length))
         return None
 
     def _step_planned(self) -> tuple[Point | None, list[Marker]]:
@@ -401,14 +420,14 @@ class Planner:
             at_stop_point = True
         self.velocity = 0.0 if at_stop_point else v_next
         if ds <= 0.0:
-            return (item.segment.point_at(self.position_in_item) if v > 0 else None), reached
+            return (item.axes_at(self.position_in_item) if v > 0 else None), reached
         # advance, possibly across junctions
         while True:
             s_rem = item.length - self.position_in_item
             if ds < s_rem - 1e-12:
                 self.position_in_item += ds
                 self.s_abs += ds
-                return item.segment.point_at(self.position_in_item), reached
+                return item.axes_at(self.position_in_item), reached
             self.s_abs = item.s_start + item.length
             ds -= max(s_rem, 0.0)
             self.queue.popleft()
@@ -426,10 +445,10 @@ class Planner:
                 self.velocity = 0.0  # standstill at the end of the item
                 if item.exact_stop:
                     self._exact_stop_pending = item
-                return item.segment.end, reached
+                return item.axes_end(), reached
             item = nxt
             if ds <= 1e-12:
-                return item.segment.start, reached
+                return item.axes_start(), reached
 
 
 def _braking_limit(v_end: float, accel: float, distance: float, t: float) -> float:

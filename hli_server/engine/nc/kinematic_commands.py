@@ -7,6 +7,7 @@ reaches them (a selection changes what the following blocks mean, so it is decod
 from __future__ import annotations
 
 from hli_server.engine.nc.blocks import Block
+from hli_server.engine.nc.directives import Directive
 
 __all__ = [
     "AxisEntry",
@@ -21,11 +22,8 @@ __all__ = [
 ]
 
 
-class KinematicCommand:
+class KinematicCommand(Directive):
     """A kinematic command; ``block`` says where it was programmed (line, N)."""
-
-    def __init__(self, block: Block | None) -> None:
-        self.block = block
 
 
 class KinSelect(KinematicCommand):
