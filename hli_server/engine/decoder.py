@@ -448,7 +448,7 @@ class Decoder:
                 err = next((e for e in (check(seg, block) for seg in path.segments) if e is not None), None)
             if err is not None:
                 return Marker(MarkerKind.ERROR, block, payload=err)
-        v_max, accel = self._kin_limits(piece, path)
+        v_max, accel, gain = self._kin_limits(piece, path)
         self.kin_axes = path.end
         return Motion(
             segment=piece.segment,
@@ -458,14 +458,17 @@ class Decoder:
             rapid=piece.rapid,
             exact_stop=piece.exact_stop,
             kin=SegmentMap(trafo, path.anchor_s, path.anchors) if trafo.mode else SegmentMap(trafo),
+            gain=gain,
         )
 
-    def _kin_limits(self, piece: Piece, path: AxisPath) -> tuple[float, float]:
+    def _kin_limits(self, piece: Piece, path: AxisPath) -> tuple[float, float, float]:
         """Path velocity and acceleration [mm/s, mm/s²]: the tip path's own limits, and for every axis its
-        v_max (rapid) and a_max over the largest ratio of its travel to the tip's along the axes' path."""
+        v_max (rapid) and a_max over the largest ratio of its travel to the tip's along the axes' path (that
+        ratio's largest is the third value, :attr:`Motion.gain`)."""
         v, a = self._limits(piece.segment, piece.rapid, feed=piece.feed)
         if len(path.segments) == 1 and path.segments[0].length == piece.segment.length:
-            return v, a  # a shifted copy of the tip's path: the same ratios
+            return v, a, 1.0  # a shifted copy of the tip's path: the same ratios
+        gain = 1.0
         ss, pts = path.anchor_s, path.anchors
         for k, name in enumerate(self.axes):
             share = 0.0
@@ -475,10 +478,11 @@ class Decoder:
                     share = max(share, abs(pts[n][k] - pts[n - 1][k]) / ds)
             if share <= 1e-12:
                 continue
+            gain = max(gain, share)
             v_ax, v_rapid, a_ax = self.axis_limits[name]
             v = min(v, (v_rapid if piece.rapid else v_ax) / share)
             a = min(a, a_ax / share * self._weight(piece.segment, piece.rapid))
-        return v, a
+        return v, a, gain
 
     def _end_wait(self) -> None:
         """The path reached a ``#FLUSH WAIT``: decoding goes on."""

@@ -86,6 +86,9 @@ class Motion:
     kin: SegmentMap | None = None
     """With a kinematic transformation on: ``segment`` is the tool tip's path and this turns its points
     into axis positions (docs/kinematics.md); None: the segment is the axes' path."""
+    gain: float = 1.0
+    """The largest ratio of an axis' travel to the path's along this item (above 1 only with a
+    transformation: a turning head moves its linear axes farther than the tool tip goes)."""
 
     def axes_at(self, s: float) -> Point:
         """The axis positions at path coordinate ``s`` of this item (the segment's point, transformed)."""
@@ -162,6 +165,8 @@ class Planner:
     _dirty: bool = True
     _motions: int = 0
     """Motion items in the queue, counted as they come and go (the channel asks every cycle)."""
+    _geared: int = 0
+    """Motion items in the queue (and the profile's trail) with a ``gain`` above 1."""
 
     # --- filling -------------------------------------------------------------------------
     def clear(self) -> None:
@@ -175,6 +180,7 @@ class Planner:
         self.generation += 1
         self._dirty = True
         self._motions = 0
+        self._geared = 0
         self._trail.clear()
         self.dwell_remaining = 0.0
         self.s_out = 0.0
@@ -220,6 +226,8 @@ class Planner:
             if prev is not None:
                 prev.v_junction = _junction_velocity(prev, item)
             self._motions += 1
+            if item.gain > 1.0:
+                self._geared += 1
         else:
             item.s_start = self.s_queued_end
         self.queue.append(item)
@@ -238,6 +246,19 @@ class Planner:
     def motion_items(self) -> int:
         """Motion items queued (the look-ahead's fill level)."""
         return self._motions
+
+    def axis_gain(self, until: float) -> float:
+        """The largest :attr:`Motion.gain` of the path from the axes' point to path coordinate ``until``
+        (1 where no transformation makes an axis travel farther than the path)."""
+        if not self._geared:
+            return 1.0
+        gain = 1.0
+        for item in (*self._trail, *self.queue):
+            if isinstance(item, Motion) and item.s_start + item.length >= self.s_out - 1e-9:
+                if item.s_start > until:
+                    break
+                gain = max(gain, item.gain)
+        return gain
 
     @property
     def queued_length(self) -> float:
@@ -343,7 +364,8 @@ class Planner:
         self.v_out = (s_f - before) / self.t_a
         trail = self._trail
         while trail and trail[0].s_start + trail[0].length < s_f - 1e-9:
-            trail.popleft()
+            if trail.popleft().gain > 1.0:
+                self._geared -= 1
         if s_f == before:
             return None, reached
         return self._point_out(s_f), reached
@@ -433,6 +455,8 @@ class Planner:
             self.queue.popleft()
             if self._filter is not None:
                 self._trail.append(item)
+            elif item.gain > 1.0:
+                self._geared -= 1
             self._motions -= 1
             self.position_in_item = 0.0
             # SYNC markers are passed on the way (their actions run this cycle, in program order)

@@ -313,7 +313,7 @@ def test_bad_data_sets_are_the_kernels_errors(data: KinematicData, alarm: int) -
 @given(xyz=st.tuples(coord, coord, coord), rest=st.tuples(angle, angle, coord), length=tool)
 def test_undescribed_type_with_zero_parameters_is_the_identity(xyz, rest, length) -> None:
     """Kinematic type 5 (TF5240 names it, its geometry is not public) with every parameter 0: the identity,
-    the tool length along Z as without a transformation (warning 911050 where it is selected)."""
+    the tool length along Z as without a transformation (warning 913001 where it is selected)."""
     trafo, identity = build(KinematicData(5), SLOTS, length)
     assert identity
     p = (*xyz, *rest)

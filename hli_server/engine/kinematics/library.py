@@ -18,7 +18,7 @@ parameters ``param[0..73]`` in the kernel's units (0.1 µm, 0.0001°). The types
   (RTCP), 1: program virtual C-A angles (complete, CA mode).
 * **any other type with every parameter 0**: its geometry is not on the public pages, but with all its
   offsets 0 the tool tip is where the axes put it: simulated as the identity (the tool length along Z, as
-  without a transformation), said so by warning 911050. With a parameter set it is refused (910110).
+  without a transformation), said so by warning 913001. With a parameter set it is refused (910110).
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ __all__ = [
 UNIVERSAL = 91
 TUBE = 90
 ALARM_NOT_SIMULATED = 910110
-ALARM_SIMULATED_AS_IDENTITY = 911050
+ALARM_SIMULATED_AS_IDENTITY = 913001
 """Warning (project's own number): a kinematic type whose geometry the public pages do not give runs
 as the identity because all its parameters are 0."""
 

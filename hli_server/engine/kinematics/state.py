@@ -21,7 +21,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 from hli_server.engine.kinematics.chain import KinematicError
-from hli_server.engine.kinematics.library import KinematicData, build
+from hli_server.engine.kinematics.library import ALARM_SIMULATED_AS_IDENTITY, KinematicData, build
 from hli_server.engine.kinematics.transform import Transformation
 
 __all__ = [
@@ -39,7 +39,7 @@ ALARM_KIN_CHANGE_ACTIVE = 20687
 """Kinematic change not allowed during active RTCP/TLC."""
 ALARM_TOOL_KIN_ID = 20990
 """The tool's kinematic ID differs from the active transformation's (P-TOOL-00011)."""
-ALARM_PARAM_INDEX = 912003
+ALARM_PARAM_INDEX = 913000
 """Project's own: a ``V.G.KIN[i].PARAM[j]`` outside the data set (j 0..73, i 1..65535)."""
 LIBRARY_IDS = range(1, 1000)
 """P-CHAN-00032's data range: the IDs of the kernel's library."""
@@ -131,7 +131,7 @@ class KinematicState:
         if identity:
             self.warnings.append(
                 (
-                    911050,
+                    ALARM_SIMULATED_AS_IDENTITY,
                     f"kinematic ID {kin_id} (type {data.effective_type}): the public pages do not "
                     "give this type's "
                     "geometry; with every parameter 0 it is simulated as the identity (the tool "

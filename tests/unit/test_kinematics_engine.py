@@ -1,0 +1,247 @@
+"""Kinematic transformations in the running engine (issue 35): the path planned on the tool tip, the axes
+on the inverse, and the monitors watching the axes (K-04, K-05).
+
+The commands are handed to the decoder as the interpreter hands them (:mod:`hli_server.engine.nc.
+kinematic_commands`); the blocks are parsed lines."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import pytest
+
+from hli_server.engine import Machine
+from hli_server.engine.channel import Channel
+from hli_server.engine.nc.blocks import Block
+from hli_server.engine.nc.kinematic_commands import KinematicCommand, KinParamWrite, KinSelect, TrafoSwitch
+from hli_server.engine.nc.parser import parse_line
+from schemas.config import AxisConfig, ChannelConfig, KinematicAxis, KinematicEntry, MachineConfig, ToolEntry
+from schemas.wire import ProgramState
+
+AXES = ("X", "Y", "Z", "C", "A")
+FCT = "FCT_LOOK_AHEAD_STANDARD | FCT_DYN_POS_LIMIT"
+TOOL_MM = 100.0
+
+
+def ca_head(pivot_mm: float = 0.0) -> KinematicEntry:
+    """Universal Kinematics of a CA fork head, RTCP: X, Y, Z, then C about Z and A about X through a pivot
+    ``pivot_mm`` above the tool's fixing point."""
+    p = round(pivot_mm * 10_000)
+    return KinematicEntry(
+        id=7,
+        type=91,
+        zero_orientation=(0, 0, 1),
+        zero_position=(0, 0, 0),
+        axes=[
+            KinematicAxis(type=1, orientation=(1, 0, 0)),
+            KinematicAxis(type=1, orientation=(0, 1, 0)),
+            KinematicAxis(type=1, orientation=(0, 0, 1)),
+            KinematicAxis(type=2, orientation=(0, 0, 1)),
+            KinematicAxis(type=2, orientation=(1, 0, 0), point=(0, 0, p)),
+        ],
+        rtcp=1,
+    )
+
+
+def machine(*, swe_mm: float = 1000.0, **channel: object) -> Machine:
+    swe = round(swe_mm * 10_000)
+    axes = [
+        AxisConfig(
+            number=i + 1, name=n, axis_type="R" if n in "CA" else "T", swe_neg=-swe, swe_pos=swe, a_max=2000.0
+        )
+        for i, n in enumerate(AXES)
+    ]
+    ch = ChannelConfig(
+        axes=list(AXES),
+        kinematics=[ca_head()],
+        kinematik_id=7,
+        tools=[ToolEntry(number=1, length=round(TOOL_MM * 10_000))],
+        **channel,  # type: ignore[arg-type]
+    )
+    return Machine(MachineConfig(axes=axes, channels=[ch]))
+
+
+class Feed:
+    """The decoder's feed: parsed blocks and the kinematic commands, as the interpreter hands them."""
+
+    def __init__(self, items: Sequence[str | KinematicCommand]) -> None:
+        self._items = list(items)
+        self._line = 0
+
+    def next(self) -> Block | KinematicCommand | None:
+        if not self._items:
+            return None
+        item = self._items.pop(0)
+        self._line += 1
+        if isinstance(item, str):
+            block = parse_line(item, self._line, AXES)
+            assert block is not None
+            return block
+        item.block = Block(self._line, None, "")
+        return item
+
+
+def start(m: Machine, items: Sequence[str | KinematicCommand]) -> Channel:
+    ch = m.channel(1)
+    ch.load_program("M30\n")
+    ch.start()
+    assert ch.state == ProgramState.RUNNING, list(m.alarm_history)
+    ch.decoder.blocks = Feed(items)  # type: ignore[assignment]
+    return ch
+
+
+def errors(m: Machine) -> list[int]:
+    return [a.number for a in m.alarm_history if a.severity == "error"]
+
+
+def run(m: Machine, ch: Channel, limit: int = 100_000, each=None) -> None:  # type: ignore[no-untyped-def]
+    for _ in range(limit):
+        if ch.state not in (ProgramState.RUNNING, ProgramState.HELD) and ch.planner.at_rest:
+            return
+        m.step(1)
+        if each is not None:
+            each(ch)
+    raise AssertionError("program still running")
+
+
+def tip(ch: Channel) -> tuple[float, ...]:
+    return ch.tool_tip(ch.setpoints())
+
+
+@pytest.mark.req("K-04")
+def test_rtcp_keeps_the_tool_tip_while_the_head_turns() -> None:
+    """#TRAFO ON, then only the A axis programmed: the tip stays on the programmed point every cycle while
+    the linear axes move on the circle of the tool (RTCP, TF5240 introduction)."""
+    m = machine()
+    ch = start(
+        m,
+        [
+            "D1",
+            "G90 G01 X10 Y20 Z30 C0 A0 F3000",
+            TrafoSwitch(None, True),
+            "G01 X10 Y20 Z30 A90",
+            "C90",
+            TrafoSwitch(None, False),
+            "M30",
+        ],
+    )
+    seen_a: list[float] = []
+    worst = 0.0
+
+    def each(c: Channel) -> None:
+        nonlocal worst
+        if c.kinematic is not None:
+            t = tip(c)
+            worst = max(worst, math.dist(t[:3], (10.0, 20.0, 30.0)))
+            seen_a.append(c.axis("A").setpoint)
+
+    run(m, ch, each=each)
+    assert errors(m) == [], list(m.alarm_history)
+    assert worst <= 1e-9
+    assert max(seen_a) == pytest.approx(90.0)
+    assert len(seen_a) > 50
+    # A 90°, C 90°: the tool points along +X; the head is 100 mm from the tip up the tool
+    pos = ch.setpoints()
+    assert pos[:3] == pytest.approx((10.0 + TOOL_MM, 20.0, 30.0), abs=1e-9)
+    assert ch.kinematic is None
+
+
+@pytest.mark.req("K-04")
+def test_the_tip_moves_with_the_programmed_feed() -> None:
+    """With the head tilted the tip's path is planned: a line of the tip at F6000 (100 mm/s) moves the tip
+    100 mm/s (0.1 mm per 1 ms cycle) at constant velocity, the axes on the same line shifted."""
+    m = machine()
+    ch = start(
+        m,
+        [
+            "D1",
+            "G90 G01 X0 Y0 Z0 C0 A30 F6000",
+            TrafoSwitch(None, True),
+            "G01 X0 Y0 Z0",
+            "X200",
+            TrafoSwitch(None, False),
+            "M30",
+        ],
+    )
+    steps: list[float] = []
+    last: list[tuple[float, ...]] = []
+
+    def each(c: Channel) -> None:
+        if c.kinematic is not None:
+            t = tip(c)
+            if last:
+                steps.append(math.dist(t[:3], last[-1][:3]))
+            last.append(t)
+
+    run(m, ch, each=each)
+    assert max(steps) == pytest.approx(0.1, rel=1e-9)
+    assert last[-1][:3] == pytest.approx((200.0, 0.0, 0.0), abs=1e-9)
+
+
+@pytest.mark.req("K-05")
+def test_dynamic_limit_stops_the_turning_head_by_an_axis() -> None:
+    """FCT-C43 on the Y *axis* (low limit -50 mm): the tool tip never leaves Y 0, but turning A towards 90°
+    swings the head (100 mm up the tool) to Y -100; the path stops where the Y axis reaches -50 (A 30°)."""
+    m = machine(interpolator_function=FCT)
+    ctl = m.hli.axes[m.axis("Y").index].ipo_mc_control.dyn_pos_limit_low
+    ctl.command_w = -50 * 10_000
+    ctl.enable_w = True
+    m.step(3)
+    ch = start(m, ["D1", "G90 G01 X0 Y0 Z0 C0 A0 F3000", TrafoSwitch(None, True), "A90", "M30"])
+    tips: list[float] = []
+    for _ in range(20_000):
+        m.step(1)
+        if ch.kinematic is not None:
+            tips.append(tip(ch)[1])
+        if ch.planner.at_rest and ch.state == ProgramState.HELD:
+            break
+    y = ch.axis("Y").setpoint
+    a = ch.axis("A").setpoint
+    assert y >= -50.0 - 1e-6
+    assert y == pytest.approx(-50.0, abs=0.2)
+    assert a == pytest.approx(30.0, abs=0.2)  # sin(30°) * 100 mm = 50 mm
+    assert max(abs(v) for v in tips) <= 1e-9  # the tip never moved: the axis reached the limit
+
+
+@pytest.mark.req("K-05")
+def test_software_limit_of_an_axis_refuses_the_block() -> None:
+    """The tip's target is well inside the software limits (±80 mm), but the Y axis of the tilted head
+    would go to -100 mm: the block is refused before it moves (the axes' path is checked)."""
+    m = machine(swe_mm=80.0)
+    ch = start(m, ["D1", "G90 G01 X0 Y0 Z-50 C0 A0 F3000", TrafoSwitch(None, True), "A90", "M30"])
+    run(m, ch)
+    found = [a for a in m.alarm_history if a.severity == "error"]
+    assert found, "no error"
+    assert found[0].axis == "Y", found
+    assert abs(ch.axis("Y").setpoint) < 1e-9
+    assert ch.axis("A").setpoint == pytest.approx(0.0)
+
+
+@pytest.mark.req("K-03")
+def test_kin_id_while_active_is_20687() -> None:
+    m = machine()
+    ch = start(m, [TrafoSwitch(None, True), KinSelect(None, 5), "M30"])
+    run(m, ch)
+    assert errors(m) == [20687]
+
+
+@pytest.mark.req("K-01")
+def test_param_writes_reach_the_data_set() -> None:
+    """V.G.KIN[90].PARAM[0] = 100 mm (HD1) before #KIN ID[90] / #TRAFO ON: the TF5290 AB head with a
+    100 mm offset to the tool's fixing point; C0 A45 (CA programming) tilts the tool about X."""
+    m = machine()
+    ch = start(
+        m,
+        [
+            KinParamWrite(None, 90, 0, 1_000_000),
+            KinParamWrite(None, 90, 13, 1),
+            KinSelect(None, 90),
+            "G90 G01 X0 Y0 Z0 C0 A0 F3000",
+            TrafoSwitch(None, True),
+            "X0 Y0 Z0 C0 A45",
+        ],
+    )
+    run(m, ch)
+    s = 100.0 * math.sqrt(0.5)
+    assert ch.setpoints() == pytest.approx([0.0, -s, s, 45.0, 0.0], abs=1e-6)
