@@ -571,10 +571,10 @@ class ChannelConfig(_Strict):
         description="P-CHAN-00095 logical number of the #CAXTRACK axis (0: the axis named C of the channel)",
     )
     tool_ori_cs_axis: int = Field(
-        default=3,
-        ge=1,
+        default=0,
+        ge=0,
         le=3,
-        description="P-CHAN-00188 #TOOL ORI CS aligns the tool with X (1), Y (2), Z (3)",
+        description="P-CHAN-00188 #TOOL ORI CS aligns the tool with X (1), Y (2), Z (3, and 0: the default)",
     )
     tool_ori_cs_mode: int = Field(
         default=0,
@@ -1119,6 +1119,24 @@ CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
             "",
         ),
         ("dpl_input_cycles", "dpl_input_cycles", "P-CHAN-00874", "cycles", _CH + "1201698699.html", ""),
+        (
+            "kinematik_id",
+            "kinematik_id",
+            "P-CHAN-00032",
+            "-",
+            "https://infosys.beckhoff.com/content/1033/tf5200_trafo_interface/441082251.html",
+            "",
+        ),
+        (
+            "log_number_tracking_axis",
+            "log_number_tracking_axis",
+            "P-CHAN-00095",
+            "-",
+            _CH + "149106571.html",
+            "",
+        ),
+        ("tool_ori_cs.axis", "tool_ori_cs_axis", "P-CHAN-00188", "0..3", _CH + "149277323.html", ""),
+        ("tool_ori_cs.mode", "tool_ori_cs_mode", "P-CHAN-00189", "0..4", _CH + "347022219.html", ""),
         (
             "prog_start.slope.profile",
             "slope_profile",

@@ -43,10 +43,10 @@ from schemas.events import (
     NcMessage,
     ProgramStateChanged,
 )
-from schemas.units import mm_from_increments, s_from_us
+from schemas.units import DINT_MAX, DINT_MIN, INCREMENTS_PER_MM, mm_from_increments, s_from_us
 from schemas.wire import HoldSource, Mode, ProgramState
 
-__all__ = ["LOOKAHEAD_ITEMS", "Channel", "ChannelHost", "JogGuard"]
+__all__ = ["LOOKAHEAD_ITEMS", "Channel", "ChannelHost", "JogGuard", "increments_clamped"]
 
 LOOKAHEAD_ITEMS = 64
 """Motion blocks decoded ahead of the interpolator (the look-ahead buffer, P-STUP-00070's size)."""
@@ -56,6 +56,12 @@ ALARM_REFUSED = 911021
 ALARM_NOT_REFERENCED = 911020
 ALARM_STILL_BRAKING = 911022
 """Warning: program start refused while the channel's axes still brake (after a reset or a stop)."""
+
+
+def increments_clamped(mm: float) -> int:
+    """mm -> 0.1 µm, rounded, clamped to a DINT (as the machine publishes the axes' positions)."""
+    value = round(mm * INCREMENTS_PER_MM)
+    return DINT_MAX if value > DINT_MAX else DINT_MIN if value < DINT_MIN else value
 
 
 class JogGuard(Protocol):
@@ -215,6 +221,7 @@ class Channel:
         """The transformation the axes follow now (switched in program order, at rest): the tool tip is
         its forward transformation of the axes (docs/kinematics.md)."""
         self.decoder.kinematic_handler = self._kinematic_changed
+        self._main_slots = tuple(self.axis_names.index(a) for a in config.main_axes)
         self.compiler = Compiler(self.axis_names, config.main_axes)
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))
         self.decoder.warn = ChannelHost(self).warn
@@ -740,3 +747,11 @@ class Channel:
         st.feedhold_active_r = bool(self.hold_source)
         st.hold_source_r = self.hold_source
         st.cycle_r = cycle % (2**31)
+        kinematic = self.kinematic
+        st.kin_id_r = kinematic.kin_id if kinematic is not None else 0
+        st.trafo_active_r = kinematic is not None
+        tip = self.tool_tip(self.setpoints())
+        mi = self._main_slots
+        st.tcp_x_r = increments_clamped(tip[mi[0]])
+        st.tcp_y_r = increments_clamped(tip[mi[1]])
+        st.tcp_z_r = increments_clamped(tip[mi[2]])
