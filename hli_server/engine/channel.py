@@ -221,6 +221,10 @@ class Channel:
         """The transformation the axes follow now (switched in program order, at rest): the tool tip is
         its forward transformation of the axes (docs/kinematics.md)."""
         self.decoder.kinematic_handler = self._kinematic_changed
+        self.decoder.axis_numbers = [a.config.number for a in axes]
+        self.decoder.tracking_axis_number = config.log_number_tracking_axis
+        self.decoder.tool_ori_cs = (config.tool_ori_cs_axis, config.tool_ori_cs_mode)
+        self.decoder.soft_limits = lambda k: (self.axes[k].swe_neg, self.axes[k].swe_pos)
         self._main_slots = tuple(self.axis_names.index(a) for a in config.main_axes)
         self.compiler = Compiler(self.axis_names, config.main_axes)
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))

@@ -14,8 +14,20 @@ import pytest
 from hli_server.engine import Machine
 from hli_server.engine.channel import Channel
 from hli_server.engine.nc.blocks import Block
-from hli_server.engine.nc.kinematic_commands import KinematicCommand, KinParamWrite, KinSelect, TrafoSwitch
+from hli_server.engine.nc.interpreter import CoordinateCommand
+from hli_server.engine.nc.kinematic_commands import (
+    AxisEntry,
+    CaxTrack,
+    CylSelect,
+    KinematicCommand,
+    KinParamWrite,
+    KinSelect,
+    SetAxes,
+    ToolOriCs,
+    TrafoSwitch,
+)
 from hli_server.engine.nc.parser import parse_line
+from hli_server.engine.planner import Marker, MarkerKind, Motion
 from schemas.config import AxisConfig, ChannelConfig, KinematicAxis, KinematicEntry, MachineConfig, ToolEntry
 from schemas.wire import ProgramState
 
@@ -65,11 +77,11 @@ def machine(*, swe_mm: float = 1000.0, **channel: object) -> Machine:
 class Feed:
     """The decoder's feed: parsed blocks and the kinematic commands, as the interpreter hands them."""
 
-    def __init__(self, items: Sequence[str | KinematicCommand]) -> None:
+    def __init__(self, items: Sequence[str | KinematicCommand | CoordinateCommand]) -> None:
         self._items = list(items)
         self._line = 0
 
-    def next(self) -> Block | KinematicCommand | None:
+    def next(self) -> object:
         if not self._items:
             return None
         item = self._items.pop(0)
@@ -78,7 +90,8 @@ class Feed:
             block = parse_line(item, self._line, AXES)
             assert block is not None
             return block
-        item.block = Block(self._line, None, "")
+        if item.block is None:
+            item.block = Block(self._line, None, "")
         return item
 
 
@@ -245,3 +258,171 @@ def test_param_writes_reach_the_data_set() -> None:
     run(m, ch)
     s = 100.0 * math.sqrt(0.5)
     assert ch.setpoints() == pytest.approx([0.0, -s, s, 45.0, 0.0], abs=1e-6)
+
+
+# --- #CAXTRACK, #SET AX, #TOOL ORI CS, #CYL -------------------------------------------------------------
+def decode_all(
+    m: Machine, items: Sequence[str | KinematicCommand | CoordinateCommand]
+) -> tuple[list[Motion], list[Marker]]:
+    """Decode the whole feed (no motion): the motions and the markers."""
+    ch = m.channel(1)
+    ch.load_program("M30\n")
+    ch.start()
+    ch.decoder.blocks = Feed(items)  # type: ignore[assignment]
+    motions: list[Motion] = []
+    markers: list[Marker] = []
+    for _ in range(10_000):
+        out = ch.decoder.next_items()
+        for item in out:
+            (motions if isinstance(item, Motion) else markers).append(item)  # type: ignore[arg-type]
+        if ch.decoder.finished:
+            break
+    return motions, markers
+
+
+@pytest.mark.req("K-04")
+def test_caxtrack_follows_the_tangent_as_the_manuals_example() -> None:
+    """The block search page's #CAXTRACK example (https://infosys.beckhoff.com/content/1033/tf5200_blocksearch/
+    348522379.html): after X10 Y10 (45°) the move X20 turns C to 0° by an inserted block (beyond ANGLIMIT 3°),
+    X40 keeps 0°, X30 (backwards) is 180°, Y0 is -90° (written 270° here: the shortest way from 180°)."""
+    m = machine()
+    motions, markers = decode_all(
+        m,
+        [
+            "G00 G90 X0 Y0 Z0 C0",
+            "X5 Y5 C45",
+            CaxTrack(None, True, anglimit=3.0, offset=0.0),
+            "G01 X10 Y10 F1000",
+            "X20",
+            "X40",
+            "X30",
+            "Y0",
+            CaxTrack(None, False),
+            "M30",
+        ],
+    )
+    assert not [mk for mk in markers if mk.kind is MarkerKind.ERROR]
+    c = AXES.index("C")
+    ends = [
+        (round(mo.segment.end[0], 6), round(mo.segment.end[1], 6), round(mo.segment.end[c], 6))
+        for mo in motions
+    ]
+    assert ends[1:] == [
+        (10.0, 10.0, 45.0),
+        (10.0, 10.0, 0.0),  # inserted: C turns at rest
+        (20.0, 10.0, 0.0),
+        (40.0, 10.0, 0.0),
+        (40.0, 10.0, 180.0),
+        (30.0, 10.0, 180.0),
+        (30.0, 10.0, 270.0),
+        (30.0, 0.0, 270.0),
+    ]
+
+
+@pytest.mark.req("K-04")
+def test_caxtrack_turns_along_a_circle() -> None:
+    """Along a full circle the tracking axis turns 360° with it, linearly: tangential at every point."""
+    m = machine()
+    motions, _ = decode_all(
+        m,
+        ["G01 G90 X0 Y0 Z0 C90 F1000", CaxTrack(None, True, anglimit=1.0), "G03 I-10", CaxTrack(None, False)],
+    )
+    arc = motions[-1]
+    c = AXES.index("C")
+    assert (arc.segment.start[c], arc.segment.end[c]) == pytest.approx((90.0, 450.0))
+    for k in range(1, 8):
+        s = arc.length * k / 8
+        d = arc.segment.direction_at(s)
+        tangent = math.degrees(math.atan2(d[1], d[0]))
+        assert (arc.segment.point_at(s)[c] - tangent) % 360.0 == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.req("K-04")
+@pytest.mark.parametrize(
+    ("entries", "alarm"),
+    [
+        ([("X", 1, 0), ("Y", 2, 1), ("Z", 3, 2), ("C", 4, 3), ("C", 5, 4)], 21256),
+        ([("X", 1, 0), ("Y", 2, 1), ("Z", 3, 2), ("C", 4, 3), ("A", 5, 3)], 21257),
+        ([("X", 1, 0), ("Y", 2, 1), ("Z", 3, 2), ("C", 4, 3), ("A", 4, 4)], 21258),
+        ([("X", 1, 0), ("Y", 2, 1), ("Z", 3, 2), ("C", 9, 3)], 20312),
+    ],
+)
+def test_set_ax_errors(entries: list[tuple[str, int, int]], alarm: int) -> None:
+    m = machine()
+    _, markers = decode_all(m, [SetAxes(None, tuple(AxisEntry(*e) for e in entries)), "M30"])
+    assert [mk.payload.alarm for mk in markers if mk.kind is MarkerKind.ERROR] == [alarm]
+
+
+@pytest.mark.req("K-04")
+def test_set_ax_renames_and_orders_the_kinematic_axes() -> None:
+    """#SET AX [X,1,0][Y,2,1][Z,3,2][A,4,3][C,5,4]: the names swap (A is axis 4, C axis 5) and the
+    kinematic's indices follow: the CA head's first rotary axis (index 3) is now the one programmed as A."""
+    m = machine()
+    entries = (("X", 1, 0), ("Y", 2, 1), ("Z", 3, 2), ("A", 4, 3), ("C", 5, 4))
+    motions, markers = decode_all(
+        m,
+        [
+            SetAxes(None, tuple(AxisEntry(*e) for e in entries)),
+            "D1",
+            "G01 G90 X0 Y0 Z0 A0 C0 F1000",
+            TrafoSwitch(None, True),
+            "C90",  # axis 5 (the head's A, about X) to 90°
+            TrafoSwitch(None, False),
+            "M30",
+        ],
+    )
+    assert not [mk for mk in markers if mk.kind is MarkerKind.ERROR]
+    end = motions[-1].axes_end()
+    assert end[:3] == pytest.approx((0.0, -TOOL_MM, 0.0), abs=1e-9)  # slot 4 turned about X
+    assert end[3:] == pytest.approx((0.0, 90.0))
+    assert m.channel(1).decoder.axes == ["X", "Y", "Z", "A", "C"]
+
+
+@pytest.mark.req("K-04")
+def test_tool_ori_cs_turns_the_tool_onto_the_cs_z_axis() -> None:
+    """#CS ON [0,0,0,30,0,0] (turned 30° about X), #TOOL ORI CS: the CA head turns the tool parallel to the
+    CS's Z axis with RTCP on (the tip rests): A 30° (the nearer of the poses C 0°/A 30° and C 180°/A -30°)."""
+    m = machine()
+    ch = m.channel(1)
+    motions, markers = decode_all(
+        m,
+        [
+            "D1",
+            "G01 G90 X0 Y0 Z0 C0 A0 F1000",
+            TrafoSwitch(None, True),
+            CoordinateCommand(Block(0, None, ""), "CS", "ON", values=(0.0, 0.0, 0.0, 30.0, 0.0, 0.0)),
+            ToolOriCs(None),
+            "M30",
+        ],
+    )
+    assert not [mk for mk in markers if mk.kind is MarkerKind.ERROR]
+    last = motions[-1]
+    trafo = ch.decoder.kin.active
+    assert trafo is not None
+    axes = last.axes_end()
+    assert axes[3:] == pytest.approx((0.0, 30.0), abs=1e-9)
+    assert trafo.to_tip(axes)[:3] == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+    z_cs = (0.0, -math.sin(math.radians(30.0)), math.cos(math.radians(30.0)))
+    assert trafo.orientation(axes) == pytest.approx(z_cs, abs=1e-12)
+
+
+@pytest.mark.req("K-04")
+def test_cyl_programs_the_development_in_mm() -> None:
+    """#CYL [X, C, Z35]: C programmed in mm of the development on a radius of 35 mm: C 10 mm is
+    10 * 180 / (35 pi) degrees at the axis; #CYL OFF ends it."""
+    m = machine()
+    motions, markers = decode_all(
+        m,
+        [
+            "G01 G90 X0 Y0 Z35 C0 A0 F1000",
+            CylSelect(None, ("X", "C", "Z"), 35.0),
+            "G01 X5 C10",
+            CylSelect(None),
+            "M30",
+        ],
+    )
+    assert not [mk for mk in markers if mk.kind is MarkerKind.ERROR]
+    end = motions[-1].axes_end()
+    assert end[0] == pytest.approx(5.0)
+    assert end[3] == pytest.approx(10.0 * 180.0 / (35.0 * math.pi))
+    assert m.channel(1).decoder.kin.active is None

@@ -192,6 +192,23 @@ class Chain:
         for joint, value in zip(lin, x, strict=True):
             q[joint.index] = value
 
+    def poses(self, target: Vec3, hint: Sequence[float]) -> list[tuple[float, float]]:
+        """Every pose (the two rotary axes' values, chain order) that turns the tool to ``target``, each
+        angle the shortest way from the hint, in the order of :func:`two_axis_angles` (pose 1, pose 2)."""
+        first, second = self.rotary
+        h1, h2 = hint[first.index], hint[second.index]
+        return [
+            (wrap_near(first.value(a1), h1, first.sign), wrap_near(second.value(a2), h2, second.sign))
+            for a1, a2 in two_axis_angles(
+                first.direction,
+                second.direction,
+                self.zero_orientation,
+                target,
+                first.angle(h1),
+                second.angle(h2),
+            )
+        ]
+
     def solve_orientation(self, target: Vec3, hint: Sequence[float]) -> tuple[float, float]:
         """The values of the two rotary axes (chain order) that turn the tool to ``target`` (a unit vector):
         of the (at most) two poses the one nearest to the values ``hint`` (by kinematic index), each angle

@@ -40,6 +40,7 @@ from hli_server.engine.kinematics.vectors import Vec3, add, norm, unit
 __all__ = [
     "ALARM_NOT_SIMULATED",
     "ALARM_SIMULATED_AS_IDENTITY",
+    "LATERAL",
     "TUBE",
     "TUBE_HEADS",
     "UNIVERSAL",
@@ -50,6 +51,10 @@ __all__ = [
 
 UNIVERSAL = 91
 TUBE = 90
+LATERAL = 15
+"""KIN_TYP_15, lateral surface (#CYL): X, Y, Z as they are; the decoder adds the development of the rotary
+axis (https://infosys.beckhoff.com/content/1033/tf5240_kinematic_transformation/1272858251.html; of its
+parameters only HD2, the angle offset of the rotary axis, is simulated)."""
 ALARM_NOT_SIMULATED = 910110
 ALARM_SIMULATED_AS_IDENTITY = 913001
 """Warning (project's own number): a kinematic type whose geometry the public pages do not give runs
@@ -122,6 +127,8 @@ def build(data: KinematicData, slots: tuple[int, ...], tool_length: float) -> tu
         return _universal(data, slots, tool_length), False
     if kind == TUBE:
         return _tube_head(data, slots, tool_length), False
+    if kind == LATERAL:
+        return Transformation(data.kin_id, _identity(), slots[:3], tool_length, 0, "tool on X, Y, Z"), False
     if any(v != 0.0 for v in data.params.values()):
         raise KinematicError(
             ALARM_NOT_SIMULATED,
@@ -130,7 +137,13 @@ def build(data: KinematicData, slots: tuple[int, ...], tool_length: float) -> tu
             "in the public documents); describe the machine as Universal Kinematics (type 91, "
             "docs/kinematics.md)",
         )
-    chain = Chain(
+    name = f"kinematic type {kind} (identity: all parameters 0)"
+    return Transformation(data.kin_id, _identity(), slots[:3], tool_length, 0, name), True
+
+
+def _identity() -> Chain:
+    """X, Y, Z and nothing else: the tool tip is the axes' point less the tool length along Z."""
+    return Chain(
         (
             Joint(0, False, (1.0, 0.0, 0.0)),
             Joint(1, False, (0.0, 1.0, 0.0)),
@@ -139,8 +152,6 @@ def build(data: KinematicData, slots: tuple[int, ...], tool_length: float) -> tu
         (0.0, 0.0, 0.0),
         (0.0, 0.0, 1.0),
     )
-    name = f"kinematic type {kind} (identity: all parameters 0)"
-    return Transformation(data.kin_id, chain, slots[:3], tool_length, 0, name), True
 
 
 def _vec(p: Mapping[int, float], start: int, unit_value: float = 1.0) -> Vec3:

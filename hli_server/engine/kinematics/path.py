@@ -75,10 +75,6 @@ class AxisPath:
     anchors: tuple[Point, ...]
 
 
-def _rotary_slots(trafo: Transformation) -> tuple[int, ...]:
-    return tuple(trafo.slots[j.index] for j in trafo.chain.rotary)
-
-
 def _translation_only(trafo: Transformation) -> bool:
     """The linear axes are X, Y, Z (unit directions on the indices 0, 1, 2) ahead of every rotary axis
     in the chain: with the angles fixed the tip and the axes differ by a constant vector."""
@@ -95,7 +91,8 @@ def axis_path(trafo: Transformation, segment: Segment, start_axes: Sequence[floa
     """The axes' path of the tip ``segment`` that starts with the axes at ``start_axes``. Raises
     :class:`KinematicError` where a point cannot be reached (292004) or the axes would have to jump
     (292016)."""
-    rotary = _rotary_slots(trafo)
+    angles = trafo.angle_slots()
+    rotary = tuple(k for k, _ in angles)
     still = all(segment.start[k] == segment.end[k] for k in rotary)
     if still and _translation_only(trafo):
         first = trafo.to_axes(segment.start, start_axes)
@@ -117,7 +114,7 @@ def axis_path(trafo: Transformation, segment: Segment, start_axes: Sequence[floa
             )
         return AxisPath((moved,), end, (0.0,), (first,))
     length = segment.length
-    travel = max((abs(segment.end[k] - segment.start[k]) for k in rotary), default=0.0)
+    travel = max((abs(segment.end[k] - segment.start[k]) * gear for k, gear in angles), default=0.0)
     steps = max(1, math.ceil(travel / MAX_ROTARY_STEP))
     if isinstance(segment, ArcSegment):
         steps = max(steps, math.ceil(math.degrees(abs(segment.sweep)) / MAX_ARC_STEP))

@@ -42,6 +42,13 @@ class Transformation:
     """0: RTCP (programmed angles are the axes'); 14..19: complete, the P-CHAN-00288 programming mode."""
     name: str = ""
     """What the kinematic is, for messages and the documentation (e.g. "TF5290 AB head")."""
+    scaled_slot: int = -1
+    """Lateral surface machining (#CYL): the channel slot of the rotary axis programmed as the surface's
+    development in mm; -1: none."""
+    scale: float = 1.0
+    """Degrees of that rotary axis per mm of the development (180 / (pi R))."""
+    scale_offset: float = 0.0
+    """Degrees of that axis at development 0 (its angle offset)."""
 
     @property
     def complete(self) -> bool:
@@ -72,6 +79,9 @@ class Transformation:
         out = list(tip)
         for joint in chain.joints:
             out[slots[joint.index]] = q[joint.index]
+        scaled = self.scaled_slot
+        if scaled >= 0:
+            out[scaled] = tip[scaled] * self.scale + self.scale_offset
         return tuple(out)
 
     def to_tip(self, axes: Sequence[float], hint: Sequence[float] | None = None) -> tuple[float, ...]:
@@ -83,10 +93,21 @@ class Transformation:
         tip, orientation = chain.forward(q, self.tool_length)
         out = list(axes)
         out[slots[0]], out[slots[1]], out[slots[2]] = tip
+        scaled = self.scaled_slot
+        if scaled >= 0:
+            out[scaled] = (axes[scaled] - self.scale_offset) / self.scale
         if self.mode:
             s1, s2 = self._angle_slots()
             h = hint if hint is not None else axes
             out[s1], out[s2] = mode_angles(self.mode, orientation, h[s1], h[s2])
+        return tuple(out)
+
+    def angle_slots(self) -> tuple[tuple[int, float], ...]:
+        """The slots whose axes turn, with the degrees of the axis per unit of the tip point's value
+        (1 for a rotary axis of the chain, :attr:`scale` for the development of #CYL)."""
+        out = [(self.slots[j.index], 1.0) for j in self.chain.rotary]
+        if self.scaled_slot >= 0:
+            out.append((self.scaled_slot, abs(self.scale)))
         return tuple(out)
 
     def orientation(self, axes: Sequence[float]) -> tuple[float, float, float]:
