@@ -249,6 +249,7 @@ def scene_of(result: CheckResult) -> dict[str, Any]:
         alarms=[a.to_json() for a in result.alarms],
         stop=result.stop_point,
         channel=result.channel,
+        tool_path=result.kinematics.tool_path,
     )
 
 

@@ -92,6 +92,8 @@ class CheckResult:
         self.capped: str | None = None
         """``cycles`` or ``iterations`` when the check stopped at its cap (the program did not end)."""
         self.cap = 0
+        self.kinematics = KinematicReport()
+        """What the axes and the tool tip did while a kinematic transformation was on (K-06, K-08)."""
 
     @property
     def stopped_by_error(self) -> bool:
@@ -143,7 +145,53 @@ class CheckResult:
         areas = self.areas_json()
         if areas is not None:
             out["areas"] = _round_numbers(areas)
+        if self.kinematics.used:
+            out["kinematics"] = self.kinematics.to_json(self.machine.channel(self.channel))
         return out
+
+
+class KinematicReport:
+    """While a transformation is on: the kinematics used, each axis' range and the tool tip's (in a full
+    check every cycle's setpoints; in a geometry check every block's support points), the tool tip's path
+    for the picture, and where the tool tip ended."""
+
+    def __init__(self) -> None:
+        self.used: dict[int, str] = {}
+        self.axes: dict[int, tuple[float, float]] = {}
+        """Slot -> (min, max) of the axis while a transformation was on."""
+        self.tip: dict[int, tuple[float, float]] = {}
+        """Main-axis slot -> (min, max) of the tool tip."""
+        self.tool_path: list[tuple[float, ...]] = []
+        self.final_tip: tuple[float, ...] | None = None
+
+    def add(
+        self, kin_id: int, name: str, axes: tuple[float, ...], tip: tuple[float, ...], main: tuple[int, ...]
+    ) -> None:
+        self.used.setdefault(kin_id, name)
+        for k, v in enumerate(axes):
+            lo, hi = self.axes.get(k, (v, v))
+            self.axes[k] = (min(lo, v), max(hi, v))
+        for k in main:
+            v = tip[k]
+            lo, hi = self.tip.get(k, (v, v))
+            self.tip[k] = (min(lo, v), max(hi, v))
+        self.final_tip = tip
+
+    def to_json(self, ch: Channel) -> dict[str, Any]:
+        names = ch.axis_names
+        main = [names.index(a) for a in ch.config.main_axes]
+        return {
+            "used": [{"id": k, "name": n} for k, n in sorted(self.used.items())],
+            "axis_range": {
+                names[k]: [_round_mm(lo), _round_mm(hi)] for k, (lo, hi) in sorted(self.axes.items())
+            },
+            "tool_tip_range": {
+                names[k]: [_round_mm(lo), _round_mm(hi)] for k, (lo, hi) in sorted(self.tip.items())
+            },
+            "final_tool_tip": (
+                {names[k]: _round_mm(self.final_tip[k]) for k in main} if self.final_tip is not None else None
+            ),
+        }
 
 
 _ARC_CHORD_MM = 0.01
@@ -255,10 +303,18 @@ class ProgramCheck:
         progress = self.progress
         step(1)
         countdown = 0
+        kin_report = result.kinematics
+        main = tuple(ch.axis_names.index(a) for a in ch.config.main_axes)
         while ch.state in running and machine.cycle < self.max_cycles:
             step(1)
             if record and machine.cycle % 10 == 0:
                 _record(result.path, tuple(ch.setpoints()))
+                if ch.kinematic is not None:
+                    _record(kin_report.tool_path, ch.tool_tip(ch.setpoints()))
+            kinematic = ch.kinematic
+            if kinematic is not None:
+                axes = tuple(ch.setpoints())
+                kin_report.add(kinematic.kin_id, kinematic.name, axes, kinematic.to_tip(axes), main)
             countdown -= 1
             if countdown <= 0:
                 countdown = 1000
@@ -341,13 +397,33 @@ class ProgramCheck:
             for item in items:
                 if isinstance(item, Motion):
                     motions += 1
-                    if record:
+                    if item.kin is not None:
+                        self._kinematic_motion(ch, item, result, record)
+                    elif record:
                         result.path.extend(segment_points(item.segment))
                 elif isinstance(item, Marker):
                     self._marker(ch, item, result)
             if progress is not None and motions >= next_update:
                 next_update = motions + 4096
                 progress(ch.interpreter.main_line, decoder.blocks_decoded)
+
+    @staticmethod
+    def _kinematic_motion(ch: Channel, item: Motion, result: CheckResult, record: bool) -> None:
+        """A transformed block of a geometry check: its tool tip and its axes at the support points."""
+        kin = item.kin
+        assert kin is not None
+        tips = segment_points(item.segment)
+        n = max(len(tips), 8)
+        report = result.kinematics
+        main = tuple(ch.axis_names.index(a) for a in ch.config.main_axes)
+        for k in range(1, n + 1):
+            s = item.length * k / n
+            axes = item.axes_at(s)
+            report.add(kin.trafo.kin_id, kin.trafo.name, axes, item.segment.point_at(s), main)
+            if record:
+                result.path.append(axes)
+        if record:
+            report.tool_path.extend(tips)
 
     @staticmethod
     def _marker(ch: Channel, item: Marker, result: CheckResult) -> None:
