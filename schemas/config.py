@@ -558,6 +558,13 @@ class ChannelConfig(_Strict):
         le=ACCELERATION_LIMIT,
         description="path deceleration of feedhold [mm/s²] (project's own)",
     )
+    default_feedrate: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=VELOCITY_LIMIT_MM_PER_MIN,
+        description="P-CHAN-00099 the feed of a G01/G02/G03 block at program start while no F is programmed "
+        "[mm/min]; 0: an F word is needed",
+    )
     kinematik_id: int = Field(
         default=0, ge=0, lt=1000, description="P-CHAN-00032 the default kinematic ID (0: none)"
     )
@@ -1119,6 +1126,7 @@ CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
             "",
         ),
         ("dpl_input_cycles", "dpl_input_cycles", "P-CHAN-00874", "cycles", _CH + "1201698699.html", ""),
+        ("prog_start.feedrate", "default_feedrate", "P-CHAN-00099", "mm/min", _CH + "149303051.html", ""),
         (
             "kinematik_id",
             "kinematik_id",

@@ -223,6 +223,7 @@ class Channel:
         self.decoder.kinematic_handler = self._kinematic_changed
         self.decoder.axis_numbers = [a.config.number for a in axes]
         self.decoder.tracking_axis_number = config.log_number_tracking_axis
+        self.decoder.default_feed = config.default_feedrate
         self.decoder.tool_ori_cs = (config.tool_ori_cs_axis, config.tool_ori_cs_mode)
         self.decoder.soft_limits = lambda k: (self.axes[k].swe_neg, self.axes[k].swe_pos)
         self._main_slots = tuple(self.axis_names.index(a) for a in config.main_axes)

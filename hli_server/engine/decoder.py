@@ -286,6 +286,8 @@ class Decoder:
         """The software limits in effect of a slot's axis (#TOOL ORI CS's pose, P-CHAN-00189 = 2)."""
         self.cax: Tracking | None = None
         """An active #CAXTRACK."""
+        self.default_feed = 0.0
+        """P-CHAN-00099: the feed [mm/min] at program start while no F is programmed (0: none)."""
         self.cyl = False
         """The transformation on was selected by #CYL (ends with #CYL OFF)."""
         self._default_axes = (list(axes), main_axes, dict(axis_limits), self.rotary_axes)
@@ -295,6 +297,8 @@ class Decoder:
         """Decode from ``blocks`` (the interpreter, or parsed blocks) starting at ``position``."""
         self.blocks = _Blocks(blocks) if isinstance(blocks, Iterator) else blocks
         self.position = list(position)
+        if self.modal.feed is None and self.default_feed > 0.0:
+            self.modal.feed = self.default_feed  # P-CHAN-00099
         self.finished = False
         self.waiting = False
         self.blocks_decoded = 0
