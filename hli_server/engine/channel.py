@@ -753,10 +753,20 @@ class Channel:
         st.hold_source_r = self.hold_source
         st.cycle_r = cycle % (2**31)
         kinematic = self.kinematic
-        st.kin_id_r = kinematic.kin_id if kinematic is not None else 0
-        st.trafo_active_r = kinematic is not None
-        tip = self.tool_tip(self.setpoints())
         mi = self._main_slots
-        st.tcp_x_r = increments_clamped(tip[mi[0]])
-        st.tcp_y_r = increments_clamped(tip[mi[1]])
-        st.tcp_z_r = increments_clamped(tip[mi[2]])
+        if kinematic is None and self.decoder.tools.applied_length == 0.0:
+            # the tool tip is the main axes' point: no transformation, no tool length (the common case,
+            # written out: this runs every cycle)
+            if st.trafo_active_r:
+                st.kin_id_r = 0
+                st.trafo_active_r = False
+            axes = self.axes
+            x, y, z = axes[mi[0]].setpoint, axes[mi[1]].setpoint, axes[mi[2]].setpoint
+        else:
+            st.kin_id_r = kinematic.kin_id if kinematic is not None else 0
+            st.trafo_active_r = kinematic is not None
+            tip = self.tool_tip(self.setpoints())
+            x, y, z = tip[mi[0]], tip[mi[1]], tip[mi[2]]
+        st.tcp_x_r = increments_clamped(x)
+        st.tcp_y_r = increments_clamped(y)
+        st.tcp_z_r = increments_clamped(z)
