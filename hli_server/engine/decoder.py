@@ -1037,6 +1037,13 @@ class Decoder:
             Marker(MarkerKind.END, block, payload=f"M{code:02d}") for code in block.m_codes if code in (2, 30)
         ]
         if ends:
+            if self.cax is not None and self.warn is not None:
+                self.warn(
+                    21250,
+                    "#CAXTRACK is still on at the program's end: program #CAXTRACK OFF",
+                    block.line,
+                    block.label,
+                )
             # the program's end: every stage emptied first (an error of a held block replaces the end)
             return items + self._flushed(ends)
         # another M function is a "non-relevant block" to the compensation and the contouring: both keep
