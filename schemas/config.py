@@ -30,7 +30,10 @@ __all__ = [
     "AXIS_PARAMETER_ALIASES",
     "CHANNEL_PARAMETERS",
     "COLLISION_MODE_BIT",
+    "KINEMATIC_AXIS_PARAMETERS",
+    "KINEMATIC_PARAMETERS",
     "MANUAL_PARAMETERS",
+    "TOOL_PARAMETERS",
     "AdapterEntry",
     "AxisConfig",
     "AxisType",
@@ -1170,6 +1173,49 @@ MANUAL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
     (("move_limit_warning", "move_limit_warning", "P-MANU-00014", "0/1", "FCT-C14 6.2", ""),)
 )
 """ISG text-list names of the manual-mode parameters (FCT-C14 6.2)."""
+
+_UK = "https://infosys.beckhoff.com/content/1033/tf5240_universal_kinematic/"
+KINEMATIC_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        ("trafo[0].id", "id", "P-CHAN-00262", "-", _CH + "149247371.html", ""),
+        (
+            "trafo[0].type",
+            "type",
+            "P-CHAN-00829",
+            "-",
+            "https://infosys.beckhoff.com/content/1033/tf5240_kinematic_transformation/893485323.html",
+            "",
+        ),
+        ("trafo[0].param[k]", "param", "P-CHAN-00263", "0.1 µm / 0.0001°", _CH + "149248907.html", ""),
+        ("trafo[0].zero_orientation[l]", "zero_orientation", "P-CHAN-00285", "-", _UK + "893810955.html", ""),
+        ("trafo[0].zero_position[l]", "zero_position", "P-CHAN-00286", "0.1 µm", _UK + "893810955.html", ""),
+        ("trafo[0].chain[k]", "chain", "P-CHAN-00290", "-", _CH + "149260683.html", ""),
+        ("trafo[0].programming_mode", "programming_mode", "P-CHAN-00288", "-", _CH + "149257611.html", ""),
+        ("trafo[0].rtcp", "rtcp", "P-CHAN-00287", "0/1", _CH + "149256075.html", ""),
+    )
+)
+"""The channel parameters of a kinematic data set ``trafo[j]`` (TOML only: ``[[channels.kinematics]]``)."""
+KINEMATIC_AXIS_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        ("trafo[0].axis[k].type", "type", "P-CHAN-00291", "1/2", _CH + "149263755.html", ""),
+        ("trafo[0].axis[k].orientation[l]", "orientation", "P-CHAN-00292", "-", _UK + "893810955.html", ""),
+        ("trafo[0].axis[k].point[l]", "point", "P-CHAN-00293", "0.1 µm", _CH + "149266827.html", ""),
+    )
+)
+"""The axes of a Universal Kinematics data set (``axes = [{...}]``; the count is P-CHAN-00289)."""
+TOOL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        (
+            "wz[0].kin_id",
+            "kin_id",
+            "P-TOOL-00011",
+            "-",
+            "https://infosys.beckhoff.com/content/1033/tf5200_tool_data/104788875.html",
+            "",
+        ),
+    )
+)
+"""The tool data the tool table takes from the kernel's tool list (the rest of a D block is the project's)."""
 
 _EXTV = "https://infosys.beckhoff.com/content/1033/tf5200_external_variables/"
 EXTERNAL_VARIABLE_PARAMETERS: tuple[ParameterInfo, ...] = _infos(

@@ -12,11 +12,16 @@ from hli_server.configuration.fields import _range_text
 from hli_server.configuration.tables import _PARAMETERS_OF_MODEL
 from schemas.config import (
     EXTERNAL_VARIABLE_PARAMETERS,
+    KINEMATIC_AXIS_PARAMETERS,
+    KINEMATIC_PARAMETERS,
+    TOOL_PARAMETERS,
     AdapterEntry,
     AxisConfig,
     ChannelConfig,
     DriveModel,
     ExternalVariableConfig,
+    KinematicAxis,
+    KinematicEntry,
     MachineConfig,
     ManualConfig,
     ParameterInfo,
@@ -50,8 +55,18 @@ _SECTIONS: tuple[tuple[str, type[BaseModel], frozenset[str]], ...] = (
     ("Machine (top level)", MachineConfig, frozenset({"axes", "channels", "manual", "adapters"})),
     ("Axis `[[axes]]`", AxisConfig, frozenset({"drive"})),
     ("Drive model `[axes.drive]` (project's own, E-02)", DriveModel, frozenset()),
-    ("Channel `[[channels]]`", ChannelConfig, frozenset({"zero_offsets", "tools", "programs"})),
+    ("Channel `[[channels]]`", ChannelConfig, frozenset({"zero_offsets", "tools", "programs", "kinematics"})),
     ("Zero offsets `[[channels.zero_offsets]]`", ZeroOffset, frozenset()),
+    (
+        "Kinematic data sets `[[channels.kinematics]]` (trafo[j], K-01, [kinematics.md](kinematics.md))",
+        KinematicEntry,
+        frozenset({"axes"}),
+    ),
+    (
+        "Universal Kinematics axes `axes = [{...}]` of a data set (P-CHAN-00291..00293)",
+        KinematicAxis,
+        frozenset(),
+    ),
     ("Tool table `[[channels.tools]]` (D blocks, M-14)", ToolEntry, frozenset()),
     ("Programs `[[channels.programs]]` (project's own program table)", ProgramEntry, frozenset()),
     ("Manual mode `[manual]`", ManualConfig, frozenset()),
@@ -59,7 +74,10 @@ _SECTIONS: tuple[tuple[str, type[BaseModel], frozenset[str]], ...] = (
     ("V.E. variables `[[external_variables]]` (N-05)", ExternalVariableConfig, frozenset()),
 )
 _LIST_PATHS: dict[type[BaseModel], tuple[ParameterInfo, ...]] = {
-    ExternalVariableConfig: EXTERNAL_VARIABLE_PARAMETERS
+    ExternalVariableConfig: EXTERNAL_VARIABLE_PARAMETERS,
+    KinematicEntry: KINEMATIC_PARAMETERS,
+    KinematicAxis: KINEMATIC_AXIS_PARAMETERS,
+    ToolEntry: TOOL_PARAMETERS,
 }
 """Fields that come from a list of their own (not a parameter list of the table's kind)."""
 
