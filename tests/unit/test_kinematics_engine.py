@@ -77,9 +77,12 @@ def machine(*, swe_mm: float = 1000.0, **channel: object) -> Machine:
 class Feed:
     """The decoder's feed: parsed blocks and the kinematic commands, as the interpreter hands them."""
 
-    def __init__(self, items: Sequence[str | KinematicCommand | CoordinateCommand]) -> None:
+    def __init__(
+        self, items: Sequence[str | KinematicCommand | CoordinateCommand], axes: Sequence[str] = AXES
+    ) -> None:
         self._items = list(items)
         self._line = 0
+        self._axes = tuple(axes)
 
     def next(self) -> object:
         if not self._items:
@@ -87,12 +90,16 @@ class Feed:
         item = self._items.pop(0)
         self._line += 1
         if isinstance(item, str):
-            block = parse_line(item, self._line, AXES)
+            block = parse_line(item, self._line, self._axes)
             assert block is not None
             return block
         if item.block is None:
             item.block = Block(self._line, None, "")
         return item
+
+
+def _feed(axes: Sequence[str], items: Sequence[str | KinematicCommand]) -> Feed:
+    return Feed(items, axes)
 
 
 def start(m: Machine, items: Sequence[str | KinematicCommand]) -> Channel:
@@ -426,3 +433,104 @@ def test_cyl_programs_the_development_in_mm() -> None:
     assert end[0] == pytest.approx(5.0)
     assert end[3] == pytest.approx(10.0 * 180.0 / (35.0 * math.pi))
     assert m.channel(1).decoder.kin.active is None
+
+
+PROT_BOX = [
+    "#CONTROL AREA BEGIN [ID=1 PROT POLY MIN_EXCUR=-300 MAX_EXCUR=300]",
+    "G01 X-20 Y-120 F1000",
+    "X20",
+    "Y-40",
+    "X-20",
+    "Y-120",
+    "#CONTROL AREA END",
+    "#CONTROL AREA ON [ID=1]",
+]
+
+
+@pytest.mark.req("K-05")
+def test_protection_area_watches_the_tool_tip_not_the_axes() -> None:
+    """FCT-C14 watches the TCP: the head swings the Y axis through a protection area (Y -120..-40) while
+    the tip rests at the origin: nothing is refused. Moving the tip itself into the area is refused."""
+    m = machine()
+    ch = start(
+        m, ["D1", "G90 G01 X0 Y0 Z0 C0 A0 F3000", TrafoSwitch(None, True), *PROT_BOX, "A90", "A0", "M30"]
+    )
+    lowest = 0.0
+
+    def each(c: Channel) -> None:
+        nonlocal lowest
+        lowest = min(lowest, c.axis("Y").setpoint)
+
+    run(m, ch, each=each)
+    assert errors(m) == [], list(m.alarm_history)
+    assert lowest == pytest.approx(-TOOL_MM)  # the Y axis was deep inside the area
+
+    m = machine()
+    ch = start(m, ["D1", "G90 G01 X0 Y0 Z0 C0 A0 F3000", TrafoSwitch(None, True), *PROT_BOX, "Y-60", "M30"])
+    run(m, ch)
+    assert errors(m), "the tip entering the protection area is refused"
+    assert ch.tool_tip(ch.setpoints())[1] > -40.0
+
+
+@pytest.mark.req("K-05")
+def test_collision_monitoring_sees_the_swinging_axis() -> None:
+    """FCT-C3 on the pair X / W (W at 190 mm, minimum distance 20 mm): the tool tip stays at X 80 while a
+    CB head turns B towards 90°, which swings the X axis (the head 100 mm up the tool) towards 180 mm; the
+    pair's distance falls below 20 mm by the X axis: the move is refused, the tip never came near W."""
+    names = ("X", "Y", "Z", "C", "B", "W")
+    axes = [
+        AxisConfig(
+            number=i + 1,
+            name=n,
+            axis_type="R" if n in "CB" else "T",
+            swe_neg=-10_000_000,
+            swe_pos=10_000_000,
+            a_max=2000.0,
+            **(
+                {"achs_mode": 0x8001}
+                if n == "X"
+                else {
+                    "achs_mode": 0x8001,
+                    "coll_check_ax_nr": 1,
+                    "coll_offset": 200_000,
+                    "start_position": 1_900_000,
+                }
+                if n == "W"
+                else {}
+            ),  # type: ignore[arg-type]
+        )
+        for i, n in enumerate(names)
+    ]
+    cb_head = KinematicEntry(
+        id=8,
+        type=91,
+        rtcp=1,
+        zero_orientation=(0, 0, 1),
+        zero_position=(0, 0, 0),
+        axes=[
+            KinematicAxis(type=1, orientation=(1, 0, 0)),
+            KinematicAxis(type=1, orientation=(0, 1, 0)),
+            KinematicAxis(type=1, orientation=(0, 0, 1)),
+            KinematicAxis(type=2, orientation=(0, 0, 1)),
+            KinematicAxis(type=2, orientation=(0, 1, 0)),
+        ],
+    )
+    ch_config = ChannelConfig(
+        axes=list(names),
+        kinematics=[cb_head],
+        kinematik_id=8,
+        tools=[ToolEntry(number=1, length=round(TOOL_MM * 10_000))],
+    )
+    m = Machine(MachineConfig(axes=axes, channels=[ch_config]))
+    ch = m.channel(1)
+    ch.load_program("M30\n")
+    ch.start()
+    ch.decoder.blocks = _feed(
+        names, ["D1", "G90 G01 X80 Y0 Z0 C0 B0 F3000", TrafoSwitch(None, True), "B90", "M30"]
+    )
+    tip_x: list[float] = []
+    run(m, ch, each=lambda c: tip_x.append(c.tool_tip(c.setpoints())[0]) if c.kinematic is not None else None)
+    found = [a for a in m.alarm_history if a.severity == "error"]
+    assert found, "the swinging X axis comes within 20 mm of W"
+    assert max(tip_x) == pytest.approx(80.0, abs=1e-9)
+    assert ch.axis("X").setpoint < 170.0 + 1e-6
