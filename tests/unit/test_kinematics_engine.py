@@ -14,7 +14,7 @@ import pytest
 from hli_server.engine import Machine
 from hli_server.engine.channel import Channel
 from hli_server.engine.nc.blocks import Block
-from hli_server.engine.nc.interpreter import CoordinateCommand
+from hli_server.engine.nc.directives import CoordinateCommand
 from hli_server.engine.nc.kinematic_commands import (
     AxisEntry,
     CaxTrack,
