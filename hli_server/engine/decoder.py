@@ -658,7 +658,13 @@ class Decoder:
             return items
         if self.kin.active is not None:
             return self._error_at(block, 20687, "#CYL while a transformation is on: program #TRAFO OFF first")
-        names = cmd.axes
+        # AXNR1=/AXNR2= name their axes by the logical number ("#<number>")
+        names = tuple(
+            self.axes[self.axis_numbers.index(int(a[1:]))]
+            if a.startswith("#") and a[1:].isdigit() and int(a[1:]) in self.axis_numbers
+            else a
+            for a in cmd.axes
+        )
         missing = [a for a in names if a not in self.index]
         if missing:
             return self._error_at(block, 910107, f"#CYL: {missing[0]} is not an axis of the channel")

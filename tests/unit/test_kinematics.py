@@ -43,7 +43,8 @@ def universal(
     zero_position: Sequence[float] = (0.0, 0.0, 0.0),
     mode: int = 0,
 ) -> KinematicData:
-    """A Universal Kinematics data set: ``axes`` (1 linear / 2 rotary, direction, point in mm) by axis index."""
+    """A Universal Kinematics data set: ``axes`` (1 linear / 2 rotary, direction, point in mm)
+    by axis index."""
     params = universal_params(Z, um(zero_position), [(k, d, um(p)) for k, d, p in axes])
     return KinematicData(91, params=params, chain=tuple(chain), programming_mode=mode, rtcp=0 if mode else 1)
 
@@ -52,7 +53,9 @@ LINEAR = [(1, X, (0.0, 0.0, 0.0)), (1, Y, (0.0, 0.0, 0.0)), (1, Z, (0.0, 0.0, 0.
 DIRS = {"A": X, "B": Y, "C": Z}
 
 
-def head(letters: str, p1: Sequence[float], p2: Sequence[float], mode: int = 0, zero=(0.0, 0.0, 0.0)) -> KinematicData:
+def head(
+    letters: str, p1: Sequence[float], p2: Sequence[float], mode: int = 0, zero=(0.0, 0.0, 0.0)
+) -> KinematicData:
     """A fork head: X, Y, Z, then the head's two rotary axes (the first one nearer the machine)."""
     return universal(
         [*LINEAR, (2, DIRS[letters[0]], p1), (2, DIRS[letters[1]], p2)], zero_position=zero, mode=mode
@@ -149,8 +152,10 @@ def test_head_and_table_roundtrip(pt, ph, length, xyz, c, b) -> None:
     b=angle,
     u=coord,
 )
-def test_tube_heads_rtcp_roundtrip(structure, offsets, direction, angle_offsets, length, xyz, a, b, u) -> None:
-    hd = {i: v for i, v in enumerate(offsets)}
+def test_tube_heads_rtcp_roundtrip(
+    structure, offsets, direction, angle_offsets, length, xyz, a, b, u
+) -> None:
+    hd = dict(enumerate(offsets))
     hd.update({14: float(direction[0]), 15: float(direction[1]), 16: angle_offsets[0], 17: angle_offsets[1]})
     trafo, _ = build(tube(structure, False, hd), SLOTS, length)
     roundtrip_rtcp(trafo, (*xyz, a, b, u))
@@ -166,7 +171,8 @@ def roundtrip_complete(trafo: Transformation, p: tuple[float, ...], hint: tuple[
     assert all(abs(a - b) <= TOL for a, b in zip(o1, o2, strict=True))
     # away from the pole the programmed angles come back themselves
     if abs(math.sin(math.radians(p[4]))) > 1e-3:
-        assert abs(back[3] - p[3]) <= 1e-7 and abs(back[4] - p[4]) <= 1e-7
+        assert abs(back[3] - p[3]) <= 1e-7
+        assert abs(back[4] - p[4]) <= 1e-7
     assert back[5] == p[5]
 
 
@@ -199,20 +205,27 @@ def test_tube_ab_ba_heads_with_ca_programming(structure, length, xyz, c, a, hint
     a=tilt,
 )
 def test_universal_complete_transformation(letters, p1, p2, length, xyz, c, a) -> None:
-    """Universal Kinematics, complete transformation in CA mode (P-CHAN-00287 = 0, P-CHAN-00288 = 17):
-    heads whose first axis is C reach every orientation; A-B gimbals every one off the pole (tilts below 90°)."""
+    """Universal Kinematics, complete transformation in CA mode (P-CHAN-00287 = 0,
+    P-CHAN-00288 = 17): heads whose first axis is C reach every orientation; A-B gimbals every
+    one off the pole (tilts below 90°)."""
     trafo, _ = build(head(letters, p1, p2, mode=17), SLOTS, length)
     roundtrip_complete(trafo, (*xyz, c, a, 0.0), (0.0,) * 6)
 
 
 @pytest.mark.req("K-02")
 @settings(max_examples=100, deadline=None)
-@given(mode=st.sampled_from([14, 15, 16, 17, 18, 19]), a1=angle, a2=st.floats(1.0, 179.0), h=st.tuples(angle, angle))
+@given(
+    mode=st.sampled_from([14, 15, 16, 17, 18, 19]),
+    a1=angle,
+    a2=st.floats(1.0, 179.0),
+    h=st.tuples(angle, angle),
+)
 def test_programming_modes_roundtrip(mode, a1, a2, h) -> None:
     """Mode angles -> orientation -> mode angles: one of the two poses is the programmed one."""
     o = mode_orientation(mode, a1, a2)
     b1, b2 = mode_angles(mode, o, a1, a2)
-    assert abs(b1 - a1) < 1e-7 and abs(b2 - a2) < 1e-7
+    assert abs(b1 - a1) < 1e-7
+    assert abs(b2 - a2) < 1e-7
     c1, c2 = mode_angles(mode, o, *h)  # any hint: another pose of the same orientation
     o2 = mode_orientation(mode, c1, c2)
     assert all(abs(x - y) < 1e-9 for x, y in zip(o, o2, strict=True))
@@ -258,7 +271,8 @@ def test_pole_keeps_the_free_angle() -> None:
     trafo, _ = build(head("CA", (0, 0, 0), (0, 0, 0), mode=17), SLOTS, 50.0)
     for previous in (-120.0, 0.0, 37.5, 250.0):
         axes = trafo.to_axes((1.0, 2.0, 3.0, 77.0, 0.0, 0.0), (0, 0, 0, previous, 0, 0))
-        assert axes[3] == pytest.approx(previous) and axes[4] == pytest.approx(0.0, abs=1e-9)
+        assert axes[3] == pytest.approx(previous)
+        assert axes[4] == pytest.approx(0.0, abs=1e-9)
         assert axes[:3] == pytest.approx((1.0, 2.0, 53.0))
 
 
@@ -303,9 +317,12 @@ def test_unreachable_orientation_is_292004() -> None:
     ],
 )
 def test_bad_data_sets_are_the_kernels_errors(data: KinematicData, alarm: int) -> None:
-    with pytest.raises(KinematicError) as err:
+    def build_and_move() -> None:
         trafo, _ = build(data, SLOTS, 0.0)
         trafo.to_axes((1.0, 2.0, 3.0, 0.0, 0.0, 0.0))
+
+    with pytest.raises(KinematicError) as err:
+        build_and_move()
     assert err.value.alarm == alarm
 
 
