@@ -30,7 +30,7 @@ from hli_server.engine.nc.compiler import Compiler
 from hli_server.engine.nc.interpreter import Interpreter
 from hli_server.engine.path.profiles import SlopeProfile, SlopeType
 from hli_server.engine.path.tools import ToolData
-from hli_server.engine.planner import Marker, MarkerKind, Planner
+from hli_server.engine.planner import Marker, MarkerKind, Motion, Planner
 from hli_server.engine.ports import MachinePort
 from hli_server.engine.programs import ProgramFile
 from schemas.config import ChannelConfig
@@ -220,6 +220,8 @@ class Channel:
         self.kinematic: Transformation | None = None
         """The transformation the axes follow now (switched in program order, at rest): the tool tip is
         its forward transformation of the axes (docs/kinematics.md)."""
+        self.kinematic_from: tuple[float, ...] = ()
+        """The axes where the transformation was last switched (at rest there: the next move's start)."""
         self.decoder.kinematic_handler = self._kinematic_changed
         self.decoder.axis_numbers = [a.config.number for a in axes]
         self.decoder.tracking_axis_number = config.log_number_tracking_axis
@@ -511,6 +513,8 @@ class Channel:
     def _kinematic_changed(self, trafo: Transformation | None) -> None:
         """``#TRAFO ON``/``OFF`` reached (the path at rest): the axes follow ``trafo`` from here."""
         self.kinematic = trafo
+        item = self.planner.current()
+        self.kinematic_from = item.axes_start() if isinstance(item, Motion) else tuple(self.setpoints())
 
     def set_slope(self, profile: int | None) -> None:
         """The acceleration profile from now on (``#SLOPE``, M-01..M-03): 0 STEP, 1 TRAPEZ, 2 SIN2,

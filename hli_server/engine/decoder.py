@@ -732,10 +732,14 @@ class Decoder:
             return [Marker(MarkerKind.ACTION, block, payload=lambda: handler(active) if handler else None)]
         if kin.active is None:
             return []
-        kin.switch_off()
+        self._kin_off()
+        return [Marker(MarkerKind.ACTION, cmd.block, payload=lambda: handler(None) if handler else None)]
+
+    def _kin_off(self) -> None:
+        """The transformation off: the decoder's position is the axes' again, the tool length applied."""
+        self.kin.switch_off()
         self.position = list(self.kin_axes)
         self.tools.applied_length = self._position_length = self.tools.length
-        return [Marker(MarkerKind.ACTION, cmd.block, payload=lambda: handler(None) if handler else None)]
 
     def _kin_pieces(self, piece: Piece, trafo: Transformation) -> Motion | Marker:
         """A tip segment with the transformation on: its axes' path (:func:`axis_path`) is what the
@@ -1051,7 +1055,10 @@ class Decoder:
                     block.label,
                 )
             # the program's end: every stage emptied first (an error of a held block replaces the end)
-            return items + self._flushed(ends)
+            out = items + self._flushed(ends)
+            if self.kin.active is not None:
+                self._kin_off()  # the end deselects the transformation: the position is the axes' again
+            return out
         # another M function is a "non-relevant block" to the compensation and the contouring: both keep
         # their corner across it (PM 207844107; it has no effect on the path here)
         return items

@@ -27,6 +27,7 @@ from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.batch import BatchGeometryCheck, unsupported
 from hli_server.engine.channel import Channel
 from hli_server.engine.geometry import ArcSegment, Segment
+from hli_server.engine.kinematics.transform import Transformation
 from hli_server.engine.machine import Machine
 from hli_server.engine.nc.directives import IterationCapError
 from hli_server.engine.nc.source import ProgramText
@@ -305,6 +306,7 @@ class ProgramCheck:
         countdown = 0
         kin_report = result.kinematics
         main = tuple(ch.axis_names.index(a) for a in ch.config.main_axes)
+        switched: Transformation | None = None
         while ch.state in running and machine.cycle < self.max_cycles:
             step(1)
             if record and machine.cycle % 10 == 0:
@@ -313,6 +315,10 @@ class ProgramCheck:
                     _record(kin_report.tool_path, ch.tool_tip(ch.setpoints()))
             kinematic = ch.kinematic
             if kinematic is not None:
+                if kinematic is not switched:  # switched on: the axes at rest where it was
+                    switched = kinematic
+                    start = ch.kinematic_from
+                    kin_report.add(kinematic.kin_id, kinematic.name, start, kinematic.to_tip(start), main)
                 axes = tuple(ch.setpoints())
                 kin_report.add(kinematic.kin_id, kinematic.name, axes, kinematic.to_tip(axes), main)
             countdown -= 1
@@ -358,6 +364,8 @@ class ProgramCheck:
                     for item in items:
                         if isinstance(item, Marker):
                             self._marker(ch, item, result)
+                        elif item.kin is not None:
+                            self._kinematic_motion(ch, item, result, False)
                     countdown -= 1
                     if progress is not None and countdown <= 0:
                         countdown = 256
@@ -416,11 +424,12 @@ class ProgramCheck:
         n = max(len(tips), 8)
         report = result.kinematics
         main = tuple(ch.axis_names.index(a) for a in ch.config.main_axes)
-        for k in range(1, n + 1):
-            s = item.length * k / n
+        length = item.segment.length  # item.length is set when the planner queues it
+        for k in range(n + 1):
+            s = length * k / n
             axes = item.axes_at(s)
             report.add(kin.trafo.kin_id, kin.trafo.name, axes, item.segment.point_at(s), main)
-            if record:
+            if record and k:
                 result.path.append(axes)
         if record:
             report.tool_path.extend(tips)

@@ -36,6 +36,7 @@ from hli_server.engine.nc.language import (
     A_CORNER_DEVIATION,
     A_INDEX,
     A_MESSAGE,
+    A_NOT_SIMULATED,
     A_RANGE,
     CONTOUR_KEYS,
     CONTOUR_TYPES,
@@ -103,6 +104,15 @@ class Effects(VariableAccess):
         if command == "CAXTRACK":
             if "OFF" in options:
                 return CaxTrack(place, False, angpos=params.get("ANGPOS"))
+            unsimulated: list[str] = [k for k in ("OPTALIGN", "ROTMODE") if k in params]
+            unsimulated += ["SCALEFACT"] if params.get("SCALEFACT", 1.0) != 1.0 else []
+            unsimulated += ["START_STROKE"] if "START_STROKE" in options else []
+            if unsimulated:
+                raise stmt.error(
+                    A_NOT_SIMULATED,
+                    f"#CAXTRACK ON [{', '.join(unsimulated)}] is not simulated (ANGLIMIT, OFFSET, AX, AXNR "
+                    "are): see docs/kinematics.md",
+                )
             axnr = stmt.params.get("AXNR")
             return CaxTrack(
                 place,

@@ -360,7 +360,17 @@ class HashParser(ExpressionParser):
             )
         for k in range(3):
             self.blanks()
-            name = self.name()
+            if k < 2:
+                name = self.name()
+            else:  # <3rd axis><radius>: the name's letters, then the radius (``Z35``, ``Z=35``, ``Z[R]``)
+                start = self.pos
+                while self.pos < self.n and self.u[self.pos].isalpha():
+                    self.pos += 1
+                name = self.u[start : self.pos]
+                self.blanks()
+                if self.peek() == "=":
+                    self.pos += 1
+                    self.blanks()
             if not name:
                 self.fail(
                     A_CONTROL_SYNTAX, "#CYL [..]: three axis names, the third with the reference radius"
