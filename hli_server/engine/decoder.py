@@ -766,7 +766,11 @@ class Decoder:
             accel=accel,
             rapid=piece.rapid,
             exact_stop=piece.exact_stop,
-            kin=SegmentMap(trafo, path.anchor_s, path.anchors) if trafo.mode else SegmentMap(trafo),
+            kin=(
+                SegmentMap(trafo, path.anchor_s, path.anchors, path.segments)
+                if trafo.mode
+                else SegmentMap(trafo, segments=path.segments)
+            ),
             gain=gain,
         )
 

@@ -169,13 +169,27 @@ class KinematicReport:
         self, kin_id: int, name: str, axes: tuple[float, ...], tip: tuple[float, ...], main: tuple[int, ...]
     ) -> None:
         self.used.setdefault(kin_id, name)
+        self.see_axes(axes)
+        self.see_tip(tip, main)
+
+    def see_axes(self, axes: tuple[float, ...]) -> None:
+        ranges = self.axes
         for k, v in enumerate(axes):
-            lo, hi = self.axes.get(k, (v, v))
-            self.axes[k] = (min(lo, v), max(hi, v))
+            lo, hi = ranges.get(k, (v, v))
+            if v < lo:
+                ranges[k] = (v, hi)
+            elif v > hi or k not in ranges:
+                ranges[k] = (lo, v)
+
+    def see_tip(self, tip: tuple[float, ...], main: tuple[int, ...]) -> None:
+        ranges = self.tip
         for k in main:
             v = tip[k]
-            lo, hi = self.tip.get(k, (v, v))
-            self.tip[k] = (min(lo, v), max(hi, v))
+            lo, hi = ranges.get(k, (v, v))
+            if v < lo:
+                ranges[k] = (v, hi)
+            elif v > hi or k not in ranges:
+                ranges[k] = (lo, v)
         self.final_tip = tip
 
     def to_json(self, ch: Channel) -> dict[str, Any]:
@@ -417,20 +431,26 @@ class ProgramCheck:
 
     @staticmethod
     def _kinematic_motion(ch: Channel, item: Motion, result: CheckResult, record: bool) -> None:
-        """A transformed block of a geometry check: its tool tip and its axes at the support points."""
+        """A transformed block of a geometry check: its tool tip's path and its axes' path (the one the
+        decoder checked: exact where the head's angles stand still, else its support points)."""
         kin = item.kin
         assert kin is not None
-        tips = segment_points(item.segment)
-        n = max(len(tips), 8)
         report = result.kinematics
+        report.used.setdefault(kin.trafo.kin_id, kin.trafo.name)
         main = tuple(ch.axis_names.index(a) for a in ch.config.main_axes)
-        length = item.segment.length  # item.length is set when the planner queues it
-        for k in range(n + 1):
-            s = length * k / n
-            axes = item.axes_at(s)
-            report.add(kin.trafo.kin_id, kin.trafo.name, axes, item.segment.point_at(s), main)
-            if record and k:
-                result.path.append(axes)
+        segments = kin.segments
+        report.see_axes(segments[0].start if segments else item.axes_start())
+        for seg in segments:
+            for p in segment_points(seg):
+                report.see_axes(p)
+                if record:
+                    result.path.append(p)
+        if not segments:
+            report.see_axes(item.axes_end())
+        tips = segment_points(item.segment)
+        report.see_tip(item.segment.start, main)
+        for t in tips:
+            report.see_tip(t, main)
         if record:
             report.tool_path.extend(tips)
 

@@ -44,6 +44,8 @@ class SegmentMap:
     trafo: Transformation
     anchor_s: tuple[float, ...] = ()
     anchors: tuple[Point, ...] = ()
+    segments: tuple[Segment, ...] = ()
+    """The axes' path (:attr:`AxisPath.segments`), for the reports of a geometry check."""
 
     def axes(self, p: Point, s: float) -> Point:
         trafo = self.trafo
