@@ -767,9 +767,9 @@ class Decoder:
             rapid=piece.rapid,
             exact_stop=piece.exact_stop,
             kin=(
-                SegmentMap(trafo, path.anchor_s, path.anchors, path.segments)
+                SegmentMap(trafo, path.anchor_s, path.anchors, path.segments, path.shift)
                 if trafo.mode
-                else SegmentMap(trafo, segments=path.segments)
+                else SegmentMap(trafo, segments=path.segments, shift=path.shift)
             ),
             gain=gain,
         )

@@ -46,8 +46,13 @@ class SegmentMap:
     anchors: tuple[Point, ...] = ()
     segments: tuple[Segment, ...] = ()
     """The axes' path (:attr:`AxisPath.segments`), for the reports of a geometry check."""
+    shift: Point = ()
+    """Axes minus tip where that is a constant along the segment (:attr:`AxisPath.shift`)."""
 
     def axes(self, p: Point, s: float) -> Point:
+        shift = self.shift
+        if shift:
+            return tuple([a + b for a, b in zip(p, shift, strict=True)])
         trafo = self.trafo
         if not trafo.mode:
             return trafo.to_axes(p)
@@ -75,6 +80,9 @@ class AxisPath:
     end: Point
     anchor_s: tuple[float, ...]
     anchors: tuple[Point, ...]
+    shift: Point = ()
+    """Where the head's angles stand still: the constant the axes stand off the tip by (exact); else
+    empty."""
 
 
 def _translation_only(trafo: Transformation) -> bool:
@@ -114,7 +122,7 @@ def axis_path(trafo: Transformation, segment: Segment, start_axes: Sequence[floa
                 segment.start_angle,
                 segment.sweep,
             )
-        return AxisPath((moved,), end, (0.0,), (first,))
+        return AxisPath((moved,), end, (0.0,), (first,), tuple(shift))
     length = segment.length
     travel = max((abs(segment.end[k] - segment.start[k]) * gear for k, gear in angles), default=0.0)
     steps = max(1, math.ceil(travel / MAX_ROTARY_STEP))
