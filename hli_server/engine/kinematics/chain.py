@@ -221,20 +221,10 @@ class Chain:
                 f"an orientation needs exactly two rotary axes in the chain, it has {len(rot)}: program the "
                 "axes' angles (RTCP, P-CHAN-00287 = 1)",
             )
-        first, second = rot
-        h1, h2 = hint[first.index], hint[second.index]
+        h1, h2 = hint[rot[0].index], hint[rot[1].index]
         best: tuple[float, float] | None = None
         best_cost = math.inf
-        for a1, a2 in two_axis_angles(
-            first.direction,
-            second.direction,
-            self.zero_orientation,
-            target,
-            first.angle(h1),
-            second.angle(h2),
-        ):
-            v1 = wrap_near(first.value(a1), h1, first.sign)
-            v2 = wrap_near(second.value(a2), h2, second.sign)
+        for v1, v2 in self.poses(target, hint):
             cost = abs(v1 - h1) + abs(v2 - h2)
             if cost < best_cost - 1e-12:
                 best, best_cost = (v1, v2), cost
