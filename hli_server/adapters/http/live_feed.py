@@ -200,7 +200,7 @@ class LiveFeed:
         self._scene_failed: set[int] = set()
         self._scene_checked = 0.0
         self._axes: list[_AxisSignals] | None = None
-        self._channel_signals: list[tuple[int, Signal, Signal]] | None = None
+        self._channel_signals: list[tuple[int, Signal, Signal, tuple[Signal, ...]]] | None = None
 
     # --- streams ------------------------------------------------------------------------------
     def open(self, *, events: bool = True) -> Stream:
@@ -388,21 +388,37 @@ class LiveFeed:
                     c.number,
                     image.layout.signal(f"gpCh[{c.index}]^bahn_mc_control.override.state_r"),
                     image.layout.signal(f"gpCh[{c.index}]^bahn_mc_control.feedhold.state_r"),
+                    tuple(
+                        image.layout.signal(f"gpCh[{c.index}]^bahn_state.{name}")
+                        for name in ("kin_id_r", "trafo_active_r", "tcp_x_r", "tcp_y_r", "tcp_z_r")
+                    ),
                 )
                 for c in image.layout.channels
             ]
         units = {
-            number: (read_field(c2p, 0, override), read_field(c2p, 0, feedhold))
-            for number, override, feedhold in self._channel_signals or ()
+            number: (
+                read_field(c2p, 0, override),
+                read_field(c2p, 0, feedhold),
+                [read_field(c2p, 0, k) for k in kin],
+            )
+            for number, override, feedhold, kin in self._channel_signals or ()
         }
         channels = []
         for ch in snap["channels"]:
-            override, feedhold = units.get(ch["number"], (None, None))
+            override, feedhold, kin = units.get(ch["number"], (None, None, None))
             channels.append(
                 {
                     **ch,
                     "override_percent": None if override is None else int(override) / 10,
                     "feedhold": feedhold,
+                    # K-07: the kinematic transformation and the tool tip (TCP), as the image has them
+                    "kinematic": None
+                    if kin is None
+                    else {
+                        "id": int(kin[0]),
+                        "active": bool(kin[1]),
+                        "tool_tip_mm": [int(v) * _MM for v in kin[2:]],
+                    },
                 }
             )
         axes = []

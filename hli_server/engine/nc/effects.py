@@ -17,14 +17,26 @@ from hli_server.engine.nc.directives import (
     SyncAction,
 )
 from hli_server.engine.nc.expr import (
+    Expr,
     Value,
     format_value,
+)
+from hli_server.engine.nc.kinematic_commands import (
+    AxisEntry,
+    CaxTrack,
+    CylSelect,
+    KinematicCommand,
+    KinSelect,
+    SetAxes,
+    ToolOriCs,
+    TrafoSwitch,
 )
 from hli_server.engine.nc.language import (
     A_CONTROL_SYNTAX,
     A_CORNER_DEVIATION,
     A_INDEX,
     A_MESSAGE,
+    A_NOT_SIMULATED,
     A_RANGE,
     CONTOUR_KEYS,
     CONTOUR_TYPES,
@@ -53,6 +65,69 @@ class Effects(VariableAccess):
     ``#FILE NAME``, ``#FLUSH``, and the directives of ``#MEAS MODE``, ``#SLOPE``, ``#CS``/``#ACS``/
     ``#ROTATION``, ``#CONTOUR MODE``/``#HSC``/``#SPLINE`` (which ``#`` commands exist is
     ``nc/language.py``'s ``HASH_COMMANDS``)."""
+
+    # --- kinematic transformations (issue 35, docs/kinematics.md) -------------------------------------------
+    def _whole(self, stmt: Hash, expr: Expr, what: str, low: int, high: int) -> int:
+        value = self._number(stmt, expr, what)
+        if value != int(value) or not low <= value <= high:
+            raise stmt.error(A_INDEX, f"{what} {format_value(value)}: a whole number {low} .. {high}")
+        return int(value)
+
+    def _kinematic(self, frame: Frame, stmt: Hash) -> KinematicCommand:
+        """The decoder's command of ``#KIN ID``, ``#TRAFO``, ``#TOOL ORI CS``, ``#CYL``, ``#CAXTRACK``,
+        ``#SET AX`` (:mod:`hli_server.engine.nc.kinematic_commands`), its values evaluated."""
+        place = self._place_block(frame, stmt)
+        command, options = stmt.command, stmt.options
+        names = [o[3:] for o in options if o.startswith("AX:")]
+        params = {k: self._number(stmt, e, f"#{command} {k}") for k, e in stmt.params.items()}
+        if command == "KIN ID":
+            kin_id = self._whole(stmt, stmt.args[0], "#KIN ID", 0, 65535) if stmt.args else None
+            return KinSelect(place, kin_id)
+        if command == "TRAFO":
+            return TrafoSwitch(place, "ON" in options)
+        if command == "TOOL ORI CS":
+            return ToolOriCs(place, "OFF" not in options)
+        if command == "CYL":
+            if "OFF" in options:
+                return CylSelect(place)
+            if "LATERAL" in options:
+                for k, key in enumerate(("AXNR1", "AXNR2")):
+                    if key in params:
+                        logical = self._whole(stmt, stmt.params[key], f"#CYL ORI LATERAL {key}", 1, 65535)
+                        names.insert(k, f"#{logical}")  # the decoder knows the axis of the number
+                if len(names) != 2 or "RADIUS" not in params:
+                    raise stmt.error(
+                        A_CONTROL_SYNTAX,
+                        "#CYL ORI LATERAL [AX1=.. AX2=.. RADIUS=..]: both axes and the radius",
+                    )
+            return CylSelect(place, tuple(names), params.get("RADIUS", 0.0), lateral="LATERAL" in options)
+        if command == "CAXTRACK":
+            if "OFF" in options:
+                return CaxTrack(place, False, angpos=params.get("ANGPOS"))
+            unsimulated: list[str] = [k for k in ("OPTALIGN", "ROTMODE") if k in params]
+            unsimulated += ["SCALEFACT"] if params.get("SCALEFACT", 1.0) != 1.0 else []
+            unsimulated += ["START_STROKE"] if "START_STROKE" in options else []
+            if unsimulated:
+                raise stmt.error(
+                    A_NOT_SIMULATED,
+                    f"#CAXTRACK ON [{', '.join(unsimulated)}] is not simulated (ANGLIMIT, OFFSET, AX, AXNR "
+                    "are): see docs/kinematics.md",
+                )
+            axnr = stmt.params.get("AXNR")
+            return CaxTrack(
+                place,
+                True,
+                anglimit=params.get("ANGLIMIT"),
+                offset=params.get("OFFSET", 0.0),
+                axis=names[0] if names else None,
+                axis_number=self._whole(stmt, axnr, "#CAXTRACK AXNR", 1, 65535) if axnr is not None else None,
+            )
+        entries = []
+        for k, name in enumerate(names):
+            number = self._whole(stmt, stmt.args[2 * k], f"#SET AX [{name}, <number>", 1, 65535)
+            index = self._whole(stmt, stmt.args[2 * k + 1], f"#SET AX [{name}, {number}, <index>", 0, 31)
+            entries.append(AxisEntry(name, number, index))
+        return SetAxes(place, tuple(entries), fast="FAST" in options)
 
     # --- # commands ------------------------------------------------------------------------------------
     def _hash(self, frame: Frame, stmt: Hash) -> None:
@@ -120,6 +195,9 @@ class Effects(VariableAccess):
             return
         if command in ("CONTOUR MODE", "HSC", "SPLINE"):
             self._pending.append(self._contour(frame, stmt))
+            return
+        if command in ("KIN ID", "TRAFO", "TOOL ORI CS", "CYL", "CAXTRACK", "SET AX"):
+            self._pending.append(self._kinematic(frame, stmt))
             return
         # MSG
         if self._needs_flush(frame, stmt, stmt.args):

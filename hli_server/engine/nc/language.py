@@ -311,10 +311,7 @@ MOTION_FUNCTIONS: Final[dict[str, str]] = {
     "TRC": "tool radius compensation options (#TRC)",
 }
 """Motion functions not simulated (N-08): refused by name with 910110 (docs/nc-language.md)."""
-REFUSED_HASH: Final[dict[str, str]] = {
-    "KIN": "kinematic transformations (#KIN)",
-    "TRAFO": "kinematic transformations (#TRAFO)",
-}
+REFUSED_HASH: Final[dict[str, str]] = {}
 """Refused with their own message (M-26): docs/nc-language.md says what simulating them
 would take."""
 
@@ -375,10 +372,17 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
     "CONTOUR": _kernel("CONTOUR", ("MODE",)),
     "HSC": _SIMULATED,
     "SPLINE": _SIMULATED,
-    "SET": _kernel("SET", ("SPLINE", "SPLINETYPE")),
+    "SET": _kernel("SET", ("SPLINE", "SPLINETYPE", "AX")),
     "CS": _SIMULATED,
     "ACS": _SIMULATED,
     "ROTATION": _SIMULATED,
+    # kinematic transformations (issue 35, docs/kinematics.md): directives for the decoder
+    "KIN": _kernel("KIN", ("ID",)),
+    "TRAFO": _SIMULATED,
+    "RTCP": _SIMULATED,
+    "TOOL": _kernel("TOOL", ("ORI",)),
+    "CYL": _SIMULATED,
+    "CAXTRACK": _SIMULATED,
     # the logical-block reader's (nc/reader.py): met here only where they are misplaced
     "VAR": HashRule(
         (), A_DECLARATION, "#VAR must stand alone on its line; the declarations follow on the next lines"
