@@ -474,7 +474,8 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(919000, "Internal error: a cycle failed; the axes were stopped", "project", Reaction.AXIS_STOP),
     _w(
         919010,
-        "#MSG SAVE: report file not written (its name leaves the NC output directory, or it is full)",
+        "#MSG SAVE: report file not written (its name leaves the NC output directory, it is no regular file "
+        "of one link, or a bound is reached)",
         "project (N-07)",
     ),
 )

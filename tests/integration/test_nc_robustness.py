@@ -1,0 +1,180 @@
+"""Robustness, round three (issue 36): the NC language as an attack surface, through the real doors.
+
+Each finding has its regression test here, against ``hli-server run`` as users start it (realtime clock, the
+doors process), the attack being an NC program uploaded over loopback, bounded in count and time. The clock
+is judged by what it says of itself (``GET /api/timing``, ``tests/integration/attacks.py``).
+
+Where a flood keeps the interpreter busy (its budget of 128 statements a cycle, all of them ``#MSG``), the
+server runs a machine with T_A = 4 ms: the engine as pure Python (a worktree without the compiled engine)
+spends about 2 ms on such a cycle, so that with 1 ms no clock could keep pace whatever the files and events
+cost; with 4 ms what the test measures is the cost of what the program asks for, not the interpreter's.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import httpx
+import pytest
+
+from hli_server.runtime.nc_files import MAX_FILE_BYTES, MAX_FILES, REPORT_BURST
+from tests.integration.attacks import LOOP_BOUND_US, Server, clock_since, server
+
+pytestmark = [pytest.mark.slow]
+
+DEMO = Path(__file__).resolve().parents[2] / "hli_server" / "machines"
+
+
+def slow_clock_machine(directory: Path, cycle_us: int = 4000) -> str:
+    """The demo machine with T_A = ``cycle_us`` (its files copied into ``directory``)."""
+    directory.mkdir(parents=True, exist_ok=True)
+    for f in DEMO.glob("demo*"):
+        shutil.copy(f, directory / f.name)
+    machine = directory / "demo.toml"
+    text = machine.read_text(encoding="utf-8")
+    assert "cycle_time_us = 1000" in text
+    machine.write_text(text.replace("cycle_time_us = 1000", f"cycle_time_us = {cycle_us}"), encoding="utf-8")
+    return str(machine)
+
+
+def run_program(srv: Server, program: str, timeout: float = 20.0) -> dict[str, Any]:
+    """Load and start ``program`` in channel 1; its channel's state once it is no longer running (or the
+    last state seen after ``timeout`` s). Every request of the way must be answered within 5 s."""
+    with httpx.Client(base_url=srv.url, timeout=5.0) as c:
+        assert c.post("/api/channels/1/program", content=program).status_code == 200
+        assert c.post("/api/channels/1/start").status_code == 202
+        deadline = time.monotonic() + timeout
+        state: dict[str, Any] = {}
+        while time.monotonic() < deadline:
+            state = c.get("/api/state").json()["channels"][0]
+            if state["program_state_name"] in ("finished", "aborted"):
+                break
+            time.sleep(0.1)
+        return state
+
+
+def alarms(srv: Server, number: int) -> list[dict[str, Any]]:
+    history = httpx.get(srv.url + "/api/alarms", timeout=5).json()["history"]
+    return [a for a in history if a["id"] == number]
+
+
+# --- finding 2: a named pipe, a hard link ----------------------------------------------------------------
+
+
+@pytest.mark.req("N-07", "E-01")
+def test_a_named_pipe_or_a_hard_link_in_the_output_directory_is_refused_and_the_clock_goes_on(
+    tmp_path: Path,
+) -> None:
+    """Before: ``#MSG SAVE`` into a named pipe blocked the cycle until someone read it (7,958 cycles
+    dropped, ``/api/timing`` silent); a hard link to a file outside the directory was appended to. Now only
+    regular files of one link are written, off the clock's thread, never waiting: the pipe (with or
+    without a reader), the link and a directory are refused with warning 919010, the file beside them is
+    written, and the clock drops nothing."""
+    out, outside = tmp_path / "reports", tmp_path / "outside.txt"
+    out.mkdir()
+    os.mkfifo(out / "pipe.txt")
+    os.mkfifo(out / "read.txt")
+    outside.write_text("not yours\n")
+    os.link(outside, out / "linked.txt")
+    (out / "dir.txt").mkdir()
+    reader = os.open(out / "read.txt", os.O_RDONLY | os.O_NONBLOCK)  # a pipe somebody reads
+    program = (
+        "".join(
+            f'#FILE NAME [MSG="{name}"]\nN{10 * k + 10} #MSG SAVE ["line {k}"]\n'
+            for k, name in enumerate(["pipe.txt", "read.txt", "linked.txt", "dir.txt", "ok.txt"])
+        )
+        + "N90 M30\n"
+    )
+    try:
+        with server("--nc-output-dir", str(out)) as srv:
+            before = srv.timing()
+            state = run_program(srv, program)
+            clock = clock_since(before, srv.timing())
+            refused = alarms(srv, 919010)
+    finally:
+        os.close(reader)
+    assert state["program_state_name"] == "finished", state
+    assert clock["dropped"] == 0, clock
+    assert clock["failed"] == 0, clock
+    by_line = {a["line"]: a["message"] for a in refused}
+    assert sorted(by_line) == [2, 4, 6, 8], refused  # pipe, read pipe, link, directory: with their lines
+    assert "named pipe" in by_line[2]
+    assert "named pipe" in by_line[4]
+    assert "2 links" in by_line[6]
+    assert "directory" in by_line[8] or "Is a directory" in by_line[8]
+    assert {a["block"] for a in refused} == {"N10", "N20", "N30", "N40"}
+    assert outside.read_text() == "not yours\n"  # nothing appended through the link
+    assert (out / "ok.txt").read_text() == "line 4\n"
+
+
+# --- finding 3: bounded output that still cost the clock; a log line and an alarm per refusal ---------------
+
+
+@pytest.mark.req("N-07", "E-01")
+def test_a_flood_of_report_writes_and_refusals_costs_the_clock_nothing_and_is_reported_at_a_rate(
+    tmp_path: Path,
+) -> None:
+    """A program writes 8,000 lines into one file (16 a cycle), 300 files (more than the 256 a server writes)
+    and 8,000 lines into a name that leaves the directory. Before: every write was done inside the cycle and
+    every refusal logged a WARNING and raised an alarm (20,430 log lines for such a program; with T_A = 4 ms
+    2,905 of 3,033 cycles late, p99 5.6 s, ``/api/timing`` answered after 4 s). Now the cycle only queues
+    the write; the refusals are warned of at most ``REPORT_BURST`` at once, then once a second, each saying
+    how many it stands for."""
+    out = tmp_path / "reports"
+    pad = "".join(f"P{k + 1} = P{k} + 1\n" for k in range(1, 7))  # 8 statements a round: 16 writes a cycle
+    program = (
+        f'#FILE NAME [MSG="big.txt"]\n$FOR P1 = 1, 8000\n#MSG SAVE ["part %d of the batch done", P1]\n{pad}'
+        "$ENDFOR\n"
+        + "".join(f'#FILE NAME [MSG="f{k}.txt"]\n#MSG SAVE ["y"]\n' for k in range(300))
+        + f'#FILE NAME [MSG="../escape.txt"]\n$FOR P1 = 1, 8000\n#MSG SAVE ["z"]\n{pad}$ENDFOR\nM30\n'
+    )
+    answered: list[float] = []
+    stop = threading.Event()
+
+    def operator(url: str) -> None:  # /api/timing must be answered throughout
+        with httpx.Client(base_url=url, timeout=10) as c:
+            while not stop.is_set():
+                began = time.monotonic()
+                assert c.get("/api/timing").status_code == 200
+                answered.append(time.monotonic() - began)
+                time.sleep(0.2)
+
+    with server("--config", slow_clock_machine(tmp_path / "machine"), "--nc-output-dir", str(out)) as srv:
+        before = srv.timing()
+        poll = threading.Thread(target=operator, args=(srv.url,))
+        poll.start()
+        try:
+            began = time.monotonic()
+            state = run_program(srv, program, timeout=30)
+            took = time.monotonic() - began
+        finally:
+            stop.set()
+            poll.join()
+        clock = clock_since(before, srv.timing())
+        refused = alarms(srv, 919010)
+    log = srv.proc.stderr.read() if srv.proc.stderr else ""
+    warnings = re.findall(r"WARNING hli_server\.runtime\.nc_files: .*", log)
+    assert state["program_state_name"] == "finished", state
+    files = sorted(p.name for p in out.iterdir())
+    assert len(files) == MAX_FILES  # the bounds hold: 256 files
+    assert (out / "big.txt").stat().st_size <= MAX_FILE_BYTES
+    assert not (tmp_path / "escape.txt").exists()
+    # the cycle paid for a queue append: no cycle late for its own work beyond a few, none dropped
+    assert clock["dropped"] == 0, clock
+    assert clock["failed"] == 0, clock
+    assert clock["worst_loop_us"] < LOOP_BOUND_US, clock
+    assert clock["late_causes"].get("cycle", 0) < clock["cycles"] // 20, clock
+    assert answered
+    assert max(answered) < 1.0, answered
+    # reported at a rate: a burst, then one a second (and one at the stop), each counting what it stands for
+    bound = REPORT_BURST + int(took) + 3
+    assert 1 <= len(warnings) <= bound, (len(warnings), took)
+    assert 1 <= len(refused) <= bound, len(refused)
+    assert any("more writes were refused" in w for w in warnings), warnings
+    assert any("leaves" in a["message"] or "'..'" in a["message"] for a in refused)
