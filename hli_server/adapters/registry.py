@@ -156,6 +156,7 @@ ADAPTERS: dict[str, AdapterKind] = {
             "hli_server.adapters.mqtt:MqttOptions",
             default=False,
             summary="MQTT events to a broker, JSON per event kind (H-05; docs/mqtt.md)",
+            doors=True,
             label="MQTT",
         ),
     )

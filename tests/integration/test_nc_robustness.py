@@ -24,6 +24,7 @@ import httpx
 import pytest
 
 from hli_server.runtime.nc_files import MAX_FILE_BYTES, MAX_FILES, REPORT_BURST
+from tests.integration._mosquitto import Mosquitto, missing_tools
 from tests.integration.attacks import LOOP_BOUND_US, Server, clock_since, server
 
 pytestmark = [pytest.mark.slow]
@@ -178,3 +179,112 @@ def test_a_flood_of_report_writes_and_refusals_costs_the_clock_nothing_and_is_re
     assert 1 <= len(refused) <= bound, len(refused)
     assert any("more writes were refused" in w for w in warnings), warnings
     assert any("leaves" in a["message"] or "'..'" in a["message"] for a in refused)
+
+
+# --- finding 4: a #MSG flood with MQTT and dashboard streams ------------------------------------------------
+
+
+def cpu_s(pid: int) -> float:
+    """CPU time (user and system) the process ``pid`` has used, in seconds (Linux ``/proc``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+class Phase:
+    """What the clock said over a stretch of time, and the engine process' CPU time per cycle in it."""
+
+    def __init__(self, srv: Server) -> None:
+        self._srv = srv
+        self._before = srv.timing()
+        self._cpu = cpu_s(srv.proc.pid)
+
+    def end(self) -> dict[str, Any]:
+        clock = clock_since(self._before, self._srv.timing())
+        clock["cpu_per_cycle_ms"] = (cpu_s(self._srv.proc.pid) - self._cpu) * 1e3 / max(1, clock["cycles"])
+        return clock
+
+
+@pytest.mark.req("N-07", "H-05", "E-01")
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the engine's CPU time from /proc")
+def test_a_message_flood_costs_the_clock_the_same_whatever_mqtt_and_the_dashboards_do(tmp_path: Path) -> None:
+    """A program sends ``#MSG`` as fast as the interpreter runs (32 a cycle, 8,000 a second): for two
+    seconds nobody listens (the MQTT broker is not there yet), then for two seconds MQTT publishes every
+    event, two dashboard streams are open (one read, one never) and a client reads the whole event log
+    again and again. Before: MQTT published on the clock's loop: the engine's process spent 3.4 ms of CPU
+    on a cycle against 1.1 ms without consumers, its loop up to 9.3 ms on other work than cycles in one
+    cycle, and ``GET /api/events`` took 5.0-8.7 s. Now the consumers live in the doors process and the
+    clock sends each batch of events as tuples, never waiting for them: the engine's process spends the
+    same CPU time on a cycle either way."""
+    reason = missing_tools("mosquitto")
+    if reason:
+        pytest.skip(reason)
+    broker = Mosquitto(tmp_path / "mosquitto")  # its port now, the broker later
+    program = 'P1 = 0\n$WHILE 1\nP1 = P1 + 1\n#MSG ["part %d of the batch done", P1]\n$ENDWHILE\nM30\n'
+    machine = slow_clock_machine(tmp_path / "machine")
+    answers: dict[str, list[float]] = {"timing": [], "events": []}
+    stop, consumers = threading.Event(), threading.Event()
+
+    def stream(url: str, read: bool) -> None:
+        consumers.wait()
+        with httpx.Client(base_url=url, timeout=30) as c, c.stream("GET", "/api/live") as r:
+            for _ in r.iter_lines() if read else ():
+                if stop.is_set():
+                    return
+            stop.wait()
+
+    def operator(url: str) -> None:
+        with httpx.Client(base_url=url, timeout=30) as c:
+            while not stop.is_set():
+                paths = [("timing", "/api/timing")]
+                if consumers.is_set():
+                    paths.append(("events", "/api/events?limit=10000"))
+                for what, path in paths:
+                    began = time.monotonic()
+                    assert c.get(path).status_code == 200
+                    answers[what].append(time.monotonic() - began)
+                time.sleep(0.2)
+
+    mqtt = ("--mqtt", f"127.0.0.1:{broker.port}", "--adapter", "mqtt:reconnect_max_s=0.2")
+    try:
+        with server("--config", machine, *mqtt) as srv, httpx.Client(base_url=srv.url, timeout=5) as c:
+            threads = [threading.Thread(target=stream, args=(srv.url, read)) for read in (True, False)]
+            threads.append(threading.Thread(target=operator, args=(srv.url,)))
+            for t in threads:
+                t.start()
+            try:
+                assert c.post("/api/channels/1/program", content=program).status_code == 200
+                assert c.post("/api/channels/1/start").status_code == 202
+                time.sleep(0.5)  # the flood is on
+                phase = Phase(srv)
+                time.sleep(2.0)
+                alone = phase.end()
+                broker.start()
+                deadline = time.monotonic() + 10
+                while "New client connected" not in broker.log_text() and time.monotonic() < deadline:
+                    time.sleep(0.05)
+                assert "New client connected" in broker.log_text(), broker.log_text()
+                consumers.set()
+                time.sleep(0.5)  # the streams are open
+                phase = Phase(srv)
+                time.sleep(2.0)
+                watched = phase.end()
+                state = c.get("/api/state").json()["channels"][0]["program_state_name"]
+                events = c.get("/api/events?limit=1").json()["latest"]
+            finally:
+                stop.set()
+                consumers.set()
+                for t in threads:
+                    t.join(10)
+    finally:
+        broker.stop()
+    assert state == "running"  # the flood ran throughout
+    assert events > 15_000, events
+    for clock in (alone, watched):
+        assert clock["dropped"] == 0, clock
+        assert clock["failed"] == 0, clock
+        assert clock["worst_loop_us"] < LOOP_BOUND_US, clock  # nothing but cycles on the clock's loop
+    # what the consumers cost the engine's process: nothing measurable (before: 3.1 times the CPU a cycle)
+    assert watched["cpu_per_cycle_ms"] < 1.25 * alone["cpu_per_cycle_ms"] + 0.1, (alone, watched)
+    assert max(answers["timing"]) < 1.0, answers
+    assert answers["events"]
+    assert max(answers["events"]) < 5.0, answers  # the doors process' own work (before: 5.0-8.7 s)
