@@ -407,7 +407,8 @@ def door_guards(plan: Sequence[tuple[str, Mapping[str, Any]]], policy: AccessPol
             continue
         if name == "http":
             if policy.api_token:
-                out.append(DoorGuard(name, label, True, "changes and the event log need the API token"))
+                guard = "changes, the event log and the recordings need the API token"
+                out.append(DoorGuard(name, label, True, guard))
             else:
                 out.append(
                     DoorGuard(

@@ -11,6 +11,7 @@ import json
 import socket
 import time
 from collections.abc import AsyncIterator
+from pathlib import Path
 
 import httpx
 import pytest
@@ -214,3 +215,74 @@ def test_over_a_thousand_idle_connections_do_not_take_the_server_down() -> None:
             s.close()
         stop_server(proc)
     assert proc.returncode == 0
+
+
+# --- round three (issue 36), finding 5: what the token guards, on every route -----------------------------
+
+
+GUARDED_READS = {"/api/events", "/api/recordings", "/api/recordings/{name}"}
+"""The reads the token guards (docs/reliability.md, "Access"; ``guard.TOKEN_READS``): what was done on the
+machine, by whom, with which programs. Every other read shows the machine as it is now."""
+
+
+def _sample_path(path: str, recording: str) -> str:
+    """A route's path with its parameters filled with values that exist on the demo machine."""
+    values = {
+        "{number}": "1",
+        "{n}": "1",
+        "{st_path}": "gpCh[0]^bahn_state.cycle_r",
+        "{fault_id}": "1",
+        "{name}": recording if path.startswith("/api/recordings/") else "X",
+    }
+    for key, value in values.items():
+        path = path.replace(key, value)
+    return path
+
+
+@pytest.mark.req("H-01", "B-02")
+def test_the_token_guards_every_change_the_event_log_and_the_recordings_on_every_route(
+    tmp_path: Path,
+) -> None:
+    """Before: with ``--api-token`` a recording (the programs' text, every input and every event) could be
+    listed and downloaded without the token while ``GET /api/events`` answered 401. Now every route of the
+    OpenAPI description is tried without the token: every change is 401, and of the reads exactly the event
+    log and the recordings; with the token (header or ``?access_token=``) they answer."""
+    proc = start_server(
+        "--clock", "stepped", "--http-port", "0", "--no-modbus", "--api-token", "s3cret", "--record-dir",
+        str(tmp_path),
+    )  # fmt: skip
+    auth = {"authorization": "Bearer s3cret"}
+    try:
+        url = read_banner(proc)["url"]
+        with httpx.Client(base_url=url, timeout=10) as c:
+            assert c.post("/api/channels/1/program", content=PROGRAM, headers=auth).status_code == 200
+            assert c.post("/api/recording/start", json={"name": "tuesday"}, headers=auth).status_code == 201
+            assert c.post("/api/step", json={"cycles": 20}, headers=auth).status_code == 200
+            assert c.post("/api/recording/stop", headers=auth).status_code == 200
+            recording = "tuesday.jsonl.gz"
+            routes = c.get("/openapi.json").json()["paths"]
+            refused: set[str] = set()
+            for path, methods in routes.items():
+                for method in methods:
+                    if path == "/api/live":
+                        continue  # a stream: tests/integration/test_slow_clients.py
+                    r = c.request(method.upper(), _sample_path(path, recording))
+                    if method != "get":
+                        assert r.status_code == 401, (method, path, r.status_code)
+                    elif r.status_code == 401:
+                        refused.add(path)
+                    else:
+                        assert r.status_code < 500, (path, r.status_code, r.text)
+            assert refused == GUARDED_READS
+            files = c.get("/api/recordings", headers=auth)
+            assert files.status_code == 200
+            assert [f["name"] for f in files.json()] == [recording]
+            download = c.get(f"/api/recordings/{recording}?access_token=s3cret")
+            assert download.status_code == 200
+            assert download.content[:2] == b"\x1f\x8b"  # the gzip file
+            assert c.get(f"/api/recordings/{recording}?access_token=wrong").status_code == 401
+            assert "the recordings" in c.get("/api/recordings").json()["detail"]
+            assert c.get("/api/recording").json()["recording"] is False  # whether one runs: open
+            assert c.get("/").status_code == 200
+    finally:
+        stop_server(proc)
