@@ -15,6 +15,7 @@ import os
 import random
 import socket
 import struct
+import subprocess
 import sys
 import time
 from collections.abc import AsyncIterator
@@ -405,3 +406,92 @@ async def test_fuzz_the_udp_door_never_crashes_and_still_answers() -> None:
     finally:
         udp.close()
         await rt.stop()
+
+
+# ================================================================================================
+# The route password out of the command line (issue 36, finding 8)
+# ================================================================================================
+
+
+def _udp_port(banner: str) -> int:
+    line = next(x for x in banner.splitlines() if x.strip().startswith("ADS (UDP):"))
+    return int(line.split(": ", 1)[1].split()[0].rsplit(":", 1)[1])
+
+
+@pytest.mark.parametrize("source", ["file", "environment"])
+async def test_the_route_password_comes_from_a_file_or_the_environment_not_the_command_line(
+    tmp_path: Path, source: str
+) -> None:
+    """Before: the password could be given only as an option, on the command line, where ``ps`` shows it to
+    every local user. Now ``route_password_file`` or ``HLI_ADS_ROUTE_PASSWORD`` gives it: AddRoute with it
+    adds the route, with another is refused (0x704), and no process' command line holds it."""
+    from tests.integration.servers import hli_server_cmd, read_banner, stop_server
+
+    secret = "Tr0ub4dor&3"
+    options = "route_user=Administrator,allow=192.168.77.1.1.1"
+    env = dict(os.environ)
+    if source == "file":
+        file = tmp_path / "ads-password"
+        file.write_text(secret + "\n")
+        file.chmod(0o600)
+        options += f",route_password_file={file}"
+    else:
+        env["HLI_ADS_ROUTE_PASSWORD"] = secret
+    args = [
+        "run",
+        "--clock",
+        "stepped",
+        "--no-http",
+        "--no-modbus",
+        "--ads-port",
+        "0",
+        "--adapter",
+        f"ads:{options}",
+    ]
+    proc = subprocess.Popen(
+        [*hli_server_cmd(), *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+    )
+    try:
+        banner = read_banner(proc, timeout=60)["text"]
+        assert "AddRoute accepted with route_user/route_password" in banner
+        udp = Udp(("127.0.0.1", _udp_port(banner)))
+        try:
+            assert status_of(await udp.ask(add_route("10.9.8.7.1.1", "127.0.0.1", USER, "1")) or b"") == 0x704
+            await asyncio.sleep(1.1)  # AddRoute is answered once a second per sender
+            assert status_of(await udp.ask(add_route("10.9.8.7.1.1", "127.0.0.1", USER, secret)) or b"") == 0
+        finally:
+            udp.close()
+        for pid in [proc.pid, *_children(proc.pid)]:  # the server and its doors process
+            assert secret.encode() not in Path(f"/proc/{pid}/cmdline").read_bytes()
+    finally:
+        stop_server(proc)
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        children = task / "children"
+        if children.exists():
+            out += [int(c) for c in children.read_text().split()]
+    return out
+
+
+def test_a_route_password_file_that_cannot_be_read_stops_the_start_with_its_name(tmp_path: Path) -> None:
+    from tests.integration.servers import hli_server_cmd
+
+    missing = tmp_path / "nope"
+    result = subprocess.run(
+        [*hli_server_cmd(), "run", "--cycles", "1", "--no-http", "--no-modbus", "--ads-port", "0",
+         "--adapter", f"ads:route_user=Administrator,route_password_file={missing}"],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert result.returncode == 2, result.stderr
+    assert f"route_password_file {missing}: cannot be read (No such file or directory)" in result.stderr
+    result = subprocess.run(
+        [*hli_server_cmd(), "run", "--cycles", "1", "--no-http", "--no-modbus", "--ads-port", "0",
+         "--adapter", f"ads:route_user=Administrator,route_password=1,route_password_file={missing}"],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert result.returncode == 2
+    assert "give one of them" in result.stderr
+    assert "'1'" not in result.stderr  # an error never quotes a password
