@@ -319,6 +319,14 @@ _TABLE: tuple[AlarmDef, ...] = (
     ),
     _e(20235, "After 'WHILE' only the condition is permissible", "kernel", page=_DIAG + "251215755.html"),
     _e(
+        20721,
+        "Number of parameters and the number of format specifiers do not match (#MSG)",
+        "kernel",
+        page=_DIAG + "252329867.html",
+    ),
+    _e(21232, "Unknown format string (#MSG)", "kernel", page=_DIAG + "253866123.html"),
+    _e(21870, "String exceeds the maximum length", "kernel", page=_DIAG + "256359819.html"),
+    _e(
         20237,
         "Unexpected ENDWHILE: does not match the current control block",
         "kernel",

@@ -65,6 +65,49 @@ def alarms(srv: Server, number: int) -> list[dict[str, Any]]:
     return [a for a in history if a["id"] == number]
 
 
+def peak_rss_mb(pid: int) -> float:
+    """The most resident memory ``pid`` has had, in MiB (``VmHWM``, Linux ``/proc``)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return 0.0
+
+
+# --- finding 1: a format width that stalled the clock ----------------------------------------------------
+
+
+@pytest.mark.req("N-07", "N-08", "N-10", "E-01")
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads the server's memory from /proc")
+def test_a_format_width_is_refused_before_the_text_is_built_in_the_cycle_and_in_the_check() -> None:
+    """``N10 #MSG ["%.300000000f", 1.5]``. Before: refused (914020) only after the 300 MB text was built
+    inside the cycle: 451-502 cycles dropped, the worst 552 ms late, memory 66 -> 635 MiB; the same line took
+    9 s in ``POST /api/check``. Now the width is refused before formatting, with the kernel's 21870 ("String
+    exceeds the maximum length"), at the line and block, in the running program and in the check alike."""
+    program = 'N10 #MSG ["%.300000000f", 1.5]\nN20 #MSG ["%.999999999f %0300000000d", 1.5, 2]\nN30 M30\n'
+    with server() as srv:
+        began = time.monotonic()
+        r = httpx.post(srv.url + "/api/check", content=program, timeout=60)
+        checked_in = time.monotonic() - began
+        assert r.status_code == 200, r.text
+        report = r.json()
+        peak = peak_rss_mb(srv.proc.pid)
+        before = srv.timing()
+        state = run_program(srv, program)
+        clock = clock_since(before, srv.timing())
+        grown = peak_rss_mb(srv.proc.pid) - peak
+        refused = alarms(srv, 21870)
+    assert checked_in < 5.0, checked_in  # a worker starts; the check itself takes milliseconds
+    assert [(a["id"], a["line"], a["block"]) for a in report["alarms"]] == [(21870, 1, "N10")]
+    assert report["exit_code"] == 1
+    assert state["program_state_name"] == "aborted", state
+    assert [(a["line"], a["block"]) for a in refused] == [(1, "N10")]
+    assert "asks for 300000000 characters" in refused[0]["message"]
+    assert clock["dropped"] == 0, clock
+    assert clock["failed"] == 0, clock
+    assert clock["late_causes"].get("cycle", 0) < 20, clock  # (before: one cycle 0.5 s late, and its backlog)
+    assert grown < 50, grown  # MiB at the peak: nothing of the 300 MB was made (before: +569)
+
+
 # --- finding 2: a named pipe, a hard link ----------------------------------------------------------------
 
 

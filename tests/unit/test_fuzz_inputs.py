@@ -14,6 +14,7 @@ import math
 import random
 import re
 import shutil
+import time
 import traceback
 from importlib import resources
 from pathlib import Path
@@ -35,6 +36,7 @@ from hli_server.engine.nc import (
     iter_blocks,
     parse_line,
 )
+from hli_server.engine.nc.directives import SyncAction
 from hli_server.engine.programs import MemoryLibrary
 from schemas.config import ExternalVariableConfig, MachineConfig
 from tests import fuzz
@@ -318,6 +320,58 @@ LANGUAGE_FILES = {
 
 def _language_host() -> FakeHost:
     return FakeHost(LANGUAGE_FILES, [real("COUNT"), real("SYNC", synchronous=True)])
+
+
+MSG_REFUSALS = {20721, 21232, 21870, 914031, 914020}
+"""What a #MSG may be refused with: values and elements that do not match, an unknown element, a text (or a
+width or precision) beyond 255 characters, a value the element cannot take, a literal beyond 255."""
+
+
+@pytest.mark.req("N-07", "N-08")
+def test_fuzz_msg_format_strings_are_bounded_and_refused_with_their_ids() -> None:
+    """Format strings with every flag, widths and precisions from none to 60 digits, every conversion and
+    unknown ones, matching and mismatching values (issue 36, finding 1): a message of at most 255
+    characters comes out, or a refusal of :data:`MSG_REFUSALS` with its line and block; no example takes
+    longer than 0.25 s (a width that is formatted before it is bounded takes seconds and hundreds of MB)."""
+    seed = fuzz.seed_for("msg-formats")
+    rng = random.Random(seed)
+    said = refused = 0
+    seen: set[int] = set()
+    longest = 0.0
+    for example in range(fuzz.count(3000)):
+        block = fuzz.format_message(rng)
+        host = FakeHost()
+        it = Interpreter(Compiler(("X", "Y", "Z"), ("X", "Y", "Z")), host, budget=None, iteration_cap=100)
+        began = time.perf_counter()
+        try:
+            it.start(block + "\nM30\n", "fuzz")
+            for _ in range(10):
+                out = it.next()
+                if out is None or (isinstance(out, Block) and 30 in out.m_codes):
+                    break
+                if isinstance(out, SyncAction):  # a #MSG SYN waits for the path: it passes now
+                    out.action()
+        except NcError as err:
+            refused += 1
+            seen.add(err.alarm)
+            if err.alarm not in MSG_REFUSALS | {914000, 910100} or not err.message or err.block != "N10":
+                pytest.fail(_fail(f"bad NcError {err!r}", seed, example, block))
+        except Exception:
+            pytest.fail(_fail("the interpreter raised", seed, example, block))
+        took = time.perf_counter() - began
+        longest = max(longest, took)
+        if took > 0.25:
+            pytest.fail(_fail(f"took {took:.2f} s", seed, example, block))
+        for text, *_ in host.messages:
+            said += 1
+            if len(text) > 255:
+                pytest.fail(_fail(f"a message of {len(text)} characters", seed, example, block))
+    print(
+        f"#MSG formats: {fuzz.count(3000)} blocks, {said} messages, {refused} refused ({sorted(seen)}), "
+        f"longest {longest * 1e3:.1f} ms"
+    )
+    assert {20721, 21232, 21870} <= seen or fuzz.FUZZ_SCALE < 1
+    assert said > fuzz.count(3000) // 10 or fuzz.FUZZ_SCALE < 1
 
 
 def test_fuzz_interpreter_raises_only_numbered_nc_errors() -> None:
