@@ -284,5 +284,6 @@ def test_the_token_guards_every_change_the_event_log_and_the_recordings_on_every
             assert "the recordings" in c.get("/api/recordings").json()["detail"]
             assert c.get("/api/recording").json()["recording"] is False  # whether one runs: open
             assert c.get("/").status_code == 200
+        assert (tmp_path / recording).stat().st_mode & 0o777 == 0o600  # on disk: its owner's alone
     finally:
         stop_server(proc)
