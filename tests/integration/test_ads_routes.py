@@ -495,3 +495,79 @@ def test_a_route_password_file_that_cannot_be_read_stops_the_start_with_its_name
     assert result.returncode == 2
     assert "give one of them" in result.stderr
     assert "'1'" not in result.stderr  # an error never quotes a password
+
+
+# ================================================================================================
+# A discovery flood from many loopback sources (issue 36, finding 7)
+# ================================================================================================
+
+
+def test_the_shared_budget_keeps_an_honest_senders_share() -> None:
+    """40 senders each at its own bound drain the shared 200 a second; an honest client asking every 300 ms
+    (within its share, 200 / 41 a second) is still answered every time, and the light senders together
+    never take more than the shared rate again."""
+    from hli_server.adapters.ads.udp import RateLimiter
+
+    limit = RateLimiter(20.0, 40.0, 200.0, 400.0)
+    honest = answered = 0
+    for step in range(300):  # 3 s in steps of 10 ms
+        now = step * 0.01
+        for k in range(40):
+            answered += limit.allow(f"127.0.1.{k}", now)
+        if step % 30 == 0:
+            honest += limit.allow("127.0.0.9", now)
+    assert honest == 10
+    assert answered <= 2 * 200 * 3 + 400  # the shared rate twice over and its burst, not 40 x 20 x 3
+
+
+@linux_only
+@pytest.mark.slow
+def test_a_discovery_flood_from_many_sources_locks_no_honest_client_out() -> None:
+    """Before: 40 loopback sources flooding discovery emptied the shared budget, and an honest client asking
+    every 300 ms got 0-2 of 20 answers. Now it gets its share (200 / 41 a second): at least 18 of 20,
+    through ``hli-server run``'s real UDP door."""
+    import threading
+
+    from tests.integration.servers import read_banner, start_server, stop_server
+
+    proc = start_server("--clock", "stepped", "--no-http", "--no-modbus", "--ads-port", "0")
+    stop = threading.Event()
+    try:
+        banner = read_banner(proc, timeout=60)["text"]
+        port = _udp_port(banner)
+
+        def flood(k: int) -> None:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                s.bind((f"127.0.{1 + k // 200}.{1 + k % 200}", 0))
+                s.setblocking(False)
+                sent = 0
+                while not stop.is_set() and sent < 2000:
+                    with contextlib.suppress(BlockingIOError):
+                        s.sendto(discovery(k), ("127.0.0.1", port))
+                        sent += 1
+                    with contextlib.suppress(BlockingIOError):
+                        while s.recv(4096):
+                            pass
+                    time.sleep(0.02)  # 50 a second each: past its own 20, 2,000 a second in all
+
+        flooders = [threading.Thread(target=flood, args=(k,)) for k in range(40)]
+        for t in flooders:
+            t.start()
+        time.sleep(0.5)  # the shared budget is drained
+        answered = 0
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as honest:
+            honest.bind(("127.0.0.9", 0))
+            honest.settimeout(0.25)
+            for k in range(20):
+                began = time.monotonic()
+                honest.sendto(discovery(100 + k), ("127.0.0.1", port))
+                with contextlib.suppress(TimeoutError):
+                    answered += bool(honest.recv(4096))
+                time.sleep(max(0.0, 0.3 - (time.monotonic() - began)))
+        stop.set()
+        for t in flooders:
+            t.join(10)
+    finally:
+        stop.set()
+        stop_server(proc)
+    assert answered >= 18, answered
