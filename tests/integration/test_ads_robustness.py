@@ -247,3 +247,51 @@ def test_every_edge_request_gets_an_answer_or_its_connection_is_closed() -> None
     assert sum(codes.values()) == len(requests)  # every one answered on its open connection
     assert codes.get(0x700, 0) == 0, codes  # none failed inside the server (before: 20, out of memory)
     assert codes.get(0x705, 0) > 0
+
+
+async def _add_many(client: RawClient, payload: bytes, count: int) -> list[int]:
+    """``count`` AddDeviceNotification pipelined on one connection; their results in order."""
+    invokes = []
+    for _ in range(count):
+        client.writer.write(client.frame(CommandId.ADD_DEVICE_NOTIFICATION, payload))
+        invokes.append(client.invoke)
+    await client.writer.drain()
+    results: dict[int, int] = {}
+    while len(results) < count:
+        frame = await client.next(timeout=10.0)
+        if frame.header.is_response and frame.header.command == CommandId.ADD_DEVICE_NOTIFICATION:
+            results[frame.header.invoke_id] = result_of(frame)
+    return [results[k] for k in invokes]
+
+
+@pytest.mark.timeout(60)
+async def test_a_newcomer_gets_its_share_of_a_full_notification_budget_and_the_hog_pays() -> None:
+    """Round two's probe again: eight loopback clients (eight NetIds; loopback peers are not bounded per
+    host) hold 256 notifications each, the server's 2,048. Before: a ninth, honest client got 0x716 for
+    every one. Now it is served up to its share (2,048 / 9 = 227): each of its notifications takes the
+    newest of the NetId holding the most; beyond its share it gets 0x716 like anybody."""
+    rt = await start_runtime()
+    clients: list[RawClient] = []
+    try:
+        port = ads(rt).port or 0
+        x = rt.layout.signal(X_POS)
+        add = struct.pack("<IIIIII16s", F020, x.offset, 4, 4, 0, 0, bytes(16))
+        for k in range(9):
+            client = await RawClient.connect(port)
+            client.source = client.source._replace(
+                net_id=type(client.source.net_id).parse(f"10.7.7.{k + 1}.1.1")
+            )
+            clients.append(client)
+        for hog in clients[:8]:
+            assert await _add_many(hog, add, 256) == [0] * 256
+        device = ads(rt).device
+        assert device.notification_count == 2048
+        newcomer = await _add_many(clients[8], add, 256)
+        assert newcomer[:227] == [0] * 227
+        assert set(newcomer[227:]) == {0x716}
+        assert device.notification_count == 2048
+        assert device.stats.notifications_evicted == 227
+    finally:
+        for client in clients:
+            client.close()
+        await rt.stop()
