@@ -295,3 +295,27 @@ async def test_a_newcomer_gets_its_share_of_a_full_notification_budget_and_the_h
         for client in clients:
             client.close()
         await rt.stop()
+
+
+async def test_a_flood_of_oversize_sum_commands_is_answered_not_reset() -> None:
+    """Before: a sum write of 500 items of 200 bytes (100 KB, more than the 64 KiB frame the door takes)
+    closed the connection without an ADS error code, and so did a flood of them. Now each is answered 0x705
+    (its bytes dropped as they arrive, never held) and the connection goes on serving."""
+    rt = await start_runtime()
+    client = await RawClient.connect(ads(rt).port or 0)
+    try:
+        items = b"".join(struct.pack("<III", F020, 0, 200) for _ in range(500)) + bytes(200) * 500
+        sum_write = struct.pack("<IIII", 0xF081, 500, 500 * 4, len(items)) + items
+        assert len(sum_write) > 100_000
+        for _ in range(50):
+            client.writer.write(client.frame(CommandId.READ_WRITE, sum_write))
+        await client.writer.drain()
+        results = [result_of(await client.next(timeout=10.0)) for _ in range(50)]  # type: ignore[arg-type]
+        assert results == [0x705] * 50
+        x = rt.layout.signal(X_POS)
+        read = await client.request(CommandId.READ, struct.pack("<III", F020, x.offset, 4))
+        assert result_of(read) == 0  # the same connection, still served
+        assert ads(rt).stats.broken_streams == 0
+    finally:
+        client.close()
+        await rt.stop()
