@@ -319,6 +319,14 @@ _TABLE: tuple[AlarmDef, ...] = (
     ),
     _e(20235, "After 'WHILE' only the condition is permissible", "kernel", page=_DIAG + "251215755.html"),
     _e(
+        20721,
+        "Number of parameters and the number of format specifiers do not match (#MSG)",
+        "kernel",
+        page=_DIAG + "252329867.html",
+    ),
+    _e(21232, "Unknown format string (#MSG)", "kernel", page=_DIAG + "253866123.html"),
+    _e(21870, "String exceeds the maximum length", "kernel", page=_DIAG + "256359819.html"),
+    _e(
         20237,
         "Unexpected ENDWHILE: does not match the current control block",
         "kernel",
@@ -521,7 +529,8 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(919000, "Internal error: a cycle failed; the axes were stopped", "project", Reaction.AXIS_STOP),
     _w(
         919010,
-        "#MSG SAVE: report file not written (its name leaves the NC output directory, or it is full)",
+        "#MSG SAVE: report file not written (its name leaves the NC output directory, it is no regular file "
+        "of one link, or a bound is reached)",
         "project (N-07)",
     ),
 )

@@ -109,7 +109,16 @@ class ChannelHost:
         )
         if save:
             m.emit(
-                NcFileWrite(cycle=m.cycle, time_s=m.cycle * ch.t_a, channel=ch.number, file=file, text=text)
+                NcFileWrite(
+                    cycle=m.cycle,
+                    time_s=m.cycle * ch.t_a,
+                    channel=ch.number,
+                    file=file,
+                    text=text,
+                    program=program,
+                    line=line,
+                    block=block,
+                )
             )
 
     def warn(self, alarm: int, message: str, line: int, block: str) -> None:
