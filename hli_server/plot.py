@@ -48,6 +48,8 @@ _WORK = "#2e8b57"  # green: the allowed space
 _PROT = "#c0392b"  # red: never to be touched
 _PATH = "#1f4e9c"
 _REFUSED = "#e31a1c"
+_TOOL = "#ff7f00"
+"""The tool tip's path (TCP) where a kinematic transformation was on (K-06)."""
 _STOP = "#d35400"
 
 
@@ -190,7 +192,7 @@ def _draw_top(fig: Figure, ax: Any, scene: Mapping[str, Any]) -> None:
         xs = [p[0] for p in line]
         ys = [p[1] for p in line]
         hs = [p[2] for p in line]
-        path_label: str | None = "path" if k == 0 else None
+        path_label: str | None = ("axes' path" if scene.get("tool_path") else "path") if k == 0 else None
         if coloured and len(line) > 1:
             segments, heights = _coloured_segments(xs, ys, hs)
             coll = LineCollection(segments, cmap="viridis", linewidths=1.6, label=path_label)
@@ -203,6 +205,17 @@ def _draw_top(fig: Figure, ax: Any, scene: Mapping[str, Any]) -> None:
             height = f" ({vh} {_num(hs[0])})" if vh is not None and hs else ""
             ax.plot(xs, ys, color=_PATH, linewidth=1.4, label=f"path{height}" if path_label else None)
         ax.plot(xs[:1], ys[:1], marker="o", color=_PATH, linestyle="none", label="start" if k == 0 else None)
+    tool = scene.get("tool_path")
+    if tool:
+        # K-06: with a kinematic transformation the path above is the axes'; the tool tip's beside it
+        ax.plot(
+            [p[0] for p in tool],
+            [p[1] for p in tool],
+            color=_TOOL,
+            linestyle=":",
+            linewidth=1.6,
+            label="tool tip (TCP) with the transformation on",
+        )
     refused = scene.get("refused")
     if refused is not None:
         pts = refused["points"]

@@ -26,6 +26,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import functools
+import inspect
 import json
 import math
 import struct
@@ -37,10 +38,12 @@ from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
+from hli_server.adapters.faults import FaultSpec
 from hli_server.adapters.host import OperatorError
 from hli_server.recording.format import (
     RecordingError,
     Records,
+    check_recording,
     decode_value,
     read_records,
     signal_pattern,
@@ -302,6 +305,8 @@ class Feeder:
         self._fault_ids: dict[int, int] = {}
         self._events: list[Event] = []
         self._expected_events: list[Any] = []
+        self._stop_after_cycle = False
+        self._failure: CannotReplayError | None = None
 
     # --- set-up ----------------------------------------------------------------------------------
     def bind(self, runtime: Runtime) -> None:
@@ -416,6 +421,16 @@ class Feeder:
         pass
 
     def before_cycle(self, cycle: int) -> None:
+        """The recorded inputs of ``cycle``, before it runs. Called inside the runtime's cycle, whose
+        failures become alarm 919000: what stops the replay here is raised after the cycle instead."""
+        try:
+            self._before_cycle(cycle)
+        except _StopReplayError:
+            self._stop_after_cycle = True
+        except Exception as exc:
+            self._failure = CannotReplayError(f"cycle {cycle}: {type(exc).__name__}: {exc}")
+
+    def _before_cycle(self, cycle: int) -> None:
         buffer = self._buffer
         changed = False
         while buffer and buffer[0]["c"] <= cycle and "o" not in buffer[0] and "e" not in buffer[0]:
@@ -532,6 +547,10 @@ class Feeder:
         return self._searched
 
     def after_cycle(self, cycle: int, latched: bytes, packed: bytearray | None) -> None:
+        if self._failure is not None:
+            raise self._failure
+        if self._stop_after_cycle:
+            raise _StopReplayError
         events, self._events[:] = list(self._events), []
         if self.follow and cycle > self.window:
             own = cycle % CYCLE_MODULUS
@@ -656,6 +675,10 @@ async def replay(
     began = time.perf_counter()
     info = Records()
     try:
+        # every line checked before the first cycle runs: a bad line anywhere (a cycle out of order, an
+        # index beyond the header's signals, a field of the wrong kind) is refused with its place, and the
+        # replay runs no further than the recording's own last cycle (issue 36, finding 6)
+        check_recording(path, _replayable)
         records = read_records(path, info)
         header = next(records)
         report.recorded_with = dict(header.get("server") or {})
@@ -719,6 +742,30 @@ async def replay(
         report.notes.append("the recording holds no cycle")
     report.notes.extend(info.notes)
     return report
+
+
+def _replayable(line: int, record: dict[str, Any]) -> str | None:
+    """What the replay will do with ``record`` that the file's own check cannot know: an operator request
+    it knows with arguments its panel takes, a stall fault it can set; the problem in words, or None."""
+    from hli_server.runtime.operator_panel import OperatorPanel
+
+    name = record.get("op")
+    if name is not None:
+        if name not in OPERATOR_REQUESTS:
+            return f"op: an operator request this version does not know: {str(name)[:60]!r}"
+        args = dict(record.get("args") or {})
+        try:
+            inspect.signature(getattr(OperatorPanel, str(name))).bind(None, **args)
+            if name == "mode" and "mode" in args:
+                Mode(args["mode"])
+        except (TypeError, ValueError) as exc:
+            return f"args: operator request {name}: {exc}"
+    if record.get("fault") == "set" and (record.get("spec") or {}).get("kind") == "stall":
+        try:
+            FaultSpec.model_validate(record["spec"])
+        except ValueError as exc:
+            return f"spec: {' '.join(str(exc).split())[:300]}"
+    return None
 
 
 def replay_sync(path: Path | str, **options: Any) -> ReplayReport:

@@ -507,6 +507,7 @@ def build_scene(
     tolerance: float | None = None,
     position: Sequence[float] | None = None,
     ahead: Sequence[Sequence[float]] = (),
+    tool_path: Sequence[Sequence[float]] = (),
 ) -> dict[str, Any]:
     """The scene (module docstring) of a channel's areas and the path it travelled.
 
@@ -517,7 +518,9 @@ def build_scene(
     point. ``stop``: where the axes came to rest (all axes). ``tolerance``: mm the drawn path may deviate
     from the recorded one (default 1e-4 of the scene's diagonal; 0 keeps every point). ``position`` (all
     axes) and ``ahead`` (points, all axes) are the live dashboard's: the TCP now and the path decoded
-    ahead of it (drawn from ``position``; not related to the areas, see the module docstring)."""
+    ahead of it (drawn from ``position``; not related to the areas, see the module docstring).
+    ``tool_path``: with a kinematic transformation on, the tool tip's path (all axes' slots, the main axes
+    the tip's) beside the axes' ``path`` (K-06); the scene has ``"tool_path"`` only when it is given."""
     names = list(axis_names)
     width = len(names)
     table = _area_list(areas)
@@ -635,6 +638,7 @@ def build_scene(
         h0, h1 = bounds["height"] or (0.0, 0.0)
         tolerance = _SIMPLIFY * math.dist((a0, b0, h0), (a1, b1, h1))
     polylines = [_simplify(path_view, tolerance)] if path_view else []
+    tool_view = [[p[ia], p[ib], p[ih] if ih is not None else None, 0.0] for p in tool_path]
     scene = {
         "scene": SCENE_VERSION,
         "channel": channel,
@@ -649,6 +653,8 @@ def build_scene(
         "position": position_view,
         "ahead": _simplify(ahead_view, tolerance),
     }
+    if tool_view:
+        scene["tool_path"] = _simplify(tool_view, tolerance)
     result: dict[str, Any] = round_numbers(scene)
     return result
 

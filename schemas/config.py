@@ -30,7 +30,10 @@ __all__ = [
     "AXIS_PARAMETER_ALIASES",
     "CHANNEL_PARAMETERS",
     "COLLISION_MODE_BIT",
+    "KINEMATIC_AXIS_PARAMETERS",
+    "KINEMATIC_PARAMETERS",
     "MANUAL_PARAMETERS",
+    "TOOL_PARAMETERS",
     "AdapterEntry",
     "AxisConfig",
     "AxisType",
@@ -40,6 +43,8 @@ __all__ = [
     "ExternalStructureConfig",
     "ExternalVariableConfig",
     "InterpolatorFunction",
+    "KinematicAxis",
+    "KinematicEntry",
     "MachineConfig",
     "ManualConfig",
     "ParameterInfo",
@@ -377,6 +382,13 @@ class ToolEntry(_Strict):
     )
     length: Dint = Field(default=0, description="tool length, in the third main axis of the plane [0.1 µm]")
     radius: Dint = Field(default=0, description="tool radius for G41/G42 [0.1 µm]")
+    kin_id: int = Field(
+        default=0,
+        ge=0,
+        le=65535,
+        description="P-TOOL-00011 the kinematic the tool selects (as #KIN ID; 0: the default or "
+        "programmed one)",
+    )
 
 
 class ProgramEntry(_Strict):
@@ -391,6 +403,102 @@ class ProgramEntry(_Strict):
     def _one_source(self) -> ProgramEntry:
         if (self.text is None) == (self.path is None):
             raise ValueError(f"program {self.number}: give exactly one of 'text' or 'path'")
+        return self
+
+
+KIN_PARAMS = 74
+"""P-CHAN-00263: ``trafo[j].param[k]`` with k = 0..73."""
+
+
+class KinematicAxis(_Strict):
+    """One axis of a Universal Kinematics chain (type 91; P-CHAN-00291..00293), by axis index."""
+
+    type: Literal[1, 2] = Field(description="P-CHAN-00291 1 linear (translator), 2 rotary (rotator)")
+    orientation: tuple[float, float, float] = Field(description="P-CHAN-00292 direction, not the zero vector")
+    point: tuple[float, float, float] = Field(
+        default=(0.0, 0.0, 0.0), description="P-CHAN-00293 a point on a rotary axis [0.1 µm]"
+    )
+
+
+class KinematicEntry(_Strict):
+    """One kinematic data set ``trafo[j]`` (P-CHAN-00262, P-CHAN-00263; TF5240, docs/kinematics.md)."""
+
+    id: int = Field(ge=1, le=65535, description="P-CHAN-00262 kinematic ID")
+    type: int = Field(default=0, ge=0, le=65535, description="P-CHAN-00829 kinematic type (0: the ID)")
+    param: dict[int, float] = Field(
+        default_factory=dict,
+        description="P-CHAN-00263 param[k], k 0..73, in the kernel's units (0.1 µm, 0.0001°)",
+    )
+    zero_orientation: tuple[float, float, float] | None = Field(
+        default=None, description="P-CHAN-00285 (Universal Kinematics) tool orientation in the zero position"
+    )
+    zero_position: tuple[float, float, float] | None = Field(
+        default=None,
+        description="P-CHAN-00286 (Universal Kinematics) tool position in the zero position [0.1 µm]",
+    )
+    axes: list[KinematicAxis] = Field(
+        default_factory=list,
+        description="P-CHAN-00289..00293 (Universal Kinematics) the chain's axes by axis index (3..6)",
+    )
+    chain: list[int] = Field(
+        default_factory=list, description="P-CHAN-00290 (Universal Kinematics) axis indices in chain order"
+    )
+    programming_mode: int = Field(
+        default=0, ge=0, le=19, description="P-CHAN-00288 (Universal Kinematics) programming mode"
+    )
+    rtcp: int = Field(
+        default=0,
+        ge=0,
+        le=1,
+        description="P-CHAN-00287 (Universal Kinematics) 1 RTCP, 0 complete transformation",
+    )
+
+    @property
+    def universal(self) -> bool:
+        return (self.type or self.id) == 91
+
+    @model_validator(mode="after")
+    def _check(self) -> KinematicEntry:
+        issues: list[ParameterIssue] = []
+        bad = sorted(k for k in self.param if not 0 <= k < KIN_PARAMS)
+        if bad:
+            issues.append(
+                ParameterIssue(
+                    f"kinematic {self.id}: param index {bad} outside 0..{KIN_PARAMS - 1}", field="param"
+                )
+            )
+        named = self.zero_orientation is not None or self.zero_position is not None or bool(self.axes)
+        if named and not self.universal:
+            issues.append(
+                ParameterIssue(
+                    f"kinematic {self.id}: zero_orientation, zero_position and axes describe Universal "
+                    "Kinematics (type 91); give type = 91",
+                    field="axes",
+                )
+            )
+        if named and any(k < 7 + 7 * max(len(self.axes), 1) for k in self.param):
+            issues.append(
+                ParameterIssue(
+                    f"kinematic {self.id}: the named Universal Kinematics parameters fill param[0..]; "
+                    "give them "
+                    "either way, not both",
+                    field="param",
+                )
+            )
+        if self.axes and not 3 <= len(self.axes) <= 6:
+            issues.append(
+                ParameterIssue(
+                    f"kinematic {self.id}: 3..6 axes (P-CHAN-00289), got {len(self.axes)}", field="axes"
+                )
+            )
+        if self.chain and sorted(self.chain) != list(range(len(self.axes) or len(self.chain))):
+            issues.append(
+                ParameterIssue(
+                    f"kinematic {self.id}: the chain {self.chain} must name each axis index once",
+                    field="chain",
+                )
+            )
+        _raise_issues(issues)
         return self
 
 
@@ -452,18 +560,43 @@ class ChannelConfig(_Strict):
         description="P-CHAN-00071 acceleration profile at program start: 0 STEP, 1 TRAPEZ, 2 SIN2, 3 HSC "
         "(simulated as TRAPEZ)",
     )
-    default_feedrate: float = Field(
-        default=0.0,
-        ge=0.0,
-        le=VELOCITY_LIMIT_MM_PER_MIN,
-        description="P-CHAN-00099 feed of a feed move (G01/G02/G03) without F at program start [mm/min]; "
-        "0: none (ID 20008)",
-    )
     feedhold_deceleration: float = Field(
         default=1000.0,
         gt=0.0,
         le=ACCELERATION_LIMIT,
         description="path deceleration of feedhold [mm/s²] (project's own)",
+    )
+    default_feedrate: float = Field(
+        default=0.0,
+        ge=0.0,
+        le=VELOCITY_LIMIT_MM_PER_MIN,
+        description="P-CHAN-00099 the feed of a G01/G02/G03 block at program start while no F is programmed "
+        "[mm/min]; 0: an F word is needed",
+    )
+    kinematik_id: int = Field(
+        default=0, ge=0, lt=1000, description="P-CHAN-00032 the default kinematic ID (0: none)"
+    )
+    kinematics: list[KinematicEntry] = Field(
+        default_factory=list, description="the kinematic data sets trafo[j] (P-CHAN-00262/00263, TF5240)"
+    )
+    log_number_tracking_axis: int = Field(
+        default=0,
+        ge=0,
+        le=65535,
+        description="P-CHAN-00095 logical number of the #CAXTRACK axis (0: the axis named C of the channel)",
+    )
+    tool_ori_cs_axis: int = Field(
+        default=0,
+        ge=0,
+        le=3,
+        description="P-CHAN-00188 #TOOL ORI CS aligns the tool with X (1), Y (2), Z (3, and 0: the default)",
+    )
+    tool_ori_cs_mode: int = Field(
+        default=0,
+        ge=0,
+        le=4,
+        description="P-CHAN-00189 #TOOL ORI CS pose: 0 internal, 1 shortest way, 2 soft limits first, "
+        "3/4 pose 1/2",
     )
     zero_offsets: list[ZeroOffset] = Field(default_factory=list)
     tools: list[ToolEntry] = Field(
@@ -528,6 +661,14 @@ class ChannelConfig(_Strict):
                 ParameterIssue(
                     f"channel {self.number}: each zero offset G54..G59 may be given once, got {codes}",
                     field="zero_offsets",
+                )
+            )
+        kin_ids = [k.id for k in self.kinematics]
+        if len(set(kin_ids)) != len(kin_ids):
+            issues.append(
+                ParameterIssue(
+                    f"channel {self.number}: kinematic IDs (P-CHAN-00262) must be unique, got {kin_ids}",
+                    field="kinematics",
                 )
             )
         tool_numbers = [t.number for t in self.tools]
@@ -1127,20 +1268,31 @@ CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
             "",
         ),
         ("dpl_input_cycles", "dpl_input_cycles", "P-CHAN-00874", "cycles", _CH + "1201698699.html", ""),
+        ("prog_start.feedrate", "default_feedrate", "P-CHAN-00099", "mm/min", _CH + "149303051.html", ""),
+        (
+            "kinematik_id",
+            "kinematik_id",
+            "P-CHAN-00032",
+            "-",
+            "https://infosys.beckhoff.com/content/1033/tf5200_trafo_interface/441082251.html",
+            "",
+        ),
+        (
+            "log_number_tracking_axis",
+            "log_number_tracking_axis",
+            "P-CHAN-00095",
+            "-",
+            _CH + "149106571.html",
+            "",
+        ),
+        ("tool_ori_cs.axis", "tool_ori_cs_axis", "P-CHAN-00188", "0..3", _CH + "149277323.html", ""),
+        ("tool_ori_cs.mode", "tool_ori_cs_mode", "P-CHAN-00189", "0..4", _CH + "347022219.html", ""),
         (
             "prog_start.slope.profile",
             "slope_profile",
             "P-CHAN-00071",
             "0..3",
             "https://infosys.beckhoff.com/content/1033/tf5200_oscillating_axis/222124555.html",
-            "",
-        ),
-        (
-            "prog_start.feedrate",
-            "default_feedrate",
-            "P-CHAN-00099",
-            "mm/min",
-            _CH + "149303051.html",
             "",
         ),
         # a start-up parameter (P-STUP) that belongs to one channel; [0] stands for the channel's index
@@ -1160,6 +1312,49 @@ MANUAL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
     (("move_limit_warning", "move_limit_warning", "P-MANU-00014", "0/1", "FCT-C14 6.2", ""),)
 )
 """ISG text-list names of the manual-mode parameters (FCT-C14 6.2)."""
+
+_UK = "https://infosys.beckhoff.com/content/1033/tf5240_universal_kinematic/"
+KINEMATIC_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        ("trafo[0].id", "id", "P-CHAN-00262", "-", _CH + "149247371.html", ""),
+        (
+            "trafo[0].type",
+            "type",
+            "P-CHAN-00829",
+            "-",
+            "https://infosys.beckhoff.com/content/1033/tf5240_kinematic_transformation/893485323.html",
+            "",
+        ),
+        ("trafo[0].param[k]", "param", "P-CHAN-00263", "0.1 µm / 0.0001°", _CH + "149248907.html", ""),
+        ("trafo[0].zero_orientation[l]", "zero_orientation", "P-CHAN-00285", "-", _UK + "893810955.html", ""),
+        ("trafo[0].zero_position[l]", "zero_position", "P-CHAN-00286", "0.1 µm", _UK + "893810955.html", ""),
+        ("trafo[0].chain[k]", "chain", "P-CHAN-00290", "-", _CH + "149260683.html", ""),
+        ("trafo[0].programming_mode", "programming_mode", "P-CHAN-00288", "-", _CH + "149257611.html", ""),
+        ("trafo[0].rtcp", "rtcp", "P-CHAN-00287", "0/1", _CH + "149256075.html", ""),
+    )
+)
+"""The channel parameters of a kinematic data set ``trafo[j]`` (TOML only: ``[[channels.kinematics]]``)."""
+KINEMATIC_AXIS_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        ("trafo[0].axis[k].type", "type", "P-CHAN-00291", "1/2", _CH + "149263755.html", ""),
+        ("trafo[0].axis[k].orientation[l]", "orientation", "P-CHAN-00292", "-", _UK + "893810955.html", ""),
+        ("trafo[0].axis[k].point[l]", "point", "P-CHAN-00293", "0.1 µm", _CH + "149266827.html", ""),
+    )
+)
+"""The axes of a Universal Kinematics data set (``axes = [{...}]``; the count is P-CHAN-00289)."""
+TOOL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
+    (
+        (
+            "wz[0].kin_id",
+            "kin_id",
+            "P-TOOL-00011",
+            "-",
+            "https://infosys.beckhoff.com/content/1033/tf5200_tool_data/104788875.html",
+            "",
+        ),
+    )
+)
+"""The tool data the tool table takes from the kernel's tool list (the rest of a D block is the project's)."""
 
 _EXTV = "https://infosys.beckhoff.com/content/1033/tf5200_external_variables/"
 EXTERNAL_VARIABLE_PARAMETERS: tuple[ParameterInfo, ...] = _infos(

@@ -104,7 +104,7 @@ __all__ = [
     "external_modbus_use",
 ]
 
-LAYOUT_VERSION: Final = 4
+LAYOUT_VERSION: Final = 5
 """Bumped whenever the templates or the addressing rules change (the hash changes with any config)."""
 
 LAYOUT_FORMAT: Final = "hli-layout"
@@ -378,6 +378,25 @@ CHANNEL_TEMPLATES: Final[tuple[SignalTemplate, ...]] = (
     SignalTemplate(
         "bahn_state.cycle_r",
         _UDI, _R, "cycles", "interpolation cycle counter (wraps around)", ("E-01",), _OWN,
+    ),
+    SignalTemplate(
+        "bahn_state.kin_id_r",
+        _UDI, _R, "-", "kinematic ID of the active transformation (#TRAFO ON), 0 = none", ("K-07",), _OWN,
+    ),
+    SignalTemplate(
+        "bahn_state.trafo_active_r", _B, _R, "-", "a kinematic transformation is on (RTCP)", ("K-07",), _OWN
+    ),
+    SignalTemplate(
+        "bahn_state.tcp_x_r",
+        _DI, _R, "0.1 µm", "tool tip (TCP), first main axis, machine coordinates", ("K-07",), _OWN,
+    ),
+    SignalTemplate(
+        "bahn_state.tcp_y_r",
+        _DI, _R, "0.1 µm", "tool tip (TCP), second main axis, machine coordinates", ("K-07",), _OWN,
+    ),
+    SignalTemplate(
+        "bahn_state.tcp_z_r",
+        _DI, _R, "0.1 µm", "tool tip (TCP), third main axis, machine coordinates", ("K-07",), _OWN,
     ),
     # gpCh[i]^bahn_mc_control: control units
     *_unit_templates(

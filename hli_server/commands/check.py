@@ -225,6 +225,18 @@ def _text_report(result: CheckResult, program: str) -> str:
             lines.append(f"      params: {json.dumps(round_numbers(a.params))}")
     pos = ", ".join(f"{k}={round_mm(v):.4f}" for k, v in result.final_position.items())
     lines.append(f"  final position (mm): {pos}")
+    if result.kinematics.used:
+        # K-06/K-08: what the axes and the tool tip did while a kinematic transformation was on
+        kin = result.to_json()["kinematics"]
+        used = ", ".join(f"ID {k['id']} ({k['name']})" for k in kin["used"])
+        lines.append(f"  kinematic transformation: {used}")
+        ranges = ", ".join(f"{n} {lo:g}..{hi:g}" for n, (lo, hi) in kin["axis_range"].items() if lo != hi)
+        lines.append(f"    axes while it was on (mm, °): {ranges or 'at rest'}")
+        tip = ", ".join(f"{n} {lo:g}..{hi:g}" for n, (lo, hi) in kin["tool_tip_range"].items())
+        lines.append(f"    tool tip (TCP, mm): {tip}")
+        if kin["final_tool_tip"] is not None:
+            end = ", ".join(f"{n}={v:.4f}" for n, v in kin["final_tool_tip"].items())
+            lines.append(f"    tool tip at the end of it (mm): {end}")
     areas = result.areas_json()
     if areas:
         lines.append("  areas:")
@@ -249,6 +261,7 @@ def scene_of(result: CheckResult) -> dict[str, Any]:
         alarms=[a.to_json() for a in result.alarms],
         stop=result.stop_point,
         channel=result.channel,
+        tool_path=result.kinematics.tool_path,
     )
 
 

@@ -375,6 +375,14 @@ _TABLE: tuple[AlarmDef, ...] = (
     ),
     _e(20235, "After 'WHILE' only the condition is permissible", "kernel", page=_DIAG + "251215755.html"),
     _e(
+        20721,
+        "Number of parameters and the number of format specifiers do not match (#MSG)",
+        "kernel",
+        page=_DIAG + "252329867.html",
+    ),
+    _e(21232, "Unknown format string (#MSG)", "kernel", page=_DIAG + "253866123.html"),
+    _e(21870, "String exceeds the maximum length", "kernel", page=_DIAG + "256359819.html"),
+    _e(
         20237,
         "Unexpected ENDWHILE: does not match the current control block",
         "kernel",
@@ -432,6 +440,53 @@ _TABLE: tuple[AlarmDef, ...] = (
         "kernel",
         page=_DIAG + "255123851.html",
     ),
+    # --- the kernel's IDs: kinematic transformations (issue 35, docs/kinematics.md) ---------
+    _e(
+        292004, "Kinematic transformation: illegal argument for ACOS", "kernel", page=_DIAG + "267444363.html"
+    ),
+    _e(292005, "Kinematic transformation: illegal kinematic ID", "kernel", page=_DIAG + "267448715.html"),
+    _e(
+        292006,
+        "Kinematic transformation: transformation not available",
+        "kernel",
+        page=_DIAG + "267453067.html",
+    ),
+    _e(292016, "Kinematic transformation: singular matrix", "kernel", page=_DIAG + "267496587.html"),
+    _e(
+        292040,
+        "Kinematic transformation: invalid axis configuration programmed",
+        "kernel",
+        page=_DIAG + "267579275.html",
+    ),
+    _e(
+        292045,
+        "Selected orientation mode or rotation sequence unsupported by the transformation",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1033/tf5200_trafo_interface/441093515.html",
+    ),
+    _e(20687, "Kinematic change not allowed during active RTCP/TLC", "kernel", page=_DIAG + "252225419.html"),
+    _e(
+        20990,
+        "The tool's kinematic ID differs from the active transformation's (P-TOOL-00011)",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1031/tf5200_tool_data/104788875.html",
+    ),
+    _e(20683, "Axis exchange not allowed with active RTCP/TLC", "kernel", page=_DIAG + "252208011.html"),
+    _e(20312, "The requested logical axis is unknown", "kernel", page=_DIAG + "251350667.html"),
+    _e(21256, "Multiple use of the same axis name", "kernel", page=_DIAG + "253966219.html"),
+    _e(21257, "Multiple use of the same axis index", "kernel", page=_DIAG + "253970571.html"),
+    _e(21258, "Multiple use of the same logical axis number", "kernel", page=_DIAG + "253974923.html"),
+    _w(
+        21250,
+        "Active axis tracking (#CAXTRACK) at program end",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1033/tccncdiagnosis/15651584395.html",
+    ),
+    _e(21135, "Parameter of axis tracking is out of data format", "kernel", page=_DIAG + "253548427.html"),
+    _e(120626, "Tracking axis on main axis index", "kernel", page=_DIAG + "265237899.html"),
+    # --- project's own: kinematic transformations (913xxx) ----------------------------------
+    _e(913000, "V.G.KIN write outside a kinematic data set", "project (K-01)"),
+    _w(913001, "Kinematic type without public geometry simulated as the identity", "project (K-02)"),
     # --- project's own: NC program syntax (910xxx) ------------------------------------------
     _e(910100, "Unknown word in NC block", "project"),
     _e(910101, "Malformed number in NC block", "project"),
@@ -540,7 +595,8 @@ _TABLE: tuple[AlarmDef, ...] = (
     _e(919000, "Internal error: a cycle failed; the axes were stopped", "project", Reaction.AXIS_STOP),
     _w(
         919010,
-        "#MSG SAVE: report file not written (its name leaves the NC output directory, or it is full)",
+        "#MSG SAVE: report file not written (its name leaves the NC output directory, it is no regular file "
+        "of one link, or a bound is reached)",
         "project (N-07)",
     ),
 )

@@ -22,13 +22,16 @@ from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import LineSegment, Point
 from hli_server.engine.hli import AxisHli, ChannelHli
+from hli_server.engine.kinematics.configured import data_sets
+from hli_server.engine.kinematics.state import KinematicState
+from hli_server.engine.kinematics.transform import Transformation
 from hli_server.engine.nc.blocks import Block, NcError
 from hli_server.engine.nc.compiler import Compiler
 from hli_server.engine.nc.directives import Realtime
 from hli_server.engine.nc.interpreter import Interpreter
 from hli_server.engine.path.profiles import SlopeProfile, SlopeType
 from hli_server.engine.path.tools import ToolData
-from hli_server.engine.planner import Marker, MarkerKind, Planner
+from hli_server.engine.planner import Marker, MarkerKind, Motion, Planner
 from hli_server.engine.ports import MachinePort
 from hli_server.engine.programs import ProgramFile
 from hli_server.engine.realtime import RealtimeCycles, RtCycle
@@ -42,10 +45,10 @@ from schemas.events import (
     NcMessage,
     ProgramStateChanged,
 )
-from schemas.units import mm_from_increments, s_from_us
+from schemas.units import DINT_MAX, DINT_MIN, INCREMENTS_PER_MM, mm_from_increments, s_from_us
 from schemas.wire import HoldSource, Mode, ProgramState
 
-__all__ = ["LOOKAHEAD_ITEMS", "Channel", "ChannelHost", "JogGuard"]
+__all__ = ["LOOKAHEAD_ITEMS", "Channel", "ChannelHost", "JogGuard", "increments_clamped"]
 
 LOOKAHEAD_ITEMS = 64
 """Motion blocks decoded ahead of the interpolator (the look-ahead buffer, P-STUP-00070's size)."""
@@ -57,6 +60,12 @@ ALARM_REFUSED = 911021
 ALARM_NOT_REFERENCED = 911020
 ALARM_STILL_BRAKING = 911022
 """Warning: program start refused while the channel's axes still brake (after a reset or a stop)."""
+
+
+def increments_clamped(mm: float) -> int:
+    """mm -> 0.1 µm, rounded, clamped to a DINT (as the machine publishes the axes' positions)."""
+    value = round(mm * INCREMENTS_PER_MM)
+    return DINT_MAX if value > DINT_MAX else DINT_MIN if value < DINT_MIN else value
 
 
 class JogGuard(Protocol):
@@ -104,7 +113,16 @@ class ChannelHost:
         )
         if save:
             m.emit(
-                NcFileWrite(cycle=m.cycle, time_s=m.cycle * ch.t_a, channel=ch.number, file=file, text=text)
+                NcFileWrite(
+                    cycle=m.cycle,
+                    time_s=m.cycle * ch.t_a,
+                    channel=ch.number,
+                    file=file,
+                    text=text,
+                    program=program,
+                    line=line,
+                    block=block,
+                )
             )
 
     def warn(self, alarm: int, message: str, line: int, block: str) -> None:
@@ -213,15 +231,27 @@ class Channel:
             zero_offsets,
             {
                 t.number: ToolData(
-                    t.number, mm_from_increments(t.length), mm_from_increments(t.radius), t.tool
+                    t.number, mm_from_increments(t.length), mm_from_increments(t.radius), t.tool, t.kin_id
                 )
                 for t in config.tools
             },
+            KinematicState(data_sets(config.kinematics), config.kinematik_id, len(axes)),
         )
+        self.kinematic: Transformation | None = None
+        """The transformation the axes follow now (switched in program order, at rest): the tool tip is
+        its forward transformation of the axes (docs/kinematics.md)."""
+        self.kinematic_from: tuple[float, ...] = ()
+        """The axes where the transformation was last switched (at rest there: the next move's start)."""
+        self.decoder.kinematic_handler = self._kinematic_changed
+        self.decoder.axis_numbers = [a.config.number for a in axes]
+        self.decoder.tracking_axis_number = config.log_number_tracking_axis
+        self.decoder.default_feed = config.default_feedrate
+        self.decoder.tool_ori_cs = (config.tool_ori_cs_axis, config.tool_ori_cs_mode)
+        self.decoder.soft_limits = lambda k: (self.axes[k].swe_neg, self.axes[k].swe_pos)
+        self._main_slots = tuple(self.axis_names.index(a) for a in config.main_axes)
         self.compiler = Compiler(self.axis_names, config.main_axes)
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))
         self.decoder.warn = ChannelHost(self).warn
-        self.decoder.default_feed = config.default_feedrate or None
         self.decoder.corner_ahead = self.interpreter.corner_ahead
         self.decoder.homing = {a.name: (a.home_position, a.jog_velocity, a.jog_acceleration) for a in axes}
         self.decoder.referenced_handler = self._referenced_by_program
@@ -368,8 +398,12 @@ class Channel:
         return [a.setpoint for a in self.axes]
 
     def tool_tip(self, point: Sequence[float]) -> Point:
-        """The tool tip (the TCP the areas monitor) for the axis positions ``point``: less the tool length
-        the decoder has put into the tool axis (M-15)."""
+        """The tool tip (the TCP the areas monitor) for the axis positions ``point``: the forward
+        transformation where one is on (K-05), else less the tool length the decoder has put into the tool
+        axis (M-15)."""
+        kinematic = self.kinematic
+        if kinematic is not None:
+            return kinematic.to_tip(point)
         decoder = self.decoder
         if decoder.tools.applied_length == 0.0:
             return tuple(point)
@@ -504,9 +538,16 @@ class Channel:
         self.planner.clear()
         self.set_slope(None)  # P-CHAN-00071 at every program start (#SLOPE's page)
         self.decoder.start(self.interpreter, self.setpoints())
+        self.kinematic = None
         self.aborting = False
         self.current_block = None
         self._state.apply(Cause.START)
+
+    def _kinematic_changed(self, trafo: Transformation | None) -> None:
+        """``#TRAFO ON``/``OFF`` reached (the path at rest): the axes follow ``trafo`` from here."""
+        self.kinematic = trafo
+        item = self.planner.current()
+        self.kinematic_from = item.axes_start() if isinstance(item, Motion) else tuple(self.setpoints())
 
     def set_slope(self, profile: int | None) -> None:
         """The acceleration profile from now on (``#SLOPE``, M-01..M-03): 0 STEP, 1 TRAPEZ, 2 SIN2,
@@ -528,6 +569,7 @@ class Channel:
         self.decoder.reset_modal()
         self.interpreter.reset()
         self.realtime.end_program()
+        self.kinematic = None
         self.aborting = False
         self.jog_velocity = [0.0] * len(self.axes)
         self._jog_keys = [0] * len(self.axes)
@@ -647,6 +689,7 @@ class Channel:
             self.warn_missing_program_end(marker)
             self.realtime.end_program()
             self.planner.clear()
+            self.kinematic = None  # the program's end deselects the transformation (docs/kinematics.md)
             if self.program_running:
                 self._state.apply(Cause.END)
         elif marker.kind == MarkerKind.ERROR:
@@ -777,3 +820,21 @@ class Channel:
         st.feedhold_active_r = bool(self.hold_source)
         st.hold_source_r = self.hold_source
         st.cycle_r = cycle % (2**31)
+        kinematic = self.kinematic
+        mi = self._main_slots
+        if kinematic is None and self.decoder.tools.applied_length == 0.0:
+            # the tool tip is the main axes' point: no transformation, no tool length (the common case,
+            # written out: this runs every cycle)
+            if st.trafo_active_r:
+                st.kin_id_r = 0
+                st.trafo_active_r = False
+            axes = self.axes
+            x, y, z = axes[mi[0]].setpoint, axes[mi[1]].setpoint, axes[mi[2]].setpoint
+        else:
+            st.kin_id_r = kinematic.kin_id if kinematic is not None else 0
+            st.trafo_active_r = kinematic is not None
+            tip = self.tool_tip(self.setpoints())
+            x, y, z = tip[mi[0]], tip[mi[1]], tip[mi[2]]
+        st.tcp_x_r = increments_clamped(x)
+        st.tcp_y_r = increments_clamped(y)
+        st.tcp_z_r = increments_clamped(z)

@@ -14,11 +14,19 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 from hli_server.engine.geometry import ArcSegment, LineSegment, Point, Segment, arc_from_centre
+from hli_server.engine.kinematics.chain import KinematicError
+from hli_server.engine.kinematics.library import build as build_kinematic
+from hli_server.engine.kinematics.modes import mode_angles
+from hli_server.engine.kinematics.path import AxisPath, SegmentMap, axis_path
+from hli_server.engine.kinematics.state import KinematicState
+from hli_server.engine.kinematics.tracking import Tracking, track
+from hli_server.engine.kinematics.transform import Transformation
+from hli_server.engine.kinematics.vectors import sub, unit
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
 from hli_server.engine.nc.directives import (
     PAUSE,
@@ -32,6 +40,16 @@ from hli_server.engine.nc.directives import (
     Slope,
     SyncAction,
     ToolWrite,
+)
+from hli_server.engine.nc.kinematic_commands import (
+    CaxTrack,
+    CylSelect,
+    KinematicCommand,
+    KinParamWrite,
+    KinSelect,
+    SetAxes,
+    ToolOriCs,
+    TrafoSwitch,
 )
 from hli_server.engine.path.contour import (
     BSPLINE_PATH_DEV,
@@ -246,6 +264,7 @@ class Decoder:
         axis_limits: dict[str, tuple[float, float, float]],
         zero_offsets: dict[str, dict[str, float]],
         tools: dict[int, ToolData] | None = None,
+        kinematics: KinematicState | None = None,
     ) -> None:
         self.axes = axes
         self.index = {a: i for i, a in enumerate(axes)}
@@ -303,16 +322,34 @@ class Decoder:
         referenced)."""
         self.realtime_handler: Callable[[Realtime], None] | None = None
         """Defines and manages the channel's realtime cycles (``#RT CYCLE``) when the path passes."""
-        self.default_feed: float | None = None
-        """mm/min: P-CHAN-00099 (``prog_start.feedrate``), the F at a program start where no F is in
-        effect (the modal state is kept from program to program here until a reset); None for 0."""
+        self.kin = kinematics if kinematics is not None else KinematicState({}, 0, len(axes))
+        """The kinematic data sets, the selection and the active transformation (docs/kinematics.md)."""
+        self.kin_axes: Point = ()
+        """With a transformation on: the axis positions at :attr:`position` (the tip's)."""
+        self.kinematic_handler: Callable[[Transformation | None], None] | None = None
+        """Told in program order (at rest) when a transformation goes on or off: the channel sets it."""
+        self.axis_numbers: list[int] = []
+        """The logical axis number of each slot (#SET AX, #CAXTRACK AXNR=): the channel sets them."""
+        self.tracking_axis_number = 0
+        """P-CHAN-00095: the #CAXTRACK axis when the command names none (0: the axis named C)."""
+        self.tool_ori_cs = (0, 0)
+        """P-CHAN-00188 (axis), P-CHAN-00189 (pose) of #TOOL ORI CS."""
+        self.soft_limits: Callable[[int], tuple[float, float]] | None = None
+        """The software limits in effect of a slot's axis (#TOOL ORI CS's pose, P-CHAN-00189 = 2)."""
+        self.cax: Tracking | None = None
+        """An active #CAXTRACK."""
+        self.default_feed = 0.0
+        """P-CHAN-00099: the feed [mm/min] at program start while no F is programmed (0: none)."""
+        self.cyl = False
+        """The transformation on was selected by #CYL (ends with #CYL OFF)."""
+        self._default_axes = (list(axes), main_axes, dict(axis_limits), self.rotary_axes)
 
     # --- program control -----------------------------------------------------------------
     def start(self, blocks: BlockFeed | Iterator[Block], position: list[float]) -> None:
         """Decode from ``blocks`` (the interpreter, or parsed blocks) starting at ``position``."""
         self.blocks = _Blocks(blocks) if isinstance(blocks, Iterator) else blocks
         self.position = list(position)
-        if self.modal.feed is None:
+        if self.modal.feed is None and self.default_feed > 0.0:
             self.modal.feed = self.default_feed  # P-CHAN-00099: the F of a program start without one
         self.corner_size = None
         self.motion_unheld = False
@@ -328,6 +365,7 @@ class Decoder:
         self._trc_prog = None
         self._position_length = 0.0
         self.contour.reset()
+        self._reset_kinematics()
 
     def resume(self, position: list[float]) -> None:
         """Continue decoding from ``position`` (after a measuring move stopped where the probe fired)."""
@@ -343,6 +381,7 @@ class Decoder:
         self._trc_prog = None
         self._position_length = 0.0
         self.contour.reset()
+        self._reset_kinematics()
         self.blocks = None
         self.finished = True
         self.waiting = False
@@ -385,7 +424,11 @@ class Decoder:
         if isinstance(out, ContourDirective):
             self._contour_directive(out)
             return []
+        if isinstance(out, KinParamWrite):
+            return self._kin_error(out, lambda: self.kin.write(out.kin_id, out.index, out.value))
         items = self._flushed([])
+        if isinstance(out, KinematicCommand):
+            return items if self.finished else items + self._kinematic(out)
         if self.finished:
             return items  # a held block failed its path check: its error ends decoding
         if isinstance(out, ToolWrite):
@@ -422,6 +465,397 @@ class Decoder:
             profile = out.profile
             return [*items, Marker(MarkerKind.ACTION, block, payload=lambda: handler(profile))]
         return items  # pragma: no cover - every directive is handled above
+
+    # --- kinematic transformations (docs/kinematics.md) ---------------------------------------------
+    def _reset_kinematics(self) -> None:
+        """Program start and reset: the data sets and the selection of the machine file, no transformation,
+        no tracking, the channel's own axis configuration (#SET AX undone)."""
+        self.kin.reset()
+        self.cax = None
+        self.cyl = False
+        axes, main, limits, rotary = self._default_axes
+        if self.axes != axes or self.main != main:
+            self._configure(list(axes), main, dict(limits), rotary)
+
+    def _configure(
+        self,
+        axes: list[str],
+        main: tuple[str, str, str],
+        limits: dict[str, tuple[float, float, float]],
+        rotary: frozenset[str],
+    ) -> None:
+        self.axes = axes
+        self.index = {a: i for i, a in enumerate(axes)}
+        self.axis_limits = limits
+        self.rotary_axes = rotary
+        self._set_main(main)
+
+    def _set_main(self, main: tuple[str, str, str]) -> None:
+        self.main = main
+        self._main_index = tuple(self.index[a] for a in main)
+
+    def _kin_error(self, cmd: KinematicCommand, act: Callable[[], None]) -> list[Motion | Marker]:
+        """Run ``act``; the error marker of a :class:`KinematicError` it raises (decoding ends)."""
+        try:
+            act()
+        except KinematicError as exc:
+            self.finished = True
+            return [Marker(MarkerKind.ERROR, cmd.block, payload=DecodeError(exc.alarm, exc.message))]
+        return []
+
+    def _kinematic(self, cmd: KinematicCommand) -> list[Motion | Marker]:
+        """A kinematic command at a flush point (the stages are empty)."""
+        if isinstance(cmd, KinSelect):
+            return self._kin_error(cmd, lambda: self.kin.select(cmd.kin_id))
+        if isinstance(cmd, TrafoSwitch):
+            if self.cyl:
+                return self._error_at(cmd.block, 20687, "#TRAFO while #CYL is on: program #CYL OFF first")
+            return self._trafo(cmd)
+        if isinstance(cmd, CaxTrack):
+            return self._caxtrack(cmd)
+        if isinstance(cmd, SetAxes):
+            return self._set_axes(cmd)
+        if isinstance(cmd, ToolOriCs):
+            return self._tool_ori_cs(cmd)
+        if isinstance(cmd, CylSelect):
+            return self._cylinder(cmd)
+        return self._error_at(cmd.block, 910110, f"{type(cmd).__name__} is not simulated")  # pragma: no cover
+
+    def _error_at(self, block: Block | None, alarm: int, message: str) -> list[Motion | Marker]:
+        self.finished = True
+        return [Marker(MarkerKind.ERROR, block, payload=DecodeError(alarm, message))]
+
+    def _set_axes(self, cmd: SetAxes) -> list[Motion | Marker]:
+        """``#SET AX``: exactly the programmed axes form the channel's configuration, by name, logical number
+        and axis index (the kernel's errors 21256/21257/21258 for a name, index or number twice, 20312 for an
+        unknown number, 20683 with a transformation on). The axes keep their positions; an axis left out
+        cannot be programmed; the axis indices 0, 1, 2 are the main axes and the kinematic's indices follow
+        the new order."""
+        block = cmd.block
+        if self.kin.active is not None:
+            return self._error_at(
+                block, 20683, "#SET AX while a kinematic transformation is on: #TRAFO OFF first"
+            )
+        entries = cmd.entries
+        for attr, alarm, what in (
+            ("name", 21256, "axis name"),
+            ("index", 21257, "axis index"),
+            ("number", 21258, "logical axis number"),
+        ):
+            values = [getattr(e, attr) for e in entries]
+            twice = sorted({v for v in values if values.count(v) > 1})
+            if twice:
+                return self._error_at(block, alarm, f"#SET AX: {what} {twice[0]} programmed twice")
+        slot_of = {n: k for k, n in enumerate(self.axis_numbers)}
+        unknown = [e.number for e in entries if e.number not in slot_of]
+        if unknown:
+            return self._error_at(
+                block, 20312, f"#SET AX: logical axis number {unknown[0]} is not an axis of the channel"
+            )
+        ordered = sorted(entries, key=lambda e: e.index)
+        if [e.index for e in ordered[:3]] != [0, 1, 2]:
+            return self._error_at(
+                block, 21257, "#SET AX: the axis indices 0, 1, 2 (the main axes) must be programmed"
+            )
+        limits_of_slot = [self.axis_limits[name] for name in self.axes]
+        rotary_slots = {k for k, name in enumerate(self.axes) if name in self.rotary_axes}
+        names = [f"#{n}" for n in self.axis_numbers]  # not in the configuration: cannot be programmed
+        for e in entries:
+            names[slot_of[e.number]] = e.name
+        self._configure(
+            names,
+            (ordered[0].name, ordered[1].name, ordered[2].name),
+            {name: limits_of_slot[k] for k, name in enumerate(names)},
+            frozenset(names[k] for k in rotary_slots),
+        )
+        self.kin.configure_slots(slot_of[e.number] for e in ordered)
+        return []
+
+    def _caxtrack(self, cmd: CaxTrack) -> list[Motion | Marker]:
+        """``#CAXTRACK ON [...]`` / ``OFF [ANGPOS=..]`` (:mod:`hli_server.engine.kinematics.tracking`)."""
+        block = cmd.block
+        if not cmd.on:
+            items: list[Motion | Marker] = []
+            cax = self.cax
+            self.cax = None
+            if cax is not None and cmd.angpos is not None:
+                end = list(self.position)
+                end[cax.slot] = cmd.angpos
+                items = self._rotation(block, end)
+            return items
+        for name, value in (("ANGLIMIT", cmd.anglimit), ("OFFSET", cmd.offset)):
+            if value is not None and not -360.0 <= value <= 360.0:
+                return self._error_at(block, 21135, f"#CAXTRACK {name}={value:g} outside -360..360°")
+        if cmd.axis is not None:
+            slot = self.index.get(cmd.axis)
+        else:
+            number = cmd.axis_number or self.tracking_axis_number
+            slot = (
+                (self.axis_numbers.index(number) if number in self.axis_numbers else None)
+                if number
+                else self.index.get("C")
+            )
+        if slot is None:
+            return self._error_at(
+                block, 20312, "#CAXTRACK: no tracking axis (AX=, AXNR=, P-CHAN-00095 or an axis named C)"
+            )
+        if slot in self._main_index:
+            return self._error_at(
+                block, 120626, f"#CAXTRACK: the tracking axis {self.axes[slot]} is a main axis"
+            )
+        plane = _PLANE_AXES[self.modal.plane]
+        self.cax = Tracking(
+            slot,
+            (self._main_index[plane[0]], self._main_index[plane[1]]),
+            abs(cmd.anglimit or 0.0),
+            cmd.offset,
+        )
+        return []
+
+    def _rotation(self, block: Block | None, end: list[float]) -> list[Motion | Marker]:
+        """A block of its own that turns axes while the tip rests (#CAXTRACK, #TOOL ORI CS): at rapid."""
+        start = tuple(self.position)
+        if block is None or math.dist(start, end) <= 1e-12:
+            self.position = end
+            return []
+        piece = Piece(segment=LineSegment(start, tuple(end)), block=block, rapid=True)
+        items = self._emit_pieces(self.contour.push(piece))
+        if not (items and isinstance(items[-1], Marker)):
+            self.position = end
+        return items
+
+    def _tracked(self, segment: Segment, block: Block) -> tuple[list[Motion | Marker], Segment]:
+        """With #CAXTRACK on: the inserted turning block's items (if any) and the segment with the tracking
+        axis following its tangent."""
+        cax = self.cax
+        if cax is None:
+            return [], segment
+        inserted, tracked = track(cax, segment)
+        if inserted is None:
+            return [], tracked
+        return self._rotation(block, list(inserted.end)), tracked
+
+    def _tool_ori_cs(self, cmd: ToolOriCs) -> list[Motion | Marker]:
+        """``#TOOL ORI CS``: the rotary axes turn the tool onto the axis P-CHAN-00188 of the active #CS (the
+        selected kinematic, on or not), in the pose P-CHAN-00189 chooses; with RTCP on the tip rests, else
+        only the rotary axes move. 292006 for a kinematic without two rotary axes."""
+        block = cmd.block
+        if not cmd.on:
+            return []
+        trafo = self.kin.active
+        if trafo is None:
+            try:
+                data = self.kin.data.get(self.kin.selected) or self.kin.set_of(self.kin.selected)
+                trafo, _ = build_kinematic(data, self.kin.slots, self.tools.length)
+            except KinematicError as exc:
+                return self._error_at(block, exc.alarm, exc.message)
+        chain = trafo.chain
+        if len(chain.rotary) != 2:
+            return self._error_at(
+                block,
+                292006,
+                f"#TOOL ORI CS: kinematic {trafo.kin_id} has no two rotary axes to turn the tool",
+            )
+        axis = (
+            (0.0, 0.0, 1.0)
+            if self.tool_ori_cs[0] in (0, 3)
+            else ((1.0, 0.0, 0.0) if self.tool_ori_cs[0] == 1 else (0.0, 1.0, 0.0))
+        )
+        zero = self.frames.fixture_to_machine(self.frames.to_workpiece((0.0, 0.0, 0.0)))
+        tip = self.frames.fixture_to_machine(self.frames.to_workpiece(axis))
+        target = unit(sub(tip, zero))
+        axes_now = tuple(self.kin_axes) if self.kin.active is not None else tuple(self.position)
+        try:
+            values = self._pose(trafo, target, axes_now)
+        except KinematicError as exc:
+            return self._error_at(block, exc.alarm, exc.message)
+        end = list(self.position)
+        first, second = chain.rotary
+        s1, s2 = trafo.slots[first.index], trafo.slots[second.index]
+        if self.kin.active is not None and trafo.mode:
+            a1, a2 = sorted((s1, s2))
+            end[a1], end[a2] = mode_angles(trafo.mode, target, self.position[a1], self.position[a2])
+        else:
+            end[s1], end[s2] = values
+        return self._rotation(block, end)
+
+    def _pose(
+        self, trafo: Transformation, target: tuple[float, float, float], axes: Sequence[float]
+    ) -> tuple[float, float]:
+        """The rotary axes' values for ``target`` by P-CHAN-00189: 0/1 the nearer pose (shortest way), 2 the
+        one within the software limits first, 3/4 the first/second solution."""
+        chain = trafo.chain
+        first, second = chain.rotary
+        q = [axes[s] for s in trafo.slots]
+        mode = self.tool_ori_cs[1]
+        if mode in (0, 1):
+            return chain.solve_orientation(target, q)
+        poses = chain.poses(target, q)
+        if not poses:
+            return chain.solve_orientation(target, q)  # raises 292004
+        if mode == 2 and self.soft_limits is not None:
+            s1, s2 = trafo.slots[first.index], trafo.slots[second.index]
+            lo1, hi1 = self.soft_limits(s1)
+            lo2, hi2 = self.soft_limits(s2)
+            inside = [p for p in poses if lo1 <= p[0] <= hi1 and lo2 <= p[1] <= hi2]
+            if inside:
+                poses = inside
+            return min(poses, key=lambda p: abs(p[0] - q[first.index]) + abs(p[1] - q[second.index]))
+        return poses[0] if mode == 3 or len(poses) == 1 else poses[1]
+
+    def _cylinder(self, cmd: CylSelect) -> list[Motion | Marker]:
+        """``#CYL [..]`` (kinematic 15) / ``#CYL ORI LATERAL [..]`` (kinematic 90) / ``#CYL OFF``: the
+        development of the rotary axis is programmed in mm (degrees = mm * 180 / (pi R)); the main axes
+        are the ones named."""
+        block = cmd.block
+        if not cmd.axes:
+            if not self.cyl:
+                return []
+            items = self._trafo(TrafoSwitch(block, False))
+            self.cyl = False
+            main = self._default_axes[1]
+            self._set_main(main if all(a in self.index for a in main) else self.main)
+            return items
+        if self.kin.active is not None:
+            return self._error_at(block, 20687, "#CYL while a transformation is on: program #TRAFO OFF first")
+        # AXNR1=/AXNR2= name their axes by the logical number ("#<number>")
+        names = tuple(
+            self.axes[self.axis_numbers.index(int(a[1:]))]
+            if a.startswith("#") and a[1:].isdigit() and int(a[1:]) in self.axis_numbers
+            else a
+            for a in cmd.axes
+        )
+        missing = [a for a in names if a not in self.index]
+        if missing:
+            return self._error_at(block, 910107, f"#CYL: {missing[0]} is not an axis of the channel")
+        rotary = [a for a in names[:2] if a in self.rotary_axes]
+        if len(rotary) != 1 or cmd.radius <= 0.0:
+            return self._error_at(
+                block,
+                292040,
+                "#CYL: one of the first two axes must be the rotary axis, and a radius above 0 is needed",
+            )
+        kin_id = 90 if cmd.lateral else 15
+        data = self.kin.data.get(kin_id) or self.kin.set_of(kin_id)
+        try:
+            trafo, _ = build_kinematic(data, self.kin.slots, self.tools.length)
+        except KinematicError as exc:
+            return self._error_at(block, exc.alarm, exc.message)
+        offset = (
+            0.0 if cmd.lateral else data.params.get(1, 0.0) * 1e-4
+        )  # HD2: angle offset of the rotary axis
+        trafo = dataclasses.replace(
+            trafo,
+            kin_id=kin_id,
+            scaled_slot=self.index[rotary[0]],
+            scale=180.0 / (math.pi * cmd.radius),
+            scale_offset=offset,
+            name=("TF5290 tube, " if cmd.lateral else "lateral surface, ") + trafo.name,
+        )
+        third = names[2] if len(names) > 2 else self.main[2]
+        self._set_main((names[0], names[1], third))
+        axes_now = tuple(self.position)
+        self.kin.active = trafo
+        self.kin.selected = kin_id
+        self.cyl = True
+        self.kin_axes = axes_now
+        self.position = list(trafo.to_tip(axes_now, axes_now))
+        handler = self.kinematic_handler
+        return [Marker(MarkerKind.ACTION, block, payload=lambda: handler(trafo) if handler else None)]
+
+    def _trafo(self, cmd: TrafoSwitch) -> list[Motion | Marker]:
+        """``#TRAFO ON``: the selected kinematic with the tool's length; the decoder's position becomes the
+        tool tip's. ``#TRAFO OFF``: back to the axes. Either is a point where the path rests (an action
+        marker tells the channel, in program order)."""
+        kin = self.kin
+        handler = self.kinematic_handler
+        if cmd.on:
+            if kin.active is not None:
+                return []
+            axes = tuple(self.position)
+            trafo: Transformation | None = None
+            try:
+                trafo = kin.switch_on(self.tools.length)
+                if trafo is not None:
+                    self.position = list(trafo.to_tip(axes, axes))
+            except KinematicError as exc:
+                kin.switch_off()
+                return self._error_at(cmd.block, exc.alarm, exc.message)
+            if trafo is None:
+                return []  # kinematic ID 0: "no kinematic is enabled, no warning or error"
+            block = cmd.block
+            if self.warn is not None and block is not None:
+                for alarm, message in kin.warnings:
+                    self.warn(alarm, message, block.line, block.label)
+            self.kin_axes = axes
+            active = trafo
+            return [Marker(MarkerKind.ACTION, block, payload=lambda: handler(active) if handler else None)]
+        if kin.active is None:
+            return []
+        self._kin_off()
+        return [Marker(MarkerKind.ACTION, cmd.block, payload=lambda: handler(None) if handler else None)]
+
+    def _kin_off(self) -> None:
+        """The transformation off: the decoder's position is the axes' again, the tool length applied."""
+        self.kin.switch_off()
+        self.position = list(self.kin_axes)
+        self.tools.applied_length = self._position_length = self.tools.length
+
+    def _kin_pieces(self, piece: Piece, trafo: Transformation) -> Motion | Marker:
+        """A tip segment with the transformation on: its axes' path (:func:`axis_path`) is what the
+        checks of the axes see (software limits, collision), the tip what the areas see (``monitors_tcp``);
+        the velocity is what the axes allow along the axes' path."""
+        block = piece.block
+        try:
+            path = axis_path(trafo, piece.segment, self.kin_axes)
+        except KinematicError as exc:
+            return Marker(MarkerKind.ERROR, block, payload=DecodeError(exc.alarm, exc.message))
+        for check in self.path_checks:
+            if getattr(getattr(check, "__self__", check), "monitors_tcp", False):
+                err = check(piece.segment, block)
+            else:
+                err = next((e for e in (check(seg, block) for seg in path.segments) if e is not None), None)
+            if err is not None:
+                return Marker(MarkerKind.ERROR, block, payload=err)
+        v_max, accel, gain = self._kin_limits(piece, path)
+        self.kin_axes = path.end
+        return Motion(
+            segment=piece.segment,
+            block=block,
+            v_max=v_max,
+            accel=accel,
+            rapid=piece.rapid,
+            exact_stop=piece.exact_stop,
+            kin=(
+                SegmentMap(trafo, path.anchor_s, path.anchors, path.segments, path.shift)
+                if trafo.mode
+                else SegmentMap(trafo, segments=path.segments, shift=path.shift)
+            ),
+            gain=gain,
+        )
+
+    def _kin_limits(self, piece: Piece, path: AxisPath) -> tuple[float, float, float]:
+        """Path velocity and acceleration [mm/s, mm/s²]: the tip path's own limits, and for every axis its
+        v_max (rapid) and a_max over the largest ratio of its travel to the tip's along the axes' path (that
+        ratio's largest is the third value, :attr:`Motion.gain`)."""
+        v, a = self._limits(piece.segment, piece.rapid, feed=piece.feed)
+        if len(path.segments) == 1 and path.segments[0].length == piece.segment.length:
+            return v, a, 1.0  # a shifted copy of the tip's path: the same ratios
+        gain = 1.0
+        ss, pts = path.anchor_s, path.anchors
+        for k, name in enumerate(self.axes):
+            share = 0.0
+            for n in range(1, len(ss)):
+                ds = ss[n] - ss[n - 1]
+                if ds > 0.0:
+                    share = max(share, abs(pts[n][k] - pts[n - 1][k]) / ds)
+            if share <= 1e-12:
+                continue
+            gain = max(gain, share)
+            v_ax, v_rapid, a_ax = self.axis_limits[name]
+            v = min(v, (v_rapid if piece.rapid else v_ax) / share)
+            a = min(a, a_ax / share * self._weight(piece.segment, piece.rapid))
+        return v, a, gain
 
     def _end_wait(self) -> None:
         """The path reached a ``#FLUSH WAIT``: decoding goes on."""
@@ -700,8 +1134,18 @@ class Decoder:
             Marker(MarkerKind.END, block, payload=f"M{code:02d}") for code in block.m_codes if code in (2, 30)
         ]
         if ends:
+            if self.cax is not None and self.warn is not None:
+                self.warn(
+                    21250,
+                    "#CAXTRACK is still on at the program's end: program #CAXTRACK OFF",
+                    block.line,
+                    block.label,
+                )
             # the program's end: every stage emptied first (an error of a held block replaces the end)
-            return items + self._flushed(ends)
+            out = items + self._flushed(ends)
+            if self.kin.active is not None:
+                self._kin_off()  # the end deselects the transformation: the position is the axes' again
+            return out
         # another M function is a "non-relevant block" to the compensation and the contouring: both keep
         # their corner across it (PM 207844107; it has no effect on the path here)
         return items
@@ -880,6 +1324,12 @@ class Decoder:
             feed_error = self._feed_error(block)
             if feed_error is not None:
                 return feed_error
+        before: list[Motion | Marker] = []
+        if self.cax is not None:
+            before, segment = self._tracked(segment, block)
+            if before and isinstance(before[-1], Marker):
+                return before
+            target = list(segment.end)
         hold = self._corner_next(block)
         self.motion_unheld = not hold
         piece = Piece(
@@ -891,7 +1341,7 @@ class Decoder:
             blend=None if rapid else m.blend(block.g_codes),
             hold=hold,
         )
-        items = self._push(piece)
+        items = before + self._push(piece)
         if not (items and isinstance(items[-1], Marker)):
             self.position = target
             self._position_length = 0.0
@@ -1006,8 +1456,17 @@ class Decoder:
         """The path checks and the planner's items for the pieces the contouring stage gives out; the
         first piece that fails a check is replaced by its error marker and the rest dropped."""
         items: list[Motion | Marker] = []
+        trafo = self.kin.active
         for piece in pieces:
             if piece.segment.length <= 1e-12:
+                continue
+            if trafo is not None:
+                item = self._kin_pieces(piece, trafo)
+                items.append(item)
+                if isinstance(item, Marker):
+                    self.contour.reset()
+                    self.position = list(piece.segment.start)
+                    return items
                 continue
             err = self._check(piece.segment, piece.block, piece.tip_start, piece.tip_end)
             if err is not None:
@@ -1039,6 +1498,7 @@ class Decoder:
             or self.tools.length_written is not None
             or self.trc.active
             or self._trc_prog is not None
+            or self.kin.active is not None
         )
 
     def _tool_axis(self) -> int:
@@ -1058,7 +1518,8 @@ class Decoder:
         mach = self.frames.fixture_to_machine(z)
         for a in range(3):
             out[mi[a]] = mach[a]
-        out[mi[self._tool_axis()]] += length
+        if self.kin.active is None:  # with a transformation the tool length is the kinematic's
+            out[mi[self._tool_axis()]] += length
         return out
 
     def to_program(self, pos: list[float] | tuple[float, ...], length: float) -> list[float]:
@@ -1070,7 +1531,8 @@ class Decoder:
             if k not in mi:
                 out[k] = pos[k] - m.offset(name)
         q = [pos[mi[0]], pos[mi[1]], pos[mi[2]]]
-        q[self._tool_axis()] -= length
+        if self.kin.active is None:
+            q[self._tool_axis()] -= length
         z = self.frames.machine_to_fixture((q[0], q[1], q[2]))
         w = (z[0] - m.offset(self.main[0]), z[1] - m.offset(self.main[1]), z[2] - m.offset(self.main[2]))
         p = self.frames.from_workpiece(w)
@@ -1097,9 +1559,22 @@ class Decoder:
                 return self._error(
                     block, 916001, f"D{d:g}: the D word takes a tool data block number 0, 1, 2, ..."
                 )
+            length = self.tools.length
             err = self.tools.select(int(d))
             if err is not None:
                 return self._error(block, 916001, err, d=int(d))
+            try:
+                self.kin.tool_kinematic(self.tools.data.kin_id)  # P-TOOL-00011
+            except KinematicError as exc:
+                return self._error(block, exc.alarm, exc.message)
+            if self.kin.active is not None and self.tools.length != length:
+                return self._error(
+                    block,
+                    910110,
+                    f"D{d:g} changes the tool length while kinematic {self.kin.active.kin_id} is on: "
+                    "not simulated; "
+                    "select the tool before #TRAFO ON (docs/kinematics.md)",
+                )
             if self.trc.side != 0:
                 self.trc.radius = abs(self.tools.radius)
         sides = [g for g in block.g_codes if g in (41, 42)]
@@ -1115,7 +1590,7 @@ class Decoder:
     def _g92_framed(self, block: Block) -> None:
         """G92 with frames active: the current point gets the programmed coordinates (all frames kept)."""
         m = self.modal
-        length = self.tools.applied_length
+        length = self.tools.applied_length if self.kin.active is None else 0.0
         prog = self.to_program(self.position, length)
         for name, value in block.axes:
             prog[self.index[name]] = value
@@ -1312,6 +1787,12 @@ class Decoder:
                 c_m = self.to_machine(c_prog, e.length)
                 cw = e.cw if sense > 0 else not e.cw
                 segment, _ = arc_from_centre(start, end, (i, j), (c_m[i], c_m[j]), cw)
+            if self.cax is not None and segment.length > 1e-12:
+                inserted, segment = self._tracked(segment, block)
+                items += inserted
+                if items and isinstance(items[-1], Marker):
+                    return items
+                end = segment.end
             length_at_start = self._position_length
             self.position = list(end)
             self._position_length = e.length
@@ -1343,7 +1824,7 @@ class Decoder:
         differ from the one applied now, as for a piece the contouring stage held back)."""
         length = self.tools.applied_length if length_at_end is None else length_at_end
         l0 = length if length_at_start is None else length_at_start
-        if length == 0.0 and l0 == 0.0:
+        if (length == 0.0 and l0 == 0.0) or self.kin.active is not None:
             return segment
         k = self._main_index[self._tool_axis()]
 
@@ -1382,6 +1863,12 @@ class Decoder:
         if self.trc.active:
             return self._error(
                 block, 910110, "G100 with tool radius compensation active is not simulated: program G40 first"
+            )
+        if self.kin.active is not None:
+            return self._error(
+                block,
+                910110,
+                "G100 with a kinematic transformation on is not simulated: program #TRAFO OFF first",
             )
         target = self._target(block)
         if self.transforms_active:

@@ -79,6 +79,13 @@ class BahnState:
     warning_id_r: int = 0
     alarm_count_r: int = 0
     cycle_r: int = 0
+    kin_id_r: int = 0
+    """The kinematic ID of the active transformation, 0 = none (K-07)."""
+    trafo_active_r: bool = False
+    tcp_x_r: int = 0
+    """The tool tip (TCP) in machine coordinates of the first, second, third main axis [0.1 µm] (K-07)."""
+    tcp_y_r: int = 0
+    tcp_z_r: int = 0
 
 
 @dataclass(slots=True)

@@ -43,6 +43,7 @@ from enum import StrEnum
 from typing import Any
 
 from hli_server.engine.geometry import Point, Segment
+from hli_server.engine.kinematics.path import SegmentMap
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.path.profiles import PathFilter, SlopeProfile
 
@@ -82,6 +83,27 @@ class Motion:
     v_exit_max: float = 0.0
     """Result of the backward pass."""
     tag: Any = None
+    kin: SegmentMap | None = None
+    """With a kinematic transformation on: ``segment`` is the tool tip's path and this turns its points
+    into axis positions (docs/kinematics.md); None: the segment is the axes' path."""
+    gain: float = 1.0
+    """The largest ratio of an axis' travel to the path's along this item (above 1 only with a
+    transformation: a turning head moves its linear axes farther than the tool tip goes)."""
+
+    def axes_at(self, s: float) -> Point:
+        """The axis positions at path coordinate ``s`` of this item (the segment's point, transformed)."""
+        kin = self.kin
+        if kin is None:
+            return self.segment.point_at(s)
+        return kin.axes(self.segment.point_at(s), s)
+
+    def axes_start(self) -> Point:
+        kin = self.kin
+        return self.segment.start if kin is None else kin.axes(self.segment.start, 0.0)
+
+    def axes_end(self) -> Point:
+        kin = self.kin
+        return self.segment.end if kin is None else kin.axes(self.segment.end, self.length)
 
 
 @dataclass(slots=True)
@@ -143,6 +165,8 @@ class Planner:
     _dirty: bool = True
     _motions: int = 0
     """Motion items in the queue, counted as they come and go (the channel asks every cycle)."""
+    _geared: int = 0
+    """Motion items in the queue (and the profile's trail) with a ``gain`` above 1."""
 
     # --- filling -------------------------------------------------------------------------
     def clear(self) -> None:
@@ -156,6 +180,7 @@ class Planner:
         self.generation += 1
         self._dirty = True
         self._motions = 0
+        self._geared = 0
         self._trail.clear()
         self.dwell_remaining = 0.0
         self.s_out = 0.0
@@ -201,6 +226,8 @@ class Planner:
             if prev is not None:
                 prev.v_junction = _junction_velocity(prev, item)
             self._motions += 1
+            if item.gain > 1.0:
+                self._geared += 1
         else:
             item.s_start = self.s_queued_end
         self.queue.append(item)
@@ -219,6 +246,19 @@ class Planner:
     def motion_items(self) -> int:
         """Motion items queued (the look-ahead's fill level)."""
         return self._motions
+
+    def axis_gain(self, until: float) -> float:
+        """The largest :attr:`Motion.gain` of the path from the axes' point to path coordinate ``until``
+        (1 where no transformation makes an axis travel farther than the path)."""
+        if not self._geared:
+            return 1.0
+        gain = 1.0
+        for item in (*self._trail, *self.queue):
+            if isinstance(item, Motion) and item.s_start + item.length >= self.s_out - 1e-9:
+                if item.s_start > until:
+                    break
+                gain = max(gain, item.gain)
+        return gain
 
     @property
     def queued_length(self) -> float:
@@ -242,13 +282,13 @@ class Planner:
         return self.queue[0] if self.queue else None
 
     def position_at(self, s_abs: float) -> Point | None:
-        """Point of the queued path at absolute path coordinate ``s_abs`` (None beyond the queue)."""
+        """Axis positions of the queued path at absolute path coordinate ``s_abs`` (None beyond the queue)."""
         for item in self.queue:
             if (
                 isinstance(item, Motion)
                 and item.s_start - 1e-12 <= s_abs <= item.s_start + item.length + 1e-12
             ):
-                return item.segment.point_at(s_abs - item.s_start)
+                return item.axes_at(s_abs - item.s_start)
         return None
 
     def points_at(self, s_values: Sequence[float]) -> list[Point | None]:
@@ -264,7 +304,7 @@ class Planner:
             if item is None or s < item.s_start - 1e-12:
                 out.append(None)
                 continue
-            out.append(item.segment.point_at(s - item.s_start))
+            out.append(item.axes_at(s - item.s_start))
         return out
 
     def next_motion(self) -> Motion | None:
@@ -324,7 +364,8 @@ class Planner:
         self.v_out = (s_f - before) / self.t_a
         trail = self._trail
         while trail and trail[0].s_start + trail[0].length < s_f - 1e-9:
-            trail.popleft()
+            if trail.popleft().gain > 1.0:
+                self._geared -= 1
         if s_f == before:
             return None, reached
         return self._point_out(s_f), reached
@@ -332,10 +373,10 @@ class Planner:
     def _point_out(self, s: float) -> Point | None:
         for passed in self._trail:
             if passed.s_start - 1e-9 <= s <= passed.s_start + passed.length + 1e-9:
-                return passed.segment.point_at(min(max(s - passed.s_start, 0.0), passed.length))
+                return passed.axes_at(min(max(s - passed.s_start, 0.0), passed.length))
         for item in self.queue:
             if isinstance(item, Motion) and item.s_start - 1e-9 <= s <= item.s_start + item.length + 1e-9:
-                return item.segment.point_at(min(max(s - item.s_start, 0.0), item.length))
+                return item.axes_at(min(max(s - item.s_start, 0.0), item.length))
         return None
 
     def _step_planned(self) -> tuple[Point | None, list[Marker]]:
@@ -401,19 +442,21 @@ class Planner:
             at_stop_point = True
         self.velocity = 0.0 if at_stop_point else v_next
         if ds <= 0.0:
-            return (item.segment.point_at(self.position_in_item) if v > 0 else None), reached
+            return (item.axes_at(self.position_in_item) if v > 0 else None), reached
         # advance, possibly across junctions
         while True:
             s_rem = item.length - self.position_in_item
             if ds < s_rem - 1e-12:
                 self.position_in_item += ds
                 self.s_abs += ds
-                return item.segment.point_at(self.position_in_item), reached
+                return item.axes_at(self.position_in_item), reached
             self.s_abs = item.s_start + item.length
             ds -= max(s_rem, 0.0)
             self.queue.popleft()
             if self._filter is not None:
                 self._trail.append(item)
+            elif item.gain > 1.0:
+                self._geared -= 1
             self._motions -= 1
             self.position_in_item = 0.0
             # SYNC markers are passed on the way (their actions run this cycle, in program order)
@@ -426,10 +469,10 @@ class Planner:
                 self.velocity = 0.0  # standstill at the end of the item
                 if item.exact_stop:
                     self._exact_stop_pending = item
-                return item.segment.end, reached
+                return item.axes_end(), reached
             item = nxt
             if ds <= 1e-12:
-                return item.segment.start, reached
+                return item.axes_start(), reached
 
 
 def _braking_limit(v_end: float, accel: float, distance: float, t: float) -> float:

@@ -27,6 +27,7 @@ from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.batch import BatchGeometryCheck, unsupported
 from hli_server.engine.channel import Channel
 from hli_server.engine.geometry import ArcSegment, Segment
+from hli_server.engine.kinematics.transform import Transformation
 from hli_server.engine.machine import Machine
 from hli_server.engine.nc.directives import IterationCapError
 from hli_server.engine.nc.source import ProgramText
@@ -92,6 +93,8 @@ class CheckResult:
         self.capped: str | None = None
         """``cycles`` or ``iterations`` when the check stopped at its cap (the program did not end)."""
         self.cap = 0
+        self.kinematics = KinematicReport()
+        """What the axes and the tool tip did while a kinematic transformation was on (K-06, K-08)."""
 
     @property
     def stopped_by_error(self) -> bool:
@@ -143,7 +146,67 @@ class CheckResult:
         areas = self.areas_json()
         if areas is not None:
             out["areas"] = _round_numbers(areas)
+        if self.kinematics.used:
+            out["kinematics"] = self.kinematics.to_json(self.machine.channel(self.channel))
         return out
+
+
+class KinematicReport:
+    """While a transformation is on: the kinematics used, each axis' range and the tool tip's (in a full
+    check every cycle's setpoints; in a geometry check every block's support points), the tool tip's path
+    for the picture, and where the tool tip ended."""
+
+    def __init__(self) -> None:
+        self.used: dict[int, str] = {}
+        self.axes: dict[int, tuple[float, float]] = {}
+        """Slot -> (min, max) of the axis while a transformation was on."""
+        self.tip: dict[int, tuple[float, float]] = {}
+        """Main-axis slot -> (min, max) of the tool tip."""
+        self.tool_path: list[tuple[float, ...]] = []
+        self.final_tip: tuple[float, ...] | None = None
+
+    def add(
+        self, kin_id: int, name: str, axes: tuple[float, ...], tip: tuple[float, ...], main: tuple[int, ...]
+    ) -> None:
+        self.used.setdefault(kin_id, name)
+        self.see_axes(axes)
+        self.see_tip(tip, main)
+
+    def see_axes(self, axes: tuple[float, ...]) -> None:
+        ranges = self.axes
+        for k, v in enumerate(axes):
+            lo, hi = ranges.get(k, (v, v))
+            if v < lo:
+                ranges[k] = (v, hi)
+            elif v > hi or k not in ranges:
+                ranges[k] = (lo, v)
+
+    def see_tip(self, tip: tuple[float, ...], main: tuple[int, ...]) -> None:
+        ranges = self.tip
+        for k in main:
+            v = tip[k]
+            lo, hi = ranges.get(k, (v, v))
+            if v < lo:
+                ranges[k] = (v, hi)
+            elif v > hi or k not in ranges:
+                ranges[k] = (lo, v)
+        self.final_tip = tip
+
+    def to_json(self, ch: Channel) -> dict[str, Any]:
+        names = ch.axis_names
+        main = [names.index(a) for a in ch.config.main_axes]
+        return {
+            "used": [{"id": k, "name": n} for k, n in sorted(self.used.items())],
+            "axis_range": {
+                names[k]: [_round_mm(lo), _round_mm(hi)] for k, (lo, hi) in sorted(self.axes.items())
+            },
+            "tool_tip_range": {
+                names[k]: [_round_mm(lo), _round_mm(hi)] for k, (lo, hi) in sorted(self.tip.items())
+            },
+            "final_tool_tip": (
+                {names[k]: _round_mm(self.final_tip[k]) for k in main} if self.final_tip is not None else None
+            ),
+        }
 
 
 _ARC_CHORD_MM = 0.01
@@ -255,10 +318,23 @@ class ProgramCheck:
         progress = self.progress
         step(1)
         countdown = 0
+        kin_report = result.kinematics
+        main = tuple(ch.axis_names.index(a) for a in ch.config.main_axes)
+        switched: Transformation | None = None
         while ch.state in running and machine.cycle < self.max_cycles:
             step(1)
             if record and machine.cycle % 10 == 0:
                 _record(result.path, tuple(ch.setpoints()))
+                if ch.kinematic is not None:
+                    _record(kin_report.tool_path, ch.tool_tip(ch.setpoints()))
+            kinematic = ch.kinematic
+            if kinematic is not None:
+                if kinematic is not switched:  # switched on: the axes at rest where it was
+                    switched = kinematic
+                    start = ch.kinematic_from
+                    kin_report.add(kinematic.kin_id, kinematic.name, start, kinematic.to_tip(start), main)
+                axes = tuple(ch.setpoints())
+                kin_report.add(kinematic.kin_id, kinematic.name, axes, kinematic.to_tip(axes), main)
             countdown -= 1
             if countdown <= 0:
                 countdown = 1000
@@ -302,6 +378,8 @@ class ProgramCheck:
                     for item in items:
                         if isinstance(item, Marker):
                             self._marker(ch, item, result)
+                        elif item.kin is not None:
+                            self._kinematic_motion(ch, item, result, False)
                     countdown -= 1
                     if progress is not None and countdown <= 0:
                         countdown = 256
@@ -341,13 +419,40 @@ class ProgramCheck:
             for item in items:
                 if isinstance(item, Motion):
                     motions += 1
-                    if record:
+                    if item.kin is not None:
+                        self._kinematic_motion(ch, item, result, record)
+                    elif record:
                         result.path.extend(segment_points(item.segment))
                 elif isinstance(item, Marker):
                     self._marker(ch, item, result)
             if progress is not None and motions >= next_update:
                 next_update = motions + 4096
                 progress(ch.interpreter.main_line, decoder.blocks_decoded)
+
+    @staticmethod
+    def _kinematic_motion(ch: Channel, item: Motion, result: CheckResult, record: bool) -> None:
+        """A transformed block of a geometry check: its tool tip's path and its axes' path (the one the
+        decoder checked: exact where the head's angles stand still, else its support points)."""
+        kin = item.kin
+        assert kin is not None
+        report = result.kinematics
+        report.used.setdefault(kin.trafo.kin_id, kin.trafo.name)
+        main = tuple(ch.axis_names.index(a) for a in ch.config.main_axes)
+        segments = kin.segments
+        report.see_axes(segments[0].start if segments else item.axes_start())
+        for seg in segments:
+            for p in segment_points(seg):
+                report.see_axes(p)
+                if record:
+                    result.path.append(p)
+        if not segments:
+            report.see_axes(item.axes_end())
+        tips = segment_points(item.segment)
+        report.see_tip(item.segment.start, main)
+        for t in tips:
+            report.see_tip(t, main)
+        if record:
+            report.tool_path.extend(tips)
 
     @staticmethod
     def _marker(ch: Channel, item: Marker, result: CheckResult) -> None:

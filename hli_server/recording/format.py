@@ -54,11 +54,14 @@ from schemas.layout import STRING_ENCODING
 __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
+    "MAX_SPAN",
     "SUFFIX",
+    "RecordChecker",
     "RecordingError",
     "RecordingFullError",
     "RecordingWriter",
     "Records",
+    "check_recording",
     "decode_value",
     "encode_text",
     "encode_value",
@@ -78,7 +81,14 @@ COMPRESS_LEVEL: Final = 1
 9 % and 22 % more bytes; docs/record-replay.md)."""
 MAX_LINE_BYTES: Final = 256 * 1024 * 1024
 """A line longer than this is refused by the reader (a program text may be up to 64 MiB, escaped)."""
+MAX_SPAN: Final = 2**31
+"""Cycles a recording may span from its first line to its last (24.8 days at T_A = 1 ms, the range of the
+HLI's cycle counter): what a replay may have to run, bounded by the file itself (issue 36, finding 6)."""
+_RANGES: Final = {"DINT": (-(2**31), 2**31 - 1), "UDINT": (0, 2**32 - 1)}
+_KINDS: Final = ("i", "o", "e", "op", "file", "program_file", "fault", "end")
+_TYPES: Final = ("BOOL", "DINT", "UDINT", "LREAL", "STRING")
 _READ_CHUNK: Final = 1 << 20
+_CLOEXEC: Final = getattr(os, "O_CLOEXEC", 0)
 
 
 class RecordingError(ValueError):
@@ -164,8 +174,13 @@ class RecordingWriter:
         self.path = path
         self.max_bytes = max_bytes
         self.level = level
-        mode = "wb" if overwrite else "xb"
-        self._file: IO[bytes] | None = open(path, mode)  # noqa: SIM115 - closed by close()
+        # the owner's alone (0600): a recording holds the programs' text, every input and every event,
+        # which the HTTP door gives only to the API token's holders (docs/reliability.md, "Access")
+        flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if overwrite else os.O_EXCL) | _CLOEXEC
+        fd = os.open(path, flags, 0o600)
+        if overwrite:
+            os.fchmod(fd, 0o600)
+        self._file: IO[bytes] | None = os.fdopen(fd, "wb")
         self._lines: list[str] = []
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hli-record-writer")
         self._error: OSError | None = None
@@ -298,10 +313,13 @@ def _members(path: Path, info: Records) -> Iterator[bytes]:
 
 def read_records(path: Path | str, info: Records | None = None) -> Iterator[dict[str, Any]]:
     """Every line of the recording as a dict, header first; stops before an incomplete last member
-    (``info.truncated`` says so). Raises :class:`RecordingError` for a file that is no recording."""
+    (``info.truncated`` says so). Raises :class:`RecordingError` for a file that is no recording, and for
+    a line that is not what a recording holds, naming the file, the line and the field
+    (:class:`RecordChecker`: a recording is input like any other, issue 36, finding 6)."""
     path = Path(path)
     info = info if info is not None else Records()
     first = True
+    checker: RecordChecker | None = None
     rest = b""
     try:
         for text in _members(path, info):
@@ -322,7 +340,10 @@ def read_records(path: Path | str, info: Records | None = None) -> Iterator[dict
                 info.lines += 1
                 if first:
                     _check_header(path, record)
+                    checker = RecordChecker(path, record)
                     first = False
+                elif checker is not None:
+                    checker.check(info.lines, record)
                 yield record
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read: {exc.strerror or exc}") from None
@@ -341,6 +362,135 @@ def read_header(path: Path | str) -> dict[str, Any]:
     raise RecordingError(f"{path}: no recording header")  # pragma: no cover - read_records raises first
 
 
+def check_recording(
+    path: Path | str, each: Callable[[int, dict[str, Any]], str | None] | None = None
+) -> tuple[dict[str, Any], Records, int]:
+    """Read the whole recording once (every line checked): its header, what was read, and its last
+    cycle. A replay does this first, so that a bad line anywhere is refused before the first cycle runs.
+    ``each(line, record)`` checks more (the replay: what it will do with the line); a text it returns is
+    the problem, raised as :class:`RecordingError` with the file and the line."""
+    info = Records()
+    records = read_records(path, info)
+    header = next(records)
+    last = 0
+    for record in records:
+        last = record["c"]
+        problem = each(info.lines, record) if each is not None else None
+        if problem is not None:
+            raise RecordingError(f"{path}: line {info.lines}: {problem}")
+    return header, info, last
+
+
+def _short(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+class RecordChecker:
+    """Checks each line after the header against it: the cycle (a whole number, in order, the whole within
+    :data:`MAX_SPAN`), the kind of line, every field's type, every signal index against the header's lists
+    and every value against its signal's type."""
+
+    def __init__(self, path: Path, header: dict[str, Any]) -> None:
+        self.path = path
+        self.inputs = [str(kind) for _, kind in header["inputs"]]
+        self.outputs = [str(kind) for _, kind in header["outputs"]]
+        self.first: int | None = None
+        self.last = 0
+        self.line = 0
+
+    def fail(self, field: str, what: str) -> RecordingError:
+        return RecordingError(f"{self.path}: line {self.line}: {field}: {what}")
+
+    def check(self, line: int, record: dict[str, Any]) -> None:
+        self.line = line
+        cycle = record.get("c")
+        if type(cycle) is not int or cycle < 0:
+            raise self.fail("c", f"the cycle is a whole number >= 0, got {_short(cycle)}")
+        if cycle < self.last:
+            raise self.fail("c", f"cycle {cycle} after cycle {self.last}: a recording's lines are in order")
+        if self.first is None:
+            self.first = cycle
+        if cycle - self.first > MAX_SPAN:
+            raise self.fail(
+                "c",
+                f"cycle {cycle} lies {cycle - self.first} cycles after the first line's ({self.first}); a "
+                f"recording spans at most {MAX_SPAN} cycles",
+            )
+        self.last = cycle
+        if not any(kind in record for kind in _KINDS):
+            raise self.fail("record", f"none of {', '.join(_KINDS)}: {_short(record)}")
+        if "i" in record:
+            self._changes("i", record["i"], self.inputs)
+        if "o" in record:
+            self._changes("o", record["o"], self.outputs)
+        if "e" in record:
+            self._events(record["e"])
+        if "op" in record:
+            self._text(record, "op")
+            if not isinstance(record.get("args", {}), dict | None):
+                raise self.fail("args", f"an object, got {_short(record.get('args'))}")
+            self._text(record, "error", optional=True)
+        for key in ("file", "program_file"):
+            if key in record:
+                self._text(record, key)
+                self._text(record, "text", optional=True)
+        if "program_file" in record:
+            self._text(record, "found", optional=True)
+            self._text(record, "origin", optional=True)
+            searched = record.get("searched", [])
+            if not isinstance(searched, list | None) or not all(isinstance(x, str) for x in searched or ()):
+                raise self.fail("searched", f"a list of directories, got {_short(searched)}")
+        if "fault" in record:
+            if record["fault"] not in ("set", "end"):
+                raise self.fail("fault", f"set or end, got {_short(record['fault'])}")
+            if type(record.get("id")) is not int:
+                raise self.fail("id", f"a fault's number, got {_short(record.get('id'))}")
+            if record["fault"] == "set" and not isinstance(record.get("spec"), dict):
+                raise self.fail("spec", f"the fault as an object, got {_short(record.get('spec'))}")
+            self._text(record, "reason", optional=True)
+        if "end" in record:
+            self._text(record, "end")
+
+    def _text(self, record: dict[str, Any], key: str, *, optional: bool = False) -> None:
+        value = record.get(key)
+        if not isinstance(value, str) and not (optional and value is None):
+            raise self.fail(key, f"text, got {_short(value)}")
+
+    def _changes(self, field: str, flat: object, kinds: list[str]) -> None:
+        if not isinstance(flat, list) or len(flat) % 2:
+            raise self.fail(field, f"pairs of a signal's index and its value, got {_short(flat)}")
+        for k in range(0, len(flat), 2):
+            index, value = flat[k], flat[k + 1]
+            if type(index) is not int or not 0 <= index < len(kinds):
+                raise self.fail(
+                    field, f"signal index {_short(index)} is not one of the header's {len(kinds)} signals"
+                )
+            kind = kinds[index]
+            if kind == "BOOL":
+                ok = isinstance(value, bool) or value in (0, 1)
+            elif kind == "STRING":
+                ok = isinstance(value, list) and len(value) == 1 and isinstance(value[0], str)
+            elif kind == "LREAL":
+                ok = (isinstance(value, int | float) and not isinstance(value, bool)) or value in _NON_FINITE
+            else:
+                low, high = _RANGES.get(kind, (0, -1))
+                ok = type(value) is int and low <= value <= high
+            if not ok:
+                raise self.fail(field, f"signal {index} is a {kind}, its value {_short(value)} is none")
+
+    def _events(self, events: object) -> None:
+        if not isinstance(events, list):
+            raise self.fail("e", f"a list of events, got {_short(events)}")
+        for event in events:
+            if (
+                not isinstance(event, dict)
+                or not isinstance(event.get("kind"), str)
+                or not isinstance(event.get("data", {}), dict)
+            ):
+                raise self.fail("e", f"an event is an object with its kind and data, got {_short(event)}")
+
+
 def _check_header(path: Path, record: dict[str, Any]) -> None:
     if record.get("record") != "header" or record.get("format") != FORMAT:
         raise RecordingError(f"{path}: not an hli-server recording (its first line is no {FORMAT} header)")
@@ -352,3 +502,25 @@ def _check_header(path: Path, record: dict[str, Any]) -> None:
             f"{path}: recording format version {version} is newer than this hli-server reads "
             f"({FORMAT_VERSION}); replay it with the hli-server that made it ({record.get('server')})"
         )
+
+    def bad(field: str, what: str) -> RecordingError:
+        return RecordingError(f"{path}: line 1 (the header): {field}: {what}")
+
+    for key in ("inputs", "outputs"):
+        listed = record.get(key)
+        if not isinstance(listed, list) or not all(
+            isinstance(e, list) and len(e) >= 2 and isinstance(e[0], str) and e[1] in _TYPES for e in listed
+        ):
+            raise bad(key, "a list of [ST path, type] (BOOL, DINT, UDINT, LREAL, STRING)")
+    for key, low in (("t_a_us", 1), ("window_start", 0), ("outputs_every", 1)):
+        value = record.get(key, low)
+        if type(value) is not int or not low <= value <= 2**62:
+            raise bad(key, f"a whole number >= {low}, got {_short(value)}")
+    for key in ("server", "layout", "journal", "config"):
+        if not isinstance(record.get(key, {}), dict):
+            raise bad(key, f"an object, got {_short(record.get(key))}")
+    follow = record.get("follow_cycle") or []
+    if not isinstance(follow, list) or not all(
+        type(k) is int and 0 <= k < len(record["outputs"]) for k in follow
+    ):
+        raise bad("follow_cycle", f"indices of the header's outputs, got {_short(follow)}")

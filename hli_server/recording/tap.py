@@ -972,7 +972,7 @@ class SessionRecorderPort:
         try:
             path = tap.resolve(name)
             try:
-                path.parent.mkdir(parents=True, exist_ok=True)
+                path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # a new one: its owner's only
             except OSError as exc:
                 raise RecordingError(f"cannot create the recording directory {path.parent}: {exc}") from None
             return tap.start(path, origin="api").to_json()

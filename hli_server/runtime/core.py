@@ -662,6 +662,12 @@ class Runtime:
             machine.step(1)
         except Exception as exc:  # the server outlives a failing cycle: the channels take an error
             self._cycle_failed(exc)
+        files = self.nc_files  # #MSG SAVE is written off this thread; its refusals come back here
+        if files.active:
+            try:
+                files.after_cycle(inline=self.clock is Clock.STEPPED)
+            except Exception as exc:
+                self._cycle_failed(exc)
         try:
             stalled = self.comm_faults.publish_stalled(machine.cycle)  # a stalled publish, on demand
             packed = image.publish_from(machine.hli, machine.cycle, commit=not stalled)

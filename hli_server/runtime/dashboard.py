@@ -177,7 +177,11 @@ def path_ahead(ch: Channel, limit: int = AHEAD_POINTS) -> list[tuple[float, ...]
             half_angle = math.acos(max(-1.0, 1.0 - TRAIL_TOLERANCE / seg.radius))
             n = min(_ARC_SAMPLES_MAX, max(2, math.ceil(abs(seg.sweep) / max(2.0 * half_angle, 1e-6))))
             length = seg.length
-            out += [seg.point_at(s0 + (length - s0) * k / n) for k in range(1, n + 1)]
+            out += [item.axes_at(s0 + (length - s0) * k / n) for k in range(1, n + 1)]
+        elif item.kin is not None:
+            # a transformed block: the axes' path (the trail is the axes'), a point every 16th of it
+            length = item.length
+            out += [item.axes_at(s0 + (length - s0) * k / 16) for k in range(1, 17)]
         else:
             out.append(seg.end)
         if len(out) >= limit:

@@ -899,6 +899,10 @@ KERNEL_DEFAULTS: dict[str, object] = {
     "P-CHAN-00442": 0,
     "P-CHAN-00751": 0,
     "P-CHAN-00874": 0,
+    "P-CHAN-00032": 0,  # kinematik_id (issue 35: the trafo interface page, "Default value 0")
+    "P-CHAN-00095": 0,
+    "P-CHAN-00188": 0,
+    "P-CHAN-00189": 0,
     "P-STUP-00070": ["FCT_IPO_DEFAULT"],
     "P-MANU-00014": 0,
 }

@@ -515,15 +515,13 @@ def test_malformed_contouring_commands_are_refused_with_line_and_block(
 @pytest.mark.parametrize(
     ("line", "text"),
     [
-        ("#KIN ID[3]", "kinematic transformations (#KIN)"),
-        ("#TRAFO ON", "kinematic transformations (#TRAFO)"),
         ("N50 : G0 X200 Y0 : G0 X10 Y0", "two-path programming"),
         (
             '#CONTROL AREA BEGIN [ID1 PROT POLY MIN_EXCUR=0 MAX_EXCUR=1 MONITOR_LVL="IMCS"]',
             'MONITOR_LVL="IMCS"',
         ),
     ],
-    ids=["kin", "trafo", "two-path", "imcs"],
+    ids=["two-path", "imcs"],
 )
 def test_what_stays_refused_is_refused_with_a_clear_alarm(line: str, text: str) -> None:
     m = make_machine()

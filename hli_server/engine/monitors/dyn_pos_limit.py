@@ -175,10 +175,12 @@ class _Ramp:
     ) -> None:
         self._planner = planner
         self.s0, self.v0, self.s1, self.v1, self.a, self.t_brake = s0, v0, s1, v1, a, t_brake
-        self.reach = s1 + v1 * t_brake - 0.5 * a * t_brake * t_brake - s0 + (planner.s_abs - planner.s_out)
-        """How far along the path the ramp reaches from where the axes are: no axis can travel
-        farther than this. With a jerk-limited profile (M-04) the axes lag the planned path by the
-        profile's filter; their ramp ends where the planned one ends, so it reaches that much farther."""
+        reach = s1 + v1 * t_brake - 0.5 * a * t_brake * t_brake - s0 + (planner.s_abs - planner.s_out)
+        self.reach = reach * planner.axis_gain(s0 + reach)
+        """How far the ramp reaches from where the axes are: no axis can travel farther than this. With a
+        jerk-limited profile (M-04) the axes lag the planned path by the profile's filter; their ramp ends
+        where the planned one ends, so it reaches that much farther. With a kinematic transformation an
+        axis can travel farther than the tool tip's path (``axis_gain``, K-05)."""
         self._samples: list[tuple[float, tuple[float, ...]]] | None = None
 
     @property

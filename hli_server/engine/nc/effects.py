@@ -20,9 +20,20 @@ from hli_server.engine.nc.directives import (
 )
 from hli_server.engine.nc.expr import (
     ALARM_TYPE,
+    Expr,
     Ref,
     Value,
     format_value,
+)
+from hli_server.engine.nc.kinematic_commands import (
+    AxisEntry,
+    CaxTrack,
+    CylSelect,
+    KinematicCommand,
+    KinSelect,
+    SetAxes,
+    ToolOriCs,
+    TrafoSwitch,
 )
 from hli_server.engine.nc.language import (
     A_CONTROL_SYNTAX,
@@ -34,8 +45,12 @@ from hli_server.engine.nc.language import (
     A_INDEX,
     A_LIMIT,
     A_MESSAGE,
+    A_MSG_FORMAT,
+    A_MSG_VALUES,
+    A_NOT_SIMULATED,
     A_RANGE,
     A_RT_ID,
+    A_STRING_LENGTH,
     A_UNKNOWN_AXIS_NAME,
     CONTOUR_KEYS,
     CONTOUR_TYPES,
@@ -69,6 +84,69 @@ class Effects(VariableAccess):
     ``#FILE NAME``, ``#FLUSH``, and the directives of ``#MEAS MODE``, ``#SLOPE``, ``#CS``/``#ACS``/
     ``#ROTATION``, ``#CONTOUR MODE``/``#HSC``/``#SPLINE`` (which ``#`` commands exist is
     ``nc/language.py``'s ``HASH_COMMANDS``)."""
+
+    # --- kinematic transformations (issue 35, docs/kinematics.md) -------------------------------------------
+    def _whole(self, stmt: Hash, expr: Expr, what: str, low: int, high: int) -> int:
+        value = self._number(stmt, expr, what)
+        if value != int(value) or not low <= value <= high:
+            raise stmt.error(A_INDEX, f"{what} {format_value(value)}: a whole number {low} .. {high}")
+        return int(value)
+
+    def _kinematic(self, frame: Frame, stmt: Hash) -> KinematicCommand:
+        """The decoder's command of ``#KIN ID``, ``#TRAFO``, ``#TOOL ORI CS``, ``#CYL``, ``#CAXTRACK``,
+        ``#SET AX`` (:mod:`hli_server.engine.nc.kinematic_commands`), its values evaluated."""
+        place = self._place_block(frame, stmt)
+        command, options = stmt.command, stmt.options
+        names = [o[3:] for o in options if o.startswith("AX:")]
+        params = {k: self._number(stmt, e, f"#{command} {k}") for k, e in stmt.params.items()}
+        if command == "KIN ID":
+            kin_id = self._whole(stmt, stmt.args[0], "#KIN ID", 0, 65535) if stmt.args else None
+            return KinSelect(place, kin_id)
+        if command == "TRAFO":
+            return TrafoSwitch(place, "ON" in options)
+        if command == "TOOL ORI CS":
+            return ToolOriCs(place, "OFF" not in options)
+        if command == "CYL":
+            if "OFF" in options:
+                return CylSelect(place)
+            if "LATERAL" in options:
+                for k, key in enumerate(("AXNR1", "AXNR2")):
+                    if key in params:
+                        logical = self._whole(stmt, stmt.params[key], f"#CYL ORI LATERAL {key}", 1, 65535)
+                        names.insert(k, f"#{logical}")  # the decoder knows the axis of the number
+                if len(names) != 2 or "RADIUS" not in params:
+                    raise stmt.error(
+                        A_CONTROL_SYNTAX,
+                        "#CYL ORI LATERAL [AX1=.. AX2=.. RADIUS=..]: both axes and the radius",
+                    )
+            return CylSelect(place, tuple(names), params.get("RADIUS", 0.0), lateral="LATERAL" in options)
+        if command == "CAXTRACK":
+            if "OFF" in options:
+                return CaxTrack(place, False, angpos=params.get("ANGPOS"))
+            unsimulated: list[str] = [k for k in ("OPTALIGN", "ROTMODE") if k in params]
+            unsimulated += ["SCALEFACT"] if params.get("SCALEFACT", 1.0) != 1.0 else []
+            unsimulated += ["START_STROKE"] if "START_STROKE" in options else []
+            if unsimulated:
+                raise stmt.error(
+                    A_NOT_SIMULATED,
+                    f"#CAXTRACK ON [{', '.join(unsimulated)}] is not simulated (ANGLIMIT, OFFSET, AX, AXNR "
+                    "are): see docs/kinematics.md",
+                )
+            axnr = stmt.params.get("AXNR")
+            return CaxTrack(
+                place,
+                True,
+                anglimit=params.get("ANGLIMIT"),
+                offset=params.get("OFFSET", 0.0),
+                axis=names[0] if names else None,
+                axis_number=self._whole(stmt, axnr, "#CAXTRACK AXNR", 1, 65535) if axnr is not None else None,
+            )
+        entries = []
+        for k, name in enumerate(names):
+            number = self._whole(stmt, stmt.args[2 * k], f"#SET AX [{name}, <number>", 1, 65535)
+            index = self._whole(stmt, stmt.args[2 * k + 1], f"#SET AX [{name}, {number}, <index>", 0, 31)
+            entries.append(AxisEntry(name, number, index))
+        return SetAxes(place, tuple(entries), fast="FAST" in options)
 
     # --- # commands ------------------------------------------------------------------------------------
     def _hash(self, frame: Frame, stmt: Hash) -> None:
@@ -150,6 +228,9 @@ class Effects(VariableAccess):
         if command in ("CONTOUR MODE", "HSC", "SPLINE"):
             self._pending.append(self._contour(frame, stmt))
             return
+        if command in ("KIN ID", "TRAFO", "TOOL ORI CS", "CYL", "CAXTRACK", "SET AX"):
+            self._pending.append(self._kinematic(frame, stmt))
+            return
         if command == "TIME":
             self._dwell(frame, stmt)
             return
@@ -213,69 +294,98 @@ class Effects(VariableAccess):
 
     def _format(self, stmt: Stmt, values: list[Value]) -> str:
         """The message text: the format string's ``%d``, ``%f``, ``%s``, ... filled in (printf, as the
-        manual says)."""
+        manual says), at most :data:`MAX_MESSAGE` characters.
+
+        Bounded before anything is built (issue 36, finding 1: ``%.300000000f`` built 300 MB inside the
+        cycle): a width, or a precision that fixes the digits (all but ``%g`` and ``%s``, whose precision
+        only cuts), beyond :data:`MAX_MESSAGE` is refused at once, and so is the text as soon as it grows
+        beyond it (the kernel's 21870, "String exceeds the maximum length"); each element then costs at
+        most a few hundred characters."""
         fmt = values[0]
         if not isinstance(fmt, str):
             raise stmt.error(A_MESSAGE, '#MSG: the message text is a string in quotes: #MSG ["text"]')
         args = values[1:]
         out: list[str] = []
+        length = 0
         i = 0
         n = len(fmt)
         used = 0
         while i < n:
-            c = fmt[i]
-            if c != "%":
-                out.append(c)
-                i += 1
-                continue
+            j = fmt.find("%", i)
+            if j != i:  # the text up to the next element, as it is
+                literal = fmt[i:] if j < 0 else fmt[i:j]
+                out.append(literal)
+                length += len(literal)
+                if j < 0:
+                    break
+            i = j
             j = i + 1
             while j < n and fmt[j] in "-+ #0":
                 j += 1
+            digits = j
             while j < n and fmt[j].isdigit():
                 j += 1
+            width = int(fmt[digits:j]) if j > digits else 0
+            spec = fmt[i:j]  # flags and width
+            precision = 0
             if j < n and fmt[j] == ".":
                 j += 1
+                digits = j
                 while j < n and fmt[j].isdigit():
                     j += 1
+                precision = int(fmt[digits:j]) if j > digits else 0
             while j < n and fmt[j] in "lh":
                 j += 1
             if j >= n:
-                raise stmt.error(A_MESSAGE, f"#MSG: incomplete format {fmt[i:]!r}")
+                raise stmt.error(A_MSG_FORMAT, f"#MSG: incomplete format {fmt[i:]!r} (%d, %f, %s, ...)")
             conversion = fmt[j]
-            spec = fmt[i:j].replace("l", "").replace("h", "")
+            element = fmt[i : j + 1]
+            if "." in element:
+                # %g: a precision beyond the bound gives the same text as the bound where that fits
+                cut = min(precision, MAX_MESSAGE) if conversion in "gG" else precision
+                spec += f".{cut}"
             if conversion == "%":
                 out.append("%")
+                length += 1
                 i = j + 1
                 continue
             if conversion not in "diufFeEgGxXos":
-                raise stmt.error(A_MESSAGE, f"#MSG: unknown format {fmt[i : j + 1]!r} (%d, %f, %s, ...)")
+                raise stmt.error(A_MSG_FORMAT, f"#MSG: unknown format {element!r} (%d, %f, %s, ...)")
+            fixed = 0 if conversion in "gGs" else precision  # %g and %s: the precision only cuts
+            if max(width, fixed) > MAX_MESSAGE:
+                raise stmt.error(
+                    A_STRING_LENGTH,
+                    f"#MSG: format {_shorten(element)} asks for {max(width, fixed)} characters; a message "
+                    f"has at most {MAX_MESSAGE}",
+                )
             if used >= len(args):
                 raise stmt.error(
-                    A_MESSAGE, f"#MSG: the text has more formats than values ({len(args)} given)"
+                    A_MSG_VALUES, f"#MSG: the text has more formats than values ({len(args)} given)"
                 )
             value = args[used]
             used += 1
-            if len(spec) > 12:
-                raise stmt.error(A_MESSAGE, f"#MSG: format {fmt[i : j + 1]!r} too wide")
             try:
                 if conversion == "s":
-                    out.append((spec + "s") % (value if isinstance(value, str) else format_value(value)))
+                    piece = (spec + "s") % (value if isinstance(value, str) else format_value(value))
                 elif isinstance(value, str):
-                    raise stmt.error(A_MESSAGE, f"#MSG: {fmt[i : j + 1]!r} needs a number, got a string")
+                    raise stmt.error(A_MESSAGE, f"#MSG: {element!r} needs a number, got a string")
                 elif conversion in "diuxXo":
                     conv = "d" if conversion in "iu" else conversion
-                    out.append((spec + conv) % math.trunc(value))
+                    piece = (spec + conv) % math.trunc(value)
                 else:
-                    out.append((spec + conversion) % value)
+                    piece = (spec + conversion) % value
             except (ValueError, OverflowError) as exc:
                 raise stmt.error(A_MESSAGE, f"#MSG: cannot format {format_value(value)}: {exc}") from None
+            out.append(piece)
+            length += len(piece)
+            if length > MAX_MESSAGE:
+                break  # said below, without formatting the rest
             i = j + 1
+        if length > MAX_MESSAGE:
+            raise stmt.error(A_STRING_LENGTH, f"#MSG: the message grows beyond {MAX_MESSAGE} characters")
         if used < len(args):
-            raise stmt.error(A_MESSAGE, f"#MSG: {len(args)} values for {used} format(s) in the text")
-        text = "".join(out)
-        if len(text) > MAX_MESSAGE:
-            raise stmt.error(914020, f"#MSG: the message has {len(text)} characters, at most {MAX_MESSAGE}")
-        return text
+            raise stmt.error(A_MSG_VALUES, f"#MSG: {len(args)} values for {used} format(s) in the text")
+        return "".join(out)
 
     def _contour(self, frame: Frame, stmt: Hash) -> ContourDirective:
         """Checks and evaluates ``#CONTOUR MODE``, ``#HSC``, ``#SPLINE`` (M-20..M-23)."""
@@ -516,3 +626,8 @@ class Effects(VariableAccess):
         self._pending.append(Realtime(place, op, ident))
         if op == "START" and ident in self._rt_block_scope:
             self._rt_block_scope[ident] = True  # valid for the next block again (TF5261 444677387)
+
+
+def _shorten(element: str) -> str:
+    """A format element as a message quotes it: its digits cut short when there are many."""
+    return repr(element) if len(element) <= 24 else repr(element[:20] + "..." + element[-1])

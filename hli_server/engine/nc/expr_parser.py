@@ -70,6 +70,9 @@ from hli_server.engine.nc.language import (
 from hli_server.engine.nc.reader import RawBlock, nc_error
 from schemas.external_types import MAX_NESTING
 
+UPPER_LETTERS = frozenset("ABCDEFGHIJKLMNOPQRSTUVWXYZ")
+"""The letters a member name after an index starts with (``V.G.KIN[90].PARAM[0]``)."""
+
 __all__ = [
     "CONSTANT",
     "DIGITS",
@@ -557,6 +560,11 @@ class ExpressionParser:
                 if len(indices) + len(more) > MAX_EXTERNAL_INDICES:
                     self.fail(ALARM_EXPRESSION, f"more than {MAX_EXTERNAL_INDICES} indices")
                 indices += more
+        while kind == KIND_VG and indices and self.peek() == "." and self.peek(1) in UPPER_LETTERS:
+            # V.G.KIN[90].PARAM[12], V.G.KIN[91].AXIS[0].ORIENTATION[1]: a member after an index
+            self.pos += 1
+            name += "." + self.var_name()
+            indices += self.indices()
         return Ref(kind, name, indices, text=self.u[start : self.pos])
 
     def parameter(self) -> Ref:

@@ -10,6 +10,8 @@ statements (``nc/effects.py``, ``nc/control_flow.py`` for ``#IF``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from hli_server.engine.nc import parser as word_parser
 from hli_server.engine.nc.expr import Const, Expr
 from hli_server.engine.nc.expr_parser import NAME_CHARS, ExpressionParser
@@ -103,6 +105,8 @@ class HashParser(ExpressionParser):
             return self.motion_options("SPLINE", prefix=["TYPE"])
         if command in ("CS", "ACS", "ROTATION"):
             return self.coordinates(command)
+        if command in ("KIN ID", "TRAFO", "RTCP", "TOOL ORI", "CYL", "CAXTRACK", "SET AX"):
+            return self.kinematic(command)
         if command == "TIME":
             return self.dwell()
         if command in ("TOOL PREP", "TOOL DATA", "TOOL LIFE"):
@@ -476,6 +480,215 @@ class HashParser(ExpressionParser):
                 f"{self.word_at(self.pos)!r} after #{name} {op}: the command stands alone in its block",
             )
         return Hash(self.raw, self.number, f"{name} {op}", options, args)
+
+    # --- kinematic transformations (issue 35, docs/kinematics.md) -----------------------------------------
+    def kinematic(self, command: str) -> Stmt:
+        """``#KIN ID [[<id>]]``, ``#TRAFO ON|OFF`` (``#RTCP ON|OFF``), ``#TOOL ORI CS [OFF]``, ``#CYL ..``,
+        ``#CAXTRACK ON|OFF [..]``, ``#SET AX [FAST] [<name>, <number>, <index>] ..``: the statement whose
+        ``options`` and ``args``/``params`` ``nc/effects.py`` turns into the decoder's kinematic commands."""
+        options: list[str] = []
+        args: list[Expr] = []
+        params: dict[str, Expr] = {}
+        if command == "KIN ID":
+            self.blanks()
+            if self.peek() == "[":
+                self.pos += 1
+                self.depth += 1
+                args.append(self.expression(stop_at_blank=False))
+                self.expect("]", "after #KIN ID [<id>")
+                self.depth -= 1
+        elif command in ("TRAFO", "RTCP"):
+            word = next((w for w in ("ON", "OFF") if self.keyword(w)), None)
+            if word is None:
+                self.fail(
+                    A_NOT_SIMULATED,
+                    f"#{command} {self.word_at(self.pos) if self.pos < self.n else ''}: simulated are "
+                    f"#{command} "
+                    "ON and OFF (multi-step transformations are not): see docs/nc-language.md",
+                )
+            options.append(word)
+            command = "TRAFO"
+        elif command == "TOOL ORI":
+            if not self.keyword("CS"):
+                self.fail(
+                    A_NOT_SIMULATED, "#TOOL ORI: only #TOOL ORI CS is simulated: see docs/nc-language.md"
+                )
+            command = "TOOL ORI CS"
+            if self.keyword("OFF"):
+                options.append("OFF")
+        elif command == "CYL":
+            self.cylinder(options, params)
+        elif command == "CAXTRACK":
+            self.caxtrack(options, params)
+        else:
+            self.set_axes(options, args)
+        if not self.at_end():
+            self.fail(
+                A_CONTROL_SYNTAX,
+                f"{self.word_at(self.pos)!r} after #{command}: the command stands alone in its block",
+            )
+        return Hash(self.raw, self.number, command, options, args, params=params)
+
+    def _bracket_entries(self, what: str, read: Callable[[str], None]) -> None:
+        """``[KEY=value KEY value, FLAG ..]``: ``read(key)`` reads each entry's value after its key."""
+        self.expect("[", f"after {what}")
+        self.depth += 1
+        while True:
+            self.blanks()
+            if self.peek() == "]":
+                self.pos += 1
+                break
+            if self.peek() == ",":
+                self.pos += 1
+                continue
+            key = self.name()
+            if not key:
+                got = self.word_at(self.pos) if self.pos < self.n else "the end of the block"
+                self.fail(A_CONTROL_SYNTAX, f"{what} [..]: unexpected {got!r}")
+            read(key)
+        self.depth -= 1
+
+    def _key_value(self, what: str, key: str, params: dict[str, Expr]) -> None:
+        """``KEY=<expr>`` or ``KEY <expr>`` (the older spelling, ``ANGLIMIT 1``)."""
+        if key in params:
+            self.fail(A_CONTROL_SYNTAX, f"{what}: {key} given twice")
+        self.blanks()
+        if self.peek() == "=":
+            self.pos += 1
+            self.blanks()
+        if self.at_end() or self.peek() in ("]", ","):
+            self.fail(A_CONTROL_SYNTAX, f"{what}: {key} without a value")
+        params[key] = self.expression(stop_at_blank=True)
+
+    def _axis_name(self, what: str) -> str:
+        self.blanks()
+        if self.peek() == "=":
+            self.pos += 1
+            self.blanks()
+        name = self.name()
+        if not name:
+            self.fail(A_CONTROL_SYNTAX, f"{what}: an axis name expected")
+        return name
+
+    def cylinder(self, options: list[str], params: dict[str, Expr]) -> None:
+        """``#CYL OFF``; ``#CYL [<1st>, <2nd>, <3rd><radius>]`` (kinematic 15); ``#CYL ORI LATERAL
+        [AX1=.. AX2=.. | AXNR1=.. AXNR2=.. RADIUS=..]`` (kinematic 90). ``options``: ``OFF``, ``LATERAL``,
+        ``AX:<name>`` in order; ``params``: ``RADIUS``, ``AXNR1``, ``AXNR2``."""
+        if self.keyword("OFF"):
+            options.append("OFF")
+            return
+        if self.keyword("ORI"):
+            if not self.keyword("LATERAL"):
+                self.fail(
+                    A_NOT_SIMULATED,
+                    "#CYL ORI: only #CYL ORI LATERAL [..] is simulated: see docs/nc-language.md",
+                )
+            options.append("LATERAL")
+            names: dict[str, str] = {}
+
+            def read(key: str) -> None:
+                if key in ("AX1", "AX2"):
+                    names[key] = self._axis_name(f"#CYL ORI LATERAL [{key}")
+                elif key in ("AXNR1", "AXNR2", "RADIUS"):
+                    self._key_value("#CYL ORI LATERAL", key, params)
+                else:
+                    self.fail(
+                        A_CONTROL_SYNTAX,
+                        f"#CYL ORI LATERAL [..]: {key}: AX1=, AX2= (or AXNR1=, AXNR2=), RADIUS=",
+                    )
+
+            self._bracket_entries("#CYL ORI LATERAL", read)
+            options.extend(f"AX:{names[k]}" for k in ("AX1", "AX2") if k in names)
+            return
+        self.expect("[", "after #CYL: #CYL [<1st axis>, <2nd axis>, <3rd axis><radius>] or #CYL OFF")
+        self.depth += 1
+        self.blanks()
+        if self.keyword("RADIUS"):
+            self.fail(
+                A_NOT_SIMULATED,
+                "#CYL [RADIUS=.. LIMIT=..] (the round tube projection, kinematic 78) is not simulated: see "
+                "docs/kinematics.md",
+            )
+        for k in range(3):
+            self.blanks()
+            if k < 2:
+                name = self.name()
+            else:  # <3rd axis><radius>: the name's letters, then the radius (``Z35``, ``Z=35``, ``Z[R]``)
+                start = self.pos
+                while self.pos < self.n and self.u[self.pos].isalpha():
+                    self.pos += 1
+                name = self.u[start : self.pos]
+                self.blanks()
+                if self.peek() == "=":
+                    self.pos += 1
+                    self.blanks()
+            if not name:
+                self.fail(
+                    A_CONTROL_SYNTAX, "#CYL [..]: three axis names, the third with the reference radius"
+                )
+            options.append(f"AX:{name}")
+            self.blanks()
+            if k < 2:
+                self.expect(",", f"after #CYL's axis {name}")
+        params["RADIUS"] = self.expression(stop_at_blank=False)
+        self.expect("]", "after #CYL [..")
+        self.depth -= 1
+
+    def caxtrack(self, options: list[str], params: dict[str, Expr]) -> None:
+        """``#CAXTRACK ON [ANGLIMIT=.. OFFSET=.. AX=<name> | AXNR=.. ..]``, ``#CAXTRACK OFF [ANGPOS=..]``."""
+        on = self.keyword("ON")
+        if not on and not self.keyword("OFF"):
+            self.fail(A_CONTROL_SYNTAX, "#CAXTRACK: ON or OFF expected")
+        options.append("ON" if on else "OFF")
+        self.blanks()
+        if self.at_end():
+            return
+        keys = ("ANGLIMIT", "OFFSET", "AXNR", "OPTALIGN", "ROTMODE", "SCALEFACT") if on else ("ANGPOS",)
+
+        def read(key: str) -> None:
+            if on and key == "AX":
+                options.append("AX:" + self._axis_name("#CAXTRACK ON [AX"))
+            elif on and key == "START_STROKE":
+                options.append(key)
+            elif key in keys:
+                self._key_value(f"#CAXTRACK {options[0]}", key, params)
+            else:
+                self.fail(A_CONTROL_SYNTAX, f"#CAXTRACK {options[0]} [..]: {key}: " + ", ".join(keys))
+
+        self._bracket_entries(f"#CAXTRACK {options[0]}", read)
+
+    def set_axes(self, options: list[str], args: list[Expr]) -> None:
+        """``#SET AX [FAST] [<name>, <number>, <index>] ..``: ``options`` the names (``AX:<name>``) and
+        ``FAST``; ``args`` each entry's number and index expressions."""
+        if self.keyword("FAST"):
+            options.append("FAST")
+        while True:
+            self.blanks()
+            if self.at_end():
+                break
+            self.expect("[", "around an axis of #SET AX [<name>, <number>, <index>]")
+            self.depth += 1
+            self.blanks()
+            name = self.name()
+            if not name or name[0] not in "ABCQUVWXYZ":
+                self.fail(
+                    A_CONTROL_SYNTAX,
+                    "#SET AX [<name>, ..]: an axis name starts with A, B, C, Q, U, V, W, X, Y or Z",
+                )
+            options.append(f"AX:{name}")
+            for what in ("logical axis number", "axis index"):
+                self.expect(",", f"before the {what} of #SET AX [{name}, ..]")
+                args.append(self.expression(stop_at_blank=False))
+            self.blanks()
+            if self.peek() == ",":
+                self.fail(
+                    A_NOT_SIMULATED,
+                    f"#SET AX [{name}, ..]: the axis' options are not simulated: see docs/kinematics.md",
+                )
+            self.expect("]", f"after #SET AX [{name}, <number>, <index>")
+            self.depth -= 1
+        if not any(o.startswith("AX:") for o in options):
+            self.fail(A_CONTROL_SYNTAX, "#SET AX without its axes [<name>, <number>, <index>]")
 
     def components(self, what: str) -> list[Expr]:
         """``[a, , c]``: up to six values, a gap is 0."""

@@ -80,6 +80,13 @@ A_RT_ID: Final = 22003
 A_APPROXIMATED: Final = 911041
 """Warning: a construct that only shapes the path runs approximated within a documented tolerance (once per
 program and construct; docs/nc-language.md, "Refusals and approximations")."""
+A_MSG_VALUES: Final = 20721
+"""#MSG: the number of values does not match the format elements (the kernel's ID 20721)."""
+A_MSG_FORMAT: Final = 21232
+"""#MSG: an unknown format element (the kernel's ID 21232)."""
+A_STRING_LENGTH: Final = 21870
+"""A string exceeds its maximum length (the kernel's ID 21870): a #MSG text, or a format element's width
+or precision that would make it so."""
 
 MAX_EXPRESSION_DEPTH: Final = 64
 """Brackets and operators nested deeper than this are alarm 914020 (a bounded recursion)."""
@@ -327,10 +334,7 @@ MOTION_FUNCTIONS: Final[dict[str, str]] = {
     "TRC": "tool radius compensation options (#TRC)",
 }
 """Motion functions not simulated (N-08): refused by name with 910110 (docs/nc-language.md)."""
-REFUSED_HASH: Final[dict[str, str]] = {
-    "KIN": "kinematic transformations (#KIN)",
-    "TRAFO": "kinematic transformations (#TRAFO)",
-}
+REFUSED_HASH: Final[dict[str, str]] = {}
 """Refused with their own message (M-26): docs/nc-language.md says what simulating them
 would take."""
 
@@ -391,7 +395,7 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
     "CONTOUR": _kernel("CONTOUR", ("MODE",)),
     "HSC": _SIMULATED,
     "SPLINE": _SIMULATED,
-    "SET": _kernel("SET", ("SPLINETYPE", "SPLINE", "ASPLINE")),
+    "SET": _kernel("SET", ("SPLINETYPE", "SPLINE", "ASPLINE", "AX")),
     "CS": _SIMULATED,
     "ACS": _SIMULATED,
     "ROTATION": _SIMULATED,
@@ -400,8 +404,14 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
     "FILTER": _SIMULATED,
     "RT": _kernel("RT", ("CYCLE",)),
     "FRC": _SIMULATED,
-    "TOOL": _kernel("TOOL", ("PREP", "DATA", "LIFE")),
     "IDENT": _kernel("IDENT", ("WR", "RD")),
+    # kinematic transformations (issue 35, docs/kinematics.md): directives for the decoder
+    "KIN": _kernel("KIN", ("ID",)),
+    "TRAFO": _SIMULATED,
+    "RTCP": _SIMULATED,
+    "TOOL": _kernel("TOOL", ("PREP", "DATA", "LIFE", "ORI")),
+    "CYL": _SIMULATED,
+    "CAXTRACK": _SIMULATED,
     # the logical-block reader's (nc/reader.py): met here only where they are misplaced
     "VAR": HashRule(
         (), A_DECLARATION, "#VAR must stand alone on its line; the declarations follow on the next lines"

@@ -34,6 +34,7 @@ from hli_server.engine.nc.expr import (
     as_number,
     format_value,
 )
+from hli_server.engine.nc.kinematic_commands import KinParamWrite
 from hli_server.engine.nc.language import (
     A_CYCLE_PARAMETER,
     A_DECLARATION,
@@ -318,6 +319,9 @@ class VariableAccess(InterpreterState):
                 index = int(as_number(ref.number.evaluate(self), ref.text))
                 frame.params[index] = as_number(value, ref.text)
                 return None
+            if kind == KIND_VG and ref.name.startswith("KIN."):
+                self._pending.append(self._kinematic_write(frame, stmt, ref, value))
+                return None
             if kind == KIND_VG and not ref.indices and ref.name in TOOL_WRITES:
                 number = as_number(value, ref.text)
                 self._pending.append(ToolWrite(self._place_block(frame, stmt), TOOL_WRITES[ref.name], number))
@@ -327,6 +331,44 @@ class VariableAccess(InterpreterState):
             raise EvalError(A_READ_ONLY, f"{ref.text} is read-only")
         except EvalError as exc:
             raise stmt.error(exc.alarm, exc.message) from None
+
+    def _kinematic_write(self, frame: Frame, stmt: Stmt, ref: Ref, value: Value) -> KinParamWrite:
+        """``V.G.KIN[<id>].PARAM[<i>] = ..`` and the Universal Kinematics' named parameters
+        (``ZERO_ORIENTATION[l]``, ``ZERO_POSITION[l]``, ``NUMBER_OF_AXES``, ``AXIS[k].TYPE``,
+        ``AXIS[k].ORIENTATION[l]``, ``AXIS[k].POINT[l]``: PARAM[0..48] as TF5240 lays them out,
+        https://infosys.beckhoff.com/content/1033/tf5240_universal_kinematic/882078603.html): a parameter of a
+        kinematic data set, in program order (docs/kinematics.md)."""
+        index = self._indices(ref)
+        member = ref.name[4:]
+        starts = {
+            "PARAM": 0,
+            "ZERO_ORIENTATION": 0,
+            "ZERO_POSITION": 3,
+            "AXIS.ORIENTATION": 8,
+            "AXIS.POINT": 11,
+        }
+        arity = {"NUMBER_OF_AXES": 1, "AXIS.TYPE": 2, "AXIS.ORIENTATION": 3, "AXIS.POINT": 3}.get(member, 2)
+        if (
+            (member not in starts and arity == 2)
+            or len(index) != arity
+            or any(i != int(i) or i < 0 for i in index)
+        ):
+            raise EvalError(
+                A_READ_ONLY,
+                f"{ref.text}: the kinematic parameters written are V.G.KIN[<id>].PARAM[<i>] (and the "
+                "Universal "
+                "Kinematics' ZERO_ORIENTATION[l], ZERO_POSITION[l], NUMBER_OF_AXES, AXIS[k].TYPE, "
+                "AXIS[k].ORIENTATION[l], AXIS[k].POINT[l])",
+            )
+        if member == "NUMBER_OF_AXES":
+            param = 6
+        elif member == "AXIS.TYPE":
+            param = 7 + 7 * int(index[1])
+        elif arity == 3:
+            param = starts[member] + 7 * int(index[1]) + int(index[2])
+        else:
+            param = starts[member] + int(index[1])
+        return KinParamWrite(self._place_block(frame, stmt), int(index[0]), param, as_number(value, ref.text))
 
     # --- V.E. (N-05): elementary, STRING, a structure's elements ----------------------------------------
     def _external_spec(self, ref: Ref) -> ExternalVarSpec:

@@ -34,6 +34,8 @@ class ToolData:
     length: float = 0.0
     radius: float = 0.0
     tool: int | None = None
+    kin_id: int = 0
+    """P-TOOL-00011: the kinematic the tool selects (0: none)."""
 
 
 @dataclass(slots=True)

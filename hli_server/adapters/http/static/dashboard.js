@@ -207,6 +207,8 @@ function channelCard(ch) {
       el("dt", { text: "active block" }), el("dd", { id: id("block"), text: "-" }),
       el("dt", { text: "holds" }), el("dd", { id: id("holds"), text: "-" }),
       el("dt", { text: "override" }), el("dd", { id: id("override-state"), text: "-" }),
+      el("dt", { text: "kinematics" }), el("dd", { id: id("kinematic"), text: "-" }),
+      el("dt", { text: "tool tip (TCP)" }), el("dd", { id: id("tcp"), text: "-" }),
     ),
     el("div", { class: "controls" },
       el("span", { class: "group" }, programSelect,
@@ -548,6 +550,9 @@ function showNumbers(s) {
     setText(id("block"), ch.block ? `${ch.block} (line ${ch.line})` : "-");
     setText(id("holds"), ch.holds.length ? ch.holds.join(", ") : "none");
     setText(id("override-state"), ch.override_percent === null ? "-" : `${ch.override_percent} %${ch.feedhold ? ", feedhold" : ""}`);
+    const kin = ch.kinematic;
+    setText(id("kinematic"), !kin ? "-" : kin.active ? `ID ${kin.id} on (#TRAFO ON)` : "off");
+    setText(id("tcp"), !kin ? "-" : kin.tool_tip_mm.map((v) => num(v, 3)).join(" / ") + " mm");
     c.feedhold = Boolean(ch.feedhold);
     id("feedhold").classList.toggle("on", c.feedhold);
     id("auto").classList.toggle("on", ch.mode === "automatic");
