@@ -50,6 +50,7 @@ from typing import TYPE_CHECKING, Any, Literal, TypeVar, cast
 from hli_server.testing.transports import open_transport
 from schemas.layout import Direction, Layout
 from schemas.results import CommFault, ProgramLoaded
+from schemas.units import increments_from_mm, mm_from_increments
 
 if TYPE_CHECKING:
     from hli_server.adapters.host import OperatorPort, Value
@@ -568,6 +569,18 @@ class Harness(_Programs):
         if self._operator is None:
             raise HarnessError("the harness is not started")
         return cast("OperatorPort", self._operator)
+
+    def set_probe_deviation(self, channel: int = 1, **axes_mm: float) -> dict[str, float]:
+        """Where the simulated workpiece of the built-in measuring cycles lies off its nominal position,
+        per axis in mm (``hli.set_probe_deviation(X=0.2, Y=-0.1)``; docs/cycles.md). An axis that the machine
+        file gives a V.E. variable has that variable written, as the PLC would. Returns the deviation now."""
+        self.operator.set_probe_deviation(channel, {k: increments_from_mm(v) for k, v in axes_mm.items()})
+        return self.probe_deviation(channel)
+
+    def probe_deviation(self, channel: int = 1) -> dict[str, float]:
+        """The simulated workpiece's deviation per axis [mm]."""
+        raw = self.operator.probe_deviation(channel)["deviation"]
+        return {k: mm_from_increments(v) for k, v in raw.items()}
 
     def step(self, cycles: int = 1) -> int:
         """Run ``cycles`` cycles now; returns the machine's cycle counter."""
