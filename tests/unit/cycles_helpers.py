@@ -79,6 +79,8 @@ class FakeContext:
     # --- the machine ---
     def apply(self, block: Block) -> None:
         self.blocks.append(block)
+        if 4 in block.g_codes:  # a dwell: its X is the time
+            return
         target = list(self.at)
         for name, value in block.axes:
             target[("X", "Y", "Z").index(name)] = value
@@ -96,9 +98,7 @@ class FakeContext:
         self.at = end
 
 
-def run_standin(
-    name: str, params: Mapping[int, ParamValue], ctx: FakeContext, line: int = 1
-) -> FakeContext:
+def run_standin(name: str, params: Mapping[int, ParamValue], ctx: FakeContext, line: int = 1) -> FakeContext:
     spec = find(name)
     assert isinstance(spec, StandIn), name
     for block in Cycle(spec, params, ctx, line).blocks():

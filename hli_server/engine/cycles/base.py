@@ -144,6 +144,12 @@ class Cycle:
         ]
         return " ".join(words)
 
+    @staticmethod
+    def _round(p: Vec3) -> Vec3:
+        """A target as the block's text will hold it (to 1 nm): the probe's contact is computed on the
+        line the block really programs."""
+        return (round(p[0], 6), round(p[1], 6), round(p[2], 6))
+
     def rapid(self, target: Vec3) -> Iterator[Block]:
         """A positioning move at rapid traverse (G00); near the workpiece a measuring stand-in positions
         at its positioning feed instead, watching for a collision (:meth:`position`)."""
@@ -172,12 +178,15 @@ class Cycle:
         self.at = target
 
     def dwell(self, seconds: float) -> Iterator[Block]:
-        if seconds > 0.0:
-            yield self._parse(f"G04 {fmt(seconds)}")
+        if seconds > 0.0:  # the time by the first main axis (PM 206132747)
+            yield self._parse(
+                f"G04 {self.x_axis if len(self.x_axis) == 1 else self.x_axis + '='}{fmt(seconds)}"
+            )
 
     def position(self, target: Vec3) -> Iterator[Block]:
         """A positioning move of a measuring cycle (positioning feed). Where it would run into the
         simulated workpiece it is a measuring move, and a probe signal on it is error 13414."""
+        target = self._round(target)
         if self._words(target) == "":
             return
         touch = self._touch(self.at, target)
@@ -202,6 +211,7 @@ class Cycle:
         """A measuring move (G100, measuring feed) toward ``target``; ``feature`` is what the simulated
         probe touches. :meth:`contact` then tells where the probe signal came."""
         start = self.at
+        target = self._round(target)
         touch = first_touch(shifted(feature, self.ctx.deviation()), start, target, self.ball)
         if isinstance(feature, Spigot | Sphere) and feature not in self.obstacles:
             # bounded solids only: a face or a bore has no known top, the stand-in cannot tell whether a

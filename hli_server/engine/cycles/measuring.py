@@ -47,7 +47,10 @@ P10 = Param(10, "shift of the result along Y", default=0.0)
 P11 = Param(11, "shift of the result along Z", default=0.0)
 P12 = Param(12, "reference angle [deg]: output = computed C - @P12", default=0.0)
 P13 = Param(
-    13, "safety clearance for pre-positioning [mm]", default_text="probe diameter", check="nonnegative"
+    13,
+    "safety clearance for pre-positioning [mm]",
+    default_text="probe diameter (at least 1)",
+    check="nonnegative",
 )
 P33 = Param(33, "crossover range beyond the expected edge [mm]", default=_CROSSOVER, check="nonnegative")
 P39 = Param(39, "the coordinate system (#CS) to write, 1..10", required=True, low=1.0, high=10.0, alarm=13448)
@@ -55,6 +58,22 @@ P39 = Param(39, "the coordinate system (#CS) to write, 1..10", required=True, lo
 
 def _path(number: int, axis: str) -> Param:
     return Param(number, f"measuring path along {axis} (incremental, signed)", required=True, check="nonzero")
+
+
+def safety(c: Cycle) -> float:
+    """@P13, by default the probe's diameter; at least 1 mm for the simulated probe of radius 0 (a point),
+    which would otherwise pre-position on the very surface."""
+    return c.args.num(13, max(2.0 * c.ball, 1.0))
+
+
+def _fit(c: Cycle, points: list[tuple[float, float]], what: str) -> tuple[tuple[float, float], float]:
+    try:
+        return fit_circle(points)
+    except ValueError:
+        raise CycleError(
+            A_INVALID,
+            f"{c.spec.name}: the touches on the {what} give no circle (check the angles and the probe)",
+        ) from None
 
 
 def _margin(path: float) -> float:
@@ -195,22 +214,28 @@ def probe_hole(
     the measured centre (at the current height) and diameter."""
     a = c.args
     radius = diameter / 2.0
+    if c.ball >= radius:
+        raise CycleError(
+            A_INVALID,
+            f"{c.spec.name}: the probe (radius {fmt(c.ball)}) does not fit the hole @P2 = {fmt(diameter)}",
+            2,
+        )
     crossover = a.num(33)
-    safety = a.num(13, -1.0)
+    clearance = a.num(13, -1.0)
     hole = Hole(centre, radius)
     ring: list[tuple[float, float]] = []
     for angle in angles:
         u = (math.cos(math.radians(angle)), math.sin(math.radians(angle)))
         reach = radius - c.ball
-        if safety >= 0.0:
-            pre = max(0.0, reach - safety)
+        if clearance >= 0.0:
+            pre = max(0.0, reach - clearance)
             yield from c.position(_add(centre, u[0] * pre, u[1] * pre, 0.0))
         far = reach + crossover
         yield from c.measure(_add(centre, u[0] * far, u[1] * far, 0.0), hole)
         tip = c.contact()
         ring.append((tip[0], tip[1]))
         yield from c.position(centre)
-    (cx, cy), rho = fit_circle(ring)
+    (cx, cy), rho = _fit(c, ring, "hole")
     return (cx, cy, centre[2]), 2.0 * (rho + c.ball)
 
 
@@ -222,15 +247,15 @@ def probe_spigot(
     and diameter. The simulated spigot's top lies half the safety clearance below ``centre``."""
     a = c.args
     radius = diameter / 2.0
-    safety = a.num(13, 2.0 * c.ball)
+    clearance = safety(c)
     crossover = a.num(33)
-    spigot = Spigot(centre, radius, centre[2] - safety / 2.0)
+    spigot = Spigot(centre, radius, centre[2] - clearance / 2.0)
     if spigot not in c.obstacles:
         c.obstacles.append(spigot)
     ring: list[tuple[float, float]] = []
     for angle in angles:
         u = (math.cos(math.radians(angle)), math.sin(math.radians(angle)))
-        out = radius + c.ball + safety
+        out = radius + c.ball + clearance
         above = _add(centre, u[0] * out, u[1] * out, 0.0)
         yield from c.position(above)
         beside = _add(above, 0.0, 0.0, depth)
@@ -242,7 +267,7 @@ def probe_spigot(
         yield from c.position(beside)
         yield from c.position(above)
     yield from c.position(centre)
-    (cx, cy), rho = fit_circle(ring)
+    (cx, cy), rho = _fit(c, ring, "spigot")
     return (cx, cy, centre[2]), 2.0 * (rho - c.ball)
 
 
@@ -291,11 +316,7 @@ def _spigot_run(points: int, fixed: bool, depth_param: int, depth_default: bool)
             require_distinct(c.spec.name, angles, [14, 15, 16])
         else:
             angles = _angles(points, a.num(14), a.num(15))
-        safety = a.num(13, 2.0 * c.ball)
-        if a.given(depth_param):
-            depth = a.num(depth_param)
-        else:
-            depth = -(safety / 2.0 + _BELOW_TOP)
+        depth = a.num(depth_param) if a.given(depth_param) else -(safety(c) / 2.0 + _BELOW_TOP)
         found, diameter = yield from probe_spigot(c, start, a.num(2), angles, depth)
         _circle_results(c, found, diameter)
         c.write_zero_offset(zo, {c.x_axis: found[0] + a.num(9), c.y_axis: found[1] + a.num(10)})
@@ -383,7 +404,7 @@ def probe_sphere(
     a = c.args
     radius = diameter / 2.0
     crossover = a.num(33, radius / 2.0)
-    safety = a.num(13, 2.0 * c.ball)
+    clearance = safety(c)
     top_tip = start[2] - (abs(path) - _margin(path))
     sphere = Sphere((start[0], start[1], top_tip - radius), radius)
     yield from c.measure(_add(start, 0.0, 0.0, -abs(path)), sphere)
@@ -395,7 +416,7 @@ def probe_sphere(
     for k in range(4):
         angle = math.radians(first + k * step)
         u = (math.cos(angle), math.sin(angle))
-        out = radius + c.ball + safety
+        out = radius + c.ball + clearance
         above = _add(start, u[0] * out, u[1] * out, 0.0)
         yield from c.position(above)
         beside = _with(above, 2, ring_tip)
@@ -407,7 +428,10 @@ def probe_sphere(
         yield from c.position(beside)
         yield from c.position(above)
     yield from c.position(start)
-    centre, reach = sphere_from_ring(c.centre_of(touched), ring, ring_tip + c.ball)
+    try:
+        centre, reach = sphere_from_ring(c.centre_of(touched), ring, ring_tip + c.ball)
+    except ValueError:
+        raise CycleError(A_INVALID, f"{c.spec.name}: the touches on the sphere give no sphere") from None
     return (centre[0], centre[1], centre[2]), 2.0 * (reach - c.ball)
 
 
@@ -523,12 +547,7 @@ def _calib_ring(c: Cycle) -> Iterator[Block]:
         tip = c.contact()
         points.append((tip[0], tip[1]))
         yield from c.position(start)
-    try:
-        _, rho = fit_circle(points)
-    except ValueError:
-        raise CycleError(
-            A_INVALID, f"{c.spec.name}: the probing angles @P14/@P15 give no circle", 15
-        ) from None
+    _, rho = _fit(c, points, "ring")
     c.result("SysRetToolRadius", radius - rho)
     c.result("SysRetOffsetX", 0.0)
     c.result("SysRetOffsetY", 0.0)

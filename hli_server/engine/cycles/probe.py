@@ -181,9 +181,9 @@ def _spigot(f: Spigot, s: Vec3, d: Vec3, ball: float) -> float | None:
 def _sphere(f: Sphere, s: Vec3, d: Vec3, ball: float) -> float | None:
     reach = f.radius + ball
     o = (s[0] - f.centre[0], s[1] - f.centre[1], s[2] - f.centre[2])
-    c = _dot(o, o) - reach * reach
-    if c < -_INSIDE:
+    if math.sqrt(_dot(o, o)) < reach - _INSIDE:
         return 0.0
+    c = _dot(o, o) - reach * reach
     roots = _roots(_dot(d, d), 2.0 * _dot(o, d), c)
     if roots is None or roots[0] < -_EPS:
         return None
