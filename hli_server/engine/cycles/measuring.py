@@ -41,6 +41,7 @@ P7 = Param(
     7,
     "zero offset to write: 1..9 (G159=n), 54..59 (G54..G59); absent: measure only; only with G53 active",
     alarm=13408,
+    rule="1..6 or 54..59 simulated (7..9, 53: 910110); writing needs G53 at the call (else 14421)",
 )
 P9 = Param(9, "shift of the result along X", default=0.0)
 P10 = Param(10, "shift of the result along Y", default=0.0)
@@ -559,10 +560,10 @@ _FACE = "measured value of the workpiece"
 MEASURING: tuple[StandIn, ...] = (
     _faces_spec(1, "Measure in X axis", "303455883.html", True, False, False),
     _faces_spec(2, "Measure in Y axis", "349450763.html", False, True, False),
-    _faces_spec(3, "Measure in Z axis", "303455883.html", False, False, True),
+    _faces_spec(3, "Measure in Z axis (by analogy with SysMeasWcs1)", "322102027.html", False, False, True),
     _faces_spec(4, "Measure in X and Y axes", "303480843.html", True, True, False),
     _faces_spec(5, "Measure in X and Z axes", "303491467.html", True, False, True),
-    _faces_spec(6, "Measure in Y and Z axes", "303491467.html", False, True, True),
+    _faces_spec(6, "Measure in Y and Z axes (by analogy with SysMeasWcs5)", "322102027.html", False, True, True),
     _faces_spec(7, "Measure in X, Y and Z axes", "303507595.html", True, True, True),
     _spec(
         "SysMeasWcs8.ecy",

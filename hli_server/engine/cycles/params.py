@@ -46,6 +46,8 @@ class Param:
     alarm: int = 0
     text: bool = False
     """A string parameter (a reference cycle's name, ``@P100 = "SysDrillDeepHole"``)."""
+    rule: str = ""
+    """What the cycle checks beyond the fields above, for docs/cycles.md."""
 
     @property
     def default_doc(self) -> str:
@@ -70,6 +72,8 @@ class Param:
             parts.append(f"{_fmt(self.low)} .. {_fmt(self.high)}")
         if self.text:
             parts.append("a string")
+        if self.rule:
+            parts.append(self.rule)
         return "; ".join(parts) if parts else "-"
 
 
