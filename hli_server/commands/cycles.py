@@ -23,7 +23,8 @@ def _standin(spec: StandIn) -> list[str]:
     for p in sorted(spec.params, key=lambda p: p.number):
         alarm = str(p.alarm) if p.alarm else "917000"
         lines.append(
-            f"| {p.number} | {p.meaning} | {'yes' if p.required else '-'} | {p.default_doc} | {p.rule_doc} | {alarm} |"
+            f"| {p.number} | {p.meaning} | {'yes' if p.required else '-'} | {p.default_doc} | {p.rule_doc} | "
+            f"{alarm} |"
         )
     if spec.outputs:
         lines += ["", "| output | value |", "|---|---|"]

@@ -202,7 +202,8 @@ class Cycle:
             hit = _lerp(start, target, measured)
             raise CycleError(
                 A_COLLISION,
-                f"{self.spec.name}: collision on positioning, please check your motion range: the probe touched "
+                f"{self.spec.name}: collision on positioning, please check your motion range: the probe "
+                f"touched "
                 f"the workpiece at X{fmt(hit[0])} Y{fmt(hit[1])} Z{fmt(hit[2])} on the way to "
                 f"X{fmt(target[0])} Y{fmt(target[1])} Z{fmt(target[2])}",
             )
@@ -234,7 +235,8 @@ class Cycle:
         if fraction is None:
             raise CycleError(
                 A_NO_WORKPIECE,
-                f"{self.spec.name}: no workpiece detected, please check your measuring section: the measuring "
+                f"{self.spec.name}: no workpiece detected, please check your measuring section: the "
+                f"measuring "
                 f"move from X{fmt(start[0])} Y{fmt(start[1])} Z{fmt(start[2])} to X{fmt(target[0])} "
                 f"Y{fmt(target[1])} Z{fmt(target[2])} ended without a probe signal",
             )
@@ -281,7 +283,8 @@ class Cycle:
         if active is not None:
             raise CycleError(
                 14421,
-                f"{self.spec.name}: changing an active zero offset ({active}) is not permitted: writing {name} "
+                f"{self.spec.name}: changing an active zero offset ({active}) is not permitted: writing "
+                f"{name} "
                 "(@P7) needs G53 active at the cycle call",
                 7,
             )

@@ -60,7 +60,8 @@ def drill_depth(c: Cycle) -> float:
         if c.ball <= 0.0:
             raise CycleError(
                 A_INVALID,
-                f"{c.spec.name}: @P87 (point angle) needs the drill's radius from the tool data; the active D has "
+                f"{c.spec.name}: @P87 (point angle) needs the drill's radius from the tool data; the active "
+                f"D has "
                 "radius 0",
                 87,
             )
@@ -91,7 +92,8 @@ def _check_planes(c: Cycle) -> None:
     if a.num(2) < a.num(1) + a.num(3):
         raise CycleError(
             A_INVALID,
-            f"{c.spec.name}: the retraction plane @P2 = {fmt(a.num(2))} lies below the reference plane plus the safety "
+            f"{c.spec.name}: the retraction plane @P2 = {fmt(a.num(2))} lies below the reference plane plus "
+            f"the safety "
             f"clearance ({fmt(a.num(1) + a.num(3))})",
             2,
         )
@@ -169,7 +171,8 @@ def _deep_hole(c: Cycle) -> Iterator[Block]:
     else:
         raise CycleError(
             13103,
-            f"{c.spec.name}: number of infeeds not defined: pass @P11 (number of infeeds) or @P10 (infeed depth)",
+            f"{c.spec.name}: number of infeeds not defined: pass @P11 (number of infeeds) or @P10 (infeed "
+            f"depth)",
             11,
         )
     feed = a.num(132, feed_at_call(c))
@@ -246,7 +249,8 @@ DRILLING: tuple[StandIn, ...] = (
         ),
         (),
         _deep_hole,
-        "infeeds of @P4/@P11 (or @P10): after each back by @P61 (chip breaking) or out to @P1+@P3 and back to @P61 above the last depth (evacuation); dwell, retract",
+        "infeeds of @P4/@P11 (or @P10): after each back by @P61 (chip breaking) or out to @P1+@P3 and back "
+        "to @P61 above the last depth (evacuation); dwell, retract",
     ),
     StandIn(
         "SysDrillReaming.ecy",
@@ -280,7 +284,8 @@ DRILLING: tuple[StandIn, ...] = (
         ),
         (),
         _boring,
-        "rapid to @P2 and @P1+@P3, feed to the depth, dwell; retract rapid, at feed, or (@P92 = 2) first @P93 sideways toward @P62 and @P94 up",
+        "rapid to @P2 and @P1+@P3, feed to the depth, dwell; retract rapid, at feed, or (@P92 = 2) first "
+        "@P93 sideways toward @P62 and @P94 up",
     ),
 )
 
@@ -292,7 +297,8 @@ def _reference(c: Cycle) -> StandIn:
     if name is None:
         raise CycleError(
             14346,
-            f"{c.spec.name}: reference cycle is not defined or incorrect: @P100 must name the drilling cycle as a string",
+            f"{c.spec.name}: reference cycle is not defined or incorrect: @P100 must name the drilling cycle "
+            f"as a string",
             100,
         )
     spec = _BY_NAME.get(name.strip().casefold().removesuffix(".ecy"))
@@ -300,7 +306,8 @@ def _reference(c: Cycle) -> StandIn:
         known = ", ".join(s.name.removesuffix(".ecy") for s in DRILLING)
         raise CycleError(
             14346,
-            f'{c.spec.name}: reference cycle is not defined or incorrect: @P100 = "{name}"; the stand-in patterns run {known}',
+            f'{c.spec.name}: reference cycle is not defined or incorrect: @P100 = "{name}"; '
+            f"the stand-in patterns run {known}",
             100,
         )
     return spec
@@ -385,6 +392,7 @@ PATTERNS: tuple[StandIn, ...] = (
         ),
         (),
         _pattern_circle,
-        "for each position on the circle: rapid to the reference cycle's @P2, to the position, the reference cycle",
+        "for each position on the circle: rapid to the reference cycle's @P2, to the position, the reference "
+        "cycle",
     ),
 )

@@ -2,7 +2,8 @@
 
 * :func:`fit_circle`: the circle through measured points (three or more, least squares; exact for points
   that lie on a circle);
-* :func:`sphere_from_ring`: a sphere's centre and radius from a touch on its top and a ring of lateral touches;
+* :func:`sphere_from_ring`: a sphere's centre and radius from a touch on its top and a ring of lateral
+  touches;
 * :func:`frame_angles`: the rotation between a nominal and a measured triangle as the kernel's ZYX angles;
 * :func:`line_points`, :func:`circle_points`, :func:`frame_points`, :func:`grid_points`: the drilling
   patterns' positions (TF5293 SysDrillPattern*);

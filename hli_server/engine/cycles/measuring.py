@@ -191,7 +191,8 @@ def _faces_spec(number: int, title: str, page: str, x: bool, y: bool, z: bool) -
     moves = (
         f"probes {', '.join(names)} from the start"
         + (
-            ": Z over the top (start + @P17/@P18), the lateral faces below it (start + @P19), each from beside the corner"
+            ": Z over the top (start + @P17/@P18), the lateral faces below it (start + @P19), each from "
+            "beside the corner"
             if several
             else ""
         )
@@ -512,7 +513,8 @@ def _cs1_run(c: Cycle) -> Iterator[Block]:
     _check_cs(c)
     c.ctx.warn(
         A_APPROXIMATED,
-        f"{c.spec.name}: manual teach-in is an operator's dialogue on the kernel; the stand-in takes the tool "
+        f"{c.spec.name}: manual teach-in is an operator's dialogue on the kernel; the stand-in takes the "
+        f"tool "
         "tip's position at the call (plus the probe deviation) as the taught origin and no rotation",
     )
     dev = c.ctx.deviation()
@@ -563,7 +565,9 @@ MEASURING: tuple[StandIn, ...] = (
     _faces_spec(3, "Measure in Z axis (by analogy with SysMeasWcs1)", "322102027.html", False, False, True),
     _faces_spec(4, "Measure in X and Y axes", "303480843.html", True, True, False),
     _faces_spec(5, "Measure in X and Z axes", "303491467.html", True, False, True),
-    _faces_spec(6, "Measure in Y and Z axes (by analogy with SysMeasWcs5)", "322102027.html", False, True, True),
+    _faces_spec(
+        6, "Measure in Y and Z axes (by analogy with SysMeasWcs5)", "322102027.html", False, True, True
+    ),
     _faces_spec(7, "Measure in X, Y and Z axes", "303507595.html", True, True, True),
     _spec(
         "SysMeasWcs8.ecy",
@@ -583,7 +587,8 @@ MEASURING: tuple[StandIn, ...] = (
         ),
         _CIRCLE_OUT,
         _hole_run(4, True, False),
-        "inside the hole at the measuring height: four touches outward at 0/90/180/270 deg, back to the centre after each",
+        "inside the hole at the measuring height: four touches outward at 0/90/180/270 deg, back to the "
+        "centre after each",
     ),
     _spec(
         "SysMeasWcs9.ecy",
@@ -604,7 +609,8 @@ MEASURING: tuple[StandIn, ...] = (
         ),
         _CIRCLE_OUT,
         _hole_run(3, False, False),
-        "inside the hole: three touches outward at @P14/@P15/@P16 (must differ), back to the centre after each",
+        "inside the hole: three touches outward at @P14/@P15/@P16 (must differ), back to the centre after "
+        "each",
     ),
     _spec(
         "SysMeasWcs10.ecy",
@@ -621,7 +627,8 @@ MEASURING: tuple[StandIn, ...] = (
         ),
         _CIRCLE_OUT,
         _spigot_run(4, True, 19, False),
-        "centrally above the spigot: for 0/90/180/270 deg out beside it, down by @P19, a touch toward its axis, back out and up",
+        "centrally above the spigot: for 0/90/180/270 deg out beside it, down by @P19, a touch toward its "
+        "axis, back out and up",
     ),
     _spec(
         "SysMeasWcs11.ecy",
@@ -680,7 +687,8 @@ MEASURING: tuple[StandIn, ...] = (
         ),
         (Output("SysRetC", "angle of the line point -> spigot centre to X+, less @P12 [deg]"),),
         _point_spigot(1),
-        "down by @P22, a touch along X (@P4), up; by @P17/@P18/@P19 above the spigot; four points round it at depth @P22",
+        "down by @P22, a touch along X (@P4), up; by @P17/@P18/@P19 above the spigot; four points round it "
+        "at depth @P22",
     ),
     _spec(
         "SysMeasWcs27.ecy",
@@ -700,7 +708,8 @@ MEASURING: tuple[StandIn, ...] = (
         ),
         (Output("SysRetC", "angle of the line point -> spigot centre to X+, less @P12 [deg]"),),
         _point_spigot(0),
-        "down by @P22, a touch along Y (@P5), up; by @P17/@P18/@P19 above the spigot; four points round it at depth @P22",
+        "down by @P22, a touch along Y (@P5), up; by @P17/@P18/@P19 above the spigot; four points round it "
+        "at depth @P22",
     ),
     _spec(
         "SysMeasWcs36.ecy",
@@ -739,7 +748,8 @@ MEASURING: tuple[StandIn, ...] = (
         ),
         _CIRCLE_OUT,
         _spigot_run(3, False, 19, True),
-        "centrally above the spigot: three points from @P14 in steps of @P15 (out, down, toward the axis, back)",
+        "centrally above the spigot: three points from @P14 in steps of @P15 (out, down, toward the axis, "
+        "back)",
     ),
     _spec(
         "SysMeasWcs39.ecy",
@@ -761,7 +771,8 @@ MEASURING: tuple[StandIn, ...] = (
         ),
         _CIRCLE_OUT,
         _spigot_run(4, False, 19, True),
-        "centrally above the spigot: four points from @P14 in steps of @P15 (out, down, toward the axis, back)",
+        "centrally above the spigot: four points from @P14 in steps of @P15 (out, down, toward the axis, "
+        "back)",
     ),
     _spec(
         "SysMeasWcs40.ecy",
@@ -783,7 +794,8 @@ MEASURING: tuple[StandIn, ...] = (
             ),
             Param(
                 88,
-                "repeat at the equator 1 yes, 2 no (the stand-in's lateral touches are at the equator already)",
+                "repeat at the equator 1 yes, 2 no (the stand-in's lateral touches are at the equator "
+                "already)",
                 default=2.0,
                 choices=(1.0, 2.0),
             ),
@@ -795,7 +807,8 @@ MEASURING: tuple[StandIn, ...] = (
             Output("SysRetDiameter", "measured diameter"),
         ),
         _sphere_run,
-        "centrally above the sphere: a touch on its top, back up; four lateral touches at its equator; back to the start",
+        "centrally above the sphere: a touch on its top, back up; four lateral touches at its equator; back "
+        "to the start",
     ),
     _spec(
         "SysMeasCs1.ecy",
@@ -804,7 +817,8 @@ MEASURING: tuple[StandIn, ...] = (
         (P39,),
         tuple(Output(f"SysRet{n}", "origin / angle of the coordinate system written") for n in "XYZABC"),
         _cs1_run,
-        "no motion: an operator's dialogue on the kernel; the tip's position at the call is the taught origin (warning 917001); writes CS_BASE_<@P39>.bcs",
+        "no motion: an operator's dialogue on the kernel; the tip's position at the call is the taught "
+        "origin (warning 917001); writes CS_BASE_<@P39>.bcs",
     ),
     _spec(
         "SysMeasCs2.ecy",
@@ -824,7 +838,8 @@ MEASURING: tuple[StandIn, ...] = (
         ),
         tuple(Output(f"SysRet{n}", "origin / angle of the coordinate system written") for n in "XYZABC"),
         _cs2_run,
-        "from the start: a touch down (@P6), along X (@P4), along Y (@P5), back to the start after each; writes CS_BASE_<@P39>.bcs",
+        "from the start: a touch down (@P6), along X (@P4), along Y (@P5), back to the start after each; "
+        "writes CS_BASE_<@P39>.bcs",
     ),
     _spec(
         "SysMeasCs5.ecy",
@@ -851,7 +866,8 @@ MEASURING: tuple[StandIn, ...] = (
             for n in "XYZABC"
         ),
         _cs5_run,
-        "each sphere as SysMeasWcs40 (top, four at the equator), moving at constant Z to the 2nd (@P41/@P43) and 3rd (@P42/@P44) pre-position; back to the start; writes CS_BASE_<@P39>.bcs",
+        "each sphere as SysMeasWcs40 (top, four at the equator), moving at constant Z to the 2nd (@P41/@P43) "
+        "and 3rd (@P42/@P44) pre-position; back to the start; writes CS_BASE_<@P39>.bcs",
     ),
     _spec(
         "SysCalibTouchprobe1.ecy",
@@ -869,6 +885,7 @@ MEASURING: tuple[StandIn, ...] = (
             Output("SysRetOffsetY", "shift of the probe head along Y (0)"),
         ),
         _calib_ring,
-        "centrally in the ring at the measuring height: four touches outward from @P14 in steps of @P15, back to the centre after each",
+        "centrally in the ring at the measuring height: four touches outward from @P14 in steps of @P15, "
+        "back to the centre after each",
     ),
 )

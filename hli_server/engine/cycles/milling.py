@@ -91,7 +91,8 @@ class _Pocket:
         if self.retract < self.safe:
             raise CycleError(
                 A_INVALID,
-                f"{c.spec.name}: the retraction plane @P2 = {fmt(self.retract)} lies below the reference plane plus "
+                f"{c.spec.name}: the retraction plane @P2 = {fmt(self.retract)} lies below the reference "
+                f"plane plus "
                 f"the safety clearance ({fmt(self.safe)})",
                 2,
             )
@@ -101,7 +102,8 @@ class _Pocket:
         if radius > 0.0 and self.step_xy > 2.0 * radius + 1e-9:
             raise CycleError(
                 A_INVALID,
-                f"{c.spec.name}: maximum infeed in XY @P6 = {fmt(self.step_xy)} is more than the tool diameter "
+                f"{c.spec.name}: maximum infeed in XY @P6 = {fmt(self.step_xy)} is more than the tool "
+                f"diameter "
                 f"({fmt(2.0 * radius)})",
                 6,
             )
@@ -146,7 +148,8 @@ def _rect_pocket(c: Cycle) -> Iterator[Block]:
     if final_x < -1e-9 or final_y < -1e-9:
         raise CycleError(
             A_INVALID,
-            f"{c.spec.name}: the tool (radius {fmt(r)}) and the edge allowance do not fit the pocket {fmt(length)} x {fmt(width)}",
+            f"{c.spec.name}: the tool (radius {fmt(r)}) and the edge allowance do not fit the pocket "
+            f"{fmt(length)} x {fmt(width)}",
             72,
         )
     final_x, final_y = max(0.0, final_x), max(0.0, final_y)
@@ -187,7 +190,8 @@ def _circ_pocket(c: Cycle) -> Iterator[Block]:
     if final < -1e-9:
         raise CycleError(
             14327,
-            f"{c.spec.name}: pocket diameter @P68 = {fmt(diameter)} is smaller than the tool ({fmt(2.0 * r)}) and the edge allowance",
+            f"{c.spec.name}: pocket diameter @P68 = {fmt(diameter)} is smaller than the tool "
+            f"({fmt(2.0 * r)}) and the edge allowance",
             68,
         )
     final = max(0.0, final)
@@ -220,7 +224,8 @@ MILLING: tuple[StandIn, ...] = (
         ),
         (),
         _rect_pocket,
-        "centred on the position at the call: per level (<= @P5) a plunge at the centre and rings outward (<= @P6 apart) to the outline less the tool radius and @P16; finishing at the outline; back to @P2",
+        "centred on the position at the call: per level (<= @P5) a plunge at the centre and rings outward "
+        "(<= @P6 apart) to the outline less the tool radius and @P16; finishing at the outline; back to @P2",
     ),
     StandIn(
         "SysMillCircularPocket.ecy",
@@ -230,6 +235,7 @@ MILLING: tuple[StandIn, ...] = (
         (*_COMMON, Param(68, "pocket diameter", required=True, check="positive", alarm=14327)),
         (),
         _circ_pocket,
-        "centred on the position at the call: per level a plunge at the centre and full circles outward (<= @P6 apart); finishing at the outline; back to @P2",
+        "centred on the position at the call: per level a plunge at the centre and full circles outward (<= "
+        "@P6 apart); finishing at the outline; back to @P2",
     ),
 )
