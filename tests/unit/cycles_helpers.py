@@ -46,6 +46,9 @@ class FakeContext:
     def plane(self) -> int:
         return 17
 
+    def inch(self) -> bool:
+        return False
+
     def tool_radius(self) -> float:
         return self.radius
 

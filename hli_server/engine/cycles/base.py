@@ -107,6 +107,11 @@ class Cycle:
                 f"{self.spec.name}: the stand-in works in the G17 plane; G{ctx.plane()} is active "
                 "(select G17 before the call, or use your own cycle file)",
             )
+        if ctx.inch():
+            raise CycleError(
+                A_NOT_SIMULATED,
+                f"{self.spec.name}: the stand-in programs in mm; G70 (inch) is active at the call (select G71)",
+            )
         state = ctx.motion_state()
         self.at = ctx.position()
         self.ball = ctx.tool_radius()

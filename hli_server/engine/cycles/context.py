@@ -46,6 +46,10 @@ class CycleContext(Protocol):
         """The active plane: 17, 18 or 19."""
         ...
 
+    def inch(self) -> bool:
+        """G70 is active (the stand-ins program in mm)."""
+        ...
+
     def tool_radius(self) -> float:
         """The active D's radius [mm] (the probe sphere's radius of a touch probe)."""
         ...
