@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Protocol
 
 from hli_server.engine.axis import Axis
-from hli_server.engine.cycles import MotionState
+from hli_server.engine.cycles import CycleError, MotionState
 from hli_server.engine.cycles import run as run_standin
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
 from hli_server.engine.decoder import DecodeError, Decoder
@@ -27,7 +27,7 @@ from hli_server.engine.hli import AxisHli, ChannelHli
 from hli_server.engine.kinematics.configured import data_sets
 from hli_server.engine.kinematics.state import KinematicState
 from hli_server.engine.kinematics.transform import Transformation
-from hli_server.engine.nc.blocks import Block
+from hli_server.engine.nc.blocks import Block, NcError
 from hli_server.engine.nc.compiler import Compiler
 from hli_server.engine.nc.interpreter import Interpreter
 from hli_server.engine.path.profiles import SlopeProfile, SlopeType
@@ -120,7 +120,11 @@ class ChannelHost:
         cycle has the name; :class:`~hli_server.engine.cycles.CycleError` (910110) for one not built.
         ``results`` writes a ``V.CYC.`` output (the interpreter's)."""
         context = ChannelCycleContext(self._channel, results, line, block)
-        return run_standin(name, params, context, line)
+        try:
+            blocks = run_standin(name, params, context, line)
+        except CycleError as exc:
+            raise _call_error(exc, line, block, name) from None
+        return None if blocks is None else _as_nc_errors(blocks, line, block, name)
 
     def message(self, text: str, save: bool, file: str, program: str, line: int, block: str) -> None:
         ch = self._channel
@@ -195,6 +199,21 @@ class ChannelHost:
         if name in ("I", "J", "K"):
             return decoder.last_centre.get(name, 0.0)
         return _tool_and_frame_value(decoder, name)
+
+
+def _call_error(exc: CycleError, line: int, block: str, program: str) -> NcError:
+    """A built-in cycle's error as the alarm of its call's line (the kernel stops the program there)."""
+    params: dict[str, object] = {"cycle": program}
+    if exc.param:
+        params["param"] = exc.param
+    return NcError(exc.alarm, line, block, exc.message, params)
+
+
+def _as_nc_errors(blocks: Iterator[Block], line: int, block: str, program: str) -> Iterator[Block]:
+    try:
+        yield from blocks
+    except CycleError as exc:
+        raise _call_error(exc, line, block, program) from None
 
 
 class ChannelCycleContext:

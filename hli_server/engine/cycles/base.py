@@ -24,7 +24,7 @@ from hli_server.engine.cycles.errors import (
     CycleError,
 )
 from hli_server.engine.cycles.params import Args, Param, ParamValue, check_params
-from hli_server.engine.cycles.probe import Feature, Sphere, Spigot, Vec3, first_touch, shifted
+from hli_server.engine.cycles.probe import Feature, Sphere, Spigot, Vec3, first_touch, inside, shifted
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.parser import parse_line
 
@@ -255,7 +255,10 @@ class Cycle:
         dev = self.ctx.deviation()
         best: float | None = None
         for feature in self.obstacles:
-            t = first_touch(shifted(feature, dev), start, target, self.ball)
+            moved = shifted(feature, dev)
+            if inside(moved, start, self.ball):
+                continue  # still deflected from the last touch: the move leaves the workpiece
+            t = first_touch(moved, start, target, self.ball)
             if t is not None and (best is None or t < best):
                 best = t
         return best
