@@ -36,6 +36,13 @@ EXAMPLES: dict[str, tuple[tuple[float, float, float], dict[int, float | str]]] =
     "SysMeasWcs10.ecy": ((0, 0, 5), {2: 20, 7: 54, 13: 10, 19: -10, 33: 10}),
     "SysMeasWcs11.ecy": ((0, 0, 5), {2: 20, 7: 54, 13: 10, 14: 30, 15: 150, 16: 270, 19: -10, 33: 10}),
     "SysMeasWcs18.ecy": ((0, 0, 5), {2: 40, 7: 54, 13: 5, 19: -15, 33: 20}),
+    "SysMeasWcs19.ecy": ((0, 0, 5), {4: 10, 7: 54, 18: 10, 19: 5, 20: -15}),
+    "SysMeasWcs20.ecy": ((0, 0, 5), {5: 10, 7: 54, 17: 10, 19: 5, 20: -15}),
+    "SysMeasWcs21.ecy": ((0, 0, 5), {2: 20, 7: 54, 17: 50, 18: 20, 19: 10, 22: -15, 29: 30, 33: 10}),
+    "SysMeasWcs22.ecy": ((0, 0, 5), {2: 20, 7: 54, 13: 5, 17: 50, 18: 20, 19: 10, 22: -15, 29: 30, 33: 10}),
+    "SysMeasWcs23.ecy": ((0, 0, 5), {2: 20, 22: -15, 29: 30, 17: 50, 18: 20, 19: 10, 33: 10}),
+    "SysMeasWcs24.ecy": ((0, 0, 5), {2: 20, 4: 10, 7: 54, 17: 50, 18: 20, 19: 10, 22: -10, 33: 10}),
+    "SysMeasWcs26.ecy": ((0, 0, 5), {2: 20, 5: 10, 17: 50, 18: 20, 19: 10, 22: -15, 33: 10}),
     "SysMeasWcs25.ecy": ((0, 0, 5), {2: 20, 4: 10, 7: 54, 13: 10, 17: 50, 18: 20, 19: -15, 22: -10, 33: 10}),
     "SysMeasWcs27.ecy": ((0, 0, 5), {2: 20, 5: 10, 7: 54, 13: 10, 17: 50, 18: 20, 19: 10, 22: -15, 33: 10}),
     "SysMeasWcs36.ecy": ((50, 20, -10), {2: 20, 7: 54, 13: 1, 14: 20, 15: 70, 33: 0.5}),
@@ -181,6 +188,21 @@ def test_the_point_and_spigot_angle() -> None:
     )
     assert close(shifted.results["SysRetC"], math.degrees(math.atan2(21 - 6, 50 - 0)) - 10.0)
     assert ctx.warnings and ctx.warnings[0][0] == 917001  # no C axis: measured, not written
+
+
+@pytest.mark.req("CY-04", "CY-06")
+@settings(max_examples=25, deadline=None)
+@given(dev=deviation, r=radius)
+def test_twists_are_those_of_the_nominal_part_when_it_is_only_shifted(dev: tuple[float, float, float], r: float) -> None:
+    """The angle cycles measure a rotation: a part shifted without turning keeps its angles (the faces' twist
+    0, the line between two centres its nominal angle), whatever the probe's radius."""
+    for name in ("SysMeasWcs19.ecy", "SysMeasWcs20.ecy"):
+        start, params = EXAMPLES[name]
+        assert close(run_standin(name, params, FakeContext(start, radius=r, deviation=dev)).results["SysRetC"], 0.0)
+    for name in ("SysMeasWcs21.ecy", "SysMeasWcs22.ecy", "SysMeasWcs23.ecy"):
+        start, params = EXAMPLES[name]
+        found = run_standin(name, {**params, 12: 3.0}, FakeContext(start, radius=r, deviation=(dev[0], dev[1], 0.0)))
+        assert close(found.results["SysRetC"], math.degrees(math.atan2(20, 50)) - 3.0), name
 
 
 def test_calibration_finds_the_probe_radius_wherever_the_ring_is() -> None:

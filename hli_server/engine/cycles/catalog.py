@@ -39,21 +39,6 @@ BUILT: tuple[StandIn, ...] = (*MEASURING, *DRILLING, *PATTERNS, *MILLING)
 
 NOT_BUILT: tuple[NotBuilt, ...] = (
     NotBuilt("SysMeasWcs14.ecy", "TF5225", "Measure web in X axis", _MEAS + "303582859.html"),
-    NotBuilt("SysMeasWcs19.ecy", "TF5225", "Measure angle in X axis (C axis)", _MEAS + "303619723.html"),
-    NotBuilt("SysMeasWcs20.ecy", "TF5225", "Measure angle in Y axis (C axis)", _MEAS + "303625483.html"),
-    NotBuilt(
-        "SysMeasWcs21.ecy",
-        "TF5225",
-        "Measure angle between 2 drilled holes (C axis)",
-        _MEAS + "303630091.html",
-    ),
-    NotBuilt("SysMeasWcs22.ecy", "TF5225", "Measure angle between pins (C axis)", _MEAS + "303638923.html"),
-    NotBuilt(
-        "SysMeasWcs24.ecy",
-        "TF5225",
-        "Measure angle between point in Y and drilled hole (C axis)",
-        _MEAS + "303663883.html",
-    ),
     NotBuilt("SysMeasWcs29.ecy", "TF5225", "Outer rectangle", _MEAS + "303727243.html"),
     NotBuilt("SysMeasWcs30.ecy", "TF5225", "Centre point across 4 drilled holes", _MEAS + "303737611.html"),
     NotBuilt("SysMeasWcs31.ecy", "TF5225", "Centre point of a hole circle", _MEAS + "303746443.html"),

@@ -355,8 +355,30 @@ def _spec(
 
 
 # --- SysMeasWcs25/27: angle between a point and a spigot (C) -----------------------------------------
-def _point_spigot(point_axis: int) -> RunFn:
-    """SysMeasWcs27 (point in X, probed along Y with @P5) and SysMeasWcs25 (point in Y, along X, @P4)."""
+def probe_circle(
+    c: Cycle, kind: str, above: Vec3, diameter: float, depth: float
+) -> Generator[Block, None, Vec3]:
+    """A hole or a spigot centred under ``above``, four points at ``depth`` below it (SysMeasWcs8 / 10);
+    the probe back at ``above``; the measured centre."""
+    if kind == "spigot":
+        found, _ = yield from probe_spigot(c, above, diameter, [0.0, 90.0, 180.0, 270.0], depth)
+        return found
+    down = _add(above, 0.0, 0.0, depth)
+    yield from c.position(down)
+    found, _ = yield from probe_hole(c, down, diameter, [0.0, 90.0, 180.0, 270.0])
+    yield from c.position(above)
+    return found
+
+
+def _twist(c: Cycle, zo: str | None, first: tuple[float, float], second: tuple[float, float]) -> None:
+    angle = math.degrees(math.atan2(second[1] - first[1], second[0] - first[0])) - c.args.num(12)
+    c.result("SysRetC", angle)
+    _write_twist(c, zo, angle)
+
+
+def _point_circle(point_axis: int, kind: str) -> RunFn:
+    """SysMeasWcs24..27: a point of a face (along Y with @P5: "point in X"; along X with @P4: "point in Y")
+    and the centre of a hole or a spigot; the angle of the line from the point to the centre."""
 
     def run(c: Cycle) -> Iterator[Block]:
         a = c.args
@@ -365,18 +387,75 @@ def _point_spigot(point_axis: int) -> RunFn:
         depth = a.num(22)
         path = a.num(5) if point_axis == 0 else a.num(4)
         # 1. the point: down by the measuring depth, a touch across, back up
-        down = _add(start, 0.0, 0.0, depth)
-        yield from c.position(down)
+        yield from c.position(_add(start, 0.0, 0.0, depth))
         edge = yield from probe_edge(c, 1 if point_axis == 0 else 0, path)
         yield from c.position(start)
-        point = (c.at[0], edge) if point_axis == 0 else (edge, c.at[1])
-        # 2. above the spigot, 3. four points round it at the measuring depth
+        point = (start[0], edge) if point_axis == 0 else (edge, start[1])
+        # 2. above the hole or spigot (@P17/@P18, then @P19), 3. four points round it at the depth
         over = _add(start, a.num(17), a.num(18), 0.0)
         yield from c.position(over)
         above = _add(over, 0.0, 0.0, a.num(19, 0.0))
         yield from c.position(above)
-        found, _ = yield from probe_spigot(c, above, a.num(2), [0.0, 90.0, 180.0, 270.0], depth)
-        angle = math.degrees(math.atan2(found[1] - point[1], found[0] - point[0])) - a.num(12)
+        found = yield from probe_circle(c, kind, above, a.num(2), depth)
+        _twist(c, zo, point, (found[0], found[1]))
+
+    return run
+
+
+def _two_circles(first: str, second: str) -> RunFn:
+    """SysMeasWcs21..23: two holes, two spigots, a hole and a spigot; the angle of the line between
+    their centres."""
+
+    def run(c: Cycle) -> Iterator[Block]:
+        a = c.args
+        zo = c.zero_offset_target()
+        start = c.at
+        depth = a.num(22)
+        one = yield from probe_circle(c, first, start, a.num(2), depth)
+        over = _add(start, a.num(17), a.num(18), 0.0)
+        yield from c.position(over)
+        above = _add(over, 0.0, 0.0, a.num(19, 0.0))
+        yield from c.position(above)
+        two = yield from probe_circle(c, second, above, a.num(29, a.num(2)), depth)
+        _twist(c, zo, (one[0], one[1]), (two[0], two[1]))
+
+    return run
+
+
+def _face_twist(axis: int) -> RunFn:
+    """SysMeasWcs19 (a face probed along X at two Y positions) and SysMeasWcs20 (along Y at two X positions):
+    the face's twist about Z."""
+
+    def run(c: Cycle) -> Iterator[Block]:
+        a = c.args
+        zo = c.zero_offset_target()
+        start = c.at
+        path = a.num(4) if axis == 0 else a.num(5)
+        shift = a.num(18) if axis == 0 else a.num(17)
+        if shift == 0.0:
+            number = 18 if axis == 0 else 17
+            raise CycleError(
+                A_INVALID, f"{c.spec.name}: @P{number} must not be 0 (the second point's offset)", number
+            )
+        down = a.num(22, a.num(20, 0.0))
+        clear = a.num(19, -down)
+        first_at = _add(start, 0.0, 0.0, down)
+        yield from c.position(first_at)
+        one = yield from probe_edge(c, axis, path)
+        yield from c.position(_add(first_at, 0.0, 0.0, clear))
+        side = (0.0, shift) if axis == 0 else (shift, 0.0)
+        yield from c.position(_add(first_at, side[0], side[1], clear))
+        second_at = _add(first_at, side[0], side[1], 0.0)
+        yield from c.position(second_at)
+        two = yield from probe_edge(c, axis, path)
+        yield from c.position(_add(second_at, 0.0, 0.0, clear))
+        yield from c.position(_add(start, 0.0, 0.0, clear))
+        yield from c.position(start)
+        if axis == 0:  # a face along Y turned by C: x = x0 - y tan C
+            angle = -math.degrees(math.atan2(two - one, shift))
+        else:  # a face along X: y = y0 + x tan C
+            angle = math.degrees(math.atan2(two - one, shift))
+        angle -= a.num(12)
         c.result("SysRetC", angle)
         _write_twist(c, zo, angle)
 
@@ -670,6 +749,163 @@ MEASURING: tuple[StandIn, ...] = (
         "above the hole: down by @P19, four touches outward, back up",
     ),
     _spec(
+        "SysMeasWcs19.ecy",
+        "Measure angle in X axis (C axis)",
+        "303619723.html",
+        (
+            _path(4, "X"),
+            Param(18, "offset along Y of the 2nd point (incremental)", required=True, check="nonzero"),
+            P7,
+            P12,
+            Param(
+                19,
+                "clearance along Z between the measurements (incremental)",
+                default_text="back up by the Z pre-positioning",
+            ),
+            Param(
+                22,
+                "pre-positioning along Z before the 1st measurement (incremental); @P20 in the page's "
+                "example",
+                default_text="@P20, else 0",
+            ),
+        ),
+        (Output("SysRetC", "twist of the face about Z, less @P12 [deg]"),),
+        _face_twist(0),
+        "down (@P22/@P20), a touch along X, up (@P19), over by @P18 along Y, down, a touch along X, back to "
+        "the start",
+    ),
+    _spec(
+        "SysMeasWcs20.ecy",
+        "Measure angle in Y axis (C axis)",
+        "303625483.html",
+        (
+            _path(5, "Y"),
+            Param(17, "offset along X of the 2nd point (incremental)", required=True, check="nonzero"),
+            P7,
+            P12,
+            Param(
+                19,
+                "clearance along Z between the measurements (incremental)",
+                default_text="back up by the Z pre-positioning",
+            ),
+            Param(
+                22,
+                "pre-positioning along Z before the 1st measurement (incremental); @P20 in the page's "
+                "example",
+                default_text="@P20, else 0",
+            ),
+        ),
+        (Output("SysRetC", "twist of the face about Z, less @P12 [deg]"),),
+        _face_twist(1),
+        "down (@P22/@P20), a touch along Y, up (@P19), over by @P17 along X, down, a touch along Y, back to "
+        "the start",
+    ),
+    _spec(
+        "SysMeasWcs21.ecy",
+        "Measure angle between 2 drilled holes (C axis)",
+        "303630091.html",
+        (
+            Param(2, "diameter of the 1st hole", required=True, check="positive"),
+            Param(22, "measuring depth (incremental Z)", required=True),
+            P7,
+            P12,
+            P13,
+            Param(17, "pre-positioning along X to the 2nd hole (incremental)", default=0.0),
+            Param(18, "pre-positioning along Y to the 2nd hole (incremental)", default=0.0),
+            Param(19, "pre-positioning along Z above the 2nd hole (incremental)", default=0.0),
+            Param(29, "diameter of the 2nd hole", default_text="@P2", check="positive"),
+            P33,
+        ),
+        (Output("SysRetC", "angle of the line between the centres to X+, less @P12 [deg]"),),
+        _two_circles("hole", "hole"),
+        "centrally above the 1st hole: down by @P22, four points, up; by @P17/@P18/@P19 to above the 2nd; "
+        "the same",
+    ),
+    _spec(
+        "SysMeasWcs22.ecy",
+        "Measure angle between pins (C axis)",
+        "303643147.html",
+        (
+            Param(2, "diameter of the 1st spigot", required=True, check="positive"),
+            Param(22, "measuring depth (incremental Z)", required=True),
+            P7,
+            P12,
+            P13,
+            Param(17, "pre-positioning along X above the 2nd spigot (incremental)", default=0.0),
+            Param(18, "pre-positioning along Y above the 2nd spigot (incremental)", default=0.0),
+            Param(19, "pre-positioning along Z above the 2nd spigot (incremental)", default=0.0),
+            Param(29, "diameter of the 2nd spigot", default_text="@P2", check="positive"),
+            P33,
+        ),
+        (Output("SysRetC", "angle of the line between the centres to X+, less @P12 [deg]"),),
+        _two_circles("spigot", "spigot"),
+        "centrally above the 1st spigot: four points at @P22 below; by @P17/@P18/@P19 to above the 2nd; the "
+        "same",
+    ),
+    _spec(
+        "SysMeasWcs23.ecy",
+        "Measure angle between drilled hole and spigot (C axis)",
+        "303651979.html",
+        (
+            Param(2, "hole diameter", required=True, check="positive"),
+            Param(22, "measuring depth (incremental Z)", required=True),
+            Param(29, "spigot diameter", required=True, check="positive"),
+            P7,
+            P12,
+            P13,
+            Param(17, "pre-positioning along X above the spigot (incremental)", default=0.0),
+            Param(18, "pre-positioning along Y above the spigot (incremental)", default=0.0),
+            Param(19, "pre-positioning along Z above the spigot (incremental)", default=0.0),
+            P33,
+        ),
+        (Output("SysRetC", "angle of the line hole -> spigot to X+, less @P12 [deg]"),),
+        _two_circles("hole", "spigot"),
+        "centrally above the hole: down by @P22, four points, up; by @P17/@P18/@P19 above the spigot; four "
+        "points round it",
+    ),
+    _spec(
+        "SysMeasWcs24.ecy",
+        "Measure angle between point in Y and drilled hole (C axis)",
+        "303663883.html",
+        (
+            Param(2, "hole diameter", required=True, check="positive"),
+            _path(4, "X"),
+            Param(22, "measuring depth (incremental Z)", required=True),
+            P7,
+            P12,
+            P13,
+            Param(17, "pre-positioning along X above the hole (incremental)", default=0.0),
+            Param(18, "pre-positioning along Y above the hole (incremental)", default=0.0),
+            Param(19, "pre-positioning along Z above the hole (incremental)", default=0.0),
+            P33,
+        ),
+        (Output("SysRetC", "angle of the line point -> hole centre to X+, less @P12 [deg]"),),
+        _point_circle(1, "hole"),
+        "down by @P22, a touch along X (@P4), up; by @P17/@P18/@P19 above the hole; down by @P22, four "
+        "points",
+    ),
+    _spec(
+        "SysMeasWcs26.ecy",
+        "Measure angle between point in X and drilled hole (C axis)",
+        "303660811.html",
+        (
+            Param(2, "hole diameter", required=True, check="positive"),
+            _path(5, "Y"),
+            Param(22, "measuring depth (incremental Z)", required=True),
+            P7,
+            P12,
+            P13,
+            Param(17, "pre-positioning along X above the hole (incremental)", default=0.0),
+            Param(18, "pre-positioning along Y above the hole (incremental)", default=0.0),
+            Param(19, "pre-positioning along Z above the hole (incremental)", default=0.0),
+            P33,
+        ),
+        (Output("SysRetC", "angle of the line point -> hole centre to X+, less @P12 [deg]"),),
+        _point_circle(0, "hole"),
+        "down by @P22, a touch along Y (@P5), up; by @P17/@P18/@P19 above the hole; down by @P22, four "
+        "points",
+    ),
+    _spec(
         "SysMeasWcs25.ecy",
         "Measure angle between point in Y and spigot (C axis)",
         "303669643.html",
@@ -686,7 +922,7 @@ MEASURING: tuple[StandIn, ...] = (
             P33,
         ),
         (Output("SysRetC", "angle of the line point -> spigot centre to X+, less @P12 [deg]"),),
-        _point_spigot(1),
+        _point_circle(1, "spigot"),
         "down by @P22, a touch along X (@P4), up; by @P17/@P18/@P19 above the spigot; four points round it "
         "at depth @P22",
     ),
@@ -707,7 +943,7 @@ MEASURING: tuple[StandIn, ...] = (
             P33,
         ),
         (Output("SysRetC", "angle of the line point -> spigot centre to X+, less @P12 [deg]"),),
-        _point_spigot(0),
+        _point_circle(0, "spigot"),
         "down by @P22, a touch along Y (@P5), up; by @P17/@P18/@P19 above the spigot; four points round it "
         "at depth @P22",
     ),

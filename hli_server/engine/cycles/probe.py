@@ -116,9 +116,10 @@ def first_touch(feature: Feature, start: Vec3, end: Vec3, ball: float) -> float 
 def inside(feature: Feature, tip: Vec3, ball: float) -> bool:
     """Is the probe sphere (its lowest point ``tip``) in the feature, deeper than 1 µm (deflected: the
     probe stops a little beyond the touch, braking)?"""
-    return first_touch(feature, tip, (tip[0], tip[1], tip[2] + 1.0), ball) == 0.0 and first_touch(
-        feature, tip, (tip[0], tip[1], tip[2] - 1.0), ball
-    ) == 0.0
+    return (
+        first_touch(feature, tip, (tip[0], tip[1], tip[2] + 1.0), ball) == 0.0
+        and first_touch(feature, tip, (tip[0], tip[1], tip[2] - 1.0), ball) == 0.0
+    )
 
 
 def _dot(a: Vec3, b: Vec3) -> float:
