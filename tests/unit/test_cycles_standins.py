@@ -35,6 +35,8 @@ EXAMPLES: dict[str, tuple[tuple[float, float, float], dict[int, float | str]]] =
     "SysMeasWcs9.ecy": ((0, 0, -10), {2: 40, 7: 54, 13: 5, 14: 30, 15: 150, 16: 270, 33: 10}),
     "SysMeasWcs10.ecy": ((0, 0, 5), {2: 20, 7: 54, 13: 10, 19: -10, 33: 10}),
     "SysMeasWcs11.ecy": ((0, 0, 5), {2: 20, 7: 54, 13: 10, 14: 30, 15: 150, 16: 270, 19: -10, 33: 10}),
+    "SysMeasWcs14.ecy": ((0, 0, 5), {3: 20, 7: 54, 13: 5, 19: -10, 33: 10}),
+    "SysMeasWcs29.ecy": ((0, 0, 5), {7: 54, 13: 10, 19: -15, 31: 40, 32: 60, 33: 10}),
     "SysMeasWcs18.ecy": ((0, 0, 5), {2: 40, 7: 54, 13: 5, 19: -15, 33: 20}),
     "SysMeasWcs19.ecy": ((0, 0, 5), {4: 10, 7: 54, 18: 10, 19: 5, 20: -15}),
     "SysMeasWcs20.ecy": ((0, 0, 5), {5: 10, 7: 54, 17: 10, 19: 5, 20: -15}),
@@ -143,6 +145,19 @@ def test_a_spigot_off_by_a_deviation_is_measured_off_by_it(dev: tuple[float, flo
         assert close(ctx.results["SysRetX"], start[0] + dev[0]), name
         assert close(ctx.results["SysRetY"], start[1] + dev[1]), name
         assert close(ctx.results["SysRetDiameter"], params[2]), name
+
+
+@pytest.mark.req("CY-04")
+@settings(max_examples=40, deadline=None)
+@given(dev=deviation, r=radius)
+def test_a_block_and_a_web_off_by_a_deviation(dev: tuple[float, float, float], r: float) -> None:
+    start, params = EXAMPLES["SysMeasWcs29.ecy"]
+    ctx = run_standin("SysMeasWcs29.ecy", params, FakeContext(start, radius=r, deviation=dev))
+    assert close(ctx.results["SysRetX"], dev[0]) and close(ctx.results["SysRetY"], dev[1])
+    assert close(ctx.results["SysRetLengthX"], 40.0) and close(ctx.results["SysRetLengthY"], 60.0)
+    start, params = EXAMPLES["SysMeasWcs14.ecy"]
+    ctx = run_standin("SysMeasWcs14.ecy", params, FakeContext(start, radius=r, deviation=dev))
+    assert close(ctx.results["SysRetX"], dev[0]) and close(ctx.results["SysRetLengthX"], 20.0)
 
 
 @pytest.mark.req("CY-04")

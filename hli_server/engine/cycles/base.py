@@ -24,7 +24,7 @@ from hli_server.engine.cycles.errors import (
     CycleError,
 )
 from hli_server.engine.cycles.params import Args, Param, ParamValue, check_params
-from hli_server.engine.cycles.probe import Feature, Sphere, Spigot, Vec3, first_touch, inside, shifted
+from hli_server.engine.cycles.probe import Box, Feature, Sphere, Spigot, Vec3, first_touch, inside, shifted
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.parser import parse_line
 
@@ -219,7 +219,7 @@ class Cycle:
         start = self.at
         target = self._round(target)
         touch = first_touch(shifted(feature, self.ctx.deviation()), start, target, self.ball)
-        if isinstance(feature, Spigot | Sphere) and feature not in self.obstacles:
+        if isinstance(feature, Spigot | Box | Sphere) and feature not in self.obstacles:
             # bounded solids only: a face or a bore has no known top, the stand-in cannot tell whether a
             # move above it would hit it
             self.obstacles.append(feature)

@@ -38,8 +38,6 @@ class NotBuilt:
 BUILT: tuple[StandIn, ...] = (*MEASURING, *DRILLING, *PATTERNS, *MILLING)
 
 NOT_BUILT: tuple[NotBuilt, ...] = (
-    NotBuilt("SysMeasWcs14.ecy", "TF5225", "Measure web in X axis", _MEAS + "303582859.html"),
-    NotBuilt("SysMeasWcs29.ecy", "TF5225", "Outer rectangle", _MEAS + "303727243.html"),
     NotBuilt("SysMeasWcs30.ecy", "TF5225", "Centre point across 4 drilled holes", _MEAS + "303737611.html"),
     NotBuilt("SysMeasWcs31.ecy", "TF5225", "Centre point of a hole circle", _MEAS + "303746443.html"),
     NotBuilt("SysMeasWcs35.ecy", "TF5225", "Measuring any outer corner", _MEAS + "548364555.html"),

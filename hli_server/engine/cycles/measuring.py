@@ -25,7 +25,7 @@ from hli_server.engine.cycles.base import Cycle, Output, RunFn, StandIn, fmt, re
 from hli_server.engine.cycles.errors import A_APPROXIMATED, A_INVALID, CycleError
 from hli_server.engine.cycles.geometry import fit_circle, frame_angles, sphere_from_ring
 from hli_server.engine.cycles.params import Param
-from hli_server.engine.cycles.probe import HalfSpace, Hole, Sphere, Spigot, Vec3
+from hli_server.engine.cycles.probe import Box, HalfSpace, Hole, Sphere, Spigot, Vec3
 from hli_server.engine.nc.blocks import Block
 
 __all__ = ["MEASURING"]
@@ -271,6 +271,59 @@ def probe_spigot(
     yield from c.position(centre)
     (cx, cy), rho = _fit(c, ring, "spigot")
     return (cx, cy, centre[2]), 2.0 * (rho - c.ball)
+
+
+def probe_block(
+    c: Cycle, centre: Vec3, half: tuple[float, float], axes: tuple[int, ...], depth: float
+) -> Generator[Block, None, dict[int, tuple[float, float]]]:
+    """A block (or a web) centred under the probe: for each of ``axes`` both faces, each from beside it
+    above the top, down by ``depth``, a touch toward the centre, back out and up; per axis the faces'
+    coordinates (low, high). The simulated block's top lies half the safety clearance below ``centre``."""
+    a = c.args
+    clearance = safety(c)
+    crossover = a.num(33)
+    block = Box(centre, half, centre[2] - clearance / 2.0)
+    faces: dict[int, tuple[float, float]] = {}
+    for k in axes:
+        found: list[float] = []
+        for sign in (1.0, -1.0):
+            out = half[k] + c.ball + clearance
+            above = _with(centre, k, centre[k] + sign * out)
+            yield from c.position(above)
+            beside = _add(above, 0.0, 0.0, depth)
+            yield from c.position(beside)
+            near = half[k] + c.ball - crossover
+            yield from c.measure(_with(beside, k, centre[k] + sign * near), block)
+            tip = c.contact()
+            found.append(tip[k] - sign * c.ball)
+            yield from c.position(beside)
+            yield from c.position(above)
+        yield from c.position(centre)
+        faces[k] = (found[1], found[0])
+    return faces
+
+
+def _block_run(axes: tuple[int, ...]) -> RunFn:
+    """SysMeasWcs14 (a web along Y, its width along X: @P3) and SysMeasWcs29 (an outer rectangle
+    @P31 x @P32): the centre and the lengths between the faces."""
+
+    def run(c: Cycle) -> Iterator[Block]:
+        a = c.args
+        zo = c.zero_offset_target()
+        start = c.at
+        half = (a.num(31) / 2.0, a.num(32) / 2.0) if len(axes) == 2 else (a.num(3) / 2.0, 1.0e6)
+        faces = yield from probe_block(c, start, half, axes, a.num(19))
+        values: dict[str, float] = {}
+        for k in axes:
+            low, high = faces[k]
+            name, axis = ((c.x_axis, "X"), (c.y_axis, "Y"))[k]
+            middle = (low + high) / 2.0 + a.num(9 + k)
+            c.result(f"SysRet{axis}", middle)
+            c.result(f"SysRetLength{axis}", high - low)
+            values[name] = middle
+        c.write_zero_offset(zo, values)
+
+    return run
 
 
 def _circle_results(c: Cycle, centre: Vec3, diameter: float) -> None:
@@ -728,6 +781,26 @@ MEASURING: tuple[StandIn, ...] = (
         "as SysMeasWcs10 with three points at @P14/@P15/@P16",
     ),
     _spec(
+        "SysMeasWcs14.ecy",
+        "Measure web in X axis",
+        "303582859.html",
+        (
+            Param(3, "web width (along X)", required=True, check="positive"),
+            Param(19, "pre-positioning along Z to the measuring height (incremental)", required=True),
+            P7,
+            P9,
+            P13,
+            P33,
+        ),
+        (
+            Output("SysRetX", "centre of the web in X (+ @P9)"),
+            Output("SysRetLengthX", "measured width of the web"),
+        ),
+        _block_run((0,)),
+        "centrally above the web: for X+ and X- out beside it, down by @P19, a touch toward its middle, back "
+        "out and up",
+    ),
+    _spec(
         "SysMeasWcs18.ecy",
         "Inner diameter with 4 points and obstacle",
         "303554827.html",
@@ -946,6 +1019,30 @@ MEASURING: tuple[StandIn, ...] = (
         _point_circle(0, "spigot"),
         "down by @P22, a touch along Y (@P5), up; by @P17/@P18/@P19 above the spigot; four points round it "
         "at depth @P22",
+    ),
+    _spec(
+        "SysMeasWcs29.ecy",
+        "Outer rectangle",
+        "303727243.html",
+        (
+            Param(31, "length of the block along X", required=True, check="positive"),
+            Param(32, "length of the block along Y", required=True, check="positive"),
+            Param(19, "pre-positioning along Z to the measuring height (incremental)", required=True),
+            P7,
+            P9,
+            P10,
+            P13,
+            P33,
+        ),
+        (
+            Output("SysRetX", "centre X (+ @P9)"),
+            Output("SysRetY", "centre Y (+ @P10)"),
+            Output("SysRetLengthX", "measured length along X"),
+            Output("SysRetLengthY", "measured length along Y"),
+        ),
+        _block_run((0, 1)),
+        "centrally above the block: for X+, X-, Y+, Y- out beside it, down by @P19, a touch toward its "
+        "middle, back out and up",
     ),
     _spec(
         "SysMeasWcs36.ecy",

@@ -22,6 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 __all__ = [
+    "Box",
     "Feature",
     "HalfSpace",
     "Hole",
@@ -67,12 +68,23 @@ class Spigot:
 
 
 @dataclass(frozen=True, slots=True)
+class Box:
+    """A block with faces parallel to X and Y about ``centre`` (x, y), ``half`` its half lengths (a web:
+    a huge half length along the web), up to ``top``. The probe sphere's corners are taken square (the
+    grown block is a box): exact on the faces the cycles probe."""
+
+    centre: Vec3
+    half: tuple[float, float]
+    top: float
+
+
+@dataclass(frozen=True, slots=True)
 class Sphere:
     centre: Vec3
     radius: float
 
 
-Feature = HalfSpace | Hole | Spigot | Sphere
+Feature = HalfSpace | Hole | Spigot | Box | Sphere
 
 
 def shifted(feature: Feature, by: Vec3) -> Feature:
@@ -87,6 +99,9 @@ def shifted(feature: Feature, by: Vec3) -> Feature:
     if isinstance(feature, Spigot):
         c = feature.centre
         return Spigot((c[0] + dx, c[1] + dy, c[2] + dz), feature.radius, feature.top + dz)
+    if isinstance(feature, Box):
+        c = feature.centre
+        return Box((c[0] + dx, c[1] + dy, c[2] + dz), feature.half, feature.top + dz)
     c = feature.centre
     return Sphere((c[0] + dx, c[1] + dy, c[2] + dz), feature.radius)
 
@@ -106,6 +121,8 @@ def first_touch(feature: Feature, start: Vec3, end: Vec3, ball: float) -> float 
         t = _hole(feature, s, d, ball)
     elif isinstance(feature, Spigot):
         t = _spigot(feature, s, d, ball)
+    elif isinstance(feature, Box):
+        t = _box(feature, s, d, ball)
     else:
         t = _sphere(feature, s, d, ball)
     if t is None or t > 1.0 + _EPS:
@@ -185,6 +202,27 @@ def _spigot(f: Spigot, s: Vec3, d: Vec3, ball: float) -> float | None:
         if t >= 0.0 and x * x + y * y <= reach * reach and (best is None or t < best):
             best = t
     return best
+
+
+def _box(f: Box, s: Vec3, d: Vec3, ball: float) -> float | None:
+    """Where the centre ``s + t d`` enters the box grown by ``ball`` (slabs; no bottom)."""
+    low = (f.centre[0] - f.half[0] - ball, f.centre[1] - f.half[1] - ball, -math.inf)
+    high = (f.centre[0] + f.half[0] + ball, f.centre[1] + f.half[1] + ball, f.top + ball)
+    inside = all(low[k] + _INSIDE < s[k] < high[k] - _INSIDE for k in range(3))
+    if inside:
+        return 0.0
+    enter, leave = -math.inf, math.inf
+    for k in range(3):
+        if abs(d[k]) <= _EPS:
+            if not low[k] <= s[k] <= high[k]:
+                return None
+            continue
+        t1, t2 = (low[k] - s[k]) / d[k], (high[k] - s[k]) / d[k]
+        enter = max(enter, min(t1, t2))
+        leave = min(leave, max(t1, t2))
+    if enter > leave or leave < 0.0 or enter < -_EPS:
+        return None
+    return max(0.0, enter)
 
 
 def _sphere(f: Sphere, s: Vec3, d: Vec3, ball: float) -> float | None:
