@@ -17,9 +17,9 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Protocol
 
 from hli_server.engine.axis import Axis
+from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
 from hli_server.engine.cycles import CycleError, MotionState
 from hli_server.engine.cycles import run as run_standin
-from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
 from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import LineSegment, Point
@@ -221,7 +221,9 @@ class ChannelCycleContext:
     the decoder's state in program order (the interpreter runs a stand-in lazily, and decoding waits for a
     measuring move to end), the simulated probe's deviation, the results."""
 
-    def __init__(self, channel: Channel, results: Callable[[str, float], None], line: int, block: str) -> None:
+    def __init__(
+        self, channel: Channel, results: Callable[[str, float], None], line: int, block: str
+    ) -> None:
         self._channel = channel
         self._results = results
         self._line = line

@@ -31,10 +31,10 @@ from schemas.results import (
     CollisionPair,
     ExternalVariable,
     MachineState,
+    ProbeDeviation,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
-    ProbeDeviation,
     Scene,
     SoftLimits,
     Timing,
@@ -207,7 +207,7 @@ class OperatorPanel(OperatorPort):
     def set_probe_deviation(self, channel: int, values: dict[str, int]) -> ProbeDeviation:
         ch = self._channel(channel)
         if not values:
-            raise InvalidRequestError("give the deviation per axis [0.1 µm], e.g. {\"X\": 2000}")
+            raise InvalidRequestError('give the deviation per axis [0.1 µm], e.g. {"X": 2000}')
         try:
             self._m.set_probe_deviation(ch.number, {k: mm_from_increments(v) for k, v in values.items()})
         except KeyError as exc:

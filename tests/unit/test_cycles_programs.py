@@ -10,7 +10,14 @@ import pytest
 from hli_server.engine import Machine
 from hli_server.engine.program_check import ProgramCheck
 from hli_server.engine.programs import MemoryLibrary
-from schemas.config import AxisConfig, ChannelConfig, ExternalVariableConfig, MachineConfig, ProbeConfig, ToolEntry
+from schemas.config import (
+    AxisConfig,
+    ChannelConfig,
+    ExternalVariableConfig,
+    MachineConfig,
+    ProbeConfig,
+    ToolEntry,
+)
 from tests.unit.engine_helpers import run
 
 RADIUS = 2.0
@@ -20,17 +27,24 @@ RADIUS = 2.0
 def config(*, swe: int = 5_000_000, variables: dict[str, str] | None = None) -> MachineConfig:
     names = ("X", "Y", "Z")
     return MachineConfig(
-        axes=[AxisConfig(number=i + 1, name=n, swe_neg=-swe, swe_pos=swe, messachse=True) for i, n in enumerate(names)],
+        axes=[
+            AxisConfig(number=i + 1, name=n, swe_neg=-swe, swe_pos=swe, messachse=True)
+            for i, n in enumerate(names)
+        ],
         channels=[
             ChannelConfig(
                 axes=list(names),
-                tools=[ToolEntry(number=1, radius=round(RADIUS * 10_000)), ToolEntry(number=2, radius=30_000)],
-                probe=ProbeConfig(measuring_feed=300.0, positioning_feed=3000.0, deviation_variables=variables or {}),
+                tools=[
+                    ToolEntry(number=1, radius=round(RADIUS * 10_000)),
+                    ToolEntry(number=2, radius=30_000),
+                ],
+                probe=ProbeConfig(
+                    measuring_feed=300.0, positioning_feed=3000.0, deviation_variables=variables or {}
+                ),
             )
         ],
         external_variables=[
-            ExternalVariableConfig(name=n)
-            for n in ("MEAS_X", "MEAS_Y", "MEAS_D", "MEAS_C", "DEV_X", "MARK")
+            ExternalVariableConfig(name=n) for n in ("MEAS_X", "MEAS_Y", "MEAS_D", "MEAS_C", "DEV_X", "MARK")
         ],
     )
 
@@ -85,7 +99,8 @@ def test_a_part_too_far_off_is_13413_at_the_call() -> None:
     run(machine, SPIGOT)
     errors = [a for a in machine.alarm_history if a.number in (13413, 13414)]
     assert errors, alarms(machine)
-    assert errors[0].line == 10 and "SysMeasWcs39.ecy" in errors[0].message
+    assert errors[0].line == 10
+    assert "SysMeasWcs39.ecy" in errors[0].message
     assert machine.external.read("MEAS_X", 1) == 0.0  # the program stopped at the call
 
 
@@ -116,17 +131,22 @@ def test_a_cycle_not_built_and_an_unknown_cycle() -> None:
     machine = Machine(config(), cycle_programs={1: MemoryLibrary({"other.ecy": "M17\n"}, where="my cycles")})
     run(machine, "G00 X0\nL CYCLE [NAME=SysMillFace.ecy @P1=0]\nM30\n")
     last = machine.alarm_history[-1]
-    assert (last.number, last.line) == (910110, 2) and "SysMillFace.ecy" in last.message
+    assert (last.number, last.line) == (910110, 2)
+    assert "SysMillFace.ecy" in last.message
     machine = Machine(config(), cycle_programs={1: MemoryLibrary({"other.ecy": "M17\n"}, where="my cycles")})
     run(machine, "L CYCLE [NAME=NoSuchCycle.ecy]\nM30\n")
     last = machine.alarm_history[-1]
-    assert last.number == 914010 and "my cycles" in last.message
+    assert last.number == 914010
+    assert "my cycles" in last.message
 
 
 @pytest.mark.req("N-04")
 def test_cycle_variables_of_the_main_program_and_string_parameters() -> None:
     """V.CYC. declared in the main program is seen by the levels it calls (PM 486123531); a string @P."""
-    cycle = '$IF @P31 == "Roughing"\n  V.CYC.Got = 1\n$ELSE\n  V.CYC.Got = 2\n$ENDIF\nV.CYC.Depth = V.CYC.Depth + 1\nM17\n'
+    cycle = (
+        '$IF @P31 == "Roughing"\n  V.CYC.Got = 1\n$ELSE\n  V.CYC.Got = 2\n$ENDIF\n'
+        "V.CYC.Depth = V.CYC.Depth + 1\nM17\n"
+    )
     machine = Machine(config(), programs=MemoryLibrary({"mine.ecy": cycle}))
     program = (
         "#VAR\n  V.CYC.Got = 0\n  V.CYC.Depth = 5\n#ENDVAR\n"
@@ -142,11 +162,13 @@ def test_a_soft_limit_stops_a_pocket_ring() -> None:
     machine = Machine(config(swe=560_000))  # +/-56 mm: the tool centre of the pocket at X50 reaches X57
     program = (
         "T2 D2\nG00 X50 Y0 Z50\nF1000\n"
-        "L CYCLE [NAME=SysMillRectangularPocket.ecy @P1=0 @P2=50 @P3=2 @P4=4 @P5=4 @P6=6 @P72=20 @P73=10]\nM30\n"
+        "L CYCLE [NAME=SysMillRectangularPocket.ecy @P1=0 @P2=50 @P3=2 @P4=4 @P5=4 @P6=6 @P72=20 "
+        "@P73=10]\nM30\n"
     )
     run(machine, program)
     refused = [a for a in machine.alarm_history if a.number == 120002]
-    assert refused and refused[0].line == 4, alarms(machine)
+    assert refused, alarms(machine)
+    assert refused[0].line == 4, alarms(machine)
     assert refused[0].params.get("program") == "SysMillRectangularPocket.ecy"
     assert max(a.setpoint for a in machine.axes if a.name == "X") <= 56.0 + 1e-9
 
@@ -159,7 +181,7 @@ def test_the_callers_modal_state_is_restored() -> None:
         "L CYCLE [NAME=SysDrillCenterHole.ecy @P1=0 @P2=20 @P3=2 @P4=5]\nX10\nM30\n"
     )
     run(machine, program)
-    assert [a for a in alarms(machine)] == []
+    assert alarms(machine) == []
     modal = machine.channel(1).decoder.modal
     assert (modal.absolute, modal.motion, modal.feed) == (False, 1, 777.0)
     assert machine.axes[0].setpoint == pytest.approx(10.0)  # the X10 after the call is incremental
@@ -175,8 +197,12 @@ def test_the_teach_in_subroutine_sets_a_cs() -> None:
         "L CS_BASE_2.bcs\nG01 X0 Y0 Z20 F1000\n#CS OFF\nM30\n"
     )
     run(machine, program)
-    assert [a for a in alarms(machine)] == []
+    assert alarms(machine) == []
     # the CS's origin is the first sphere's centre (0 + 1, 0 + 2, -45 - 0.5): X0 Y0 Z20 of the CS
     x, y, z = (a.setpoint for a in machine.axes)
-    assert (x, y, z) == (pytest.approx(1.0, abs=1e-4), pytest.approx(2.0, abs=1e-4), pytest.approx(-25.5, abs=1e-4))
+    assert (x, y, z) == (
+        pytest.approx(1.0, abs=1e-4),
+        pytest.approx(2.0, abs=1e-4),
+        pytest.approx(-25.5, abs=1e-4),
+    )
     assert "#CS DEF [2][1,2,-45.5,0,0,0]" in (machine.channel(1).written.find("CS_BASE_2.bcs") or None).text  # type: ignore[union-attr]

@@ -10,7 +10,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tests.unit.cycles_helpers import FakeContext, close, run_standin
 from hli_server.engine.cycles import BUILT, NOT_BUILT, CycleError, NotBuilt, StandIn, find, run
 from hli_server.engine.cycles.geometry import (
     circle_points,
@@ -21,6 +20,7 @@ from hli_server.engine.cycles.geometry import (
 )
 from hli_server.engine.cycles.milling import depth_levels, pocket_rings
 from hli_server.engine.cycles.probe import HalfSpace, Hole, Sphere, Spigot, first_touch
+from tests.unit.cycles_helpers import FakeContext, close, run_standin
 
 # --- calls as the pages' examples make them (the corpus programs' calls are among them) ---------------
 EXAMPLES: dict[str, tuple[tuple[float, float, float], dict[int, float | str]]] = {
@@ -96,7 +96,8 @@ def test_the_pages_example_runs(name: str) -> None:
     reference = params.get(100)
     owners = {spec.name, f"{reference}.ecy"}
     assert all(b.program in owners for b in ctx.blocks)
-    assert ctx.blocks[-1].g_codes == (1, 90) and ctx.blocks[-1].feed == 1000.0  # the caller's G01 G90 F1000
+    assert ctx.blocks[-1].g_codes == (1, 90)
+    assert ctx.blocks[-1].feed == 1000.0
     for out in spec.outputs:
         assert out.name in ctx.results, (name, out.name)
     if spec.measuring and name not in ("SysMeasCs1.ecy",):
@@ -153,11 +154,14 @@ def test_a_spigot_off_by_a_deviation_is_measured_off_by_it(dev: tuple[float, flo
 def test_a_block_and_a_web_off_by_a_deviation(dev: tuple[float, float, float], r: float) -> None:
     start, params = EXAMPLES["SysMeasWcs29.ecy"]
     ctx = run_standin("SysMeasWcs29.ecy", params, FakeContext(start, radius=r, deviation=dev))
-    assert close(ctx.results["SysRetX"], dev[0]) and close(ctx.results["SysRetY"], dev[1])
-    assert close(ctx.results["SysRetLengthX"], 40.0) and close(ctx.results["SysRetLengthY"], 60.0)
+    assert close(ctx.results["SysRetX"], dev[0])
+    assert close(ctx.results["SysRetY"], dev[1])
+    assert close(ctx.results["SysRetLengthX"], 40.0)
+    assert close(ctx.results["SysRetLengthY"], 60.0)
     start, params = EXAMPLES["SysMeasWcs14.ecy"]
     ctx = run_standin("SysMeasWcs14.ecy", params, FakeContext(start, radius=r, deviation=dev))
-    assert close(ctx.results["SysRetX"], dev[0]) and close(ctx.results["SysRetLengthX"], 20.0)
+    assert close(ctx.results["SysRetX"], dev[0])
+    assert close(ctx.results["SysRetLengthX"], 20.0)
 
 
 @pytest.mark.req("CY-04")
@@ -202,21 +206,28 @@ def test_the_point_and_spigot_angle() -> None:
         "SysMeasWcs27.ecy", {**params, 12: 10.0}, FakeContext(start, radius=0.0, deviation=(0, 1, 0))
     )
     assert close(shifted.results["SysRetC"], math.degrees(math.atan2(21 - 6, 50 - 0)) - 10.0)
-    assert ctx.warnings and ctx.warnings[0][0] == 917001  # no C axis: measured, not written
+    assert ctx.warnings
+    assert ctx.warnings[0][0] == 917001
 
 
 @pytest.mark.req("CY-04", "CY-06")
 @settings(max_examples=25, deadline=None)
 @given(dev=deviation, r=radius)
-def test_twists_are_those_of_the_nominal_part_when_it_is_only_shifted(dev: tuple[float, float, float], r: float) -> None:
+def test_twists_are_those_of_the_nominal_part_when_it_is_only_shifted(
+    dev: tuple[float, float, float], r: float
+) -> None:
     """The angle cycles measure a rotation: a part shifted without turning keeps its angles (the faces' twist
     0, the line between two centres its nominal angle), whatever the probe's radius."""
     for name in ("SysMeasWcs19.ecy", "SysMeasWcs20.ecy"):
         start, params = EXAMPLES[name]
-        assert close(run_standin(name, params, FakeContext(start, radius=r, deviation=dev)).results["SysRetC"], 0.0)
+        assert close(
+            run_standin(name, params, FakeContext(start, radius=r, deviation=dev)).results["SysRetC"], 0.0
+        )
     for name in ("SysMeasWcs21.ecy", "SysMeasWcs22.ecy", "SysMeasWcs23.ecy"):
         start, params = EXAMPLES[name]
-        found = run_standin(name, {**params, 12: 3.0}, FakeContext(start, radius=r, deviation=(dev[0], dev[1], 0.0)))
+        found = run_standin(
+            name, {**params, 12: 3.0}, FakeContext(start, radius=r, deviation=(dev[0], dev[1], 0.0))
+        )
         assert close(found.results["SysRetC"], math.degrees(math.atan2(20, 50)) - 3.0), name
 
 
@@ -237,10 +248,12 @@ def test_teach_in_writes_the_cs_subroutine() -> None:
     assert text.startswith("%CS_BASE_3.bcs\n")
     x, y, z = ctx.results["SysRetX"], ctx.results["SysRetY"], ctx.results["SysRetZ"]
     # the touches 5 mm (the crossover) before the paths' ends, the faces a probe radius beyond the centre
-    assert close(x, 26.5) and close(y, 26.25) and close(z, -35.125)
-    assert (
-        "#CS DEF [3][26.5,26.25,-35.125,0,90,0]" in text and "#CS ON [3]" in text and text.endswith("M17\n")
-    )
+    assert close(x, 26.5)
+    assert close(y, 26.25)
+    assert close(z, -35.125)
+    assert "#CS DEF [3][26.5,26.25,-35.125,0,90,0]" in text
+    assert "#CS ON [3]" in text
+    assert text.endswith("M17\n")
 
 
 # --- the error IDs ------------------------------------------------------------------------------------
@@ -307,25 +320,30 @@ def test_writing_a_zero_offset_needs_g53() -> None:
     err = _error(
         "SysMeasWcs1.ecy", EXAMPLES["SysMeasWcs1.ecy"][1], FakeContext((-50, 0, -10), zero_offset="G55")
     )
-    assert err.alarm == 14421 and "G55" in err.message
+    assert err.alarm == 14421
+    assert "G55" in err.message
     ctx = run_standin("SysMeasWcs1.ecy", {4: 10}, FakeContext((-50, 0, -10), zero_offset="G55"))
-    assert ctx.offsets == {} and "SysRetX" in ctx.results  # measure only: allowed under a zero offset
+    assert ctx.offsets == {}
+    assert "SysRetX" in ctx.results
 
 
 @pytest.mark.req("CY-04")
 def test_no_workpiece_is_13413() -> None:
     start, params = EXAMPLES["SysMeasWcs1.ecy"]
     err = _error("SysMeasWcs1.ecy", params, FakeContext(start, radius=1.0, deviation=(5.5, 0, 0)))
-    assert err.alarm == 13413 and "no workpiece detected" in err.message
+    assert err.alarm == 13413
+    assert "no workpiece detected" in err.message
     err = _error("SysMeasWcs8.ecy", EXAMPLES["SysMeasWcs8.ecy"][1], FakeContext((0, 0, -10), radius=25.0))
-    assert err.alarm == 917000 and "does not fit the hole" in err.message
+    assert err.alarm == 917000
+    assert "does not fit the hole" in err.message
 
 
 @pytest.mark.req("CY-04")
 def test_a_spigot_in_the_way_of_a_positioning_move_is_13414() -> None:
     start, params = EXAMPLES["SysMeasWcs39.ecy"]
     err = _error("SysMeasWcs39.ecy", params, FakeContext(start, radius=1.0, deviation=(14.0, 0, 0)))
-    assert err.alarm == 13414 and "collision on positioning" in err.message
+    assert err.alarm == 13414
+    assert "collision on positioning" in err.message
 
 
 def test_a_cycle_not_built_is_refused_naming_it() -> None:
@@ -333,7 +351,8 @@ def test_a_cycle_not_built_is_refused_naming_it() -> None:
     assert isinstance(found, NotBuilt)
     with pytest.raises(CycleError) as info:
         run("sysmillface", {}, FakeContext(), 1)
-    assert info.value.alarm == 910110 and "SysMillFace.ecy" in info.value.message
+    assert info.value.alarm == 910110
+    assert "SysMillFace.ecy" in info.value.message
     assert run("MyOwnCycle.ecy", {}, FakeContext(), 1) is None
     assert {c.name for c in NOT_BUILT}.isdisjoint({c.name for c in BUILT})
 
@@ -358,7 +377,9 @@ def test_fit_circle_is_exact_for_points_on_a_circle(
     if spread < 30 or any(abs(a - b) < 5.0 for i, a in enumerate(angles) for b in angles[i + 1 :]):
         return
     (fx, fy), fr = fit_circle(pts)
-    assert close(fx, cx, 1e-6 * r + 1e-6) and close(fy, cy, 1e-6 * r + 1e-6) and close(fr, r, 1e-6 * r + 1e-6)
+    assert close(fx, cx, 1e-6 * r + 1e-6)
+    assert close(fy, cy, 1e-6 * r + 1e-6)
+    assert close(fr, r, 1e-6 * r + 1e-6)
 
 
 def test_sphere_from_an_off_centre_top_touch() -> None:
@@ -368,7 +389,10 @@ def test_sphere_from_an_off_centre_top_touch() -> None:
     rho = math.sqrt(reach**2 - 9.0)
     ring = [(1.0 + rho * math.cos(a), 2.0 + rho * math.sin(a)) for a in (0.1, 1.7, 3.9, 5.0)]
     (x, y, z), found = sphere_from_ring(top, ring, ring_h)
-    assert close(x, 1.0) and close(y, 2.0) and close(z, -30.0) and close(found, 12.0)
+    assert close(x, 1.0)
+    assert close(y, 2.0)
+    assert close(z, -30.0)
+    assert close(found, 12.0)
 
 
 def test_frame_angles_of_a_turned_triangle() -> None:
@@ -379,7 +403,9 @@ def test_frame_angles_of_a_turned_triangle() -> None:
         for x, y, _ in nominal
     ]
     a, b, cc = frame_angles(nominal, turned)
-    assert close(a, 0.0) and close(b, 0.0) and close(cc, 7.0)
+    assert close(a, 0.0)
+    assert close(b, 0.0)
+    assert close(cc, 7.0)
 
 
 @pytest.mark.req("CY-06")
@@ -401,7 +427,8 @@ def test_the_row_pattern_drills_where_the_page_says(n: int, d: float, rot: float
     assert len(bottoms) == n
     expect = line_points((x, y), d, n, rot)
     for (_, end), (px, py) in zip(bottoms, expect, strict=True):
-        assert close(end[0], px) and close(end[1], py)
+        assert close(end[0], px)
+        assert close(end[1], py)
         assert close(end[0], x + (expect.index((px, py))) * d * math.cos(math.radians(rot)))
 
 
@@ -416,7 +443,8 @@ def test_the_circle_pattern_drills_where_the_page_says(n: int, r: float, start: 
     )
     bottoms = [e for s, e, b in ctx.path if close(e[2], -5.0)]
     for (ex, ey, _), (px, py) in zip(bottoms, circle_points((10, -5), r, n, start, 360.0 / n), strict=True):
-        assert close(ex, px) and close(ey, py)
+        assert close(ex, px)
+        assert close(ey, py)
         assert close(math.hypot(ex - 10, ey + 5), r)
     assert len(bottoms) == n
 

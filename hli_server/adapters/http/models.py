@@ -113,7 +113,7 @@ class ProbeBody(_Body):
 
 class ProbeDeviationBody(_Body):
     deviation: dict[str, StrictInt] = Field(
-        description="the simulated workpiece's deviation per axis name [0.1 µm], e.g. {\"X\": 2000} = 0.2 mm; "
+        description='the simulated workpiece\'s deviation per axis name [0.1 µm], e.g. {"X": 2000} = 0.2 mm; '
         "the axes not named keep theirs",
         min_length=1,
     )

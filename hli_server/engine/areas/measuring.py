@@ -144,10 +144,8 @@ class MeasuringMoves(AreaRole):
     ) -> DecodeError | MeasuringMove:
         ch = self.channel
         standin = block.probe_touch is not None
-        if standin:
-            mtype = 1
-        else:
-            mtype = modal.meas_type if modal.meas_type is not None else ch.config.messtyp
+        default = modal.meas_type if modal.meas_type is not None else ch.config.messtyp
+        mtype = 1 if standin else default
         refused = self._check(block, mtype, modal)
         if isinstance(refused, DecodeError):
             return refused

@@ -110,7 +110,8 @@ class Cycle:
         if ctx.inch():
             raise CycleError(
                 A_NOT_SIMULATED,
-                f"{self.spec.name}: the stand-in programs in mm; G70 (inch) is active at the call (select G71)",
+                f"{self.spec.name}: the stand-in programs in mm; G70 (inch) is active at the call "
+                "(select G71)",
             )
         state = ctx.motion_state()
         self.at = ctx.position()

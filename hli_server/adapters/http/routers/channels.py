@@ -121,7 +121,8 @@ async def post_probe(host: HostDep, number: int, body: ProbeBody) -> AcceptedBod
 
 @router.get(
     "/api/channels/{number}/probe/deviation",
-    summary="The simulated workpiece's deviation per axis [0.1 µm] (built-in measuring cycles, docs/cycles.md)",
+    summary="The simulated workpiece's deviation per axis [0.1 µm] (built-in measuring cycles, "
+    "docs/cycles.md)",
 )
 async def get_probe_deviation(host: HostDep, number: int) -> ProbeDeviation:
     return host.operator.probe_deviation(number)
@@ -129,7 +130,8 @@ async def get_probe_deviation(host: HostDep, number: int) -> ProbeDeviation:
 
 @router.put(
     "/api/channels/{number}/probe/deviation",
-    summary="Set the simulated workpiece's deviation per axis [0.1 µm]; an axis with a V.E. variable has it written",
+    summary="Set the simulated workpiece's deviation per axis [0.1 µm]; an axis with a V.E. variable has it "
+    "written",
 )
 async def put_probe_deviation(host: HostDep, number: int, body: ProbeDeviationBody) -> ProbeDeviation:
     return host.operator.set_probe_deviation(number, dict(body.deviation))
