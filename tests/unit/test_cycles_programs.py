@@ -206,3 +206,21 @@ def test_the_teach_in_subroutine_sets_a_cs() -> None:
         pytest.approx(-25.5, abs=1e-4),
     )
     assert "#CS DEF [2][1,2,-45.5,0,0,0]" in (machine.channel(1).written.find("CS_BASE_2.bcs") or None).text  # type: ignore[union-attr]
+
+
+@pytest.mark.req("CY-03", "C14-02")
+def test_a_protection_area_stops_the_drill_above_a_clamp() -> None:
+    """A clamp's protection area below Z-1 around X30: the stand-in's feed to the depth enters it and is
+    refused by the area monitor at the call's line; the drill's rapid above it was allowed."""
+    machine = Machine(config())
+    program = (
+        "G90 F1000\n#CONTROL AREA BEGIN [ID=1 PROT POLY MIN_EXCUR=-50 MAX_EXCUR=-1]\n"
+        "G01 X25 Y-5\nX35 Y-5\nX35 Y5\nX25 Y5\nX25 Y-5\n#CONTROL AREA END\n#CONTROL AREA ON ALL\n"
+        "T2 D2\nG00 X30 Y0 Z50\n"
+        "L CYCLE [NAME=SysDrillCenterHole.ecy @P1=0 @P2=20 @P3=2 @P4=5]\nM30\n"
+    )
+    run(machine, program)
+    entered = [a for a in machine.alarm_history if a.number in (912000, 912001)]
+    assert entered, alarms(machine)
+    assert entered[0].line == 12, alarms(machine)  # the call's line
+    assert min(a.setpoint for a in machine.axes if a.name == "Z") >= -1.0 - 1e-6
