@@ -209,8 +209,7 @@ class Cycle:
             raise CycleError(
                 A_COLLISION,
                 f"{self.spec.name}: collision on positioning, please check your motion range: the probe "
-                f"touched "
-                f"the workpiece at X{fmt(hit[0])} Y{fmt(hit[1])} Z{fmt(hit[2])} on the way to "
+                f"touched the workpiece at X{fmt(hit[0])} Y{fmt(hit[1])} Z{fmt(hit[2])} on the way to "
                 f"X{fmt(target[0])} Y{fmt(target[1])} Z{fmt(target[2])}",
             )
 
@@ -242,9 +241,8 @@ class Cycle:
             raise CycleError(
                 A_NO_WORKPIECE,
                 f"{self.spec.name}: no workpiece detected, please check your measuring section: the "
-                f"measuring "
-                f"move from X{fmt(start[0])} Y{fmt(start[1])} Z{fmt(start[2])} to X{fmt(target[0])} "
-                f"Y{fmt(target[1])} Z{fmt(target[2])} ended without a probe signal",
+                f"measuring move from X{fmt(start[0])} Y{fmt(start[1])} Z{fmt(start[2])} to "
+                f"X{fmt(target[0])} Y{fmt(target[1])} Z{fmt(target[2])} ended without a probe signal",
             )
         return _lerp(start, target, fraction)
 

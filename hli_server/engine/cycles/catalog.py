@@ -98,7 +98,6 @@ def run(
         raise CycleError(
             A_NOT_SIMULATED,
             f"{found.name} ({found.package}, {found.title}) has no built-in stand-in in the simulator: put "
-            f"the "
-            f"cycle file into a program directory or the channel's cycle_directories ({found.page})",
+            f"the cycle file into a program directory or the channel's cycle_directories ({found.page})",
         )
     return Cycle(found, params, ctx, line, call_text).blocks()

@@ -61,8 +61,7 @@ def drill_depth(c: Cycle) -> float:
             raise CycleError(
                 A_INVALID,
                 f"{c.spec.name}: @P87 (point angle) needs the drill's radius from the tool data; the active "
-                f"D has "
-                "radius 0",
+                "D has radius 0",
                 87,
             )
         depth += c.ball / math.tan(math.radians(a.num(87)) / 2.0)
@@ -75,6 +74,14 @@ def _approach(c: Cycle) -> Iterator[Block]:
     x, y, _ = c.at
     yield from c.rapid((x, y, a.num(2)))
     yield from c.rapid((x, y, a.num(1) + a.num(3)))
+
+
+def _drill(c: Cycle, depth: float, feed: float) -> Iterator[Block]:
+    """Approach, feed to ``depth`` below the reference plane, dwell @P17 there."""
+    yield from _approach(c)
+    x, y, _ = c.at
+    yield from c.feed_move((x, y, c.args.num(1) - depth), feed)
+    yield from c.dwell(c.args.num(17))
 
 
 def _retract(c: Cycle, at_feed: bool, feed: float) -> Iterator[Block]:
@@ -93,8 +100,7 @@ def _check_planes(c: Cycle) -> None:
         raise CycleError(
             A_INVALID,
             f"{c.spec.name}: the retraction plane @P2 = {fmt(a.num(2))} lies below the reference plane plus "
-            f"the safety "
-            f"clearance ({fmt(a.num(1) + a.num(3))})",
+            f"the safety clearance ({fmt(a.num(1) + a.num(3))})",
             2,
         )
 
@@ -112,10 +118,7 @@ def _center_hole(c: Cycle) -> Iterator[Block]:
         depth = a.num(68) / 2.0 / math.tan(math.radians(angle) / 2.0)
     else:
         depth = drill_depth(c)
-    yield from _approach(c)
-    x, y, _ = c.at
-    yield from c.feed_move((x, y, a.num(1) - depth), feed)
-    yield from c.dwell(a.num(17))
+    yield from _drill(c, depth, feed)
     yield from _retract(c, False, feed)
 
 
@@ -123,10 +126,7 @@ def _reaming(c: Cycle) -> Iterator[Block]:
     a = c.args
     _check_planes(c)
     feed = feed_at_call(c)
-    yield from _approach(c)
-    x, y, _ = c.at
-    yield from c.feed_move((x, y, a.num(1) - a.num(4)), feed)
-    yield from c.dwell(a.num(17))
+    yield from _drill(c, a.num(4), feed)
     yield from _retract(c, a.num(92) == 1.0, feed)
 
 
@@ -134,16 +134,13 @@ def _boring(c: Cycle) -> Iterator[Block]:
     a = c.args
     _check_planes(c)
     feed = feed_at_call(c)
-    yield from _approach(c)
-    x, y, _ = c.at
-    bottom = (x, y, a.num(1) - a.num(4))
-    yield from c.feed_move(bottom, feed)
-    yield from c.dwell(a.num(17))
+    yield from _drill(c, a.num(4), feed)
+    x, y, bottom_z = c.at
     mode = a.num(92)
     if mode == 2.0:
         angle = math.radians(a.num(62))
         r = a.num(93)
-        aside: Vec3 = (x + r * math.cos(angle), y + r * math.sin(angle), bottom[2] + a.num(94))
+        aside: Vec3 = (x + r * math.cos(angle), y + r * math.sin(angle), bottom_z + a.num(94))
         yield from c.rapid(aside)
         yield from c.rapid((aside[0], aside[1], a.num(2)))
         yield from c.rapid((x, y, a.num(2)))

@@ -55,6 +55,43 @@ P13 = Param(
 )
 P33 = Param(33, "crossover range beyond the expected edge [mm]", default=_CROSSOVER, check="nonnegative")
 P39 = Param(39, "the coordinate system (#CS) to write, 1..10", required=True, low=1.0, high=10.0, alarm=13448)
+P13_OPTIONAL = Param(
+    13, "safety clearance for pre-positioning; absent: the whole path at measuring feed", check="nonnegative"
+)
+P14_FIRST = Param(14, "angle of the 1st point from X+ [deg]", default=0.0)
+P15_BETWEEN = Param(15, "angle between the lateral touches [deg]", default=90.0, check="nonzero")
+P19_BELOW_TOP = Param(
+    19,
+    "pre-positioning along Z (relative) to the measuring height",
+    default_text="5 mm below the spigot's top",
+)
+P19_CLEARANCE = Param(
+    19,
+    "clearance along Z between the measurements (incremental)",
+    default_text="back up by the Z pre-positioning",
+)
+P19_TO_HEIGHT = Param(19, "pre-positioning along Z (incremental, to the measuring height)", required=True)
+P22_BEFORE = Param(
+    22,
+    "pre-positioning along Z before the 1st measurement (incremental); @P20 in the page's example",
+    default_text="@P20, else 0",
+)
+P22_DEPTH = Param(22, "measuring depth (incremental Z)", required=True)
+P2_HOLE = Param(2, "hole diameter", required=True, check="positive")
+P2_SPIGOT = Param(2, "spigot diameter", required=True, check="positive")
+P2_SPIGOT_ESTIMATED = Param(2, "estimated spigot diameter", required=True, check="positive")
+P33_SPHERE = Param(33, "crossover range", default_text="@P87/4")
+P6_DOWN = Param(6, "measuring path toward -Z", required=True, check="nonzero")
+P87_SPHERE = Param(87, "sphere diameter", required=True, check="positive")
+
+
+def _above(what: str) -> tuple[Param, Param, Param]:
+    """@P17..@P19: the pre-positioning above ``what`` (a spigot, a hole)."""
+    return (
+        Param(17, f"pre-positioning along X above {what} (incremental)", default=0.0),
+        Param(18, f"pre-positioning along Y above {what} (incremental)", default=0.0),
+        Param(19, f"pre-positioning along Z above {what} (incremental)", default=0.0),
+    )
 
 
 def _path(number: int, axis: str) -> Param:
@@ -385,12 +422,12 @@ _CIRCLE_OUT = (
     Output("SysRetDiameter", "measured diameter"),
 )
 _ANGLES3 = (
-    Param(14, "angle of the 1st point from X+ [deg]", default=0.0),
+    P14_FIRST,
     Param(15, "angle of the 2nd point from X+ [deg]", default=120.0),
     Param(16, "angle of the 3rd point from X+ [deg]", default=240.0),
 )
 _START_STEP = (
-    Param(14, "angle of the 1st point from X+ [deg]", default=0.0),
+    P14_FIRST,
     Param(15, "incremental angle to the next point [deg]", default=90.0, check="nonzero"),
 )
 
@@ -646,8 +683,7 @@ def _cs1_run(c: Cycle) -> Iterator[Block]:
     c.ctx.warn(
         A_APPROXIMATED,
         f"{c.spec.name}: manual teach-in is an operator's dialogue on the kernel; the stand-in takes the "
-        f"tool "
-        "tip's position at the call (plus the probe deviation) as the taught origin and no rotation",
+        f"tool tip's position at the call (plus the probe deviation) as the taught origin and no rotation",
     )
     dev = c.ctx.deviation()
     origin = (c.at[0] + dev[0], c.at[1] + dev[1], c.at[2] + dev[2])
@@ -706,15 +742,11 @@ MEASURING: tuple[StandIn, ...] = (
         "Inner diameter with 4 points",
         "304402827.html",
         (
-            Param(2, "hole diameter", required=True, check="positive"),
+            P2_HOLE,
             P7,
             P9,
             P10,
-            Param(
-                13,
-                "safety clearance for pre-positioning; absent: the whole path at measuring feed",
-                check="nonnegative",
-            ),
+            P13_OPTIONAL,
             P33,
         ),
         _CIRCLE_OUT,
@@ -727,15 +759,11 @@ MEASURING: tuple[StandIn, ...] = (
         "Inner diameter with 3 points",
         "303525259.html",
         (
-            Param(2, "hole diameter", required=True, check="positive"),
+            P2_HOLE,
             P7,
             P9,
             P10,
-            Param(
-                13,
-                "safety clearance for pre-positioning; absent: the whole path at measuring feed",
-                check="nonnegative",
-            ),
+            P13_OPTIONAL,
             *_ANGLES3,
             P33,
         ),
@@ -749,8 +777,8 @@ MEASURING: tuple[StandIn, ...] = (
         "Outer diameter with 4 points",
         "303535627.html",
         (
-            Param(2, "spigot diameter", required=True, check="positive"),
-            Param(19, "pre-positioning along Z (incremental, to the measuring height)", required=True),
+            P2_SPIGOT,
+            P19_TO_HEIGHT,
             P7,
             P9,
             P10,
@@ -767,8 +795,8 @@ MEASURING: tuple[StandIn, ...] = (
         "Outer diameter with 3 points",
         "303542923.html",
         (
-            Param(2, "spigot diameter", required=True, check="positive"),
-            Param(19, "pre-positioning along Z (incremental, to the measuring height)", required=True),
+            P2_SPIGOT,
+            P19_TO_HEIGHT,
             P7,
             P9,
             P10,
@@ -786,7 +814,7 @@ MEASURING: tuple[StandIn, ...] = (
         "303582859.html",
         (
             Param(3, "web width (along X)", required=True, check="positive"),
-            Param(19, "pre-positioning along Z to the measuring height (incremental)", required=True),
+            P19_TO_HEIGHT,
             P7,
             P9,
             P13,
@@ -805,16 +833,12 @@ MEASURING: tuple[StandIn, ...] = (
         "Inner diameter with 4 points and obstacle",
         "303554827.html",
         (
-            Param(2, "hole diameter", required=True, check="positive"),
+            P2_HOLE,
             Param(19, "pre-positioning along Z into the hole (incremental)", required=True),
             P7,
             P9,
             P10,
-            Param(
-                13,
-                "safety clearance for pre-positioning; absent: the whole path at measuring feed",
-                check="nonnegative",
-            ),
+            P13_OPTIONAL,
             P33,
         ),
         _CIRCLE_OUT,
@@ -830,17 +854,8 @@ MEASURING: tuple[StandIn, ...] = (
             Param(18, "offset along Y of the 2nd point (incremental)", required=True, check="nonzero"),
             P7,
             P12,
-            Param(
-                19,
-                "clearance along Z between the measurements (incremental)",
-                default_text="back up by the Z pre-positioning",
-            ),
-            Param(
-                22,
-                "pre-positioning along Z before the 1st measurement (incremental); @P20 in the page's "
-                "example",
-                default_text="@P20, else 0",
-            ),
+            P19_CLEARANCE,
+            P22_BEFORE,
         ),
         (Output("SysRetC", "twist of the face about Z, less @P12 [deg]"),),
         _face_twist(0),
@@ -856,17 +871,8 @@ MEASURING: tuple[StandIn, ...] = (
             Param(17, "offset along X of the 2nd point (incremental)", required=True, check="nonzero"),
             P7,
             P12,
-            Param(
-                19,
-                "clearance along Z between the measurements (incremental)",
-                default_text="back up by the Z pre-positioning",
-            ),
-            Param(
-                22,
-                "pre-positioning along Z before the 1st measurement (incremental); @P20 in the page's "
-                "example",
-                default_text="@P20, else 0",
-            ),
+            P19_CLEARANCE,
+            P22_BEFORE,
         ),
         (Output("SysRetC", "twist of the face about Z, less @P12 [deg]"),),
         _face_twist(1),
@@ -879,7 +885,7 @@ MEASURING: tuple[StandIn, ...] = (
         "303630091.html",
         (
             Param(2, "diameter of the 1st hole", required=True, check="positive"),
-            Param(22, "measuring depth (incremental Z)", required=True),
+            P22_DEPTH,
             P7,
             P12,
             P13,
@@ -900,13 +906,11 @@ MEASURING: tuple[StandIn, ...] = (
         "303643147.html",
         (
             Param(2, "diameter of the 1st spigot", required=True, check="positive"),
-            Param(22, "measuring depth (incremental Z)", required=True),
+            P22_DEPTH,
             P7,
             P12,
             P13,
-            Param(17, "pre-positioning along X above the 2nd spigot (incremental)", default=0.0),
-            Param(18, "pre-positioning along Y above the 2nd spigot (incremental)", default=0.0),
-            Param(19, "pre-positioning along Z above the 2nd spigot (incremental)", default=0.0),
+            *_above("the 2nd spigot"),
             Param(29, "diameter of the 2nd spigot", default_text="@P2", check="positive"),
             P33,
         ),
@@ -920,15 +924,13 @@ MEASURING: tuple[StandIn, ...] = (
         "Measure angle between drilled hole and spigot (C axis)",
         "303651979.html",
         (
-            Param(2, "hole diameter", required=True, check="positive"),
-            Param(22, "measuring depth (incremental Z)", required=True),
+            P2_HOLE,
+            P22_DEPTH,
             Param(29, "spigot diameter", required=True, check="positive"),
             P7,
             P12,
             P13,
-            Param(17, "pre-positioning along X above the spigot (incremental)", default=0.0),
-            Param(18, "pre-positioning along Y above the spigot (incremental)", default=0.0),
-            Param(19, "pre-positioning along Z above the spigot (incremental)", default=0.0),
+            *_above("the spigot"),
             P33,
         ),
         (Output("SysRetC", "angle of the line hole -> spigot to X+, less @P12 [deg]"),),
@@ -941,15 +943,13 @@ MEASURING: tuple[StandIn, ...] = (
         "Measure angle between point in Y and drilled hole (C axis)",
         "303663883.html",
         (
-            Param(2, "hole diameter", required=True, check="positive"),
+            P2_HOLE,
             _path(4, "X"),
-            Param(22, "measuring depth (incremental Z)", required=True),
+            P22_DEPTH,
             P7,
             P12,
             P13,
-            Param(17, "pre-positioning along X above the hole (incremental)", default=0.0),
-            Param(18, "pre-positioning along Y above the hole (incremental)", default=0.0),
-            Param(19, "pre-positioning along Z above the hole (incremental)", default=0.0),
+            *_above("the hole"),
             P33,
         ),
         (Output("SysRetC", "angle of the line point -> hole centre to X+, less @P12 [deg]"),),
@@ -962,15 +962,13 @@ MEASURING: tuple[StandIn, ...] = (
         "Measure angle between point in X and drilled hole (C axis)",
         "303660811.html",
         (
-            Param(2, "hole diameter", required=True, check="positive"),
+            P2_HOLE,
             _path(5, "Y"),
-            Param(22, "measuring depth (incremental Z)", required=True),
+            P22_DEPTH,
             P7,
             P12,
             P13,
-            Param(17, "pre-positioning along X above the hole (incremental)", default=0.0),
-            Param(18, "pre-positioning along Y above the hole (incremental)", default=0.0),
-            Param(19, "pre-positioning along Z above the hole (incremental)", default=0.0),
+            *_above("the hole"),
             P33,
         ),
         (Output("SysRetC", "angle of the line point -> hole centre to X+, less @P12 [deg]"),),
@@ -983,15 +981,13 @@ MEASURING: tuple[StandIn, ...] = (
         "Measure angle between point in Y and spigot (C axis)",
         "303669643.html",
         (
-            Param(2, "spigot diameter", required=True, check="positive"),
+            P2_SPIGOT,
             _path(4, "X"),
-            Param(22, "measuring depth (incremental Z)", required=True),
+            P22_DEPTH,
             P7,
             P12,
             P13,
-            Param(17, "pre-positioning along X above the spigot (incremental)", default=0.0),
-            Param(18, "pre-positioning along Y above the spigot (incremental)", default=0.0),
-            Param(19, "pre-positioning along Z above the spigot (incremental)", default=0.0),
+            *_above("the spigot"),
             P33,
         ),
         (Output("SysRetC", "angle of the line point -> spigot centre to X+, less @P12 [deg]"),),
@@ -1004,15 +1000,13 @@ MEASURING: tuple[StandIn, ...] = (
         "Measure angle between point in X and spigot (C axis)",
         "303687307.html",
         (
-            Param(2, "spigot diameter", required=True, check="positive"),
+            P2_SPIGOT,
             _path(5, "Y"),
-            Param(22, "measuring depth (incremental Z)", required=True),
+            P22_DEPTH,
             P7,
             P12,
             P13,
-            Param(17, "pre-positioning along X above the spigot (incremental)", default=0.0),
-            Param(18, "pre-positioning along Y above the spigot (incremental)", default=0.0),
-            Param(19, "pre-positioning along Z above the spigot (incremental)", default=0.0),
+            *_above("the spigot"),
             P33,
         ),
         (Output("SysRetC", "angle of the line point -> spigot centre to X+, less @P12 [deg]"),),
@@ -1027,7 +1021,7 @@ MEASURING: tuple[StandIn, ...] = (
         (
             Param(31, "length of the block along X", required=True, check="positive"),
             Param(32, "length of the block along Y", required=True, check="positive"),
-            Param(19, "pre-positioning along Z to the measuring height (incremental)", required=True),
+            P19_TO_HEIGHT,
             P7,
             P9,
             P10,
@@ -1066,17 +1060,13 @@ MEASURING: tuple[StandIn, ...] = (
         "Measure a spigot with 3 points (start and incremental angle)",
         "548093579.html",
         (
-            Param(2, "estimated spigot diameter", required=True, check="positive"),
+            P2_SPIGOT_ESTIMATED,
             P7,
             P9,
             P10,
             P13,
             *_START_STEP,
-            Param(
-                19,
-                "pre-positioning along Z (relative) to the measuring height",
-                default_text="5 mm below the spigot's top",
-            ),
+            P19_BELOW_TOP,
             P33,
         ),
         _CIRCLE_OUT,
@@ -1089,17 +1079,13 @@ MEASURING: tuple[StandIn, ...] = (
         "Measure a spigot with 4 points (start and incremental angle)",
         "548093579.html",
         (
-            Param(2, "estimated spigot diameter", required=True, check="positive"),
+            P2_SPIGOT_ESTIMATED,
             P7,
             P9,
             P10,
             P13,
             *_START_STEP,
-            Param(
-                19,
-                "pre-positioning along Z (relative) to the measuring height",
-                default_text="5 mm below the spigot's top",
-            ),
+            P19_BELOW_TOP,
             P33,
         ),
         _CIRCLE_OUT,
@@ -1113,15 +1099,15 @@ MEASURING: tuple[StandIn, ...] = (
         "536041483.html",
         (
             Param(6, "measuring path toward -Z (positive)", required=True, check="positive"),
-            Param(87, "sphere diameter", required=True, check="positive"),
+            P87_SPHERE,
             P7,
             P9,
             P10,
             P11,
             P13,
             Param(14, "probing angle of the 1st lateral touch from X+ [deg]", default=0.0),
-            Param(15, "angle between the lateral touches [deg]", default=90.0, check="nonzero"),
-            Param(33, "crossover range", default_text="@P87/4"),
+            P15_BETWEEN,
+            P33_SPHERE,
             Param(
                 64, "approach 0 linear, 1 circular (circular: linear here)", default=0.0, choices=(0.0, 1.0)
             ),
@@ -1160,7 +1146,7 @@ MEASURING: tuple[StandIn, ...] = (
         (
             _path(4, "X"),
             _path(5, "Y"),
-            Param(6, "measuring path toward -Z", required=True, check="nonzero"),
+            P6_DOWN,
             P39,
             P9,
             P10,
@@ -1179,20 +1165,20 @@ MEASURING: tuple[StandIn, ...] = (
         "Teach-in with 3 spheres",
         "550151051.html",
         (
-            Param(6, "measuring path toward -Z", required=True, check="nonzero"),
+            P6_DOWN,
             P39,
             Param(41, "X of the 2nd pre-position, relative to the start", required=True),
             Param(42, "X of the 3rd pre-position, relative to the start", required=True),
             Param(43, "Y of the 2nd pre-position, relative to the start", required=True),
             Param(44, "Y of the 3rd pre-position, relative to the start", required=True),
-            Param(87, "sphere diameter", required=True, check="positive"),
+            P87_SPHERE,
             P9,
             P10,
             P11,
             P13,
             Param(14, "probing angle of the 1st lateral touch [deg]", default=0.0),
-            Param(15, "angle between the lateral touches [deg]", default=90.0, check="nonzero"),
-            Param(33, "crossover range", default_text="@P87/4"),
+            P15_BETWEEN,
+            P33_SPHERE,
         ),
         tuple(
             Output(f"SysRet{n}", "origin (1st sphere) / rotation (nominal -> measured triangle, ZYX)")

@@ -92,8 +92,7 @@ class _Pocket:
             raise CycleError(
                 A_INVALID,
                 f"{c.spec.name}: the retraction plane @P2 = {fmt(self.retract)} lies below the reference "
-                f"plane plus "
-                f"the safety clearance ({fmt(self.safe)})",
+                f"plane plus the safety clearance ({fmt(self.safe)})",
                 2,
             )
         self.step_z = a.num(5)
@@ -103,8 +102,7 @@ class _Pocket:
             raise CycleError(
                 A_INVALID,
                 f"{c.spec.name}: maximum infeed in XY @P6 = {fmt(self.step_xy)} is more than the tool "
-                f"diameter "
-                f"({fmt(2.0 * radius)})",
+                f"diameter ({fmt(2.0 * radius)})",
                 6,
             )
         self.feed_xy = a.num(20, feed_at_call(c) if not a.given(20) else 0.0)
