@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import pytest
 
+from hli_server.adapters.host import NotFoundError
 from hli_server.testing import Harness
+from hli_server.testing.remote import RemoteHarness
 from schemas.config import ExternalVariableConfig, MachineConfig, ProbeConfig
 from schemas.wire import ProgramState
+from tests.integration.servers import read_banner, start_server, stop_server
 from tests.machines import demo_config
 
 
@@ -65,3 +68,18 @@ def test_the_harness_sets_the_deviation_the_plc_reads_the_measured_part(hli: Har
     hli.image["gpVEGlob^DEV_X"] = -1.0
     hli.step(2)
     assert hli.probe_deviation()["X"] == pytest.approx(-1.0)
+
+
+@pytest.mark.req("CY-04", "H-12")
+@pytest.mark.slow
+def test_the_remote_harness_sets_the_deviation_over_http() -> None:
+    """``pytest --hli-url``'s harness has the same calls: over the server's HTTP API, in mm."""
+    proc = start_server("--clock", "stepped", "--http-port", "0", "--no-modbus")
+    try:
+        with RemoteHarness(read_banner(proc, timeout=90)["url"]) as hli:
+            assert hli.set_probe_deviation(X=0.25, Z=-0.5) == {"X": 0.25, "Y": 0.0, "Z": -0.5}
+            assert hli.probe_deviation() == {"X": 0.25, "Y": 0.0, "Z": -0.5}
+            with pytest.raises(NotFoundError):
+                hli.set_probe_deviation(Q=1.0)
+    finally:
+        stop_server(proc)
