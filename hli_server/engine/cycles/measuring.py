@@ -430,6 +430,8 @@ _START_STEP = (
     P14_FIRST,
     Param(15, "incremental angle to the next point [deg]", default=90.0, check="nonzero"),
 )
+_SPIGOT_START_STEP = (P2_SPIGOT_ESTIMATED, P7, P9, P10, P13, *_START_STEP, P19_BELOW_TOP, P33)
+"""SysMeasWcs38 and 39 (one page: three or four points)."""
 
 
 def _spec(
@@ -1059,16 +1061,7 @@ MEASURING: tuple[StandIn, ...] = (
         "SysMeasWcs38.ecy",
         "Measure a spigot with 3 points (start and incremental angle)",
         "548093579.html",
-        (
-            P2_SPIGOT_ESTIMATED,
-            P7,
-            P9,
-            P10,
-            P13,
-            *_START_STEP,
-            P19_BELOW_TOP,
-            P33,
-        ),
+        _SPIGOT_START_STEP,
         _CIRCLE_OUT,
         _spigot_run(3, False, 19, True),
         "centrally above the spigot: three points from @P14 in steps of @P15 (out, down, toward the axis, "
@@ -1078,16 +1071,7 @@ MEASURING: tuple[StandIn, ...] = (
         "SysMeasWcs39.ecy",
         "Measure a spigot with 4 points (start and incremental angle)",
         "548093579.html",
-        (
-            P2_SPIGOT_ESTIMATED,
-            P7,
-            P9,
-            P10,
-            P13,
-            *_START_STEP,
-            P19_BELOW_TOP,
-            P33,
-        ),
+        _SPIGOT_START_STEP,
         _CIRCLE_OUT,
         _spigot_run(4, False, 19, True),
         "centrally above the spigot: four points from @P14 in steps of @P15 (out, down, toward the axis, "
