@@ -13,11 +13,13 @@ accepted, the path reached M30, an error reaction, ...) and tells the table.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Protocol
 
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
+from hli_server.engine.cycles import CycleError, MotionState
+from hli_server.engine.cycles import run as run_standin
 from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import LineSegment, Point
@@ -33,7 +35,7 @@ from hli_server.engine.path.profiles import SlopeProfile, SlopeType
 from hli_server.engine.path.tools import ToolData
 from hli_server.engine.planner import Marker, MarkerKind, Motion, Planner
 from hli_server.engine.ports import MachinePort
-from hli_server.engine.programs import ProgramFile
+from hli_server.engine.programs import MemoryLibrary, ProgramFile
 from hli_server.engine.realtime import RealtimeCycles, RtCycle
 from schemas.config import ChannelConfig
 from schemas.events import (
@@ -91,10 +93,42 @@ class ChannelHost:
         return self._channel.machine.external
 
     def find_program(self, name: str) -> ProgramFile | None:
+        written = self._channel.written.find(name)
+        if written is not None:
+            return written
         return self._channel.machine.programs.find(name)
 
     def searched(self) -> tuple[str, ...]:
         return self._channel.machine.programs.searched()
+
+    def find_cycle(self, name: str) -> ProgramFile | None:
+        """A cycle's file: the program libraries first (:meth:`find_program`), then the channel's
+        ``cycle_directories`` (CY-01)."""
+        found = self.find_program(name)
+        if found is not None:
+            return found
+        return self._channel.machine.cycle_library(self._channel.number).find(name)
+
+    def cycle_searched(self) -> tuple[str, ...]:
+        return (*self.searched(), *self._channel.machine.cycle_library(self._channel.number).searched())
+
+    def stand_in(
+        self,
+        name: str,
+        params: dict[int, float | str],
+        results: Callable[[str, float], None],
+        line: int,
+        block: str,
+    ) -> Iterator[Block] | None:
+        """The blocks of the built-in stand-in of cycle ``name`` (engine/cycles), None where no documented
+        cycle has the name; :class:`~hli_server.engine.cycles.CycleError` (910110) for one not built.
+        ``results`` writes a ``V.CYC.`` output (the interpreter's)."""
+        context = ChannelCycleContext(self._channel, results, line, block)
+        try:
+            blocks = run_standin(name, params, context, line)
+        except CycleError as exc:
+            raise _call_error(exc, line, block, name) from None
+        return None if blocks is None else _as_nc_errors(blocks, line, block, name)
 
     def message(self, text: str, save: bool, file: str, program: str, line: int, block: str) -> None:
         ch = self._channel
@@ -178,6 +212,86 @@ class ChannelHost:
         return _tool_and_frame_value(decoder, name)
 
 
+def _call_error(exc: CycleError, line: int, block: str, program: str) -> NcError:
+    """A built-in cycle's error as the alarm of its call's line (the kernel stops the program there)."""
+    params: dict[str, object] = {"cycle": program}
+    if exc.param:
+        params["param"] = exc.param
+    return NcError(exc.alarm, line, block, exc.message, params)
+
+
+def _as_nc_errors(blocks: Iterator[Block], line: int, block: str, program: str) -> Iterator[Block]:
+    try:
+        yield from blocks
+    except CycleError as exc:
+        raise _call_error(exc, line, block, program) from None
+
+
+class ChannelCycleContext:
+    """What a built-in cycle reads of and writes to its channel (engine/cycles' :class:`CycleContext`):
+    the decoder's state in program order (the interpreter runs a stand-in lazily, and decoding waits for a
+    measuring move to end), the simulated probe's deviation, the results."""
+
+    def __init__(
+        self, channel: Channel, results: Callable[[str, float], None], line: int, block: str
+    ) -> None:
+        self._channel = channel
+        self._results = results
+        self._line = line
+        self._block = block
+        self.axis_names: tuple[str, ...] = tuple(channel.axis_names)
+        self.main_axes: tuple[str, str, str] = channel.config.main_axes
+
+    def _main(self, values: Sequence[float]) -> tuple[float, float, float]:
+        index = self._channel.decoder.index
+        x, y, z = self.main_axes
+        return values[index[x]], values[index[y]], values[index[z]]
+
+    def position(self) -> tuple[float, float, float]:
+        return self._main(self._channel.decoder.program_position())
+
+    def plane(self) -> int:
+        return self._channel.decoder.modal.plane
+
+    def inch(self) -> bool:
+        return self._channel.decoder.modal.inch
+
+    def tool_radius(self) -> float:
+        return abs(self._channel.decoder.tools.radius)
+
+    def zero_offset(self) -> str | None:
+        return self._channel.decoder.modal.zero_offset
+
+    def motion_state(self) -> MotionState:
+        modal = self._channel.decoder.modal
+        return MotionState(modal.absolute, modal.motion, modal.feed)
+
+    def measured(self) -> float | None:
+        return self._channel.decoder.measured
+
+    def deviation(self) -> tuple[float, float, float]:
+        values = self._channel.machine.probe_deviation(self._channel.number)
+        x, y, z = self.main_axes
+        return values.get(x, 0.0), values.get(y, 0.0), values.get(z, 0.0)
+
+    def probe_feeds(self) -> tuple[float, float]:
+        probe = self._channel.config.probe
+        return probe.measuring_feed, probe.positioning_feed
+
+    def write_zero_offset(self, name: str, values: Mapping[str, float]) -> None:
+        self._channel.decoder.modal.zero_offsets.setdefault(name, {}).update(values)
+
+    def set_result(self, name: str, value: float) -> None:
+        self._results(name, value)
+
+    def write_program(self, name: str, text: str) -> None:
+        self._channel.written.write(name, text)
+
+    def warn(self, alarm: int, message: str) -> None:
+        ch = self._channel
+        ch.machine.raise_alarm(alarm, ch, message, line=self._line, block=self._block)
+
+
 def _tool_and_frame_value(decoder: Decoder, name: str) -> float | None:
     """V.G. (M-12, M-14): the active tool's data (WZ_AKT.R/.L/.NR, WZR, WZL) and #ROTATION's (ROT_ACTIVE,
     ROT_ANGLE, ROT_CENTER1, ROT_CENTER2), as the decoder has them at the block being decoded."""
@@ -250,6 +364,9 @@ class Channel:
         self.decoder.soft_limits = lambda k: (self.axes[k].swe_neg, self.axes[k].swe_pos)
         self._main_slots = tuple(self.axis_names.index(a) for a in config.main_axes)
         self.compiler = Compiler(self.axis_names, config.main_axes)
+        self.written = MemoryLibrary(where="files written by cycles")
+        """Program files the channel's cycles wrote (a teach-in's ``CS_BASE_<n>.bcs``): ``L name`` finds
+        them before the program directories, as the kernel finds the file a cycle just wrote."""
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))
         self.decoder.warn = ChannelHost(self).warn
         self.decoder.corner_ahead = self.interpreter.corner_ahead

@@ -87,6 +87,14 @@ HLI's cycle counter): what a replay may have to run, bounded by the file itself 
 _RANGES: Final = {"DINT": (-(2**31), 2**31 - 1), "UDINT": (0, 2**32 - 1)}
 _KINDS: Final = ("i", "o", "e", "op", "file", "program_file", "fault", "end")
 _TYPES: Final = ("BOOL", "DINT", "UDINT", "LREAL", "STRING")
+_STRING_TYPE: Final = re.compile(r"STRING\(([1-9][0-9]{0,3})\)")
+
+
+def _known_type(name: object) -> bool:
+    """A type a recording's signal may have: an IEC base type or a V.E. STRING(n) of n <= 9999 bytes."""
+    return isinstance(name, str) and (name in _TYPES or _STRING_TYPE.fullmatch(name) is not None)
+
+
 _READ_CHUNK: Final = 1 << 20
 _CLOEXEC: Final = getattr(os, "O_CLOEXEC", 0)
 
@@ -469,7 +477,7 @@ class RecordChecker:
             kind = kinds[index]
             if kind == "BOOL":
                 ok = isinstance(value, bool) or value in (0, 1)
-            elif kind == "STRING":
+            elif kind.startswith("STRING"):
                 ok = isinstance(value, list) and len(value) == 1 and isinstance(value[0], str)
             elif kind == "LREAL":
                 ok = (isinstance(value, int | float) and not isinstance(value, bool)) or value in _NON_FINITE
@@ -509,9 +517,10 @@ def _check_header(path: Path, record: dict[str, Any]) -> None:
     for key in ("inputs", "outputs"):
         listed = record.get(key)
         if not isinstance(listed, list) or not all(
-            isinstance(e, list) and len(e) >= 2 and isinstance(e[0], str) and e[1] in _TYPES for e in listed
+            isinstance(e, list) and len(e) >= 2 and isinstance(e[0], str) and _known_type(e[1])
+            for e in listed
         ):
-            raise bad(key, "a list of [ST path, type] (BOOL, DINT, UDINT, LREAL, STRING)")
+            raise bad(key, "a list of [ST path, type] (BOOL, DINT, UDINT, LREAL, STRING(n))")
     for key, low in (("t_a_us", 1), ("window_start", 0), ("outputs_every", 1)):
         value = record.get(key, low)
         if type(value) is not int or not low <= value <= 2**62:

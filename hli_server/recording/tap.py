@@ -70,6 +70,7 @@ from schemas.results import (
     CollisionPair,
     CommFaultChange,
     MachineState,
+    ProbeDeviation,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
@@ -859,6 +860,17 @@ class JournaledOperator(OperatorPort):
         )
         return result
 
+    def probe_deviation(self, channel: int) -> ProbeDeviation:
+        return self.panel.probe_deviation(channel)
+
+    def set_probe_deviation(self, channel: int, values: dict[str, int]) -> ProbeDeviation:
+        result: ProbeDeviation = self._do(
+            "set_probe_deviation",
+            {"channel": channel, "values": dict(values)},
+            lambda: self.panel.set_probe_deviation(channel, values),
+        )
+        return result
+
     def reference(self, axis: str) -> Accepted:
         result: Accepted = self._do("reference", {"axis": axis}, lambda: self.panel.reference(axis))
         return result
@@ -948,6 +960,7 @@ OPERATOR_REQUESTS: Final = (
     "override",
     "jog",
     "probe",
+    "set_probe_deviation",
     "reference",
     "inject_faults",
     "clear_faults",

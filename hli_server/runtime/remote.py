@@ -92,6 +92,7 @@ from schemas.results import (
     CollisionPair,
     CommFaultChange,
     MachineState,
+    ProbeDeviation,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
@@ -145,6 +146,8 @@ OPERATOR_CALLS = frozenset(
         "override",
         "jog",
         "probe",
+        "probe_deviation",
+        "set_probe_deviation",
         "reference",
         "faults",
         "inject_faults",
@@ -746,6 +749,14 @@ class RemoteOperator(OperatorPort):
 
     def probe(self, channel: int, on: bool) -> Accepted:
         return self._accepted("probe", channel, on)
+
+    def probe_deviation(self, channel: int) -> ProbeDeviation:
+        out: ProbeDeviation = self._call("probe_deviation", channel)
+        return out
+
+    def set_probe_deviation(self, channel: int, values: dict[str, int]) -> ProbeDeviation:
+        out: ProbeDeviation = self._call("set_probe_deviation", channel, values)
+        return out
 
     def reference(self, axis: str) -> Accepted:
         return self._accepted("reference", axis)

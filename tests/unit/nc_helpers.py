@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 
 from hli_server.engine.external import ExternalType, ExternalVariables, ExternalVarSpec
@@ -61,6 +61,22 @@ class FakeHost:
 
     def drive_value(self, axis: str, ident: str) -> float | None:
         return 1000.0 if ident in ("S-0-0001", "S-0-0002") else None
+
+    def find_cycle(self, name: str) -> ProgramFile | None:
+        return self.library.find(name)
+
+    def cycle_searched(self) -> tuple[str, ...]:
+        return self.library.searched()
+
+    def stand_in(
+        self,
+        name: str,
+        params: dict[int, float | str],
+        results: Callable[[str, float], None],
+        line: int,
+        block: str,
+    ) -> Iterator[Block] | None:
+        return None  # the interpreter alone has no built-in cycles (tests/unit/test_cycles_programs.py has)
 
 
 @dataclass

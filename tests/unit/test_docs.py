@@ -65,3 +65,10 @@ def test_the_readme_tour_shows_the_program_the_example_runs() -> None:
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     assert f"```\n{PROGRAM}```" in readme, "README.md's tour program differs from demos/ve_mode.py"
     assert f"```\n{POCKET}```" in readme, "README.md's pocket.nc differs from plc_clients/demos/ve_mode.py"
+
+
+def test_the_cycle_doc_lists_every_cycle() -> None:
+    from hli_server.commands.cycles import cycles_markdown
+
+    doc = (ROOT / "docs" / "cycles.md").read_text(encoding="utf-8")
+    assert cycles_markdown() in doc, "docs/cycles.md is stale: paste `hli-server cycles` between its markers"
