@@ -872,7 +872,6 @@ KERNEL_DEFAULTS: dict[str, object] = {
     "P-AXIS-00197": 50_000,
     "P-AXIS-00198": 50_000,
     "P-CHAN-00071": 0,  # STEP
-    "P-CHAN-00099": 0.0,  # prog_start.feedrate: no default feed (ID 20008)
     "P-AXIS-00043": 0,
     "P-AXIS-00044": 0,
     "P-AXIS-00045": 0,
@@ -899,6 +898,7 @@ KERNEL_DEFAULTS: dict[str, object] = {
     "P-CHAN-00442": 0,
     "P-CHAN-00751": 0,
     "P-CHAN-00874": 0,
+    "P-CHAN-00099": 0.0,
     "P-CHAN-00032": 0,  # kinematik_id (issue 35: the trafo interface page, "Default value 0")
     "P-CHAN-00095": 0,
     "P-CHAN-00188": 0,

@@ -430,8 +430,8 @@ the next one)."""
 CORNER_PASSES: Final = re.compile(r"\s*(?:/[0-9]*\s*)?(?:N\s*[0-9]+\s*:?\s*)?[$#]", re.ASCII | re.IGNORECASE)
 """A control statement or ``#`` command line the look-ahead for G301/G302 passes."""
 UNKNOWN_HASH_HINT: Final = (
-    "the commands simulated here: #CONTROL AREA, #VAR/#ENDVAR, #MSG, #FILE NAME, #FLUSH, #IF/#ELSE/#ENDIF, "
-    "#COMMENT BEGIN/END (docs/nc-language.md)"
+    "no # command of the kernel's language: docs/nc-language.md lists the # commands simulated here and "
+    "those refused by name"
 )
 RT_FREQUENCIES: Final = ("ONCE", "EDGE", "ALWAYS")
 """The qualifiers of a realtime cycle's ``$IF`` (TF5261 444686091)."""

@@ -77,6 +77,8 @@ __all__ = ["ChannelAxes", "StatementParser"]
 
 _PROG_DELIMITERS: Final = frozenset(' \t();"[],#$')
 _M_RETURN_BEFORE = re.compile(r"(?:^|[\s])M0*(?:17|29)[ \t]*$")
+_IMPLICIT_CALL_BEFORE = re.compile(r"(?:^|[\s])G0*(8[0-9]{1,2})[ \t]*$", re.ASCII)
+"""``G80``-``G89``, ``G800``-``G8xx`` right before a ``[``: an implicit subroutine call's parameters."""
 """``M17 [MAIN ..]``: the M17/M29 right before a ``[`` (the parameterised jump)."""
 _SPINDLE_NAME = re.compile(r"S[0-9]*", re.ASCII)
 """The main spindle ``S`` (P-CHAN-00053's default name) or another spindle ``S1``, ``S2`` ..."""
@@ -204,6 +206,13 @@ class StatementParser(HashParser):
             self.fail(
                 A_NOT_SIMULATED,
                 f"the parameterised jump of M17/M29 ({u[start:].strip()}: PM 206781707) is not "
+                "simulated: see docs/nc-language.md",
+            )
+        implicit = _IMPLICIT_CALL_BEFORE.search(u, 0, start) if c == "[" else None
+        if implicit is not None:
+            self.fail(
+                A_NOT_SIMULATED,
+                f"G{implicit[1]}[..]: the implicit subroutine call with parameters (PM 206278923) is not "
                 "simulated: see docs/nc-language.md",
             )
         if c == "[":
