@@ -236,14 +236,7 @@ class HashParser(ExpressionParser):
             self.blanks()
             if self.peek() == "[":
                 self.pos += 1
-                while True:
-                    self.blanks()
-                    if self.peek() == ",":
-                        self.pos += 1
-                        continue
-                    if self.peek() == "]":
-                        self.pos += 1
-                        break
+                while self.next_entry("#AKIMA TRANS"):
                     key = self.name()
                     if key not in ("START", "END") or any(o.startswith(key + "=") for o in options):
                         self.fail(A_CONTROL_SYNTAX, "#AKIMA TRANS [START=<type> END=<type>] (each once)")
