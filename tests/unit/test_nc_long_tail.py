@@ -317,10 +317,24 @@ def test_the_manuals_akima_example_runs_as_the_spline_with_one_warning_more() ->
 @pytest.mark.req("LT-09")
 @pytest.mark.parametrize(
     "line",
-    ["#AKIMA TRANS [START=FOO]", "#AKIMA TRANS [START=AUTO START=USER]", "#AKIMA STARTVECTOR", "#AKIMA"],
+    [
+        "#AKIMA TRANS [START=FOO]",
+        "#AKIMA TRANS [START=AUTO START=USER]",
+        "#AKIMA TRANS [START=AUTO",
+        "#AKIMA STARTVECTOR",
+        "#AKIMA",
+    ],
 )
 def test_malformed_akima_commands_are_refused(line: str) -> None:
     assert interpret(f"{line}\nM30\n").alarm in (914015, 910110)
+
+
+@pytest.mark.req("LT-09")
+def test_an_akima_transition_list_without_its_bracket_says_so() -> None:
+    error = interpret("#AKIMA TRANS [START=AUTO, END=USER\nM30\n").error
+    assert error is not None
+    assert (error.alarm, error.line) == (914015, 1)
+    assert "#AKIMA TRANS [: ']' missing" in error.message
 
 
 @pytest.mark.req("LT-09")
