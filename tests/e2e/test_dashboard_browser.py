@@ -10,10 +10,12 @@ after the reset (docs/dashboard.md).
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
 import subprocess
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -350,3 +352,82 @@ def test_an_nc_message_shows_on_the_page(server: str, page: Any) -> None:
     expect(p.locator("#message")).to_contain_text("load program: done")
     p.click("#ch1-start")
     expect(p.locator("#nc-messages li").first).to_contain_text("hello from the NC", timeout=5_000)
+
+
+@pytest.mark.req("B-02", "E-05")
+def test_the_first_paint_shows_the_recording_and_the_override_in_effect(browser: Any, tmp_path: Path) -> None:
+    """Issue 37, item 3: drawn from what the page was served with alone (the stream and the recorder's
+    status are held back, as a slow network or a screenshot at the load event sees it), the page shows
+    the recording ``--record`` runs, the override in effect (40 %, set through the API before the page
+    was opened) on the slider, and says the picture is the served one rather than "connecting…"."""
+    import urllib.request
+
+    record = tmp_path / "run.jsonl.gz"
+    proc, url = _start("--record", str(record), log=tmp_path / "server.log")
+    try:
+        request = urllib.request.Request(
+            f"{url}/api/channels/1/override",
+            data=b'{"percent": 40}',
+            method="POST",
+            headers={"content-type": "application/json"},
+        )
+        with urllib.request.urlopen(request, timeout=10) as answer:
+            assert answer.status == 202
+        # in effect once the clock latched it (the next cycle): the CNC's state of the override unit says so
+        state = f"{url}/api/image/gpCh[0].bahn_mc_control.override.state_r"
+        deadline = time.monotonic() + 20
+        while json.load(urllib.request.urlopen(state, timeout=10))["value"] != 400:
+            assert time.monotonic() < deadline, "the override of 40 % never came into effect"
+            time.sleep(0.02)
+        context = browser.new_context()
+        p = context.new_page()
+        p.set_default_timeout(WAIT_MS)
+        held: list[Any] = []  # the stream's and the recorder's requests, never answered: a slow network
+
+        def hold(route: Any) -> None:  # (Playwright takes no bound method of a builtin)
+            held.append(route)
+
+        p.route(re.compile(r".*/api/(live|recording)(\?.*)?$"), hold)
+        p.goto(url)
+        expect(p.locator("#ch1-override-state")).to_have_text("40 %")
+        expect(p.locator("#ch1-override")).to_have_value("40")
+        expect(p.locator("#ch1-override-value")).to_have_text("40 %")
+        expect(p.locator("#record")).to_have_text("■ Stop recording")
+        expect(p.locator("#record-status")).to_contain_text("recording run")
+        expect(p.locator("#conn")).to_contain_text("as served at cycle")
+        assert held  # the page did ask for them
+        context.close()
+    finally:
+        stop_server(proc)
+
+
+@pytest.mark.req("E-06", "C14-14")
+def test_a_software_limit_refusal_draws_the_refused_block_and_where_it_crosses(
+    server: str, page: Any
+) -> None:
+    """Issue 37, item 3: X's software limit is 600 mm (the demo machine); N20 would cross it at
+    X600 Y83.3333 and is refused before it starts (120002): the page draws the refused block and the
+    crossing point as it does an area's refusal, and names the limit in the legend."""
+    p = page
+    _open(p, server)
+    p.click("#ch1-reset")
+    _at_rest(p)
+    p.click("#ch1-card details.load summary")
+    p.fill("#ch1-text", "N10 G01 X100 Y0 F30000\nN20 X700 Y100\nN30 M30\n")
+    p.click("#ch1-load")
+    expect(p.locator("#message")).to_contain_text("load program: done")
+    p.click("#ch1-start")
+    expect(p.locator("#alarms li[data-alarm='120002']")).to_contain_text("N20")
+    expect(p.locator("#ch1-state")).to_have_text("aborted")
+    expect(p.locator("#ch1-refused")).to_have_count(1)
+    expect(p.locator("#ch1-violation")).to_have_count(1)
+    legend = p.locator("#ch1-legend")
+    expect(legend).to_contain_text(
+        "refused block N20 (line 2, alarm 120002, the software limit of X (600.0000 mm))"
+    )
+    expect(legend).to_contain_text(
+        "violation at X600.0000 Y83.3333 Z0.0000, the software limit of X (600.0000 mm) (alarm 120002)"
+    )
+    p.click("#ch1-reset")
+    expect(p.locator("#ch1-refused")).to_have_count(0)
+    expect(p.locator("#ch1-violation")).to_have_count(0)
