@@ -65,3 +65,18 @@ def test_the_readme_tour_shows_the_program_the_example_runs() -> None:
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     assert f"```\n{PROGRAM}```" in readme, "README.md's tour program differs from demos/ve_mode.py"
     assert f"```\n{POCKET}```" in readme, "README.md's pocket.nc differs from plc_clients/demos/ve_mode.py"
+
+
+def test_the_plc_clients_doc_names_every_demo() -> None:
+    """Issue 37, item 5: ``hli-plc``'s DEMO row and its introduction name every demo it runs."""
+    import re
+
+    from plc_clients.demos import DEMOS
+
+    doc = (ROOT / "docs" / "plc-clients.md").read_text(encoding="utf-8")
+    row = re.search(r"^\| `DEMO` \| (.*) \|$", doc, flags=re.MULTILINE)
+    assert row is not None, "docs/plc-clients.md has no DEMO row in hli-plc's options"
+    assert re.findall(r"`([a-z][a-z0-9-]*)`", row.group(1)) == list(DEMOS)
+    intro = doc[doc.index("## `hli-plc`") : doc.index("<!-- doc-run", doc.index("## `hli-plc`"))]
+    missing = [name for name in DEMOS if f"`{name}`" not in intro]
+    assert not missing, f"docs/plc-clients.md's hli-plc section does not introduce {missing}"
