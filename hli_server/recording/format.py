@@ -70,8 +70,11 @@ __all__ = [
 ]
 
 FORMAT: Final = "hli-recording"
-FORMAT_VERSION: Final = 3
-"""Raised when a reader of this version could not read the new files; readers refuse newer versions."""
+FORMAT_VERSION: Final = 4
+"""Raised when a reader of this version could not read the new files; readers refuse newer versions.
+4: a recording started in a running server carries a snapshot of the machine (a ``snapshot`` line after
+the journal; the header's ``snapshot`` and ``snapshot_note``); 3: V.E. STRING values; 2: the outputs
+sampled every ``outputs_every`` cycles; 1: every cycle's outputs."""
 SUFFIX: Final = ".jsonl.gz"
 COMPRESS_LEVEL: Final = 1
 """zlib level of the members: the fastest (140 MB/s here against 76 at level 3 and 24 at level 6, for

@@ -80,3 +80,18 @@ def test_the_plc_clients_doc_names_every_demo() -> None:
     intro = doc[doc.index("## `hli-plc`") : doc.index("<!-- doc-run", doc.index("## `hli-plc`"))]
     missing = [name for name in DEMOS if f"`{name}`" not in intro]
     assert not missing, f"docs/plc-clients.md's hli-plc section does not introduce {missing}"
+
+
+def test_what_make_run_writes_into_a_checkout_is_ignored_by_git() -> None:
+    """Issue 37, item 2: a recording started from the API or the dashboard of ``make run`` goes to
+    ``./recordings`` (the default ``--record-dir``), which showed as untracked in a checkout."""
+    import shutil
+    import subprocess
+
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        import pytest
+
+        pytest.skip("not a git checkout")
+    for path in ("recordings/session-20260101-120000.jsonl.gz", "test-artifacts/dashboard-reset.png"):
+        done = subprocess.run(["git", "check-ignore", "-q", path], cwd=ROOT, check=False)
+        assert done.returncode == 0, f"{path} is not ignored by .gitignore"

@@ -1,0 +1,140 @@
+"""The snapshot of the engine's state a recording started in a running server carries (issue 37, item 2;
+``hli_server/recording/snapshot.py``): taken, written as JSON, read back into a machine built from the
+same configuration, the machine goes on exactly as the one it was taken from; a malformed or hostile
+snapshot is refused with a reason, never executed."""
+
+from __future__ import annotations
+
+import copy
+import json
+from typing import Any
+
+import pytest
+
+from hli_server.configuration import load_machine
+from hli_server.engine import Machine
+from hli_server.recording.snapshot import (
+    SnapshotError,
+    SnapshotRestoreError,
+    capture,
+    engine_fingerprint,
+    restore,
+)
+from schemas.events import Event
+from tests.spec_examples import CIRC_PROT_OLD
+
+# a loop with a local variable, an arc, an active protection area beside the path, a message, a V.E. write
+PROGRAM = (
+    CIRC_PROT_OLD
+    + "N50 G01 X0 Y-100 Z0 F6000\n"
+    + "N60 #CONTROL AREA ON [ID4]\n"
+    + "N70 $FOR P1 = 1, 50, 1\n"
+    + '#MSG["pass %d", P1]\n'
+    + "N80   G01 X[40 + P1] Y-100\n"
+    + "N90   G02 X[40 + P1] Y-80 I0 J10\n"
+    + "N100  G01 X0 Y-80\n"
+    + "N110  V.E.MODE = V.E.MODE + 1\n"
+    + "N120 $ENDFOR\n"
+    + "N130 M30\n"
+)
+
+
+def machine() -> tuple[Machine, list[Event]]:
+    m = Machine(load_machine(None))
+    events: list[Event] = []
+    m.event_listeners.append(events.append)
+    return m, events
+
+
+def running(cycles: int) -> tuple[Machine, list[Event]]:
+    m, events = machine()
+    ch = m.channel(1)
+    ch.load_program(PROGRAM, "busy")
+    ch.request_start()
+    m.axis("Y").faults.gain_factor = 0.95
+    m.step(cycles)
+    return m, events
+
+
+def as_json(data: dict[str, Any]) -> dict[str, Any]:
+    """What a recording holds: the snapshot through JSON text."""
+    out: dict[str, Any] = json.loads(json.dumps(data, allow_nan=False))
+    return out
+
+
+@pytest.mark.req("E-01", "B-02")
+@pytest.mark.parametrize("cycles", [1, 700, 2300])
+def test_a_restored_machine_goes_on_exactly_as_the_one_it_was_taken_from(cycles: int) -> None:
+    live, live_events = running(cycles)
+    taken = as_json(capture(live))
+    assert taken["cycle"] == cycles
+    assert taken["fingerprint"] == engine_fingerprint()
+    twin, twin_events = machine()
+    restore(taken, twin)
+    assert as_json(capture(twin)) == taken  # the same state, object for object
+    live_events.clear()
+    for _ in range(20):
+        live.step(150)
+        twin.step(150)
+        assert capture(twin) == capture(live), f"the machines differ at cycle {live.cycle}"
+    assert [e.to_json() for e in twin_events] == [e.to_json() for e in live_events]
+    assert any(e.kind == "nc_message" for e in live_events)
+
+
+def test_the_host_parts_stay_the_restoring_machines_own() -> None:
+    live, _ = running(500)
+    twin, twin_events = machine()
+    listeners, programs = twin.event_listeners, twin.programs
+    restore(as_json(capture(live)), twin)
+    assert twin.event_listeners is listeners
+    assert twin.programs is programs
+    twin.step(3000)
+    assert twin_events  # its own listener hears the restored machine
+
+
+def test_what_cannot_be_kept_as_data_is_named_with_its_place() -> None:
+    live, _ = running(10)
+    live.channel(2).decoder.path_checks.append(lambda segment, block: None)
+    with pytest.raises(SnapshotError, match=r"machine\.channels\[1\]\.decoder\.path_checks\[\d+\]: the function"):
+        capture(live)
+
+
+def _root_state(data: dict[str, Any]) -> dict[str, Any]:
+    state: dict[str, Any] = data["objects"][data["root"]["r"]]["state"]
+    return state
+
+
+@pytest.mark.parametrize(
+    ("forge", "message"),
+    [
+        (lambda d: _root_state(d).__setitem__("cycle", {"fn": "os:system"}), "no module of the engine"),
+        (lambda d: _root_state(d).__setitem__("cycle", {"fn": "builtins:eval"}), "no module of the engine"),
+        (lambda d: _root_state(d).__setitem__("cycle", {"g": "subprocess:Popen"}), "no module of the engine"),
+        (lambda d: _root_state(d).__setitem__("cycle", {"c": "hli_server.engine.machine:__class__"}), "no name"),
+        (lambda d: _root_state(d).__setitem__("cycle", {"r": 10**9}), "a reference to object"),
+        (lambda d: _root_state(d).__setitem__("__class__", 1), "attributes"),
+        (lambda d: _root_state(d).__setitem__("cycle", {"t": [{"t": []}] * 3, "x": 1}), "a value"),
+        (lambda d: d["objects"].__setitem__(d["root"]["r"], {"obj": "os:system", "state": {}}), "of a os:system"),
+        (lambda d: d.__setitem__("fingerprint", "0" * 32), "another engine"),
+        (lambda d: d.__setitem__("snapshot", 99), "layout 99"),
+    ],
+)
+def test_a_malformed_or_hostile_snapshot_is_refused_with_a_reason(forge: Any, message: str) -> None:
+    live, _ = running(300)
+    data = copy.deepcopy(as_json(capture(live)))
+    forge(data)
+    twin, _ = machine()
+    with pytest.raises(SnapshotRestoreError, match=message):
+        restore(data, twin)
+
+
+def test_deep_nesting_is_refused_not_a_crash() -> None:
+    live, _ = running(50)
+    data = as_json(capture(live))
+    value: dict[str, Any] = {"t": []}
+    for _ in range(5000):
+        value = {"t": [value]}
+    _root_state(data)["cycle"] = value
+    twin, _ = machine()
+    with pytest.raises(SnapshotRestoreError, match="nested"):
+        restore(data, twin)
