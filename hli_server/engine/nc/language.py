@@ -393,9 +393,12 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
 """Every ``#`` word the front end knows, by its first word (``#CONTROL AREA`` is the word parser's,
 ``nc/parser.py``); any other is alarm 910109."""
 UNKNOWN_HASH_HINT: Final = (
-    "the commands simulated here: #CONTROL AREA, #VAR/#ENDVAR, #MSG, #FILE NAME, #FLUSH, #IF/#ELSE/#ENDIF, "
-    "#COMMENT BEGIN/END (docs/nc-language.md)"
+    "the commands simulated here: #CONTROL AREA, #VAR/#ENDVAR, #COMMENT BEGIN/END, #IF/#ELSE/#ENDIF, #MSG, "
+    "#FILE NAME (#FILENAME), #FLUSH, #MEAS MODE, #SLOPE, #CONTOUR MODE, #HSC, #SPLINE, #SET SPLINE, "
+    "#SET SPLINETYPE, #CS, #ACS, #ROTATION (docs/nc-language.md)"
 )
+"""910109's list: every spelling :data:`HASH_COMMANDS` simulates (``tests/unit/test_nc_language.py`` holds the
+two together)."""
 SLOPE_TYPES: Final = ("STEP", "TRAPEZ", "SIN2", "HSC")
 """``#SLOPE [TYPE=<ident>]``'s profiles (P-CHAN-00071's 0..3)."""
 MSG_OPTIONS: Final = (
