@@ -13,6 +13,7 @@ and do not move the axes.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
@@ -403,7 +404,8 @@ class Decoder:
             if handler is None:
                 return items
             profile = out.profile
-            return [*items, Marker(MarkerKind.ACTION, block, payload=lambda: handler(profile))]
+            # a partial, not a closure: a recording's snapshot keeps it (hli_server/recording/snapshot.py)
+            return [*items, Marker(MarkerKind.ACTION, block, payload=functools.partial(handler, profile))]
         return items  # pragma: no cover - every directive is handled above
 
     # --- kinematic transformations (docs/kinematics.md) ---------------------------------------------

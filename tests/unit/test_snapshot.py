@@ -34,6 +34,9 @@ PROGRAM = (
     + "N90   G02 X[40 + P1] Y-80 I0 J10\n"
     + "N100  G01 X0 Y-80\n"
     + "N110  V.E.MODE = V.E.MODE + 1\n"
+    + "N112  V.E.PART_COUNT = P1\n"  # synchronous: written when the path gets there
+    + '#MSG SYN["reached %d", P1]\n'
+    + "N114  #SLOPE [TYPE=TRAPEZ]\n"
     + "N120 $ENDFOR\n"
     + "N130 M30\n"
 )
@@ -79,6 +82,46 @@ def test_a_restored_machine_goes_on_exactly_as_the_one_it_was_taken_from(cycles:
         assert capture(twin) == capture(live), f"the machines differ at cycle {live.cycle}"
     assert [e.to_json() for e in twin_events] == [e.to_json() for e in live_events]
     assert any(e.kind == "nc_message" for e in live_events)
+
+
+def test_what_waits_in_the_look_ahead_is_kept_whenever_the_snapshot_is_taken() -> None:
+    """The actions the path runs when it gets there (a synchronous V.E. write, ``#MSG SYN``, ``#SLOPE``,
+    an area command) wait in the planner's queue as marker payloads: kept at any cycle, and run by the
+    restored machine as by the live one."""
+    from plc_clients.demos.ve_mode import CONTOUR, POCKET
+    from plc_clients.demos.ve_mode import PROGRAM as VE_MODE
+
+    live, _ = running(0)
+    kinds: set[str] = set()
+    for _ in range(60):
+        live.step(50)
+        taken = capture(live)  # never SnapshotError
+        kinds |= {o.get("obj", "") for o in taken["objects"]}
+    assert "hli_server.engine.planner:Marker" in kinds
+    demo, _ = machine()
+    demo.programs = _Library({"pocket.nc": POCKET, "contour.nc": CONTOUR})
+    demo.channel(1).load_program(VE_MODE, "ve_mode")
+    demo.channel(1).request_start()
+    demo.external.write("PLC_READY", None, True)
+    for _ in range(40):
+        demo.step(100)
+        capture(demo)
+
+
+class _Library:
+    """The subprograms of the ve-mode demo (the runtime's library is the host's: named in a snapshot)."""
+
+    def __init__(self, files: dict[str, str]) -> None:
+        self.files = files
+
+    def find(self, name: str) -> Any:
+        from hli_server.engine.programs import ProgramFile
+
+        text = self.files.get(name)
+        return None if text is None else ProgramFile(name, text, "test")
+
+    def searched(self) -> tuple[str, ...]:
+        return ("test",)
 
 
 def test_the_host_parts_stay_the_restoring_machines_own() -> None:
