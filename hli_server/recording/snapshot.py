@@ -229,7 +229,12 @@ class _Encoder:
                 raise SnapshotError(
                     f"{self.path(parent, key)}: an enum of {kind.__module__} ({kind.__name__})"
                 )
-            return {"e": _name_of(kind), "v": obj.name}
+            value = obj.value
+            if not isinstance(value, int | str):
+                raise SnapshotError(
+                    f"{self.path(parent, key)}: {_name_of(kind)}.{obj.name} is no number or text"
+                )
+            return {"e": _name_of(kind), "v": value}
         if type(obj) is tuple:
             return {"t": [self.value(v, parent, f"{key}[{k}]", depth + 1) for k, v in enumerate(obj)]}
         if type(obj) is frozenset:
@@ -491,13 +496,12 @@ class _Restorer:
             return self.externals[v["x"]]
         if "e" in v and set(v) == {"e", "v"}:
             kind = _class(v["e"])
-            if (
-                not issubclass(kind, enum.Enum)
-                or not isinstance(v["v"], str)
-                or v["v"] not in kind.__members__
-            ):
+            if not issubclass(kind, enum.Enum) or not isinstance(v["v"], int | str):
                 raise _bad(f"the enum value {str(v)[:80]}")
-            return kind[v["v"]]
+            try:
+                return kind(v["v"])  # by value: an IntFlag's combination has no member name
+            except ValueError:
+                raise _bad(f"the enum value {str(v)[:80]}") from None
         if "c" in v and len(v) == 1:
             return _class(v["c"])
         if "g" in v and len(v) == 1:

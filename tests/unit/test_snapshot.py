@@ -138,7 +138,9 @@ def test_the_host_parts_stay_the_restoring_machines_own() -> None:
 def test_what_cannot_be_kept_as_data_is_named_with_its_place() -> None:
     live, _ = running(10)
     live.channel(2).decoder.path_checks.append(lambda segment, block: None)
-    with pytest.raises(SnapshotError, match=r"machine\.channels\[1\]\.decoder\.path_checks\[\d+\]: the function"):
+    with pytest.raises(
+        SnapshotError, match=r"machine\.channels\[1\]\.decoder\.path_checks\[\d+\]: the function"
+    ):
         capture(live)
 
 
@@ -153,11 +155,17 @@ def _root_state(data: dict[str, Any]) -> dict[str, Any]:
         (lambda d: _root_state(d).__setitem__("cycle", {"fn": "os:system"}), "no module of the engine"),
         (lambda d: _root_state(d).__setitem__("cycle", {"fn": "builtins:eval"}), "no module of the engine"),
         (lambda d: _root_state(d).__setitem__("cycle", {"g": "subprocess:Popen"}), "no module of the engine"),
-        (lambda d: _root_state(d).__setitem__("cycle", {"c": "hli_server.engine.machine:__class__"}), "no name"),
+        (
+            lambda d: _root_state(d).__setitem__("cycle", {"c": "hli_server.engine.machine:__class__"}),
+            "no name",
+        ),
         (lambda d: _root_state(d).__setitem__("cycle", {"r": 10**9}), "a reference to object"),
         (lambda d: _root_state(d).__setitem__("__class__", 1), "attributes"),
         (lambda d: _root_state(d).__setitem__("cycle", {"t": [{"t": []}] * 3, "x": 1}), "a value"),
-        (lambda d: d["objects"].__setitem__(d["root"]["r"], {"obj": "os:system", "state": {}}), "of a os:system"),
+        (
+            lambda d: d["objects"].__setitem__(d["root"]["r"], {"obj": "os:system", "state": {}}),
+            "of a os:system",
+        ),
         (lambda d: d.__setitem__("fingerprint", "0" * 32), "another engine"),
         (lambda d: d.__setitem__("snapshot", 99), "layout 99"),
     ],
