@@ -600,9 +600,8 @@ class SessionTap:
         if isinstance(raw, bytes | bytearray):
             record["external"] = base64.b64encode(bytes(raw)).decode("ascii")
         for fault_id, (stamp, spec) in sorted(self._stalls.items()):
-            left = (
-                stamp - 1 + int(spec.get("cycles", 0)) - (window - 1)
-            )  # CommFaults.add: ends at cycle+cycles
+            ends = stamp - 1 + int(spec.get("cycles", 0))  # CommFaults.add: the cycle it was set + cycles
+            left = ends - (window - 1)
             if left > 0:
                 record["faults"].append({"id": fault_id, "spec": {**spec, "cycles": left}})
         self.snapshot_s = time.perf_counter() - began

@@ -16,6 +16,7 @@ import re
 import shutil
 import subprocess
 import time
+import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -99,9 +100,26 @@ def page(browser: Any) -> Iterator[Any]:
     assert not errors, f"the page's script failed: {errors}"
 
 
+def _post(url: str, body: bytes, content_type: str = "text/plain") -> int:
+    """A request of the control API from outside the page (as another client); its status."""
+    request = urllib.request.Request(url, data=body, method="POST", headers={"content-type": content_type})
+    with urllib.request.urlopen(request, timeout=10) as answer:
+        status: int = answer.status
+        return status
+
+
 def _open(page: Any, url: str) -> None:
     page.goto(url)
     expect(page.locator("#conn")).to_have_text("live", timeout=WAIT_MS)
+
+
+def _load_and_start(page: Any, text: str) -> None:
+    """Load ``text`` into channel 1 from the page's text field and start it."""
+    page.click("#ch1-card details.load summary")
+    page.fill("#ch1-text", text)
+    page.click("#ch1-load")
+    expect(page.locator("#message")).to_contain_text("load program: done")
+    page.click("#ch1-start")
 
 
 def _at_rest(page: Any, axes: str = "XYZ") -> None:
@@ -138,11 +156,7 @@ def test_an_operator_starts_the_demo_program_sees_a_violation_and_resets(server:
     _at_rest(p)
 
     # a program whose block N70 goes through an active protection area
-    p.click("#ch1-card details.load summary")
-    p.fill("#ch1-text", THROUGH)
-    p.click("#ch1-load")
-    expect(p.locator("#message")).to_contain_text("load program: done")
-    p.click("#ch1-start")
+    _load_and_start(p, THROUGH)
     alarm = p.locator("#alarms li[data-alarm='912001']")
     expect(alarm).to_contain_text("touches protection area 4")
     expect(alarm).to_contain_text("N70")
@@ -254,16 +268,8 @@ def test_a_plain_headless_chromium_sees_the_state_and_the_events_of_before(serve
     stream says anything: ``chromium --headless --dump-dom`` (which, like ``--screenshot``, takes the
     page at its load event) shows the mode, the program, the axes with their positions, and the event
     of a program loaded before the page was opened. The screenshot is kept as an artifact."""
-    import urllib.request
-
-    request = urllib.request.Request(
-        f"{server}/api/channels/1/program?name=before-the-page",
-        data=b"N10 G01 X5 F6000\nN20 M30\n",
-        method="POST",
-        headers={"content-type": "text/plain"},
-    )
-    with urllib.request.urlopen(request, timeout=10) as answer:
-        assert answer.status in (200, 202)
+    status = _post(f"{server}/api/channels/1/program?name=before-the-page", b"N10 G01 X5 F6000\nN20 M30\n")
+    assert status in (200, 202)
     dom = subprocess.run(
         [CHROMIUM, *CHROMIUM_FLAGS, "--dump-dom", server + "/"],
         capture_output=True,
@@ -346,11 +352,7 @@ def test_an_nc_message_shows_on_the_page(server: str, page: Any) -> None:
     p = page
     _open(p, server)
     p.click("#ch1-reset")
-    p.click("#ch1-card details.load summary")
-    p.fill("#ch1-text", '%msg\nN10 #MSG["hello from the NC"]\nN20 M30\n')
-    p.click("#ch1-load")
-    expect(p.locator("#message")).to_contain_text("load program: done")
-    p.click("#ch1-start")
+    _load_and_start(p, '%msg\nN10 #MSG["hello from the NC"]\nN20 M30\n')
     expect(p.locator("#nc-messages li").first).to_contain_text("hello from the NC", timeout=5_000)
 
 
@@ -360,19 +362,10 @@ def test_the_first_paint_shows_the_recording_and_the_override_in_effect(browser:
     status are held back, as a slow network or a screenshot at the load event sees it), the page shows
     the recording ``--record`` runs, the override in effect (40 %, set through the API before the page
     was opened) on the slider, and says the picture is the served one rather than "connecting…"."""
-    import urllib.request
-
     record = tmp_path / "run.jsonl.gz"
     proc, url = _start("--record", str(record), log=tmp_path / "server.log")
     try:
-        request = urllib.request.Request(
-            f"{url}/api/channels/1/override",
-            data=b'{"percent": 40}',
-            method="POST",
-            headers={"content-type": "application/json"},
-        )
-        with urllib.request.urlopen(request, timeout=10) as answer:
-            assert answer.status == 202
+        assert _post(f"{url}/api/channels/1/override", b'{"percent": 40}', "application/json") == 202
         # in effect once the clock latched it (the next cycle): the CNC's state of the override unit says so
         state = f"{url}/api/image/gpCh[0].bahn_mc_control.override.state_r"
         deadline = time.monotonic() + 20
@@ -412,11 +405,7 @@ def test_a_software_limit_refusal_draws_the_refused_block_and_where_it_crosses(
     _open(p, server)
     p.click("#ch1-reset")
     _at_rest(p)
-    p.click("#ch1-card details.load summary")
-    p.fill("#ch1-text", "N10 G01 X100 Y0 F30000\nN20 X700 Y100\nN30 M30\n")
-    p.click("#ch1-load")
-    expect(p.locator("#message")).to_contain_text("load program: done")
-    p.click("#ch1-start")
+    _load_and_start(p, "N10 G01 X100 Y0 F30000\nN20 X700 Y100\nN30 M30\n")
     expect(p.locator("#alarms li[data-alarm='120002']")).to_contain_text("N20")
     expect(p.locator("#ch1-state")).to_have_text("aborted")
     expect(p.locator("#ch1-refused")).to_have_count(1)

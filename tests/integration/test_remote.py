@@ -78,19 +78,24 @@ class Engine:
         self._thread.join(30)
 
 
+def doors_side(engine: Engine) -> tuple[Runtime, EventMirror, RemoteLink, RemoteOperator]:
+    """The doors process' end of the link in this test's loop: the event mirror, the link, the operator."""
+    rt = engine.rt
+    assert rt is not None
+    loop = asyncio.get_running_loop()
+    mirror = EventMirror()
+    mirror.start(loop)
+    link = RemoteLink(engine.theirs, mirror.take)
+    link.start(loop)
+    return rt, mirror, link, RemoteOperator(link, rt.image, rt.config.cycle_time_us)
+
+
 @pytest.mark.req("H-01", "H-07")
 async def test_operator_requests_events_and_steps_cross_the_link() -> None:
     with Engine() as engine:
-        rt = engine.rt
-        assert rt is not None
-        loop = asyncio.get_running_loop()
-        mirror = EventMirror()
-        mirror.start(loop)
+        rt, mirror, link, op = doors_side(engine)
         seen: list[str] = []
         mirror.subscribe(lambda e: seen.append(e.kind))
-        link = RemoteLink(engine.theirs, mirror.take)
-        link.start(loop)
-        op = RemoteOperator(link, rt.image, rt.config.cycle_time_us)
         try:
             assert op.machine_name == "demo"
             assert op.channel_numbers() == [1, 2]
@@ -136,14 +141,7 @@ async def test_a_fault_ended_through_the_doors_says_how_often_it_acted_and_why()
     count, and the doors' fault history gives the engine's reason ("api", "cycles"), as the engine's log
     and the recording do, not "engine"."""
     with Engine() as engine:
-        rt = engine.rt
-        assert rt is not None
-        loop = asyncio.get_running_loop()
-        mirror = EventMirror()
-        mirror.start(loop)
-        link = RemoteLink(engine.theirs, mirror.take)
-        link.start(loop)
-        op = RemoteOperator(link, rt.image, rt.config.cycle_time_us)
+        rt, _, link, op = doors_side(engine)
         faults = RemoteFaults(link, lambda: rt.image.cycle)
         try:
             fault = faults.add({"kind": "error", "door": "modbus", "code": 2, "count": 5})
