@@ -227,7 +227,7 @@ class Channel:
         self.decoder.tracking_axis_number = config.log_number_tracking_axis
         self.decoder.default_feed = config.default_feedrate
         self.decoder.tool_ori_cs = (config.tool_ori_cs_axis, config.tool_ori_cs_mode)
-        self.decoder.soft_limits = lambda k: (self.axes[k].swe_neg, self.axes[k].swe_pos)
+        self.decoder.soft_limits = self._soft_limits  # a method, not a closure: a snapshot keeps it
         self._main_slots = tuple(self.axis_names.index(a) for a in config.main_axes)
         self.compiler = Compiler(self.axis_names, config.main_axes)
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))
@@ -328,6 +328,11 @@ class Channel:
         return self.machine.raise_alarm(number, self, message)
 
     # --- operator requests ---------------------------------------------------------------
+    def _soft_limits(self, k: int) -> tuple[float, float]:
+        """The software limits in effect of axis ``k`` (the decoder's two-path check asks)."""
+        axis = self.axes[k]
+        return (axis.swe_neg, axis.swe_pos)
+
     def load_program(self, text: str, name: str = "program", number: int = 0) -> Alarm | None:
         """Select a program (text). Refused (the alarm is returned) while a program runs."""
         if self.program_running:

@@ -111,6 +111,14 @@ class _Blocks:
         return next(self._blocks, None)
 
 
+def _tell(
+    handler: Callable[[Transformation | None], None] | None, trafo: Transformation | None
+) -> Callable[[], None]:
+    """The action marker's payload that tells ``handler`` the transformation now in effect (a partial, not
+    a closure: a recording's snapshot keeps it, hli_server/recording/snapshot.py)."""
+    return _nothing if handler is None else functools.partial(handler, trafo)
+
+
 def _nothing() -> None:
     """The action of a ``#FLUSH`` marker: the path stops there, nothing else happens."""
 
@@ -703,7 +711,7 @@ class Decoder:
         self.kin_axes = axes_now
         self.position = list(trafo.to_tip(axes_now, axes_now))
         handler = self.kinematic_handler
-        return [Marker(MarkerKind.ACTION, block, payload=lambda: handler(trafo) if handler else None)]
+        return [Marker(MarkerKind.ACTION, block, payload=_tell(handler, trafo))]
 
     def _trafo(self, cmd: TrafoSwitch) -> list[Motion | Marker]:
         """``#TRAFO ON``: the selected kinematic with the tool's length; the decoder's position becomes the
@@ -731,11 +739,11 @@ class Decoder:
                     self.warn(alarm, message, block.line, block.label)
             self.kin_axes = axes
             active = trafo
-            return [Marker(MarkerKind.ACTION, block, payload=lambda: handler(active) if handler else None)]
+            return [Marker(MarkerKind.ACTION, block, payload=_tell(handler, active))]
         if kin.active is None:
             return []
         self._kin_off()
-        return [Marker(MarkerKind.ACTION, cmd.block, payload=lambda: handler(None) if handler else None)]
+        return [Marker(MarkerKind.ACTION, cmd.block, payload=_tell(handler, None))]
 
     def _kin_off(self) -> None:
         """The transformation off: the decoder's position is the axes' again, the tool length applied."""

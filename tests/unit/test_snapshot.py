@@ -108,6 +108,28 @@ def test_what_waits_in_the_look_ahead_is_kept_whenever_the_snapshot_is_taken() -
         capture(demo)
 
 
+@pytest.mark.req("E-01", "K-04")
+def test_a_machine_with_a_kinematic_transformation_on_is_restored_mid_move() -> None:
+    """The CA head of the kinematics tests with #TRAFO ON (RTCP) while the head turns: the transformation
+    in effect, the planner's action markers of #TRAFO ON/OFF and the decoder's software-limit check are
+    kept, and the restored machine moves the axes as the live one does."""
+    from tests.unit.test_kinematics_engine import machine as ca_machine
+
+    program = "D1\nG90 G01 X10 Y20 Z30 C0 A0 F3000\n#TRAFO ON\nG01 X10 Y20 Z30 A90\nC90\n#TRAFO OFF\nM30\n"
+    for cycles in (150, 900, 2500):
+        live = ca_machine()
+        live.channel(1).load_program(program, "ca")
+        live.channel(1).request_start()
+        live.step(cycles)
+        twin = ca_machine()
+        restore(as_json(capture(live)), twin)
+        for _ in range(10):
+            live.step(200)
+            twin.step(200)
+            assert capture(twin) == capture(live), f"the machines differ at cycle {live.cycle}"
+        assert not [a for a in live.alarm_history if a.severity == "error"]
+
+
 class _Library:
     """The subprograms of the ve-mode demo (the runtime's library is the host's: named in a snapshot)."""
 
