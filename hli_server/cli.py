@@ -1,4 +1,4 @@
-"""The command line: ``hli-server run | check | config | map | alarms | events | record | replay``.
+"""The command line: ``hli-server run | check | config | map | alarms | cycles | events | record | replay``.
 
 Each command lives in its own module under ``hli_server/commands``; this file only assembles them.
 Exit codes: 0 success, 1 the checked program or the validated file has an error, 2 usage, file or
@@ -21,6 +21,7 @@ _COMMANDS = {
     "run": "hli_server.commands.run:run",
     "map": "hli_server.commands.map:map_command",
     "alarms": "hli_server.commands.alarms:alarms",
+    "cycles": "hli_server.commands.cycles:cycles",
     "events": "hli_server.commands.events:events",
     "record": "hli_server.commands.record:record",
     "replay": "hli_server.commands.record:replay_command",

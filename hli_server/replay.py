@@ -36,6 +36,7 @@ import base64
 import binascii
 import contextlib
 import functools
+import inspect
 import json
 import math
 import struct
@@ -47,10 +48,12 @@ from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final
 
+from hli_server.adapters.faults import FaultSpec
 from hli_server.adapters.host import OperatorError
 from hli_server.recording.format import (
     RecordingError,
     Records,
+    check_recording,
     decode_value,
     read_records,
     signal_pattern,
@@ -337,6 +340,8 @@ class Feeder:
         self._fault_ids: dict[int, int] = {}
         self._events: list[Event] = []
         self._expected_events: list[Any] = []
+        self._stop_after_cycle = False
+        self._failure: CannotReplayError | None = None
 
     # --- set-up ----------------------------------------------------------------------------------
     def bind(self, runtime: Runtime) -> None:
@@ -471,6 +476,16 @@ class Feeder:
         pass
 
     def before_cycle(self, cycle: int) -> None:
+        """The recorded inputs of ``cycle``, before it runs. Called inside the runtime's cycle, whose
+        failures become alarm 919000: what stops the replay here is raised after the cycle instead."""
+        try:
+            self._before_cycle(cycle)
+        except _StopReplayError:
+            self._stop_after_cycle = True
+        except Exception as exc:
+            self._failure = CannotReplayError(f"cycle {cycle}: {type(exc).__name__}: {exc}")
+
+    def _before_cycle(self, cycle: int) -> None:
         buffer = self._buffer
         changed = False
         while buffer and buffer[0]["c"] <= cycle and "o" not in buffer[0] and "e" not in buffer[0]:
@@ -588,6 +603,10 @@ class Feeder:
         return self._searched
 
     def after_cycle(self, cycle: int, latched: bytes, packed: bytearray | None) -> None:
+        if self._failure is not None:
+            raise self._failure
+        if self._stop_after_cycle:
+            raise _StopReplayError
         events, self._events[:] = list(self._events), []
         if self.follow and cycle > self.window:
             own = cycle % CYCLE_MODULUS
@@ -720,6 +739,10 @@ async def replay(
         "until": until,
     }
     try:
+        # every line checked before the first cycle runs: a bad line anywhere (a cycle out of order, an
+        # index beyond the header's signals, a field of the wrong kind) is refused with its place, and the
+        # replay runs no further than the recording's own last cycle (issue 36, finding 6)
+        check_recording(path, _replayable)
         records = read_records(path, info)
         header = next(records)
         report.recorded_with = dict(header.get("server") or {})
@@ -733,17 +756,17 @@ async def replay(
         machine_config = _recorded_config(header, config)
         start = _snapshot_record(header, records, report, from_journal)
         if start is not None:
+            line = info.lines
             try:
                 await _run(machine_config, header, records, info, report, options, prepare, start)
             except SnapshotRestoreError as exc:
-                _journal_or_cannot(
-                    header, report, f"the recording's snapshot cannot be restored here ({exc})"
-                )
-                start = None
-                info = Records()
-                records = read_records(path, info)
-                next(records)
-        if start is None:
+                # the fingerprint says this engine wrote it: a snapshot it cannot restore is damaged or
+                # forged (docs/record-replay.md); the input journal may still serve, if the user wants
+                raise RecordingError(
+                    f"{path}: line {line}: snapshot: {exc} (hli-server replay --from-journal replays the "
+                    "recording from its input journal instead)"
+                ) from None
+        else:
             report.started_from, report.first_cycle = "journal", 1
             await _run(machine_config, header, records, info, report, options, prepare, None)
     except CannotReplayError as exc:
@@ -841,6 +864,8 @@ async def _run(
     )
     runtime.session = feeder  # type: ignore[assignment]  # the replay's tap: feeds and compares
     runtime.machine.programs = feeder  # the subprograms the recorded session found
+    # and the cycle files its channels' cycle directories gave (noted in the same stream, find by find)
+    runtime.machine.cycle_programs = dict.fromkeys(runtime.machine.cycle_programs, feeder)
     if start is not None:
         restore(start.get("snapshot") or {}, runtime.machine)
     if prepare is not None:
@@ -854,6 +879,40 @@ async def _run(
                 if end <= cycle:
                     break
                 await runtime.step(end - cycle)
+
+
+def _replayable(line: int, record: dict[str, Any]) -> str | None:
+    """What the replay will do with ``record`` that the file's own check cannot know: an operator request
+    it knows with arguments its panel takes, a stall fault it can set; the problem in words, or None."""
+    from hli_server.runtime.operator_panel import OperatorPanel
+
+    name = record.get("op")
+    if name is not None:
+        if name not in OPERATOR_REQUESTS:
+            return f"op: an operator request this version does not know: {str(name)[:60]!r}"
+        args = dict(record.get("args") or {})
+        try:
+            inspect.signature(getattr(OperatorPanel, str(name))).bind(None, **args)
+            if name == "mode" and "mode" in args:
+                Mode(args["mode"])
+        except (TypeError, ValueError) as exc:
+            return f"args: operator request {name}: {exc}"
+    if record.get("fault") == "set" and (record.get("spec") or {}).get("kind") == "stall":
+        return _stall_problem("spec", record["spec"])
+    for k, fault in enumerate(record.get("faults") or () if "snapshot" in record else ()):
+        problem = _stall_problem(f"faults[{k}].spec", {**fault["spec"], "kind": "stall"})
+        if problem is not None:
+            return problem
+    return None
+
+
+def _stall_problem(field: str, spec: dict[str, Any]) -> str | None:
+    """A stall fault the replay cannot set (``field``: where it is in the line), or None."""
+    try:
+        FaultSpec.model_validate(spec)
+    except ValueError as exc:
+        return f"{field}: {' '.join(str(exc).split())[:300]}"
+    return None
 
 
 def replay_sync(path: Path | str, **options: Any) -> ReplayReport:

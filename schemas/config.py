@@ -391,6 +391,30 @@ class ToolEntry(_Strict):
     )
 
 
+class ProbeConfig(_Strict):
+    """The simulated touch probe of the built-in measuring cycles (docs/cycles.md, "The simulated probe"):
+    the feeds the kernel's SysCalibConfigTouchprobe.nc gives, and the V.E. variables through which the PLC
+    sets the simulated workpiece's deviation per axis."""
+
+    measuring_feed: float = Field(
+        default=100.0,
+        gt=0.0,
+        le=VELOCITY_LIMIT_MM_PER_MIN,
+        description="feed of the measuring moves [mm/min]",
+    )
+    positioning_feed: float = Field(
+        default=2000.0,
+        gt=0.0,
+        le=VELOCITY_LIMIT_MM_PER_MIN,
+        description="feed of the measuring cycles' positioning moves [mm/min]",
+    )
+    deviation_variables: dict[str, Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]{0,19}$")]] = Field(
+        default_factory=dict,
+        description="axis -> V.E. variable (a REAL or integer scalar) holding the simulated workpiece's "
+        "deviation along that axis [mm]; axes not named take the value set through the API or the harness",
+    )
+
+
 class ProgramEntry(_Strict):
     """A program the PLC can select by number (project's own program table)."""
 
@@ -603,6 +627,13 @@ class ChannelConfig(_Strict):
         default_factory=list, description="tool table: D blocks with length and radius (M-14)"
     )
     programs: list[ProgramEntry] = Field(default_factory=list)
+    cycle_directories: list[Annotated[str, Field(min_length=1, max_length=4096)]] = Field(
+        default_factory=list,
+        max_length=64,
+        description="where `L CYCLE [NAME=..]` finds cycle files after the program directories, in order "
+        "(relative to the machine file); a built-in stand-in runs where none has the file",
+    )
+    probe: ProbeConfig = Field(default_factory=ProbeConfig, description="the simulated touch probe")
 
     @property
     def dyn_pos_limit_enabled(self) -> bool:
@@ -647,6 +678,15 @@ class ChannelConfig(_Strict):
                     field="interpolator_function",
                 )
             )
+        for axis in self.probe.deviation_variables:
+            if axis not in self.axes:
+                issues.append(
+                    ParameterIssue(
+                        f"channel {self.number}: probe.deviation_variables names axis {axis!r}, which is not "
+                        f"an axis of the channel {self.axes}",
+                        field="probe",
+                    )
+                )
         program_numbers = [p.number for p in self.programs]
         if len(set(program_numbers)) != len(program_numbers):
             issues.append(
@@ -825,6 +865,38 @@ class ExternalStructureConfig(_Strict):
         return self
 
 
+def _check_probe_variables(config: MachineConfig) -> list[ParameterIssue]:
+    """Each channel's ``probe.deviation_variables``: a declared V.E. variable of the channel (or global), a
+    numeric scalar (docs/cycles.md, "The simulated probe")."""
+    from schemas.external_types import ELEMENTARY_TYPES
+
+    issues: list[ParameterIssue] = []
+    for ch in config.channels:
+        for axis, var_name in ch.probe.deviation_variables.items():
+            declared = [
+                v
+                for v in config.external_variables
+                if v.name.upper() == var_name.upper() and v.channel in (None, ch.number)
+            ]
+            if not declared:
+                what = f"{var_name!r}: no such V.E. variable in [[external_variables]]"
+            elif (
+                declared[0].dims or declared[0].type not in ELEMENTARY_TYPES or declared[0].type == "BOOLEAN"
+            ):
+                it = f"{declared[0].type}{declared[0].dims or ''}"
+                what = f"V.E.{var_name} must be a numeric scalar (it is {it})"
+            else:
+                continue
+            issues.append(
+                ParameterIssue(
+                    f"channel {ch.number}: probe.deviation_variables {axis} = {what}",
+                    field="probe",
+                    channel=ch.number,
+                )
+            )
+    return issues
+
+
 def _check_external_types(config: MachineConfig) -> list[ParameterIssue]:
     """The V.E. structures: unique names, no clash with the kernel's types, every type known, no structure
     that contains itself (schemas/external_types.py resolves them)."""
@@ -969,6 +1041,7 @@ class MachineConfig(_Strict):
                 )
             seen_vars.add(key)
         issues += _check_external_types(self)
+        issues += _check_probe_variables(self)
         if not issues:
             too_much = check_external_fits(self)
             if too_much is not None:

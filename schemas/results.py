@@ -45,6 +45,7 @@ __all__ = [
     "MachineInfo",
     "MachineState",
     "PacingSummary",
+    "ProbeDeviation",
     "ProgramEntry",
     "ProgramLoaded",
     "ProgramSelected",
@@ -140,6 +141,15 @@ class AlarmList(TypedDict):
 
     active: list[AlarmJson]
     history: list[AlarmJson]
+
+
+class ProbeDeviation(TypedDict):
+    """The simulated workpiece's deviation of a channel, per axis [0.1 µm] (docs/cycles.md); ``variables``:
+    the axes whose value a V.E. variable holds (axis -> variable name)."""
+
+    channel: int
+    deviation: dict[str, int]
+    variables: dict[str, str]
 
 
 class AxisFaults(TypedDict):

@@ -28,6 +28,7 @@ __all__ = [
     "count",
     "expression",
     "fault_values",
+    "format_message",
     "language_program",
     "mutate",
     "nc_line",
@@ -448,3 +449,69 @@ def fault_values(rng: random.Random) -> dict[str, object]:
     )  # fmt: skip
     fields = rng.sample(list(valid), rng.randint(1, 3))
     return {name: rng.choice(valid[name] if rng.random() < 0.7 else invalid) for name in fields}
+
+
+_FORMAT_TEXT = "abc XYZ 0123 -+.,:;_/|=()<>!?#*&"
+_CONVERSIONS = "diufFeEgGxXos"
+_NUMBER_DIGITS = (1, 2, 3, 9, 10, 20, 60)
+
+
+def _format_number(rng: random.Random) -> str:
+    """A width or precision: small, at the 255 bound, or far beyond it (digits up to 60)."""
+    pick = rng.random()
+    if pick < 0.5:
+        return str(rng.randrange(0, 20))
+    if pick < 0.65:
+        return str(rng.choice((254, 255, 256, 300)))
+    if pick < 0.9:
+        return str(10 ** rng.randrange(3, 10) - rng.randrange(0, 2))
+    return "".join(rng.choice("0123456789") for _ in range(rng.choice(_NUMBER_DIGITS)))
+
+
+def _format_element(rng: random.Random) -> str:
+    element = "%" + "".join(rng.choice("-+ #0") for _ in range(rng.choice((0, 0, 1, 2, 5))))
+    if rng.random() < 0.5:
+        element += _format_number(rng)
+    if rng.random() < 0.5:
+        element += "." + (_format_number(rng) if rng.random() < 0.9 else "")
+    element += rng.choice(("", "", "l", "h", "ll"))
+    return element + (rng.choice(_CONVERSIONS) if rng.random() < 0.9 else rng.choice("%qkZc$ "))
+
+
+def _format_value(rng: random.Random) -> str:
+    return rng.choice(
+        (
+            str(rng.randrange(-1000, 1000)),
+            f"{rng.uniform(-1e6, 1e6):.6f}",
+            "EXP[709]",
+            "-EXP[709]",
+            "EXP[-744]",
+            "EXP[-700]",
+            "0",
+            "1/3",
+            '"text"',
+            '""',
+            '"' + "s" * rng.randrange(0, 120) + '"',
+        )
+    )
+
+
+def format_message(rng: random.Random) -> str:
+    """A ``#MSG`` block with a format string of text and elements (flags, widths and precisions from 0
+    to 60 digits, every conversion and unknown ones, an element cut short at the end) and a number of
+    values that matches the elements, or not (issue 36, finding 1)."""
+    parts: list[str] = []
+    elements = 0
+    for _ in range(rng.randrange(1, 8)):
+        if rng.random() < 0.4:
+            parts.append("".join(rng.choice(_FORMAT_TEXT) for _ in range(rng.randrange(1, 30))))
+        else:
+            parts.append(_format_element(rng))
+            elements += 1
+    if rng.random() < 0.05:
+        parts.append("%" + rng.choice(("", "5", ".", "-0")))  # cut short
+    text = "".join(parts)[:255]
+    values = elements + rng.choice((0, 0, 0, 0, 0, 0, -1, 1, 2))
+    args = "".join(", " + _format_value(rng) for _ in range(max(0, values)))
+    mode = rng.choice(("", "", "SAVE ", "SYN "))
+    return f'N10 #MSG {mode}["{text}"{args}]'

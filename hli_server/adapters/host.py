@@ -42,6 +42,7 @@ from schemas.results import (
     CheckReport,
     CollisionPair,
     MachineState,
+    ProbeDeviation,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
@@ -408,6 +409,14 @@ class OperatorPort(Protocol):
     def jog(self, channel: int, axis: str, direction: int) -> Accepted: ...
 
     def probe(self, channel: int, on: bool) -> Accepted: ...
+
+    def probe_deviation(self, channel: int) -> ProbeDeviation:
+        """The simulated workpiece's deviation per axis [0.1 µm] (the built-in measuring cycles' probe)."""
+        ...
+
+    def set_probe_deviation(self, channel: int, values: dict[str, int]) -> ProbeDeviation:
+        """Set it for the named axes [0.1 µm]; an axis with a V.E. variable gets the variable written."""
+        ...
 
     def reference(self, axis: str) -> Accepted: ...
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 import difflib
 import importlib
 import importlib.util
+import logging
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
@@ -55,6 +56,8 @@ __all__ = [
     "plan_adapters",
     "register_adapter",
 ]
+
+logger = logging.getLogger(__name__)
 
 
 @runtime_checkable
@@ -156,6 +159,7 @@ ADAPTERS: dict[str, AdapterKind] = {
             "hli_server.adapters.mqtt:MqttOptions",
             default=False,
             summary="MQTT events to a broker, JSON per event kind (H-05; docs/mqtt.md)",
+            doors=True,
             label="MQTT",
         ),
     )
@@ -304,9 +308,19 @@ def check_options(name: str, options: Mapping[str, Any]) -> AdapterOptions:
         return model.model_validate(dict(options)).model_dump()
     except ValidationError as exc:
         problems = "; ".join(
-            f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']} (got {e.get('input')!r})" for e in exc.errors()
+            f"{'.'.join(str(p) for p in e['loc'])}: {e['msg']} (got {_shown(e['loc'], e.get('input'))!r})"
+            for e in exc.errors()
         )
         raise AdapterError(f"adapter {name!r}: {problems}") from None
+
+
+def _shown(loc: Sequence[int | str], value: object) -> object:
+    """What an error may quote of an option's value: never a password (a log is read by others)."""
+    if any("password" in str(part) for part in loc):
+        return "***"
+    if isinstance(value, Mapping):
+        return {k: "***" if "password" in str(k) else v for k, v in value.items()}
+    return value
 
 
 def create_adapter(name: str, *, bind: str, options: Mapping[str, Any] | None = None) -> Adapter:
@@ -338,6 +352,14 @@ def plan_adapters(
     for spec in specs:
         name, options = parse_adapter_spec(spec)
         _kind(name)
+        for key in options:
+            if "password" in key and not key.endswith("_file"):
+                logger.warning(
+                    "--adapter %s:%s=... shows the password to every user of this computer (ps): give it in "
+                    "a file, the environment or the machine file instead (docs/ads.md, docs/mqtt.md)",
+                    name,
+                    key,
+                )
         plan[name] = options
     for alias in CLI_ALIASES:
         value = (aliases or {}).get(alias.flag)
@@ -406,7 +428,8 @@ def door_guards(plan: Sequence[tuple[str, Mapping[str, Any]]], policy: AccessPol
             continue
         if name == "http":
             if policy.api_token:
-                out.append(DoorGuard(name, label, True, "changes and the event log need the API token"))
+                guard = "changes, the event log and the recordings need the API token"
+                out.append(DoorGuard(name, label, True, guard))
             else:
                 out.append(
                     DoorGuard(

@@ -350,7 +350,10 @@ def check(
             click.echo(f"error: cannot read configuration: {exc}", err=True)
             sys.exit(2)
         library = DirectoryLibrary([program.parent, *program_dirs])
-        machine = Machine(config, programs=library)
+        cycles = {
+            ch.number: DirectoryLibrary([Path(d) for d in ch.cycle_directories]) for ch in config.channels
+        }
+        machine = Machine(config, programs=library, cycle_programs=cycles)
         try:
             machine.channel(channel)
         except KeyError:

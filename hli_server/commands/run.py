@@ -209,8 +209,8 @@ def _alias_options(command: Callable[..., None]) -> Callable[..., None]:
     envvar="HLI_API_TOKEN",
     default=None,
     metavar="TOKEN",
-    help="the HTTP door's changes and its event log need 'Authorization: Bearer TOKEN' (or env "
-    "HLI_API_TOKEN); it guards HTTP only: Modbus and ADS by their allow lists or --read-only-door",
+    help="the HTTP door's changes, its event log and the recordings need 'Authorization: Bearer TOKEN' "
+    "(or env HLI_API_TOKEN); it guards HTTP only: Modbus and ADS by their allow lists or --read-only-door",
 )
 @click.option(
     "--insecure",

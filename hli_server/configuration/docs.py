@@ -30,6 +30,7 @@ from schemas.config import (
     MachineConfig,
     ManualConfig,
     ParameterInfo,
+    ProbeConfig,
     ProgramEntry,
     ToolEntry,
     ZeroOffset,
@@ -60,7 +61,12 @@ _SECTIONS: tuple[tuple[str, type[BaseModel], frozenset[str]], ...] = (
     ("Machine (top level)", MachineConfig, frozenset({"axes", "channels", "manual", "adapters"})),
     ("Axis `[[axes]]`", AxisConfig, frozenset({"drive"})),
     ("Drive model `[axes.drive]` (project's own, E-02)", DriveModel, frozenset()),
-    ("Channel `[[channels]]`", ChannelConfig, frozenset({"zero_offsets", "tools", "programs", "kinematics"})),
+    (
+        "Channel `[[channels]]`",
+        ChannelConfig,
+        frozenset({"zero_offsets", "tools", "programs", "kinematics", "probe"}),
+    ),
+    ("Simulated touch probe `[channels.probe]` (project's own; docs/cycles.md)", ProbeConfig, frozenset()),
     ("Zero offsets `[[channels.zero_offsets]]`", ZeroOffset, frozenset()),
     (
         "Kinematic data sets `[[channels.kinematics]]` (trafo[j], K-01, [kinematics.md](kinematics.md))",
@@ -126,6 +132,8 @@ _RANGE_NOTES: dict[tuple[type[BaseModel], str], str] = {
     (ChannelConfig, "main_axes"): "three different axes of the channel",
     (ChannelConfig, "interpolator_function"): "keywords FCT_IPO_DEFAULT, FCT_LOOK_AHEAD_STANDARD, "
     "FCT_DYN_POS_LIMIT; a list or `A | B`",
+    (ChannelConfig, "cycle_directories"): "directories (relative to the machine file), at most 64",
+    (ProbeConfig, "deviation_variables"): "axis of the channel -> a declared numeric scalar V.E. variable",
     (ZeroOffset, "code"): "G54 … G59, each once per channel",
     (ZeroOffset, "offsets"): "axis name -> offset [0.1 µm], axes of the channel",
     (ProgramEntry, "number"): "1 ≤ value ≤ 65535, unique in the channel",

@@ -103,6 +103,7 @@ class _Loader:
         self._import_lists()
         self._resolve_program_paths()
         self._resolve_program_directories()
+        self._resolve_cycle_directories()
         config: MachineConfig | None = None
         try:
             config = MachineConfig.model_validate(self.data)
@@ -313,6 +314,25 @@ class _Loader:
                 what = "is not a directory" if path.exists() else "not found"
                 self.errors.append(f"{where}: program directory {path} {what}")
             directories[index] = str(path)
+
+    def _resolve_cycle_directories(self) -> None:
+        """A channel's ``cycle_directories`` are relative to the machine file; each must be a directory."""
+        channels = self.data.get("channels")
+        if not isinstance(channels, list):
+            return
+        for c_index, channel in enumerate(channels):
+            directories = channel.get("cycle_directories") if isinstance(channel, dict) else None
+            if not isinstance(directories, list):
+                continue
+            for index, entry in enumerate(directories):
+                if not isinstance(entry, str) or not entry:
+                    continue  # the model's own error says why
+                path = (self.path.parent / entry).resolve()
+                if not path.is_dir():
+                    where = self._origin(("channels", c_index, "cycle_directories", index)).where()
+                    what = "is not a directory" if path.exists() else "not found"
+                    self.errors.append(f"{where}: cycle directory {path} {what}")
+                directories[index] = str(path)
 
     # -- locations ---------------------------------------------------------------------------
 

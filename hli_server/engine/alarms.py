@@ -319,6 +319,14 @@ _TABLE: tuple[AlarmDef, ...] = (
     ),
     _e(20235, "After 'WHILE' only the condition is permissible", "kernel", page=_DIAG + "251215755.html"),
     _e(
+        20721,
+        "Number of parameters and the number of format specifiers do not match (#MSG)",
+        "kernel",
+        page=_DIAG + "252329867.html",
+    ),
+    _e(21232, "Unknown format string (#MSG)", "kernel", page=_DIAG + "253866123.html"),
+    _e(21870, "String exceeds the maximum length", "kernel", page=_DIAG + "256359819.html"),
+    _e(
         20237,
         "Unexpected ENDWHILE: does not match the current control block",
         "kernel",
@@ -517,11 +525,72 @@ _TABLE: tuple[AlarmDef, ...] = (
         "Geometry check stopped at its cap of loop iterations: the program did not end",
         "project (N-10)",
     ),
+    # --- the built-in cycles (TF5225 measuring, TF5293 drilling/milling; docs/cycles.md) -------
+    _e(
+        13100,
+        "Cycle: safety clearance not defined",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1033/cnccycles/15423613707.html",
+    ),
+    _e(
+        13103,
+        "Cycle: number of infeeds not defined",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1033/tccncdiagnosis/15651570059.html",
+    ),
+    _e(
+        13105,
+        "Cycle: retraction travel / holding distance not defined",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1033/tccncdiagnosis/15651570059.html",
+    ),
+    _e(13166, "Cycle: unknown machining mode", "kernel", page=_DIAG + "249731723.html"),
+    _e(
+        13408,
+        "Measuring cycle: zero offset @P7 not or incorrectly defined (1-9, 53-59)",
+        "kernel",
+        page=_DIAG + "250206091.html",
+    ),
+    _e(
+        13413,
+        "Measuring cycle: no workpiece detected, please check your measuring section",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1033/tf5225_tc3_cnc_cycles_measurement/322102027.html",
+    ),
+    _e(
+        13414,
+        "Measuring cycle: collision on positioning, please check your motion range",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1033/tf5225_tc3_cnc_cycles_measurement/322102027.html",
+    ),
+    _e(
+        13448,
+        "Measuring cycle: coordinate system ID @P39 not defined (1..10)",
+        "kernel",
+        page=_DIAG + "518889739.html",
+    ),
+    _e(14327, "Cycle: pocket diameter not or incorrectly defined", "kernel", page=_DIAG + "539967243.html"),
+    _e(14346, "Cycle: reference cycle not defined or incorrect", "kernel", page=_DIAG + "800081419.html"),
+    _e(
+        14421,
+        "Cycle: changing an active zero offset (G54-G59) not permitted",
+        "kernel",
+        page=_DIAG + "1208284683.html",
+    ),
+    _e(
+        917000, "Cycle parameter missing or invalid (no ID of its own on the cycle's page)", "project (CY-02)"
+    ),
+    _w(
+        917001,
+        "A built-in cycle approximates what the kernel's cycle does (a dialogue, a missing axis)",
+        "project (CY-04)",
+    ),
     # --- project's own: the simulator itself (919xxx) -----------------------------------------
     _e(919000, "Internal error: a cycle failed; the axes were stopped", "project", Reaction.AXIS_STOP),
     _w(
         919010,
-        "#MSG SAVE: report file not written (its name leaves the NC output directory, or it is full)",
+        "#MSG SAVE: report file not written (its name leaves the NC output directory, it is no regular file "
+        "of one link, or a bound is reached)",
         "project (N-07)",
     ),
 )

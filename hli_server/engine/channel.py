@@ -13,11 +13,14 @@ accepted, the path reached M30, an error reaction, ...) and tells the table.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
-from typing import Protocol
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from typing import Any, ClassVar, Protocol, cast
 
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
+from hli_server.engine.cycles import CycleError, MotionState
+from hli_server.engine.cycles import run as run_standin
+from hli_server.engine.cycles.errors import A_NOT_SIMULATED
 from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import LineSegment, Point
@@ -25,14 +28,14 @@ from hli_server.engine.hli import AxisHli, ChannelHli
 from hli_server.engine.kinematics.configured import data_sets
 from hli_server.engine.kinematics.state import KinematicState
 from hli_server.engine.kinematics.transform import Transformation
-from hli_server.engine.nc.blocks import Block
+from hli_server.engine.nc.blocks import Block, NcError
 from hli_server.engine.nc.compiler import Compiler
 from hli_server.engine.nc.interpreter import Interpreter
 from hli_server.engine.path.profiles import SlopeProfile, SlopeType
 from hli_server.engine.path.tools import ToolData
 from hli_server.engine.planner import Marker, MarkerKind, Motion, Planner
 from hli_server.engine.ports import MachinePort
-from hli_server.engine.programs import ProgramFile
+from hli_server.engine.programs import MemoryLibrary, ProgramFile
 from schemas.config import ChannelConfig
 from schemas.events import (
     Alarm,
@@ -87,10 +90,42 @@ class ChannelHost:
         return self._channel.machine.external
 
     def find_program(self, name: str) -> ProgramFile | None:
+        written = self._channel.written.find(name)
+        if written is not None:
+            return written
         return self._channel.machine.programs.find(name)
 
     def searched(self) -> tuple[str, ...]:
         return self._channel.machine.programs.searched()
+
+    def find_cycle(self, name: str) -> ProgramFile | None:
+        """A cycle's file: the program libraries first (:meth:`find_program`), then the channel's
+        ``cycle_directories`` (CY-01)."""
+        found = self.find_program(name)
+        if found is not None:
+            return found
+        return self._channel.machine.cycle_library(self._channel.number).find(name)
+
+    def cycle_searched(self) -> tuple[str, ...]:
+        return (*self.searched(), *self._channel.machine.cycle_library(self._channel.number).searched())
+
+    def stand_in(
+        self,
+        name: str,
+        params: dict[int, float | str],
+        results: Callable[[str, float], None],
+        line: int,
+        block: str,
+    ) -> Iterator[Block] | None:
+        """The blocks of the built-in stand-in of cycle ``name`` (engine/cycles), None where no documented
+        cycle has the name; :class:`~hli_server.engine.cycles.CycleError` (910110) for one not built.
+        ``results`` writes a ``V.CYC.`` output (the interpreter's)."""
+        context = LoggedCycleContext(ChannelCycleContext(self._channel, results, line, block))
+        try:
+            blocks = run_standin(name, params, context, line)
+        except CycleError as exc:
+            raise _call_error(exc, line, block, name) from None
+        return None if blocks is None else StandInRun(name, params, context, line, block, blocks)
 
     def message(self, text: str, save: bool, file: str, program: str, line: int, block: str) -> None:
         ch = self._channel
@@ -109,7 +144,16 @@ class ChannelHost:
         )
         if save:
             m.emit(
-                NcFileWrite(cycle=m.cycle, time_s=m.cycle * ch.t_a, channel=ch.number, file=file, text=text)
+                NcFileWrite(
+                    cycle=m.cycle,
+                    time_s=m.cycle * ch.t_a,
+                    channel=ch.number,
+                    file=file,
+                    text=text,
+                    program=program,
+                    line=line,
+                    block=block,
+                )
             )
 
     def warn(self, alarm: int, message: str, line: int, block: str) -> None:
@@ -156,6 +200,223 @@ class ChannelHost:
         if name in ("I", "J", "K"):
             return decoder.last_centre.get(name, 0.0)
         return _tool_and_frame_value(decoder, name)
+
+
+def _call_error(exc: CycleError, line: int, block: str, program: str) -> NcError:
+    """A built-in cycle's error as the alarm of its call's line (the kernel stops the program there)."""
+    params: dict[str, object] = {"cycle": program}
+    if exc.param:
+        params["param"] = exc.param
+    return NcError(exc.alarm, line, block, exc.message, params)
+
+
+class StandInRun:
+    """One run of a built-in cycle as the interpreter's level holds it: the iterator of its blocks, each
+    :class:`CycleError` as the alarm of the call's line.
+
+    A stand-in is a Python generator (engine/cycles), which a recording's snapshot cannot keep
+    (recording/snapshot.py: it is code in the middle of running). This keeps what rebuilds it instead: the
+    call (cycle, @P values, line), how many blocks it gave (``taken``) and every answer its context gave
+    (:class:`LoggedCycleContext`). A snapshot leaves the generator out (``snapshot_transient``); the
+    first block asked for after the restore runs the stand-in again from its start, answering its reads
+    from the log and dropping the ``taken`` blocks it already gave (its writes took effect then, the
+    snapshot holds them), then goes on live: the same blocks, as the generator is deterministic in what it
+    reads (docs/record-replay.md, "A cycle running when the recording starts")."""
+
+    snapshot_transient: ClassVar[tuple[str, ...]] = ("_blocks",)
+
+    def __init__(
+        self,
+        name: str,
+        params: dict[int, float | str],
+        context: LoggedCycleContext,
+        line: int,
+        block: str,
+        blocks: Iterator[Block] | None,
+    ) -> None:
+        self.name = name
+        self.params = params
+        self.context = context
+        self.line = line
+        self.block = block
+        self.taken = 0
+        self.done = False
+        self._blocks = blocks
+
+    def __iter__(self) -> StandInRun:
+        return self
+
+    def __next__(self) -> Block:
+        if self.done:
+            raise StopIteration
+        try:
+            blocks = self._blocks
+            if blocks is None:
+                blocks = self._rebuild()
+            block = next(blocks, None)
+        except CycleError as exc:
+            self.done = True
+            raise _call_error(exc, self.line, self.block, self.name) from None
+        if block is None:
+            self.done = True
+            raise StopIteration
+        self.taken += 1
+        return block
+
+    def _rebuild(self) -> Iterator[Block]:
+        """The stand-in run again up to where the snapshot took it, from the log of its reads."""
+        context = self.context
+        context.rewind()
+        blocks = run_standin(self.name, self.params, context, self.line)
+        if blocks is None:  # the name was a documented cycle when it was called: the same engine
+            raise CycleError(A_NOT_SIMULATED, f"{self.name}: no stand-in to resume")
+        for _ in range(self.taken):
+            if next(blocks, None) is None:
+                break
+        context.go_live()
+        self._blocks = blocks
+        return blocks
+
+
+class LoggedCycleContext:
+    """A stand-in's :class:`~hli_server.engine.cycles.CycleContext` that logs every answer the channel
+    gave it, so that a run rebuilt after a snapshot's restore reads the same (:class:`StandInRun`): while
+    it is rebuilt, reads come from the log and writes are dropped (they took effect the first time)."""
+
+    def __init__(self, live: ChannelCycleContext) -> None:
+        self.live = live
+        self.axis_names: tuple[str, ...] = live.axis_names
+        self.main_axes: tuple[str, str, str] = live.main_axes
+        self.log: list[Any] = []
+        self.replayed = -1
+        """While the run is rebuilt: how many answers of the log it was given again; -1: live."""
+
+    def rewind(self) -> None:
+        self.replayed = 0
+
+    def go_live(self) -> None:
+        self.replayed = -1
+
+    def _read(self, fetch: Callable[[], Any]) -> Any:
+        """The logged answer while rebuilding, else the channel's (logged)."""
+        if 0 <= self.replayed < len(self.log):
+            self.replayed += 1
+            return self.log[self.replayed - 1]
+        self.replayed = -1  # past the log: live from here
+        value = fetch()
+        self.log.append(value)
+        return value
+
+    def _writes(self) -> bool:
+        return self.replayed < 0
+
+    def position(self) -> tuple[float, float, float]:
+        return cast(tuple[float, float, float], self._read(self.live.position))
+
+    def plane(self) -> int:
+        return cast(int, self._read(self.live.plane))
+
+    def inch(self) -> bool:
+        return cast(bool, self._read(self.live.inch))
+
+    def tool_radius(self) -> float:
+        return cast(float, self._read(self.live.tool_radius))
+
+    def zero_offset(self) -> str | None:
+        return cast("str | None", self._read(self.live.zero_offset))
+
+    def motion_state(self) -> MotionState:
+        return cast(MotionState, self._read(self.live.motion_state))
+
+    def measured(self) -> float | None:
+        return cast("float | None", self._read(self.live.measured))
+
+    def deviation(self) -> tuple[float, float, float]:
+        return cast(tuple[float, float, float], self._read(self.live.deviation))
+
+    def probe_feeds(self) -> tuple[float, float]:
+        return cast(tuple[float, float], self._read(self.live.probe_feeds))
+
+    def write_zero_offset(self, name: str, values: Mapping[str, float]) -> None:
+        if self._writes():
+            self.live.write_zero_offset(name, values)
+
+    def set_result(self, name: str, value: float) -> None:
+        if self._writes():
+            self.live.set_result(name, value)
+
+    def write_program(self, name: str, text: str) -> None:
+        if self._writes():
+            self.live.write_program(name, text)
+
+    def warn(self, alarm: int, message: str) -> None:
+        if self._writes():
+            self.live.warn(alarm, message)
+
+
+class ChannelCycleContext:
+    """What a built-in cycle reads of and writes to its channel (engine/cycles' :class:`CycleContext`):
+    the decoder's state in program order (the interpreter runs a stand-in lazily, and decoding waits for a
+    measuring move to end), the simulated probe's deviation, the results."""
+
+    def __init__(
+        self, channel: Channel, results: Callable[[str, float], None], line: int, block: str
+    ) -> None:
+        self._channel = channel
+        self._results = results
+        self._line = line
+        self._block = block
+        self.axis_names: tuple[str, ...] = tuple(channel.axis_names)
+        self.main_axes: tuple[str, str, str] = channel.config.main_axes
+
+    def _main(self, values: Sequence[float]) -> tuple[float, float, float]:
+        index = self._channel.decoder.index
+        x, y, z = self.main_axes
+        return values[index[x]], values[index[y]], values[index[z]]
+
+    def position(self) -> tuple[float, float, float]:
+        return self._main(self._channel.decoder.program_position())
+
+    def plane(self) -> int:
+        return self._channel.decoder.modal.plane
+
+    def inch(self) -> bool:
+        return self._channel.decoder.modal.inch
+
+    def tool_radius(self) -> float:
+        return abs(self._channel.decoder.tools.radius)
+
+    def zero_offset(self) -> str | None:
+        return self._channel.decoder.modal.zero_offset
+
+    def motion_state(self) -> MotionState:
+        modal = self._channel.decoder.modal
+        return MotionState(modal.absolute, modal.motion, modal.feed)
+
+    def measured(self) -> float | None:
+        return self._channel.decoder.measured
+
+    def deviation(self) -> tuple[float, float, float]:
+        values = self._channel.machine.probe_deviation(self._channel.number)
+        x, y, z = self.main_axes
+        return values.get(x, 0.0), values.get(y, 0.0), values.get(z, 0.0)
+
+    def probe_feeds(self) -> tuple[float, float]:
+        probe = self._channel.config.probe
+        return probe.measuring_feed, probe.positioning_feed
+
+    def write_zero_offset(self, name: str, values: Mapping[str, float]) -> None:
+        self._channel.decoder.modal.zero_offsets.setdefault(name, {}).update(values)
+
+    def set_result(self, name: str, value: float) -> None:
+        self._results(name, value)
+
+    def write_program(self, name: str, text: str) -> None:
+        self._channel.written.write(name, text)
+
+    def warn(self, alarm: int, message: str) -> None:
+        ch = self._channel
+        ch.machine.raise_alarm(alarm, ch, message, line=self._line, block=self._block)
 
 
 def _tool_and_frame_value(decoder: Decoder, name: str) -> float | None:
@@ -230,6 +491,9 @@ class Channel:
         self.decoder.soft_limits = self._soft_limits  # a method, not a closure: a snapshot keeps it
         self._main_slots = tuple(self.axis_names.index(a) for a in config.main_axes)
         self.compiler = Compiler(self.axis_names, config.main_axes)
+        self.written = MemoryLibrary(where="files written by cycles")
+        """Program files the channel's cycles wrote (a teach-in's ``CS_BASE_<n>.bcs``): ``L name`` finds
+        them before the program directories, as the kernel finds the file a cycle just wrote."""
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))
         self.decoder.warn = ChannelHost(self).warn
         """Runs the NC programs of this channel ahead of the motion (N-01..N-08)."""

@@ -255,6 +255,9 @@ class Decoder:
         self.path_checks: list[PathCheck] = []
         self.area_handler: AreaHandler | None = None
         self.measure_handler: MeasureHandler | None = None
+        self.measured: float | None = None
+        """The last measuring move: the fraction of its line where the probe signal came (the latched
+        position), None when it ended without one (a built-in cycle reads it, engine/cycles)."""
         self.current_block: Block | None = None
         self._position_before_area: list[float] | None = None
         self.blocks_decoded = 0
@@ -321,9 +324,11 @@ class Decoder:
         self.contour.reset()
         self._reset_kinematics()
 
-    def resume(self, position: list[float]) -> None:
-        """Continue decoding from ``position`` (after a measuring move stopped where the probe fired)."""
+    def resume(self, position: list[float], measured: float | None = None) -> None:
+        """Continue decoding from ``position`` after a measuring move; ``measured``: where along its line the
+        probe signal came (None: none came)."""
         self.position = list(position)
+        self.measured = measured
         self.finished = False
 
     def reset_modal(self) -> None:

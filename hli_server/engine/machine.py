@@ -22,8 +22,9 @@ the hooks a monitor overrides.
 from __future__ import annotations
 
 import contextlib
+import math
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any, TypeVar
 
 from pydantic import ValidationError
@@ -32,6 +33,7 @@ from hli_server.engine.alarms import ALARMS, Reaction, Severity
 from hli_server.engine.areas.monitor import AreaMonitor
 from hli_server.engine.axis import Axis, AxisFaults, check_fault_value
 from hli_server.engine.channel import Channel
+from hli_server.engine.cycles import ProbeDeviation
 from hli_server.engine.external import ExternalVariables, external_specs
 from hli_server.engine.hli import AxisHli, ChannelHli, MachineHli
 from hli_server.engine.monitors.base import Monitor, MonitorFactory
@@ -96,11 +98,18 @@ class Machine:
         read_program: Callable[[str], str] | None = None,
         *,
         programs: ProgramLibrary | None = None,
+        cycle_programs: Mapping[int, ProgramLibrary] | None = None,
         monitors: Iterable[MonitorFactory] | None = None,
     ) -> None:
         self.config = config
         self.read_program = read_program
         self.programs: ProgramLibrary = MemoryLibrary() if programs is None else programs
+        self.cycle_programs: dict[int, ProgramLibrary] = dict(cycle_programs or {})
+        """Per channel: its ``cycle_directories`` (the runtime's; searched after ``programs`` for cycles)."""
+        self.probes: dict[int, ProbeDeviation] = {
+            ch.number: ProbeDeviation(ch.probe.deviation_variables) for ch in config.channels
+        }
+        """Per channel: the simulated workpiece's deviation (docs/cycles.md, "The simulated probe")."""
         self.external = ExternalVariables(external_specs(config))
         self.t_a = s_from_us(config.cycle_time_us)
         self.cycle = 0
@@ -207,6 +216,54 @@ class Machine:
             update={"axes": [record if a.name == axis_name else a for a in self.config.axes]}
         )
         return record
+
+    def cycle_library(self, channel: int) -> ProgramLibrary:
+        """Where channel ``channel``'s cycle calls look after the program directories."""
+        library = self.cycle_programs.get(channel)
+        if library is None:
+            library = self.cycle_programs[channel] = MemoryLibrary(where="cycle directories")
+        return library
+
+    def probe_deviation(self, channel: int = 1) -> dict[str, float]:
+        """The simulated workpiece's deviation per axis of channel ``channel`` [mm]: the V.E. variable of an
+        axis that ``[channels.probe] deviation_variables`` names, else the value set by
+        :meth:`set_probe_deviation` (0 until set)."""
+        ch = self.channel(channel)
+        probe = self.probes[ch.number]
+        values: dict[str, float] = {}
+        for name in ch.axis_names:
+            var = probe.variables.get(name.upper())
+            if var is not None:
+                value = self.external.read(var, ch.number)
+                values[name] = float(value)
+            else:
+                values[name] = probe.values.get(name, 0.0)
+        return values
+
+    def set_probe_deviation(self, channel: int, values: Mapping[str, float]) -> None:
+        """Set the simulated workpiece's deviation along the named axes [mm]; an axis with a V.E. variable
+        gets it written into the variable (as the PLC would write it). KeyError for an axis the channel does
+        not have, ValueError for a value that is not finite or beyond +/-10000 mm; nothing changes then."""
+        ch = self.channel(channel)
+        probe = self.probes[ch.number]
+        names = {n.upper(): n for n in ch.axis_names}
+        checked: dict[str, float] = {}
+        for axis, value in values.items():
+            name = names.get(axis.upper())
+            if name is None:
+                raise KeyError(
+                    f"probe deviation: channel {ch.number} has no axis {axis!r} ({', '.join(ch.axis_names)})"
+                )
+            number = float(value)
+            if not math.isfinite(number) or abs(number) > 10_000.0:
+                raise ValueError(f"probe deviation {name} = {value!r}: a finite value within +/-10000 mm")
+            checked[name] = number
+        for name, number in checked.items():
+            var = probe.variables.get(name.upper())
+            if var is not None:
+                self.external.write(var, ch.number, number)
+            else:
+                probe.values[name] = number
 
     def inject_fault(self, axis_name: str, **fields: object) -> None:
         """Fault injection (A3-05): set fields of the axis' :class:`AxisFaults` (friction,

@@ -52,6 +52,14 @@ class MachinePort(Protocol):
         """The ``V.E.`` variables shared with the PLC (N-05)."""
         ...
 
+    def cycle_library(self, channel: int) -> ProgramLibrary:
+        """Where channel ``channel``'s cycle calls look after ``programs`` (its ``cycle_directories``)."""
+        ...
+
+    def probe_deviation(self, channel: int = 1) -> dict[str, float]:
+        """The simulated workpiece's deviation per axis of the channel [mm] (docs/cycles.md)."""
+        ...
+
     def raise_alarm(
         self,
         number: int,

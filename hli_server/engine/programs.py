@@ -55,3 +55,11 @@ class MemoryLibrary:
 
     def searched(self) -> tuple[str, ...]:
         return (self._where,) if self._files else ()
+
+    def write(self, name: str, text: str) -> None:
+        """Add or replace file ``name`` (a file of the same name in another case is replaced)."""
+        old = self._folded.get(name.casefold())
+        if old is not None:
+            del self._files[old]
+        self._files[name] = text
+        self._folded[name.casefold()] = name

@@ -38,6 +38,8 @@ list of one (``["teach_01.dat"]``; version 3). The outputs the header lists in
 
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 import math
 import os
@@ -54,11 +56,14 @@ from schemas.layout import STRING_ENCODING
 __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
+    "MAX_SPAN",
     "SUFFIX",
+    "RecordChecker",
     "RecordingError",
     "RecordingFullError",
     "RecordingWriter",
     "Records",
+    "check_recording",
     "decode_value",
     "encode_text",
     "encode_value",
@@ -81,7 +86,23 @@ COMPRESS_LEVEL: Final = 1
 9 % and 22 % more bytes; docs/record-replay.md)."""
 MAX_LINE_BYTES: Final = 256 * 1024 * 1024
 """A line longer than this is refused by the reader (a program text may be up to 64 MiB, escaped)."""
+MAX_SPAN: Final = 2**31
+"""Cycles a recording may span from its first line to its last (24.8 days at T_A = 1 ms, the range of the
+HLI's cycle counter): what a replay may have to run, bounded by the file itself (issue 36, finding 6)."""
+_RANGES: Final = {"DINT": (-(2**31), 2**31 - 1), "UDINT": (0, 2**32 - 1)}
+_KINDS: Final = ("i", "o", "e", "op", "file", "program_file", "fault", "snapshot", "end")
+_TYPES: Final = ("BOOL", "DINT", "UDINT", "LREAL", "STRING")
+_STRING_TYPE: Final = re.compile(r"STRING\(([1-9][0-9]{0,3})\)")
+_FINGERPRINT: Final = re.compile(r"[0-9a-f]{1,64}")
+
+
+def _known_type(name: object) -> bool:
+    """A type a recording's signal may have: an IEC base type or a V.E. STRING(n) of n <= 9999 bytes."""
+    return isinstance(name, str) and (name in _TYPES or _STRING_TYPE.fullmatch(name) is not None)
+
+
 _READ_CHUNK: Final = 1 << 20
+_CLOEXEC: Final = getattr(os, "O_CLOEXEC", 0)
 
 
 class RecordingError(ValueError):
@@ -167,8 +188,13 @@ class RecordingWriter:
         self.path = path
         self.max_bytes = max_bytes
         self.level = level
-        mode = "wb" if overwrite else "xb"
-        self._file: IO[bytes] | None = open(path, mode)  # noqa: SIM115 - closed by close()
+        # the owner's alone (0600): a recording holds the programs' text, every input and every event,
+        # which the HTTP door gives only to the API token's holders (docs/reliability.md, "Access")
+        flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if overwrite else os.O_EXCL) | _CLOEXEC
+        fd = os.open(path, flags, 0o600)
+        if overwrite:
+            os.fchmod(fd, 0o600)
+        self._file: IO[bytes] | None = os.fdopen(fd, "wb")
         self._lines: list[str] = []
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="hli-record-writer")
         self._error: OSError | None = None
@@ -301,10 +327,13 @@ def _members(path: Path, info: Records) -> Iterator[bytes]:
 
 def read_records(path: Path | str, info: Records | None = None) -> Iterator[dict[str, Any]]:
     """Every line of the recording as a dict, header first; stops before an incomplete last member
-    (``info.truncated`` says so). Raises :class:`RecordingError` for a file that is no recording."""
+    (``info.truncated`` says so). Raises :class:`RecordingError` for a file that is no recording, and for
+    a line that is not what a recording holds, naming the file, the line and the field
+    (:class:`RecordChecker`: a recording is input like any other, issue 36, finding 6)."""
     path = Path(path)
     info = info if info is not None else Records()
     first = True
+    checker: RecordChecker | None = None
     rest = b""
     try:
         for text in _members(path, info):
@@ -325,7 +354,10 @@ def read_records(path: Path | str, info: Records | None = None) -> Iterator[dict
                 info.lines += 1
                 if first:
                     _check_header(path, record)
+                    checker = RecordChecker(path, record)
                     first = False
+                elif checker is not None:
+                    checker.check(info.lines, record)
                 yield record
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read: {exc.strerror or exc}") from None
@@ -344,6 +376,198 @@ def read_header(path: Path | str) -> dict[str, Any]:
     raise RecordingError(f"{path}: no recording header")  # pragma: no cover - read_records raises first
 
 
+def check_recording(
+    path: Path | str, each: Callable[[int, dict[str, Any]], str | None] | None = None
+) -> tuple[dict[str, Any], Records, int]:
+    """Read the whole recording once (every line checked): its header, what was read, and its last
+    cycle. A replay does this first, so that a bad line anywhere is refused before the first cycle runs.
+    ``each(line, record)`` checks more (the replay: what it will do with the line); a text it returns is
+    the problem, raised as :class:`RecordingError` with the file and the line."""
+    info = Records()
+    records = read_records(path, info)
+    header = next(records)
+    last = 0
+    for record in records:
+        last = record["c"]
+        problem = each(info.lines, record) if each is not None else None
+        if problem is not None:
+            raise RecordingError(f"{path}: line {info.lines}: {problem}")
+    return header, info, last
+
+
+def _short(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+class RecordChecker:
+    """Checks each line after the header against it: the cycle (a whole number, in order, the whole within
+    :data:`MAX_SPAN`), the kind of line, every field's type, every signal index against the header's lists
+    and every value against its signal's type."""
+
+    def __init__(self, path: Path, header: dict[str, Any]) -> None:
+        self.path = path
+        self.inputs = [str(kind) for _, kind in header["inputs"]]
+        self.outputs = [str(kind) for _, kind in header["outputs"]]
+        self.first: int | None = None
+        self.last = 0
+        self.line = 0
+        announced = header.get("snapshot")
+        self.snapshot_cycle: int | None = announced.get("cycle") if isinstance(announced, dict) else None
+        self.snapshot_seen = False
+
+    def fail(self, field: str, what: str) -> RecordingError:
+        return RecordingError(f"{self.path}: line {self.line}: {field}: {what}")
+
+    def check(self, line: int, record: dict[str, Any]) -> None:
+        self.line = line
+        cycle = record.get("c")
+        if type(cycle) is not int or cycle < 0:
+            raise self.fail("c", f"the cycle is a whole number >= 0, got {_short(cycle)}")
+        if cycle < self.last:
+            raise self.fail("c", f"cycle {cycle} after cycle {self.last}: a recording's lines are in order")
+        if self.first is None:
+            self.first = cycle
+        if cycle - self.first > MAX_SPAN:
+            raise self.fail(
+                "c",
+                f"cycle {cycle} lies {cycle - self.first} cycles after the first line's ({self.first}); a "
+                f"recording spans at most {MAX_SPAN} cycles",
+            )
+        self.last = cycle
+        if not any(kind in record for kind in _KINDS):
+            raise self.fail("record", f"none of {', '.join(_KINDS)}: {_short(record)}")
+        if "i" in record:
+            self._changes("i", record["i"], self.inputs)
+        if "o" in record:
+            self._changes("o", record["o"], self.outputs)
+        if "e" in record:
+            self._events(record["e"])
+        if "op" in record:
+            self._text(record, "op")
+            if not isinstance(record.get("args", {}), dict | None):
+                raise self.fail("args", f"an object, got {_short(record.get('args'))}")
+            self._text(record, "error", optional=True)
+        for key in ("file", "program_file"):
+            if key in record:
+                self._text(record, key)
+                self._text(record, "text", optional=True)
+        if "program_file" in record:
+            self._text(record, "found", optional=True)
+            self._text(record, "origin", optional=True)
+            searched = record.get("searched", [])
+            if not isinstance(searched, list | None) or not all(isinstance(x, str) for x in searched or ()):
+                raise self.fail("searched", f"a list of directories, got {_short(searched)}")
+        if "fault" in record:
+            if record["fault"] not in ("set", "end"):
+                raise self.fail("fault", f"set or end, got {_short(record['fault'])}")
+            if type(record.get("id")) is not int:
+                raise self.fail("id", f"a fault's number, got {_short(record.get('id'))}")
+            if record["fault"] == "set" and not isinstance(record.get("spec"), dict):
+                raise self.fail("spec", f"the fault as an object, got {_short(record.get('spec'))}")
+            self._text(record, "reason", optional=True)
+        if "snapshot" in record:
+            self._snapshot(record)
+        if "end" in record:
+            self._text(record, "end")
+
+    def _snapshot(self, record: dict[str, Any]) -> None:
+        """The line that holds the machine's state where the recording began (format 4): once, at the cycle
+        before the header's window, its envelope of the shape :mod:`.snapshot` writes. What the objects
+        hold is read as untrusted data by :func:`~hli_server.recording.snapshot.restore` (engine classes
+        by name only, values by kind, nesting bounded) when the replay starts from it."""
+        if self.snapshot_seen:
+            raise self.fail("snapshot", "a second snapshot line (a recording holds one)")
+        self.snapshot_seen = True
+        if self.snapshot_cycle is None:
+            raise self.fail("snapshot", "a snapshot line in a recording whose header announces none")
+        if record["c"] != self.snapshot_cycle:
+            raise self.fail(
+                "c", f"the snapshot is of cycle {record['c']}, the header's of cycle {self.snapshot_cycle}"
+            )
+        state = record["snapshot"]
+        if not isinstance(state, dict):
+            raise self.fail("snapshot", f"the machine's state as an object, got {_short(state)}")
+        if type(state.get("snapshot")) is not int:
+            raise self.fail(
+                "snapshot.snapshot", f"the snapshot's layout number, got {_short(state.get('snapshot'))}"
+            )
+        fingerprint = state.get("fingerprint")
+        if not isinstance(fingerprint, str) or not _FINGERPRINT.fullmatch(fingerprint):
+            raise self.fail(
+                "snapshot.fingerprint", f"the engine's hash (hex digits), got {_short(fingerprint)}"
+            )
+        if type(state.get("cycle")) is not int or state["cycle"] != record["c"]:
+            raise self.fail(
+                "snapshot.cycle", f"the line's cycle {record['c']}, got {_short(state.get('cycle'))}"
+            )
+        root = state.get("root")
+        if not isinstance(root, dict) or set(root) != {"r"} or type(root["r"]) is not int:
+            raise self.fail("snapshot.root", f"a reference to the machine's object, got {_short(root)}")
+        objects = state.get("objects")
+        if not isinstance(objects, list) or not 0 <= root["r"] < len(objects):
+            raise self.fail(
+                "snapshot.objects", f"the list of objects the root's index lies in, got {_short(objects)}"
+            )
+        if not all(isinstance(entry, dict) for entry in objects):
+            raise self.fail("snapshot.objects", "every object is a JSON object")
+        self._changes("in", record.get("in"), self.inputs)
+        external = record.get("external")
+        if external is not None:
+            if not isinstance(external, str):
+                raise self.fail("external", f"the V.E. fields' bytes in base64, got {_short(external)}")
+            try:
+                base64.b64decode(external, validate=True)
+            except (ValueError, binascii.Error):
+                raise self.fail("external", "the V.E. fields' bytes are no base64") from None
+        faults = record.get("faults", [])
+        if not isinstance(faults, list) or not all(
+            isinstance(f, dict) and type(f.get("id")) is int and isinstance(f.get("spec"), dict)
+            for f in faults
+        ):
+            raise self.fail(
+                "faults", f"the stall faults in effect as {{id, spec}} objects, got {_short(faults)}"
+            )
+
+    def _text(self, record: dict[str, Any], key: str, *, optional: bool = False) -> None:
+        value = record.get(key)
+        if not isinstance(value, str) and not (optional and value is None):
+            raise self.fail(key, f"text, got {_short(value)}")
+
+    def _changes(self, field: str, flat: object, kinds: list[str]) -> None:
+        if not isinstance(flat, list) or len(flat) % 2:
+            raise self.fail(field, f"pairs of a signal's index and its value, got {_short(flat)}")
+        for k in range(0, len(flat), 2):
+            index, value = flat[k], flat[k + 1]
+            if type(index) is not int or not 0 <= index < len(kinds):
+                raise self.fail(
+                    field, f"signal index {_short(index)} is not one of the header's {len(kinds)} signals"
+                )
+            kind = kinds[index]
+            if kind == "BOOL":
+                ok = isinstance(value, bool) or value in (0, 1)
+            elif kind.startswith("STRING"):
+                ok = isinstance(value, list) and len(value) == 1 and isinstance(value[0], str)
+            elif kind == "LREAL":
+                ok = (isinstance(value, int | float) and not isinstance(value, bool)) or value in _NON_FINITE
+            else:
+                low, high = _RANGES.get(kind, (0, -1))
+                ok = type(value) is int and low <= value <= high
+            if not ok:
+                raise self.fail(field, f"signal {index} is a {kind}, its value {_short(value)} is none")
+
+    def _events(self, events: object) -> None:
+        if not isinstance(events, list):
+            raise self.fail("e", f"a list of events, got {_short(events)}")
+        for event in events:
+            if (
+                not isinstance(event, dict)
+                or not isinstance(event.get("kind"), str)
+                or not isinstance(event.get("data", {}), dict)
+            ):
+                raise self.fail("e", f"an event is an object with its kind and data, got {_short(event)}")
+
+
 def _check_header(path: Path, record: dict[str, Any]) -> None:
     if record.get("record") != "header" or record.get("format") != FORMAT:
         raise RecordingError(f"{path}: not an hli-server recording (its first line is no {FORMAT} header)")
@@ -355,3 +579,37 @@ def _check_header(path: Path, record: dict[str, Any]) -> None:
             f"{path}: recording format version {version} is newer than this hli-server reads "
             f"({FORMAT_VERSION}); replay it with the hli-server that made it ({record.get('server')})"
         )
+
+    def bad(field: str, what: str) -> RecordingError:
+        return RecordingError(f"{path}: line 1 (the header): {field}: {what}")
+
+    for key in ("inputs", "outputs"):
+        listed = record.get(key)
+        if not isinstance(listed, list) or not all(
+            isinstance(e, list) and len(e) >= 2 and isinstance(e[0], str) and _known_type(e[1])
+            for e in listed
+        ):
+            raise bad(key, "a list of [ST path, type] (BOOL, DINT, UDINT, LREAL, STRING(n))")
+    for key, low in (("t_a_us", 1), ("window_start", 0), ("outputs_every", 1)):
+        value = record.get(key, low)
+        if type(value) is not int or not low <= value <= 2**62:
+            raise bad(key, f"a whole number >= {low}, got {_short(value)}")
+    for key in ("server", "layout", "journal", "config"):
+        if not isinstance(record.get(key, {}), dict):
+            raise bad(key, f"an object, got {_short(record.get(key))}")
+    snapshot = record.get("snapshot")
+    if snapshot is not None and not (
+        isinstance(snapshot, dict)
+        and type(snapshot.get("cycle")) is int
+        and snapshot["cycle"] == record.get("window_start", 1) - 1 >= 1
+        and isinstance(snapshot.get("fingerprint"), str)
+        and _FINGERPRINT.fullmatch(snapshot["fingerprint"]) is not None
+    ):
+        raise bad("snapshot", f"null or {{cycle: window_start - 1, fingerprint}}, got {_short(snapshot)}")
+    if not isinstance(record.get("snapshot_note"), str | None):
+        raise bad("snapshot_note", f"text, got {_short(record.get('snapshot_note'))}")
+    follow = record.get("follow_cycle") or []
+    if not isinstance(follow, list) or not all(
+        type(k) is int and 0 <= k < len(record["outputs"]) for k in follow
+    ):
+        raise bad("follow_cycle", f"indices of the header's outputs, got {_short(follow)}")

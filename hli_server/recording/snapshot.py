@@ -71,9 +71,10 @@ SNAPSHOT_VERSION: Final = 1
 _MODULES: Final = ("hli_server.engine.", "schemas.")
 """Where the classes, enums and functions of a snapshot come from (nothing else is looked up)."""
 
-EXTERNALS: Final = ("event_listeners", "programs", "read_program")
+EXTERNALS: Final = ("event_listeners", "programs", "cycle_programs", "read_program")
 """The machine's attributes that belong to its host (the runtime's event log and recorder, its program
-library, its file reader): named in a snapshot, and the replaying machine keeps its own."""
+library and the channels' cycle directories, its file reader): named in a snapshot, and the replaying
+machine keeps its own."""
 
 _NDARRAY_DTYPES: Final = frozenset({"<i8", "<f8", "|b1", "|u1", "<i4", "<u4", "<u8", "<f4"})
 """numpy arrays a snapshot may hold (the program text's line tables): plain numbers only."""
@@ -172,6 +173,7 @@ def _module_globals() -> dict[int, str]:
                 or isinstance(
                     value, bool | int | float | str | bytes | type | types.ModuleType | types.FunctionType
                 )
+                or (callable(value) and not _ours(type(value).__module__))  # what restore refuses as "g"
             ):
                 continue
             out.setdefault(id(value), f"{module_name}:{name}")
@@ -268,7 +270,7 @@ class _Encoder:
         if isinstance(obj, types.FunctionType | types.BuiltinFunctionType):
             module = getattr(obj, "__module__", None)
             qual = getattr(obj, "__qualname__", "")
-            if not _ours(module) or "<" in qual:
+            if module is None or not module.startswith(_MODULES[0]) or "<" in qual or "." in qual:
                 raise SnapshotError(
                     f"{self.path(parent, key)}: the function {module}.{qual} (a function made at run time or "
                     "of another package cannot be kept as data)"
@@ -308,6 +310,9 @@ class _Encoder:
             state = _attributes(obj)
         except Exception as exc:
             raise SnapshotError(f"{self.path(at, '')}: the attributes of {_name_of(kind)}: {exc}") from None
+        for name in getattr(kind, "snapshot_transient", ()):  # rebuilt by the object after a restore
+            if name in state:
+                state[name] = None
         return {"obj": _name_of(kind), "state": {k: self.value(v, at, f".{k}") for k, v in state.items()}}
 
     def run(self) -> None:
@@ -370,6 +375,20 @@ def _lookup(name: str) -> Any:
             found = getattr(found, part)
     except (ImportError, AttributeError) as exc:
         raise SnapshotRestoreError(f"this engine has no {name}: {exc}") from None
+    return found
+
+
+def _function(name: Any) -> Any:
+    """A function the engine's modules define at their top level (``module:name``; what a planner's
+    action calls): no method reached through a class, no function of another package a module imported."""
+    if not isinstance(name, str) or not name.startswith(_MODULES[0]) or "." in name.partition(":")[2]:
+        raise _bad(f"{str(name)[:80]!r} is no function of the engine")
+    found = _lookup(name)
+    if (
+        not isinstance(found, types.FunctionType | types.BuiltinFunctionType)
+        or getattr(found, "__module__", None) != name.partition(":")[0]
+    ):
+        raise _bad(f"{name[:80]} is no function of the engine")
     return found
 
 
@@ -508,14 +527,14 @@ class _Restorer:
             name = v["g"]
             if not isinstance(name, str) or "." in name.partition(":")[2]:
                 raise _bad(f"a module's object {str(name)[:80]!r}")
-            return _lookup(name)
-        if "fn" in v and len(v) == 1:
-            found = _lookup(v["fn"])
-            if not isinstance(found, types.FunctionType | types.BuiltinFunctionType) or not _ours(
-                getattr(found, "__module__", None)
-            ):
-                raise _bad(f"{v['fn']} is no function of the engine")
+            found = _lookup(name)
+            if isinstance(found, types.ModuleType | type) or (
+                callable(found) and not _ours(type(found).__module__)
+            ):  # a module or a function a module imported (os, a class, eval...) is no table of its own
+                raise _bad(f"{name[:80]} is no table or constant of the engine")
             return found
+        if "fn" in v and len(v) == 1:
+            return _function(v["fn"])
         if "re" in v and set(v) == {"re", "flags"}:
             if not isinstance(v["re"], str) or len(v["re"]) > _MAX_PATTERN or type(v["flags"]) is not int:
                 raise _bad("a regular expression")
@@ -526,9 +545,10 @@ class _Restorer:
         if "m" in v and set(v) == {"m", "n"}:
             return self.method(self.value(v["m"], depth + 1), v["n"])
         if set(v) == {"p", "a", "k"} and isinstance(v["a"], list) and isinstance(v["k"], list):
-            func = self.value(v["p"], depth + 1)
-            if not callable(func) or isinstance(func, type):
-                raise _bad("a partial of no method or function")
+            kind = v["p"]
+            if not isinstance(kind, dict) or not ({"fn"} == set(kind) or {"m", "n"} == set(kind)):
+                raise _bad("a partial of no method or function of the engine")
+            func = self.value(kind, depth + 1)
             if not all(isinstance(kv, list) and len(kv) == 2 and isinstance(kv[0], str) for kv in v["k"]):
                 raise _bad("a partial's keywords")
             args = [self.value(x, depth + 1) for x in v["a"]]

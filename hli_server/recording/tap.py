@@ -74,6 +74,7 @@ from schemas.results import (
     CollisionPair,
     CommFaultChange,
     MachineState,
+    ProbeDeviation,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
@@ -926,6 +927,17 @@ class JournaledOperator(OperatorPort):
         )
         return result
 
+    def probe_deviation(self, channel: int) -> ProbeDeviation:
+        return self.panel.probe_deviation(channel)
+
+    def set_probe_deviation(self, channel: int, values: dict[str, int]) -> ProbeDeviation:
+        result: ProbeDeviation = self._do(
+            "set_probe_deviation",
+            {"channel": channel, "values": dict(values)},
+            lambda: self.panel.set_probe_deviation(channel, values),
+        )
+        return result
+
     def reference(self, axis: str) -> Accepted:
         result: Accepted = self._do("reference", {"axis": axis}, lambda: self.panel.reference(axis))
         return result
@@ -1015,6 +1027,7 @@ OPERATOR_REQUESTS: Final = (
     "override",
     "jog",
     "probe",
+    "set_probe_deviation",
     "reference",
     "inject_faults",
     "clear_faults",
@@ -1039,7 +1052,7 @@ class SessionRecorderPort:
         try:
             path = tap.resolve(name)
             try:
-                path.parent.mkdir(parents=True, exist_ok=True)
+                path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # a new one: its owner's only
             except OSError as exc:
                 raise RecordingError(f"cannot create the recording directory {path.parent}: {exc}") from None
             return tap.start(path, origin="api").to_json()

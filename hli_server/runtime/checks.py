@@ -37,7 +37,7 @@ from hli_server.adapters.host import (
     NotFoundError,
     UnavailableError,
 )
-from hli_server.runtime.programs import RuntimeLibrary
+from hli_server.runtime.programs import RuntimeLibrary, cycle_libraries
 from schemas.results import CheckReport
 
 if TYPE_CHECKING:
@@ -112,7 +112,7 @@ def run_check(
     numbers = [c.number for c in config.channels]
     if channel not in numbers:
         raise NotFoundError(f"no channel {channel} (the machine has {', '.join(map(str, numbers))})")
-    machine = Machine(config, programs=library)
+    machine = Machine(config, programs=library, cycle_programs=cycle_libraries(config))
     return ProgramCheck(
         machine,
         channel,

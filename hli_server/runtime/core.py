@@ -69,7 +69,7 @@ from hli_server.runtime.pacing import (
     run_realtime,
     summarize_timing,
 )
-from hli_server.runtime.programs import RuntimeLibrary, read_program_file
+from hli_server.runtime.programs import RuntimeLibrary, cycle_libraries, read_program_file
 from schemas.results import Timing
 
 if TYPE_CHECKING:
@@ -227,7 +227,12 @@ class Runtime:
     def _power_on(self) -> Machine:
         """A machine as the machine file starts it, wired to the session recorder and the event log."""
         machine = Machine(
-            self.config, read_program=self.session.wrap_reader(self._read_program), programs=self.programs
+            self.config,
+            read_program=self.session.wrap_reader(self._read_program),
+            programs=self.programs,
+            cycle_programs={
+                n: self.session.wrap_library(lib) for n, lib in cycle_libraries(self.config).items()
+            },
         )
         self.session.bind(machine)
         machine.programs = self.session.wrap_library(machine.programs)
@@ -662,6 +667,12 @@ class Runtime:
             machine.step(1)
         except Exception as exc:  # the server outlives a failing cycle: the channels take an error
             self._cycle_failed(exc)
+        files = self.nc_files  # #MSG SAVE is written off this thread; its refusals come back here
+        if files.active:
+            try:
+                files.after_cycle(inline=self.clock is Clock.STEPPED)
+            except Exception as exc:
+                self._cycle_failed(exc)
         try:
             stalled = self.comm_faults.publish_stalled(machine.cycle)  # a stalled publish, on demand
             packed = image.publish_from(machine.hli, machine.cycle, commit=not stalled)

@@ -33,7 +33,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Final, Protocol
 
 from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
@@ -367,6 +367,7 @@ async def _serve_doors_until(
                 _tell(conn, ("error", str(exc)))
                 return
             started.append(adapter)
+        await _first_connections(started)
         # the parent may have gone while the doors started (stopped during its start-up): then stop too
         if _tell(
             conn, ("ready", [(a.name, getattr(a, "port", None), a.endpoints(), _url(a)) for a in started])
@@ -397,6 +398,18 @@ def _url(adapter: Adapter) -> str | None:
     except RuntimeError:
         return None
     return url if isinstance(url, str) else None
+
+
+#: how long the doors process waits for a client door's first connection (the MQTT broker) before it
+#: reports ready: the banner then says "connected" as it did in the clock's process; an absent broker
+#: costs the start this much once and is retried in the background
+FIRST_CONNECT_S: Final = 1.0
+
+
+async def _first_connections(started: list[Adapter]) -> None:
+    waits = [w(FIRST_CONNECT_S) for a in started if callable(w := getattr(a, "wait_connected", None))]
+    if waits:
+        await asyncio.gather(*waits, return_exceptions=True)  # a time-out only means "not yet"
 
 
 def _tell(conn: Connection, message: tuple[str, object]) -> bool:

@@ -31,6 +31,7 @@ from schemas.results import (
     CollisionPair,
     ExternalVariable,
     MachineState,
+    ProbeDeviation,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
@@ -193,6 +194,27 @@ class OperatorPanel(OperatorPort):
             raise ConflictError("the machine has no area monitoring (no G100 measuring moves)")
         self._m.monitor(AreaMonitor).handler(ch.number).request_probe(on)
         return self._accepted(ch, f"probe {'on' if on else 'off'}")
+
+    def probe_deviation(self, channel: int) -> ProbeDeviation:
+        ch = self._channel(channel)
+        values = self._m.probe_deviation(ch.number)
+        return {
+            "channel": ch.number,
+            "deviation": {name: increments_from_mm(v) for name, v in values.items()},
+            "variables": dict(self._m.probes[ch.number].variables),
+        }
+
+    def set_probe_deviation(self, channel: int, values: dict[str, int]) -> ProbeDeviation:
+        ch = self._channel(channel)
+        if not values:
+            raise InvalidRequestError('give the deviation per axis [0.1 µm], e.g. {"X": 2000}')
+        try:
+            self._m.set_probe_deviation(ch.number, {k: mm_from_increments(v) for k, v in values.items()})
+        except KeyError as exc:
+            raise NotFoundError(str(exc.args[0])) from None
+        except ValueError as exc:
+            raise InvalidRequestError(str(exc)) from None
+        return self.probe_deviation(channel)
 
     def reference(self, axis: str) -> Accepted:
         ax = self._axis(axis)

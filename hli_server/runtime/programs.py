@@ -33,6 +33,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Final
 
 from hli_server.engine.programs import ProgramFile
+from schemas.config import MachineConfig
 
 __all__ = [
     "MAX_PROGRAM_BYTES",
@@ -41,6 +42,7 @@ __all__ = [
     "ProgramNameError",
     "RuntimeLibrary",
     "check_program_name",
+    "cycle_libraries",
     "read_program_file",
 ]
 
@@ -247,3 +249,9 @@ class RuntimeLibrary:
     def searched(self) -> tuple[str, ...]:
         uploaded = ("uploaded files",) if any(self._uploads.values()) else ()
         return uploaded + self.directories.searched()
+
+
+def cycle_libraries(config: MachineConfig) -> dict[int, ProgramDirectories]:
+    """Per channel, its ``cycle_directories`` (the machine file's, resolved by the loader): where a cycle
+    call looks after the program directories, before a built-in stand-in (docs/cycles.md)."""
+    return {ch.number: ProgramDirectories(ch.cycle_directories) for ch in config.channels}

@@ -20,13 +20,21 @@ What crosses the socket (frames: a 4-byte length, then a pickle; both ends are t
                       ("faults", id, op, args)                 set, end or reset communication faults
                       ("fault-ended", 0, fault id, reason)     a fault the doors used up (no answer)
     engine -> doors   ("ok", id, result) / ("err", id, exception)
-                      ("events", [(seq, event), ...])          every engine event, numbered, in order
+                      ("events", [(seq, class, values), ...])  the engine's events, numbered, in order (an
+                                                               event as its class and its fields' values)
                       ("faults", table, ended)                 the communication faults, on every change, with
                                                                the reasons of those ended since (id -> reason)
 
 The messages are typed ``Any`` inside this module (a frame holds whatever the method called takes and
 answers); the answers are typed where they leave it: each :class:`RemoteOperator`, :class:`RemoteRecorder`
 and :class:`RemoteFaults` method names its result's shape (``schemas.results``), as the ports do.
+
+The events cost the clock the same whatever their consumers do (issue 36, finding 4): the clock's end
+queues each (an append), sends them after each batch of cycles as plain tuples (a third of pickling the
+event objects), and when the doors process does not take them (its socket buffer holds more than
+:data:`MIRROR_BUFFER_BYTES`) it keeps only the newest :data:`~hli_server.runtime.event_log.EVENT_LOG` for
+later: what is lost shows as a gap in the numbers, which ``GET /api/events`` counts as ``missed``.
+The consumers (MQTT, the dashboard's streams, the readers of the log) all live in the doors process.
 
 The doors process keeps its own copy of the event log (``GET /api/events`` and the streams read it there),
 answers what never changes from a cache (channels, axes, program tables, the machine's name), reads cycle
@@ -47,8 +55,10 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import itertools
 import logging
+import operator
 import pickle
 import select
 import socket
@@ -73,7 +83,7 @@ from hli_server.adapters.host import (
     Trace,
     UnavailableError,
 )
-from hli_server.runtime.event_log import EventLog
+from hli_server.runtime.event_log import EVENT_LOG, EventLog
 from hli_server.runtime.pacing import PacingRaw, summarize_timing
 from schemas.events import Event
 from schemas.results import (
@@ -83,6 +93,7 @@ from schemas.results import (
     CollisionPair,
     CommFaultChange,
     MachineState,
+    ProbeDeviation,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
@@ -96,6 +107,7 @@ from schemas.wire import Mode
 
 __all__ = [
     "CALL_TIMEOUT_S",
+    "MIRROR_BUFFER_BYTES",
     "OPERATOR_CALLS",
     "EngineSide",
     "EventMirror",
@@ -104,6 +116,8 @@ __all__ = [
     "RemoteLink",
     "RemoteOperator",
     "RemoteRecorder",
+    "event_from_wire",
+    "event_to_wire",
 ]
 
 logger = logging.getLogger(__name__)
@@ -113,6 +127,12 @@ _READ_SIZE = 1 << 20
 
 CALL_TIMEOUT_S = 10.0
 """How long the doors process waits for an answer of the engine before it says it is unavailable (503)."""
+MIRROR_BUFFER_BYTES = 8 << 20
+"""While more than this waits in the socket for the doors process, the clock sends no events (it keeps the
+newest ``EVENT_LOG`` for when the doors take them again): a doors process that falls behind costs the
+clock neither time nor memory."""
+LOST_LOG_INTERVAL_S = 5.0
+"""Events the doors process did not get are logged at most this often (with their count)."""
 
 OPERATOR_CALLS = frozenset(
     {
@@ -127,6 +147,8 @@ OPERATOR_CALLS = frozenset(
         "override",
         "jog",
         "probe",
+        "probe_deviation",
+        "set_probe_deviation",
         "reference",
         "faults",
         "inject_faults",
@@ -178,6 +200,27 @@ class FrameReader:
         if pos:
             del buf[:pos]
         return out
+
+
+_EVENT_FIELDS: dict[type[Event], tuple[tuple[str, ...], Callable[[Event], tuple[Any, ...]]]] = {}
+
+
+def _event_fields(cls: type[Event]) -> tuple[tuple[str, ...], Callable[[Event], tuple[Any, ...]]]:
+    spec = _EVENT_FIELDS.get(cls)
+    if spec is None:
+        names = tuple(f.name for f in dataclasses.fields(cls))  # cycle, time_s, channel and its own
+        spec = _EVENT_FIELDS[cls] = (names, operator.attrgetter(*names))
+    return spec
+
+
+def event_to_wire(seq: int, event: Event) -> tuple[int, type[Event], tuple[Any, ...]]:
+    """``(seq, class, values)``: what crosses the socket for an event (a third of pickling the object)."""
+    cls = type(event)
+    return seq, cls, _event_fields(cls)[1](event)
+
+
+def event_from_wire(cls: type[Event], values: Sequence[Any]) -> Event:
+    return cls(**dict(zip(_event_fields(cls)[0], values, strict=True)))
 
 
 def _portable(exc: BaseException) -> BaseException:
@@ -239,7 +282,9 @@ class OperatorService(asyncio.Protocol):
         self._transport: asyncio.Transport | None = None
         self._pending: deque[Any] = deque()
         self._steps: dict[int, asyncio.Task[None]] = {}
-        self._outbox: list[tuple[int, Event]] = []
+        self._outbox: deque[tuple[int, Event]] = deque(maxlen=EVENT_LOG)
+        self.withheld = 0
+        """Flushes that sent no events because the doors process had not taken the earlier ones."""
         self._unsubscribe = runtime.event_log.subscribe(self._on_event)
         self._faults_changed = runtime.comm_faults.active  # the doors start with the engine's table
         self._faults_ended: dict[int, str] = {}
@@ -278,6 +323,16 @@ class OperatorService(asyncio.Protocol):
         if self._transport is not None:
             self._transport.close()
 
+    @property
+    def buffered(self) -> int:
+        """Bytes sent that wait in this end's buffer for the doors process to read them."""
+        return self._transport.get_write_buffer_size() if self._transport is not None else 0
+
+    @property
+    def held(self) -> int:
+        """Events not yet sent (at most ``EVENT_LOG``: the newest)."""
+        return len(self._outbox)
+
     # --- the clock's side ---------------------------------------------------------------------
     def _on_event(self, event: Event) -> None:
         self._outbox.append((self._rt.event_log.latest, event))
@@ -295,14 +350,20 @@ class OperatorService(asyncio.Protocol):
 
     def flush(self) -> None:
         """Send the events of the cycles run since the last flush (after each batch of cycles), and the
-        table of communication faults if it changed."""
-        if self._transport is None:
+        table of communication faults if it changed. While the doors process has not taken what was
+        sent (:data:`MIRROR_BUFFER_BYTES`), the events wait (the newest ``EVENT_LOG`` of them)."""
+        transport = self._transport
+        if transport is None:
             return
-        if self._outbox:
-            self._transport.write(frame(("events", self._outbox)))
-            self._outbox = []
+        outbox = self._outbox
+        if outbox:
+            if transport.get_write_buffer_size() > MIRROR_BUFFER_BYTES:
+                self.withheld += 1
+            else:
+                transport.write(frame(("events", [event_to_wire(seq, event) for seq, event in outbox])))
+                outbox.clear()
         if self._faults_changed:
-            self._transport.write(frame(("faults", *self._fault_table())))
+            transport.write(frame(("faults", *self._fault_table())))
 
     def serve(self, deadline: float) -> bool:
         """Serve queued requests until ``deadline`` (``time.monotonic``), at least one if any wait;
@@ -431,7 +492,9 @@ class RemoteLink:
     caller waits, the loop with it, for an answer that comes between two of the engine's cycles), async
     calls (steps), and the events the engine sends (``on_events``)."""
 
-    def __init__(self, sock: socket.socket, on_events: Callable[[list[tuple[int, Event]]], None]) -> None:
+    def __init__(
+        self, sock: socket.socket, on_events: Callable[[list[tuple[int, type[Event], Sequence[Any]]]], None]
+    ) -> None:
         sock.setblocking(False)
         self._sock = sock
         self._on_events = on_events
@@ -573,16 +636,40 @@ class RemoteLink:
 
 class EventMirror(EventFeed):
     """The engine's event log as the doors process keeps it: the same numbers, the same bound; the
-    subscribers (the dashboard's streams, MQTT) are called from the loop after each batch arrives."""
+    subscribers (the dashboard's streams, MQTT) are called from the loop after each batch arrives. Events
+    the engine could not send (this process fell behind) are a gap in the numbers: counted in :attr:`lost`
+    and logged (at most every :data:`LOST_LOG_INTERVAL_S`)."""
 
     def __init__(self) -> None:
         self.log = EventLog()
         self._loop: asyncio.AbstractEventLoop | None = None
+        self._last: int | None = None
+        self.lost = 0
+        self._lost_logged = 0
+        self._last_log = -LOST_LOG_INTERVAL_S
 
     def start(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
 
-    def take(self, logged: Iterable[tuple[int, Event]]) -> None:
+    def take(self, wired: Iterable[tuple[int, type[Event], Sequence[Any]]]) -> None:
+        """A batch as the engine sent it (:func:`event_to_wire`)."""
+        logged = []
+        last = self._last
+        for seq, cls, values in wired:
+            if last is not None and seq > last + 1:
+                self.lost += seq - last - 1
+            last = seq
+            logged.append((seq, event_from_wire(cls, values)))
+        self._last = last
+        if self.lost != self._lost_logged and time.monotonic() - self._last_log >= LOST_LOG_INTERVAL_S:
+            self._last_log = time.monotonic()
+            logger.warning(
+                "the doors process fell behind the engine's events: %d not taken (%d in all; the event log "
+                "counts them as missed, MQTT and the dashboards did not get them)",
+                self.lost - self._lost_logged,
+                self.lost,
+            )
+            self._lost_logged = self.lost
         events = self.log.extend(logged)
         if events and self._loop is not None:
             self._loop.call_soon(self.log.deliver, events)
@@ -674,6 +761,14 @@ class RemoteOperator(OperatorPort):
 
     def probe(self, channel: int, on: bool) -> Accepted:
         return self._accepted("probe", channel, on)
+
+    def probe_deviation(self, channel: int) -> ProbeDeviation:
+        out: ProbeDeviation = self._call("probe_deviation", channel)
+        return out
+
+    def set_probe_deviation(self, channel: int, values: dict[str, int]) -> ProbeDeviation:
+        out: ProbeDeviation = self._call("set_probe_deviation", channel, values)
+        return out
 
     def reference(self, axis: str) -> Accepted:
         return self._accepted("reference", axis)

@@ -45,11 +45,12 @@ import time
 from collections import deque
 from collections.abc import Callable, Coroutine, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, TypeVar, cast
+from typing import TYPE_CHECKING, Any, Literal, Protocol, TypeVar, cast
 
 from hli_server.testing.transports import open_transport
 from schemas.layout import Direction, Layout
-from schemas.results import CommFault, ProgramLoaded
+from schemas.results import CommFault, ProbeDeviation, ProgramLoaded
+from schemas.units import increments_from_mm, mm_from_increments
 
 if TYPE_CHECKING:
     from hli_server.adapters.host import OperatorPort, Value
@@ -288,11 +289,36 @@ class _OperatorInLoop:
         return f"<operator panel of {self._harness!r}>"
 
 
+class _ProbePort(Protocol):
+    """The operator panel's calls of the simulated probe (in-process or over HTTP)."""
+
+    def probe_deviation(self, channel: int) -> ProbeDeviation: ...
+
+    def set_probe_deviation(self, channel: int, values: dict[str, int]) -> ProbeDeviation: ...
+
+
 class _Programs:
-    """``load_program`` and ``check``, the same for the in-process harness and the remote one
-    (``remote.py``): each says how a program is loaded and which machine a check runs on."""
+    """``load_program``, ``check`` and the simulated probe's deviation, the same for the in-process harness
+    and the remote one (``remote.py``): each says how a program is loaded, which machine a check runs on
+    and which operator panel it talks to."""
 
     _base: Path | None
+
+    def _probe_port(self) -> _ProbePort:
+        raise NotImplementedError
+
+    def set_probe_deviation(self, channel: int = 1, **axes_mm: float) -> dict[str, float]:
+        """Where the simulated workpiece of the built-in measuring cycles lies off its nominal position,
+        per axis in mm (``hli.set_probe_deviation(X=0.2, Y=-0.1)``; docs/cycles.md). An axis that the machine
+        file gives a V.E. variable has that variable written, as the PLC would. Returns the deviation now."""
+        values = {k: increments_from_mm(v) for k, v in axes_mm.items()}
+        self._probe_port().set_probe_deviation(channel, values)
+        return self.probe_deviation(channel)
+
+    def probe_deviation(self, channel: int = 1) -> dict[str, float]:
+        """The simulated workpiece's deviation per axis [mm]."""
+        raw = self._probe_port().probe_deviation(channel)["deviation"]
+        return {k: mm_from_increments(v) for k, v in raw.items()}
 
     def _load(self, channel: int, text: str, name: str, files: dict[str, str]) -> ProgramLoaded:
         raise NotImplementedError
@@ -568,6 +594,9 @@ class Harness(_Programs):
         if self._operator is None:
             raise HarnessError("the harness is not started")
         return cast("OperatorPort", self._operator)
+
+    def _probe_port(self) -> _ProbePort:
+        return self.operator
 
     def step(self, cycles: int = 1) -> int:
         """Run ``cycles`` cycles now; returns the machine's cycle counter."""

@@ -65,6 +65,7 @@ from schemas.results import (
     CollisionPair,
     CommFault,
     MachineState,
+    ProbeDeviation,
     ProgramEntry,
     ProgramLoaded,
     ProgramSelected,
@@ -263,6 +264,15 @@ class RemoteOperator:
 
     def probe(self, channel: int, on: bool) -> Accepted:
         return self._accepted(channel, "probe", {"on": on})
+
+    def probe_deviation(self, channel: int) -> ProbeDeviation:
+        out: ProbeDeviation = self._api.get(f"/api/channels/{channel}/probe/deviation")
+        return out
+
+    def set_probe_deviation(self, channel: int, values: dict[str, int]) -> ProbeDeviation:
+        body = {"deviation": values}
+        out: ProbeDeviation = self._api.call("PUT", f"/api/channels/{channel}/probe/deviation", body)[1]
+        return out
 
     # --- axes -----------------------------------------------------------------------------------
     def reference(self, axis: str) -> Accepted:
@@ -613,6 +623,9 @@ class RemoteHarness(_Programs):
         self._ready()
         assert self._operator is not None
         return self._operator
+
+    def _probe_port(self) -> RemoteOperator:
+        return self.operator
 
     @property
     def comm_faults(self) -> RemoteCommFaults:

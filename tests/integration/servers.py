@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -21,12 +22,14 @@ def hli_server_cmd() -> list[str]:
     return [str(Path(sys.executable).parent / "hli-server")]
 
 
-def start_server(*args: str) -> subprocess.Popen[str]:
+def start_server(*args: str, env: dict[str, str] | None = None) -> subprocess.Popen[str]:
+    """``hli-server run ARGS`` (``env``: variables set for it besides this process' environment)."""
     return subprocess.Popen(
         [*hli_server_cmd(), "run", *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        env={**os.environ, **env} if env else None,
     )
 
 

@@ -42,8 +42,9 @@ def server() -> Iterator[str]:
         address = f"127.{rng.randrange(1, 255)}.{rng.randrange(256)}.{rng.randrange(1, 255)}"
         proc = start_server(
             *("--bind", address, "--http-port", "0", "--no-modbus", "--ads-port", "48898"),
-            *("--adapter", "ads:route_user=Administrator,route_password=1"),
+            *("--adapter", "ads:route_user=Administrator"),
             *("--image-name", f"hli_test_adsdoc_{os.getpid()}_{time.monotonic_ns() % 10**6}"),
+            env={"HLI_ADS_ROUTE_PASSWORD": "1"},  # as docs/ads.md, step 1
         )
         try:
             banner = read_banner(proc)

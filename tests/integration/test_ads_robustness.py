@@ -158,3 +158,164 @@ async def test_a_refused_net_id_does_not_swallow_the_answers_before_it() -> None
         client.close()
     finally:
         await rt.stop()
+
+
+# --- round three (issue 36, finding 9): every edge request is answered ----------------------------------
+
+
+_GROUPS = (0, 0x4020, 0xF003, 0xF005, 0xF006, 0xF008, 0xF020, 0xF021, 0xF030, 0xF031, 0xF080, 0xF081, 0xF082,
+           0xF083, 0xF100, 0x120300, 0xFFFFFFFF)  # fmt: skip
+_EDGES = (0, 1, 4, 0x7FFFFFFF, 0xFFFFFFFF)
+
+
+def _edge_requests() -> list[tuple[int, int, bytes]]:
+    """(port, command, payload): every command of a device with index groups of every service, offsets and
+    lengths at their edges (0, 1, 4, 2^31 - 1, 2^32 - 1), on ports 851, 551 and 10000."""
+    out: list[tuple[int, int, bytes]] = []
+    for port in (851, 551, 10000):
+        for g in _GROUPS:
+            for o in _EDGES:
+                for n in _EDGES:
+                    short = min(n, 12)
+                    out += [
+                        (port, CommandId.READ, struct.pack("<III", g, o, n)),
+                        (port, CommandId.WRITE, struct.pack("<III", g, o, min(n, 8)) + b"\x01" * min(n, 8)),
+                        (port, CommandId.WRITE, struct.pack("<III", g, o, n)),
+                        (port, CommandId.READ_WRITE, struct.pack("<IIII", g, o, n, short) + bytes(short)),
+                        (port, CommandId.READ_WRITE, struct.pack("<IIII", g, o, 4, n)),
+                        (
+                            port,
+                            CommandId.ADD_DEVICE_NOTIFICATION,
+                            struct.pack("<IIIIII16x", g, o, n, 4, 0, 10000),
+                        ),
+                    ]
+            out.append((port, CommandId.DELETE_DEVICE_NOTIFICATION, struct.pack("<I", g)))
+        out += [(port, CommandId.READ_STATE, b""), (port, CommandId.READ_DEVICE_INFO, b"")]
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(120)
+def test_every_edge_request_gets_an_answer_or_its_connection_is_closed() -> None:
+    """Before: 14 of 31,104 edge requests got no answer at all: a notification of the symbol version or the
+    device state 0x7FFFFFFF or 0xFFFFFFFF bytes long built a sample of 2 or 4 GB (seconds, and a probe of
+    ours grew past 6 GB); with the server's address space bounded to 1 GiB here, those 20 requests failed
+    inside it (0x700). Now each of these 7,000 requests is answered with its own code (0x705 for those
+    lengths), none closes its connection, and the server answers the next client."""
+    import resource
+    import subprocess
+
+    from tests.integration.servers import door_port, hli_server_cmd, read_banner, stop_server
+
+    proc = subprocess.Popen(
+        [*hli_server_cmd(), "run", "--clock", "stepped", "--no-http", "--no-modbus", "--ads-port", "0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    resource.prlimit(proc.pid, resource.RLIMIT_AS, (1 << 30, 1 << 30))  # its doors process inherits it
+    requests = _edge_requests()
+    silent: list[tuple[int, int, str]] = []
+    codes: dict[int, int] = {}
+
+    async def sweep(port: int) -> None:
+        for k in range(0, len(requests), 50):  # 50 pipelined on a connection of their own
+            client = await RawClient.connect(port)
+            waiting = {}
+            for target, command, payload in requests[k : k + 50]:
+                client.writer.write(client.frame(command, payload, target))
+                waiting[client.invoke] = (target, command, payload.hex()[:32])
+            await client.writer.drain()
+            try:
+                while waiting:
+                    frame = await client.next(timeout=3.0)
+                    if frame.header.is_response and waiting.pop(frame.header.invoke_id, None) is not None:
+                        code = result_of(frame) if frame.header.error_code or len(frame.data) >= 4 else 0
+                        codes[code] = codes.get(code, 0) + 1
+            except TimeoutError:
+                silent.extend(waiting.values())
+            finally:
+                client.close()
+        last = await RawClient.connect(port)
+        assert result_of(await last.request(CommandId.READ_STATE, b"")) == 0
+        last.close()
+
+    try:
+        banner = read_banner(proc, timeout=60)
+        asyncio.run(sweep(door_port(banner["ADS (AMS/TCP)"])))
+    finally:
+        stop_server(proc)
+    assert not silent, silent[:20]
+    assert sum(codes.values()) == len(requests)  # every one answered on its open connection
+    assert codes.get(0x700, 0) == 0, codes  # none failed inside the server (before: 20, out of memory)
+    assert codes.get(0x705, 0) > 0
+
+
+async def _add_many(client: RawClient, payload: bytes, count: int) -> list[int]:
+    """``count`` AddDeviceNotification pipelined on one connection; their results in order."""
+    invokes = []
+    for _ in range(count):
+        client.writer.write(client.frame(CommandId.ADD_DEVICE_NOTIFICATION, payload))
+        invokes.append(client.invoke)
+    await client.writer.drain()
+    results: dict[int, int] = {}
+    while len(results) < count:
+        frame = await client.next(timeout=10.0)
+        if frame.header.is_response and frame.header.command == CommandId.ADD_DEVICE_NOTIFICATION:
+            results[frame.header.invoke_id] = result_of(frame)
+    return [results[k] for k in invokes]
+
+
+@pytest.mark.timeout(60)
+async def test_a_newcomer_gets_its_share_of_a_full_notification_budget_and_the_hog_pays() -> None:
+    """Round two's probe again: eight loopback clients (eight NetIds; loopback peers are not bounded per
+    host) hold 256 notifications each, the server's 2,048. Before: a ninth, honest client got 0x716 for
+    every one. Now it is served up to its share (2,048 / 9 = 227): each of its notifications takes the
+    newest of the NetId holding the most; beyond its share it gets 0x716 like anybody."""
+    rt = await start_runtime()
+    clients: list[RawClient] = []
+    try:
+        port = ads(rt).port or 0
+        x = rt.layout.signal(X_POS)
+        add = struct.pack("<IIIIII16s", F020, x.offset, 4, 4, 0, 0, bytes(16))
+        for k in range(9):
+            client = await RawClient.connect(port)
+            client.source = client.source._replace(
+                net_id=type(client.source.net_id).parse(f"10.7.7.{k + 1}.1.1")
+            )
+            clients.append(client)
+        for hog in clients[:8]:
+            assert await _add_many(hog, add, 256) == [0] * 256
+        device = ads(rt).device
+        assert device.notification_count == 2048
+        newcomer = await _add_many(clients[8], add, 256)
+        assert newcomer[:227] == [0] * 227
+        assert set(newcomer[227:]) == {0x716}
+        assert device.notification_count == 2048
+        assert device.stats.notifications_evicted == 227
+    finally:
+        for client in clients:
+            client.close()
+        await rt.stop()
+
+
+async def test_a_flood_of_oversize_sum_commands_is_answered_not_reset() -> None:
+    """Before: a sum write of 500 items of 200 bytes (100 KB, more than the 64 KiB frame the door takes)
+    closed the connection without an ADS error code, and so did a flood of them. Now each is answered 0x705
+    (its bytes dropped as they arrive, never held) and the connection goes on serving."""
+    rt = await start_runtime()
+    client = await RawClient.connect(ads(rt).port or 0)
+    try:
+        items = b"".join(struct.pack("<III", F020, 0, 200) for _ in range(500)) + bytes(200) * 500
+        sum_write = struct.pack("<IIII", 0xF081, 500, 500 * 4, len(items)) + items
+        assert len(sum_write) > 100_000
+        for _ in range(50):
+            client.writer.write(client.frame(CommandId.READ_WRITE, sum_write))
+        await client.writer.drain()
+        results = [result_of(await client.next(timeout=10.0)) for _ in range(50)]  # type: ignore[arg-type]
+        assert results == [0x705] * 50
+        x = rt.layout.signal(X_POS)
+        read = await client.request(CommandId.READ, struct.pack("<III", F020, x.offset, 4))
+        assert result_of(read) == 0  # the same connection, still served
+        assert ads(rt).stats.broken_streams == 0
+    finally:
+        client.close()
+        await rt.stop()

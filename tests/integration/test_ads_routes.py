@@ -15,6 +15,7 @@ import os
 import random
 import socket
 import struct
+import subprocess
 import sys
 import time
 from collections.abc import AsyncIterator
@@ -405,3 +406,168 @@ async def test_fuzz_the_udp_door_never_crashes_and_still_answers() -> None:
     finally:
         udp.close()
         await rt.stop()
+
+
+# ================================================================================================
+# The route password out of the command line (issue 36, finding 8)
+# ================================================================================================
+
+
+def _udp_port(banner: str) -> int:
+    line = next(x for x in banner.splitlines() if x.strip().startswith("ADS (UDP):"))
+    return int(line.split(": ", 1)[1].split()[0].rsplit(":", 1)[1])
+
+
+@pytest.mark.parametrize("source", ["file", "environment"])
+async def test_the_route_password_comes_from_a_file_or_the_environment_not_the_command_line(
+    tmp_path: Path, source: str
+) -> None:
+    """Before: the password could be given only as an option, on the command line, where ``ps`` shows it to
+    every local user. Now ``route_password_file`` or ``HLI_ADS_ROUTE_PASSWORD`` gives it: AddRoute with it
+    adds the route, with another is refused (0x704), and no process' command line holds it."""
+    from tests.integration.servers import hli_server_cmd, read_banner, stop_server
+
+    secret = "Tr0ub4dor&3"
+    options = "route_user=Administrator,allow=192.168.77.1.1.1"
+    env = dict(os.environ)
+    if source == "file":
+        file = tmp_path / "ads-password"
+        file.write_text(secret + "\n")
+        file.chmod(0o600)
+        options += f",route_password_file={file}"
+    else:
+        env["HLI_ADS_ROUTE_PASSWORD"] = secret
+    args = [
+        "run",
+        "--clock",
+        "stepped",
+        "--no-http",
+        "--no-modbus",
+        "--ads-port",
+        "0",
+        "--adapter",
+        f"ads:{options}",
+    ]
+    proc = subprocess.Popen(
+        [*hli_server_cmd(), *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+    )
+    try:
+        banner = read_banner(proc, timeout=60)["text"]
+        assert "AddRoute accepted with route_user/route_password" in banner
+        udp = Udp(("127.0.0.1", _udp_port(banner)))
+        try:
+            assert status_of(await udp.ask(add_route("10.9.8.7.1.1", "127.0.0.1", USER, "1")) or b"") == 0x704
+            await asyncio.sleep(1.1)  # AddRoute is answered once a second per sender
+            assert status_of(await udp.ask(add_route("10.9.8.7.1.1", "127.0.0.1", USER, secret)) or b"") == 0
+        finally:
+            udp.close()
+        for pid in [proc.pid, *_children(proc.pid)]:  # the server and its doors process
+            assert secret.encode() not in Path(f"/proc/{pid}/cmdline").read_bytes()
+    finally:
+        stop_server(proc)
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        children = task / "children"
+        if children.exists():
+            out += [int(c) for c in children.read_text().split()]
+    return out
+
+
+def test_a_route_password_file_that_cannot_be_read_stops_the_start_with_its_name(tmp_path: Path) -> None:
+    from tests.integration.servers import hli_server_cmd
+
+    missing = tmp_path / "nope"
+    result = subprocess.run(
+        [*hli_server_cmd(), "run", "--cycles", "1", "--no-http", "--no-modbus", "--ads-port", "0",
+         "--adapter", f"ads:route_user=Administrator,route_password_file={missing}"],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert result.returncode == 2, result.stderr
+    assert f"route_password_file {missing}: cannot be read (No such file or directory)" in result.stderr
+    result = subprocess.run(
+        [*hli_server_cmd(), "run", "--cycles", "1", "--no-http", "--no-modbus", "--ads-port", "0",
+         "--adapter", f"ads:route_user=Administrator,route_password=1,route_password_file={missing}"],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert result.returncode == 2
+    assert "give one of them" in result.stderr
+    assert "'1'" not in result.stderr  # an error never quotes a password
+
+
+# ================================================================================================
+# A discovery flood from many loopback sources (issue 36, finding 7)
+# ================================================================================================
+
+
+def test_the_shared_budget_keeps_an_honest_senders_share() -> None:
+    """40 senders each at its own bound drain the shared 200 a second; an honest client asking every 300 ms
+    (within its share, 200 / 41 a second) is still answered every time, and the light senders together
+    never take more than the shared rate again."""
+    from hli_server.adapters.ads.udp import RateLimiter
+
+    limit = RateLimiter(20.0, 40.0, 200.0, 400.0)
+    honest = answered = 0
+    for step in range(300):  # 3 s in steps of 10 ms
+        now = step * 0.01
+        for k in range(40):
+            answered += limit.allow(f"127.0.1.{k}", now)
+        if step % 30 == 0:
+            honest += limit.allow("127.0.0.9", now)
+    assert honest == 10
+    assert answered <= 2 * 200 * 3 + 400  # the shared rate twice over and its burst, not 40 x 20 x 3
+
+
+@linux_only
+@pytest.mark.slow
+def test_a_discovery_flood_from_many_sources_locks_no_honest_client_out() -> None:
+    """Before: 40 loopback sources flooding discovery emptied the shared budget, and an honest client asking
+    every 300 ms got 0-2 of 20 answers. Now it gets its share (200 / 41 a second): at least 18 of 20,
+    through ``hli-server run``'s real UDP door."""
+    import threading
+
+    from tests.integration.servers import read_banner, start_server, stop_server
+
+    proc = start_server("--clock", "stepped", "--no-http", "--no-modbus", "--ads-port", "0")
+    stop = threading.Event()
+    try:
+        banner = read_banner(proc, timeout=60)["text"]
+        port = _udp_port(banner)
+
+        def flood(k: int) -> None:
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+                s.bind((f"127.0.{1 + k // 200}.{1 + k % 200}", 0))
+                s.setblocking(False)
+                sent = 0
+                while not stop.is_set() and sent < 2000:
+                    with contextlib.suppress(BlockingIOError):
+                        s.sendto(discovery(k), ("127.0.0.1", port))
+                        sent += 1
+                    with contextlib.suppress(BlockingIOError):
+                        while s.recv(4096):
+                            pass
+                    time.sleep(0.02)  # 50 a second each: past its own 20, 2,000 a second in all
+
+        flooders = [threading.Thread(target=flood, args=(k,)) for k in range(40)]
+        for t in flooders:
+            t.start()
+        time.sleep(0.5)  # the shared budget is drained
+        answered = 0
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as honest:
+            honest.bind(("127.0.0.9", 0))
+            honest.settimeout(0.25)
+            for k in range(20):
+                began = time.monotonic()
+                honest.sendto(discovery(100 + k), ("127.0.0.1", port))
+                with contextlib.suppress(TimeoutError):
+                    answered += bool(honest.recv(4096))
+                time.sleep(max(0.0, 0.3 - (time.monotonic() - began)))
+        stop.set()
+        for t in flooders:
+            t.join(10)
+    finally:
+        stop.set()
+        stop_server(proc)
+    assert answered >= 18, answered

@@ -753,3 +753,47 @@ async def test_openapi_says_what_the_timing_image_recording_and_fault_routes_ans
     assert ended["id"] == body["id"]
     assert required("CommFault") <= set(ended)
     assert (await client.delete("/api/comm/faults")).json() == {"ended": 0}
+
+
+MEASURE_SPIGOT = """
+G53
+G00 X50 Y20 Z10
+#VAR
+  V.CYC.SysRetX
+  V.CYC.SysRetY
+#ENDVAR
+L CYCLE [NAME=SysMeasWcs39.ecy @P2=20 @P13=4 @P33=5]
+#MSG ["spigot at X%.4f Y%.4f", V.CYC.SysRetX, V.CYC.SysRetY]
+M30
+"""
+
+
+@pytest.mark.req("CY-04")
+async def test_the_probe_deviation_through_the_api_moves_the_measured_spigot(
+    hli: Harness, client: httpx.AsyncClient
+) -> None:
+    """docs/cycles.md: the simulated workpiece's deviation set through the HTTP API (0.1 µm) is what a
+    built-in measuring cycle finds; the harness reads the same deviation (mm)."""
+    r = await client.put("/api/channels/1/probe/deviation", json={"deviation": {"X": 2500, "Y": -1000}})
+    assert r.status_code == 200, r.text
+    assert r.json() == {"channel": 1, "deviation": {"X": 2500, "Y": -1000, "Z": 0}, "variables": {}}
+    assert (await client.get("/api/channels/1/probe/deviation")).json()["deviation"]["X"] == 2500
+    assert hli.probe_deviation() == {"X": 0.25, "Y": -0.1, "Z": 0.0}
+    no_axis = await client.put("/api/channels/1/probe/deviation", json={"deviation": {"Q": 1}})
+    assert no_axis.status_code == 404
+    too_far = await client.put("/api/channels/1/probe/deviation", json={"deviation": {"X": 200_000_000}})
+    assert too_far.status_code == 422
+    assert (await client.put("/api/channels/1/probe/deviation", json={"deviation": {}})).status_code == 422
+    r = await client.post(
+        "/api/channels/1/program?name=spigot", content=MEASURE_SPIGOT, headers={"content-type": "text/plain"}
+    )
+    assert r.status_code == 200, r.text
+    await client.post("/api/channels/1/start")
+    for _ in range(200):
+        await step(client, 1000)
+        if (await client.get("/api/state")).json()["channels"][0]["program_state"] == ProgramState.FINISHED:
+            break
+    events = (await client.get("/api/events?limit=1000")).json()["events"]
+    texts = [e["data"]["text"] for e in events if e["kind"] == "nc_message"]
+    assert texts == ["spigot at X50.2500 Y19.9000"], [e for e in events if e["kind"] == "alarm"]
+    assert any(e["kind"] == "measurement" for e in events)

@@ -180,12 +180,36 @@ async def test_an_nc_message_reaches_the_event_log(hli: Harness, client: httpx.A
 # --- #MSG SAVE: report files (N-07) ------------------------------------------------------------
 
 
+@pytest.mark.req("N-07", "H-05")
+def test_a_report_write_event_names_the_program_line_and_block_that_wrote(tmp_path: Path) -> None:
+    """``nc_file_write`` carries the program, line and block of its ``#MSG SAVE``, as ``nc_message`` does
+    (issue 37, item 4: it carried ``"program": ""`` and no line or block), in a subprogram its own name."""
+    program = '%main\nN10 #MSG SAVE ["first"]\nN20 L UP1.NC\nN30 M30\n'
+    files = {"UP1.NC": '%UP1\nN10 #MSG SAVE ["in the subprogram"]\nN20 M17\n'}
+    with Harness(nc_output_dir=tmp_path) as hli:
+        hli.load_program(1, program, name="main.nc", files=files)
+        hli.operator.start(1)
+        finished = lambda: hli.operator.snapshot()["channels"][0]["program_state_name"] == "finished"  # noqa: E731
+        hli.run_until(finished, 2000)
+        events, _ = hli.runtime.events_since(0, 1000)
+        writes = [e.event for e in events if isinstance(e.event, NcFileWrite)]
+        messages = [e.event for e in events if isinstance(e.event, NcMessage)]
+    assert [(w.program, w.line, w.block, w.text) for w in writes] == [
+        ("main.nc", 2, "N10", "first"),
+        ("UP1.NC", 2, "N10", "in the subprogram"),
+    ]
+    assert [(m.program, m.line, m.block) for m in messages] == [(w.program, w.line, w.block) for w in writes]
+    assert (tmp_path / "message.txt").read_text() == "first\nin the subprogram\n"
+
+
 def _write(hli: Harness, file: str, text: str, mode: str = "line") -> None:
+    """A write as the channel emits it, then a cycle: the stepped clock's cycle waits for its writes."""
     hli.runtime.machine.emit(
         NcFileWrite(
             cycle=hli.cycle, time_s=0.0, channel=1, file=file, text=text, mode=mode, line=4, block="N40"
         )
     )
+    hli.step(1)
 
 
 @pytest.mark.req("N-07")
@@ -232,6 +256,36 @@ def test_a_symbolic_link_in_the_output_directory_is_not_followed(tmp_path: Path)
         _write(hli, "file.txt", "no")
         assert [a.number for a in hli.runtime.machine.alarm_history] == [919010, 919010]
     assert list(outside.iterdir()) == []
+
+
+@pytest.mark.req("N-07")
+def test_only_regular_files_of_one_link_are_written(tmp_path: Path) -> None:
+    """A named pipe (read or not), a hard link to a file elsewhere, a directory: refused with 919010, never
+    waited for (issue 36, finding 2; the realtime server's test is in test_nc_robustness.py)."""
+    reports, outside = tmp_path / "reports", tmp_path / "outside.txt"
+    reports.mkdir()
+    os.mkfifo(reports / "pipe.txt")
+    os.mkfifo(reports / "read.txt")
+    outside.write_text("theirs\n")
+    os.link(outside, reports / "linked.txt")
+    (reports / "dir.txt").mkdir()
+    reader = os.open(reports / "read.txt", os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        with Harness(nc_output_dir=reports) as hli:
+            for name in ("pipe.txt", "read.txt", "linked.txt", "dir.txt", "fine.txt"):
+                _write(hli, name, "x")
+            messages = [a.message for a in hli.runtime.machine.alarm_history]
+            assert hli.runtime.nc_files.refused == 4
+            assert hli.runtime.nc_files.written == 1
+    finally:
+        os.close(reader)
+    assert len(messages) == 4
+    assert "'pipe.txt': pipe.txt is a named pipe" in messages[0]
+    assert "'read.txt' is a named pipe, not a regular file" in messages[1]
+    assert "'linked.txt' has 2 links" in messages[2]
+    assert "dir.txt" in messages[3]
+    assert outside.read_text() == "theirs\n"
+    assert (reports / "fine.txt").read_text() == "x\n"
 
 
 @pytest.mark.req("N-07")

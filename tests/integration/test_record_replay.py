@@ -223,8 +223,10 @@ def test_the_commands_replay_record_show_and_export(tmp_path: Path) -> None:
     vcd = tmp_path / "out.vcd"
     png = tmp_path / "out.pdf"
     exported = cli(
-        "record", "export", str(record), "--vcd", str(vcd), "--plot", str(png), "-s", "gpCh[0]^bahn_state.*_r"
-    )
+        "record", "export", str(record), "--vcd", str(vcd), "--plot", str(png),
+        "-s", "gpCh[0]^bahn_state.*state_r", "-s", "gpCh[0]^bahn_state.*_id_r",
+        "-s", "gpCh[0]^bahn_state.tcp_?_r",
+    )  # fmt: skip
     assert exported.returncode == 0, exported.stderr
     assert "$enddefinitions" in vcd.read_text()
     assert png.read_bytes()[:4] == b"%PDF"

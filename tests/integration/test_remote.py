@@ -12,12 +12,16 @@ import asyncio
 import socket
 import threading
 import time
+from collections.abc import Coroutine
+from typing import Any, TypeVar
 
+import httpx
 import pytest
 
 from hli_server.adapters.host import ConflictError, NotFoundError, OperatorError
 from hli_server.configuration import load_machine
-from hli_server.runtime import Runtime
+from hli_server.runtime import Runtime, remote
+from hli_server.runtime.event_log import EVENT_LOG
 from hli_server.runtime.remote import (
     EventMirror,
     FrameReader,
@@ -27,8 +31,11 @@ from hli_server.runtime.remote import (
     RemoteOperator,
     frame,
 )
+from schemas.events import NcMessage
 
 PROGRAM = "N10 G01 X200 F600\nN20 M30\n"  # 20 s: it still runs when the test is done
+FLOOD = 'P1 = 0\n$WHILE 1\nP1 = P1 + 1\n#MSG ["part %d of the batch done", P1]\n$ENDWHILE\nM30\n'
+T = TypeVar("T")
 
 
 def test_frames_arrive_whole_however_the_bytes_are_split() -> None:
@@ -50,6 +57,7 @@ class Engine:
         self.ours, self.theirs = socket.socketpair()
         self.ready = threading.Event()
         self.rt: Runtime | None = None
+        self.service: OperatorService | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
         self._thread = threading.Thread(target=lambda: asyncio.run(self._main()), daemon=True)
@@ -60,6 +68,7 @@ class Engine:
         async with Runtime(load_machine(None), clock="stepped", http_port=None) as rt:
             self.rt = rt
             _, service = await self._loop.connect_accepted_socket(lambda: OperatorService(rt), self.ours)
+            self.service = service
             remove = rt.add_service(service)
             self.ready.set()
             await self._stop.wait()
@@ -70,6 +79,11 @@ class Engine:
         self._thread.start()
         assert self.ready.wait(30)
         return self
+
+    def run(self, coro: Coroutine[Any, Any, T]) -> T:
+        """``coro`` on the engine's loop, waited for here."""
+        assert self._loop is not None
+        return asyncio.run_coroutine_threadsafe(coro, self._loop).result(60)
 
     def __exit__(self, *exc: object) -> None:
         assert self._loop is not None
@@ -164,3 +178,75 @@ async def test_a_fault_ended_through_the_doors_says_how_often_it_acted_and_why()
             assert faults.reset() == 0
         finally:
             link.close()
+
+
+@pytest.mark.req("H-05")
+async def test_a_doors_process_that_lags_costs_the_engine_no_memory_and_sees_the_gap(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The doors process does not read (busy, stopped): the engine sends events until 64 KiB wait in its
+    socket buffer (``MIRROR_BUFFER_BYTES``, 8 MiB in the server), then keeps only the newest ``EVENT_LOG``
+    for later; when the doors read again they get those, and the numbers say what they missed (issue 36,
+    finding 4: the events must cost the clock the same whatever their consumers do)."""
+    monkeypatch.setattr(remote, "MIRROR_BUFFER_BYTES", 64 * 1024)
+    with Engine() as engine:
+        rt, service = engine.rt, engine.service
+        assert rt is not None
+        assert service is not None
+
+        async def flood(cycles: int) -> int:
+            if rt.machine.cycle == 0:
+                rt.operator.load_program(1, FLOOD, "flood")
+                rt.operator.start(1)
+            for _ in range(cycles):  # a step a cycle: a flush a cycle, as the realtime clock's wake-ups
+                await rt.step(1)
+            return service.buffered
+
+        async def flush() -> None:
+            service.flush()
+
+        buffered = engine.run(flood(1500))  # 32 events a cycle, 48,000 events: far more than the bound
+        assert service.withheld > 0
+        assert buffered <= 64 * 1024 + 200_000  # the bound plus one batch, not 48,000 events' worth
+        assert service.held == EVENT_LOG  # the newest, for when the doors read again
+        latest = rt.event_log.latest
+        assert latest > 40_000
+
+        loop = asyncio.get_running_loop()
+        mirror = EventMirror()
+        mirror.start(loop)
+        link = RemoteLink(engine.theirs, mirror.take)
+        link.start(loop)  # the doors read again
+        try:
+            for _ in range(200):
+                await asyncio.sleep(0.02)
+                if mirror.log.latest >= latest:
+                    break
+                engine.run(flush())  # as after a batch of cycles: sent once the doors took the rest
+            assert mirror.log.latest >= latest
+        finally:
+            link.close()
+    assert mirror.lost > 0  # the gap: counted, not hidden
+    events, newest = mirror.since(0, 10_000)
+    assert newest == events[-1].seq >= latest
+    assert [e.seq for e in events] == sorted({e.seq for e in events})  # in order, none twice
+
+
+@pytest.mark.req("H-05")
+async def test_the_event_log_counts_a_gap_in_the_numbers_as_missed() -> None:
+    """``missed`` counts every number between ``since`` and the last event answered that is not there:
+    those the log's bound dropped, and those the doors process never got (a gap)."""
+    async with Runtime(load_machine(None), clock="stepped", http_port=0) as rt:
+        log = rt.event_log
+        first = log.latest
+        event = NcMessage(cycle=0, time_s=0.0, channel=1, text="x")
+        log.extend([(first + 1, event), (first + 2, event), (first + 6, event), (first + 7, event)])
+        async with httpx.AsyncClient(base_url=rt.http_url, timeout=10) as c:
+            body = (await c.get(f"/api/events?since={first}")).json()
+            assert [e["seq"] for e in body["events"]] == [first + 1, first + 2, first + 6, first + 7]
+            assert body["missed"] == 3
+            body = (await c.get(f"/api/events?since={first + 1}&limit=1")).json()
+            assert body["missed"] == 0
+            assert body["next"] == first + 2
+            body = (await c.get(f"/api/events?since={first + 2}&limit=1")).json()
+            assert body["missed"] == 3

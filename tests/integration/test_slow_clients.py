@@ -381,7 +381,7 @@ def test_beyond_loopback_every_write_door_must_be_guarded() -> None:
     )  # fmt: skip
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
-    assert "door http: changes and the event log need the API token" in out
+    assert "door http: changes, the event log and the recordings need the API token" in out
     assert "door modbus: clients from 10.0.0.0/8 only" in out
     proc = start_server(
         "--bind", "0.0.0.0", "--insecure", "--cycles", "200", "--http-port", "0", "--modbus-port", "0"

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 
 from hli_server.engine.external import ExternalType, ExternalVariables, ExternalVarSpec
@@ -58,6 +58,22 @@ class FakeHost:
 
     def axis_name(self, index: int) -> str | None:
         return self.axes[index] if 0 <= index < len(self.axes) else None
+
+    def find_cycle(self, name: str) -> ProgramFile | None:
+        return self.library.find(name)
+
+    def cycle_searched(self) -> tuple[str, ...]:
+        return self.library.searched()
+
+    def stand_in(
+        self,
+        name: str,
+        params: dict[int, float | str],
+        results: Callable[[str, float], None],
+        line: int,
+        block: str,
+    ) -> Iterator[Block] | None:
+        return None  # the interpreter alone has no built-in cycles (tests/unit/test_cycles_programs.py has)
 
 
 @dataclass

@@ -1109,3 +1109,32 @@ def test_single_frame_is_the_decoders_shortcut_for_one_request_in_flight() -> No
     busy = AmsStreamDecoder()
     busy.receive_data(frame[:10])  # something is buffered: the frame must go through the buffer
     assert busy.single_frame(frame) is None
+
+
+def test_an_oversize_frame_is_handed_out_as_its_header_and_its_bytes_dropped() -> None:
+    """With ``max_skipped_length`` (the server's) an AMS frame above the limit yields its header once 38
+    bytes are in, its body is dropped as it arrives however it is split, and the next frame is intact."""
+    from hli_server.codecs.ads import NEED_DATA, AmsStreamDecoder, OversizeAmsFrame
+
+    big = encode_request(
+        AmsAddress(NetId.parse("1.2.3.4.1.1"), 851), AmsAddress(NetId.parse("5.6.7.8.1.1"), 30000), 9, 7,
+        bytes(100_000),
+    )  # fmt: skip
+    small = encode_request(
+        AmsAddress(NetId.parse("1.2.3.4.1.1"), 851), AmsAddress(NetId.parse("5.6.7.8.1.1"), 30000), 2, 8,
+        bytes(12),
+    )  # fmt: skip
+    stream = big + small
+    for size in (1, 37, 38, 4096, len(stream)):
+        decoder = AmsStreamDecoder(max_skipped_length=1 << 20)
+        frames = []
+        for k in range(0, len(stream), size):
+            frames += list(decoder.feed(stream[k : k + size]))
+            assert decoder.pending <= 65_584 + size  # never the whole oversize frame
+        assert isinstance(frames[0], OversizeAmsFrame)
+        assert frames[0].header.invoke_id == 7
+        assert frames[0].length == len(big) - 6
+        assert [f.header.invoke_id for f in frames[1:]] == [8]  # type: ignore[union-attr]
+        assert decoder.next_frame() is NEED_DATA
+    with pytest.raises(AmsStreamError):  # without it (a client's decoder): as before, the stream breaks
+        list(AmsStreamDecoder().feed(big))

@@ -95,3 +95,10 @@ def test_what_make_run_writes_into_a_checkout_is_ignored_by_git() -> None:
     for path in ("recordings/session-20260101-120000.jsonl.gz", "test-artifacts/dashboard-reset.png"):
         done = subprocess.run(["git", "check-ignore", "-q", path], cwd=ROOT, check=False)
         assert done.returncode == 0, f"{path} is not ignored by .gitignore"
+
+
+def test_the_cycle_doc_lists_every_cycle() -> None:
+    from hli_server.commands.cycles import cycles_markdown
+
+    doc = (ROOT / "docs" / "cycles.md").read_text(encoding="utf-8")
+    assert cycles_markdown() in doc, "docs/cycles.md is stale: paste `hli-server cycles` between its markers"

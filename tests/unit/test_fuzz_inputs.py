@@ -14,9 +14,11 @@ import math
 import random
 import re
 import shutil
+import time
 import traceback
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -35,6 +37,7 @@ from hli_server.engine.nc import (
     iter_blocks,
     parse_line,
 )
+from hli_server.engine.nc.directives import SyncAction
 from hli_server.engine.programs import MemoryLibrary
 from schemas.config import ExternalVariableConfig, MachineConfig
 from tests import fuzz
@@ -320,6 +323,58 @@ def _language_host() -> FakeHost:
     return FakeHost(LANGUAGE_FILES, [real("COUNT"), real("SYNC", synchronous=True)])
 
 
+MSG_REFUSALS = {20721, 21232, 21870, 914031, 914020}
+"""What a #MSG may be refused with: values and elements that do not match, an unknown element, a text (or a
+width or precision) beyond 255 characters, a value the element cannot take, a literal beyond 255."""
+
+
+@pytest.mark.req("N-07", "N-08")
+def test_fuzz_msg_format_strings_are_bounded_and_refused_with_their_ids() -> None:
+    """Format strings with every flag, widths and precisions from none to 60 digits, every conversion and
+    unknown ones, matching and mismatching values (issue 36, finding 1): a message of at most 255
+    characters comes out, or a refusal of :data:`MSG_REFUSALS` with its line and block; no example takes
+    longer than 0.25 s (a width that is formatted before it is bounded takes seconds and hundreds of MB)."""
+    seed = fuzz.seed_for("msg-formats")
+    rng = random.Random(seed)
+    said = refused = 0
+    seen: set[int] = set()
+    longest = 0.0
+    for example in range(fuzz.count(3000)):
+        block = fuzz.format_message(rng)
+        host = FakeHost()
+        it = Interpreter(Compiler(("X", "Y", "Z"), ("X", "Y", "Z")), host, budget=None, iteration_cap=100)
+        began = time.perf_counter()
+        try:
+            it.start(block + "\nM30\n", "fuzz")
+            for _ in range(10):
+                out = it.next()
+                if out is None or (isinstance(out, Block) and 30 in out.m_codes):
+                    break
+                if isinstance(out, SyncAction):  # a #MSG SYN waits for the path: it passes now
+                    out.action()
+        except NcError as err:
+            refused += 1
+            seen.add(err.alarm)
+            if err.alarm not in MSG_REFUSALS | {914000, 910100} or not err.message or err.block != "N10":
+                pytest.fail(_fail(f"bad NcError {err!r}", seed, example, block))
+        except Exception:
+            pytest.fail(_fail("the interpreter raised", seed, example, block))
+        took = time.perf_counter() - began
+        longest = max(longest, took)
+        if took > 0.25:
+            pytest.fail(_fail(f"took {took:.2f} s", seed, example, block))
+        for text, *_ in host.messages:
+            said += 1
+            if len(text) > 255:
+                pytest.fail(_fail(f"a message of {len(text)} characters", seed, example, block))
+    print(
+        f"#MSG formats: {fuzz.count(3000)} blocks, {said} messages, {refused} refused ({sorted(seen)}), "
+        f"longest {longest * 1e3:.1f} ms"
+    )
+    assert {20721, 21232, 21870} <= seen or fuzz.FUZZ_SCALE < 1
+    assert said > fuzz.count(3000) // 10 or fuzz.FUZZ_SCALE < 1
+
+
 def test_fuzz_interpreter_raises_only_numbered_nc_errors() -> None:
     """Every language program ends (M30, its text's end, the iteration cap) or stops at a numbered
     NcError of the alarm table with its place; nothing else comes out of the interpreter."""
@@ -401,3 +456,105 @@ def test_fuzz_language_programs_on_the_machine_and_in_check() -> None:
             assert ch.state == ProgramState.FINISHED, machine.active_alarms
         except Exception:
             pytest.fail(_fail("language program on the machine", seed, example, text))
+
+
+# --- recordings (issue 36, finding 6): a recording is input like any other ---------------------------------
+
+
+_HOSTILE = (
+    "AAAA", "", -1, 10**9, 10**13, 2**63, -(2**63), 1.5, True, None, [], {}, [1], {"a": 1}, "NaN", "../x",
+    "/etc/passwd", [10**9, 1], [0, "x"], [0], {"kind": 5}, [{"kind": "alarm", "data": "x"}],
+)  # fmt: skip
+
+
+def _mutate_recording(rng: random.Random, records: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """A recording with a few lines changed: a field's value replaced by a hostile one, a field dropped, a
+    line inserted, doubled or moved, the header's lists and numbers broken."""
+    import copy
+
+    out = copy.deepcopy(records)
+    for _ in range(rng.randint(1, 3)):
+        k = rng.randrange(len(out))
+        record = out[k]
+        choice = rng.random()
+        if choice < 0.55 and record:
+            key = rng.choice(sorted(record))
+            if key in ("record", "format", "format_version") and rng.random() < 0.8:
+                continue  # a broken header is refused at once: keep most examples past it
+            record[key] = rng.choice(_HOSTILE)
+        elif choice < 0.65 and record:
+            record.pop(rng.choice(sorted(record)))
+        elif choice < 0.75 and k > 0:
+            out.insert(
+                k,
+                {
+                    "c": out[k].get("c", 1),
+                    rng.choice(("i", "o", "e", "op", "fault", "zz")): rng.choice(_HOSTILE),
+                },
+            )
+        elif choice < 0.85 and k > 0:
+            out.insert(rng.randrange(1, len(out)), copy.deepcopy(record))
+        elif k > 0 and "i" in record and isinstance(record["i"], list) and record["i"]:
+            record["i"][rng.randrange(len(record["i"]))] = rng.choice(_HOSTILE)
+        elif k > 0 and record.get("op") == "load_program" and isinstance(record.get("args"), dict):
+            record["args"][rng.choice(("name", "files", "text", "channel", "extra"))] = rng.choice(_HOSTILE)
+    return out
+
+
+@pytest.mark.req("B-02")
+def test_fuzz_recordings_end_in_a_verdict_or_a_clear_error(tmp_path: Path) -> None:
+    """Recordings with lines changed (values of every kind where another belongs, huge cycles and indices,
+    fields dropped, lines inserted and moved, load requests with ``..`` and absolute names): ``record
+    show`` raises nothing but :class:`RecordingError` naming the file and line, ``replay`` returns its
+    report (PASS, DIFFER or CANNOT with the reason) and never runs past the recording's own last cycle."""
+    import asyncio
+    import gzip
+    import json as _json
+
+    from hli_server.recording.format import RecordingError, gzip_member, read_records
+    from hli_server.recording.inspect import summarize
+    from hli_server.recording.tap import RecordingOptions
+    from hli_server.replay import Verdict, replay
+    from hli_server.runtime import Runtime
+
+    base = tmp_path / "base.jsonl.gz"
+
+    async def record() -> None:
+        options = RecordingOptions(file=base, outputs_every=10)
+        async with Runtime(load_machine(None), clock="stepped", http_port=None, recording=options) as rt:
+            rt.operator.load_program(1, "%main\nN10 L UP1.NC\nN20 G01 X10 F6000\nN30 M30\n", "main.nc",
+                                     {"UP1.NC": "%UP1\nN10 G01 X5 F6000\nN20 M17\n"})  # fmt: skip
+            rt.operator.start(1)
+            await rt.step(300)
+
+    asyncio.run(record())
+    records = list(read_records(base))
+    assert gzip.decompress(base.read_bytes())
+    seed = fuzz.seed_for("recordings")
+    rng = random.Random(seed)
+    verdicts: dict[str, int] = {}
+    shown_refused = 0
+    for example in range(fuzz.count(120)):
+        mutant = _mutate_recording(rng, records)
+        changed = [(k, m) for k, (m, r) in enumerate(zip(mutant, records, strict=False)) if m != r][:3]
+        path = tmp_path / f"m{example % 4}.jsonl.gz"
+        path.write_bytes(gzip_member("".join(_json.dumps(r, default=str) + "\n" for r in mutant)))
+        try:
+            summarize(path)
+        except RecordingError as exc:
+            shown_refused += 1
+            if str(path) not in str(exc):
+                pytest.fail(_fail(f"an error without its file: {exc}", seed, example, changed))
+        except Exception:
+            pytest.fail(_fail("record show raised", seed, example, changed))
+        try:
+            report = asyncio.run(replay(path))
+        except Exception:
+            pytest.fail(_fail("replay raised", seed, example, changed))
+        verdicts[str(report.verdict)] = verdicts.get(str(report.verdict), 0) + 1
+        if report.verdict is Verdict.CANNOT and not report.reason:
+            pytest.fail(_fail("CANNOT without a reason", seed, example, changed))
+        if report.last_cycle > 10_000:
+            pytest.fail(_fail(f"replayed to cycle {report.last_cycle}", seed, example, changed))
+    print(f"recordings: {fuzz.count(120)} mutants, record show refused {shown_refused}, replay {verdicts}")
+    assert verdicts.get(str(Verdict.CANNOT), 0) > 0 or fuzz.FUZZ_SCALE < 1

@@ -735,19 +735,53 @@ def test_msg_with_format_and_values():
 
 @pytest.mark.req("N-07")
 @pytest.mark.parametrize(
-    ("program", "words"),
+    ("program", "alarm", "words"),
     [
-        ('#MSG ["%d %d", 1]', "more formats than values"),
-        ('#MSG ["%d", 1, 2]', "2 values for 1"),
-        ('#MSG ["%q", 1]', "unknown format"),
-        ('#MSG ["%d", "a"]', "needs a number"),
-        ("#MSG [1]", "a string in quotes"),
+        ('#MSG ["%d %d", 1]', 20721, "more formats than values"),  # the kernel's IDs where it has one
+        ('#MSG ["%d", 1, 2]', 20721, "2 values for 1"),
+        ('#MSG ["%q", 1]', 21232, "unknown format"),
+        ('#MSG ["abc %", 1]', 21232, "incomplete format"),
+        ('#MSG ["%d", "a"]', 914031, "needs a number"),
+        ("#MSG [1]", 914031, "a string in quotes"),
     ],
 )
-def test_msg_format_errors(program, words):
+def test_msg_format_errors(program, alarm, words):
     err = error(program + "\nM30\n")
-    assert err.alarm == 914031
+    assert err.alarm == alarm
     assert words in err.message
+
+
+@pytest.mark.req("N-07", "N-08")
+@pytest.mark.parametrize(
+    ("fmt", "values", "words"),
+    [
+        ("%.300000000f", "1.5", "asks for 300000000 characters"),  # issue 36, finding 1: 300 MB in the cycle
+        ("%.999999999f", "1.5", "asks for 999999999 characters"),
+        ("%0300000000d", "1", "asks for 300000000 characters"),
+        ("%256s", '"a"', "asks for 256 characters"),
+        ("%.256e", "1", "asks for 256 characters"),
+        ("%200d%200d", "1, 2", "grows beyond 255"),
+        ("%f", "EXP[709]", "grows beyond 255"),  # 308 digits before the point
+    ],
+)
+def test_msg_widths_and_precisions_are_bounded_before_the_text_is_built(fmt, values, words):
+    """A width, a precision that fixes the digits, or the text beyond 255 characters: the kernel's 21870
+    ("String exceeds the maximum length"), refused before anything that large is made."""
+    err = error(f'N10 #MSG ["{fmt}", {values}]\nM30\n')
+    assert err.alarm == 21870, err
+    assert words in err.message
+    assert err.block == "N10"
+
+
+@pytest.mark.req("N-07")
+def test_msg_precisions_that_only_cut_and_the_longest_message_pass():
+    run = interpret('#MSG ["%.999999999g|%.999999999s|%255d", 1.5, "abc", 7]\nM30\n')
+    assert run.error is not None  # 1.5|abc| and 255 characters: 263
+    assert run.error.alarm == 21870
+    run = interpret('#MSG ["%.999999999g|%.999999999s|%.2f", 1.5, "abc", 7]\nM30\n')
+    assert run.host.messages[0][0] == "1.5|abc|7.00"
+    run = interpret('#MSG ["%255d", 7]\nM30\n')
+    assert run.host.messages[0][0] == " " * 254 + "7"
 
 
 @pytest.mark.req("N-07")

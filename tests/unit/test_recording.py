@@ -702,7 +702,7 @@ async def test_a_state_that_cannot_be_kept_leaves_the_replay_the_journal_and_say
     )
 
 
-async def test_a_snapshot_of_another_engine_or_a_forged_one_leaves_the_replay_the_journal(
+async def test_a_snapshot_of_another_engine_leaves_the_replay_the_journal_a_forged_one_is_refused(
     runtime: Runtime, tmp_path: Path
 ) -> None:
     path = tmp_path / "late.jsonl.gz"
@@ -727,10 +727,16 @@ async def test_a_snapshot_of_another_engine_or_a_forged_one_leaves_the_replay_th
             root["state"]["cycle"] = {"fn": "os:system"}
         return record
 
-    report = await replay(_rewrite(path, hostile))
+    # the fingerprint is this engine's: a snapshot it cannot restore is damaged or forged, refused with
+    # the file, the line and the field (never run, never a traceback); the journal is the user's choice
+    forged = _rewrite(path, hostile)
+    report = await replay(forged)
+    assert report.verdict is Verdict.CANNOT, report.text()
+    for said in (f"{forged}: line ", ": snapshot: ", "'os:system' is no function", "--from-journal"):
+        assert said in report.reason, report.reason
+    report = await replay(forged, from_journal=True)
     assert report.verdict is Verdict.PASS, report.text()
     assert report.started_from == "journal"
-    assert any("cannot be restored here" in n and "'os'" in n for n in report.notes), report.notes
 
 
 async def test_a_stall_in_effect_when_the_recording_starts_goes_on_in_the_replay(

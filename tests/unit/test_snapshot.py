@@ -22,6 +22,7 @@ from hli_server.recording.snapshot import (
 )
 from schemas.events import Event
 from tests.spec_examples import CIRC_PROT_OLD
+from tests.unit.test_cycles_programs import SPIGOT
 
 # a loop with a local variable, an arc, an active protection area beside the path, a message, a V.E. write
 PROGRAM = (
@@ -174,8 +175,25 @@ def _root_state(data: dict[str, Any]) -> dict[str, Any]:
 @pytest.mark.parametrize(
     ("forge", "message"),
     [
-        (lambda d: _root_state(d).__setitem__("cycle", {"fn": "os:system"}), "no module of the engine"),
-        (lambda d: _root_state(d).__setitem__("cycle", {"fn": "builtins:eval"}), "no module of the engine"),
+        (lambda d: _root_state(d).__setitem__("cycle", {"fn": "os:system"}), "no function of the engine"),
+        (lambda d: _root_state(d).__setitem__("cycle", {"fn": "builtins:eval"}), "no function of the engine"),
+        # what an engine module imported, reached through it: a module, another package's function, a
+        # method through its class, a partial of a class
+        (lambda d: _root_state(d).__setitem__("cycle", {"g": "hli_server.engine.machine:math"}), "no table"),
+        (
+            lambda d: _root_state(d).__setitem__("cycle", {"g": "hli_server.engine.cycles.base:dataclass"}),
+            "no table",
+        ),
+        (
+            lambda d: _root_state(d).__setitem__("cycle", {"fn": "hli_server.engine.machine:Machine.step"}),
+            "no function of the engine",
+        ),
+        (
+            lambda d: _root_state(d).__setitem__(
+                "cycle", {"p": {"c": "hli_server.engine.machine:Machine"}, "a": [], "k": []}
+            ),
+            "a partial of no method or function",
+        ),
         (lambda d: _root_state(d).__setitem__("cycle", {"g": "subprocess:Popen"}), "no module of the engine"),
         (
             lambda d: _root_state(d).__setitem__("cycle", {"c": "hli_server.engine.machine:__class__"}),
@@ -211,3 +229,55 @@ def test_deep_nesting_is_refused_not_a_crash() -> None:
     twin, _ = machine()
     with pytest.raises(SnapshotRestoreError, match="nested"):
         restore(data, twin)
+
+
+# a drilling cycle, then a measuring cycle whose later moves depend on where the probe touched
+CYCLES = (
+    "T2 D2\nG00 X0 Y0 Z50\nG91 G01 F777\n"
+    "L CYCLE [NAME=SysDrillCenterHole.ecy @P1=0 @P2=20 @P3=2 @P4=5]\nG90\n"
+    + SPIGOT.replace("M30\n", "").replace("G53\n", "G53\nG00 Z50\n")
+    + "V.E.MARK = 1\nM30\n"
+)
+
+
+@pytest.mark.req("E-01", "CY-05")
+def test_a_machine_is_restored_while_a_built_in_cycle_runs() -> None:
+    """A built-in cycle's stand-in is a Python generator, which no snapshot can hold: the channel keeps
+    the call and the answers its context gave instead, and the restored machine runs the stand-in again
+    up to where it was (its reads from the log, its writes left out) and goes on exactly as the live one:
+    the same moves, the same measured result in V.CYC. and V.E., whatever the cycle the snapshot is of."""
+    from tests.unit.test_cycles_programs import config
+
+    def cycles_machine() -> tuple[Machine, list[Event]]:
+        m = Machine(config())
+        m.set_probe_deviation(1, {"X": 0.3, "Y": -0.125})
+        events: list[Event] = []
+        m.event_listeners.append(events.append)
+        return m, events
+
+    probe, _ = cycles_machine()
+    probe.channel(1).load_program(CYCLES, "cycles")
+    probe.channel(1).request_start()
+    inside: list[int] = []  # cycles at which a stand-in runs, spread over both cycles
+    while not probe.external.read("MARK", 1) and probe.cycle < 200_000:
+        probe.step(250)
+        if any(f.standin is not None for f in probe.channel(1).interpreter._frames):
+            inside.append(probe.cycle)
+    assert probe.external.read("MARK", 1), "the program did not end"
+    assert len(inside) >= 4
+    for at in (inside[1], inside[len(inside) // 2], inside[-2]):
+        live, live_events = cycles_machine()
+        live.channel(1).load_program(CYCLES, "cycles")
+        live.channel(1).request_start()
+        live.step(at)
+        taken = as_json(capture(live))  # no SnapshotError: the generator is left out
+        twin, twin_events = cycles_machine()
+        restore(taken, twin)
+        live_events.clear()
+        while not live.external.read("MARK", 1) and live.cycle < 200_000:
+            live.step(500)
+            twin.step(500)
+            assert capture(twin) == capture(live), f"the machines differ at cycle {live.cycle} (from {at})"
+        assert [e.to_json() for e in twin_events] == [e.to_json() for e in live_events]
+        assert twin.external.read("MEAS_X", 1) == pytest.approx(50.3, abs=1e-4)
+        assert not [a for a in twin.alarm_history if a.severity == "error"]

@@ -46,6 +46,7 @@ from hli_server.adapters.ads.symbol_info import SymbolInfoService
 from hli_server.adapters.ads.symbols import VIEW_GROUP, SymbolTable
 from hli_server.adapters.ads.system import GROUP_SYSTEM_STATE, SYSTEM_SERVICE_PORT, SystemService
 from hli_server.codecs.ads import (
+    MAX_AMS_LENGTH,
     AddDeviceNotificationRequest,
     AddDeviceNotificationResponse,
     AdsError,
@@ -242,6 +243,22 @@ class AdsDevice:
                 header, error_reply_payload(header.command, ErrorCode.GENERAL_DEVICE_ERROR)
             )
         return encode_response(header, payload)
+
+    def refuse_oversize(self, session: Session, header: AmsHeader, length: int) -> bytes | None:
+        """The reply to an AMS frame longer than the door takes (the server dropped its bytes): 0x705 with
+        the command's reply layout, as for any size the device refuses (None for a response)."""
+        if header.state_flags & 0x0001:
+            return None
+        self.stats.requests += 1
+        self.stats.count_error(ErrorCode.SIZE_WRONG)
+        logger.info(
+            "ADS %s: an AMS frame of %d bytes (command %d) is longer than this server takes (%d): 0x705",
+            session.name,
+            length,
+            header.command,
+            MAX_AMS_LENGTH,
+        )
+        return encode_response(header, error_reply_payload(header.command, ErrorCode.SIZE_WRONG))
 
     def handle_frame(self, session: Session, frame: bytes, source: bytes) -> bytes | None:
         """:meth:`handle` for the requests that make up a client's polling (Read, Write, ReadWrite), taken

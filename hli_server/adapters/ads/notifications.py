@@ -24,6 +24,11 @@ connection,
   the server and not limited by this), and ``max_notifications_total`` on the server. So one client can
   never hold the whole budget: eight connections of one NetId asking 256 each get 512 in all and a
   newcomer still finds room. Every refusal is 0x716 and says which bound it met.
+* **A newcomer gets its share, the hog pays** (issue 36, finding 9): when the server's budget is full
+  (eight NetIds of 256 each on loopback, where the per-host bound does not apply), a NetId that holds
+  less than its fair share (``max_notifications_total`` / the NetIds holding any, itself counted) is
+  still served: the NetId that holds the most, above that share, loses its newest notification (deleted
+  as by DeleteDeviceNotification: no more samples; logged at most every 10 s) to make room.
 
 The cycle's side (:meth:`NotificationService.on_cycle`) does nothing unless a notification is due; then
 it takes one copy of each half a due notification watches, compares bytes (on change) and queues the
@@ -35,6 +40,7 @@ touched here: the server writes a session's samples in a later turn (:meth:`Sess
 from __future__ import annotations
 
 import heapq
+import logging
 import time
 from collections.abc import Callable
 from functools import partial
@@ -55,6 +61,8 @@ if TYPE_CHECKING:
     from hli_server.adapters.host import ImagePort
 
 __all__ = ["MAX_PENDING_SAMPLES", "NotificationService"]
+
+logger = logging.getLogger(__name__)
 
 MAX_PENDING_SAMPLES: Final = 8192
 """Samples queued for one connection between two flushes (a long ``step(n)`` runs many cycles without a
@@ -158,6 +166,9 @@ class NotificationService:
         self._request_flush = request_flush
         self.first_sample_delay_s = first_sample_delay_s
         self._due: dict[int, list[Subscription]] = {}
+        self._held: dict[bytes, dict[Subscription, None]] = {}
+        """the notifications of each client NetId, oldest first (who holds how many, and the newest)"""
+        self._last_eviction_log = -10.0
         self._heap: list[int] = []
         self._delayed: dict[Session, object] = {}
         """sessions holding samples for a max delay: the timer that sends them"""
@@ -188,6 +199,8 @@ class NotificationService:
             )
         net_id = bytes(header.source_net_id)
         host = session.remote_host
+        if self.budget.total >= self.budget.limits.max_notifications_total:
+            self._make_room(net_id)
         self.budget.check(session, net_id, host)
         sub = Subscription(
             session,
@@ -203,6 +216,7 @@ class NotificationService:
         )
         session.notifications[sub.handle] = sub
         self.budget.take(sub)
+        self._held.setdefault(net_id, {})[sub] = None
         if self.budget.total == 1 and self.on_active is not None:
             self.on_active(True)
         if self._call_later is not None and self.first_sample_delay_s > 0:
@@ -220,6 +234,7 @@ class NotificationService:
             )
         sub.deleted = True
         self.budget.give_back(sub)
+        self._release(sub)
         session.drop_samples_of(handle)
         self._maybe_idle()
 
@@ -228,10 +243,47 @@ class NotificationService:
         for sub in session.notifications.values():
             sub.deleted = True
             self.budget.give_back(sub)
+            self._release(sub)
         session.notifications.clear()
         session.discard_pending()
         _cancel(self._delayed.pop(session, None))
         self._maybe_idle()
+
+    def _release(self, sub: Subscription) -> None:
+        held = self._held.get(sub.net_id)
+        if held is not None:
+            held.pop(sub, None)
+            if not held:
+                del self._held[sub.net_id]
+
+    def _make_room(self, net_id: bytes) -> None:
+        """The server's budget is full: if ``net_id`` holds less than its fair share, the NetId holding the
+        most (above that share) gives up its newest notification (module docstring)."""
+        holders = len(self._held) + (0 if net_id in self._held else 1)
+        share = self.budget.limits.max_notifications_total // max(1, holders)
+        mine = len(self._held.get(net_id, ()))
+        if mine >= share or not self._held:
+            return
+        hog_id, held = max(self._held.items(), key=lambda item: len(item[1]))
+        if len(held) <= share or hog_id == net_id:
+            return
+        victim = next(reversed(held))
+        self.stats.notifications_evicted += 1
+        now = time.monotonic()
+        if now - self._last_eviction_log >= 10.0:
+            self._last_eviction_log = now
+            logger.warning(
+                "ADS: NetId %s holds %d notifications, more than its share of %d while the server's %d are "
+                "taken: its newest (handle 0x%X) makes room for NetId %s (%d evicted so far)",
+                ".".join(str(b) for b in hog_id),
+                len(held),
+                share,
+                self.budget.limits.max_notifications_total,
+                victim.handle,
+                ".".join(str(b) for b in net_id),
+                self.stats.notifications_evicted,
+            )
+        self.delete(victim.session, victim.handle)
 
     def _maybe_idle(self) -> None:
         if self.budget.total == 0 and self.on_active is not None:

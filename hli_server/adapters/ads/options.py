@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import ipaddress
 import logging
+import os
+import stat
 from collections.abc import Mapping
-from typing import ClassVar, Final
+from pathlib import Path
+from typing import Any, ClassVar, Final
 
 from pydantic import Field, field_validator, model_validator
 
@@ -21,6 +24,7 @@ __all__ = [
     "DEFAULT_NET_ID",
     "DEFAULT_PORT",
     "DEFAULT_UDP_PORT",
+    "ROUTE_PASSWORD_ENV",
     "AdsOptions",
     "RouteAllowlist",
     "canonical_ip",
@@ -34,6 +38,28 @@ DEFAULT_UDP_PORT: Final = 48899
 """The UDP port of TwinCAT's route discovery and AddRoute (pyads and AdsLib send there, always)."""
 DEFAULT_NET_ID: Final = "127.0.0.1.1.1"
 """The server's AMS NetId: the clients' target (``pyads.Connection("127.0.0.1.1.1", 851, ...)``)."""
+ROUTE_PASSWORD_ENV: Final = "HLI_ADS_ROUTE_PASSWORD"
+"""The environment variable that gives ``route_password`` (with ``route_user`` set, and neither
+``route_password`` nor ``route_password_file`` given): a command line is shown to every local user by
+``ps``, the environment of a process only to its owner."""
+
+
+def read_secret_file(path: str, what: str) -> str:
+    """The first line of the file ``path`` (without its line end), or ValueError saying what is wrong;
+    a file that other users may read is taken with a warning (``chmod 600`` it)."""
+    file = Path(path).expanduser()
+    try:
+        info = file.stat()
+        text = file.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise ValueError(f"{what} {path}: cannot be read ({reason})") from None
+    secret = text.splitlines()[0] if text else ""
+    if not secret:
+        raise ValueError(f"{what} {path}: its first line is empty")
+    if info.st_mode & (stat.S_IRWXG | stat.S_IRWXO):
+        logger.warning("%s %s may be read by other users: chmod 600 %s", what, path, path)
+    return secret
 
 
 def _net_id_octets(text: str) -> tuple[int, ...] | None:
@@ -141,7 +167,14 @@ class AdsOptions(TcpDoorOptions):
         "AddRoute is refused with 0x704 as TwinCAT refuses wrong credentials",
     )
     route_password: str | None = Field(
-        default=None, max_length=256, description="password AddRoute must carry, with `route_user`"
+        default=None,
+        max_length=256,
+        description=f"password AddRoute must carry, with `route_user` (on a command line `ps` shows it to "
+        f"every local user: prefer `route_password_file` or the environment variable {ROUTE_PASSWORD_ENV})",
+    )
+    route_password_file: str | None = Field(
+        default=None,
+        description="file whose first line is `route_password` (instead of giving it; mode 600)",
     )
     routes_file: str | None = Field(
         default=None,
@@ -248,6 +281,28 @@ class AdsOptions(TcpDoorOptions):
                         ) from None
         return value
 
+    @model_validator(mode="before")
+    @classmethod
+    def _password_from_a_file_or_the_environment(cls, data: Any) -> Any:
+        """``route_password`` from ``route_password_file``, else from :data:`ROUTE_PASSWORD_ENV` (when
+        ``route_user`` is set and no password is given)."""
+        if not isinstance(data, Mapping):
+            return data
+        given, path = data.get("route_password"), data.get("route_password_file")
+        if path is None and (given is not None or data.get("route_user") is None):
+            return data
+        if given is not None:
+            raise ValueError("route_password and route_password_file: give one of them")
+        out = dict(data)
+        if path is not None:
+            if not isinstance(path, str):
+                raise ValueError("route_password_file is the path of a file")
+            out["route_password"] = read_secret_file(path, "route_password_file")
+            out["route_password_file"] = None  # read once: the options carry the password on (doors)
+        elif os.environ.get(ROUTE_PASSWORD_ENV):
+            out["route_password"] = os.environ[ROUTE_PASSWORD_ENV]
+        return out
+
     @field_validator("route_user", "route_password", mode="before")
     @classmethod
     def _text(cls, value: object) -> object:
@@ -259,7 +314,8 @@ class AdsOptions(TcpDoorOptions):
     def _credentials(self) -> AdsOptions:
         if (self.route_user is None) != (self.route_password is None):
             raise ValueError(
-                "route_user and route_password go together: AddRoute is accepted with both, refused without"
+                "route_user and route_password go together: AddRoute is accepted with both, refused without "
+                f"(the password: route_password, route_password_file or {ROUTE_PASSWORD_ENV})"
             )
         return self
 

@@ -73,6 +73,7 @@ from hli_server.codecs.ads import (
     AmsTcpCommand,
     AmsTcpFrame,
     NetId,
+    OversizeAmsFrame,
     encode_port_close_reply,
     encode_port_connect_reply,
     encode_router_frame,
@@ -139,6 +140,10 @@ answers before it."""
 
 
 _FAST_MAX: Final = 6 + MAX_AMS_LENGTH
+MAX_SKIPPED_FRAME: Final = 16 * 1024 * 1024
+"""An AMS frame above the decoder's 64 KiB (a sum write of 500 items of 200 bytes: 100 KB) but within this
+is answered 0x705 and its bytes dropped as they arrive; beyond, its connection is closed (issue 36,
+finding 9: such a frame closed the connection without an ADS error code)."""
 """The longest read :meth:`_Connection.data_received` answers on its fast path (one whole AMS frame)."""
 
 
@@ -150,7 +155,7 @@ class _Connection(asyncio.Protocol):
         self._device = adapter.device
         self._options = adapter.options
         self._routes = adapter.routes
-        self._decoder = AmsStreamDecoder()
+        self._decoder = AmsStreamDecoder(max_skipped_length=MAX_SKIPPED_FRAME)
         self._gate = adapter.faults.gate(Door.ADS, None)
         self._transport: asyncio.Transport | None = None
         self._raw: asyncio.Transport | None = None
@@ -363,7 +368,12 @@ class _Connection(asyncio.Protocol):
         if self._transport is not None and not self._transport.is_closing():
             self._serve()
 
-    def _answer(self, frame: AmsPacket | AmsTcpFrame) -> bytes | _Refused | None:
+    def _answer(self, frame: AmsPacket | AmsTcpFrame | OversizeAmsFrame) -> bytes | _Refused | None:
+        if isinstance(frame, OversizeAmsFrame):
+            source = frame.header.source_net_id
+            if source is not self._admitted and not self._admit(source):
+                return _REFUSED
+            return self._device.refuse_oversize(self.session, frame.header, frame.length)
         if isinstance(frame, AmsPacket):
             source = frame.header.source_net_id
             if source is not self._admitted and not self._admit(source):

@@ -175,6 +175,8 @@ class DeviceStats:
     """samples not evaluated because the client's output queue was full (it does not read)."""
     failures: int = 0
     """unexpected exceptions while serving a request (answered 0x700 and logged)."""
+    notifications_evicted: int = 0
+    """notifications of a NetId above its share deleted to make room for a newcomer (the budget full)."""
 
     def count_error(self, code: int) -> None:
         self.errors[code] = self.errors.get(code, 0) + 1

@@ -69,10 +69,10 @@ class SymbolInfoService:
 
     # --- watches of the constants (ads-client subscribes both on connect) --------------------------
     def watch_version(self, session: Session, offset: int, length: int) -> Watch:
-        return Watch.of_constant(bytes((self.symbols.version,)).ljust(length, b"\0")[:length])
+        return _constant_watch(IndexGroup.SYM_VERSION, bytes((self.symbols.version,)), length)
 
     def watch_device_state(self, session: Session, offset: int, length: int) -> Watch:
-        return Watch.of_constant(_STATE.ljust(length, b"\0")[:length])
+        return _constant_watch(IndexGroup.DEVICE_DATA, _STATE, length)
 
     # --- read-writes --------------------------------------------------------------------------------
     def info_by_name(self, session: Session, offset: int, read_length: int, data: bytes) -> bytes:
@@ -98,3 +98,19 @@ class SymbolInfoService:
                 ErrorCode.SIZE_WRONG, f"data type {name} is {len(entry)} bytes, read {read_length}"
             )
         return entry
+
+
+MAX_CONSTANT_WATCH: Final = 64
+"""Bytes a notification of a constant may watch (the value, padded with zeros); beyond it is 0x705: a
+notification of 0x7FFFFFFF bytes built a 2 GB sample and 0xFFFFFFFF none at all, without an answer
+(issue 36, finding 9)."""
+
+
+def _constant_watch(group: int, value: bytes, length: int) -> Watch:
+    if length > MAX_CONSTANT_WATCH:
+        raise AdsError(
+            ErrorCode.SIZE_WRONG,
+            f"index group 0x{group:X} holds {len(value)} bytes; a notification of it watches at most "
+            f"{MAX_CONSTANT_WATCH}, not {length}",
+        )
+    return Watch.of_constant(value.ljust(length, b"\0")[:length])

@@ -11,9 +11,11 @@ The asyncio shell around the sans-I/O codec :mod:`hli_server.codecs.ads.udp`:
   does not resolve the route admits the address the request came from.
 * **Bounds**: the socket is bound where the TCP door is bound (loopback by default: nothing beyond this
   computer can discover it or add routes); every sender gets ``udp_rate`` answers per second (bursts of
-  twice that), all senders together ``udp_rate_total``, and AddRoute one per second per sender (bursts
-  of 3): datagrams beyond are dropped, counted and logged once per 10 s. A datagram that does not parse
-  is dropped (UDP has no error reply). Answers are never longer than about 400 bytes.
+  twice that), all senders together ``udp_rate_total`` - and beyond it still its fair share of that, so
+  that many senders cannot lock out one that asks now and then (:class:`RateLimiter`) - and AddRoute one
+  per second per sender (bursts of 3): datagrams beyond are dropped, counted and logged once per 10 s. A
+  datagram that does not parse is dropped (UDP has no error reply). Answers are never longer than about
+  400 bytes.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import hmac
 import importlib.metadata
 import ipaddress
 import logging
+import math
 import platform
 import socket
 import time
@@ -52,6 +55,8 @@ logger = logging.getLogger(__name__)
 
 MAX_SENDERS: Final = 4096
 """Senders the rate limiter remembers; beyond, the oldest are forgotten."""
+RATE_WINDOW_S: Final = 2.0
+"""The span over which a sender's recent rate is averaged, and the active senders counted (the fair share)."""
 RESOLVE_TIMEOUT_S: Final = 2.0
 MAX_RESOLVING: Final = 4
 """Host names resolved at once for AddRoute; AddRoutes beyond are answered 0x708 (device busy)."""
@@ -69,29 +74,53 @@ class UdpStats:
 
 
 class RateLimiter:
-    """Token buckets per sender and for all senders together (``rate`` per second, bursts of ``burst``)."""
+    """Token buckets per sender and for all senders together (``rate`` per second, bursts of ``burst``),
+    with a fair share (issue 36, finding 7).
+
+    The shared bucket alone is first come, first served: many senders, each within its own rate, drain it
+    and an honest client that asks now and then finds it empty. So when the shared bucket is empty, a
+    sender is still let in (within its own bucket) while its recent rate (an average over
+    :data:`RATE_WINDOW_S`) stays within its share of the whole, ``rate_total`` / the senders active in the
+    last window: the senders that ask more than their share are the ones held back, and all the light
+    ones together never exceed ``rate_total`` again (at most twice ``rate_total`` is answered in all)."""
 
     def __init__(self, rate: float, burst: float, rate_total: float, burst_total: float) -> None:
         self.rate, self.burst = rate, burst
         self.rate_total, self.burst_total = rate_total, burst_total
-        self._senders: dict[str, tuple[float, float]] = {}
+        self._senders: dict[str, tuple[float, float, float]] = {}
+        """sender -> (its tokens, when last seen, its recent rate in datagrams per second)"""
         self._total = (burst_total, time.monotonic())
+        self._window = (time.monotonic(), 0, set[str]())
+        """(when this window began, senders active in the last one, senders seen in this one)"""
+
+    def active(self, sender: str, now: float) -> int:
+        """Senders that sent in this window or the last (``sender`` counted)."""
+        began, before, seen = self._window
+        if now - began >= RATE_WINDOW_S:
+            self._window = (now, len(seen), set())
+            began, before, seen = self._window
+        if len(seen) < MAX_SENDERS:
+            seen.add(sender)
+        return max(before, len(seen), 1)
 
     def allow(self, sender: str, now: float | None = None) -> bool:
         now = time.monotonic() if now is None else now
         tokens, last = self._total
         tokens = min(self.burst_total, tokens + (now - last) * self.rate_total)
-        own, own_last = self._senders.get(sender, (self.burst, now))
+        own, own_last, recent = self._senders.get(sender, (self.burst, now, 0.0))
         own = min(self.burst, own + (now - own_last) * self.rate)
-        if tokens < 1 or own < 1:
-            self._total = (tokens, now)
-            self._senders[sender] = (own, now)
-            return False
-        self._total = (tokens - 1, now)
+        recent = recent * math.exp(-(now - own_last) / RATE_WINDOW_S) + 1.0 / RATE_WINDOW_S
+        share = self.rate_total / self.active(sender, now)
+        allowed = own >= 1 and (tokens >= 1 or recent <= share)
+        if allowed:
+            own -= 1
+            if tokens >= 1:
+                tokens -= 1
+        self._total = (tokens, now)
         if len(self._senders) >= MAX_SENDERS and sender not in self._senders:
             self._senders.pop(next(iter(self._senders)))
-        self._senders[sender] = (own - 1, now)
-        return True
+        self._senders[sender] = (own, now, recent)
+        return allowed
 
 
 @dataclass(slots=True)

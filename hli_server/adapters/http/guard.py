@@ -12,11 +12,14 @@ A plain ASGI middleware (no per-request task, no streaming of its own):
   browser cannot load or start a program here. ``Origin: null`` (a sandboxed frame, a ``data:`` or
   ``file:`` page) is such a foreign origin too (reliability.md, round 2, finding 7).
 * **Token**: with ``api_token`` set, a state-changing request needs ``Authorization: Bearer <token>``
-  (401 with ``WWW-Authenticate`` otherwise), and so do the reads of the event log (``GET /api/events``;
-  reliability.md, round 2, finding 8). A ``GET`` may carry the token as ``?access_token=`` instead (RFC 6750,
-  2.3: a browser's ``EventSource`` cannot send headers). The other reads stay open; the dashboard's stream
-  (``/api/live``) carries the events only to a holder of the token: whether the request had it is
-  ``scope["state"]["hli_token"]`` for the routes.
+  (401 with ``WWW-Authenticate`` otherwise), and so do the reads of what was done on the machine: the
+  event log (``GET /api/events``; reliability.md, round 2, finding 8) and the recordings of sessions, which
+  hold the programs' text, every input and every event (``GET /api/recordings``, ``GET
+  /api/recordings/{name}``; round 3, finding 5): :data:`TOKEN_READS`. A ``GET`` may carry the token as
+  ``?access_token=`` instead (RFC 6750, 2.3: a browser's ``EventSource`` cannot send headers). The reads of
+  the machine as it is now stay open (state, active alarms, image, scene, timing, whether a recording
+  runs); the dashboard's stream (``/api/live``) and page carry the events only to a holder of the token:
+  whether the request had it is ``scope["state"]["hli_token"]`` for the routes.
 * **Read-only**: with ``read_only`` set, every state-changing request is refused (403).
 * **Body size**: a body above ``max_body_bytes`` is refused with 413 and never reaches the application
   (nor memory: past the bound it is read and discarded, so that the client sees the answer rather than a
@@ -44,8 +47,9 @@ Send = Callable[[Message], Awaitable[None]]
 ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
 
 _STATE_CHANGING = frozenset({"POST", "PUT", "PATCH", "DELETE"})
-TOKEN_READS = ("/api/events",)
-"""Reads that need the token when one is set (the event log: what was done on the machine, by whom)."""
+TOKEN_READS: dict[str, str] = {"/api/events": "the event log", "/api/recordings": "the recordings"}
+"""Reads that need the token when one is set (what was done on the machine, by whom, with which programs):
+a path and every path below it, and what the 401 names."""
 _DRAIN_FACTOR = 4
 """A body above the bound is read to its end and discarded (so that the client sees the 413 instead of a
 reset connection), unless it is more than this many times the bound: then the answer comes at once."""
@@ -56,6 +60,14 @@ def _host_name(host_header: str) -> str:
     if host_header.startswith("["):
         return host_header[1 : host_header.find("]")] if "]" in host_header else host_header
     return host_header.rsplit(":", 1)[0] if host_header.count(":") == 1 else host_header
+
+
+def _token_read(path: str) -> str | None:
+    """What ``path`` reads if it is one of :data:`TOKEN_READS` (or below one), else None."""
+    for guarded, what in TOKEN_READS.items():
+        if path == guarded or path.startswith(guarded + "/"):
+            return what
+    return None
 
 
 def _is_ip(name: str) -> bool:
@@ -153,10 +165,11 @@ class Guard:
                 [],
             )
         if method not in _STATE_CHANGING:
-            if not authorized and path.rstrip("/") in TOKEN_READS:
+            what = None if authorized else _token_read(path)
+            if what is not None:
                 return (
                     401,
-                    "the event log is read with the token only: send 'Authorization: Bearer <token>' (the "
+                    f"{what} is read with the token only: send 'Authorization: Bearer <token>' (the "
                     "server's --api-token / HLI_API_TOKEN)",
                     [(b"www-authenticate", b'Bearer realm="hli-server"')],
                 )

@@ -12,7 +12,8 @@ What a stream carries (``event:`` names, ``data:`` one JSON object each):
   the collision pairs with distance and braking distances; the active alarms;
 * ``event``: every typed event of the event feed (``schemas.events``), as ``GET /api/events`` shows it;
 * ``scene``: a channel's scene (``hli_server.scene``, the picture ``check --plot`` draws) when it
-  changed: on an event of its channel at the next tick, else looked at every :data:`SCENE_PERIOD_S`;
+  changed: on an event of its channel that changes it (a program state, an alarm, the areas) at the next
+  tick, else looked at every :data:`SCENE_PERIOD_S`;
 * ``dropped``: how many events this stream has lost because the page read too slowly.
 
 Why it never slows the cycle: the event listener runs inside the cycle and only appends the event
@@ -20,7 +21,8 @@ object to each stream's bounded queue (:attr:`LiveFeed.queue_size`; a full queue
 counts it, so a slow page falls behind, not the machine). The state is built by a task of its own
 between cycles, once per tick for all streams, from one consistent copy of the image and the
 operator's snapshot; a stream keeps only the newest state (states are not queued). Encoding to JSON
-happens in the streams' own tasks. Without an open stream nothing runs: no listener, no task.
+happens in the streams' own tasks, once per event however many streams send it. Without an open stream
+nothing runs: no listener, no task.
 
 Bounds: at most :attr:`LiveFeed.max_streams` streams at once (16 by default). A page that does not read
 what it is sent holds nothing for long (reliability.md, round 2, finding 4): when every slot is taken, a
@@ -82,11 +84,32 @@ class TooManyStreamsError(RuntimeError):
     """All stream slots are taken."""
 
 
+_SCENE_KINDS = frozenset({"program_state", "areas", "alarm", "alarms_cleared", "area_violation"})
+"""The events after which a channel's scene is looked at again at the next tick (the engine's scene changes
+with them: ``runtime/dashboard.py``); a flood of other events (``#MSG``) asks for no scene."""
+
+
+class _Shared:
+    """An event queued for every stream, encoded once (by the first stream that sends it), however many
+    streams there are."""
+
+    __slots__ = ("_sse", "event")
+
+    def __init__(self, event: Event) -> None:
+        self.event = event
+        self._sse: bytes | None = None
+
+    def sse(self) -> bytes:
+        if self._sse is None:
+            self._sse = _sse(b"event", json_bytes(self.event.to_json()))
+        return self._sse
+
+
 @dataclass(eq=False)
 class Stream:
     """One open page: its waiting events, its newest state and scenes, and what it lost."""
 
-    events: deque[Event] = field(default_factory=deque)
+    events: deque[_Shared] = field(default_factory=deque)
     state: bytes | None = None
     scenes: dict[int, bytes] = field(default_factory=dict)
     dropped: int = 0
@@ -113,7 +136,7 @@ class Stream:
     def _take(self) -> bytes:
         parts: list[bytes] = []
         while self.events:
-            parts.append(_sse(b"event", json_bytes(self.events.popleft().to_json())))
+            parts.append(self.events.popleft().sse())
         if self.dropped != self.dropped_told:
             self.dropped_told = self.dropped
             parts.append(_sse(b"dropped", json_bytes({"dropped": self.dropped})))
@@ -295,8 +318,9 @@ class LiveFeed:
 
     # --- inside the cycle: append and return ---------------------------------------------------
     def _on_event(self, event: Event) -> None:
-        if event.channel is not None:
+        if event.channel is not None and event.KIND in _SCENE_KINDS:
             self._dirty.add(event.channel)
+        shared = _Shared(event)
         for stream in self.streams:
             if not stream.events_allowed:
                 continue
@@ -304,7 +328,7 @@ class LiveFeed:
                 stream.dropped += 1
                 self.dropped += 1
                 continue
-            stream.events.append(event)
+            stream.events.append(shared)
             stream.wake.set()
 
     # --- between cycles: the ticks --------------------------------------------------------------

@@ -36,6 +36,7 @@ __all__ = [
     "ModeBody",
     "OverrideBody",
     "ProbeBody",
+    "ProbeDeviationBody",
     "ProgramBody",
     "SelectBody",
     "StepBody",
@@ -108,6 +109,14 @@ class FeedholdBody(_Body):
 
 class ProbeBody(_Body):
     on: StrictBool = Field(description="the probe input for G100 measuring moves (C14-23)")
+
+
+class ProbeDeviationBody(_Body):
+    deviation: dict[str, StrictInt] = Field(
+        description='the simulated workpiece\'s deviation per axis name [0.1 µm], e.g. {"X": 2000} = 0.2 mm; '
+        "the axes not named keep theirs",
+        min_length=1,
+    )
 
 
 class ModeBody(_Body):

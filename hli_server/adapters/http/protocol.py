@@ -10,11 +10,13 @@ they stayed; dashboards that never read held their slots forever. :func:`bounded
 subclass of uvicorn's ``H11Protocol`` that
 
 * counts connections and, beyond ``max_connections``, closes the *least useful* one to make room for the
-  newcomer: first a connection with no request in progress (the one idle longest), then one whose request
-  is still arriving (the one that began longest ago: a slow or stalled sender), then one whose client does
-  not read its answer (paused longest). A connection whose request the server is working on is never
-  closed for a newcomer; only if every connection is such, the newcomer gets ``503`` with ``Connection:
-  close`` before it is registered with the event loop (it costs one descriptor for a moment);
+  newcomer: first a connection that never sent a request (the one idle longest), then one whose request
+  is still arriving (the one that began longest ago: a slow or stalled sender), then a keep-alive
+  connection between two requests of its client (idle longest: an honest client's, which a storm of
+  stalled bodies closed under it before, resetting one GET in 15; issue 36, finding 9), then one whose
+  client does not read its answer (paused longest). A connection whose request the server is working on
+  is never closed for a newcomer; only if every connection is such, the newcomer gets ``503`` with
+  ``Connection: close`` before it is registered with the event loop (it costs one descriptor for a moment);
 * gives a request ``request_timeout_s`` seconds from its first byte to the end of its body: a client that
   announces a body and never sends it (or sends it a byte at a time) gets ``408 Request Timeout`` and the
   connection is closed; the application sees the client go away;
@@ -80,6 +82,8 @@ class _BoundedH11Protocol(H11Protocol):
     _request_began: float | None = None
     _write_paused_at: float | None = None
     _admitted: bool = False
+    _served: bool = False
+    """it has had an answer: between two requests it is a keep-alive client, not a silent one"""
 
     def connection_made(self, transport: asyncio.Transport) -> None:  # type: ignore[override]
         if len(self.connections) >= self.max_connections and not self._make_room():
@@ -113,13 +117,15 @@ class _BoundedH11Protocol(H11Protocol):
     def _usefulness(self, now: float) -> tuple[int, float] | None:
         """Lower = closed first for a newcomer; None = never (the server is working for it)."""
         if self._write_paused_at is not None:
-            return (2, self._write_paused_at)  # it does not read what it asked for
+            return (3, self._write_paused_at)  # it does not read what it asked for
         if self._arriving():
             assert self._request_began is not None
             return (1, self._request_began)  # still sending its request: slow or stalled
         if self._working():
             return None
-        return (0, self._last_active)  # nothing in progress: idle
+        if self._served:
+            return (2, self._last_active)  # a client between two of its requests (keep-alive)
+        return (0, self._last_active)  # connected and silent
 
     def _make_room(self) -> bool:
         """Close the least useful connection (see the module docstring), if there is one."""
@@ -216,6 +222,7 @@ class _BoundedH11Protocol(H11Protocol):
             self._request_began = None
 
     def on_response_complete(self) -> None:
+        self._served = True
         super().on_response_complete()
         self._note_arrival()
 

@@ -42,6 +42,11 @@ way to find the next frame, so a frame that cannot be delimited breaks the strea
 * the AMS header's data length disagrees with the AMS/TCP length (AdsLib delimits by the one,
   ads-client by the other: such a frame desynchronises one of them, and no client sends it).
 
+A decoder made with ``max_skipped_length`` (the server's) hands out an AMS frame above its limit but
+within that bound as :class:`OversizeAmsFrame` (its header, once its first 38 bytes are in) and drops the
+rest of it as it arrives, never holding it: the server answers it with 0x705 instead of closing the
+connection without a word (a sum write of 500 items of 200 bytes is 100 KB; issue 36, finding 9).
+
 Everything inside a well-delimited frame (unknown command, a payload too short for its command)
 is answerable: :mod:`.commands` raises :class:`AdsError` carrying the ADS code to answer with.
 """
@@ -72,6 +77,7 @@ __all__ = [
     "Frame",
     "NeedData",
     "NetId",
+    "OversizeAmsFrame",
     "encode_error_response",
     "encode_port_close_reply",
     "encode_port_connect_reply",
@@ -225,6 +231,14 @@ class AmsTcpFrame:
 Frame = AmsPacket | AmsTcpFrame
 
 
+class OversizeAmsFrame(NamedTuple):
+    """An AMS frame longer than the decoder takes (``length``, its AMS/TCP length): its header only, the
+    rest dropped as it arrives (:class:`AmsStreamDecoder` with ``max_skipped_length``)."""
+
+    header: AmsHeader
+    length: int
+
+
 class NeedData(Enum):
     """h11's ``NEED_DATA``: no complete frame buffered; call ``receive_data`` with more bytes."""
 
@@ -246,34 +260,41 @@ class AmsStreamDecoder:
     frame of ``max_ams_length`` plus the bytes of the last read that the caller has not drained yet.
     """
 
-    __slots__ = ("_buffer", "_max_ams_length", "_pos", "broken")
+    __slots__ = ("_buffer", "_max_ams_length", "_max_skipped", "_pos", "_skip", "broken")
 
-    def __init__(self, max_ams_length: int = MAX_AMS_LENGTH) -> None:
+    def __init__(self, max_ams_length: int = MAX_AMS_LENGTH, max_skipped_length: int = 0) -> None:
         if max_ams_length < AMS_HEADER_SIZE:
             raise ValueError(f"max_ams_length {max_ams_length} is below the AMS header's 32 bytes")
         self._buffer = bytearray()
         self._pos = 0
         self._max_ams_length = max_ams_length
+        self._max_skipped = max_skipped_length
+        self._skip = 0
+        """bytes of an oversize frame still to drop as they arrive"""
         self.broken: str | None = None
 
     @property
     def pending(self) -> int:
-        """Bytes received and not yet handed out as frames."""
-        return len(self._buffer) - self._pos
+        """Bytes received and not yet handed out as frames (an oversize frame being dropped counts)."""
+        return len(self._buffer) - self._pos + (1 if self._skip else 0)
 
     def receive_data(self, data: bytes) -> None:
         """Append the bytes of one read (``b""`` at EOF is fine: it adds nothing)."""
+        if self._skip:
+            dropped = min(self._skip, len(data))
+            self._skip -= dropped
+            data = data[dropped:]
         if self._pos and self._pos == len(self._buffer):
             self._buffer.clear()
             self._pos = 0
         self._buffer += data
 
-    def feed(self, data: bytes) -> Iterator[Frame]:
+    def feed(self, data: bytes) -> Iterator[Frame | OversizeAmsFrame]:
         """``receive_data(data)`` now; the iterator yields the complete frames (raising as ``next_frame``)."""
         self.receive_data(data)
         return self._drain()
 
-    def _drain(self) -> Iterator[Frame]:
+    def _drain(self) -> Iterator[Frame | OversizeAmsFrame]:
         while True:
             frame = self.next_frame()
             if frame is NEED_DATA:
@@ -285,7 +306,7 @@ class AmsStreamDecoder:
         buffered and ``data`` (one read of the socket) is exactly one well-formed AMS frame, its packet,
         taken without copying ``data`` into the buffer. None otherwise: then ``receive_data(data)`` and
         ``next_frame()`` as always (they find every problem this shortcut leaves to them)."""
-        if self._pos != len(self._buffer) or len(data) < 38 or self.broken is not None:
+        if self._pos != len(self._buffer) or self._skip or len(data) < 38 or self.broken is not None:
             return None
         reserved, length, tn, tp, sn, sp, cmd, flags, data_length, error, invoke = _FRAME_HEAD.unpack_from(
             data
@@ -311,7 +332,7 @@ class AmsStreamDecoder:
         )
         return AmsPacket(header, data[38:])
 
-    def next_frame(self) -> Frame | Literal[NeedData.NEED_DATA]:
+    def next_frame(self) -> Frame | OversizeAmsFrame | Literal[NeedData.NEED_DATA]:
         """The next complete frame, or :data:`NEED_DATA`; raises :class:`AmsStreamError` (see module doc)."""
         if self.broken is not None:
             raise AmsStreamError(self.broken)
@@ -322,6 +343,8 @@ class AmsStreamDecoder:
             return self._need_data()
         reserved, length = _TCP_HEADER.unpack_from(buf, pos)
         if reserved == 0:
+            if self._max_ams_length < length <= self._max_skipped:
+                return self._oversize(length)
             if not AMS_HEADER_SIZE <= length <= self._max_ams_length:
                 self._break(
                     f"AMS/TCP length {length} at stream byte {pos} is outside {AMS_HEADER_SIZE}.."
@@ -366,6 +389,25 @@ class AmsStreamDecoder:
             frame = AmsTcpFrame(reserved, bytes(buf[pos + AMS_TCP_HEADER_SIZE : stop]))
         self._pos = stop
         return frame
+
+    def _oversize(self, length: int) -> OversizeAmsFrame | Literal[NeedData.NEED_DATA]:
+        """An AMS frame above the limit, within ``max_skipped_length``: its header once 38 bytes are in
+        (its data length must agree, or the stream cannot be delimited), the rest dropped."""
+        buf, pos = self._buffer, self._pos
+        if len(buf) - pos < 38:
+            return self._need_data()
+        tn, tp, sn, sp, cmd, flags, data_length, error, invoke = _AMS_HEADER.unpack_from(buf, pos + 6)
+        if data_length != length - AMS_HEADER_SIZE:
+            self._break(
+                f"AMS header at stream byte {pos} announces {data_length} data bytes, its AMS/TCP length "
+                f"{length} leaves {length - AMS_HEADER_SIZE}: the frame cannot be delimited"
+            )
+        header = AmsHeader(_net_id(tn), tp, _net_id(sn), sp, cmd, flags, data_length, error, invoke)
+        stop = pos + AMS_TCP_HEADER_SIZE + length
+        here = min(stop, len(buf))
+        self._skip = stop - here
+        self._pos = here
+        return OversizeAmsFrame(header, length)
 
     def _need_data(self) -> Literal[NeedData.NEED_DATA]:
         pos = self._pos

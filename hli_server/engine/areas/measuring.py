@@ -26,6 +26,15 @@ as far as no axis passes its own offset. The offsets apply only when the move is
 CNC keine Begrenzung der Messverfahrbewegung ausführt"). The run-on itself stops before a software
 limit or an area boundary (project's decision: the target was allowed, the offset must not turn it
 into a refused block).
+
+The simulated probe of the built-in cycles (engine/cycles): a stand-in's G100 block carries
+``probe_touch``, the fraction of its line at which the probe sphere touches the simulated workpiece. Such a
+move measures as type 1 whatever the channel's type (ISG's cycles select their measuring type themselves),
+without a run-on and without an error when no signal comes (the cycle raises 13413 itself). The probe fires
+when the path passes that point (the setpoints, checked before each interpolation), latching the exact
+point; in a geometry check, which does not move the axes, it fires where the move would have touched. A
+probe signal from the PLC or the operator during such a move is taken as well. Either way the decoder is
+told the fraction of the line at which the signal came (``Decoder.measured``), which the cycle reads.
 """
 
 from __future__ import annotations
@@ -98,6 +107,18 @@ class _Measuring:
     """Where the move ends without a probe signal (``check --geometry-only`` goes on from there)."""
     triggered: bool = False
     armed: bool = False
+    origin: tuple[float, ...] = ()
+    """The start of the programmed line (machine coordinates)."""
+    direction: tuple[float, ...] = ()
+    length: float = 0.0
+    """The programmed line's length (before a P-CHAN-00268 limit)."""
+    reach: float = 0.0
+    """How far the move goes (the line, or its part before a limit)."""
+    touch: float | None = None
+    """A built-in cycle's move: mm along the line where the simulated workpiece is touched (None: not)."""
+    standin: bool = False
+    fraction: float | None = None
+    """Where along the line the probe signal came (0..1), once it came."""
 
 
 class MeasuringMoves(AreaRole):
@@ -123,12 +144,15 @@ class MeasuringMoves(AreaRole):
         self, segment: LineSegment, block: Block, modal: ModalState
     ) -> DecodeError | MeasuringMove:
         ch = self.channel
-        mtype = modal.meas_type if modal.meas_type is not None else ch.config.messtyp
+        standin = block.probe_touch is not None
+        default = modal.meas_type if modal.meas_type is not None else ch.config.messtyp
+        mtype = 1 if standin else default
         refused = self._check(block, mtype, modal)
         if isinstance(refused, DecodeError):
             return refused
         feed = refused
         length = segment.length
+        programmed = segment
         limited = False
         reason = ""
         if ch.config.meas_soft_limit_move_path:
@@ -143,8 +167,10 @@ class MeasuringMoves(AreaRole):
                     )
                 segment = LineSegment(segment.start, point_at(segment, f_limit))
         run_on = 0.0
-        if not limited and mtype != 3:
+        reach = segment.length
+        if not limited and mtype != 3 and not standin:
             segment, run_on = self._run_on(segment, mtype)
+        touch_at = block.probe_touch
         tag = _Measuring(
             block,
             limited,
@@ -153,6 +179,12 @@ class MeasuringMoves(AreaRole):
             to_target=mtype == 3 and 106 in block.g_codes,
             run_on=run_on,
             end=segment.end,
+            origin=programmed.start,
+            direction=tuple((e - a) / length for a, e in zip(programmed.start, programmed.end, strict=True)),
+            length=length,
+            reach=reach,
+            touch=touch_at * length if touch_at is not None and math.isfinite(touch_at) else None,
+            standin=standin,
         )
 
         # a partial, not a closure: a recording's snapshot keeps it (hli_server/recording/snapshot.py)
@@ -267,7 +299,13 @@ class MeasuringMoves(AreaRole):
         ch = self.channel
         line, label = tag.block.line, tag.block.label
         if tag.triggered:
-            ch.decoder.resume(ch.setpoints())
+            ch.decoder.resume(ch.setpoints(), tag.fraction)
+            return
+        if tag.touch is not None and tag.touch <= tag.reach + EPS:
+            # the simulated probe touched on the way: a geometry check (the axes did not move) or a touch at
+            # the very end of the move (the path reached the marker before the probe check saw it)
+            point = self._latch(tag, tag.touch)
+            ch.decoder.resume(list(point) if not tag.armed else ch.setpoints(), tag.fraction)
             return
         pos = fpoint(self.names, tuple(ch.setpoints()))
         if tag.limited:
@@ -282,7 +320,7 @@ class MeasuringMoves(AreaRole):
             )
             return
         error = tag.measuring_type == 2 or (tag.measuring_type == 1 and ch.config.meas_error_no_signal)
-        if not error:
+        if not error or tag.standin:
             # types 1 (P-CHAN-00176 = 0), 3 and 4: the measurement did not take place, the program goes on
             # from the end of the move (where the axes stand; a geometry check did not move them)
             ch.decoder.resume(list(tag.end))
@@ -297,6 +335,38 @@ class MeasuringMoves(AreaRole):
             params={"position": ch.setpoints(), "type": tag.measuring_type},
             line=line,
             block=label,
+        )
+
+    def _latch(self, tag: _Measuring, along: float) -> tuple[float, ...]:
+        """The simulated probe fires ``along`` mm along the line: the exact point is latched."""
+        point = tuple(o + d * along for o, d in zip(tag.origin, tag.direction, strict=True))
+        self._record(tag, dict(zip(self.names, point, strict=True)), along)
+        return point
+
+    def _record(self, tag: _Measuring, position: dict[str, float], along: float) -> None:
+        """A probe signal during ``tag``'s move (C14-23): the measurement, its event, the fraction."""
+        ch = self.channel
+        tag.triggered = True
+        tag.fraction = max(0.0, along / tag.length) if tag.length > 0.0 else 0.0
+        self.measurement = {
+            "block": tag.block.label,
+            "line": tag.block.line,
+            "cycle": self.machine.cycle,
+            "position": position,
+            "setpoint": {a.name: a.setpoint for a in ch.axes},
+            "measuring_type": tag.measuring_type,
+        }
+        m = self.machine
+        m.emit(
+            Measurement(
+                cycle=m.cycle,
+                time_s=m.time,
+                channel=ch.number,
+                block=tag.block.label,
+                line=tag.block.line,
+                position=position,
+                setpoint={a.name: a.setpoint for a in ch.axes},
+            )
         )
 
     def probe_cycle(self) -> None:
@@ -322,29 +392,22 @@ class MeasuringMoves(AreaRole):
                     block=tag.block.label,
                 )
                 return
-        if not edge:
-            return
-        tag.triggered = True
-        self.measurement = {
-            "block": tag.block.label,
-            "line": tag.block.line,
-            "cycle": self.machine.cycle,
-            "position": {a.name: a.measured for a in ch.axes},
-            "setpoint": {a.name: a.setpoint for a in ch.axes},
-            "measuring_type": tag.measuring_type,
-        }
-        m = self.machine
-        m.emit(
-            Measurement(
-                cycle=m.cycle,
-                time_s=m.time,
-                channel=ch.number,
-                block=tag.block.label,
-                line=tag.block.line,
-                position={a.name: a.measured for a in ch.axes},
-                setpoint={a.name: a.setpoint for a in ch.axes},
+        touched = False
+        if not edge and tag.touch is not None:
+            progress = sum(
+                (a.setpoint - o) * d for a, o, d in zip(ch.axes, tag.origin, tag.direction, strict=True)
             )
-        )
+            touched = progress >= tag.touch - EPS
+        if not edge and not touched:
+            return
+        if touched:
+            assert tag.touch is not None
+            self._latch(tag, tag.touch)
+        else:
+            along = sum(
+                (a.measured - o) * d for a, o, d in zip(ch.axes, tag.origin, tag.direction, strict=True)
+            )
+            self._record(tag, {a.name: a.measured for a in ch.axes}, along)
         if tag.to_target:
             return  # type 3 with G106: on to the target (FCT's "Weiterfahrt bis zum Zielpunkt")
         # brake to a stop on the remaining path and end the move there

@@ -104,6 +104,9 @@ class Block:
     extra: dict[str, float] = field(default_factory=dict)
     program: str = ""
     """The subroutine or cycle the block belongs to (``sub.nc``); empty in the main program."""
+    probe_touch: float | None = None
+    """A built-in cycle's measuring move (``engine/cycles``): the fraction of the line at which the
+    simulated probe touches the simulated workpiece (``inf``: it does not); None for a programmed block."""
 
     @property
     def label(self) -> str:

@@ -8,7 +8,7 @@ from __future__ import annotations
 from hli_server.engine.nc.blocks import Block, NcError
 from hli_server.engine.nc.control_flow import ControlFlow
 from hli_server.engine.nc.expr import ALARM_TYPE as A_TYPE
-from hli_server.engine.nc.expr import Expr, format_value
+from hli_server.engine.nc.expr import Expr, Value, format_value
 from hli_server.engine.nc.language import (
     A_CONTROL_SYNTAX,
     A_LIMIT,
@@ -47,12 +47,12 @@ class ProgramLevels(ControlFlow):
                 A_STACK_OVERFLOW,
                 f"{call.text}: more than {MAX_CALL_DEPTH} program levels nested (a recursion without end?)",
             )
-        params: dict[int, float] | None = None
-        if call.cycle:
-            params = {k: self._number(stmt, v, f"@P{k}") for k, v in call.params}
+        params: dict[int, Value] | None = None
+        if call.cycle:  # a number or a string (``@P31 = "Roughing"``, ``@P100 = "SysDrillDeepHole"``)
+            params = {k: self._evaluate(stmt, v) for k, v in call.params}
         if call.variable is not None:
             call = call.named(self._program_name(stmt, call, call.variable))
-        new = self._resolver.resolve(call, stmt, frame, place)
+        new = self._resolver.resolve(call, stmt, frame, place, params, self.set_cycle_result)
         new.params = params
         self._frames.append(new)
 

@@ -12,7 +12,7 @@ channel (:class:`Host`; the engine does no I/O).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Final, Protocol
 
 from hli_server.engine.external import ExternalVariables
@@ -178,4 +178,27 @@ class Host(Protocol):
 
     def axis_name(self, index: int) -> str | None:
         """The channel's axis number ``index`` (``V.A.ABS[0]``), or None."""
+        ...
+
+    def find_cycle(self, name: str) -> ProgramFile | None:
+        """A cycle's file (``L CYCLE [NAME=..]``): the program libraries (:meth:`find_program`), then the
+        channel's ``cycle_directories`` (CY-01)."""
+        ...
+
+    def cycle_searched(self) -> tuple[str, ...]:
+        """Where :meth:`find_cycle` looks (for the alarm of a cycle not found)."""
+        ...
+
+    def stand_in(
+        self,
+        name: str,
+        params: dict[int, float | str],
+        results: Callable[[str, float], None],
+        line: int,
+        block: str,
+    ) -> Iterator[Block] | None:
+        """The blocks of the built-in stand-in of documented cycle ``name`` (engine/cycles, docs/cycles.md),
+        None for any other name. Its errors - and 910110 for a documented cycle without a stand-in - are
+        :class:`~hli_server.engine.nc.blocks.NcError` of the call's ``line`` and ``block``; ``results`` writes
+        a ``V.CYC.`` output."""
         ...

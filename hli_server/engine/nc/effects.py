@@ -37,8 +37,11 @@ from hli_server.engine.nc.language import (
     A_CORNER_DEVIATION,
     A_INDEX,
     A_MESSAGE,
+    A_MSG_FORMAT,
+    A_MSG_VALUES,
     A_NOT_SIMULATED,
     A_RANGE,
+    A_STRING_LENGTH,
     CONTOUR_KEYS,
     CONTOUR_TYPES,
     CONTOUR_WORDS,
@@ -224,69 +227,98 @@ class Effects(VariableAccess):
 
     def _format(self, stmt: Stmt, values: list[Value]) -> str:
         """The message text: the format string's ``%d``, ``%f``, ``%s``, ... filled in (printf, as the
-        manual says)."""
+        manual says), at most :data:`MAX_MESSAGE` characters.
+
+        Bounded before anything is built (issue 36, finding 1: ``%.300000000f`` built 300 MB inside the
+        cycle): a width, or a precision that fixes the digits (all but ``%g`` and ``%s``, whose precision
+        only cuts), beyond :data:`MAX_MESSAGE` is refused at once, and so is the text as soon as it grows
+        beyond it (the kernel's 21870, "String exceeds the maximum length"); each element then costs at
+        most a few hundred characters."""
         fmt = values[0]
         if not isinstance(fmt, str):
             raise stmt.error(A_MESSAGE, '#MSG: the message text is a string in quotes: #MSG ["text"]')
         args = values[1:]
         out: list[str] = []
+        length = 0
         i = 0
         n = len(fmt)
         used = 0
         while i < n:
-            c = fmt[i]
-            if c != "%":
-                out.append(c)
-                i += 1
-                continue
+            j = fmt.find("%", i)
+            if j != i:  # the text up to the next element, as it is
+                literal = fmt[i:] if j < 0 else fmt[i:j]
+                out.append(literal)
+                length += len(literal)
+                if j < 0:
+                    break
+            i = j
             j = i + 1
             while j < n and fmt[j] in "-+ #0":
                 j += 1
+            digits = j
             while j < n and fmt[j].isdigit():
                 j += 1
+            width = int(fmt[digits:j]) if j > digits else 0
+            spec = fmt[i:j]  # flags and width
+            precision = 0
             if j < n and fmt[j] == ".":
                 j += 1
+                digits = j
                 while j < n and fmt[j].isdigit():
                     j += 1
+                precision = int(fmt[digits:j]) if j > digits else 0
             while j < n and fmt[j] in "lh":
                 j += 1
             if j >= n:
-                raise stmt.error(A_MESSAGE, f"#MSG: incomplete format {fmt[i:]!r}")
+                raise stmt.error(A_MSG_FORMAT, f"#MSG: incomplete format {fmt[i:]!r} (%d, %f, %s, ...)")
             conversion = fmt[j]
-            spec = fmt[i:j].replace("l", "").replace("h", "")
+            element = fmt[i : j + 1]
+            if "." in element:
+                # %g: a precision beyond the bound gives the same text as the bound where that fits
+                cut = min(precision, MAX_MESSAGE) if conversion in "gG" else precision
+                spec += f".{cut}"
             if conversion == "%":
                 out.append("%")
+                length += 1
                 i = j + 1
                 continue
             if conversion not in "diufFeEgGxXos":
-                raise stmt.error(A_MESSAGE, f"#MSG: unknown format {fmt[i : j + 1]!r} (%d, %f, %s, ...)")
+                raise stmt.error(A_MSG_FORMAT, f"#MSG: unknown format {element!r} (%d, %f, %s, ...)")
+            fixed = 0 if conversion in "gGs" else precision  # %g and %s: the precision only cuts
+            if max(width, fixed) > MAX_MESSAGE:
+                raise stmt.error(
+                    A_STRING_LENGTH,
+                    f"#MSG: format {_shorten(element)} asks for {max(width, fixed)} characters; a message "
+                    f"has at most {MAX_MESSAGE}",
+                )
             if used >= len(args):
                 raise stmt.error(
-                    A_MESSAGE, f"#MSG: the text has more formats than values ({len(args)} given)"
+                    A_MSG_VALUES, f"#MSG: the text has more formats than values ({len(args)} given)"
                 )
             value = args[used]
             used += 1
-            if len(spec) > 12:
-                raise stmt.error(A_MESSAGE, f"#MSG: format {fmt[i : j + 1]!r} too wide")
             try:
                 if conversion == "s":
-                    out.append((spec + "s") % (value if isinstance(value, str) else format_value(value)))
+                    piece = (spec + "s") % (value if isinstance(value, str) else format_value(value))
                 elif isinstance(value, str):
-                    raise stmt.error(A_MESSAGE, f"#MSG: {fmt[i : j + 1]!r} needs a number, got a string")
+                    raise stmt.error(A_MESSAGE, f"#MSG: {element!r} needs a number, got a string")
                 elif conversion in "diuxXo":
                     conv = "d" if conversion in "iu" else conversion
-                    out.append((spec + conv) % math.trunc(value))
+                    piece = (spec + conv) % math.trunc(value)
                 else:
-                    out.append((spec + conversion) % value)
+                    piece = (spec + conversion) % value
             except (ValueError, OverflowError) as exc:
                 raise stmt.error(A_MESSAGE, f"#MSG: cannot format {format_value(value)}: {exc}") from None
+            out.append(piece)
+            length += len(piece)
+            if length > MAX_MESSAGE:
+                break  # said below, without formatting the rest
             i = j + 1
+        if length > MAX_MESSAGE:
+            raise stmt.error(A_STRING_LENGTH, f"#MSG: the message grows beyond {MAX_MESSAGE} characters")
         if used < len(args):
-            raise stmt.error(A_MESSAGE, f"#MSG: {len(args)} values for {used} format(s) in the text")
-        text = "".join(out)
-        if len(text) > MAX_MESSAGE:
-            raise stmt.error(914020, f"#MSG: the message has {len(text)} characters, at most {MAX_MESSAGE}")
-        return text
+            raise stmt.error(A_MSG_VALUES, f"#MSG: {len(args)} values for {used} format(s) in the text")
+        return "".join(out)
 
     def _contour(self, frame: Frame, stmt: Hash) -> ContourDirective:
         """Checks and evaluates ``#CONTOUR MODE``, ``#HSC``, ``#SPLINE`` (M-20..M-23)."""
@@ -351,3 +383,8 @@ class Effects(VariableAccess):
             if mode is None and on is None:
                 raise stmt.error(A_CONTROL_SYNTAX, "#SPLINE: ON, OFF or TYPE AKIMA|BSPLINE expected")
         return ContourDirective(self._place_block(frame, stmt), name, on, mode, values)
+
+
+def _shorten(element: str) -> str:
+    """A format element as a message quotes it: its digits cut short when there are many."""
+    return repr(element) if len(element) <= 24 else repr(element[:20] + "..." + element[-1])

@@ -152,6 +152,14 @@ class Interpreter(ProgramLevels):
                 if self._ended:
                     return None
                 continue
+            if frame.standin is not None:
+                # a built-in cycle reads the decoder's state: the batch check decodes what it kept first
+                self._effect()
+                block = next(frame.standin, None)
+                if block is None:
+                    frame.returning = True
+                    continue
+                return block
             stmt = frame.units.statement(frame.line, frame.program, frame.keep or bool(frame.open))
             if isinstance(stmt, Block):
                 frame.line += 1

@@ -64,6 +64,13 @@ A_STEP: Final = 914021
 A_SUB_END: Final = 914030
 A_MESSAGE: Final = 914031
 A_MAIN_RETURN: Final = 914032
+A_MSG_VALUES: Final = 20721
+"""#MSG: the number of values does not match the format elements (the kernel's ID 20721)."""
+A_MSG_FORMAT: Final = 21232
+"""#MSG: an unknown format element (the kernel's ID 21232)."""
+A_STRING_LENGTH: Final = 21870
+"""A string exceeds its maximum length (the kernel's ID 21870): a #MSG text, or a format element's width
+or precision that would make it so."""
 
 MAX_EXPRESSION_DEPTH: Final = 64
 """Brackets and operators nested deeper than this are alarm 914020 (a bounded recursion)."""

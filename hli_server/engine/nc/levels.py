@@ -6,6 +6,7 @@ it seeks (a branch, a loop's end, a label), the level itself (:class:`Frame`) - 
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from typing import Final
 
 from hli_server.engine.nc.blocks import Block
@@ -176,7 +177,9 @@ class Frame:
         self.seek: Seek | None = None
         self.locals: dict[str, Variable] = {}
         self.cycle_vars: dict[str, Variable] = {}
-        self.params: dict[int, float] | None = None
+        self.params: dict[int, Value] | None = None
+        self.standin: Iterator[Block] | None = None
+        """A built-in cycle's blocks (engine/cycles): the level hands them out instead of running a text."""
         self.synced = -1
         """The line whose synchronous reads were flushed for (re-run after a #FLUSH WAIT)."""
         self.returning = False
@@ -208,8 +211,9 @@ class ProgramResolver:
 
     A local subroutine (``LL``) is a ``%L name`` unit of the calling text; a global subroutine or a cycle
     is a file of the machine's program libraries (``Host.find_program``), compiled once per program run
-    while the library gives the same text. (A cycle package plugs in here: its built-in stand-in where no
-    file is found.)"""
+    while the library gives the same text. A cycle's file is looked for in the channel's
+    ``cycle_directories`` too (``Host.find_cycle``); where none has it, the built-in stand-in of a documented
+    TF5225/TF5293 cycle runs (``Host.stand_in``, engine/cycles, docs/cycles.md)."""
 
     def __init__(self, compiler: Compiler, host: Host) -> None:
         self.compiler = compiler
@@ -222,9 +226,18 @@ class ProgramResolver:
         """A new program run: the global subprograms are looked up again."""
         self._globals = {}
 
-    def resolve(self, call: Call, stmt: Stmt, caller: Frame, place: Block) -> Frame:
+    def resolve(
+        self,
+        call: Call,
+        stmt: Stmt,
+        caller: Frame,
+        place: Block,
+        params: dict[int, Value] | None = None,
+        results: Callable[[str, float], None] | None = None,
+    ) -> Frame:
         """The program level ``call`` (in ``stmt`` of level ``caller``) starts; ``place`` is the calling
-        block. Raises :class:`NcError` 914010 for a program not found."""
+        block; a cycle's ``params`` and where its built-in stand-in writes its ``V.CYC.`` results. Raises
+        :class:`NcError` 914010 for a program not found."""
         if call.local:
             units = caller.units
             start = units.local(call.name)
@@ -234,9 +247,15 @@ class ProgramResolver:
                     f"local subroutine {call.name} not found: no %L {call.name} in {units.text.name}",
                 )
             return Frame("cycle" if call.cycle else "local", units, call.name, start, place)
-        found = self.host.find_program(call.name)
+        found = self.host.find_cycle(call.name) if call.cycle else self.host.find_program(call.name)
+        if found is None and call.cycle and results is not None:
+            blocks = self.host.stand_in(call.name, dict(params or {}), results, place.line, place.label)
+            if blocks is not None:
+                level = Frame("cycle", caller.units, call.name, caller.line, place)
+                level.standin = blocks
+                return level
         if found is None:
-            searched = self.host.searched()
+            searched = self.host.cycle_searched() if call.cycle else self.host.searched()
             where = ", ".join(searched) if searched else "no program directory is configured"
             raise stmt.error(
                 A_NOT_FOUND,

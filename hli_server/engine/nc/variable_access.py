@@ -110,13 +110,11 @@ class VariableAccess(InterpreterState):
                 if var is not None:
                     return var
             return None
-        if kind == KIND_CYC:
+        if kind == KIND_CYC:  # the most local declaration: a level's own, else its callers' (PM 486171019)
             for frame in reversed(self._frames):
                 var = frame.cycle_vars.get(name)
                 if var is not None:
                     return var
-                if frame.kind == "cycle":
-                    return None
             return None
         return None
 
@@ -212,7 +210,7 @@ class VariableAccess(InterpreterState):
             )
         return value
 
-    def _cycle_param(self, ref: Ref) -> float:
+    def _cycle_param(self, ref: Ref) -> Value:
         frame = self._frames[-1]
         assert ref.number is not None
         index = int(as_number(ref.number.evaluate(self), ref.text))
@@ -314,7 +312,7 @@ class VariableAccess(InterpreterState):
                     )
                 assert ref.number is not None
                 index = int(as_number(ref.number.evaluate(self), ref.text))
-                frame.params[index] = as_number(value, ref.text)
+                frame.params[index] = value
                 return None
             if kind == KIND_VG and ref.name.startswith("KIN."):
                 self._pending.append(self._kinematic_write(frame, stmt, ref, value))
@@ -453,13 +451,25 @@ class VariableAccess(InterpreterState):
             except EvalError as exc:
                 raise NcError(exc.alarm, declaration.line, stmt.place, exc.message) from None
 
+    def set_cycle_result(self, name: str, value: float) -> None:
+        """``V.CYC.<name> = value`` of a built-in cycle (engine/cycles): into the variable the cycle sees,
+        the most local declaration (the caller's ``#VAR V.CYC.SysRetX #ENDVAR``), else a new one of the
+        cycle's own level, deleted when it returns (PM 486123531)."""
+        key = name.upper()
+        for frame in reversed(self._frames):
+            var = frame.cycle_vars.get(key)
+            if var is not None:
+                var.set([], value)
+                return
+        var = Variable(f"V.CYC.{name}", "REAL64", [], 0)
+        var.set([], value)
+        self._frames[-1].cycle_vars[key] = var
+
     def _scope(self, frame: Frame, ref: Ref) -> dict[str, Variable]:
         if ref.kind == KIND_VP:
             return self._program_vars
         if ref.kind == KIND_VS:
             return self._static_vars
-        if ref.kind == KIND_CYC:
-            if frame.kind != "cycle":
-                raise EvalError(A_DECLARATION, f"{ref.text}: V.CYC. variables are declared in cycles only")
+        if ref.kind == KIND_CYC:  # in a cycle, or in a program or subroutine that calls one (PM 486123531)
             return frame.cycle_vars
         return frame.locals

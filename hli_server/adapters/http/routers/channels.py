@@ -16,10 +16,11 @@ from hli_server.adapters.http.models import (
     ModeBody,
     OverrideBody,
     ProbeBody,
+    ProbeDeviationBody,
     ProgramBody,
     SelectBody,
 )
-from schemas.results import ProgramLoaded, ProgramSelected
+from schemas.results import ProbeDeviation, ProgramLoaded, ProgramSelected
 from schemas.wire import Mode
 
 __all__ = ["router"]
@@ -116,3 +117,21 @@ async def post_jog(host: HostDep, number: int, body: JogBody) -> AcceptedBody:
 )
 async def post_probe(host: HostDep, number: int, body: ProbeBody) -> AcceptedBody:
     return accepted(host.operator.probe(number, body.on))
+
+
+@router.get(
+    "/api/channels/{number}/probe/deviation",
+    summary="The simulated workpiece's deviation per axis [0.1 µm] (built-in measuring cycles, "
+    "docs/cycles.md)",
+)
+async def get_probe_deviation(host: HostDep, number: int) -> ProbeDeviation:
+    return host.operator.probe_deviation(number)
+
+
+@router.put(
+    "/api/channels/{number}/probe/deviation",
+    summary="Set the simulated workpiece's deviation per axis [0.1 µm]; an axis with a V.E. variable has it "
+    "written",
+)
+async def put_probe_deviation(host: HostDep, number: int, body: ProbeDeviationBody) -> ProbeDeviation:
+    return host.operator.set_probe_deviation(number, dict(body.deviation))
