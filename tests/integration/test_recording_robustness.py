@@ -130,3 +130,107 @@ def test_a_hostile_recording_ends_in_a_clear_answer_never_a_traceback(
         assert replayed.returncode == 1, said  # a difference, said as one
         assert "operator load_program" in said
     assert took < 30  # the cycle of 10^13 is refused, not run
+
+
+@pytest.fixture(scope="module")
+def late(tmp_path_factory: pytest.TempPathFactory) -> list[dict[str, Any]]:
+    """A recording started 300 cycles into a program's run: the journal, the snapshot line, its cycles."""
+    path = tmp_path_factory.mktemp("late") / "late.jsonl.gz"
+
+    async def record() -> None:
+        async with Runtime(load_machine(None), clock="stepped", http_port=None) as rt:
+            rt.operator.load_program(1, "N10 G01 X50 F600\nN20 M30\n", "slow.nc")
+            rt.operator.start(1)
+            await rt.step(300)
+            rt.session.start(path)
+            await rt.step(200)
+            rt.session.stop()
+
+    asyncio.run(record())
+    return list(read_records(path))
+
+
+def _snapshot_line(r: list[dict[str, Any]]) -> dict[str, Any]:
+    return r[_first(r, lambda x: "snapshot" in x)]
+
+
+def _second_snapshot(r: list[dict[str, Any]]) -> None:
+    line = _snapshot_line(r)
+    r.insert(r.index(line) + 1, copy.deepcopy(line))
+
+
+def _snapshot_cycle(r: list[dict[str, Any]]) -> None:
+    line = _snapshot_line(r)
+    line["snapshot"]["cycle"] = line["c"] + 1
+
+
+def _snapshot_objects(r: list[dict[str, Any]]) -> None:
+    _snapshot_line(r)["snapshot"]["objects"] = "AAAA"
+
+
+def _snapshot_external(r: list[dict[str, Any]]) -> None:
+    _snapshot_line(r)["external"] = "not base64!"
+
+
+def _snapshot_code(r: list[dict[str, Any]]) -> None:
+    state = _snapshot_line(r)["snapshot"]
+    state["objects"][state["root"]["r"]]["state"]["cycle"] = {
+        "p": {"fn": "os:system"},
+        "a": ["touch /tmp/hli-forged-snapshot-ran"],
+        "k": [],
+    }
+
+
+def _announced_none(r: list[dict[str, Any]]) -> None:
+    r[0]["snapshot"] = None
+
+
+@pytest.mark.parametrize(
+    ("change", "said"),
+    [
+        (_second_snapshot, "snapshot: a second snapshot line"),
+        (_snapshot_cycle, "snapshot.cycle: the line's cycle"),
+        (_snapshot_objects, "snapshot.objects: the list of objects"),
+        (_snapshot_external, "external: the V.E. fields' bytes are no base64"),
+        (_announced_none, "snapshot: a snapshot line in a recording whose header announces none"),
+        (_snapshot_code, None),
+    ],
+)
+def test_a_hostile_snapshot_line_ends_in_a_clear_answer_never_code(
+    tmp_path: Path,
+    late: list[dict[str, Any]],
+    change: Callable[[list[dict[str, Any]]], None],
+    said: str | None,
+) -> None:
+    """The snapshot line of a recording started in a running server (issue 37, item 2) is input like any
+    other: its envelope is checked with every line (``record show`` exit 2, ``replay`` CANNOT REPLAY, with
+    file, line and field), and its objects are data the replay's restore reads with engine names only: a
+    partial of ``os:system`` is refused with its line, never called."""
+    records = copy.deepcopy(late)
+    change(records)
+    path = tmp_path / "hostile.jsonl.gz"
+    path.write_bytes(gzip_member("".join(json.dumps(r) + "\n" for r in records)))
+    shown = subprocess.run(
+        [*hli_server_cmd(), "record", "show", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    replayed = subprocess.run(
+        [*hli_server_cmd(), "replay", str(path)], capture_output=True, text=True, timeout=120, check=False
+    )
+    for result in (shown, replayed):
+        assert "Traceback" not in result.stdout + result.stderr, result.stdout + result.stderr
+    told = replayed.stdout + replayed.stderr
+    assert replayed.returncode == 3, told
+    assert "CANNOT REPLAY" in told
+    assert f"{path}: line " in told
+    if said is not None:
+        assert shown.returncode == 2, shown.stdout + shown.stderr
+        assert said in shown.stderr, shown.stderr
+        assert said in told, told
+    else:
+        assert shown.returncode == 0, shown.stderr
+        assert "snapshot: the snapshot is malformed: 'os:system' is no function of the engine" in told, told
+        assert not Path("/tmp/hli-forged-snapshot-ran").exists()
