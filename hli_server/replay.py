@@ -341,7 +341,7 @@ class Feeder:
         self._events: list[Event] = []
         self._expected_events: list[Any] = []
         self._stop_after_cycle = False
-        self._failure: CannotReplayError | None = None
+        self._failure: CannotReplayError | SnapshotRestoreError | None = None
 
     # --- set-up ----------------------------------------------------------------------------------
     def bind(self, runtime: Runtime) -> None:
@@ -474,6 +474,18 @@ class Feeder:
 
     def note_fault(self, change: dict[str, Any]) -> None:
         pass
+
+    def restored_state_failed(self, exc: Exception) -> bool:
+        """The runtime's ``cycle_failure_hook`` of a replay from a snapshot: the engine failing on the
+        restored state (a damaged or forged snapshot that restore() took: an attribute of the wrong kind)
+        ends the replay after the cycle as a snapshot that does not fit, never as alarm 919000."""
+        if self._failure is None:
+            cycle = self.runtime.machine.cycle if self.runtime is not None else 0
+            self._failure = SnapshotRestoreError(
+                f"the restored state fails the engine in cycle {cycle}: {type(exc).__name__}: "
+                f"{str(exc)[:300]}"
+            )
+        return True
 
     def before_cycle(self, cycle: int) -> None:
         """The recorded inputs of ``cycle``, before it runs. Called inside the runtime's cycle, whose
@@ -868,17 +880,29 @@ async def _run(
     runtime.machine.cycle_programs = dict.fromkeys(runtime.machine.cycle_programs, feeder)
     if start is not None:
         restore(start.get("snapshot") or {}, runtime.machine)
+        runtime.cycle_failure_hook = feeder.restored_state_failed
     if prepare is not None:
         prepare(runtime.machine)
-    async with runtime:
-        feeder.bind(runtime)
-        with contextlib.suppress(_StopReplayError):
-            while True:
-                cycle = runtime.machine.cycle
-                end = feeder.horizon(cycle)
-                if end <= cycle:
-                    break
-                await runtime.step(end - cycle)
+    try:
+        async with runtime:
+            feeder.bind(runtime)
+            with contextlib.suppress(_StopReplayError):
+                while True:
+                    cycle = runtime.machine.cycle
+                    end = feeder.horizon(cycle)
+                    if end <= cycle:
+                        break
+                    await runtime.step(end - cycle)
+    except (CannotReplayError, RecordingError, SnapshotRestoreError):
+        raise
+    except Exception as exc:
+        if start is None:
+            raise
+        # the runtime's start (the image published from the machine) on a restored state of the wrong
+        # kinds: the snapshot does not fit, as restore() says of what it sees itself
+        raise SnapshotRestoreError(
+            f"the restored state fails the runtime: {type(exc).__name__}: {str(exc)[:300]}"
+        ) from None
 
 
 def _replayable(line: int, record: dict[str, Any]) -> str | None:
