@@ -23,6 +23,7 @@ from hli_server.recording.format import gzip_member, read_records
 from hli_server.recording.tap import RecordingOptions
 from hli_server.runtime import Runtime
 from tests.integration.servers import hli_server_cmd
+from tests.recordings import record_late
 
 pytestmark = [pytest.mark.slow, pytest.mark.req("B-02")]
 
@@ -42,6 +43,25 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> list[dict[str, Any]]:
 
     asyncio.run(record())
     return list(read_records(path))
+
+
+def _show_and_replay(
+    tmp_path: Path, recorded: list[dict[str, Any]], change: Callable[[list[dict[str, Any]]], None]
+) -> tuple[Path, subprocess.CompletedProcess[str], subprocess.CompletedProcess[str]]:
+    """The recording's lines changed, written, then ``record show`` and ``replay`` of it: no traceback."""
+    records = copy.deepcopy(recorded)
+    change(records)
+    path = tmp_path / "hostile.jsonl.gz"
+    path.write_bytes(gzip_member("".join(json.dumps(r) + "\n" for r in records)))
+    done = [
+        subprocess.run(
+            [*hli_server_cmd(), *command, str(path)], capture_output=True, text=True, timeout=120, check=False
+        )
+        for command in (("record", "show"), ("replay",))
+    ]
+    for result in done:
+        assert "Traceback" not in result.stdout + result.stderr, result.stdout + result.stderr
+    return path, done[0], done[1]
 
 
 def _first(records: list[dict[str, Any]], test: Callable[[dict[str, Any]], bool]) -> int:
@@ -96,24 +116,9 @@ def test_a_hostile_recording_ends_in_a_clear_answer_never_a_traceback(
     10^13 ran the replay past any bound. Now each is refused with the file, the line and the field
     (``record show``: exit 2; ``replay``: CANNOT REPLAY, exit 3), before the first cycle runs; a load
     request the replay refuses (``../``) is a difference (exit 1) of that request, not a traceback."""
-    records = copy.deepcopy(recorded)
-    change(records)
-    path = tmp_path / "hostile.jsonl.gz"
-    path.write_bytes(gzip_member("".join(json.dumps(r) + "\n" for r in records)))
-    shown = subprocess.run(
-        [*hli_server_cmd(), "record", "show", str(path)],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
     began = time.monotonic()
-    replayed = subprocess.run(
-        [*hli_server_cmd(), "replay", str(path)], capture_output=True, text=True, timeout=60, check=False
-    )
+    path, shown, replayed = _show_and_replay(tmp_path, recorded, change)
     took = time.monotonic() - began
-    for result in (shown, replayed):
-        assert "Traceback" not in result.stdout + result.stderr, result.stdout + result.stderr
     if show is not None:
         assert shown.returncode == 2, shown.stdout + shown.stderr
         assert f"{path}: line " in shown.stderr
@@ -136,18 +141,7 @@ def test_a_hostile_recording_ends_in_a_clear_answer_never_a_traceback(
 def late(tmp_path_factory: pytest.TempPathFactory) -> list[dict[str, Any]]:
     """A recording started 300 cycles into a program's run: the journal, the snapshot line, its cycles."""
     path = tmp_path_factory.mktemp("late") / "late.jsonl.gz"
-
-    async def record() -> None:
-        async with Runtime(load_machine(None), clock="stepped", http_port=None) as rt:
-            rt.operator.load_program(1, "N10 G01 X50 F600\nN20 M30\n", "slow.nc")
-            rt.operator.start(1)
-            await rt.step(300)
-            rt.session.start(path)
-            await rt.step(200)
-            rt.session.stop()
-
-    asyncio.run(record())
-    return list(read_records(path))
+    return record_late(path, "N10 G01 X50 F600\nN20 M30\n", 300, 200)
 
 
 def _snapshot_line(r: list[dict[str, Any]]) -> dict[str, Any]:
@@ -230,22 +224,7 @@ def test_a_hostile_snapshot_line_ends_in_a_clear_answer_never_code(
     partial of ``os:system`` is refused with its line, never called; a state of the wrong kinds (which
     restore cannot know: the engine's attributes carry no types at run time) fails the engine's first
     cycle or the runtime's start, and the replay says so with the line, never alarm 919000."""
-    records = copy.deepcopy(late)
-    change(records)
-    path = tmp_path / "hostile.jsonl.gz"
-    path.write_bytes(gzip_member("".join(json.dumps(r) + "\n" for r in records)))
-    shown = subprocess.run(
-        [*hli_server_cmd(), "record", "show", str(path)],
-        capture_output=True,
-        text=True,
-        timeout=60,
-        check=False,
-    )
-    replayed = subprocess.run(
-        [*hli_server_cmd(), "replay", str(path)], capture_output=True, text=True, timeout=120, check=False
-    )
-    for result in (shown, replayed):
-        assert "Traceback" not in result.stdout + result.stderr, result.stdout + result.stderr
+    path, shown, replayed = _show_and_replay(tmp_path, late, change)
     told = replayed.stdout + replayed.stderr
     assert replayed.returncode == 3, told
     assert "CANNOT REPLAY" in told

@@ -578,25 +578,12 @@ def test_fuzz_snapshots_end_in_a_verdict_or_a_clear_error(tmp_path: Path) -> Non
     import copy
     import json as _json
 
-    from hli_server.recording.format import gzip_member, read_records
+    from hli_server.recording.format import gzip_member
     from hli_server.replay import Verdict, replay
-    from hli_server.runtime import Runtime
+    from tests.recordings import record_late
 
-    base = tmp_path / "late.jsonl.gz"
-
-    async def record() -> None:
-        async with Runtime(load_machine(None), clock="stepped", http_port=None) as rt:
-            rt.operator.load_program(
-                1, "N10 $FOR P1 = 1, 50\nN20 G01 X[P1] F6000\nN30 $ENDFOR\nN40 M30\n", "f.nc"
-            )
-            rt.operator.start(1)
-            await rt.step(300)
-            rt.session.start(base)
-            await rt.step(100)
-            rt.session.stop()
-
-    asyncio.run(record())
-    records = list(read_records(base))
+    program = "N10 $FOR P1 = 1, 50\nN20 G01 X[P1] F6000\nN30 $ENDFOR\nN40 M30\n"
+    records = record_late(tmp_path / "late.jsonl.gz", program, 300, 100)
     at = next(k for k, r in enumerate(records) if k > 0 and "snapshot" in r)
     seed = fuzz.seed_for("snapshots")
     rng = random.Random(seed)
