@@ -221,7 +221,7 @@ class StandInRun:
     first block asked for after the restore runs the stand-in again from its start, answering its reads
     from the log and dropping the ``taken`` blocks it already gave (its writes took effect then, the
     snapshot holds them), then goes on live: the same blocks, as the generator is deterministic in what it
-    reads (docs/record-replay.md, "A cycle running when the recording starts")."""
+    reads (docs/record-replay.md, "A recording started in a running server")."""
 
     snapshot_transient: ClassVar[tuple[str, ...]] = ("_blocks",)
 
