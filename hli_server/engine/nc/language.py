@@ -399,10 +399,24 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
 }
 """Every ``#`` word the front end knows, by its first word (``#CONTROL AREA`` is the word parser's,
 ``nc/parser.py``); any other is alarm 910109."""
-UNKNOWN_HASH_HINT: Final = (
-    "the commands simulated here: #CONTROL AREA, #VAR/#ENDVAR, #MSG, #FILE NAME, #FLUSH, #IF/#ELSE/#ENDIF, "
-    "#COMMENT BEGIN/END (docs/nc-language.md)"
-)
+_SHOWN_AS: Final = {"FILE": "#FILE NAME", "COMMENT": "#COMMENT BEGIN/END"}
+"""How 910109's list writes the commands whose word alone is not how they are written."""
+
+
+def _simulated_spellings() -> str:
+    """Every spelling :data:`HASH_COMMANDS` simulates, sorted (the table's order follows a set's, which
+    changes from one process to the next), after the word parser's and the reader's own (``#CONTROL AREA``,
+    ``#VAR``)."""
+    shown = sorted(
+        f"#{name} {form}" if form else _SHOWN_AS.get(name, f"#{name}")
+        for name, rule in HASH_COMMANDS.items()
+        for form in rule.forms
+    )
+    return ", ".join(["#CONTROL AREA", "#VAR/#ENDVAR", *shown])
+
+
+UNKNOWN_HASH_HINT: Final = f"the commands simulated here: {_simulated_spellings()} (docs/nc-language.md)"
+"""910109's list, made from the table, so that a command simulated later is named too (issue 37)."""
 SLOPE_TYPES: Final = ("STEP", "TRAPEZ", "SIN2", "HSC")
 """``#SLOPE [TYPE=<ident>]``'s profiles (P-CHAN-00071's 0..3)."""
 MSG_OPTIONS: Final = (
