@@ -70,3 +70,18 @@ def test_with_the_contour_selected_the_program_takes_the_other_branch(
     assert trace[Z].min() == 0  # no pocket: Z never goes down
     assert trace[X].max() > 3 * 30 * 10_000  # the third part's circle reaches beyond X = 90 mm
     assert hli.runtime.machine.external.read("PART_COUNT", None) == 3
+
+
+@pytest.mark.parametrize("plc_transport", ["shm"], indirect=True)
+def test_run_again_the_plc_counts_the_new_runs_parts_from_zero(hli: Harness, plc_transport: object) -> None:
+    """Issue 37, item 5: ``hli-plc ve-mode`` run twice reported "6 parts": the variable keeps the first
+    run's count. The program sets ``V.E.PART_COUNT`` = 0 at its start; the PLC reports from its release on."""
+    first, _ = run(hli, plc_transport, mode=1)
+    assert first.log[-1][1] == "program finished: 3 parts", first.log
+    second, _ = run(hli, plc_transport, mode=2)
+    assert not second.failed, second.log
+    assert [t for _, t in second.log if t.startswith("part")] == [
+        f"part {n} done (V.E.PART_COUNT = {n})" for n in (1, 2, 3)
+    ]
+    assert second.log[-1][1] == "program finished: 3 parts"
+    assert hli.runtime.machine.external.read("PART_COUNT", None) == 3

@@ -276,7 +276,8 @@ def _draw_marks(ax: Any, scene: Mapping[str, Any], i: int, j: int) -> None:
             color=_REFUSED,
             markeredgecolor="black",
             linestyle="none",
-            label=f"violation ({_point_text(names, violation['position'])}), area {violation.get('area')}",
+            label=f"violation ({_point_text(names, violation['position'])}), "
+            + (violation.get("cause") or f"area {violation.get('area')}"),
         )
     stop = scene.get("stop")
     if stop is not None and stop[j] is not None:

@@ -13,17 +13,27 @@ every ``outputs_every`` cycles from the window's first in version 2), and the ev
 The first difference ends the replay (``all_differences``: every difference is counted, the first
 ``max_differences`` kept).
 
+Where it starts: a recording started in a running server carries a snapshot of the machine where it
+started (format version 4, :mod:`hli_server.recording.snapshot`); the replay puts it into its machine
+and runs the recording's cycles only, so its cost is the recording's length. Where the snapshot is of
+another engine (another version, an edited engine), cannot be restored, or is missing (its state could
+not be kept, an older recording), the replay runs the recording's input journal from the server's first
+cycle instead, and says so; ``from_journal`` asks for that. The report counts the cycles replayed and the
+cycles compared (the recording's) apart.
+
 Verdicts and exit statuses: ``pass`` 0, ``differ`` 1, ``cannot replay`` 3 (2 is a usage error): a file that
 is no recording or of a newer format, a recording whose start state cannot be rebuilt (started in a
-running server after its input journal was dropped), a configuration that this version refuses or that
-differs from the one given, signals this version's image no longer has, or another hli-server version
-when ``same_version`` is asked for. Without ``same_version`` another version replays (what a regression
-test is for) and the report names both versions.
+running server after its input journal was dropped, and its snapshot of no use here), a configuration
+that this version refuses or that differs from the one given, signals this version's image no longer
+has, or another hli-server version when ``same_version`` is asked for. Without ``same_version`` another
+version replays (what a regression test is for) and the report names both versions.
 """
 
 from __future__ import annotations
 
 import asyncio
+import base64
+import binascii
 import contextlib
 import functools
 import inspect
@@ -49,6 +59,7 @@ from hli_server.recording.format import (
     signal_pattern,
     text_bytes,
 )
+from hli_server.recording.snapshot import SnapshotRestoreError, engine_fingerprint, restore
 from hli_server.recording.tap import CYCLE_MODULUS, OPERATOR_REQUESTS, _finite, server_info
 from schemas.layout import Direction, Signal, SignalType
 from schemas.wire import Mode
@@ -134,8 +145,11 @@ class ReplayReport:
     counts: dict[str, list[int]] = field(default_factory=dict)
     """signal -> [differences, first cycle, last cycle] (all of them, also beyond max_differences)."""
     first_cycle: int = 1
+    """the first cycle the replay ran: the recording's first after a snapshot, else 1 (the journal)"""
     window_start: int = 1
     last_cycle: int = 0
+    started_from: str = "journal"
+    """``snapshot`` (the recorded state where the recording began) or ``journal`` (cycle 1 on)"""
     t_a_us: int = 1000
     wall_s: float = 0.0
     recorded_with: dict[str, Any] = field(default_factory=dict)
@@ -152,22 +166,35 @@ class ReplayReport:
 
     @property
     def cycles(self) -> int:
+        """The cycles the replay ran (from :attr:`first_cycle`)."""
         return max(0, self.last_cycle - self.first_cycle + 1)
+
+    @property
+    def cycles_compared(self) -> int:
+        """The recording's cycles: from its window's first on."""
+        return max(0, self.last_cycle - self.window_start + 1)
 
     def text(self, *, limit: int = 20) -> str:
         lines: list[str] = []
         if self.verdict is Verdict.CANNOT:
             lines.append(f"replay of {self.path}: CANNOT REPLAY: {self.reason}")
         else:
-            rate = self.last_cycle / self.wall_s if self.wall_s > 0 else 0.0
-            compared = max(0, self.last_cycle - self.window_start + 1)
-            head = (
+            replayed = self.cycles
+            rate = replayed / self.wall_s if self.wall_s > 0 else 0.0
+            compared = self.cycles_compared
+            start = (
+                f"from the snapshot of cycle {self.first_cycle - 1:,}"
+                if self.started_from == "snapshot"
+                else f"from the input journal (cycles {self.first_cycle:,}..{self.last_cycle:,})"
+            )
+            lines.append(
                 f"replay of {self.path}: {'PASS' if self.verdict is Verdict.PASS else 'DIFFER'}: "
                 f"{compared:,} cycles compared (cycles {self.window_start:,}..{self.last_cycle:,}, "
-                f"{compared * self.t_a_us / 1e6:.3f} s of machine time) in {self.wall_s:.2f} s "
-                f"({rate:,.0f} cycles/s)"
+                f"{compared * self.t_a_us / 1e6:.3f} s of machine time)"
             )
-            lines.append(head)
+            lines.append(
+                f"{replayed:,} cycles replayed {start} in {self.wall_s:.2f} s ({rate:,.0f} cycles/s)"
+            )
             first = self.first
             if first is not None:
                 lines.append(f"first difference: {first}")
@@ -197,7 +224,11 @@ class ReplayReport:
             "exit_status": self.exit_status,
             "reason": self.reason,
             "window_start": self.window_start,
+            "first_cycle": self.first_cycle,
             "last_cycle": self.last_cycle,
+            "started_from": self.started_from,
+            "cycles_replayed": self.cycles,
+            "cycles_compared": self.cycles_compared,
             "t_a_us": self.t_a_us,
             "wall_s": round(self.wall_s, 3),
             "first": self.first.to_json() if self.first else None,
@@ -278,8 +309,12 @@ class Feeder:
         all_differences: bool,
         max_differences: int,
         until: int | None,
+        start: dict[str, Any] | None = None,
     ) -> None:
         self.header = header
+        self.start = start
+        """the snapshot record the replay starts from (None: the journal, from cycle 1)"""
+        self._write_inputs = False
         self._records = records
         self.info = info
         self.report = report
@@ -306,7 +341,7 @@ class Feeder:
         self._events: list[Event] = []
         self._expected_events: list[Any] = []
         self._stop_after_cycle = False
-        self._failure: CannotReplayError | None = None
+        self._failure: CannotReplayError | SnapshotRestoreError | None = None
 
     # --- set-up ----------------------------------------------------------------------------------
     def bind(self, runtime: Runtime) -> None:
@@ -351,6 +386,26 @@ class Feeder:
             self.out_position[k] for k in follow if 0 <= k < len(recorded) and self.out_position[k] >= 0
         ]
         runtime.machine.event_listeners.append(self._events.append)
+        if self.start is not None:
+            self._start_image(runtime, self.start)
+
+    def _start_image(self, runtime: Runtime, start: dict[str, Any]) -> None:
+        """What the snapshot record holds besides the machine: the PLC->CNC half the last cycle latched
+        (written into the image before the first cycle), the V.E. sync's bytes, the stalls in effect."""
+        flat = start.get("in")
+        if not isinstance(flat, list):
+            raise CannotReplayError("the recording's snapshot holds no PLC->CNC half")
+        self._apply_inputs(flat)
+        self._write_inputs = True
+        external = start.get("external")
+        if external is not None:
+            try:
+                self.image.external_raw = base64.b64decode(str(external), validate=True)
+            except (ValueError, binascii.Error) as exc:
+                raise CannotReplayError(f"the recording's snapshot: its V.E. fields: {exc}") from None
+        for fault in start.get("faults") or []:
+            if isinstance(fault, dict) and isinstance(fault.get("spec"), dict):
+                self._apply_fault({"fault": "set", "id": fault.get("id", -1), "spec": fault["spec"]})
 
     def _map(self, layout: Any, listed: Any, direction: Direction, what: str) -> list[Signal | None]:
         if not isinstance(listed, list):
@@ -420,6 +475,18 @@ class Feeder:
     def note_fault(self, change: dict[str, Any]) -> None:
         pass
 
+    def restored_state_failed(self, exc: Exception) -> bool:
+        """The runtime's ``cycle_failure_hook`` of a replay from a snapshot: the engine failing on the
+        restored state (a damaged or forged snapshot that restore() took: an attribute of the wrong kind)
+        ends the replay after the cycle as a snapshot that does not fit, never as alarm 919000."""
+        if self._failure is None:
+            cycle = self.runtime.machine.cycle if self.runtime is not None else 0
+            self._failure = SnapshotRestoreError(
+                f"the restored state fails the engine in cycle {cycle}: {type(exc).__name__}: "
+                f"{str(exc)[:300]}"
+            )
+        return True
+
     def before_cycle(self, cycle: int) -> None:
         """The recorded inputs of ``cycle``, before it runs. Called inside the runtime's cycle, whose
         failures become alarm 919000: what stops the replay here is raised after the cycle instead."""
@@ -448,7 +515,8 @@ class Feeder:
                     self.files.setdefault(str(record["file"]), deque()).append(text)
             elif "fault" in record:
                 self._apply_fault(record)
-        if changed:  # the half as the recorded cycle latched it, byte for byte (no door checks it again)
+        if changed or self._write_inputs:  # the half as the recorded cycle latched it, byte for byte
+            self._write_inputs = False
             offset = self.image.plan.p2c_offset
             self.image.buffer[offset : offset + self.p2c_size] = self.expected_in
 
@@ -663,17 +731,25 @@ async def replay(
     max_differences: int = 1000,
     same_version: bool = False,
     prepare: Callable[[Machine], None] | None = None,
+    from_journal: bool = False,
 ) -> ReplayReport:
     """Replay ``path`` (module docstring); never raises for what a recording holds: the report says.
 
-    ``prepare(machine)`` is called once the machine is built, before its first cycle: a test can change
-    the engine there (a drive parameter, a monitor) and see whether the recording notices."""
-    from hli_server.runtime import Runtime, memory_image
-
+    ``prepare(machine)`` is called once the machine is built (and holds the recording's snapshot), before
+    its first cycle: a test can change the engine there (a drive parameter, a monitor) and see whether the
+    recording notices. ``from_journal``: start from the input journal (cycle 1) although the recording
+    holds a snapshot."""
     path = Path(path)
     report = ReplayReport(path=str(path))
     began = time.perf_counter()
     info = Records()
+    options: dict[str, Any] = {
+        "signals": signals,
+        "events": events,
+        "all_differences": all_differences,
+        "max_differences": max_differences,
+        "until": until,
+    }
     try:
         # every line checked before the first cycle runs: a bad line anywhere (a cycle out of order, an
         # index beyond the header's signals, a field of the wrong kind) is refused with its place, and the
@@ -684,51 +760,27 @@ async def replay(
         report.recorded_with = dict(header.get("server") or {})
         report.t_a_us = int(header.get("t_a_us", 1000))
         report.window_start = int(header.get("window_start", 1))
-        journal = header.get("journal") or {}
-        if not journal.get("complete", True):
-            raise CannotReplayError(
-                f"the recording began at cycle {report.window_start} in a running server whose input journal "
-                f"had been dropped at cycle {journal.get('lost_at')} (--journal-limit-mb): the state at its "
-                "start cannot be rebuilt; record from the start (hli-server run --record FILE)"
-            )
         if same_version and report.recorded_with.get("version") != report.replayed_with.get("version"):
             raise CannotReplayError(
                 f"version mismatch: recorded with hli-server {report.recorded_with.get('version')}, this is "
                 f"{report.replayed_with.get('version')} (--same-version)"
             )
         machine_config = _recorded_config(header, config)
-        feeder = Feeder(
-            header,
-            records,
-            info,
-            report,
-            signals=signals,
-            events=events,
-            all_differences=all_differences,
-            max_differences=max_differences,
-            until=until,
-        )
-        runtime = Runtime(
-            machine_config,
-            clock="stepped",
-            http_port=None,
-            adapters=[],
-            image_factory=memory_image,
-            read_program=feeder.read_file,
-        )
-        runtime.session = feeder  # type: ignore[assignment]  # the replay's tap: feeds and compares
-        runtime.machine.programs = feeder  # the subprograms the recorded session found
-        if prepare is not None:
-            prepare(runtime.machine)
-        async with runtime:
-            feeder.bind(runtime)
-            with contextlib.suppress(_StopReplayError):
-                while True:
-                    cycle = runtime.machine.cycle
-                    end = feeder.horizon(cycle)
-                    if end <= cycle:
-                        break
-                    await runtime.step(end - cycle)
+        start = _snapshot_record(header, records, report, from_journal)
+        if start is not None:
+            line = info.lines
+            try:
+                await _run(machine_config, header, records, info, report, options, prepare, start)
+            except SnapshotRestoreError as exc:
+                # the fingerprint says this engine wrote it: a snapshot it cannot restore is damaged or
+                # forged (docs/record-replay.md); the input journal may still serve, if the user wants
+                raise RecordingError(
+                    f"{path}: line {line}: snapshot: {exc} (hli-server replay --from-journal replays the "
+                    "recording from its input journal instead)"
+                ) from None
+        else:
+            report.started_from, report.first_cycle = "journal", 1
+            await _run(machine_config, header, records, info, report, options, prepare, None)
     except CannotReplayError as exc:
         report.verdict = Verdict.CANNOT
         report.reason = str(exc)
@@ -742,6 +794,115 @@ async def replay(
         report.notes.append("the recording holds no cycle")
     report.notes.extend(info.notes)
     return report
+
+
+def _journal_or_cannot(header: dict[str, Any], report: ReplayReport, why: str) -> None:
+    """The replay starts from the input journal because of ``why`` (a note), or cannot (the journal of a
+    recording started in a running server was dropped)."""
+    journal = header.get("journal") or {}
+    if not journal.get("complete", True):
+        raise CannotReplayError(
+            f"the recording began at cycle {report.window_start} in a running server whose input journal "
+            f"had been dropped at cycle {journal.get('lost_at')} (--journal-limit-mb), and {why}: the state "
+            "at its start cannot be rebuilt; replay it with the hli-server that made it, or record from the "
+            "start (hli-server run --record FILE)"
+        )
+    if report.window_start > 1:
+        report.notes.append(
+            f"{why}: the replay runs the recording's input journal from cycle 1 "
+            f"({report.window_start - 1:,} cycles before the recording's first)"
+        )
+
+
+def _snapshot_record(
+    header: dict[str, Any], records: Iterator[dict[str, Any]], report: ReplayReport, from_journal: bool
+) -> dict[str, Any] | None:
+    """The snapshot record to start from (the journal before it read past), or None: start from the
+    journal (the notes say why, or CannotReplayError when neither serves)."""
+    snapshot = header.get("snapshot")
+    note = header.get("snapshot_note")
+    if snapshot is None:
+        if report.window_start > 1:
+            why = f"the recording holds no snapshot ({note})" if note else "the recording holds no snapshot"
+            _journal_or_cannot(header, report, why)
+        return None
+    if not isinstance(snapshot, dict):
+        raise CannotReplayError("the recording's header: its snapshot entry is no object")
+    if from_journal:
+        _journal_or_cannot(header, report, "the recording's snapshot is left aside (--from-journal)")
+        return None
+    if snapshot.get("fingerprint") != engine_fingerprint():
+        _journal_or_cannot(
+            header,
+            report,
+            "the recording's snapshot is of another engine (recorded with hli-server "
+            f"{report.recorded_with.get('version')}, whose engine sources differ from this one's)",
+        )
+        return None
+    for record in records:  # the journal before it: the snapshot holds what it built
+        if "snapshot" in record:
+            if record.get("c") != report.window_start - 1:
+                raise CannotReplayError(
+                    f"the recording's snapshot is of cycle {record.get('c')}, its window begins at cycle "
+                    f"{report.window_start}"
+                )
+            report.started_from, report.first_cycle = "snapshot", report.window_start
+            return record
+    raise CannotReplayError("the recording's header announces a snapshot, and the file holds none")
+
+
+async def _run(
+    machine_config: MachineConfig,
+    header: dict[str, Any],
+    records: Iterator[dict[str, Any]],
+    info: Records,
+    report: ReplayReport,
+    options: dict[str, Any],
+    prepare: Callable[[Machine], None] | None,
+    start: dict[str, Any] | None,
+) -> None:
+    """Build the replay's runtime (from the snapshot, when ``start`` is one) and run it to the end or the
+    first difference. SnapshotRestoreError when the snapshot does not fit this engine (no cycle ran)."""
+    from hli_server.runtime import Runtime, memory_image
+
+    feeder = Feeder(header, records, info, report, start=start, **options)
+    runtime = Runtime(
+        machine_config,
+        clock="stepped",
+        http_port=None,
+        adapters=[],
+        image_factory=memory_image,
+        read_program=feeder.read_file,
+    )
+    runtime.session = feeder  # type: ignore[assignment]  # the replay's tap: feeds and compares
+    runtime.machine.programs = feeder  # the subprograms the recorded session found
+    # and the cycle files its channels' cycle directories gave (noted in the same stream, find by find)
+    runtime.machine.cycle_programs = dict.fromkeys(runtime.machine.cycle_programs, feeder)
+    if start is not None:
+        restore(start.get("snapshot") or {}, runtime.machine)
+        runtime.cycle_failure_hook = feeder.restored_state_failed
+    if prepare is not None:
+        prepare(runtime.machine)
+    try:
+        async with runtime:
+            feeder.bind(runtime)
+            with contextlib.suppress(_StopReplayError):
+                while True:
+                    cycle = runtime.machine.cycle
+                    end = feeder.horizon(cycle)
+                    if end <= cycle:
+                        break
+                    await runtime.step(end - cycle)
+    except (CannotReplayError, RecordingError, SnapshotRestoreError):
+        raise
+    except Exception as exc:
+        if start is None:
+            raise
+        # the runtime's start (the image published from the machine) on a restored state of the wrong
+        # kinds: the snapshot does not fit, as restore() says of what it sees itself
+        raise SnapshotRestoreError(
+            f"the restored state fails the runtime: {type(exc).__name__}: {str(exc)[:300]}"
+        ) from None
 
 
 def _replayable(line: int, record: dict[str, Any]) -> str | None:
@@ -761,10 +922,20 @@ def _replayable(line: int, record: dict[str, Any]) -> str | None:
         except (TypeError, ValueError) as exc:
             return f"args: operator request {name}: {exc}"
     if record.get("fault") == "set" and (record.get("spec") or {}).get("kind") == "stall":
-        try:
-            FaultSpec.model_validate(record["spec"])
-        except ValueError as exc:
-            return f"spec: {' '.join(str(exc).split())[:300]}"
+        return _stall_problem("spec", record["spec"])
+    for k, fault in enumerate(record.get("faults") or () if "snapshot" in record else ()):
+        problem = _stall_problem(f"faults[{k}].spec", {**fault["spec"], "kind": "stall"})
+        if problem is not None:
+            return problem
+    return None
+
+
+def _stall_problem(field: str, spec: dict[str, Any]) -> str | None:
+    """A stall fault the replay cannot set (``field``: where it is in the line), or None."""
+    try:
+        FaultSpec.model_validate(spec)
+    except ValueError as exc:
+        return f"{field}: {' '.join(str(exc).split())[:300]}"
     return None
 
 

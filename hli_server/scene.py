@@ -16,8 +16,9 @@ The inputs are what ``check`` has at hand (:func:`build_scene`): the area table 
 (``AreaMonitor.areas_json`` / ``channel_areas(m, n).to_json()``), the recorded path points (one value
 per channel axis), the channel's axis names and main axes, the alarms as ``check --format json``
 lists them (the params of 120484 / 120486 / 912000 / 912001 carry the refused block's ``start``,
-``end``, ``arc`` and the exact ``intersection``; those of 50961 / 50962 and an ``ON`` refusal the
-``position``), and the point where the axes stopped.
+``end``, ``arc`` and the exact ``intersection``, those of the software limits' 120002 / 120003 the same
+with the ``axis`` whose limit the block would cross and the point where it would; those of 50961 / 50962
+and an ``ON`` refusal the ``position``), and the point where the axes stopped.
 
 Scene JSON (version 1)
 ----------------------
@@ -48,9 +49,13 @@ point (a side view plots ``h`` over ``s``: the path's footprint unrolled, plunge
       }],
       "path": [[[a, b, h, s], ...]],           # polylines of the path the axes travelled
       "refused": null | {"alarm": 912001, "line": 7, "block": "N70", "area": 4, "kind": "PROT",
+                         "axis": null, "cause": "area 4",
                          "points": [[a, b, h, s], ...]},  # the refused block (arcs sampled)
-      "violation": null | {"alarm": 912001, "area": 4, "kind": "PROT", "point": [a, b, h, s],
-                           "position": {"X": -75.0, "Y": 75.0, "Z": 0.0}},
+      "violation": null | {"alarm": 912001, "area": 4, "kind": "PROT", "axis": null, "cause": "area 4",
+                           "point": [a, b, h, s], "position": {"X": -75.0, "Y": 75.0, "Z": 0.0}},
+                           # a software limit's refusal (120002/120003): "area" and "kind" null, "axis"
+                           # the axis whose limit the block would cross, "point" where it would, "cause"
+                           # "the software limit of X (600.0000 mm)"
       "stop": null | [a, b, h, s],             # where the axes came to rest after an error
       "position": null | [a, b, h, s],         # live: where the axes are now (the TCP)
       "ahead": [[a, b, h, s], ...]             # live: the programmed path ahead, from ``position``
@@ -401,6 +406,16 @@ def _violation(alarms: Iterable[Mapping[str, Any]]) -> Mapping[str, Any] | None:
     return None
 
 
+def _cause(params: Mapping[str, Any]) -> str:
+    """What refused the block, in words for a legend: the area, or the software limit of an axis."""
+    if params.get("area") is not None:
+        return f"area {params['area']}"
+    limit = params.get("limit")
+    if params.get("axis") is not None and isinstance(limit, int | float):
+        return f"the software limit of {params['axis']} ({limit / _SCALE:.4f} mm)"
+    return "the alarm"
+
+
 def _nearest_s(piece: _Piece, point: Sequence[float], ia: int, ib: int) -> float:
     """``s`` of the point of the polyline closest to ``point`` in the base plane."""
     best, best_s = math.inf, piece.s[0]
@@ -568,6 +583,8 @@ def build_scene(
                 "alarm": alarm.get("id"),
                 "area": params.get("area"),
                 "kind": params.get("kind"),
+                "axis": params.get("axis"),
+                "cause": _cause(params),
                 "point": [where[ia], where[ib], where[ih] if ih is not None else None, s_at],
                 "position": dict(zip(names, where, strict=True)),
             }
@@ -583,6 +600,8 @@ def build_scene(
             "block": alarm.get("block"),
             "area": params.get("area"),
             "kind": params.get("kind"),
+            "axis": params.get("axis"),
+            "cause": _cause(params),
             "points": [view(p, s) for p, s in zip(refused_piece.points, refused_piece.s, strict=True)],
         }
 

@@ -3,7 +3,7 @@
     hli-server record show FILE [--format text|json] [--limit N]
     hli-server record export FILE (--csv OUT | --vcd OUT | --plot OUT.png|.pdf) [--signals PATTERN ...]
     hli-server replay FILE [--config MACHINE] [--until CYCLE|SECONDS s] [--signals PATTERN ...]
-                           [--all] [--no-events] [--report OUT.json] [--same-version]
+                           [--all] [--no-events] [--report OUT.json] [--same-version] [--from-journal]
 
 Exit codes of ``replay``: 0 pass, 1 the outputs differ, 3 cannot replay (the reason is printed: a
 version or configuration mismatch, a file that is no recording, ...), 2 usage. ``record``: 0, or 2 when
@@ -141,6 +141,11 @@ def _until(value: str | None, t_a_us: int) -> int | None:
     "--same-version", is_flag=True, help="cannot replay when the recording was made by another version"
 )
 @click.option(
+    "--from-journal",
+    is_flag=True,
+    help="start from the input journal (the server's first cycle) although the recording holds a snapshot",
+)
+@click.option(
     "--limit", type=click.IntRange(1, 100_000), default=20, show_default=True, help="signals listed"
 )
 def replay_command(
@@ -153,6 +158,7 @@ def replay_command(
     events: bool,
     report_out: Path | None,
     same_version: bool,
+    from_journal: bool,
     limit: int,
 ) -> None:
     """Replay FILE on the recorded machine, cycle by cycle, and compare every recorded output.
@@ -184,6 +190,7 @@ def replay_command(
         all_differences=all_differences,
         max_differences=max_differences,
         same_version=same_version,
+        from_journal=from_journal,
     )
     click.echo(report.text(limit=limit), err=report.verdict is Verdict.CANNOT)
     if report_out is not None:

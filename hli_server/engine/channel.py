@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import Protocol
+from typing import Any, ClassVar, Protocol, cast
 
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
 from hli_server.engine.cycles import CycleError, MotionState
 from hli_server.engine.cycles import run as run_standin
+from hli_server.engine.cycles.errors import A_NOT_SIMULATED
 from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import LineSegment, Point
@@ -123,12 +124,12 @@ class ChannelHost:
         """The blocks of the built-in stand-in of cycle ``name`` (engine/cycles), None where no documented
         cycle has the name; :class:`~hli_server.engine.cycles.CycleError` (910110) for one not built.
         ``results`` writes a ``V.CYC.`` output (the interpreter's)."""
-        context = ChannelCycleContext(self._channel, results, line, block)
+        context = LoggedCycleContext(ChannelCycleContext(self._channel, results, line, block))
         try:
             blocks = run_standin(name, params, context, line)
         except CycleError as exc:
             raise _call_error(exc, line, block, name) from None
-        return None if blocks is None else _as_nc_errors(blocks, line, block, name)
+        return None if blocks is None else StandInRun(name, params, context, line, block, blocks)
 
     def message(self, text: str, save: bool, file: str, program: str, line: int, block: str) -> None:
         ch = self._channel
@@ -220,11 +221,148 @@ def _call_error(exc: CycleError, line: int, block: str, program: str) -> NcError
     return NcError(exc.alarm, line, block, exc.message, params)
 
 
-def _as_nc_errors(blocks: Iterator[Block], line: int, block: str, program: str) -> Iterator[Block]:
-    try:
-        yield from blocks
-    except CycleError as exc:
-        raise _call_error(exc, line, block, program) from None
+class StandInRun:
+    """One run of a built-in cycle as the interpreter's level holds it: the iterator of its blocks, each
+    :class:`CycleError` as the alarm of the call's line.
+
+    A stand-in is a Python generator (engine/cycles), which a recording's snapshot cannot keep
+    (recording/snapshot.py: it is code in the middle of running). This keeps what rebuilds it instead: the
+    call (cycle, @P values, line), how many blocks it gave (``taken``) and every answer its context gave
+    (:class:`LoggedCycleContext`). A snapshot leaves the generator out (``snapshot_transient``); the
+    first block asked for after the restore runs the stand-in again from its start, answering its reads
+    from the log and dropping the ``taken`` blocks it already gave (its writes took effect then, the
+    snapshot holds them), then goes on live: the same blocks, as the generator is deterministic in what it
+    reads (docs/record-replay.md, "A recording started in a running server")."""
+
+    snapshot_transient: ClassVar[tuple[str, ...]] = ("_blocks",)
+
+    def __init__(
+        self,
+        name: str,
+        params: dict[int, float | str],
+        context: LoggedCycleContext,
+        line: int,
+        block: str,
+        blocks: Iterator[Block] | None,
+    ) -> None:
+        self.name = name
+        self.params = params
+        self.context = context
+        self.line = line
+        self.block = block
+        self.taken = 0
+        self.done = False
+        self._blocks = blocks
+
+    def __iter__(self) -> StandInRun:
+        return self
+
+    def __next__(self) -> Block:
+        if self.done:
+            raise StopIteration
+        try:
+            blocks = self._blocks
+            if blocks is None:
+                blocks = self._rebuild()
+            block = next(blocks, None)
+        except CycleError as exc:
+            self.done = True
+            raise _call_error(exc, self.line, self.block, self.name) from None
+        if block is None:
+            self.done = True
+            raise StopIteration
+        self.taken += 1
+        return block
+
+    def _rebuild(self) -> Iterator[Block]:
+        """The stand-in run again up to where the snapshot took it, from the log of its reads."""
+        context = self.context
+        context.rewind()
+        blocks = run_standin(self.name, self.params, context, self.line)
+        if blocks is None:  # the name was a documented cycle when it was called: the same engine
+            raise CycleError(A_NOT_SIMULATED, f"{self.name}: no stand-in to resume")
+        for _ in range(self.taken):
+            if next(blocks, None) is None:
+                break
+        context.go_live()
+        self._blocks = blocks
+        return blocks
+
+
+class LoggedCycleContext:
+    """A stand-in's :class:`~hli_server.engine.cycles.CycleContext` that logs every answer the channel
+    gave it, so that a run rebuilt after a snapshot's restore reads the same (:class:`StandInRun`): while
+    it is rebuilt, reads come from the log and writes are dropped (they took effect the first time)."""
+
+    def __init__(self, live: ChannelCycleContext) -> None:
+        self.live = live
+        self.axis_names: tuple[str, ...] = live.axis_names
+        self.main_axes: tuple[str, str, str] = live.main_axes
+        self.log: list[Any] = []
+        self.replayed = -1
+        """While the run is rebuilt: how many answers of the log it was given again; -1: live."""
+
+    def rewind(self) -> None:
+        self.replayed = 0
+
+    def go_live(self) -> None:
+        self.replayed = -1
+
+    def _read(self, fetch: Callable[[], Any]) -> Any:
+        """The logged answer while rebuilding, else the channel's (logged)."""
+        if 0 <= self.replayed < len(self.log):
+            self.replayed += 1
+            return self.log[self.replayed - 1]
+        self.replayed = -1  # past the log: live from here
+        value = fetch()
+        self.log.append(value)
+        return value
+
+    def _writes(self) -> bool:
+        return self.replayed < 0
+
+    def position(self) -> tuple[float, float, float]:
+        return cast(tuple[float, float, float], self._read(self.live.position))
+
+    def plane(self) -> int:
+        return cast(int, self._read(self.live.plane))
+
+    def inch(self) -> bool:
+        return cast(bool, self._read(self.live.inch))
+
+    def tool_radius(self) -> float:
+        return cast(float, self._read(self.live.tool_radius))
+
+    def zero_offset(self) -> str | None:
+        return cast("str | None", self._read(self.live.zero_offset))
+
+    def motion_state(self) -> MotionState:
+        return cast(MotionState, self._read(self.live.motion_state))
+
+    def measured(self) -> float | None:
+        return cast("float | None", self._read(self.live.measured))
+
+    def deviation(self) -> tuple[float, float, float]:
+        return cast(tuple[float, float, float], self._read(self.live.deviation))
+
+    def probe_feeds(self) -> tuple[float, float]:
+        return cast(tuple[float, float], self._read(self.live.probe_feeds))
+
+    def write_zero_offset(self, name: str, values: Mapping[str, float]) -> None:
+        if self._writes():
+            self.live.write_zero_offset(name, values)
+
+    def set_result(self, name: str, value: float) -> None:
+        if self._writes():
+            self.live.set_result(name, value)
+
+    def write_program(self, name: str, text: str) -> None:
+        if self._writes():
+            self.live.write_program(name, text)
+
+    def warn(self, alarm: int, message: str) -> None:
+        if self._writes():
+            self.live.warn(alarm, message)
 
 
 class ChannelCycleContext:
@@ -361,7 +499,7 @@ class Channel:
         self.decoder.tracking_axis_number = config.log_number_tracking_axis
         self.decoder.default_feed = config.default_feedrate
         self.decoder.tool_ori_cs = (config.tool_ori_cs_axis, config.tool_ori_cs_mode)
-        self.decoder.soft_limits = lambda k: (self.axes[k].swe_neg, self.axes[k].swe_pos)
+        self.decoder.soft_limits = self._soft_limits  # a method, not a closure: a snapshot keeps it
         self._main_slots = tuple(self.axis_names.index(a) for a in config.main_axes)
         self.compiler = Compiler(self.axis_names, config.main_axes)
         self.written = MemoryLibrary(where="files written by cycles")
@@ -376,7 +514,7 @@ class Channel:
             self.number,
             machine.external,
             self._rt_position,
-            lambda: self.override_permille / 1000.0,
+            self._operator_override,
             self._rt_fail,
         )
         """The realtime cycles (``#RT CYCLE``, TF5261): run in every cycle before the path's step."""
@@ -477,6 +615,11 @@ class Channel:
         return self.machine.raise_alarm(number, self, message)
 
     # --- operator requests ---------------------------------------------------------------
+    def _soft_limits(self, k: int) -> tuple[float, float]:
+        """The software limits in effect of axis ``k`` (the decoder's two-path check asks)."""
+        axis = self.axes[k]
+        return (axis.swe_neg, axis.swe_pos)
+
     def load_program(self, text: str, name: str = "program", number: int = 0) -> Alarm | None:
         """Select a program (text). Refused (the alarm is returned) while a program runs."""
         if self.program_running:
@@ -862,6 +1005,11 @@ class Channel:
         self.machine.referencing_changed(axis.index)
 
     # --- realtime cycles (#RT CYCLE) -------------------------------------------------------------------
+    def _operator_override(self) -> float:
+        """The operator's override (0..1) a realtime cycle's override multiplies (a method, not a closure:
+        a recording's snapshot keeps it)."""
+        return self.override_permille / 1000.0
+
     def _realtime(self, command: Realtime) -> None:
         """``#RT CYCLE`` reached by the path: a cycle defined (running unless ``DEF``) or managed."""
         if command.op == "DEFINE":

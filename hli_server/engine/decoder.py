@@ -13,6 +13,7 @@ and do not move the axes.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
@@ -130,6 +131,14 @@ class _Referenced:
 
     def __call__(self) -> None:
         self.handler(self.axes)
+
+
+def _tell(
+    handler: Callable[[Transformation | None], None] | None, trafo: Transformation | None
+) -> Callable[[], None]:
+    """The action marker's payload that tells ``handler`` the transformation now in effect (a partial, not
+    a closure: a recording's snapshot keeps it, hli_server/recording/snapshot.py)."""
+    return _nothing if handler is None else functools.partial(handler, trafo)
 
 
 def _nothing() -> None:
@@ -455,7 +464,7 @@ class Decoder:
             realtime = self.realtime_handler
             if realtime is None:
                 return items
-            return [*items, Marker(MarkerKind.SYNC, block, payload=lambda: realtime(out))]
+            return [*items, Marker(MarkerKind.SYNC, block, payload=functools.partial(realtime, out))]
         if isinstance(out, FlushWait):
             self.waiting = True
             return [*items, Marker(MarkerKind.ACTION, block, payload=self._end_wait)]
@@ -468,7 +477,8 @@ class Decoder:
             if handler is None:
                 return items
             profile = out.profile
-            return [*items, Marker(MarkerKind.ACTION, block, payload=lambda: handler(profile))]
+            # a partial, not a closure: a recording's snapshot keeps it (hli_server/recording/snapshot.py)
+            return [*items, Marker(MarkerKind.ACTION, block, payload=functools.partial(handler, profile))]
         return items  # pragma: no cover - every directive is handled above
 
     # --- kinematic transformations (docs/kinematics.md) ---------------------------------------------
@@ -766,7 +776,7 @@ class Decoder:
         self.kin_axes = axes_now
         self.position = list(trafo.to_tip(axes_now, axes_now))
         handler = self.kinematic_handler
-        return [Marker(MarkerKind.ACTION, block, payload=lambda: handler(trafo) if handler else None)]
+        return [Marker(MarkerKind.ACTION, block, payload=_tell(handler, trafo))]
 
     def _trafo(self, cmd: TrafoSwitch) -> list[Motion | Marker]:
         """``#TRAFO ON``: the selected kinematic with the tool's length; the decoder's position becomes the
@@ -794,11 +804,11 @@ class Decoder:
                     self.warn(alarm, message, block.line, block.label)
             self.kin_axes = axes
             active = trafo
-            return [Marker(MarkerKind.ACTION, block, payload=lambda: handler(active) if handler else None)]
+            return [Marker(MarkerKind.ACTION, block, payload=_tell(handler, active))]
         if kin.active is None:
             return []
         self._kin_off()
-        return [Marker(MarkerKind.ACTION, cmd.block, payload=lambda: handler(None) if handler else None)]
+        return [Marker(MarkerKind.ACTION, cmd.block, payload=_tell(handler, None))]
 
     def _kin_off(self) -> None:
         """The transformation off: the decoder's position is the axes' again, the tool length applied."""

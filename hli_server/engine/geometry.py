@@ -9,8 +9,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
-__all__ = ["ArcSegment", "LineSegment", "Point", "Segment", "arc_from_centre", "sub_segment"]
+__all__ = [
+    "ArcSegment",
+    "LineSegment",
+    "Point",
+    "Segment",
+    "arc_from_centre",
+    "first_beyond",
+    "segment_params",
+    "sub_segment",
+]
 
 Point = tuple[float, ...]
 
@@ -172,3 +182,48 @@ def sub_segment(segment: Segment, s0: float, s1: float) -> Segment:
         segment.start_angle + segment.sweep * f0,
         segment.sweep * (f1 - f0),
     )
+
+
+def first_beyond(segment: Segment, index: int, limit: float, above: bool) -> Point:
+    """The first point of ``segment`` at which axis ``index`` reaches ``limit`` on its way beyond it
+    (``above``: to values greater than ``limit``, else smaller): where a refused block would have crossed
+    a software limit. The start point when it lies there already; the end point when the axis never gets
+    there (the caller asks only for a segment whose extent goes beyond)."""
+    start = segment.start[index]
+    if (start >= limit) if above else (start <= limit):
+        return segment.start
+    if isinstance(segment, LineSegment) or index not in segment.plane:
+        end = segment.end[index]
+        f = 1.0 if end == start else min(max((limit - start) / (end - start), 0.0), 1.0)
+        return segment.point_at(f * segment.length)
+    # a plane axis of an arc: the angles at which the circle meets the limit, the first on the sweep
+    i, _ = segment.plane
+    centre = segment.centre[0] if index == i else segment.centre[1]
+    q = (limit - centre) / segment.radius if segment.radius > 0.0 else 2.0
+    if abs(q) > 1.0:
+        return segment.end
+    # the first axis: cos(angle) = q; the second: sin(angle) = q
+    angles = (math.acos(q), -math.acos(q)) if index == i else (math.asin(q), math.pi - math.asin(q))
+    sweep = segment.sweep
+    best = 1.0
+    for angle in angles:
+        turn = (angle - segment.start_angle) % _TAU if sweep >= 0.0 else (segment.start_angle - angle) % _TAU
+        if turn <= abs(sweep):
+            best = min(best, turn / abs(sweep))
+    return segment.point_at(best * segment.length)
+
+
+def segment_params(names: list[str] | tuple[str, ...], segment: Segment, **more: Any) -> dict[str, Any]:
+    """A refused block's path as an alarm's parameters (``axes``, ``start``, ``end``, then ``more`` and,
+    for an arc, ``arc`` with its plane, centre and sweep): what ``check`` and the dashboard draw the block
+    from (``hli_server/scene.py``); start and end alone do not say where an arc goes."""
+    params: dict[str, Any] = {"axes": list(names), "start": list(segment.start), "end": list(segment.end)}
+    params.update(more)
+    if isinstance(segment, ArcSegment):
+        i, j = segment.plane
+        params["arc"] = {
+            "plane": [names[i], names[j]],
+            "centre": list(segment.centre),
+            "sweep_deg": math.degrees(segment.sweep),
+        }
+    return params

@@ -198,6 +198,18 @@ class ExternalSync:
                     self._store_field(buf, elements[flat], value)
             variable.seen = list(values)
 
+    @property
+    def raw(self) -> bytes:
+        """The V.E. fields' bytes as this sync last took or stored them (what the next latch compares the
+        PLC's half with): part of the state a recording's snapshot carries (docs/record-replay.md)."""
+        return bytes(self._raw)
+
+    @raw.setter
+    def raw(self, value: bytes) -> None:
+        if len(value) != len(self._raw):
+            raise ValueError(f"the V.E. fields span {len(self._raw)} bytes, not {len(value)}")
+        self._raw[:] = value
+
     def values(self) -> dict[str, Any]:
         """ST path -> value as the store holds it (diagnostics and tests)."""
         out: dict[str, Any] = {}

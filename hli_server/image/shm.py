@@ -451,6 +451,18 @@ class ProcessImage:
         self.publish_from(machine, cycle)
 
     @property
+    def external_raw(self) -> bytes | None:
+        """The V.E. sync's bytes (:attr:`ExternalSync.raw`), None without V.E. variables: what a
+        recording's snapshot keeps of the image besides the PLC->CNC half (docs/record-replay.md)."""
+        return None if self._external is None else self._external.raw
+
+    @external_raw.setter
+    def external_raw(self, value: bytes) -> None:
+        if self._external is None:
+            raise ValueError("this image has no V.E. variables")
+        self._external.raw = value
+
+    @property
     def cycle(self) -> int:
         """Cycle of the newest publish."""
         return self._cycle

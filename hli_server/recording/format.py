@@ -38,6 +38,8 @@ list of one (``["teach_01.dat"]``; version 3). The outputs the header lists in
 
 from __future__ import annotations
 
+import base64
+import binascii
 import json
 import math
 import os
@@ -73,8 +75,11 @@ __all__ = [
 ]
 
 FORMAT: Final = "hli-recording"
-FORMAT_VERSION: Final = 3
-"""Raised when a reader of this version could not read the new files; readers refuse newer versions."""
+FORMAT_VERSION: Final = 4
+"""Raised when a reader of this version could not read the new files; readers refuse newer versions.
+4: a recording started in a running server carries a snapshot of the machine (a ``snapshot`` line after
+the journal; the header's ``snapshot`` and ``snapshot_note``); 3: V.E. STRING values; 2: the outputs
+sampled every ``outputs_every`` cycles; 1: every cycle's outputs."""
 SUFFIX: Final = ".jsonl.gz"
 COMPRESS_LEVEL: Final = 1
 """zlib level of the members: the fastest (140 MB/s here against 76 at level 3 and 24 at level 6, for
@@ -85,9 +90,10 @@ MAX_SPAN: Final = 2**31
 """Cycles a recording may span from its first line to its last (24.8 days at T_A = 1 ms, the range of the
 HLI's cycle counter): what a replay may have to run, bounded by the file itself (issue 36, finding 6)."""
 _RANGES: Final = {"DINT": (-(2**31), 2**31 - 1), "UDINT": (0, 2**32 - 1)}
-_KINDS: Final = ("i", "o", "e", "op", "file", "program_file", "fault", "end")
+_KINDS: Final = ("i", "o", "e", "op", "file", "program_file", "fault", "snapshot", "end")
 _TYPES: Final = ("BOOL", "DINT", "UDINT", "LREAL", "STRING")
 _STRING_TYPE: Final = re.compile(r"STRING\(([1-9][0-9]{0,3})\)")
+_FINGERPRINT: Final = re.compile(r"[0-9a-f]{1,64}")
 
 
 def _known_type(name: object) -> bool:
@@ -406,6 +412,9 @@ class RecordChecker:
         self.first: int | None = None
         self.last = 0
         self.line = 0
+        announced = header.get("snapshot")
+        self.snapshot_cycle: int | None = announced.get("cycle") if isinstance(announced, dict) else None
+        self.snapshot_seen = False
 
     def fail(self, field: str, what: str) -> RecordingError:
         return RecordingError(f"{self.path}: line {self.line}: {field}: {what}")
@@ -457,8 +466,68 @@ class RecordChecker:
             if record["fault"] == "set" and not isinstance(record.get("spec"), dict):
                 raise self.fail("spec", f"the fault as an object, got {_short(record.get('spec'))}")
             self._text(record, "reason", optional=True)
+        if "snapshot" in record:
+            self._snapshot(record)
         if "end" in record:
             self._text(record, "end")
+
+    def _snapshot(self, record: dict[str, Any]) -> None:
+        """The line that holds the machine's state where the recording began (format 4): once, at the cycle
+        before the header's window, its envelope of the shape :mod:`.snapshot` writes. What the objects
+        hold is read as untrusted data by :func:`~hli_server.recording.snapshot.restore` (engine classes
+        by name only, values by kind, nesting bounded) when the replay starts from it."""
+        if self.snapshot_seen:
+            raise self.fail("snapshot", "a second snapshot line (a recording holds one)")
+        self.snapshot_seen = True
+        if self.snapshot_cycle is None:
+            raise self.fail("snapshot", "a snapshot line in a recording whose header announces none")
+        if record["c"] != self.snapshot_cycle:
+            raise self.fail(
+                "c", f"the snapshot is of cycle {record['c']}, the header's of cycle {self.snapshot_cycle}"
+            )
+        state = record["snapshot"]
+        if not isinstance(state, dict):
+            raise self.fail("snapshot", f"the machine's state as an object, got {_short(state)}")
+        if type(state.get("snapshot")) is not int:
+            raise self.fail(
+                "snapshot.snapshot", f"the snapshot's layout number, got {_short(state.get('snapshot'))}"
+            )
+        fingerprint = state.get("fingerprint")
+        if not isinstance(fingerprint, str) or not _FINGERPRINT.fullmatch(fingerprint):
+            raise self.fail(
+                "snapshot.fingerprint", f"the engine's hash (hex digits), got {_short(fingerprint)}"
+            )
+        if type(state.get("cycle")) is not int or state["cycle"] != record["c"]:
+            raise self.fail(
+                "snapshot.cycle", f"the line's cycle {record['c']}, got {_short(state.get('cycle'))}"
+            )
+        root = state.get("root")
+        if not isinstance(root, dict) or set(root) != {"r"} or type(root["r"]) is not int:
+            raise self.fail("snapshot.root", f"a reference to the machine's object, got {_short(root)}")
+        objects = state.get("objects")
+        if not isinstance(objects, list) or not 0 <= root["r"] < len(objects):
+            raise self.fail(
+                "snapshot.objects", f"the list of objects the root's index lies in, got {_short(objects)}"
+            )
+        if not all(isinstance(entry, dict) for entry in objects):
+            raise self.fail("snapshot.objects", "every object is a JSON object")
+        self._changes("in", record.get("in"), self.inputs)
+        external = record.get("external")
+        if external is not None:
+            if not isinstance(external, str):
+                raise self.fail("external", f"the V.E. fields' bytes in base64, got {_short(external)}")
+            try:
+                base64.b64decode(external, validate=True)
+            except (ValueError, binascii.Error):
+                raise self.fail("external", "the V.E. fields' bytes are no base64") from None
+        faults = record.get("faults", [])
+        if not isinstance(faults, list) or not all(
+            isinstance(f, dict) and type(f.get("id")) is int and isinstance(f.get("spec"), dict)
+            for f in faults
+        ):
+            raise self.fail(
+                "faults", f"the stall faults in effect as {{id, spec}} objects, got {_short(faults)}"
+            )
 
     def _text(self, record: dict[str, Any], key: str, *, optional: bool = False) -> None:
         value = record.get(key)
@@ -528,6 +597,17 @@ def _check_header(path: Path, record: dict[str, Any]) -> None:
     for key in ("server", "layout", "journal", "config"):
         if not isinstance(record.get(key, {}), dict):
             raise bad(key, f"an object, got {_short(record.get(key))}")
+    snapshot = record.get("snapshot")
+    if snapshot is not None and not (
+        isinstance(snapshot, dict)
+        and type(snapshot.get("cycle")) is int
+        and snapshot["cycle"] == record.get("window_start", 1) - 1 >= 1
+        and isinstance(snapshot.get("fingerprint"), str)
+        and _FINGERPRINT.fullmatch(snapshot["fingerprint"]) is not None
+    ):
+        raise bad("snapshot", f"null or {{cycle: window_start - 1, fingerprint}}, got {_short(snapshot)}")
+    if not isinstance(record.get("snapshot_note"), str | None):
+        raise bad("snapshot_note", f"text, got {_short(record.get('snapshot_note'))}")
     follow = record.get("follow_cycle") or []
     if not isinstance(follow, list) or not all(
         type(k) is int and 0 <= k < len(record["outputs"]) for k in follow

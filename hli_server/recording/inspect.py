@@ -55,6 +55,24 @@ class Summary:
     def window_start(self) -> int:
         return int(self.header.get("window_start", 1))
 
+    def start_text(self) -> str:
+        """Where a replay starts: the snapshot, or the journal (and why), or nowhere."""
+        h = self.header
+        snapshot = h.get("snapshot")
+        journal_complete = (h.get("journal") or {}).get("complete", True)
+        if isinstance(snapshot, dict):
+            return (
+                f"the snapshot of cycle {snapshot.get('cycle', 0):,} (a replay runs the recording's cycles "
+                "only; an engine of other sources replays the input journal"
+                + (")" if journal_complete else ", which was dropped: not replayable there)")
+            )
+        if self.window_start <= 1:
+            return "cycle 1"
+        why = f" ({h['snapshot_note']})" if h.get("snapshot_note") else ""
+        if not journal_complete:
+            return f"nowhere: no snapshot{why} and the input journal was dropped (not replayable)"
+        return f"the input journal, cycle 1 (no snapshot{why})"
+
     def duration_s(self) -> float:
         return max(0, self.last_cycle - self.window_start + 1) * self.t_a_us / 1e6
 
@@ -91,7 +109,8 @@ class Summary:
             f"({server.get('engine')} engine), {h.get('created')}, {h.get('origin', '?')}",
             f"  T_A {self.t_a_us} µs; outputs from cycle {self.window_start:,} to {self.last_cycle:,}: "
             f"{self.duration_s():.3f} s of machine time; inputs from cycle 1"
-            + ("" if (h.get("journal") or {}).get("complete", True) else " (INCOMPLETE: not replayable)"),
+            + ("" if (h.get("journal") or {}).get("complete", True) else " (INCOMPLETE)"),
+            f"  starts from: {self.start_text()}",
             f"  {self.compressed_bytes:,} bytes, {self.lines:,} lines; "
             + (
                 f"ended: {self.end}"

@@ -13,10 +13,12 @@ Two sinks:
   makes a recording started in a running server replayable: the replay runs the same inputs from cycle
   1 and compares the outputs from the recording's window on;
 * **the recording file**, between :meth:`SessionTap.start` and :meth:`SessionTap.stop`: the header, the
-  journal so far, then the inputs of every cycle that changed them, the events at their cycle, and the
-  outputs (the CNC->PLC half) sampled every ``outputs_every`` cycles where they changed
-  (:mod:`hli_server.recording.format`). The engine is deterministic: the inputs reproduce every cycle,
-  the samples are the replay's checkpoints, and the cycle pays one comparison for them.
+  journal so far, a snapshot of the machine's state where the recording starts (:mod:`.snapshot`: the
+  replay starts there instead of at cycle 1, so that its cost is the recording's length), then the
+  inputs of every cycle that changed them, the events at their cycle, and the outputs (the CNC->PLC
+  half) sampled every ``outputs_every`` cycles where they changed (:mod:`hli_server.recording.format`).
+  The engine is deterministic: the inputs reproduce every cycle, the samples are the replay's
+  checkpoints, and the cycle pays one comparison for them.
 
 The operator's requests reach the tap through :class:`JournaledOperator`, the runtime's operator panel
 wrapped; program files through :meth:`SessionTap.wrap_reader`.
@@ -25,6 +27,7 @@ wrapped; program files through :meth:`SessionTap.wrap_reader`.
 from __future__ import annotations
 
 import asyncio
+import base64
 import contextlib
 import dataclasses
 import datetime
@@ -62,6 +65,7 @@ from hli_server.recording.format import (
     encode_value,
     gzip_member,
 )
+from hli_server.recording.snapshot import SnapshotError, capture
 from schemas.layout import Direction, Signal, SignalType
 from schemas.results import (
     AlarmList,
@@ -337,6 +341,12 @@ class SessionTap:
         self._task: asyncio.Task[None] | None = None
         self._closed = False
         self._listening = False
+        self._image: Any = None
+        self._stalls: dict[int, tuple[int, dict[str, Any]]] = {}
+        """the stall faults in effect: id -> (the cycle that latched their start, spec); a snapshot
+        carries them (the replay repeats a stall)"""
+        self.snapshot_s = 0.0
+        """what the last snapshot cost (seconds, in the pause between two cycles)"""
 
     # --- life cycle (the runtime) ------------------------------------------------------------
     def bind(self, machine: Machine) -> None:
@@ -365,6 +375,7 @@ class SessionTap:
         """The image exists: the halves' codecs; the encoder task starts in the running loop; with
         ``RecordingOptions.file`` the recording starts (before the first cycle)."""
         self.layout = image.layout
+        self._image = image
         self.inputs = HalfCodec(image.layout, _P2C)
         self.outputs = HalfCodec(image.layout, _C2P)
         with contextlib.suppress(RuntimeError):  # no running loop: encoded by close() / the bound
@@ -438,6 +449,11 @@ class SessionTap:
     def note_fault(self, change: CommFaultChange) -> None:
         """A communication fault set or ended (``CommFaults.subscribe``)."""
         self.note(dict(change))
+        spec = change.get("spec")
+        if change["fault"] == "set" and isinstance(spec, dict) and spec.get("kind") == "stall":
+            self._stalls[change["id"]] = (self.stamp(), dict(spec))
+        elif change["fault"] == "end":
+            self._stalls.pop(change["id"], None)
 
     def wrap_library(self, library: ProgramLibrary) -> ProgramLibrary:
         """The machine's program library (global subprograms, N-02), with every lookup noted: the
@@ -484,8 +500,9 @@ class SessionTap:
         self, path: Path, *, origin: str = "api", overwrite: bool = False, outputs_every: int | None = None
     ) -> RecordingStatus:
         """Start recording into ``path`` (a new file, unless ``overwrite``): the header, the input
-        journal so far, then every cycle's changes (the outputs every ``outputs_every`` cycles; None: the
-        server's setting). RecordingError when one runs already."""
+        journal so far, the machine's snapshot (started in a running server), then every cycle's changes
+        (the outputs every ``outputs_every`` cycles; None: the server's setting). RecordingError when one
+        runs already."""
         if self.layout is None or self.inputs is None or self.outputs is None:
             raise RecordingError("the server is not running yet")
         if outputs_every is not None and outputs_every < 1:
@@ -495,6 +512,7 @@ class SessionTap:
         self._encode(len(self._pending))
         self._flush_journal_text()
         window = self.machine.cycle + 1
+        snapshot, note = self._snapshot(window)
         try:
             writer = RecordingWriter(path, max_bytes=self.max_bytes, overwrite=overwrite)
         except FileExistsError:
@@ -522,12 +540,18 @@ class SessionTap:
                 "complete": self.journal_lost_at is None,
                 "lost_at": self.journal_lost_at,
             },
+            "snapshot": None
+            if snapshot is None
+            else {"cycle": window - 1, "fingerprint": snapshot["snapshot"]["fingerprint"]},
+            "snapshot_note": note,
         }
         try:
             writer.write_line(dumps(header))
             writer.flush()
             for member in self._journal:
                 writer.write_member(member)
+            if snapshot is not None:  # after the journal: a replay from the snapshot skips what is before
+                writer.write_line(_dumps_values(snapshot))
         except OSError as exc:
             writer.close()
             raise RecordingError(f"cannot write {path}: {exc}") from None
@@ -546,6 +570,49 @@ class SessionTap:
             self._listening = True
         logger.info("recording to %s from cycle %d", path, window)
         return self.status()
+
+    def _snapshot(self, window: int) -> tuple[dict[str, Any] | None, str | None]:
+        """The record of the machine's state before cycle ``window`` (``{"c", "snapshot", "in",
+        "external", "faults"}``), or None and why not: at the server's first cycle there is nothing
+        before; a state that cannot be kept as data (:class:`SnapshotError`) leaves the replay the input
+        journal from cycle 1, and the log and the header say why."""
+        if window <= 1 or self.inputs is None:
+            return None, None
+        began = time.perf_counter()
+        try:
+            state = capture(self.machine)
+        except SnapshotError as exc:
+            note = f"the machine's state at cycle {window - 1:,} cannot be kept as data: {exc}"
+            logger.warning(
+                "recording: %s; a replay runs the input journal from cycle 1%s",
+                note,
+                "" if self.journal_lost_at is None else ", which was dropped: it cannot be replayed",
+            )
+            return None, note
+        record: dict[str, Any] = {
+            "c": window - 1,
+            "snapshot": state,
+            # the PLC->CNC half as the last cycle latched it (every field), and the V.E. sync's bytes
+            "in": self.inputs.changes([self._last_in], None)[0] if self._last_in else [],
+            "external": None,
+            "faults": [],
+        }
+        raw = getattr(self._image, "external_raw", None)
+        if isinstance(raw, bytes | bytearray):
+            record["external"] = base64.b64encode(bytes(raw)).decode("ascii")
+        for fault_id, (stamp, spec) in sorted(self._stalls.items()):
+            ends = stamp - 1 + int(spec.get("cycles", 0))  # CommFaults.add: the cycle it was set + cycles
+            left = ends - (window - 1)
+            if left > 0:
+                record["faults"].append({"id": fault_id, "spec": {**spec, "cycles": left}})
+        self.snapshot_s = time.perf_counter() - began
+        logger.info(
+            "recording: snapshot of cycle %d, %d objects, in %.1f ms",
+            window - 1,
+            len(state["objects"]),
+            self.snapshot_s * 1000,
+        )
+        return record, None
 
     def stop(self, reason: str = "stopped") -> RecordingStatus:
         """End the recording: everything encoded and flushed, the end line, the file closed."""

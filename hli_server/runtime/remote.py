@@ -22,7 +22,8 @@ What crosses the socket (frames: a 4-byte length, then a pickle; both ends are t
     engine -> doors   ("ok", id, result) / ("err", id, exception)
                       ("events", [(seq, class, values), ...])  the engine's events, numbered, in order (an
                                                                event as its class and its fields' values)
-                      ("faults", table)                        the communication faults, on every change
+                      ("faults", table, ended)                 the communication faults, on every change, with
+                                                               the reasons of those ended since (id -> reason)
 
 The messages are typed ``Any`` inside this module (a frame holds whatever the method called takes and
 answers); the answers are typed where they leave it: each :class:`RemoteOperator`, :class:`RemoteRecorder`
@@ -286,6 +287,9 @@ class OperatorService(asyncio.Protocol):
         """Flushes that sent no events because the doors process had not taken the earlier ones."""
         self._unsubscribe = runtime.event_log.subscribe(self._on_event)
         self._faults_changed = runtime.comm_faults.active  # the doors start with the engine's table
+        self._faults_ended: dict[int, str] = {}
+        """Why each fault ended since the table was last sent: the mirror's history and listeners say the
+        engine's reason ("api", "reset", "cycles", ...), as the engine's log and the recording do."""
         self._unsubscribe_faults = runtime.comm_faults.subscribe(self._on_fault)
         self.served = 0
         self.closed = asyncio.get_running_loop().create_future()
@@ -333,8 +337,16 @@ class OperatorService(asyncio.Protocol):
     def _on_event(self, event: Event) -> None:
         self._outbox.append((self._rt.event_log.latest, event))
 
-    def _on_fault(self, _change: CommFaultChange) -> None:
+    def _on_fault(self, change: CommFaultChange) -> None:
         self._faults_changed = True  # sent with the next flush (a change may come inside the cycle)
+        if change["fault"] == "end":
+            self._faults_ended[change["id"]] = str(change.get("reason", "engine"))
+
+    def _fault_table(self) -> tuple[list[FaultMirror], dict[int, str]]:
+        """The table for the mirror and the reasons of the ends since it was last sent."""
+        self._faults_changed = False
+        ended, self._faults_ended = self._faults_ended, {}
+        return self._rt.comm_faults.export(), ended
 
     def flush(self) -> None:
         """Send the events of the cycles run since the last flush (after each batch of cycles), and the
@@ -351,8 +363,7 @@ class OperatorService(asyncio.Protocol):
                 transport.write(frame(("events", [event_to_wire(seq, event) for seq, event in outbox])))
                 outbox.clear()
         if self._faults_changed:
-            self._faults_changed = False
-            transport.write(frame(("faults", self._rt.comm_faults.export())))
+            transport.write(frame(("faults", *self._fault_table())))
 
     def serve(self, deadline: float) -> bool:
         """Serve queued requests until ``deadline`` (``time.monotonic``), at least one if any wait;
@@ -420,7 +431,8 @@ class OperatorService(asyncio.Protocol):
                 self._fail(ident, exc)
 
     def _fault_request(self, op: str, args: Sequence[Any]) -> Any:
-        """What the doors' users ask of the communication faults; the answer carries the new table."""
+        """What the doors' users ask of the communication faults; the answer carries the new table (and
+        why the faults that ended since it was sent ended)."""
         faults = self._rt.comm_faults
         result: Any
         if op == "add":
@@ -432,8 +444,7 @@ class OperatorService(asyncio.Protocol):
             result = faults.reset(args[0])
         else:
             raise OperatorError(f"{op!r} is not a request of the communication faults")
-        self._faults_changed = False  # the answer carries the table
-        return result, faults.export()
+        return result, *self._fault_table()  # the answer carries the table
 
     def _call(self, name: str, args: Sequence[Any], kwargs: dict[str, Any]) -> Any:
         if name not in OPERATOR_CALLS:
@@ -487,8 +498,9 @@ class RemoteLink:
         sock.setblocking(False)
         self._sock = sock
         self._on_events = on_events
-        self.on_faults: Callable[[list[FaultMirror]], None] | None = None
-        """Takes the engine's table of communication faults (:class:`RemoteFaults`)."""
+        self.on_faults: Callable[[list[FaultMirror], dict[int, str]], None] | None = None
+        """Takes the engine's table of communication faults and why the faults that left it ended
+        (:class:`RemoteFaults`)."""
         self._reader = FrameReader()
         self._ids = itertools.count(1)
         self._answers: dict[int, tuple[str, Any]] = {}
@@ -533,7 +545,7 @@ class RemoteLink:
             return
         if kind == "faults":
             if self.on_faults is not None:
-                self.on_faults(message[1])
+                self.on_faults(message[1], message[2])
             return
         ident = message[1]
         future = self._futures.pop(ident, None)
@@ -840,8 +852,9 @@ class RemoteFaults(CommFaults):
         if change["fault"] == "end" and not self._taking and change.get("reason") in ("count", "duration"):
             self._link.tell("fault-ended", change["id"], change["reason"])
 
-    def take(self, table: list[FaultMirror]) -> None:
-        """The engine's table: load it and tell the listeners what was set and what ended."""
+    def take(self, table: list[FaultMirror], ended: Mapping[int, str]) -> None:
+        """The engine's table: load it and tell the listeners what was set and what ended, and why
+        (``ended``: the engine's reasons; "engine" where it gave none)."""
         before = self.get_ids()
         self._taking = True
         try:
@@ -853,7 +866,7 @@ class RemoteFaults(CommFaults):
                 spec = fault.spec.model_dump(mode="json", exclude_none=True)
                 self._tell({"fault": "set", "id": fault_id, "spec": spec})
             for fault_id in sorted(before - after):
-                self._tell({"fault": "end", "id": fault_id, "reason": "engine"})
+                self._tell({"fault": "end", "id": fault_id, "reason": ended.get(fault_id, "engine")})
         finally:
             self._taking = False
 
@@ -862,8 +875,8 @@ class RemoteFaults(CommFaults):
 
     def add(self, spec: FaultSpec | dict[str, Any]) -> ActiveFault:
         data = spec.model_dump(mode="json", exclude_none=True) if isinstance(spec, FaultSpec) else dict(spec)
-        fault_id, table = self._link.call("faults", "add", (data,))
-        self.take(table)
+        fault_id, table, ended = self._link.call("faults", "add", (data,))
+        self.take(table, ended)
         fault = self.get(fault_id)
         if fault is None:  # it ended in the engine before the answer came (a duration of 0, ...)
             raise FaultError(f"communication fault {fault_id} ended as soon as it was set")
@@ -872,8 +885,9 @@ class RemoteFaults(CommFaults):
     def end(self, fault_id: int, reason: str = "api") -> ActiveFault:
         if reason in ("count", "duration"):  # the doors' own: ends here, told to the engine
             return super().end(fault_id, reason)
-        (mirror, ended), table = self._link.call("faults", "end", (fault_id, reason))
-        self.take(table)
+        here = self.get(fault_id)
+        (mirror, why), table, ended = self._link.call("faults", "end", (fault_id, reason))
+        self.take(table, ended)
         spec = FaultSpec.model_validate(mirror["spec"])
         return ActiveFault(
             id=mirror["id"],
@@ -881,15 +895,17 @@ class RemoteFaults(CommFaults):
             started_cycle=mirror["started_cycle"],
             started_at=mirror["started_at"],
             expires_at=mirror["expires_at"],
-            used=mirror["used"],
-            ended=ended,
+            # the doors count what they used (the engine's copy counts only a stall's cycles): the answer
+            # says how often the fault acted up to its end
+            used=max(mirror["used"], here.used if here is not None else 0),
+            ended=why,
         )
 
     def reset(self, reason: str = "reset") -> int:
-        ended, table = self._link.call("faults", "reset", (reason,))
-        self.take(table)
-        count: int = ended
-        return count
+        count, table, ended = self._link.call("faults", "reset", (reason,))
+        self.take(table, ended)
+        result: int = count
+        return result
 
 
 class RemoteRecorder(RecorderPort):

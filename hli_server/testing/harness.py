@@ -631,7 +631,8 @@ class Harness(_Programs):
         """Replay a recording as a test: raises :class:`ReplayFailedError` (an AssertionError, with the
         report: the first difference's cycle, signal, expected and actual value) unless it passes;
         returns the :class:`~hli_server.replay.ReplayReport`. Options: ``until``, ``signals``,
-        ``events``, ``all_differences``, ``config``, ``same_version`` (as ``hli-server replay``). The
+        ``events``, ``all_differences``, ``config``, ``same_version``, ``from_journal`` (as ``hli-server
+        replay``). The
         replay runs on a machine of its own, built from the recording; this harness' machine is left
         as it is."""
         __tracebackhide__ = True

@@ -7,7 +7,8 @@ the PLC's side: gpVECh[i]^ / gpVEGlob^). The demo machine declares three (``hli-
 * ``V.E.PLC_READY`` (BOOLEAN): the program waits for it in a ``$WHILE`` loop;
 * ``V.E.MODE`` (SGN32): 1 = pocket, 2 = contour; the program branches on it with ``$IF`` and calls
   the subprogram ``pocket.nc`` or ``contour.nc`` (``L name``, uploaded with the program);
-* ``V.E.PART_COUNT`` (UNS32): the program counts its parts in it; the PLC reads it.
+* ``V.E.PART_COUNT`` (UNS32): the program counts its parts in it, from 0 (it sets it at its start: the
+  variable keeps its value from one run to the next); the PLC reads it.
 
 All three lie in the global area (``gpVEGlob^``), which every channel's programs see.
 
@@ -17,7 +18,7 @@ The PLC program, cycle by cycle:
    of ``mc_command.start_w``);
 2. lets the program wait ``release_after`` CNC cycles in its ``$WHILE`` loop, then writes
    ``PLC_READY`` = TRUE;
-3. reports every part the program counts (``PART_COUNT``), and finishes with the program.
+3. from then on reports every part the program counts (``PART_COUNT``), and finishes with the program.
 
 Its decisions depend on CNC cycles only, so it runs the same over shared memory, Modbus and ADS.
 """
@@ -47,6 +48,7 @@ PROGRAM = """\
 %ve_mode
 (the PLC selects V.E.MODE and releases the program with V.E.PLC_READY)
 N10 G90 G17 G00 X0 Y0 Z0
+N15 V.E.PART_COUNT = 0              ( a new batch: the count of a run before stays otherwise
 N20 $WHILE V.E.PLC_READY == 0       ( wait for the PLC
 N30 $ENDWHILE
 N40 $FOR P1 = 1, 3, 1               ( three parts, 30 mm apart
@@ -151,10 +153,11 @@ class VeModeDemo(Demo):
             self.released_at = io.cycle
             self.say(io, "V.E.PLC_READY = TRUE: the program is released")
             self.step = "running"
-        count = int(io.read(PART_COUNT))
-        if count != self.parts:
-            self.parts = count
-            self.say(io, f"part {count} done (V.E.PART_COUNT = {count})")
+        if self.step == "running":  # the program counts from its release on (the count before is 0)
+            count = int(io.read(PART_COUNT))
+            if count != self.parts:
+                self.parts = count
+                self.say(io, f"part {count} done (V.E.PART_COUNT = {count})")
         if state == ProgramState.FINISHED:
             self.finish(io, f"program finished: {self.parts} parts")
         elif state == ProgramState.ABORTED:

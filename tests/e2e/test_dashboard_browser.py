@@ -10,10 +10,13 @@ after the reset (docs/dashboard.md).
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
 import subprocess
+import time
+import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -97,9 +100,26 @@ def page(browser: Any) -> Iterator[Any]:
     assert not errors, f"the page's script failed: {errors}"
 
 
+def _post(url: str, body: bytes, content_type: str = "text/plain") -> int:
+    """A request of the control API from outside the page (as another client); its status."""
+    request = urllib.request.Request(url, data=body, method="POST", headers={"content-type": content_type})
+    with urllib.request.urlopen(request, timeout=10) as answer:
+        status: int = answer.status
+        return status
+
+
 def _open(page: Any, url: str) -> None:
     page.goto(url)
     expect(page.locator("#conn")).to_have_text("live", timeout=WAIT_MS)
+
+
+def _load_and_start(page: Any, text: str) -> None:
+    """Load ``text`` into channel 1 from the page's text field and start it."""
+    page.click("#ch1-card details.load summary")
+    page.fill("#ch1-text", text)
+    page.click("#ch1-load")
+    expect(page.locator("#message")).to_contain_text("load program: done")
+    page.click("#ch1-start")
 
 
 def _at_rest(page: Any, axes: str = "XYZ") -> None:
@@ -136,11 +156,7 @@ def test_an_operator_starts_the_demo_program_sees_a_violation_and_resets(server:
     _at_rest(p)
 
     # a program whose block N70 goes through an active protection area
-    p.click("#ch1-card details.load summary")
-    p.fill("#ch1-text", THROUGH)
-    p.click("#ch1-load")
-    expect(p.locator("#message")).to_contain_text("load program: done")
-    p.click("#ch1-start")
+    _load_and_start(p, THROUGH)
     alarm = p.locator("#alarms li[data-alarm='912001']")
     expect(alarm).to_contain_text("touches protection area 4")
     expect(alarm).to_contain_text("N70")
@@ -252,16 +268,8 @@ def test_a_plain_headless_chromium_sees_the_state_and_the_events_of_before(serve
     stream says anything: ``chromium --headless --dump-dom`` (which, like ``--screenshot``, takes the
     page at its load event) shows the mode, the program, the axes with their positions, and the event
     of a program loaded before the page was opened. The screenshot is kept as an artifact."""
-    import urllib.request
-
-    request = urllib.request.Request(
-        f"{server}/api/channels/1/program?name=before-the-page",
-        data=b"N10 G01 X5 F6000\nN20 M30\n",
-        method="POST",
-        headers={"content-type": "text/plain"},
-    )
-    with urllib.request.urlopen(request, timeout=10) as answer:
-        assert answer.status in (200, 202)
+    status = _post(f"{server}/api/channels/1/program?name=before-the-page", b"N10 G01 X5 F6000\nN20 M30\n")
+    assert status in (200, 202)
     dom = subprocess.run(
         [CHROMIUM, *CHROMIUM_FLAGS, "--dump-dom", server + "/"],
         capture_output=True,
@@ -344,9 +352,71 @@ def test_an_nc_message_shows_on_the_page(server: str, page: Any) -> None:
     p = page
     _open(p, server)
     p.click("#ch1-reset")
-    p.click("#ch1-card details.load summary")
-    p.fill("#ch1-text", '%msg\nN10 #MSG["hello from the NC"]\nN20 M30\n')
-    p.click("#ch1-load")
-    expect(p.locator("#message")).to_contain_text("load program: done")
-    p.click("#ch1-start")
+    _load_and_start(p, '%msg\nN10 #MSG["hello from the NC"]\nN20 M30\n')
     expect(p.locator("#nc-messages li").first).to_contain_text("hello from the NC", timeout=5_000)
+
+
+@pytest.mark.req("B-02", "E-05")
+def test_the_first_paint_shows_the_recording_and_the_override_in_effect(browser: Any, tmp_path: Path) -> None:
+    """Issue 37, item 3: drawn from what the page was served with alone (the stream and the recorder's
+    status are held back, as a slow network or a screenshot at the load event sees it), the page shows
+    the recording ``--record`` runs, the override in effect (40 %, set through the API before the page
+    was opened) on the slider, and says the picture is the served one rather than "connecting…"."""
+    record = tmp_path / "run.jsonl.gz"
+    proc, url = _start("--record", str(record), log=tmp_path / "server.log")
+    try:
+        assert _post(f"{url}/api/channels/1/override", b'{"percent": 40}', "application/json") == 202
+        # in effect once the clock latched it (the next cycle): the CNC's state of the override unit says so
+        state = f"{url}/api/image/gpCh[0].bahn_mc_control.override.state_r"
+        deadline = time.monotonic() + 20
+        while json.load(urllib.request.urlopen(state, timeout=10))["value"] != 400:
+            assert time.monotonic() < deadline, "the override of 40 % never came into effect"
+            time.sleep(0.02)
+        context = browser.new_context()
+        p = context.new_page()
+        p.set_default_timeout(WAIT_MS)
+        held: list[Any] = []  # the stream's and the recorder's requests, never answered: a slow network
+
+        def hold(route: Any) -> None:  # (Playwright takes no bound method of a builtin)
+            held.append(route)
+
+        p.route(re.compile(r".*/api/(live|recording)(\?.*)?$"), hold)
+        p.goto(url)
+        expect(p.locator("#ch1-override-state")).to_have_text("40 %")
+        expect(p.locator("#ch1-override")).to_have_value("40")
+        expect(p.locator("#ch1-override-value")).to_have_text("40 %")
+        expect(p.locator("#record")).to_have_text("■ Stop recording")
+        expect(p.locator("#record-status")).to_contain_text("recording run")
+        expect(p.locator("#conn")).to_contain_text("as served at cycle")
+        assert held  # the page did ask for them
+        context.close()
+    finally:
+        stop_server(proc)
+
+
+@pytest.mark.req("E-06", "C14-14")
+def test_a_software_limit_refusal_draws_the_refused_block_and_where_it_crosses(
+    server: str, page: Any
+) -> None:
+    """Issue 37, item 3: X's software limit is 600 mm (the demo machine); N20 would cross it at
+    X600 Y83.3333 and is refused before it starts (120002): the page draws the refused block and the
+    crossing point as it does an area's refusal, and names the limit in the legend."""
+    p = page
+    _open(p, server)
+    p.click("#ch1-reset")
+    _at_rest(p)
+    _load_and_start(p, "N10 G01 X100 Y0 F30000\nN20 X700 Y100\nN30 M30\n")
+    expect(p.locator("#alarms li[data-alarm='120002']")).to_contain_text("N20")
+    expect(p.locator("#ch1-state")).to_have_text("aborted")
+    expect(p.locator("#ch1-refused")).to_have_count(1)
+    expect(p.locator("#ch1-violation")).to_have_count(1)
+    legend = p.locator("#ch1-legend")
+    expect(legend).to_contain_text(
+        "refused block N20 (line 2, alarm 120002, the software limit of X (600.0000 mm))"
+    )
+    expect(legend).to_contain_text(
+        "violation at X600.0000 Y83.3333 Z0.0000, the software limit of X (600.0000 mm) (alarm 120002)"
+    )
+    p.click("#ch1-reset")
+    expect(p.locator("#ch1-refused")).to_have_count(0)
+    expect(p.locator("#ch1-violation")).to_have_count(0)

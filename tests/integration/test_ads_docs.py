@@ -81,6 +81,8 @@ def test_discover_add_a_route_and_connect_pyads_as_the_document_says(server: str
     assert lines[0] == "(5, 0)"
     int(lines[1])  # a position
     assert "('enable_w', True), ('command_w', -500000)" in lines[2]
+    # issue 37, item 5: read after the cycle that latched the write, the CNC's state of the unit
+    assert "('state_r', 2)" in lines[2], lines[2]
 
 
 @pytest.mark.skipif(

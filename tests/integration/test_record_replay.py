@@ -19,7 +19,7 @@ import pytest
 
 from hli_server.recording.format import Records, read_records
 from hli_server.testing import Harness
-from tests.integration.servers import hli_server_cmd, read_banner, start_server
+from tests.integration.servers import hli_server_cmd, read_banner, start_server, stop_server
 
 pytestmark = pytest.mark.req("B-02")
 
@@ -142,6 +142,52 @@ def test_a_killed_server_leaves_a_recording_that_replays_up_to_its_last_flush(tm
     replayed = cli("replay", str(record))
     assert replayed.returncode == 0, replayed.stdout + replayed.stderr
     assert "PASS" in replayed.stdout
+
+
+LOOPING = "N10 $FOR P1 = 1, 100000\nN20 G01 X40 Y30 F12000\nN30 G01 X0 Y0\nN40 $ENDFOR\nN50 M30\n"
+DRILLING = "G00 X0 Y0 Z50\nG01 F300\nL CYCLE [NAME=SysDrillCenterHole.ecy @P1=0 @P2=20 @P3=2 @P4=40]\nM30\n"
+"""A built-in cycle's stand-in (a Python generator in the engine) at work for about 9 s from line 3."""
+
+
+@pytest.mark.slow
+@pytest.mark.req("E-01")
+@pytest.mark.parametrize(("program", "line"), [(LOOPING, None), (DRILLING, 3)], ids=["loop", "cycle"])
+def test_a_recording_started_from_the_api_in_a_running_server_replays_only_its_own_cycles(
+    tmp_path: Path, program: str, line: int | None
+) -> None:
+    """Issue 37, item 2, as the issue found it: ``hli-server run`` (realtime clock, the doors in their own
+    process) has run a while with a program when a recording is started through the API; the replay runs
+    the recording's cycles from its snapshot, not the server's uptime, and says so. Also while a built-in
+    cycle runs (its stand-in is rebuilt from the call and what it read, engine/channel.py StandInRun)."""
+    proc = start_server(
+        "--http-port", "0", "--no-modbus", "--clock", "realtime", "--record-dir", str(tmp_path)
+    )
+    try:
+        url = read_banner(proc)["url"]
+        assert httpx.post(f"{url}/api/channels/1/program", json={"text": program}).status_code in (200, 201)
+        assert httpx.post(f"{url}/api/channels/1/start").status_code == 202
+        deadline = time.monotonic() + 30
+        while True:  # the server's uptime: 2 s of cycles, the program (the cycle) at work
+            state = httpx.get(f"{url}/api/state").json()
+            if state["cycle"] >= 2000 and (line is None or state["channels"][0]["line"] == line):
+                break
+            assert time.monotonic() < deadline, state["channels"][0]
+            time.sleep(0.1)
+        started = httpx.post(f"{url}/api/recording/start", json={"name": "late"})
+        assert started.status_code == 201, started.text
+        window = started.json()["started_cycle"]
+        time.sleep(1.0)
+        stopped = httpx.post(f"{url}/api/recording/stop").json()
+    finally:
+        stop_server(proc)
+    recorded = stopped["cycles"]
+    replayed = cli("replay", str(tmp_path / "late.jsonl.gz"), "--report", str(tmp_path / "r.json"))
+    assert replayed.returncode == 0, replayed.stdout + replayed.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["started_from"] == "snapshot"
+    assert report["first_cycle"] == window > 2000
+    assert report["cycles_replayed"] == report["cycles_compared"] >= recorded - 1
+    assert f"cycles replayed from the snapshot of cycle {window - 1:,}" in replayed.stdout
 
 
 @pytest.mark.slow

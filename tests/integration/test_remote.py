@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import socket
 import threading
+import time
 from collections.abc import Coroutine
 from typing import Any, TypeVar
 
@@ -25,6 +26,7 @@ from hli_server.runtime.remote import (
     EventMirror,
     FrameReader,
     OperatorService,
+    RemoteFaults,
     RemoteLink,
     RemoteOperator,
     frame,
@@ -90,19 +92,24 @@ class Engine:
         self._thread.join(30)
 
 
+def doors_side(engine: Engine) -> tuple[Runtime, EventMirror, RemoteLink, RemoteOperator]:
+    """The doors process' end of the link in this test's loop: the event mirror, the link, the operator."""
+    rt = engine.rt
+    assert rt is not None
+    loop = asyncio.get_running_loop()
+    mirror = EventMirror()
+    mirror.start(loop)
+    link = RemoteLink(engine.theirs, mirror.take)
+    link.start(loop)
+    return rt, mirror, link, RemoteOperator(link, rt.image, rt.config.cycle_time_us)
+
+
 @pytest.mark.req("H-01", "H-07")
 async def test_operator_requests_events_and_steps_cross_the_link() -> None:
     with Engine() as engine:
-        rt = engine.rt
-        assert rt is not None
-        loop = asyncio.get_running_loop()
-        mirror = EventMirror()
-        mirror.start(loop)
+        rt, mirror, link, op = doors_side(engine)
         seen: list[str] = []
         mirror.subscribe(lambda e: seen.append(e.kind))
-        link = RemoteLink(engine.theirs, mirror.take)
-        link.start(loop)
-        op = RemoteOperator(link, rt.image, rt.config.cycle_time_us)
         try:
             assert op.machine_name == "demo"
             assert op.channel_numbers() == [1, 2]
@@ -137,6 +144,38 @@ async def test_operator_requests_events_and_steps_cross_the_link() -> None:
             await asyncio.sleep(0.3)
             assert rt.machine.cycle == stopped_at < 1_000_305  # cancelled in the engine too
             assert await op.step(1) == stopped_at + 1  # the next step runs
+        finally:
+            link.close()
+
+
+@pytest.mark.req("B-03")
+async def test_a_fault_ended_through_the_doors_says_how_often_it_acted_and_why() -> None:
+    """Issue 37, item 4: the doors process counts what its connections use of a fault (the engine's table
+    does not); ending the fault through the doors (``DELETE /api/comm/faults/1``) answers with that
+    count, and the doors' fault history gives the engine's reason ("api", "cycles"), as the engine's log
+    and the recording do, not "engine"."""
+    with Engine() as engine:
+        rt, _, link, op = doors_side(engine)
+        faults = RemoteFaults(link, lambda: rt.image.cycle)
+        try:
+            fault = faults.add({"kind": "error", "door": "modbus", "code": 2, "count": 5})
+            faults.acted(fault)  # two Modbus requests of the doors' connections answered with the error
+            faults.acted(fault)
+            ended = faults.end(fault.id, "api").to_json()
+            assert (ended["used"], ended["left"]) == (2, 3)
+            assert faults.get(fault.id) is None
+            by_api = {"fault": "end", "id": fault.id, "reason": "api"}.items()
+            assert by_api <= faults.history[-1].items()
+            assert by_api <= rt.comm_faults.history[-1].items()  # the engine's: what the log says
+
+            stall = faults.add({"kind": "stall", "cycles": 3})  # ended by the engine when its cycles are over
+            await op.step(5)
+            deadline = time.monotonic() + 10
+            while faults.get(stall.id) is not None:  # the engine's table comes after the step's cycles
+                assert time.monotonic() < deadline, "the engine's table never came"
+                await asyncio.sleep(0.01)
+            assert {"fault": "end", "id": stall.id, "reason": "cycles"}.items() <= faults.history[-1].items()
+            assert faults.reset() == 0
         finally:
             link.close()
 

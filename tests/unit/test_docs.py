@@ -67,6 +67,36 @@ def test_the_readme_tour_shows_the_program_the_example_runs() -> None:
     assert f"```\n{POCKET}```" in readme, "README.md's pocket.nc differs from plc_clients/demos/ve_mode.py"
 
 
+def test_the_plc_clients_doc_names_every_demo() -> None:
+    """Issue 37, item 5: ``hli-plc``'s DEMO row and its introduction name every demo it runs."""
+    import re
+
+    from plc_clients.demos import DEMOS
+
+    doc = (ROOT / "docs" / "plc-clients.md").read_text(encoding="utf-8")
+    row = re.search(r"^\| `DEMO` \| (.*) \|$", doc, flags=re.MULTILINE)
+    assert row is not None, "docs/plc-clients.md has no DEMO row in hli-plc's options"
+    assert re.findall(r"`([a-z][a-z0-9-]*)`", row.group(1)) == list(DEMOS)
+    intro = doc[doc.index("## `hli-plc`") : doc.index("<!-- doc-run", doc.index("## `hli-plc`"))]
+    missing = [name for name in DEMOS if f"`{name}`" not in intro]
+    assert not missing, f"docs/plc-clients.md's hli-plc section does not introduce {missing}"
+
+
+def test_what_make_run_writes_into_a_checkout_is_ignored_by_git() -> None:
+    """Issue 37, item 2: a recording started from the API or the dashboard of ``make run`` goes to
+    ``./recordings`` (the default ``--record-dir``), which showed as untracked in a checkout."""
+    import shutil
+    import subprocess
+
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        import pytest
+
+        pytest.skip("not a git checkout")
+    for path in ("recordings/session-20260101-120000.jsonl.gz", "test-artifacts/dashboard-reset.png"):
+        done = subprocess.run(["git", "check-ignore", "-q", path], cwd=ROOT, check=False)
+        assert done.returncode == 0, f"{path} is not ignored by .gitignore"
+
+
 def test_the_cycle_doc_lists_every_cycle() -> None:
     from hli_server.commands.cycles import cycles_markdown
 

@@ -558,3 +558,61 @@ def test_fuzz_recordings_end_in_a_verdict_or_a_clear_error(tmp_path: Path) -> No
             pytest.fail(_fail(f"replayed to cycle {report.last_cycle}", seed, example, changed))
     print(f"recordings: {fuzz.count(120)} mutants, record show refused {shown_refused}, replay {verdicts}")
     assert verdicts.get(str(Verdict.CANNOT), 0) > 0 or fuzz.FUZZ_SCALE < 1
+
+
+_HOSTILE_SNAPSHOT = (
+    *_HOSTILE, {"r": 10**9}, {"r": -1}, {"fn": "os:system"}, {"g": "hli_server.engine.machine:math"},
+    {"c": "builtins:object"}, {"e": "hli_server.engine.channel_state:ChannelState", "v": 99},
+    {"p": {"fn": "builtins:eval"}, "a": ["1"], "k": []}, {"t": [{"t": [{"r": 0}]}]}, {"f": "nan"},
+    {"m": {"r": 0}, "n": "__init__"}, {"x": "nothing"}, {"b": "!!"},
+)  # fmt: skip
+
+
+@pytest.mark.req("B-02")
+def test_fuzz_snapshots_end_in_a_verdict_or_a_clear_error(tmp_path: Path) -> None:
+    """The snapshot of a recording started in a running server (issue 37, item 2) with its objects
+    changed: attributes given values of every kind (references out of range, names of other modules, a
+    partial of ``eval``, enums out of range, hostile scalars), entries dropped or replaced: ``replay``
+    returns its report, never raises; a CANNOT says why with the file and the snapshot's line."""
+    import asyncio
+    import copy
+    import json as _json
+
+    from hli_server.recording.format import gzip_member
+    from hli_server.replay import Verdict, replay
+    from tests.recordings import record_late
+
+    program = "N10 $FOR P1 = 1, 50\nN20 G01 X[P1] F6000\nN30 $ENDFOR\nN40 M30\n"
+    records = record_late(tmp_path / "late.jsonl.gz", program, 300, 100)
+    at = next(k for k, r in enumerate(records) if k > 0 and "snapshot" in r)
+    seed = fuzz.seed_for("snapshots")
+    rng = random.Random(seed)
+    verdicts: dict[str, int] = {}
+    for example in range(fuzz.count(40)):
+        mutant = copy.deepcopy(records)
+        objects = mutant[at]["snapshot"]["objects"]
+        changed = []
+        for _ in range(rng.randint(1, 3)):
+            k = rng.randrange(len(objects))
+            entry = objects[k]
+            state = entry.get("state")
+            if isinstance(state, dict) and state and rng.random() < 0.8:
+                key = rng.choice(sorted(state))
+                state[key] = rng.choice(_HOSTILE_SNAPSHOT)
+                changed.append((k, key, state[key]))
+            else:
+                objects[k] = rng.choice(_HOSTILE_SNAPSHOT)
+                changed.append((k, objects[k]))
+        path = tmp_path / f"s{example % 4}.jsonl.gz"
+        path.write_bytes(gzip_member("".join(_json.dumps(r) + "\n" for r in mutant)))
+        try:
+            report = asyncio.run(replay(path))
+        except Exception:
+            pytest.fail(_fail("replay raised", seed, example, changed))
+        verdicts[str(report.verdict)] = verdicts.get(str(report.verdict), 0) + 1
+        if report.verdict is Verdict.CANNOT and f"{path}: line {at + 1}: snapshot" not in report.reason:
+            pytest.fail(_fail(f"CANNOT without the snapshot's line: {report.reason}", seed, example, changed))
+        if report.last_cycle > 1_000:
+            pytest.fail(_fail(f"replayed to cycle {report.last_cycle}", seed, example, changed))
+    print(f"snapshots: {fuzz.count(40)} mutants, replay {verdicts}")
+    assert verdicts.get(str(Verdict.CANNOT), 0) > 0 or fuzz.FUZZ_SCALE < 1

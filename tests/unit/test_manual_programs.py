@@ -97,7 +97,7 @@ MESSAGES = [
     ("G04 Y2", (20014, ["first main axis"], [])),
     ("G805[-45.785, 32.720, 2.620]", (910110, ["G805[..]", "implicit subroutine call"], ["label"])),
     ("G01 X1 F100 [LBL]", (910100, ["'[LBL]'", "label"], [])),
-    ("#FOO BAR", (910109, ["#FOO", "docs/nc-language.md"], ["simulated here:"])),
+    ("#FOO BAR", (910109, ["#FOO", "#TOOL PREP", "#RT CYCLE", "#IDENT WR"], ["#FOO BAR"])),
 ]
 
 

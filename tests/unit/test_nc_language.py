@@ -896,3 +896,23 @@ def test_a_motion_function_not_simulated_says_so_and_where_to_read_more():
     assert err.message.startswith("#TRC: tool radius compensation options (#TRC) is not simulated (N-08)")
     assert "see docs/nc-language.md" in err.message
     assert "issue" not in err.message
+
+
+@pytest.mark.req("N-08")
+def test_an_unknown_hash_command_lists_every_command_simulated() -> None:
+    """Issue 37, item 5: 910109's list of the simulated ``#`` commands is the table's (``HASH_COMMANDS``,
+    the spellings each simulates), #SLOPE and #CONTOUR MODE among them."""
+    from hli_server.engine.nc.language import HASH_COMMANDS
+
+    err = error("#FOO\nM30\n")
+    assert err.alarm == 910109
+    spellings = [
+        f"#{name} {form}".rstrip()
+        for name, rule in HASH_COMMANDS.items()
+        if rule.alarm == 0 or rule.forms
+        for form in rule.forms
+    ]
+    assert "#SLOPE" in spellings
+    assert "#CONTOUR MODE" in spellings
+    missing = [spelling for spelling in spellings if spelling not in err.message]
+    assert not missing, f"910109 does not name {missing}: {err.message}"

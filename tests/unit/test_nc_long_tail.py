@@ -8,7 +8,7 @@ import pytest
 
 from hli_server.engine import Machine
 from hli_server.engine.nc.directives import SyncAction
-from tests.unit.engine_helpers import mill, mill_config, positions, run
+from tests.unit.engine_helpers import mill, mill_config, positions, run, start
 from tests.unit.nc_helpers import FakeHost, interpret
 
 
@@ -495,3 +495,47 @@ def test_the_message_file_named_by_a_string_variable() -> None:
     assert interpret("P1 = 2\n#FILE NAME [MSG=V.P.X]\nM30\n").alarm == 914003
     numeric = interpret("V.P.X = 2\n#FILE NAME [MSG=V.P.X]\nM30\n")
     assert numeric.alarm == 914006
+
+
+# --- a recording's snapshot (recording/snapshot.py) keeps what the long tail leaves in the machine ---
+SNAPSHOT_PROGRAM = (
+    RT_PROGRAM.format(freq="EDGE").replace("M30\n", "")
+    + "G74 Z1 X2\n"
+    + "G01 X10 Y0 F3000\n"
+    + "G301 X10 Y10 I2\n"
+    + "#IDENT WR SYN [AX=X ID S-0-0104 VAL 3 TYP 2 DEC 0 SERC]\n"
+    + "G302 X0 Y10 I1\n"
+    + "#FILTER ON [ORDER=20 AX_DEV=0.01]\n"
+    + "X0 Y0\n"
+    + "M30\n"
+)
+
+
+@pytest.mark.req("LT-10", "LT-06", "LT-04")
+def test_a_snapshot_taken_in_the_middle_of_the_long_tail_goes_on_as_the_machine() -> None:
+    """A realtime cycle running, a G74 group on its way, a motion held for a rounding and an #IDENT WR SYN
+    waiting in the look-ahead: a snapshot taken at any cycle holds them as data (no function made at run
+    time), and the machine restored from it goes on exactly as the live one."""
+    import json
+
+    from hli_server.recording.snapshot import capture, restore
+
+    live = _counter_machine()
+    start(live, SNAPSHOT_PROGRAM)
+    twin: Machine | None = None
+    for _ in range(400):
+        live.step(100)
+        taken = capture(live)  # never SnapshotError
+        if twin is None and live.cycle >= 3000:
+            twin = _counter_machine()
+            restore(json.loads(json.dumps(taken, allow_nan=False)), twin)
+        elif twin is not None:
+            twin.step(100)
+            if live.cycle % 2000 == 0:
+                assert capture(twin) == taken, f"the machines differ at cycle {live.cycle}"
+        if not live.channel(1).program_running:
+            break
+    assert twin is not None
+    assert not live.channel(1).program_running
+    assert [a.number for a in live.alarm_history] == [a.number for a in twin.alarm_history]
+    assert live.external.read("COUNT", 1) == twin.external.read("COUNT", 1) == 2

@@ -20,6 +20,7 @@ from hli_server.recording.tap import RecordingOptions
 from hli_server.replay import Verdict, replay
 from hli_server.runtime import Runtime, memory_image
 from schemas.config import MachineConfig, ProgramEntry
+from tests.spec_examples import CIRC_PROT_OLD
 
 pytestmark = pytest.mark.req("B-02")
 
@@ -91,7 +92,8 @@ def _rewrite(path: Path, change: Any) -> Path:
     records = [change(r) for r in read_records(path)]
     with gzip.open(out, "wt", encoding="ascii") as f:
         for r in records:
-            f.write(json.dumps(r) + "\n")
+            if r is not None:  # None: the line left out
+                f.write(json.dumps(r) + "\n")
     return out
 
 
@@ -158,9 +160,25 @@ async def test_a_recording_started_in_a_running_server_replays_from_its_input_jo
     report = await replay(path)
     assert report.verdict is Verdict.PASS, report.text()
     assert report.window_start == 901
+    assert (report.started_from, report.cycles) == ("snapshot", report.cycles_compared)
+
+    # the same as a recording of format version 2 (no snapshot): from its journal, as before, with a note
+    def version_2(record: dict[str, Any]) -> dict[str, Any] | None:
+        if record.get("record") == "header":
+            record["format_version"] = 2
+            del record["snapshot"], record["snapshot_note"]
+        return None if "snapshot" in record else record
+
+    old = await replay(_rewrite(path, version_2))
+    assert old.verdict is Verdict.PASS, old.text()
+    assert (old.started_from, old.first_cycle, old.cycles) == ("journal", 1, old.last_cycle)
+    assert old.cycles_compared == old.last_cycle - 900
+    assert any("holds no snapshot" in note and "900 cycles before" in note for note in old.notes)
 
 
-async def test_a_dropped_journal_makes_a_late_recording_unreplayable(tmp_path: Path) -> None:
+async def test_a_dropped_journal_leaves_a_late_recording_its_snapshot(tmp_path: Path) -> None:
+    """Past the journal's limit a recording started late still replays from its snapshot; only a replay
+    that must start from the journal (another engine, or asked to) cannot."""
     options = RecordingOptions(journal_limit=64)  # bytes: the first member passes it
     async with Runtime(
         demo(), clock="stepped", http_port=None, adapters=[], image_factory=memory_image, recording=options
@@ -175,10 +193,14 @@ async def test_a_dropped_journal_makes_a_late_recording_unreplayable(tmp_path: P
         await rt.step(10)
         rt.session.stop()
     report = await replay(path)
-    assert report.verdict is Verdict.CANNOT
-    assert report.reason is not None
-    assert "journal" in report.reason
-    assert report.exit_status == 3
+    assert report.verdict is Verdict.PASS, report.text()
+    assert report.started_from == "snapshot"
+    from_journal = await replay(path, from_journal=True)
+    assert from_journal.verdict is Verdict.CANNOT
+    assert from_journal.reason is not None
+    assert "journal" in from_journal.reason
+    assert from_journal.exit_status == 3
+    assert "not replayable there" in summarize(path).text()
 
 
 async def test_program_files_the_engine_reads_are_recorded_and_served_to_the_replay(tmp_path: Path) -> None:
@@ -560,3 +582,173 @@ async def test_a_difference_between_two_samples_shows_at_the_next_sample(tmp_pat
     assert old.verdict is Verdict.DIFFER
     assert old.first is not None
     assert old.first.cycle == 2
+
+
+# --------------------------------------------------------------------------------------------
+# a recording started in a running server: its snapshot (issue 37, item 2)
+# --------------------------------------------------------------------------------------------
+
+# a program that keeps the machine busy: an active protection cylinder (centre (150, 0), radius 50) beside
+# the path, a loop whose counter and a PLC-written V.E. variable steer it, arcs
+BUSY = (
+    CIRC_PROT_OLD
+    + "N50 G01 X0 Y-100 Z0 F6000\n"
+    + "N60 #CONTROL AREA ON [ID4]\n"
+    + "N70 $FOR P1 = 1, 1000, 1\n"
+    + "N80   P2 = V.E.MODE * 3 + P1 / 10\n"
+    + "N90   G01 X[40 + P2] Y-100\n"
+    + "N100  G02 X[40 + P2] Y-80 I0 J10\n"
+    + "N110  G01 X0 Y-80\n"
+    + "N120  G01 X0 Y-100\n"
+    + "N130 $ENDFOR\n"
+    + "N140 M30\n"
+)
+DPL_HIGH = "gpAx[1]^ipo_mc_control.dyn_pos_limit_high"
+
+
+async def busy(rt: Runtime, lead: int) -> None:
+    """The machine at work for ``lead`` cycles: the program above, the override, a dynamic position limit
+    and a V.E. variable the PLC wrote, a fault injected into X's drive."""
+    rt.image.write(OVERRIDE, 700)
+    rt.image.write(OVERRIDE_ENABLE, True)
+    rt.image.write("gpVEGlob^MODE", 2)
+    rt.image.write(DPL_HIGH + ".command_w", 500_000)  # Y <= 50 mm: never reached, monitored all along
+    rt.image.write(DPL_HIGH + ".enable_w", True)
+    rt.operator.inject_faults("X", gain_factor=0.9)
+    rt.operator.load_program(1, BUSY, "busy")
+    rt.operator.start(1)
+    await rt.step(lead)
+
+
+@pytest.mark.req("E-01")
+async def test_a_recording_started_late_replays_its_own_cycles_from_its_snapshot(
+    runtime: Runtime, tmp_path: Path
+) -> None:
+    """A recording started 6,000 cycles into a run carries the machine's state there: the replay runs its
+    1,000 cycles, not 7,000, and the report counts the cycles replayed and compared apart (before: the
+    replay ran the server's whole input journal, and its cycles/s mixed the two counts)."""
+    path = tmp_path / "late.jsonl.gz"
+    await busy(runtime, 6000)
+    assert runtime.machine.channel(1).state == 1  # running: mid-loop, mid-block
+    runtime.session.start(path)
+    await runtime.step(300)
+    runtime.image.write(OVERRIDE, 1000)
+    runtime.image.write("gpVEGlob^MODE", 3)
+    await runtime.step(700)
+    runtime.session.stop()
+    header = read_header(path)
+    assert header["format_version"] == FORMAT_VERSION == 4
+    assert header["snapshot"]["cycle"] == 6000
+    assert header["snapshot_note"] is None
+    report = await replay(path)
+    assert report.verdict is Verdict.PASS, report.text()
+    assert (report.started_from, report.first_cycle, report.last_cycle) == ("snapshot", 6001, 7000)
+    assert (report.cycles, report.cycles_compared) == (1000, 1000)
+    assert "1,000 cycles compared (cycles 6,001..7,000" in report.text()
+    assert "1,000 cycles replayed from the snapshot of cycle 6,000 in" in report.text()
+    assert report.to_json()["cycles_replayed"] == 1000
+    # the same recording from the input journal: every cycle since the server's first, compared alike
+    journal = await replay(path, from_journal=True)
+    assert journal.verdict is Verdict.PASS, journal.text()
+    assert (journal.started_from, journal.cycles, journal.cycles_compared) == ("journal", 7000, 1000)
+    assert "7,000 cycles replayed from the input journal (cycles 1..7,000)" in journal.text()
+    assert "starts from: the snapshot of cycle 6,000" in summarize(path).text()
+
+
+@pytest.mark.req("E-01")
+async def test_the_snapshot_holds_what_the_next_cycles_depend_on(runtime: Runtime, tmp_path: Path) -> None:
+    """A change in the engine after the snapshot shows up in the replay (the snapshot is state, not the
+    outputs): with X's drive made softer before the first replayed cycle, X's actual position differs."""
+    path = tmp_path / "late.jsonl.gz"
+    await busy(runtime, 3000)
+    runtime.session.start(path, outputs_every=1)
+    await runtime.step(500)
+    runtime.session.stop()
+    assert (await replay(path)).verdict is Verdict.PASS
+
+    def softer(machine: Any) -> None:
+        axis = machine.axis("X")
+        axis.drive = dataclasses.replace(axis.drive, kv=axis.drive.kv * 0.5)
+
+    report = await replay(path, prepare=softer)
+    assert report.verdict is Verdict.DIFFER
+    assert report.started_from == "snapshot"
+    assert report.first is not None
+    assert report.first.cycle <= 3010
+
+
+async def test_a_state_that_cannot_be_kept_leaves_the_replay_the_journal_and_says_why(
+    runtime: Runtime, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A path check installed at run time as a lambda (a function made at run time) cannot be kept as
+    data: the recording says so, names where it is, and the replay runs the journal from cycle 1."""
+    path = tmp_path / "late.jsonl.gz"
+    runtime.machine.channel(2).decoder.path_checks.append(lambda segment, block: None)
+    await busy(runtime, 800)
+    runtime.session.start(path)
+    await runtime.step(200)
+    runtime.session.stop()
+    header = read_header(path)
+    assert header["snapshot"] is None
+    assert "machine.channels[1].decoder.path_checks[" in header["snapshot_note"]
+    assert "<lambda>" in header["snapshot_note"]
+    assert "a replay runs the input journal from cycle 1" in caplog.text
+    assert "starts from: the input journal, cycle 1 (no snapshot (" in summarize(path).text()
+    report = await replay(path)
+    assert report.verdict is Verdict.PASS, report.text()
+    assert (report.started_from, report.cycles, report.cycles_compared) == ("journal", 1000, 200)
+    assert any(
+        "the recording holds no snapshot" in note and "800 cycles before" in note for note in report.notes
+    )
+
+
+async def test_a_snapshot_of_another_engine_leaves_the_replay_the_journal_a_forged_one_is_refused(
+    runtime: Runtime, tmp_path: Path
+) -> None:
+    path = tmp_path / "late.jsonl.gz"
+    await busy(runtime, 800)
+    runtime.session.start(path)
+    await runtime.step(200)
+    runtime.session.stop()
+
+    def other_engine(record: dict[str, Any]) -> dict[str, Any]:
+        if record.get("record") == "header":
+            record["snapshot"]["fingerprint"] = "0" * 32
+        return record
+
+    report = await replay(_rewrite(path, other_engine))
+    assert report.verdict is Verdict.PASS, report.text()
+    assert report.started_from == "journal"
+    assert any("snapshot is of another engine" in note for note in report.notes)
+
+    def hostile(record: dict[str, Any]) -> dict[str, Any]:
+        if "snapshot" in record and isinstance(record["snapshot"], dict) and "objects" in record["snapshot"]:
+            root = record["snapshot"]["objects"][record["snapshot"]["root"]["r"]]
+            root["state"]["cycle"] = {"fn": "os:system"}
+        return record
+
+    # the fingerprint is this engine's: a snapshot it cannot restore is damaged or forged, refused with
+    # the file, the line and the field (never run, never a traceback); the journal is the user's choice
+    forged = _rewrite(path, hostile)
+    report = await replay(forged)
+    assert report.verdict is Verdict.CANNOT, report.text()
+    for said in (f"{forged}: line ", ": snapshot: ", "'os:system' is no function", "--from-journal"):
+        assert said in report.reason, report.reason
+    report = await replay(forged, from_journal=True)
+    assert report.verdict is Verdict.PASS, report.text()
+    assert report.started_from == "journal"
+
+
+async def test_a_stall_in_effect_when_the_recording_starts_goes_on_in_the_replay(
+    runtime: Runtime, tmp_path: Path
+) -> None:
+    path = tmp_path / "stall.jsonl.gz"
+    await busy(runtime, 500)
+    runtime.comm_faults.add({"kind": "stall", "cycles": 300})
+    await runtime.step(100)
+    runtime.session.start(path)
+    await runtime.step(400)
+    runtime.session.stop()
+    (snapshot,) = [r for r in read_records(path) if "snapshot" in r and r.get("record") != "header"]
+    assert [f["spec"]["cycles"] for f in snapshot["faults"]] == [200]  # what is left of it at cycle 600
+    assert (await replay(path)).verdict is Verdict.PASS

@@ -293,3 +293,26 @@ def test_the_legend_says_what_happened_at_the_area_that_refused_a_block(tmp_path
     assert "path goes through it" not in svg
     work = area(scene_for(U_LINE), 3)
     assert work["relation_text"] == "the refused block N170 would leave it; the axes stopped inside"
+
+
+@pytest.mark.req("E-06")
+@MODES
+def test_a_software_limit_refusal_gives_the_refused_block_and_where_it_crosses(geometry_only: bool) -> None:
+    """Issue 37, item 3: X's software limit is 600 mm on the demo machine; N20 from X100 Y0 to X700 Y100 is
+    refused before it starts (120002). The scene draws it as an area's refusal: the refused block, the
+    point where it would cross the limit, and what refused it."""
+    scene = scene_for("N10 G01 X100 Y0 F6000\nN20 X700 Y100\nN30 M30\n", geometry_only=geometry_only)
+    refused = scene["refused"]
+    assert (refused["alarm"], refused["line"], refused["block"], refused["area"], refused["axis"]) == (
+        120002,
+        2,
+        "N20",
+        None,
+        "X",
+    )
+    assert refused["cause"] == "the software limit of X (600.0000 mm)"
+    assert [p[:3] for p in refused["points"]] == [[100.0, 0.0, 0.0], [700.0, 100.0, 0.0]]
+    violation = scene["violation"]
+    assert violation["point"][:3] == [600.0, 83.3333, 0.0]
+    assert violation["position"] == {"X": 600.0, "Y": 83.3333, "Z": 0.0}
+    assert violation["point"][3] == pytest.approx(100.0 + math.hypot(500.0, 83.3333), abs=1e-3)

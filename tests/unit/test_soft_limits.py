@@ -16,6 +16,8 @@ The pages these tests hold the engine to:
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from hli_server.engine import Machine
@@ -65,7 +67,16 @@ def test_programmed_positions_beyond_a_limit_are_120002_and_120003() -> None:
     run(m, "N10 G01 X100 F6000\nN20 X501\nN30 M30\n")
     (alarm,) = m.active_alarms
     assert (alarm.number, alarm.block, alarm.axis) == (120002, "N20", "X")
-    assert alarm.params == {"axis": "X", "axis_number": 1, "position": 5_010_000, "limit": 5_000_000}
+    assert alarm.params == {
+        "axes": ["X", "Y", "Z"],
+        "start": [100.0, 0.0, 0.0],
+        "end": [501.0, 0.0, 0.0],
+        "axis": "X",
+        "axis_number": 1,
+        "position": 5_010_000,
+        "limit": 5_000_000,
+        "intersection": [500.0, 0.0, 0.0],  # where the refused block would cross the limit
+    }
     assert "beyond the positive software limit 500.0000 mm (P-AXIS-00178)" in alarm.message
     assert m.axis("X").setpoint == pytest.approx(100.0)  # the block was not executed
     m = mill()
@@ -167,3 +178,22 @@ def test_a_changed_axis_record_takes_effect_at_reset_and_mode_change_only() -> N
     with pytest.raises(ValueError, match="cannot be changed at run time"):
         m.update_axis_record("X", a_max=10.0)
     assert x.config.swe_pos == 1_000_000  # a refused change changes nothing
+
+
+@pytest.mark.req("E-06")
+def test_a_refused_arc_names_where_it_would_first_cross_the_limit() -> None:
+    """Issue 37, item 3: the alarm carries the refused block's path (its arc) and the first point on it
+    beyond the limit, so that ``check --plot`` and the dashboard draw it as they draw an area's refusal.
+    The clockwise circle from (100, 0) around (-260, 0), radius 360, goes down first and meets X = -500 at
+    the angle whose cosine is -240/360, below the X axis."""
+    m = mill()  # X within -500..500 mm
+    run(m, "N10 G01 X100 F6000\nN20 G02 X100 Y0 I-360 J0\nN30 M30\n")
+    (alarm,) = m.active_alarms
+    assert (alarm.number, alarm.block, alarm.axis) == (120003, "N20", "X")
+    params = alarm.params
+    assert params["arc"] == {"plane": ["X", "Y"], "centre": [-260.0, 0.0], "sweep_deg": -360.0}
+    x, y, z = params["intersection"]
+    assert x == pytest.approx(-500.0)
+    assert y == pytest.approx(-360.0 * math.sin(math.acos(-240.0 / 360.0)))
+    assert y < 0.0
+    assert z == 0.0

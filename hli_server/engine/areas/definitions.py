@@ -7,6 +7,7 @@ the channel runs in program order, which applies it to the *effective* table (mo
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING
@@ -226,26 +227,21 @@ class AreaDefinitions(AreaRole):
         self.pending = None
         if p is None:
             # ID 21288: "no definition of a control area belongs to it, the command has no effect"
-            def ignored() -> None:
-                self.machine.raise_alarm(
-                    ALARM_END_WITHOUT_BEGIN,
-                    self.channel,
-                    f"#CONTROL AREA END ({block.label}) without #CONTROL AREA BEGIN: the command has no "
-                    "effect; a definition begins with #CONTROL AREA BEGIN [...] and ends with END",
-                    line=block.line,
-                    block=block.label,
-                )
-
-            return ignored
+            return functools.partial(self._end_without_begin, block)
         result = self._build(p, block, modal)
         if isinstance(result, DecodeError):
             return result
-        definition = result
+        return self._commit(functools.partial(_define, result))
 
-        def define(table: AreaTable) -> None:
-            table.apply(definition.area_id, AreaEvent.DEFINE, definition)
-
-        return self._commit(define)
+    def _end_without_begin(self, block: Block) -> None:
+        self.machine.raise_alarm(
+            ALARM_END_WITHOUT_BEGIN,
+            self.channel,
+            f"#CONTROL AREA END ({block.label}) without #CONTROL AREA BEGIN: the command has no "
+            "effect; a definition begins with #CONTROL AREA BEGIN [...] and ends with END",
+            line=block.line,
+            block=block.label,
+        )
 
     def _axes_of(self, p: PendingDefinition) -> tuple[str, str, str] | DecodeError:
         """The base plane and height axes of a definition (C14-06, C14-07, C14-17)."""
@@ -500,12 +496,7 @@ class AreaDefinitions(AreaRole):
                     {"position": list(position), "area": prism.area_id},
                 )
 
-        def on(table: AreaTable) -> None:
-            for i in ids:
-                if i in table.definitions:
-                    table.apply(i, AreaEvent.ON)
-
-        return self._commit(on)
+        return self._commit(functools.partial(_apply, AreaEvent.ON, ids))
 
     def _off(self, cmd: AreaOff) -> DecodeError | Callable[[], None] | None:
         t = self.planned
@@ -521,12 +512,7 @@ class AreaDefinitions(AreaRole):
         if not any(t.state(i) == AreaState.ACTIVE for i in ids):
             return None
 
-        def off(table: AreaTable) -> None:
-            for i in ids:
-                if i in table.definitions:
-                    table.apply(i, AreaEvent.OFF)
-
-        return self._commit(off)
+        return self._commit(functools.partial(_apply, AreaEvent.OFF, ids))
 
     def _clear(self, cmd: AreaClear) -> DecodeError | Callable[[], None] | None:
         t = self.planned
@@ -540,11 +526,7 @@ class AreaDefinitions(AreaRole):
         if not ids:
             return None
 
-        def clear(table: AreaTable) -> None:
-            for i in ids:
-                if i in table.definitions:
-                    table.apply(i, AreaEvent.CLEAR)
-
+        clear = functools.partial(_apply, AreaEvent.CLEAR, ids)
         warning = None
         if active:
             warning = (
@@ -555,13 +537,26 @@ class AreaDefinitions(AreaRole):
 
     def _commit(self, op: Callable[[AreaTable], None], warning: str | None = None) -> Callable[[], None]:
         """Apply ``op`` to the planned table now and return the action that applies it to the
-        effective table when the path gets there."""
+        effective table when the path gets there (a planner marker's payload: ``op`` and the action are
+        partials of plain functions and methods, not closures, so that a recording's snapshot keeps a
+        command the path has not reached yet, hli_server/recording/snapshot.py)."""
         op(self.planned)
+        return functools.partial(self._run_committed, op, warning)
 
-        def run() -> None:
-            op(self.effective)
-            if warning is not None:
-                self.machine.raise_alarm(ALARM_ACTIVE_CLEAR, self.channel, warning, **self._where())
-            self.emit_table()
+    def _run_committed(self, op: Callable[[AreaTable], None], warning: str | None) -> None:
+        op(self.effective)
+        if warning is not None:
+            self.machine.raise_alarm(ALARM_ACTIVE_CLEAR, self.channel, warning, **self._where())
+        self.emit_table()
 
-        return run
+
+def _define(definition: AreaDefinition, table: AreaTable) -> None:
+    """``#CONTROL AREA END``: the definition into ``table``."""
+    table.apply(definition.area_id, AreaEvent.DEFINE, definition)
+
+
+def _apply(event: AreaEvent, ids: list[int], table: AreaTable) -> None:
+    """``#CONTROL AREA ON/OFF/CLEAR``: ``event`` to the areas ``ids`` that ``table`` defines."""
+    for i in ids:
+        if i in table.definitions:
+            table.apply(i, event)

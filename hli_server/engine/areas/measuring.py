@@ -39,6 +39,7 @@ told the fraction of the line at which the signal came (``Decoder.measured``), w
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -186,10 +187,8 @@ class MeasuringMoves(AreaRole):
             standin=standin,
         )
 
-        def done() -> None:
-            self._measure_done(tag)
-
-        return MeasuringMove(segment, done, tag, feed=feed)
+        # a partial, not a closure: a recording's snapshot keeps it (hli_server/recording/snapshot.py)
+        return MeasuringMove(segment, functools.partial(self._measure_done, tag), tag, feed=feed)
 
     def _check(self, block: Block, mtype: int, modal: ModalState) -> DecodeError | float | None:
         """The measuring type's rules for the block; the measuring feed of type 2 [mm/min] (None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING, Any
 
 from hli_server.engine.areas.common import (
@@ -19,7 +18,7 @@ from hli_server.engine.areas.geometry import (
     first_violation,
 )
 from hli_server.engine.decoder import DecodeError
-from hli_server.engine.geometry import ArcSegment, Segment
+from hli_server.engine.geometry import Segment, segment_params
 from hli_server.engine.nc.blocks import (
     Block,
 )
@@ -53,22 +52,13 @@ class AreaPathCheck(AreaRole):
         prism = hit.prism
         ks = (prism.a, prism.b, prism.c)
         names = self.names
-        params: dict[str, Any] = {
-            "axes": list(names),
-            "start": list(segment.start),
-            "end": list(segment.end),
-            "intersection": list(hit.point),
-            "area": prism.area_id,
-            "kind": "PROT" if prism.protection else "WORK",
-        }
-        if isinstance(segment, ArcSegment):
-            # start and end alone do not say where an arc goes; the picture of the refused block needs it
-            i, j = segment.plane
-            params["arc"] = {
-                "plane": [names[i], names[j]],
-                "centre": list(segment.centre),
-                "sweep_deg": math.degrees(segment.sweep),
-            }
+        params = segment_params(
+            names,
+            segment,
+            intersection=list(hit.point),
+            area=prism.area_id,
+            kind="PROT" if prism.protection else "WORK",
+        )
         span = f"{block.label} from {fpoint(names, segment.start, ks)} to {fpoint(names, segment.end, ks)}"
         if hit.point_violation and hit.f == 0.0:
             if prism.protection:

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 from hli_server.engine.channel import Channel
 from hli_server.engine.decoder import DecodeError
-from hli_server.engine.geometry import Point, Segment
+from hli_server.engine.geometry import Point, Segment, first_beyond, segment_params
 from hli_server.engine.monitors.base import ChannelHooks, MachineView, Monitor
 from hli_server.engine.nc.blocks import Block
 from schemas.units import increments_from_mm, mm_from_increments
@@ -212,32 +212,36 @@ class SoftLimitPathCheck:
             if with_tolerance and lo == hi and segment.start[k] == segment.end[k]:
                 tol = axis.swe_tol  # P-CHAN-00120: an axis the block does not move
             if lo < axis.swe_neg - tol - _EPS:
-                return DecodeError(
-                    ALARM_PROGRAMMED_NEGATIVE,
-                    f"axis {axis.name}: programmed path reaches {lo:.4f} mm, beyond the negative software "
-                    f"limit {axis.swe_neg:.4f} mm (P-AXIS-00177)" + _tolerance_note(tol),
-                    {
-                        "axis": axis.name,
-                        "axis_number": axis.number,
-                        "position": increments_from_mm(lo),
-                        "limit": increments_from_mm(axis.swe_neg),
-                    },
-                    axis=axis.name,
-                )
+                return self._refused(segment, k, lo, axis.swe_neg, tol, positive=False)
             if hi > axis.swe_pos + tol + _EPS:
-                return DecodeError(
-                    ALARM_PROGRAMMED_POSITIVE,
-                    f"axis {axis.name}: programmed path reaches {hi:.4f} mm, beyond the positive software "
-                    f"limit {axis.swe_pos:.4f} mm (P-AXIS-00178)" + _tolerance_note(tol),
-                    {
-                        "axis": axis.name,
-                        "axis_number": axis.number,
-                        "position": increments_from_mm(hi),
-                        "limit": increments_from_mm(axis.swe_pos),
-                    },
-                    axis=axis.name,
-                )
+                return self._refused(segment, k, hi, axis.swe_pos, tol, positive=True)
         return None
+
+    def _refused(
+        self, segment: Segment, k: int, reach: float, limit: float, tol: float, *, positive: bool
+    ) -> DecodeError:
+        """The alarm of a block whose path reaches ``reach`` beyond ``limit`` on axis ``k``: the axis and
+        the numbers, and the block's path with the point where it would cross the limit (``start``,
+        ``end``, ``arc``, ``intersection``), so that ``check --plot`` and the dashboard draw the refused
+        block as they draw an area's (``hli_server/scene.py``)."""
+        axis = self.channel.axes[k]
+        side = "positive" if positive else "negative"
+        crossing = first_beyond(segment, k, limit + tol if positive else limit - tol, positive)
+        return DecodeError(
+            ALARM_PROGRAMMED_POSITIVE if positive else ALARM_PROGRAMMED_NEGATIVE,
+            f"axis {axis.name}: programmed path reaches {reach:.4f} mm, beyond the {side} software limit "
+            f"{limit:.4f} mm (P-AXIS-{'00178' if positive else '00177'})" + _tolerance_note(tol),
+            segment_params(
+                self.channel.axis_names,
+                segment,
+                axis=axis.name,
+                axis_number=axis.number,
+                position=increments_from_mm(reach),
+                limit=increments_from_mm(limit),
+                intersection=list(crossing),
+            ),
+            axis=axis.name,
+        )
 
 
 def _tolerance_note(tol: float) -> str:

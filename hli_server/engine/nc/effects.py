@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 
 from hli_server.engine.nc import parser as word_parser
@@ -277,20 +278,19 @@ class Effects(VariableAccess):
         text = self._format(stmt, values)
         save = "SAVE" in stmt.options
         file = self._message_file
-        host = self.host
         program = frame.program or self.program_name
         line = stmt.first
         label = stmt.place
         if "SYN" in stmt.options or "SYN_ACK" in stmt.options:
-
-            def emit() -> None:
-                self._effect()
-                host.message(text, save, file, program, line, label)
-
+            # a partial, not a closure: a recording's snapshot keeps it (hli_server/recording/snapshot.py)
+            emit = functools.partial(self._emit_message, text, save, file, program, line, label)
             self._pending.append(SyncAction(self._place_block(frame, stmt), emit))
             return
+        self._emit_message(text, save, file, program, line, label)
+
+    def _emit_message(self, text: str, save: bool, file: str, program: str, line: int, label: str) -> None:
         self._effect()
-        host.message(text, save, file, program, line, label)
+        self.host.message(text, save, file, program, line, label)
 
     def _format(self, stmt: Stmt, values: list[Value]) -> str:
         """The message text: the format string's ``%d``, ``%f``, ``%s``, ... filled in (printf, as the
@@ -536,10 +536,8 @@ class Effects(VariableAccess):
             raw = round(numbers["VAL"] * scale) & mask
             store = self._drive_parameters
             if "SYN" in stmt.options:
-
-                def write() -> None:
-                    store[key] = raw
-
+                # a partial, not a closure: a recording's snapshot keeps it (hli_server/recording/snapshot.py)
+                write = functools.partial(_store, store, key, raw)
                 self._pending.append(SyncAction(self._place_block(frame, stmt), write))
             else:
                 store[key] = raw
@@ -626,6 +624,11 @@ class Effects(VariableAccess):
         self._pending.append(Realtime(place, op, ident))
         if op == "START" and ident in self._rt_block_scope:
             self._rt_block_scope[ident] = True  # valid for the next block again (TF5261 444677387)
+
+
+def _store(store: dict[str, int], key: str, value: int) -> None:
+    """``#IDENT WR SYN``'s write into the simulated drive's parameters, when the path passes."""
+    store[key] = value
 
 
 def _shorten(element: str) -> str:

@@ -429,10 +429,6 @@ and ``#`` command lines (the flow may not go there: holding the motion back is h
 the next one)."""
 CORNER_PASSES: Final = re.compile(r"\s*(?:/[0-9]*\s*)?(?:N\s*[0-9]+\s*:?\s*)?[$#]", re.ASCII | re.IGNORECASE)
 """A control statement or ``#`` command line the look-ahead for G301/G302 passes."""
-UNKNOWN_HASH_HINT: Final = (
-    "no # command of the kernel's language: docs/nc-language.md lists the # commands simulated here and "
-    "those refused by name"
-)
 RT_FREQUENCIES: Final = ("ONCE", "EDGE", "ALWAYS")
 """The qualifiers of a realtime cycle's ``$IF`` (TF5261 444686091)."""
 RT_OPERATIONS: Final = ("DEF", "END", "START", "HOLD", "CONTINUE", "ABORT", "DELETE")
@@ -447,6 +443,24 @@ IDENT_WORDS: Final = frozenset(("SYN", "NO_WAIT", "SERC", "CAN"))
 drive type."""
 IDENT_VALUES: Final = frozenset(("AX", "AXNR", "ID", "VAL", "TYP", "DEC", "P"))
 """``#IDENT``'s entries with a value (``AX=X`` or ``AX X``, ``ID S-0-0104``, ``VAL 655.35``, ``P=P1``)."""
+_SHOWN_AS: Final = {"FILE": "#FILE NAME", "COMMENT": "#COMMENT BEGIN/END"}
+"""How 910109's list writes the commands whose word alone is not how they are written."""
+
+
+def _simulated_spellings() -> str:
+    """Every spelling :data:`HASH_COMMANDS` simulates, sorted (the table's order follows a set's, which
+    changes from one process to the next), after the word parser's and the reader's own (``#CONTROL AREA``,
+    ``#VAR``)."""
+    shown = sorted(
+        f"#{name} {form}" if form else _SHOWN_AS.get(name, f"#{name}")
+        for name, rule in HASH_COMMANDS.items()
+        for form in rule.forms
+    )
+    return ", ".join(["#CONTROL AREA", "#VAR/#ENDVAR", *shown])
+
+
+UNKNOWN_HASH_HINT: Final = f"the commands simulated here: {_simulated_spellings()} (docs/nc-language.md)"
+"""910109's list, made from the table, so that a command simulated later is named too (issue 37)."""
 SLOPE_TYPES: Final = ("STEP", "TRAPEZ", "SIN2", "HSC")
 """``#SLOPE [TYPE=<ident>]``'s profiles (P-CHAN-00071's 0..3)."""
 MSG_OPTIONS: Final = (

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from typing import Final
@@ -418,11 +419,9 @@ class VariableAccess(InterpreterState):
             self._effect()
             external.write(name, channel, stored, index)
             return None
-
-        def write() -> None:
-            external.write(name, channel, stored, index)
-
-        return write
+        # a partial, not a closure: a recording's snapshot keeps the write the path has not reached yet
+        # (hli_server/recording/snapshot.py)
+        return functools.partial(external.write, name, channel, stored, index)
 
     # --- #VAR ------------------------------------------------------------------------------------------
     def _declare(self, frame: Frame, stmt: VarBlock) -> None:

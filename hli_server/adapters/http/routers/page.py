@@ -7,7 +7,8 @@ styles and connections and forbids framing (another site cannot put the operator
 trick clicks onto it), ``nosniff``, and ``no-cache`` so that a new version is picked up at once.
 
 The page is served with the machine as it is at that moment (docs/dashboard.md): the ``hello``, ``state`` and
-``scene`` messages of the live stream and the newest events of the event log, as JSON in a data block
+``scene`` messages of the live stream, the newest events of the event log and the recorder's status (what
+``GET /api/recording`` answers: a recording started with ``--record`` shows at once), as JSON in a data block
 (``<script type="application/json" id="initial">``, which runs nothing and so passes the policy). The
 script draws them before the page's load event, so the page is whole at once (a screenshot, a slow
 stream) and shows what happened before it was opened; the stream then carries it on.
@@ -26,6 +27,7 @@ from fastapi.responses import Response
 from hli_server.adapters.host import LoggedEvent
 from hli_server.adapters.http.deps import json_bytes
 from hli_server.adapters.http.live_feed import LiveFeed
+from schemas.results import RecorderStatus
 
 __all__ = ["PAGE_FILES", "router"]
 
@@ -79,11 +81,17 @@ def _initial(feed: LiveFeed, events_allowed: bool = True) -> dict[str, Any]:
     if events_allowed:
         _, latest = host.events.since(0, 1)
         events, _ = host.events.since(max(0, latest - EVENTS_SHOWN), EVENTS_SHOWN)
+    recording: RecorderStatus | None
+    try:
+        recording = host.recorder.status()
+    except Exception:  # the page polls /api/recording and says what it gets
+        recording = None
     return {
         "hello": feed.hello_body(events=events_allowed),
         "state": feed.state(),
         "scenes": scenes,
         "events": [event.to_json() for event in events],
+        "recording": recording,
     }
 
 

@@ -172,8 +172,16 @@ function channelCard(ch) {
   const override = el("input", { id: id("override"), type: "range", min: 0, max: 120, step: 1, value: 100,
     "aria-label": "feed override %" });
   const overrideText = el("output", { id: id("override-value"), text: "100 %" });
-  override.addEventListener("input", () => { overrideText.textContent = `${override.value} %`; });
-  override.addEventListener("change", () => post("override", { percent: Number(override.value) }, `override ${override.value} %`));
+  // the slider shows the override in effect (showOverride), except while the operator moves it and until
+  // the server took what was set (or refused it)
+  override.addEventListener("input", () => { override.dataset.touched = "1"; overrideText.textContent = `${override.value} %`; });
+  override.addEventListener("change", async () => {
+    override.dataset.touched = "1";
+    const percent = Number(override.value);
+    const answer = await post("override", { percent }, `override ${override.value} %`);
+    if (answer && answer.effective_cycle !== undefined) override.dataset.until = String(answer.effective_cycle);
+    delete override.dataset.touched;
+  });
 
   const jogs = el("div", { class: "jog" });
   for (const axis of ch.axes) {
@@ -374,13 +382,13 @@ function drawScene(c) {
     const r = scene.refused;
     polyline(paths, r.points.map((p) => [m.x(p[0]), m.y(p[1])]), { stroke: COLOURS.refused, "stroke-width": 2.5,
       "stroke-dasharray": "7 4", id: `ch${c.number}-refused` });
-    c.legend.append(el("li", { class: "refused", text: `refused block ${r.block} (line ${r.line}, alarm ${r.alarm}, area ${r.area})` }));
+    c.legend.append(el("li", { class: "refused", text: `refused block ${r.block} (line ${r.line}, alarm ${r.alarm}, ${r.cause || `area ${r.area}`})` }));
   }
   if (scene.violation && scene.violation.point) {
     const v = scene.violation;
     star(paths, m.x(v.point[0]), m.y(v.point[1]), 10, { fill: COLOURS.refused, stroke: "#000", id: `ch${c.number}-violation` });
     const where = Object.entries(v.position).map(([k, x]) => `${k}${num(x, 4)}`).join(" ");
-    c.legend.append(el("li", { class: "violation", text: `violation at ${where}, area ${v.area} (alarm ${v.alarm})` }));
+    c.legend.append(el("li", { class: "violation", text: `violation at ${where}, ${v.cause || `area ${v.area}`} (alarm ${v.alarm})` }));
   }
   if (scene.stop) {
     const s = scene.stop;
@@ -553,6 +561,7 @@ function showNumbers(s) {
     const kin = ch.kinematic;
     setText(id("kinematic"), !kin ? "-" : kin.active ? `ID ${kin.id} on (#TRAFO ON)` : "off");
     setText(id("tcp"), !kin ? "-" : kin.tool_tip_mm.map((v) => num(v, 3)).join(" / ") + " mm");
+    showOverride(id("override"), id("override-value"), ch.override_percent, s.cycle);
     c.feedhold = Boolean(ch.feedhold);
     id("feedhold").classList.toggle("on", c.feedhold);
     id("auto").classList.toggle("on", ch.mode === "automatic");
@@ -562,6 +571,20 @@ function showNumbers(s) {
   pairTable(s.pairs);
   alarmList(s.alarms);
   externalTable(s.external || []);
+}
+
+// the slider at the override in effect: not while the operator moves it, and not before the cycle that
+// latches what the page set (the answer's effective_cycle), so that it never jumps back under the hand
+function showOverride(slider, text, percent, cycle) {
+  if (percent === null || percent === undefined || slider.dataset.touched) return;
+  if (slider.dataset.until !== undefined) {
+    if (cycle < Number(slider.dataset.until)) return;
+    delete slider.dataset.until;
+  }
+  const value = String(Math.round(percent));
+  if (slider.value !== value) slider.value = value;
+  slider.setAttribute("value", value); // also in the DOM (a saved or dumped page shows it)
+  setText(text, `${value} %`);
 }
 
 // the V.E. variables (N-05): one row each, the value as the engine's store holds it
@@ -751,6 +774,12 @@ function drawInitial() {
   onState(data.state);
   showNumbers(data.state);
   for (const ev of data.events) onEvent(ev, false);
+  if (data.recording !== undefined) showRecording(data.recording);
+  // what the page shows until the stream opens: the machine as served, not "no data"
+  const conn = document.getElementById("conn");
+  if (conn.className === "conn wait") {
+    conn.textContent = `as served at cycle ${data.state.cycle}; the stream is connecting…`;
+  }
 }
 
 // --- recording the session (docs/record-replay.md) -----------------------------------------------
