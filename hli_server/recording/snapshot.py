@@ -636,7 +636,28 @@ class _Restorer:
             self.building.discard(n)
         if _frozen(kind):
             self.filled.add(n)  # everything it holds was its constructor's
+            self.adopt(obj, kind, state)
         return obj
+
+    def adopt(self, obj: Any, kind: type, state: dict[str, Any]) -> None:
+        """A frozen object's members its constructor made (``field(init=False)``, e.g. an area's prism)
+        are the recorded objects other places refer to: the same instance, not an equal copy."""
+        if not dataclasses.is_dataclass(kind):
+            return
+        for f in dataclasses.fields(kind):
+            ref = state.get(f.name)
+            if f.init or not (isinstance(ref, dict) and set(ref) == {"r"} and type(ref["r"]) is int):
+                continue
+            m = ref["r"]
+            if m in self.made:
+                object.__setattr__(obj, f.name, self.made[m])
+            else:
+                made = getattr(obj, f.name)
+                if not self._same_kind(self.entry(m), made):
+                    raise _bad(
+                        f"object {m} is no {type(made).__qualname__} (the {f.name} of a {kind.__qualname__})"
+                    )
+                self.made[m] = made
 
     def construct(self, kind: type, state: dict[str, Any]) -> Any:
         if dataclasses.is_dataclass(kind):

@@ -10,13 +10,17 @@ they stayed; dashboards that never read held their slots forever. :func:`bounded
 subclass of uvicorn's ``H11Protocol`` that
 
 * counts connections and, beyond ``max_connections``, closes the *least useful* one to make room for the
-  newcomer: first a connection that never sent a request (the one idle longest), then one whose request
-  is still arriving (the one that began longest ago: a slow or stalled sender), then a keep-alive
-  connection between two requests of its client (idle longest: an honest client's, which a storm of
-  stalled bodies closed under it before, resetting one GET in 15; issue 36, finding 9), then one whose
-  client does not read its answer (paused longest). A connection whose request the server is working on
-  is never closed for a newcomer; only if every connection is such, the newcomer gets ``503`` with
-  ``Connection: close`` before it is registered with the event loop (it costs one descriptor for a moment);
+  newcomer: first a connection that has not yet delivered a whole request, silent or still sending it
+  (the one that connected longest ago: a silent or stalled one), then one that was answered and whose
+  next request is still arriving (the one that began longest ago), then a keep-alive connection between
+  two requests of its client (idle longest), then one whose client does not read its answer (paused
+  longest). So an honest client is closed only after every silent or stalled connection: its keep-alive
+  connection (a storm of stalled bodies closed it before, one GET in 15 reset; issue 36, finding 9) ranks
+  above all of them once answered, and its new connection, accepted but not read yet, is the newest of
+  them (ranked "silent" below every stalled sender, it was closed by the next sender coming back: 1-3 GETs
+  of 60 were still reset). A connection whose request the server is working on is never closed for a
+  newcomer; only if every connection is such, the newcomer gets ``503`` with ``Connection: close`` before
+  it is registered with the event loop (it costs one descriptor for a moment);
 * gives a request ``request_timeout_s`` seconds from its first byte to the end of its body: a client that
   announces a body and never sends it (or sends it a byte at a time) gets ``408 Request Timeout`` and the
   connection is closed; the application sees the client go away;
@@ -79,6 +83,7 @@ class _BoundedH11Protocol(H11Protocol):
 
     _check_handle: asyncio.TimerHandle | None = None
     _last_active: float = 0.0
+    _connected_at: float = 0.0
     _request_began: float | None = None
     _write_paused_at: float | None = None
     _admitted: bool = False
@@ -97,7 +102,7 @@ class _BoundedH11Protocol(H11Protocol):
             with contextlib.suppress(OSError):
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER)
         super().connection_made(transport)
-        self._last_active = time.monotonic()
+        self._last_active = self._connected_at = time.monotonic()
         self._arm_check()
 
     @classmethod
@@ -114,26 +119,25 @@ class _BoundedH11Protocol(H11Protocol):
         cycle = self.cycle
         return cycle is not None and not cycle.response_complete and not self._arriving()
 
-    def _usefulness(self, now: float) -> tuple[int, float] | None:
+    def _usefulness(self) -> tuple[int, float] | None:
         """Lower = closed first for a newcomer; None = never (the server is working for it)."""
         if self._write_paused_at is not None:
             return (3, self._write_paused_at)  # it does not read what it asked for
-        if self._arriving():
-            assert self._request_began is not None
-            return (1, self._request_began)  # still sending its request: slow or stalled
         if self._working():
             return None
-        if self._served:
-            return (2, self._last_active)  # a client between two of its requests (keep-alive)
-        return (0, self._last_active)  # connected and silent
+        if not self._served:
+            return (0, self._connected_at)  # no whole request yet (silent, or sending it): oldest first
+        if self._arriving():
+            assert self._request_began is not None
+            return (1, self._request_began)  # a client's next request, still arriving: slow or stalled
+        return (2, self._last_active)  # a client between two of its requests (keep-alive)
 
     def _make_room(self) -> bool:
         """Close the least useful connection (see the module docstring), if there is one."""
-        now = time.monotonic()
         ranked = []
         for c in self.connections:
             if isinstance(c, _BoundedH11Protocol):
-                rank = c._usefulness(now)
+                rank = c._usefulness()
                 if rank is not None:
                     ranked.append((rank, id(c), c))
         if not ranked:
