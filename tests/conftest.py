@@ -74,7 +74,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 # --------------------------------------------------------------------------------------------
 
 _REQ_IDS: dict[str, int] = {}
-_REQ_PATTERN = r"^- ((?:E|C14|C43|C3|A3|H|N|B|M|K|CY)-\d+) "
+_REQ_PATTERN = r"^- ((?:E|C14|C43|C3|A3|H|N|B|M|K|CY|LT)-\d+) "
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:

@@ -222,12 +222,68 @@ _TABLE: tuple[AlarmDef, ...] = (
     ),
     # --- the kernel's diagnosis pages: G100 measuring moves (C14-23) --------------------------
     _e(20138, "G100 is not allowed with the current measuring type", "kernel", page=_DIAG + "250906763.html"),
-    _e(
+    _w(
         20685,
         "Dwell time programmed with additional axes (G04 takes the first main axis only)",
         "kernel",
         page=_DIAG + "252216715.html",
     ),
+    _e(
+        20014,
+        "Dwell time is not programmed with the coordinate of the first main axis",
+        "kernel",
+        page=_DIAG + "250536843.html",
+    ),
+    _e(
+        20007,
+        "Spindle speed is 0",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1033/tccncdiagnosis/15651573131.html",
+    ),
+    _e(
+        20751,
+        "Dwell time (#TIME) out of range of permissible values",
+        "kernel",
+        page=_DIAG + "252425611.html",
+    ),
+    _e(
+        22003,
+        "Realtime cycle without its ID (needed with DEF or SCOPE=GLOBAL)",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1033/tf5261_realtime_cycles/562766219.html",
+    ),
+    _e(20008, "Feed rate in motion block is 0", "kernel", page=_DIAG + "250515083.html"),
+    # --- the kernel's IDs: chamfers and roundings (G301/G302) ----------------------------------
+    _e(20012, "Radius or bevel is 0 in G301/G302", "kernel", page=_DIAG + "250528139.html"),
+    _e(
+        20130,
+        "Double-programmed chamfer/rounding selection (G301 and G302 in one block)",
+        "kernel",
+        page=_DIAG + "250885003.html",
+    ),
+    _w(
+        20351,
+        "No primary motion block for chamfer/rounding available",
+        "kernel",
+        page=_DIAG + "251381131.html",
+    ),
+    _w(20701, "Double programmed G301/G302 without motion block", "kernel", page=_DIAG + "252268939.html"),
+    _e(20800, "Chamfer value is out of data format", "kernel", page=_DIAG + "252590987.html"),
+    # --- the kernel's IDs: tools and drive parameters (#TOOL, #IDENT) --------------------------
+    _e(
+        20861,
+        "HUEMNOS tool only allowed with the corresponding tool management",
+        "kernel",
+        page=_DIAG + "252795531.html",
+    ),
+    _e(
+        20797,
+        "Unknown axis designation respectively character not allowed",
+        "kernel",
+        page=_DIAG + "252577931.html",
+    ),
+    _e(50357, "SERCOS parameter: datum not changeable", "kernel", page=_DIAG + "257826443.html"),
+    _w(140032, "Error while reading ident", "kernel", page=_DIAG + "265855883.html"),
     _e(
         60131,
         "Feedrate per revolution with the spindle stopped (G95 without M3/M4 and S)",
@@ -464,6 +520,11 @@ _TABLE: tuple[AlarmDef, ...] = (
         "Contouring, #HSC or spline type simulated as contouring with corner deviation",
         "project (M-23)",
     ),
+    _w(
+        911041,
+        "Construct approximated within a documented tolerance (once per program; docs/nc-language.md)",
+        "project (issue 33)",
+    ),
     # --- project's own: work and protection areas (912xxx) ----------------------------------
     _e(912000, "Point inside a protection area", "project (FCT-C14)"),
     _e(912001, "Path enters a protection area", "project (FCT-C14)"),
@@ -494,6 +555,11 @@ _TABLE: tuple[AlarmDef, ...] = (
     ),
     _e(916001, "Tool compensation data (D) not in the tool table", "project (M-14)"),
     _e(916002, "Coordinate system command invalid (#CS, #ACS, #CS ADD/SET/DEL)", "project (M-10)"),
+    _e(
+        916003,
+        "Chamfer/rounding (G301/G302) would reverse the direction of a contour element",
+        "project (issue 33)",
+    ),
     # --- project's own: axis collision and position monitoring (913xxx) ----------------------
     _e(913000, "Collision pair may only move apart after a collision stop", "project (FCT-C3, C3-02)"),
     # --- project's own: the NC language where the kernel's ID is not public (914xxx) -----------

@@ -68,10 +68,11 @@ from hli_server.engine.monitors.collision import MoveApartCheck
 from hli_server.engine.monitors.soft_limits import SoftLimitPathCheck
 from hli_server.engine.nc.blocks import Block, NcError
 from hli_server.engine.nc.directives import PAUSE
+from hli_server.engine.nc.language import CORNER_AHEAD
 from hli_server.engine.nc.parser import BlockReader
 from hli_server.engine.nc.plain import COL_F, COL_G, COL_I, EMPTY, OTHER, PLAIN, PlainChunk, PlainTokenizer
 from hli_server.engine.nc.reader import strip_comments
-from hli_server.engine.nc.source import ProgramText, Window
+from hli_server.engine.nc.source import LineTooLongError, ProgramText, Window
 from hli_server.engine.planner import Marker, Motion
 
 __all__ = ["SMALL_RUN", "SMALL_RUN_PER_AREA", "BatchGeometryCheck", "unsupported"]
@@ -144,6 +145,8 @@ class _StoppedError(Exception):
 
 
 _ROW_G_CODES = frozenset((0, 1, 2, 3, 90, 91))
+_CORNER_G_CODES = frozenset((301, 302))
+"""Chamfers and roundings: the motion before them is held back for the corner (the exact decoder's)."""
 _ROW_M_CODES = frozenset((17, 29))
 
 
@@ -292,6 +295,7 @@ class BatchGeometryCheck:
         column = {letter: 6 + k for k, letter in enumerate(letters)}
         self._axis_column: list[int] = [column.get(name.upper(), -1) for name in decoder.axes]
         self._chunk: _Chunk | None = None
+        self._source: ProgramText | None = None
         self._rows = _Rows(decoder)
         """Blocks the interpreter built in loops and subroutines, kept to be checked as a batch."""
         self._outbox: list[list[Item]] = []
@@ -315,6 +319,7 @@ class BatchGeometryCheck:
         # kept blocks' loop in _step lifts it while it runs)
         interpreter.iteration_cap = iteration_cap
         self._chunk = None
+        self._source = source
         self._rows.clear()
         interpreter.before_effect = self._before_effect
         try:
@@ -406,7 +411,8 @@ class BatchGeometryCheck:
         finally:
             interpreter.budget = 1
         if rows.blocks:
-            yield from self._flush_rows()
+            corner = isinstance(out, Block) and not _CORNER_G_CODES.isdisjoint(out.g_codes)
+            yield from self._flush_rows(exact_last=corner)
             if decoder.finished:
                 return
         if out is None:
@@ -446,9 +452,24 @@ class BatchGeometryCheck:
         if self.decoder.finished:
             raise _StoppedError
 
-    def _flush_rows(self) -> Iterator[list[Item]]:
-        """The kept blocks: one by one if few, else as a batch."""
+    def _flush_rows(self, exact_last: bool = False) -> Iterator[list[Item]]:
+        """The kept blocks: one by one if few, else as a batch; ``exact_last``: the last one through the exact
+        decoder in any case (a G301/G302 follows it: its motion is held back for the corner)."""
         rows = self._rows
+        if exact_last and rows.blocks:
+            last = rows.blocks[-1]
+            rows.blocks.pop()
+            rows.ends.pop()
+            rows.motion.pop()
+            rows.feed.pop()
+            rows.absolute.pop()
+            rows.present.pop()
+            rows.centre.pop()
+            yield from self._flush_rows()
+            if not self.decoder.finished:
+                self.exact_blocks += 1
+                yield self.decoder.decode_block(last)
+            return
         blocks = rows.blocks
         count = len(blocks)
         if not count:
@@ -482,6 +503,7 @@ class BatchGeometryCheck:
         )
         if not decoder.finished:
             decoder.current_block = kept[-1]
+            decoder.motion_unheld = True
 
     def _finished(self) -> bool:
         return self.decoder.finished
@@ -522,8 +544,34 @@ class BatchGeometryCheck:
 
     # --- plain lines -------------------------------------------------------------------------------
     def _plain_lines(self, chunk: _Chunk, i: int, o: int) -> Iterator[list[Item]]:
-        """Lines ``i`` to ``o`` (exclusive) of the chunk: plain or empty."""
+        """Lines ``i`` to ``o`` (exclusive) of the chunk: plain or empty. Where the line after them asks for
+        a chamfer or rounding (G301/G302), the last of them goes to the exact decoder: its motion is held
+        back for the corner (docs/nc-language.md, "Chamfers and roundings")."""
         idx = i + np.flatnonzero(chunk.plain.kind[i:o] == PLAIN)
+        after = chunk.raw(o) if o < chunk.lines else self._source_line(chunk.first_line + o)
+        if idx.shape[0] and _corner_line(after):
+            yield from self._plain_run(chunk, idx[:-1])
+            if self.decoder.finished:
+                return
+            k = int(idx[-1])
+            self.line = chunk.first_line + k
+            self.exact_blocks += 1
+            yield self.decoder.decode_block(self._exact(chunk, k))
+            return
+        yield from self._plain_run(chunk, idx)
+
+    def _source_line(self, line: int) -> str:
+        """The program's line ``line`` ("" past its end or where it cannot be read)."""
+        source = self._source
+        if source is None:
+            return ""
+        try:
+            return source.line(line) or ""
+        except LineTooLongError:
+            return ""
+
+    def _plain_run(self, chunk: _Chunk, idx: Ints) -> Iterator[list[Item]]:
+        """The plain lines ``idx`` of the chunk, batched where they may be."""
         count = int(idx.shape[0])
         if count == 0:
             return
@@ -554,6 +602,7 @@ class BatchGeometryCheck:
                     return
             return
         yield from self._batch(chunk, idx, groups, all_exact)
+        decoder.motion_unheld = True  # a G301/G302 after these comes too late (the exact decoder's rule)
 
     def _chords(self, chunk: _Chunk, idx: Ints, groups: list[Group]) -> bool:
         """Has the stretch arcs that the exact check cuts into chords (a G18 arc among G17 areas)? Each
@@ -815,6 +864,11 @@ class BatchGeometryCheck:
             elif isinstance(check, MoveApartCheck):
                 all_exact = all_exact or bool(check.monitor.latched_pairs(check.channel))
         return groups, all_exact
+
+
+def _corner_line(raw: str) -> bool:
+    """Does the line ask for a chamfer or rounding (G301/G302)?"""
+    return "30" in raw and CORNER_AHEAD.search(strip_comments(raw).upper()) is not None
 
 
 def _fill(values: Floats, initial: float) -> Floats:

@@ -30,12 +30,14 @@ from hli_server.engine.kinematics.state import KinematicState
 from hli_server.engine.kinematics.transform import Transformation
 from hli_server.engine.nc.blocks import Block, NcError
 from hli_server.engine.nc.compiler import Compiler
+from hli_server.engine.nc.directives import Realtime
 from hli_server.engine.nc.interpreter import Interpreter
 from hli_server.engine.path.profiles import SlopeProfile, SlopeType
 from hli_server.engine.path.tools import ToolData
 from hli_server.engine.planner import Marker, MarkerKind, Motion, Planner
 from hli_server.engine.ports import MachinePort
 from hli_server.engine.programs import MemoryLibrary, ProgramFile
+from hli_server.engine.realtime import RealtimeCycles, RtCycle
 from schemas.config import ChannelConfig
 from schemas.events import (
     Alarm,
@@ -54,6 +56,8 @@ __all__ = ["LOOKAHEAD_ITEMS", "Channel", "ChannelHost", "JogGuard", "increments_
 LOOKAHEAD_ITEMS = 64
 """Motion blocks decoded ahead of the interpolator (the look-ahead buffer, P-STUP-00070's size)."""
 
+DRIVE_CYCLE_IDENTS = ("S-0-0001", "S-0-0002")
+"""SERCOS idents of the cycle times (µs): NC cycle time TNcyc, communication cycle time tScyc."""
 ALARM_REFUSED = 911021
 """Warning: a command not allowed in this mode or state (the text says which and why)."""
 ALARM_NOT_REFERENCED = 911020
@@ -163,6 +167,13 @@ class ChannelHost:
     def axis_name(self, index: int) -> str | None:
         names = self._channel.axis_names
         return names[index] if 0 <= index < len(names) else None
+
+    def drive_value(self, axis: str, ident: str) -> float | None:
+        """``#IDENT RD``: the idents the simulated drive has of its own (S-0-0001 the NC cycle time and
+        S-0-0002 the communication cycle time, both the channel's cycle time in µs); None for any other."""
+        if ident in DRIVE_CYCLE_IDENTS and axis:
+            return float(round(self._channel.t_a * 1e6))
+        return None
 
     def axis_value(self, variable: str, axis: str) -> float | None:
         """V.A.: ABS and PROG (the end of the last block, program coordinates), ACT_POS (the axis'
@@ -496,6 +507,18 @@ class Channel:
         them before the program directories, as the kernel finds the file a cycle just wrote."""
         self.interpreter = Interpreter(self.compiler, ChannelHost(self))
         self.decoder.warn = ChannelHost(self).warn
+        self.decoder.corner_ahead = self.interpreter.corner_ahead
+        self.decoder.homing = {a.name: (a.home_position, a.jog_velocity, a.jog_acceleration) for a in axes}
+        self.decoder.referenced_handler = self._referenced_by_program
+        self.realtime = RealtimeCycles(
+            self.number,
+            machine.external,
+            self._rt_position,
+            self._operator_override,
+            self._rt_fail,
+        )
+        """The realtime cycles (``#RT CYCLE``, TF5261): run in every cycle before the path's step."""
+        self.decoder.realtime_handler = self._realtime
         """Runs the NC programs of this channel ahead of the motion (N-01..N-08)."""
         self.planner = Planner(t_a=self.t_a, feedhold_decel=config.feedhold_deceleration)
         self.slope_ramp_time = max(
@@ -771,6 +794,7 @@ class Channel:
             )
             return
         self.interpreter.start(self.program_text, self.program_name)
+        self.realtime.end_program()
         self.planner.clear()
         self.set_slope(None)  # P-CHAN-00071 at every program start (#SLOPE's page)
         self.decoder.start(self.interpreter, self.setpoints())
@@ -804,6 +828,7 @@ class Channel:
         self.planner.clear()
         self.decoder.reset_modal()
         self.interpreter.reset()
+        self.realtime.end_program()
         self.kinematic = None
         self.aborting = False
         self.jog_velocity = [0.0] * len(self.axes)
@@ -844,6 +869,8 @@ class Channel:
         self.monitor_holds |= source
 
     def _interpolate(self) -> None:
+        if self.realtime.cycles:
+            self.realtime.run()
         holds = self.monitor_holds | (HoldSource.FEEDHOLD if self.feedhold_active else HoldSource.NONE)
         self._set_holds(holds)
         if any(a.referencing for a in self.axes):
@@ -869,7 +896,7 @@ class Channel:
             return
         self._fill()
         self.planner.feedhold = self.feedhold_active
-        self.planner.override = self.override_permille / 1000.0
+        self.planner.override = self.override_permille / 1000.0 * self.realtime.override
         point, markers = self.planner.step()
         self._apply(point)
         head = self.planner.current()
@@ -920,6 +947,7 @@ class Channel:
             marker.payload()
         elif marker.kind == MarkerKind.END:
             self.warn_missing_program_end(marker)
+            self.realtime.end_program()
             self.planner.clear()
             self.kinematic = None  # the program's end deselects the transformation (docs/kinematics.md)
             if self.program_running:
@@ -975,6 +1003,38 @@ class Channel:
             return
         axis.start_referencing()
         self.machine.referencing_changed(axis.index)
+
+    # --- realtime cycles (#RT CYCLE) -------------------------------------------------------------------
+    def _operator_override(self) -> float:
+        """The operator's override (0..1) a realtime cycle's override multiplies (a method, not a closure:
+        a recording's snapshot keeps it)."""
+        return self.override_permille / 1000.0
+
+    def _realtime(self, command: Realtime) -> None:
+        """``#RT CYCLE`` reached by the path: a cycle defined (running unless ``DEF``) or managed."""
+        if command.op == "DEFINE":
+            block = command.block if command.block is not None else Block(0, None, "")
+            self.realtime.define(RtCycle(command.ident, command.scope, command.body, block), command.start)
+        else:
+            self.realtime.manage(command.op, command.ident)
+
+    def _rt_position(self, kind: str, axis: str) -> float | None:
+        """V.RTA.<ACS|MCS>.<kind>.<axis> in mm: the command position (ACT_POS, CMD_POS) or the actual one
+        (CUR_POS); axis and machine coordinates are the same here (no transformation below the CS)."""
+        if axis not in self.axis_names:
+            return None
+        a = self.axes[self.axis_names.index(axis)]
+        return a.actual if kind == "CUR_POS" else a.setpoint
+
+    def _rt_fail(self, error: NcError) -> None:
+        self.machine.raise_alarm(error.alarm, self, error.message, line=error.line, block=error.block)
+
+    def _referenced_by_program(self, names: tuple[str, ...]) -> None:
+        """A G74 group arrived at its reference positions: its axes are referenced (E-02)."""
+        for name in names:
+            axis = self.axes[self.axis_names.index(name)]
+            axis.referenced = True
+            self.machine.referencing_changed(axis.index)
 
     def _reference(self) -> None:
         for axis in self.axes:

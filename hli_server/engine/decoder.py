@@ -37,6 +37,7 @@ from hli_server.engine.nc.directives import (
     FlushStop,
     FlushWait,
     MeasMode,
+    Realtime,
     Slope,
     SyncAction,
     ToolWrite,
@@ -59,6 +60,7 @@ from hli_server.engine.path.contour import (
     ContourSettings,
     Piece,
 )
+from hli_server.engine.path.corners import CHAMFER, ROUNDING, CornerError, CornerRequest
 from hli_server.engine.path.frames import FrameStack
 from hli_server.engine.path.radius import Element, RadiusCompensation, TrcError
 from hli_server.engine.path.tools import ToolData, ToolState
@@ -78,6 +80,13 @@ __all__ = [
 ALARM_SIMULATED_AS_DEV = 911040
 """Warning: a contouring type, ``#HSC`` or a spline the simulator does not model is simulated as
 contouring with corner deviation (M-23; the project's own number: the kernel has none)."""
+
+ALARM_APPROXIMATED = 911041
+"""Warning: a construct approximated within a documented tolerance, once per program."""
+
+ALARM_NO_FEED = 20008
+"""The kernel's "feed rate in motion block is 0" (DG 250515083): a feed move without F and without a
+default feed (P-CHAN-00099)."""
 
 ARC_RADIUS_TOLERANCE = 0.01
 """mm: allowed difference of start and end radius of a programmed circle (project's own)."""
@@ -109,6 +118,19 @@ class _Blocks:
 
     def next(self) -> Block | Directive | None:
         return next(self._blocks, None)
+
+
+class _Referenced:
+    """The action at the end of a G74 group: its axes are referenced."""
+
+    __slots__ = ("axes", "handler")
+
+    def __init__(self, handler: Callable[[tuple[str, ...]], None], axes: tuple[str, ...]) -> None:
+        self.handler = handler
+        self.axes = axes
+
+    def __call__(self) -> None:
+        self.handler(self.axes)
 
 
 def _tell(
@@ -223,6 +245,18 @@ class ModalState:
         return base + self.g92.get(axis, 0.0)
 
 
+_TRC_METHODS: dict[int, str] = {
+    **dict.fromkeys(
+        (5, 138, 236, 237, 238, 239),
+        "is simulated as the indirect selection G139: the approach and departure blocks differ from the "
+        "kernel's within the tool radius (the compensated contour between them is the same); a G40 without a "
+        "motion block ends at the last equidistant point, as G239 does",
+    ),
+    141: "(contour masking) is not simulated: a contour violation stops the program with 916000 where the "
+    "kernel would leave the violating blocks out",
+}
+"""The TRC selection methods and contour masking, approximated (warning 911041, docs/nc-language.md)."""
+
 _PLANE_AXES = {17: (0, 1), 18: (2, 0), 19: (1, 2)}
 """Indices into the main axes (first, second, third) of the plane's first and second axis."""
 _CENTRE_WORDS = {0: "I", 1: "J", 2: "K"}
@@ -282,6 +316,24 @@ class Decoder:
         """Polynomial contouring (M-20): may hold the last motion back to blend it with the next."""
         self.warn: Callable[[int, str, int, str], None] | None = None
         """Raises a warning of the table (alarm, message, line, block): the channel sets it."""
+        self.corner_ahead: Callable[[Block], bool] | None = None
+        """Does the block after this one ask for a chamfer or rounding (G301/G302)? Then its motion is held
+        back for it (the interpreter looks at the program's next line: :meth:`Interpreter.corner_ahead`)."""
+        self.corner_size: float | None = None
+        """The I word of G301/G302: "the I word remains stored" (PM 206609163)."""
+        self.motion_unheld = False
+        """The last motion went to the path without being held for a chamfer or rounding (no flush point
+        since): a G301/G302 now comes too late for it (the batch geometry check sets it too)."""
+        self._approximations: set[str] = set()
+        """Constructs approximated in this program and said so (warning 911041 once each)."""
+        self.homing: dict[str, tuple[float, float, float]] = {}
+        """axis -> (reference position mm, homing velocity mm/s, acceleration mm/s²): G74 (the channel's
+        axes' reference positions, their jog velocity and acceleration: the project's homing model)."""
+        self.referenced_handler: Callable[[tuple[str, ...]], None] | None = None
+        """Called when a G74 group has arrived at its reference positions (the channel marks them
+        referenced)."""
+        self.realtime_handler: Callable[[Realtime], None] | None = None
+        """Defines and manages the channel's realtime cycles (``#RT CYCLE``) when the path passes."""
         self.kin = kinematics if kinematics is not None else KinematicState({}, 0, len(axes))
         """The kinematic data sets, the selection and the active transformation (docs/kinematics.md)."""
         self.kin_axes: Point = ()
@@ -310,7 +362,10 @@ class Decoder:
         self.blocks = _Blocks(blocks) if isinstance(blocks, Iterator) else blocks
         self.position = list(position)
         if self.modal.feed is None and self.default_feed > 0.0:
-            self.modal.feed = self.default_feed  # P-CHAN-00099
+            self.modal.feed = self.default_feed  # P-CHAN-00099: the F of a program start without one
+        self.corner_size = None
+        self.motion_unheld = False
+        self._approximations.clear()
         self.finished = False
         self.waiting = False
         self.blocks_decoded = 0
@@ -405,6 +460,11 @@ class Decoder:
             return items
         if isinstance(out, SyncAction):
             return [*items, Marker(MarkerKind.SYNC, block, payload=out.action)]
+        if isinstance(out, Realtime):
+            realtime = self.realtime_handler
+            if realtime is None:
+                return items
+            return [*items, Marker(MarkerKind.SYNC, block, payload=functools.partial(realtime, out))]
         if isinstance(out, FlushWait):
             self.waiting = True
             return [*items, Marker(MarkerKind.ACTION, block, payload=self._end_wait)]
@@ -884,6 +944,7 @@ class Decoder:
         through the frames into the contouring stage, then the contouring stage's held piece), then
         ``items``; if a held motion fails its check, its error marker replaces ``items`` (decoding ends)."""
         out: list[Motion | Marker] = []
+        self.motion_unheld = False
         if self.trc.active:
             out = self._trc_flush()
             if out and isinstance(out[-1], Marker):
@@ -939,6 +1000,14 @@ class Decoder:
         if announce and out.block is not None:
             self._announce(settings, out.block)
 
+    def _approximated(self, block: Block, key: str, what: str) -> None:
+        """Warning 911041 once per program and ``key``: a construct that only shapes the path, approximated
+        within the tolerance ``what`` says (docs/nc-language.md, "Refusals and approximations")."""
+        if key in self._approximations or self.warn is None:
+            return
+        self._approximations.add(key)
+        self.warn(ALARM_APPROXIMATED, f"{key} {what} (docs/nc-language.md)", block.line, block.label)
+
     def _announce(self, settings: ContourSettings, block: Block) -> None:
         """Warning 911040: ``settings.simulated_as`` is simulated as contouring with corner deviation."""
         if self.warn is not None:
@@ -965,6 +1034,8 @@ class Decoder:
             m.inch = False
         if 4 in block.g_codes:
             return self._dwell(block)  # before G70's scaling: the time is in seconds
+        if 74 in block.g_codes:
+            return self._homing(block)  # the values are the order, not positions
         if m.inch:
             block = _block_in_mm(block, self.rotary_axes)
         if 95 in block.g_codes:
@@ -1020,6 +1091,8 @@ class Decoder:
                 m.spline = False
             elif g in (100, 200, 201, 202):
                 return self._error(block, 910110, f"G{g} is not supported in this block context")
+            elif g in _TRC_METHODS:
+                self._approximated(block, f"G{g}", _TRC_METHODS[g])
         tool_error = self._tool_words(block)
         if tool_error is not None:
             return tool_error
@@ -1030,6 +1103,12 @@ class Decoder:
                 m.feed_rev = block.feed
             else:
                 m.feed = block.feed
+        corner: CornerRequest | None = None
+        if CHAMFER in block.g_codes or ROUNDING in block.g_codes:
+            found = self._corner_request(block)
+            if isinstance(found, list):
+                return found
+            corner = found
         if 92 in block.g_codes and self.transforms_active:
             self._g92_framed(block)
             return items
@@ -1046,7 +1125,9 @@ class Decoder:
             if self.finished:
                 return before
             return before + self._measuring_move(block)
-        moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre))
+        moves = bool(block.axes) or (m.motion in (2, 3) and bool(block.centre) and corner is None)
+        if corner is not None and not moves:
+            return self._corner_between(block, corner)
         if moves and (self.transforms_active or 40 in block.g_codes) and not m.in_area_definition:
             # radius compensation -> frames and tool length -> contouring -> checks (M-30)
             items = self._motion_framed(block)
@@ -1062,6 +1143,8 @@ class Decoder:
             self._trc_prog = None
             if items and isinstance(items[-1], Marker):
                 return items
+        if corner is not None and self.contour.holding_for_corner:
+            self.contour.request_corner(corner)  # at the end of this block's own motion
         ends: list[Motion | Marker] = [
             Marker(MarkerKind.END, block, payload=f"M{code:02d}") for code in block.m_codes if code in (2, 30)
         ]
@@ -1083,29 +1166,94 @@ class Decoder:
         return items
 
     def _dwell(self, block: Block) -> list[Motion | Marker]:
-        """``G04 <first main axis><s>`` (M-09, PM 206132747): the path rests for the time, then goes on
-        (the axes at rest first). The time by the first main axis only; another axis in the block is the
-        kernel's 20685 (refused here, where the kernel warns and goes on); the bare-number form
-        ``G04 2.5``, ``G04 P1`` and the spindle form ``G04 S10`` are not simulated (910110)."""
+        """``G04 <first main axis><s>``, ``G04 <s>``, ``G04 S<revolutions>`` (M-09, PM 206132747): the path
+        rests for the time, then goes on (the axes at rest first). The time by the first main axis (the
+        interpreter reads ``G04 2.5`` and ``G04 P1`` so); another axis besides it is the kernel's warning
+        20685 (the program goes on), another axis alone its 20014 (DG 250536843); revolutions of the main
+        spindle last ``60 * S / speed`` seconds at the spindle's programmed speed (none: 20007)."""
         first = self.main[0]
         others = [name for name, _ in block.axes if name != first]
-        if others:
+        seconds = dict(block.axes).get(first)
+        if seconds is None and others:
             return self._error(
                 block,
-                20685,
-                f"G04 with the axes {', '.join(others)}: the dwell time takes the first main axis only",
+                20014,
+                f"G04 {others[0]}..: the dwell time is programmed with the first main axis ({first}), "
+                f"not with {others[0]}",
             )
-        seconds = dict(block.axes).get(first)
+        if others and self.warn is not None:
+            self.warn(
+                20685,
+                f"G04 with the axes {', '.join(others)}: the dwell time takes the first main axis only "
+                f"({first}); the others are ignored",
+                block.line,
+                block.label,
+            )
+        revolutions = block.extra.get("S")
+        if seconds is None and revolutions is not None:
+            m = self.modal
+            if not m.spindle_on or m.spindle_speed <= 0.0:
+                return self._error(
+                    block,
+                    20007,
+                    f"G04 S{revolutions:g}: a dwell in spindle revolutions needs the spindle turning "
+                    "(M3/M4 with S)",
+                )
+            seconds = 60.0 * revolutions / m.spindle_speed
         if seconds is None:
             return self._error(
-                block,
-                910110,
-                f"G04 without {first}<seconds>: only G04 {first}<s> is simulated "
-                "(not G04 <s>, G04 P.., G04 S..)",
+                block, 20014, f"G04 without its time: write G04 {first}<s>, G04 <s> or G04 S<revolutions>"
             )
         if seconds < 0.0:
             return self._error(block, 911000, f"G04 {first}{seconds:g}: a dwell time is not negative")
         return [Marker(MarkerKind.ACTION, block, payload=Dwell(seconds))]
+
+    def _homing(self, block: Block) -> list[Motion | Marker]:
+        """``G74 X2 Y3 Z1`` (PM 206138635): programmable homing. The values give the order (equal values
+        together); each group moves to its reference positions (P-AXIS reference point here: the axis'
+        ``reference_position``, else its start position) in machine coordinates, as one line with the
+        axes' homing velocity and acceleration (the jog values: the project's homing model), and is
+        referenced at its end. The moves go through every path check and are travelled like any block, so
+        the monitors see them. ``G74 S..`` (a spindle) has no effect here. A flush point; with the radius
+        compensation active: not simulated (910110)."""
+        if self.trc.active:
+            return self._error(
+                block, 910110, "G74 with tool radius compensation active is not simulated: G40 first"
+            )
+        if block.axes and any(name not in self.homing for name, _ in block.axes):
+            missing = [name for name, _ in block.axes if name not in self.homing]
+            return self._error(block, 910110, f"G74: no reference point known for {', '.join(missing)}")
+        items = self._flushed([])
+        if self.finished:
+            return items
+        order = sorted({value for _, value in block.axes})
+        for rank in order:
+            group = tuple(name for name, value in block.axes if value == rank)
+            start = tuple(self.position)
+            target = list(start)
+            for name in group:
+                target[self.index[name]] = self.homing[name][0]
+            segment = LineSegment(start, tuple(target))
+            if segment.length > 1e-12:
+                err = self._check(segment, block)
+                if err is not None:
+                    return [*items, Marker(MarkerKind.ERROR, block, payload=err)]
+                v = a = math.inf
+                for name in group:
+                    k = self.index[name]
+                    share = abs(target[k] - start[k]) / segment.length
+                    if share > 1e-12:
+                        v = min(v, self.homing[name][1] / share)
+                        a = min(a, self.homing[name][2] / share)
+                items.append(Motion(segment=segment, block=block, v_max=v, accel=a, exact_stop=True))
+                self.position = target
+            handler = self.referenced_handler
+            if handler is not None:
+                items.append(Marker(MarkerKind.ACTION, block, payload=_Referenced(handler, group)))
+        if self.axes[self._main_index[self._tool_axis()]] in dict(block.axes):
+            self.tools.applied_length = 0.0  # the tool axis is at its reference: no tool length in it
+            self._position_length = 0.0
+        return items
 
     def _weighting(self, g: int, block: Block) -> None:
         """G130/G131/G230/G231: acceleration weighting in percent of the axes' acceleration (manual
@@ -1197,6 +1345,8 @@ class Decoder:
             if before and isinstance(before[-1], Marker):
                 return before
             target = list(segment.end)
+        hold = self._corner_next(block)
+        self.motion_unheld = not hold
         piece = Piece(
             segment=segment,
             block=block,
@@ -1204,8 +1354,9 @@ class Decoder:
             exact_stop=60 in block.g_codes,
             feed=None if rapid else self.path_feed(),
             blend=None if rapid else m.blend(block.g_codes),
+            hold=hold,
         )
-        items = before + self._emit_pieces(self.contour.push(piece))
+        items = before + self._push(piece)
         if not (items and isinstance(items[-1], Marker)):
             self.position = target
             self._position_length = 0.0
@@ -1216,7 +1367,9 @@ class Decoder:
         m = self.modal
         if m.feed_per_rev:
             if m.feed_rev is None:
-                return self._error(block, 911000, "G95: no feed per revolution (F word) programmed")
+                return self._error(
+                    block, ALARM_NO_FEED, "G95: feed rate 0: no feed per revolution (F word) programmed"
+                )
             if not m.spindle_on or m.spindle_speed <= 0.0:
                 return self._error(
                     block,
@@ -1224,8 +1377,95 @@ class Decoder:
                     "G95 feed per revolution with the spindle stopped: program M3/M4 and S first",
                 )
         elif m.feed is None:
-            return self._error(block, 911000, "no feed (F word) programmed for a feed move")
+            return self._error(
+                block,
+                ALARM_NO_FEED,
+                "feed rate 0: no feed (F word) programmed for a feed move, and no default feed "
+                "(P-CHAN-00099 prog_start.feedrate)",
+            )
         return None
+
+    def _push(self, piece: Piece) -> list[Motion | Marker]:
+        """``piece`` through the contouring stage (contouring, chamfers and roundings) to the path checks;
+        a chamfer or rounding that cannot be inserted is the error of its G301/G302 block, and the path
+        stops where the held pre-block starts."""
+        held = self.contour.held_piece
+        try:
+            pieces = self.contour.push(piece)
+        except CornerError as exc:
+            self.contour.reset()
+            if held is not None:
+                self.position = list(held.segment.start)
+            return [Marker(MarkerKind.ERROR, piece.block, payload=DecodeError(exc.alarm, exc.message))]
+        return self._emit_pieces(pieces)
+
+    # --- chamfers and roundings (G301/G302, PM 206609163) ---------------------------------------------
+    def _corner_next(self, block: Block) -> bool:
+        """Is this block's motion held back for a chamfer or rounding at its end?"""
+        if CHAMFER in block.g_codes or ROUNDING in block.g_codes:
+            return True
+        ahead = self.corner_ahead
+        return ahead is not None and ahead(block)
+
+    def _corner_request(self, block: Block) -> CornerRequest | list[Motion | Marker]:
+        """G301/G302 with its I word (stored: a later G301/G302 may leave it out; PM 206609163): the
+        kernel's 20130 (both in one block), 20012 (no I, or I0), 20800 (a negative I); with the radius
+        compensation active: not simulated (910110)."""
+        kinds = [g for g in block.g_codes if g in (CHAMFER, ROUNDING)]
+        if len(kinds) > 1:
+            return self._error(block, 20130, "G301 and G302 in one block: a chamfer or a rounding")
+        kind = kinds[0]
+        size = dict(block.centre).get("I")
+        if size is not None and not (self.modal.motion in (2, 3) and block.axes):
+            self.corner_size = size
+        size = self.corner_size
+        if size is None or size == 0.0:
+            return self._error(
+                block, 20012, f"G{kind} without its size: program I<mm> (not 0) with the first G301/G302"
+            )
+        if size < 0.0:
+            return self._error(block, 20800, f"G{kind} I{size:g}: the size is out of range (0 < I)")
+        if self.trc.active:
+            return self._error(
+                block,
+                910110,
+                f"G{kind} with tool radius compensation active is not simulated: the kernel inserts the "
+                "element in the programmed contour, before the compensation (docs/nc-language.md)",
+            )
+        feed = None if block.feed is None else self.path_feed()
+        return CornerRequest(kind, size, feed, block)
+
+    def _corner_between(self, block: Block, corner: CornerRequest) -> list[Motion | Marker]:
+        """A G301/G302 block without motion: the element goes between the held motion and the next one.
+        Without a motion before it: the kernel's warning 20351; a second one before the next motion: its
+        warning 20701 (the second counts). A motion that went to the path unheld (the look-ahead did not
+        see this block: a call or a jump between): not simulated (910110)."""
+        place = block.label
+        if not self.contour.holding_for_corner:
+            if self.motion_unheld:
+                return self._error(
+                    block,
+                    910110,
+                    f"G{corner.kind} after the motion it belongs to was handed to the path: write G301/G302 "
+                    "in the line right after the motion block (not after a call or a jump)",
+                )
+            if self.warn is not None:
+                self.warn(
+                    20351,
+                    f"G{corner.kind}: no motion block before it to insert the element after",
+                    block.line,
+                    place,
+                )
+            return []
+        if self.contour.corner_requested and self.warn is not None:
+            self.warn(
+                20701,
+                f"G{corner.kind}: a G301/G302 without a motion block since the last one",
+                block.line,
+                place,
+            )
+        self.contour.request_corner(corner)
+        return []
 
     def _emit_pieces(self, pieces: list[Piece]) -> list[Motion | Marker]:
         """The path checks and the planner's items for the pieces the contouring stage gives out; the
@@ -1573,6 +1813,8 @@ class Decoder:
             self._position_length = e.length
             if segment.length <= 1e-12:
                 continue
+            hold = not self.trc.active and self._corner_next(block)
+            self.motion_unheld = not hold
             piece = Piece(
                 segment=segment,
                 block=block,
@@ -1582,8 +1824,9 @@ class Decoder:
                 blend=e.blend,
                 tip_start=length_at_start,
                 tip_end=e.length,
+                hold=hold,
             )
-            items += self._emit_pieces(self.contour.push(piece))
+            items += self._push(piece)
             if items and isinstance(items[-1], Marker):
                 return items
         return items

@@ -19,6 +19,7 @@ __all__ = [
     "arc_from_centre",
     "first_beyond",
     "segment_params",
+    "sub_segment",
 ]
 
 Point = tuple[float, ...]
@@ -159,6 +160,28 @@ def arc_from_centre(
         if full or sweep == 0.0:
             sweep = _TAU
     return ArcSegment(start, end, plane, centre, r0, a0, sweep), abs(r1 - r0)
+
+
+def sub_segment(segment: Segment, s0: float, s1: float) -> Segment:
+    """The part of ``segment`` between the path distances ``s0`` and ``s1`` (0 <= s0 < s1 <= length)."""
+    length = segment.length
+    if isinstance(segment, LineSegment):
+        start = segment.start if s0 <= 0.0 else segment.point_at(s0)
+        end = segment.end if s1 >= length else segment.point_at(s1)
+        return LineSegment(start, end)
+    f0 = 0.0 if length <= 0.0 else s0 / length
+    f1 = 1.0 if length <= 0.0 else s1 / length
+    start = segment.start if s0 <= 0.0 else segment.point_at(s0)
+    end = segment.end if s1 >= length else segment.point_at(s1)
+    return ArcSegment(
+        start,
+        end,
+        segment.plane,
+        segment.centre,
+        segment.radius,
+        segment.start_angle + segment.sweep * f0,
+        segment.sweep * (f1 - f0),
+    )
 
 
 def first_beyond(segment: Segment, index: int, limit: float, above: bool) -> Point:

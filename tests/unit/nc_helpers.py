@@ -59,6 +59,9 @@ class FakeHost:
     def axis_name(self, index: int) -> str | None:
         return self.axes[index] if 0 <= index < len(self.axes) else None
 
+    def drive_value(self, axis: str, ident: str) -> float | None:
+        return 1000.0 if ident in ("S-0-0001", "S-0-0002") else None
+
     def find_cycle(self, name: str) -> ProgramFile | None:
         return self.library.find(name)
 

@@ -196,7 +196,7 @@ def test_syntax_error_stops_at_the_line_and_engine_stays_usable():
 def test_feed_move_without_feed_is_an_error():
     m = mill()
     run(m, "N10 G01 X10\nN20 M30\n")
-    assert [a.number for a in m.active_alarms] == [911000]
+    assert [a.number for a in m.active_alarms] == [20008]
 
 
 @pytest.mark.req("E-05")

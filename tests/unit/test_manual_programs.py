@@ -88,6 +88,16 @@ MESSAGES = [
     ("N10 M17 MAIN [ERR]", (910110, ["parameterised jump of M17/M29"], ["unknown name"])),
     ("N10 M29 JUMPS=2 N100", (910110, ["parameterised jump of M17/M29"], [])),
     ("N10 M17 [MAIN [ERR]]", (910110, ["parameterised jump of M17/M29"], ["label"])),
+    # issue 33: a block number from a parameter, the spindle- and axis-specific syntax, unknown words
+    ("P123 = 4\nNP123 G00 X1", None),
+    ("S1[MC_MoveVelocity Velocity=1333 Direction=1]", None),
+    ("X[INDP_SYN POS=10 G90 G01 FEED=1000]", (910110, ["X[INDP_SYN", "independent axis"], ["unknown name"])),
+    ("N25 HierStehtIrgendwasKomisches", (910100, ["'HIERSTEHTIRGENDWASKOMISCHES'"], ["'IERSTEHT"])),
+    ("FOO X2", (910100, ["unknown word 'FOO'"], ["'OO'", "in an expression"])),
+    ("G04 Y2", (20014, ["first main axis"], [])),
+    ("G805[-45.785, 32.720, 2.620]", (910110, ["G805[..]", "implicit subroutine call"], ["label"])),
+    ("G01 X1 F100 [LBL]", (910100, ["'[LBL]'", "label"], [])),
+    ("#FOO BAR", (910109, ["#FOO", "#TOOL PREP", "#RT CYCLE", "#IDENT WR"], ["#FOO BAR"])),
 ]
 
 

@@ -123,7 +123,7 @@ def test_g95_with_the_spindle_stopped_is_the_kernels_60131(program: str) -> None
 def test_g95_without_its_own_f_word_is_refused() -> None:
     m = mill()
     run(m, "N10 G01 X1 F1000 M3 S1000\nN20 G95 X2\nM30\n")
-    assert 911000 in alarms(m)
+    assert 20008 in alarms(m)
 
 
 # --- circles by radius ------------------------------------------------------------------------------
@@ -219,13 +219,43 @@ def test_g04_rests_between_moves_and_is_seconds_under_g70() -> None:
 @pytest.mark.req("M-09")
 @pytest.mark.parametrize(
     ("block", "alarm"),
-    [("G04 X1 Y2", 20685), ("G04 S10", 910110), ("G04", 910110), ("G04 X-1", 911000)],
+    [("G04 Y2", 20014), ("G04 S10", 20007), ("G04", 20014), ("G04 X-1", 911000), ("#TIME -1", 20751)],
 )
-def test_g04_forms_not_simulated_or_wrong_are_refused(block: str, alarm: int) -> None:
+def test_g04_forms_that_are_wrong_are_refused_with_the_kernels_id(block: str, alarm: int) -> None:
+    """DG 250536843 (20014: ``G04 Y2``, the dwell time not by the first main axis); a dwell in revolutions
+    with the spindle stopped (20007, spindle speed 0); #TIME out of range (DG 252425611, 20751)."""
     m = mill()
     run(m, f"N10 G01 X1 F6000\nN20 {block}\nN30 X2\nM30\n")
-    assert alarm in alarms(m)
+    assert alarms(m) == [alarm]
     assert positions(m)["X"] == pytest.approx(1.0)
+
+
+@pytest.mark.req("M-09")
+def test_g04_with_another_axis_warns_20685_and_dwells_by_the_first() -> None:
+    """DG 252216715: class 1, "continue NC program processing" - the time is X's, Y is ignored."""
+    m = mill()
+    run(m, "N10 G01 X1 F6000\nN20 G04 X1 Y3\nN30 X2\nM30\n")
+    assert alarms(m) == [20685]
+    assert positions(m) == {"X": pytest.approx(2.0), "Y": 0.0, "Z": 0.0}
+
+
+@pytest.mark.req("M-09")
+@pytest.mark.parametrize(
+    ("dwell", "seconds"),
+    [("N20 #TIME 0.5", 0.5), ("N15 P1 = 0.5\nN20 #TIME P1", 0.5), ("N15 M3 S600\nN20 G04 S5", 0.5)],
+)
+def test_time_and_g04_in_revolutions_rest_as_long_as_the_manual_says(dwell: str, seconds: float) -> None:
+    """PM 206132747: ``#TIME <s>`` and ``G04 S<revolutions>`` (10 revolutions at S200 are 3 s)."""
+
+    def duration(program: str) -> int:
+        m = mill()
+        run(m, program)
+        assert not alarms(m)
+        return m.cycle
+
+    g04 = duration(f"N10 G01 X10 F6000\nN20 G04 X{seconds}\nN30 G01 X20\nM30\n")
+    rest = duration(f"N10 G01 X10 F6000\n{dwell}\nN30 G01 X20\nM30\n")
+    assert rest == pytest.approx(g04, abs=1)
 
 
 # --- the batch geometry check ------------------------------------------------------------------------

@@ -2,7 +2,7 @@
 
 G139 (indirect selection, PM 207729163) and G140 (no contour masking, PM 206480651) are the kernel's
 initial states, the ones simulated: programmed, they change nothing. The other selection methods and
-contour masking are refused by name (910110), never as an unknown G code (910102). Inside the brackets
+contour masking run approximated by them, with warning 911041 once per program (issue 33). Inside the brackets
 of ``#CONTOUR MODE [..]`` a value is a whole expression, blanks and all, as the manual writes it.
 """
 
@@ -25,13 +25,19 @@ def test_g139_and_g140_are_the_initial_states_and_change_nothing() -> None:
     assert stated == plain
 
 
+@pytest.mark.req("LT-08")
 @pytest.mark.parametrize("g", [5, 138, 141, 236, 237, 238, 239])
-def test_the_other_trc_modes_are_refused_by_name(g: int) -> None:
-    _, errs, _ = decode(f"N10 D1 G17 G90 G01 F3000\nN15 G{g:02d}\n" + SQUARE)
-    assert errs, f"G{g} was accepted"
-    assert errs[0].alarm == 910110, errs[0]
-    assert f"G{g}" in errs[0].message
-    assert "TRC" in errs[0].message
+def test_the_other_trc_modes_run_as_g139_with_one_warning(g: int) -> None:
+    """Issue 33: the selection methods only shape the approach and departure (within the tool radius) and
+    contour masking only matters where a violation would stop the program: approximated, said once."""
+    plain, plain_errors, _ = decode("N10 D1 G17 G90 G01 F3000\n" + SQUARE)
+    m = machine()
+    other, errs, _ = decode(f"N10 D1 G17 G90 G01 F3000\nN15 G{g:02d}\n" + SQUARE, m)
+    assert errs == plain_errors == []
+    assert other == plain
+    warnings = [a for a in m.alarm_history if a.number == 911041]
+    assert len(warnings) == 1
+    assert warnings[0].message.startswith(f"G{g} ")
 
 
 @pytest.mark.req("M-20")

@@ -817,7 +817,6 @@ def test_flush_stops_the_path_flush_wait_waits_flush_continue_neither():
         ("#CS MODE ON", 910110, "#CS"),
         ("#CS SELECT [A]", 910110, "#CS"),
         ("#TLAX [Z+]", 910110, "#TLAX"),
-        ("G01 X10 E100", 910110, "E"),
         ('"STRING1" = "5"', 910110, "macros"),
         ("#TIMER", 910110, "#TIMER"),
         ("#KIN TCP DEF [1]", 910110, "#KIN"),  # #KIN ID is simulated (issue 35), other #KIN forms not
@@ -825,7 +824,7 @@ def test_flush_stops_the_path_flush_wait_waits_flush_continue_neither():
         ("#SET SLOPE PROFIL[1]", 910110, "#SET"),
         ("#FILE DELETE", 910110, "#FILE"),
         ("#FOO", 910109, "#FOO"),
-        ("G5 X1", 910110, "G5"),
+        ("#ANG [5]", 910110, "#ANG"),
         ("G77 X1", 910102, "G77"),
         ('#MSG INFO ["x"]', 910110, "INFO"),
         ("X[V.TLM.X]", 910110, "V.TLM."),

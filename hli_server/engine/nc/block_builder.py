@@ -10,6 +10,7 @@ import math
 from hli_server.engine.nc import parser as word_parser
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.language import (
+    A_BAD_N,
     A_BAD_NUMBER,
     A_NOT_SIMULATED,
     A_RANGE,
@@ -119,6 +120,14 @@ def build_block(
                 m_codes.append(int(code))
             elif "H" not in extra:
                 extra["H"] = float(code)
+        elif letter == "N":
+            # N<expr> (PM 206817035): "rounded off internally and converted into an integer"
+            shown = math.floor(value + 0.5) if math.isfinite(value) else -1
+            if not 0 <= shown <= 999_999_999:
+                word_parser._fail(
+                    A_BAD_N, line, number, f"{word.text} = {_shown(value)}: a block number is 0 .. 999999999"
+                )
+            number = int(shown)
         elif letter == "F":
             if feed is not None:
                 word_parser._twice("feed", "F", feed, _shown(value), line, number)

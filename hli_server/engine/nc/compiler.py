@@ -164,7 +164,10 @@ class Compiler:
             isinstance(stmt, Words)
             and stmt.items
             and all(
-                isinstance(i, Word) and i.value.is_constant() and (i.extra is None or i.extra.is_constant())
+                isinstance(i, Word)
+                and i.letter != "E"  # the interpreter says once that it is approximated
+                and i.value.is_constant()
+                and (i.extra is None or i.extra.is_constant())
                 for i in stmt.items
             )
         ):

@@ -119,6 +119,12 @@ class ControlFlow(Effects):
             self._flush_wait(frame, stmt)
             return
         if keyword == C_IF:
+            if stmt.frequency:
+                raise stmt.error(
+                    A_CONTROL_SYNTAX,
+                    f"$IF {stmt.frequency}: the qualifiers ONCE, EDGE, ALWAYS belong to an $IF of a realtime "
+                    "cycle (#RT CYCLE .. #RT CYCLE END)",
+                )
             condition = self._truth(stmt, stmt.exprs[0], "$IF")
             if stmt.goto is not None:
                 if condition:

@@ -17,6 +17,7 @@ from typing import Final, Protocol
 
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.nc.blocks import Block
+from hli_server.engine.nc.statements import Stmt
 from hli_server.engine.programs import ProgramFile
 
 __all__ = [
@@ -29,6 +30,7 @@ __all__ = [
     "Host",
     "IterationCapError",
     "MeasMode",
+    "Realtime",
     "Slope",
     "SyncAction",
     "ToolWrite",
@@ -133,6 +135,28 @@ class ContourDirective(Directive):
         self.values = values
 
 
+class Realtime(Directive):
+    """``#RT CYCLE`` (TF5261): ``op`` DEFINE (``body`` the cycle's statements; ``start``: it runs at once, not
+    ``DEF``), START, HOLD, CONTINUE, ABORT or DELETE; ``ident`` the cycle's ID (None: the one defined last);
+    ``scope`` BLOCK, PROG or GLOBAL. The channel runs it when the path passes this point."""
+
+    def __init__(
+        self,
+        block: Block,
+        op: str,
+        ident: int | None,
+        scope: str = "PROG",
+        body: list[Stmt] | None = None,
+        start: bool = True,
+    ) -> None:
+        super().__init__(block)
+        self.op = op
+        self.ident = ident
+        self.scope = scope
+        self.body = body or []
+        self.start = start
+
+
 class IterationCapError(Exception):
     """A geometry check ran more loop iterations than its cap (an endless loop, or a cap too low)."""
 
@@ -178,6 +202,11 @@ class Host(Protocol):
 
     def axis_name(self, index: int) -> str | None:
         """The channel's axis number ``index`` (``V.A.ABS[0]``), or None."""
+        ...
+
+    def drive_value(self, axis: str, ident: str) -> float | None:
+        """The simulated drive's own value of SERCOS ident ``ident`` (``S-0-0002``) for ``axis``, in the
+        ident's unit, or None where the simulated drive has none (``#IDENT RD``)."""
         ...
 
     def find_cycle(self, name: str) -> ProgramFile | None:

@@ -8,17 +8,21 @@ import functools
 import math
 
 from hli_server.engine.nc import parser as word_parser
+from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.directives import (
     ContourDirective,
     CoordinateCommand,
     FlushStop,
     FlushWait,
     MeasMode,
+    Realtime,
     Slope,
     SyncAction,
 )
 from hli_server.engine.nc.expr import (
+    ALARM_TYPE,
     Expr,
+    Ref,
     Value,
     format_value,
 )
@@ -35,20 +39,29 @@ from hli_server.engine.nc.kinematic_commands import (
 from hli_server.engine.nc.language import (
     A_CONTROL_SYNTAX,
     A_CORNER_DEVIATION,
+    A_DRIVE_READ,
+    A_DRIVE_READ_ONLY,
+    A_DWELL_RANGE,
+    A_HUEMNOS_TOOL,
     A_INDEX,
+    A_LIMIT,
     A_MESSAGE,
     A_MSG_FORMAT,
     A_MSG_VALUES,
     A_NOT_SIMULATED,
     A_RANGE,
+    A_RT_ID,
     A_STRING_LENGTH,
+    A_UNKNOWN_AXIS_NAME,
     CONTOUR_KEYS,
     CONTOUR_TYPES,
     CONTOUR_WORDS,
     DEVIATION_KEYS,
+    FILTER_KEYS,
     HSC_KEYS,
     HSC_WORDS,
     MAX_MESSAGE,
+    MAX_NAME,
     MEAS_TYPES,
     SPLINE_WORDS,
 )
@@ -62,6 +75,9 @@ from hli_server.engine.nc.statements import (
 from hli_server.engine.nc.variable_access import VariableAccess
 
 __all__ = ["Effects"]
+
+_MAX_DWELL_S = 214748.3647
+"""s: the longest dwell (a DINT of 0.1 ms, as a position's range; ID 20751 beyond)."""
 
 
 class Effects(VariableAccess):
@@ -196,12 +212,63 @@ class Effects(VariableAccess):
             return
         if command == "FILE NAME":
             self._message_file = stmt.files.get("MSG", self._message_file)
+            if "MSG" in stmt.params:
+                file_name = self._evaluate(stmt, stmt.params["MSG"])
+                if not isinstance(file_name, str):
+                    raise stmt.error(
+                        ALARM_TYPE,
+                        f"#FILE NAME [MSG=..]: {format_value(file_name)} is no file name (a string)",
+                    )
+                if not file_name or len(file_name) > MAX_NAME:
+                    raise stmt.error(
+                        A_LIMIT,
+                        f'#FILE NAME [MSG=..]: "{file_name}": a file name has 1 to {MAX_NAME} characters',
+                    )
+                self._message_file = file_name
             return
         if command in ("CONTOUR MODE", "HSC", "SPLINE"):
             self._pending.append(self._contour(frame, stmt))
             return
         if command in ("KIN ID", "TRAFO", "TOOL ORI CS", "CYL", "CAXTRACK", "SET AX"):
             self._pending.append(self._kinematic(frame, stmt))
+            return
+        if command == "TIME":
+            self._dwell(frame, stmt)
+            return
+        if command.startswith("TOOL "):
+            self._tool(frame, stmt)
+            return
+        if command.startswith("IDENT "):
+            self._ident(frame, stmt)
+            return
+        if command == "FILTER":
+            self._filter(stmt)
+            return
+        if command == "RT CYCLE":
+            self._rt_cycle(frame, stmt)
+            return
+        if command == "FRC":
+            feed = self._number(stmt, stmt.args[0], "the feed of #FRC")
+            if not 0.0 < feed <= word_parser._FEED_MAX:
+                raise stmt.error(A_RANGE, f"#FRC={format_value(feed)}: {word_parser._FEED_RANGE}")
+            self._approximation(
+                stmt,
+                "#FRC",
+                "#FRC (the feed of an inserted chamfer or rounding) is not simulated: the element is "
+                "travelled at the G301/G302 block's F or the pre-block's feed; the path is the same "
+                "(docs/nc-language.md)",
+            )
+            return
+        if command.startswith(("AKIMA ", "SET ASPLINE")):
+            for arg in stmt.args:
+                self._number(stmt, arg, f"a component of #{command}")
+            self._approximation(
+                stmt,
+                "#AKIMA",
+                f"#{command}: the Akima spline's transition types and tangents are not simulated: the spline "
+                "is simulated as contouring with corner deviation 0.2 mm (warning 911040), whose transitions "
+                "into and out of it are contoured corners too (docs/nc-language.md)",
+            )
             return
         # MSG
         if self._needs_flush(frame, stmt, stmt.args):
@@ -383,6 +450,185 @@ class Effects(VariableAccess):
             if mode is None and on is None:
                 raise stmt.error(A_CONTROL_SYNTAX, "#SPLINE: ON, OFF or TYPE AKIMA|BSPLINE expected")
         return ContourDirective(self._place_block(frame, stmt), name, on, mode, values)
+
+    # --- #TIME, #TOOL, #IDENT ------------------------------------------------------------------------------
+    def _dwell(self, frame: Frame, stmt: Hash) -> None:
+        """``#TIME <s>`` (PM 206132747): the dwell of ``G04 <s>``, a block the decoder rests for."""
+        seconds = self._number(stmt, stmt.args[0], "the dwell time of #TIME")
+        if not 0.0 <= seconds <= _MAX_DWELL_S:
+            raise stmt.error(
+                A_DWELL_RANGE,
+                f"#TIME {format_value(seconds)}: the dwell time is 0 .. {_MAX_DWELL_S:g} s",
+            )
+        first = self.compiler.main_axes[0]
+        self._pending.append(
+            Block(stmt.first, stmt.number, stmt.text, (4,), axes=((first, seconds),), program=frame.program)
+        )
+
+    def _tool(self, frame: Frame, stmt: Hash) -> None:
+        """``#TOOL PREP [..]`` is the T word, ``#TOOL DATA [..]`` the D word (PM 208577419): the tool ID's
+        basic number selects, a sister or variant other than 0 is the kernel's 20861 (no HÜMNOS tool
+        management is simulated). ``#TOOL LIFE READ|REMOVE`` (PM 208592267): no tool life is acquired and no
+        tool management is simulated, so nothing is sent: accepted, said once (911041)."""
+        command = stmt.command
+        ident = [self._number(stmt, a, f"the tool ID of #{command}") for a in stmt.args]
+        if command == "TOOL LIFE":
+            self._approximation(
+                stmt,
+                "#TOOL LIFE",
+                f"#TOOL LIFE {stmt.options[0]}: no tool life is acquired and no tool management is "
+                "simulated; nothing is sent (docs/nc-language.md)",
+            )
+            return
+        if any(v != 0.0 for v in ident[1:]):
+            raise stmt.error(
+                A_HUEMNOS_TOOL,
+                f"#{command} [{', '.join(format_value(v) for v in ident)}]: a sister or variant tool needs a "
+                "HÜMNOS tool management; the tool table here is by the basic number only",
+            )
+        word = "T" if command == "TOOL PREP" else "D"
+        self._pending.append(
+            Block(stmt.first, stmt.number, stmt.text, extra={word: ident[0]}, program=frame.program)
+        )
+
+    def _ident(self, frame: Frame, stmt: Hash) -> None:
+        """``#IDENT WR [SYN]``, ``#IDENT RD`` (PM 207347083): drive parameters through the service channel.
+        The simulated drive keeps what is written, per axis and ident, as the integer the telegram carries
+        (``VAL`` times 10^``DEC`` in ``TYP`` bytes); a read gives that integer / 10^``DEC``. Its own idents
+        (the cycle times S-0-0001/S-0-0002) are read-only (the kernel's 50357); an ident it neither has nor
+        was given is the kernel's warning 140032 and reads 0. No ident reaches the motion or the monitors
+        (the drive model is the machine file's)."""
+        command = stmt.command
+        numbers = {key: self._number(stmt, expr, f"{key} of #{command}") for key, expr in stmt.params.items()}
+        axis = ""
+        ident = ""
+        for option in stmt.options:
+            if option.startswith("AX:"):
+                axis = option[3:]
+            elif option.startswith("ID:"):
+                ident = option[3:]
+        if axis and axis not in self.compiler.axis_names:
+            raise stmt.error(A_UNKNOWN_AXIS_NAME, f"#{command}: AX={axis} is no axis of this channel")
+        if not axis:
+            number = numbers["AXNR"]
+            if number != int(number) or number < 1:
+                raise stmt.error(
+                    A_CONTROL_SYNTAX, f"#{command}: AXNR={format_value(number)} is no axis number"
+                )
+            axis = f"#{int(number)}"
+        size = numbers["TYP"]
+        decimals = numbers["DEC"]
+        if size not in (2.0, 4.0) or decimals != int(decimals) or not 0 <= decimals <= 9:
+            raise stmt.error(
+                A_CONTROL_SYNTAX,
+                f"#{command}: TYP {format_value(size)} DEC {format_value(decimals)}: TYP is 2 or 4 (bytes), "
+                "DEC a whole number 0 .. 9",
+            )
+        mask = (1 << (8 * int(size))) - 1
+        scale = 10.0 ** int(decimals)
+        key = f"{axis}/{ident}"
+        if command == "IDENT WR":
+            if self.host.drive_value(axis, ident) is not None:
+                raise stmt.error(
+                    A_DRIVE_READ_ONLY,
+                    f"#IDENT WR: {ident} of axis {axis} is not changeable (read it with #IDENT RD)",
+                )
+            raw = round(numbers["VAL"] * scale) & mask
+            store = self._drive_parameters
+            if "SYN" in stmt.options:
+                # a partial, not a closure: a recording's snapshot keeps it (hli_server/recording/snapshot.py)
+                write = functools.partial(_store, store, key, raw)
+                self._pending.append(SyncAction(self._place_block(frame, stmt), write))
+            else:
+                store[key] = raw
+            return
+        own = self.host.drive_value(axis, ident)
+        if own is not None:
+            value = float(round(own) & mask) / scale
+        elif key in self._drive_parameters:
+            value = float(self._drive_parameters[key] & mask) / scale
+        else:
+            self._effect()
+            self.host.warn(
+                A_DRIVE_READ,
+                f"#IDENT RD: error while reading ident {ident} of axis {axis}: the simulated drive has no "
+                "such value (nor was it written); 0 is read",
+                stmt.first,
+                stmt.place,
+            )
+            value = 0.0
+        target = stmt.args[0]
+        assert isinstance(target, Ref)
+        self._assign(frame, stmt, target, value)
+
+    def _filter(self, stmt: Hash) -> None:
+        """``#FILTER [ON|OFF] [ORDER=.. ORDER_TIME=.. SHARE=.. AX_DEV=.. FCUT=.. ACC_FACT=.. QUALITY=..]``
+        (TF5200 FIR filter, 542033291): the FIR filters of the axes' command values. Approximated: the axes
+        follow the planned path unfiltered (said once per program, 911041, at ON); the filtered path departs
+        from it in corners by at most AX_DEV where programmed (the kernel's tolerance monitoring), else by
+        at most F times the filter's time / 2."""
+        for word in stmt.options:
+            if word not in ("ON", "OFF"):
+                raise stmt.error(A_CONTROL_SYNTAX, f"#FILTER: unknown word {word!r} (ON, OFF)")
+        if "ON" in stmt.options and "OFF" in stmt.options:
+            raise stmt.error(A_CONTROL_SYNTAX, "#FILTER: ON and OFF in one command")
+        values: dict[str, float] = {}
+        for key, expr in stmt.params.items():
+            if key not in FILTER_KEYS:
+                known = ", ".join(sorted(FILTER_KEYS))
+                raise stmt.error(A_CONTROL_SYNTAX, f"#FILTER: unknown parameter {key!r} (known: {known})")
+            value = self._number(stmt, expr, f"{key} of #FILTER")
+            if value < 0.0:
+                raise stmt.error(A_RANGE, f"#FILTER: {key}={format_value(value)} must not be negative")
+            values[key] = value
+        if "ON" in stmt.options:
+            bound = (
+                f"by at most AX_DEV={format_value(values['AX_DEV'])} mm (the kernel's tolerance monitoring)"
+                if values.get("AX_DEV", 0.0) > 0.0
+                else "in corners and curves by at most the feed times half the filter's time (ORDER cycles "
+                "or ORDER_TIME)"
+            )
+            self._approximation(
+                stmt,
+                "#FILTER",
+                "#FILTER ON: the FIR filters of the axes' command values are not simulated: the axes follow "
+                f"the planned path unfiltered; the kernel's filtered path departs from it {bound} "
+                "(docs/nc-language.md)",
+            )
+
+    def _rt_cycle(self, frame: Frame, stmt: Hash) -> None:
+        """``#RT CYCLE [DEF] [ID= SCOPE= END_ACTION=]`` starts a realtime cycle's definition (its statements
+        are collected up to ``#RT CYCLE END``, not run: ``nc/interpreter.py``); ``START``, ``HOLD``,
+        ``CONTINUE``, ``ABORT ACTION``, ``DELETE`` manage one when the path passes (TF5261)."""
+        ident: int | None = None
+        if "ID" in stmt.params:
+            value = self._number(stmt, stmt.params["ID"], "the ID of #RT CYCLE")
+            if value != int(value) or value < 0:
+                raise stmt.error(
+                    A_INDEX, f"#RT CYCLE [ID={format_value(value)}]: the ID is a whole number >= 0"
+                )
+            ident = int(value)
+        op = next((o for o in stmt.options if "=" not in o), "")
+        place = self._place_block(frame, stmt)
+        if op == "END":
+            raise stmt.error(A_CONTROL_SYNTAX, "#RT CYCLE END without #RT CYCLE")
+        if op in ("", "DEF"):
+            scope = next((o[6:] for o in stmt.options if o.startswith("SCOPE=")), "PROG")
+            if ident is None and (op == "DEF" or scope == "GLOBAL"):
+                raise stmt.error(
+                    A_RT_ID, "#RT CYCLE: an ID is needed with DEF or SCOPE=GLOBAL (#RT CYCLE [ID=.. ..])"
+                )
+            self._rt_body = []
+            self._rt_define = Realtime(place, "DEFINE", ident, scope, start=op != "DEF")
+            return
+        self._pending.append(Realtime(place, op, ident))
+        if op == "START" and ident in self._rt_block_scope:
+            self._rt_block_scope[ident] = True  # valid for the next block again (TF5261 444677387)
+
+
+def _store(store: dict[str, int], key: str, value: int) -> None:
+    """``#IDENT WR SYN``'s write into the simulated drive's parameters, when the path passes."""
+    store[key] = value
 
 
 def _shorten(element: str) -> str:

@@ -22,6 +22,8 @@ from hli_server.engine.nc.expr import (
     KIND_MH,
     KIND_P,
     KIND_PP,
+    KIND_RTA,
+    KIND_RTG,
     KIND_VA,
     KIND_VE,
     KIND_VG,
@@ -533,6 +535,8 @@ class ExpressionParser:
             "A": KIND_VA,
             "G": KIND_VG,
             "CYC": KIND_CYC,
+            "RTA": KIND_RTA,
+            "RTG": KIND_RTG,
         }
         kind = kinds.get(area)
         if kind is None:

@@ -22,9 +22,14 @@ from hli_server.engine.nc.language import (
     A_LIMIT,
     A_NOT_SIMULATED,
     A_UNKNOWN_HASH,
+    AKIMA_TRANSITIONS,
     HASH_COMMANDS,
+    IDENT_VALUES,
+    IDENT_WORDS,
     MAX_NAME,
     MSG_OPTIONS,
+    RT_OPERATIONS,
+    RT_SCOPES,
     SLOPE_TYPES,
     UNKNOWN_HASH_HINT,
 )
@@ -53,6 +58,31 @@ class HashParser(ExpressionParser):
                 return self.read_hash(f"{name} {form}", start)
         raise self.failure(rule.alarm, rule.message)
 
+    def next_entry(self, what: str, separators: str = ",") -> bool:
+        """Inside ``[..]``: past blanks and separators to the next entry (True), or past the closing
+        ``]`` (False); the end of the block first is 914015."""
+        while True:
+            self.blanks()
+            c = self.peek()
+            if c == "]":
+                self.pos += 1
+                return False
+            if c and c in separators:
+                self.pos += 1
+                continue
+            if not c:
+                self.fail(A_CONTROL_SYNTAX, f"{what} [: ']' missing")
+            return True
+
+    def bracket_value(self) -> Expr:
+        """A value inside ``[..]``: an expression up to the next blank (``ID=17 SCOPE=..``)."""
+        saved = self.depth
+        self.depth = 0
+        try:
+            return self.expression(stop_at_blank=True)
+        finally:
+            self.depth = saved
+
     def read_hash(self, command: str, start: int) -> Stmt:
         """The statement of a simulated ``command`` (a form of :data:`HASH_COMMANDS`): its reader."""
         if command in ("IF", "ELSE", "ENDIF"):
@@ -77,6 +107,24 @@ class HashParser(ExpressionParser):
             return self.coordinates(command)
         if command in ("KIN ID", "TRAFO", "RTCP", "TOOL ORI", "CYL", "CAXTRACK", "SET AX"):
             return self.kinematic(command)
+        if command == "TIME":
+            return self.dwell()
+        if command in ("TOOL PREP", "TOOL DATA", "TOOL LIFE"):
+            return self.tool(command)
+        if command in ("IDENT WR", "IDENT RD"):
+            return self.ident(command)
+        if command == "FILTER":
+            return self.motion_options("FILTER")
+        if command == "RT CYCLE":
+            return self.rt_cycle()
+        if command == "FRC":
+            self.expect("=", "after #FRC (#FRC=<feed>)")
+            args = [self.expression(stop_at_blank=True)]
+            if not self.at_end():
+                self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #FRC=..")
+            return Hash(self.raw, self.number, "FRC", [], args)
+        if command in ("AKIMA TRANS", "AKIMA STARTVECTOR", "AKIMA ENDVECTOR", "SET ASPLINE"):
+            return self.akima(command)
         if command == "COMMENT":
             self.fail(
                 A_COMMENT_OPEN,
@@ -102,6 +150,202 @@ class HashParser(ExpressionParser):
         if not self.at_end():
             self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{name}")
         return Control(self.raw, self.number, keyword, exprs)
+
+    def dwell(self) -> Stmt:
+        """``#TIME <time>`` (PM 206132747): dwell time in seconds, direct or parameterised."""
+        if self.at_end():
+            self.fail(A_CONTROL_SYNTAX, "#TIME without its time: #TIME <seconds>")
+        args = [self.expression(stop_at_blank=False)]
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #TIME's time")
+        return Hash(self.raw, self.number, "TIME", [], args)
+
+    def tool(self, command: str) -> Stmt:
+        """``#TOOL PREP [<basic> [, <sister> [, <variant>]]]``, ``#TOOL DATA [..]`` (PM 208577419),
+        ``#TOOL LIFE READ [..]``, ``#TOOL LIFE REMOVE`` (PM 208592267): ``args`` the tool ID (a gap is 0),
+        ``options`` ``READ`` or ``REMOVE`` for ``#TOOL LIFE``."""
+        options: list[str] = []
+        if command == "TOOL LIFE":
+            word = next((w for w in ("READ", "REMOVE") if self.keyword(w)), None)
+            if word is None:
+                self.fail(A_CONTROL_SYNTAX, "#TOOL LIFE: READ [<basic>, ..] or REMOVE expected")
+            options.append(word)
+        args: list[Expr] = []
+        if options != ["REMOVE"]:
+            self.blanks()
+            at = self.pos
+            self.expect("[", f"after #{command}")
+            self.blanks()
+            if self.peek() in (",", "]"):
+                self.fail(A_CONTROL_SYNTAX, f"#{command} [<basic> ..]: the basic tool number is mandatory")
+            self.pos = at
+            args = self.components(f"#{command}")
+            if len(args) > 3:
+                self.fail(
+                    A_CONTROL_SYNTAX,
+                    f"#{command} [<basic> [, <sister> [, <variant>]]]: at most three values, "
+                    f"{len(args)} given",
+                )
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{command} [..]")
+        return Hash(self.raw, self.number, command, options, args)
+
+    def rt_cycle(self) -> Stmt:
+        """``#RT CYCLE [DEF] [ID=.. SCOPE=BLOCK|PROG|GLOBAL END_ACTION=..]``, ``#RT CYCLE END``, ``#RT CYCLE
+        START|HOLD|CONTINUE|ABORT ACTION|DELETE [ID=..]`` (TF5261 562766219, 444681483): ``options`` the
+        keyword (``DEF``, ``END``, ``START`` ..) and ``SCOPE=..``, ``END_ACTION=..``; ``params`` the ID."""
+        options: list[str] = []
+        word = next((w for w in RT_OPERATIONS if self.keyword(w)), None)
+        if word is not None:
+            options.append(word)
+            if word == "ABORT" and not self.keyword("ACTION"):
+                self.fail(A_CONTROL_SYNTAX, "#RT CYCLE ABORT ACTION [ID=..]")
+        params: dict[str, Expr] = {}
+        self.blanks()
+        if self.peek() == "[":
+            self.pos += 1
+            while self.next_entry("#RT CYCLE"):
+                key = self.name()
+                self.blanks()
+                self.expect("=", f"after #RT CYCLE [{key or self.word_at(self.pos)}")
+                self.blanks()
+                if key == "ID" and "ID" not in params:
+                    params["ID"] = self.bracket_value()
+                elif key in ("SCOPE", "END_ACTION") and not any(o.startswith(key + "=") for o in options):
+                    ident = self.name()
+                    allowed = RT_SCOPES if key == "SCOPE" else ("MOVE_ABORT", "MOVE_CONT")
+                    if ident not in allowed:
+                        self.fail(A_CONTROL_SYNTAX, f"#RT CYCLE [{key}={ident}]: {', '.join(allowed)}")
+                    options.append(f"{key}={ident}")
+                else:
+                    self.fail(
+                        A_CONTROL_SYNTAX, f"#RT CYCLE [..]: {key!r}: ID=, SCOPE=, END_ACTION= (each once)"
+                    )
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #RT CYCLE")
+        return Hash(self.raw, self.number, "RT CYCLE", options, [], params=params)
+
+    def akima(self, command: str) -> Stmt:
+        """``#AKIMA TRANS [START=<type> END=<type>]`` (PM 207222923), ``#AKIMA STARTVECTOR {<axis>..}``,
+        ``#AKIMA ENDVECTOR {<axis>..}`` (PM 207229579, 207237003) and the older ``#SET ASPLINE ..``: the
+        transition types and tangents of the Akima spline. ``options`` the types (``START=USER``) and the
+        tangent's axes, ``args`` its components."""
+        options: list[str] = []
+        args: list[Expr] = []
+        if command == "AKIMA TRANS":
+            self.blanks()
+            if self.peek() == "[":
+                self.pos += 1
+                while self.next_entry("#AKIMA TRANS"):
+                    key = self.name()
+                    if key not in ("START", "END") or any(o.startswith(key + "=") for o in options):
+                        self.fail(A_CONTROL_SYNTAX, "#AKIMA TRANS [START=<type> END=<type>] (each once)")
+                    self.expect("=", f"after #AKIMA TRANS [{key}")
+                    self.blanks()
+                    kind = self.name()
+                    if kind not in AKIMA_TRANSITIONS:
+                        self.fail(
+                            A_CONTROL_SYNTAX,
+                            f"#AKIMA TRANS [{key}={kind}]: the types are "
+                            + ", ".join(sorted(AKIMA_TRANSITIONS)),
+                        )
+                    options.append(f"{key}={kind}")
+        elif command in ("AKIMA STARTVECTOR", "AKIMA ENDVECTOR"):
+            while not self.at_end():
+                at = self.pos
+                axis = self.name()
+                if not axis or not axis[0].isalpha():
+                    self.fail(
+                        A_CONTROL_SYNTAX, f"#{command}: unexpected {self.word_at(at)!r} (<axis><value>)"
+                    )
+                self.blanks()
+                if self.peek() == "=":
+                    self.pos += 1
+                elif axis[-1].isdigit():
+                    # X1: the axis X and its component 1 (a name with digits takes '=': X2=1)
+                    letters = axis.rstrip("0123456789")
+                    options.append(letters)
+                    args.append(Const(float(axis[len(letters) :])))
+                    continue
+                options.append(axis)
+                args.append(self.expression(stop_at_blank=True))
+            if not args:
+                self.fail(A_CONTROL_SYNTAX, f"#{command} without the tangent's components (X1 Y1 Z0)")
+        else:  # #SET ASPLINE MODE [..] | STARTTANG [..] | ZIELTANG [..]: the older spellings, read whole
+            self.pos = self.n
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{command}")
+        return Hash(self.raw, self.number, command, options, args)
+
+    def ident(self, command: str) -> Stmt:
+        """``#IDENT WR [SYN] [AX=<axis> | AXNR=.. ID=<ident> VAL=.. TYP=.. DEC=.. SERC|CAN [NO_WAIT]]``,
+        ``#IDENT RD [AX=.. ID=.. P=<variable> TYP=.. DEC=.. SERC|CAN]`` (PM 207352971, 207365515,
+        207359627): ``options`` the keywords, ``AX:<axis>`` and ``ID:<ident>``; ``params`` AXNR, VAL, TYP,
+        DEC; ``args`` the variable of RD."""
+        options: list[str] = []
+        if command == "IDENT WR" and self.keyword("SYN"):
+            options.append("SYN")
+        self.expect("[", f"after #{command}")
+        self.depth += 1
+        params: dict[str, Expr] = {}
+        args: list[Expr] = []
+        while self.next_entry(f"#{command}"):
+            at = self.pos
+            key = self.name()
+            if key in IDENT_WORDS:
+                if key in options:
+                    self.fail(A_CONTROL_SYNTAX, f"#{command}: {key} given twice")
+                options.append(key)
+                continue
+            if key not in IDENT_VALUES:
+                self.fail(
+                    A_CONTROL_SYNTAX,
+                    f"#{command}: unexpected {self.word_at(at)!r} (AX=, AXNR=, ID=, VAL=, P=, TYP=, DEC=, "
+                    "SERC, CAN, NO_WAIT)",
+                )
+            if key in params or any(o.startswith(key + ":") for o in options) or (key == "P" and args):
+                self.fail(A_CONTROL_SYNTAX, f"#{command}: {key} given twice")
+            self.blanks()
+            if self.peek() == "=":
+                self.pos += 1
+                self.blanks()
+            if key in ("AX", "ID"):
+                begin = self.pos
+                while self.pos < self.n and self.u[self.pos] not in " \t,]":
+                    self.pos += 1
+                word = self.u[begin : self.pos]
+                if not word:
+                    self.fail(A_CONTROL_SYNTAX, f"#{command}: {key} without its value")
+                options.append(f"{key}:{word}")
+            elif key == "P":
+                if command != "IDENT RD":
+                    self.fail(A_CONTROL_SYNTAX, "#IDENT WR: P=<variable> belongs to #IDENT RD")
+                c = self.peek()
+                if c == "V" and self.peek(1) == ".":
+                    args.append(self.variable())
+                elif c == "P":
+                    args.append(self.parameter())
+                else:
+                    self.fail(A_CONTROL_SYNTAX, "#IDENT RD: P=<variable> (P1, V.P.NAME, V.L.NAME, V.S.NAME)")
+            else:
+                if self.at_end() or self.peek() in ("]", ","):
+                    self.fail(A_CONTROL_SYNTAX, f"#{command}: {key} without its value")
+                params[key] = self.bracket_value()
+        self.depth -= 1
+        missing = [k for k in ("ID", "TYP", "DEC") if k not in params and f"{k}:" not in " ".join(options)]
+        if not any(o.startswith("AX:") for o in options) and "AXNR" not in params:
+            missing.insert(0, "AX|AXNR")
+        if command == "IDENT WR" and "VAL" not in params:
+            missing.append("VAL")
+        if command == "IDENT RD" and not args:
+            missing.append("P")
+        if not ("SERC" in options or "CAN" in options):
+            missing.append("SERC|CAN")
+        if missing:
+            self.fail(A_CONTROL_SYNTAX, f"#{command} [..]: {', '.join(missing)} missing")
+        if not self.at_end():
+            self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #{command} [..]")
+        return Hash(self.raw, self.number, command, options, args, params=params)
 
     def flush(self) -> Stmt:
         """``#FLUSH``, ``#FLUSH WAIT``, ``#FLUSH CONTINUE``."""
@@ -598,6 +842,7 @@ class HashParser(ExpressionParser):
             )
         self.expect("[", "after #FILE NAME")
         files: dict[str, str] = {}
+        variables: dict[str, Expr] = {}
         while True:
             self.blanks()
             if self.peek() == "]":
@@ -612,8 +857,15 @@ class HashParser(ExpressionParser):
             if self.peek() == "=":
                 self.pos += 1
                 self.blanks()
+            if key == "MSG" and self.peek() == "V" and self.peek(1) == ".":
+                # MSG=V.E.TEACH_FILE_NAME: the name in a string variable, read when the command runs
+                variables[key] = self.variable()
+                continue
             if self.peek() != '"':
-                self.fail(A_CONTROL_SYNTAX, f'#FILE NAME: {key}= needs a file name in quotes ({key}="name")')
+                self.fail(
+                    A_CONTROL_SYNTAX,
+                    f'#FILE NAME: {key}= needs a file name in quotes ({key}="name") or a string variable',
+                )
             close = self.code.find('"', self.pos + 1)
             if close < 0:
                 self.fail(A_CONTROL_SYNTAX, "#FILE NAME: quote not closed")
@@ -630,4 +882,4 @@ class HashParser(ExpressionParser):
             files[key] = value
         if not self.at_end():
             self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #FILE NAME [..]")
-        return Hash(self.raw, self.number, "FILE NAME", [], [], files)
+        return Hash(self.raw, self.number, "FILE NAME", [], [], files, params=variables)

@@ -47,6 +47,7 @@ from hli_server.engine.nc.calls import ProgramLevels
 from hli_server.engine.nc.directives import (
     PAUSE,
     Directive,
+    Realtime,
     SyncAction,
 )
 from hli_server.engine.nc.expr import (
@@ -57,12 +58,17 @@ from hli_server.engine.nc.expr import (
 from hli_server.engine.nc.language import (
     A_CONTROL_SYNTAX,
     A_UNEXPECTED,
+    CORNER_AHEAD,
+    CORNER_LOOK_AHEAD,
+    CORNER_PASSES,
 )
 from hli_server.engine.nc.levels import (
     Frame,
     Units,
 )
-from hli_server.engine.nc.source import ProgramText
+from hli_server.engine.nc.reader import strip_comments
+from hli_server.engine.nc.rt_cycles import check_body
+from hli_server.engine.nc.source import LineTooLongError, ProgramText
 from hli_server.engine.nc.state import STATEMENTS_PER_CYCLE
 from hli_server.engine.nc.statements import (
     Assign,
@@ -74,6 +80,7 @@ from hli_server.engine.nc.statements import (
     Header,
     Refused,
     Stmt,
+    Technology,
     VarBlock,
     Word,
     Words,
@@ -101,6 +108,10 @@ class Interpreter(ProgramLevels):
         self._param_arrays = {}
         self._program_vars = {}
         self._message_file = "message.txt"
+        self._approximated.clear()
+        self._rt_body = None
+        self._rt_define = None
+        self._rt_block_scope.clear()
         self.iterations = 0
         self.statements = 0
         self._left = self.budget if self.budget is not None else 0
@@ -112,6 +123,32 @@ class Interpreter(ProgramLevels):
         self._pending.clear()
         self._ended = True
 
+    def corner_ahead(self, block: Block) -> bool:
+        """Does the next line of ``block``'s program (past blank, comment, control and ``#`` command lines)
+        ask for a chamfer or rounding (G301/G302)? The decoder then holds the block's motion back for it: the
+        kernel's decoder reads ahead; this one is asked for one block at a time."""
+        if not self._frames:
+            return False
+        frame = self._frames[-1]
+        if frame.program != block.program:
+            return False
+        text = frame.units.text
+        for k in range(block.line + 1, block.line + 1 + CORNER_LOOK_AHEAD):
+            try:
+                raw = text.line(k)
+            except LineTooLongError:
+                return False
+            if raw is None:
+                return False
+            if "30" not in raw and "$" not in raw and "#" not in raw and "(" not in raw and ";" not in raw:
+                if raw.strip():
+                    return False  # a line of words without a G30x (nearly every line): the fast answer
+                continue
+            code = strip_comments(raw)
+            if code.strip() and CORNER_PASSES.match(code) is None:
+                return "30" in code and CORNER_AHEAD.search(code.upper()) is not None
+        return False
+
     def refill(self) -> None:
         """A new cycle: a new budget."""
         if self.budget is not None:
@@ -121,21 +158,26 @@ class Interpreter(ProgramLevels):
     def next(self) -> Block | Directive | None:
         """The next block or directive; None at the end of the main program's text."""
         pending = self._pending
+        out: Block | Directive | None
         if pending:
-            return pending.popleft()
-        if self._ended:
+            out = pending.popleft()
+        elif self._ended:
             return None
-        try:
-            return self._run()
-        except NcError as exc:
-            self._ended = True
-            frame = self._frames[-1] if self._frames else None
-            if frame is not None and frame.program and not exc.program:
-                exc.program = frame.program
-            raise
-        except EvalError as exc:  # pragma: no cover - every evaluation is inside a statement
-            self._ended = True
-            raise NcError(exc.alarm, 0, "line 0", exc.message) from None
+        else:
+            try:
+                out = self._run()
+            except NcError as exc:
+                self._ended = True
+                frame = self._frames[-1] if self._frames else None
+                if frame is not None and frame.program and not exc.program:
+                    exc.program = frame.program
+                raise
+            except EvalError as exc:  # pragma: no cover - every evaluation is inside a statement
+                self._ended = True
+                raise NcError(exc.alarm, 0, "line 0", exc.message) from None
+        if self._rt_block_scope and isinstance(out, Block) and out.axes:
+            self._rt_after_block(out)
+        return out
 
     def _run(self) -> Block | Directive | None:
         pending = self._pending
@@ -161,6 +203,11 @@ class Interpreter(ProgramLevels):
                     continue
                 return block
             stmt = frame.units.statement(frame.line, frame.program, frame.keep or bool(frame.open))
+            if self._rt_body is not None:
+                self._rt_collect(frame, stmt)
+                if pending:
+                    return pending.popleft()
+                continue
             if isinstance(stmt, Block):
                 frame.line += 1
                 if frame.seek is not None:
@@ -182,6 +229,59 @@ class Interpreter(ProgramLevels):
             self._execute(frame, stmt)
             if pending:
                 return pending.popleft()
+
+    # --- realtime cycles (#RT CYCLE, TF5261) ------------------------------------------------------------
+    def _rt_collect(self, frame: Frame, stmt: Stmt | Block | None) -> None:
+        """A statement between ``#RT CYCLE`` and ``#RT CYCLE END``: kept for the cycle, not run. A block of
+        M/H functions only is accepted (no effect); motion in a realtime cycle is refused by name."""
+        body = self._rt_body
+        definition = self._rt_define
+        assert body is not None
+        assert definition is not None
+        if stmt is None or isinstance(stmt, Header):
+            raise NcError(
+                A_CONTROL_SYNTAX, frame.line, f"line {frame.line}", "#RT CYCLE without its #RT CYCLE END"
+            )
+        if isinstance(stmt, (Block, ConstBlock)):
+            block = stmt if isinstance(stmt, Block) else stmt.block
+            frame.line = block.line + 1 if isinstance(stmt, Block) else stmt.last + 1
+            if (
+                block.axes
+                or block.centre
+                or block.feed is not None
+                or block.g_codes
+                or block.area is not None
+            ):
+                raise NcError(
+                    910110,
+                    block.line,
+                    block.label,
+                    f"{block.text.strip()!r}: motion in a realtime cycle (an independent axis motion) is not "
+                    "simulated: docs/nc-language.md",
+                )
+            return
+        frame.line = stmt.last + 1
+        if isinstance(stmt, Refused):
+            raise stmt.failure
+        if isinstance(stmt, Hash) and stmt.command == "RT CYCLE" and "END" in stmt.options:
+            self._rt_body = None
+            self._rt_define = None
+            error = check_body(body, stmt.place)
+            if error is not None:
+                raise error
+            definition.body = body
+            self._pending.append(definition)
+            if definition.scope == "BLOCK":
+                self._rt_block_scope[definition.ident] = not definition.start
+            return
+        body.append(stmt)
+
+    def _rt_after_block(self, block: Block) -> None:
+        """A motion block was handed out: the realtime cycles valid for it (SCOPE=BLOCK) end after it."""
+        for ident, defined in list(self._rt_block_scope.items()):
+            self._pending.appendleft(Realtime(block, "HOLD" if defined else "DELETE", ident))
+            if not defined:
+                del self._rt_block_scope[ident]
 
     # --- statements ------------------------------------------------------------------------------------
     def _execute(self, frame: Frame, stmt: Stmt) -> None:
@@ -228,6 +328,17 @@ class Interpreter(ProgramLevels):
                 value = self._number(stmt, item.value, item.text)
                 extra = self._number(stmt, item.extra, item.text) if item.extra is not None else None
                 words.append((item, value, extra))
+            elif isinstance(item, Technology):
+                self._technology(stmt, item, words)
+        if any(w.letter == "E" for w, _, _ in words):
+            words = [w for w in words if w[0].letter != "E"]
+            self._approximation(
+                stmt,
+                "E",
+                "E (the feed at the block's end) is not simulated: the path keeps the block's F up to the "
+                "look-ahead's braking; only the velocity near the block's end differs, not the path "
+                "(docs/nc-language.md)",
+            )
         block: Block | None = None
         if words:
             block = self._build(frame, stmt, words)
@@ -263,7 +374,29 @@ class Interpreter(ProgramLevels):
                 exprs.extend(v for _, v in item.params)
                 if item.variable is not None:  # L V.E.name: a synchronous V.E. is read after the flush
                     exprs.append(item.variable)
+            elif isinstance(item, Technology):
+                exprs.extend(item.params.values())
+                exprs.extend(w.value for w in item.main)
         return exprs
+
+    def _technology(
+        self, stmt: Stmt, item: Technology, words: list[tuple[Word, float, float | None]]
+    ) -> None:
+        """``S[M3 REV500 ..]``, ``S1[MC_MoveVelocity ..]`` (PM 208178187, 208317067): the main spindle's
+        M3/M4/M5 and REV are the block's words; the rest is evaluated (its errors are the block's) and
+        accepted without effect, said once per program and spindle (warning 911041)."""
+        for word in item.main:
+            words.append((word, self._number(stmt, word.value, word.text), None))
+        for expr in item.params.values():
+            self._evaluate(stmt, expr)
+        if item.words:
+            self._approximation(
+                stmt,
+                f"spindle {item.target}",
+                f"{item.target}[{' '.join(item.words)}]: spindle-specific commands are accepted without "
+                "effect (no spindle is simulated but the main spindle's speed for G95; spindles are not "
+                "monitored): docs/nc-language.md",
+            )
 
     # --- the block for the decoder ---------------------------------------------------------------------
     def _build(self, frame: Frame, stmt: Stmt, words: list[tuple[Word, float, float | None]]) -> Block:

@@ -10,6 +10,7 @@ docs/nc-language.md lists what is simulated and what stays refused, with the man
 
 from __future__ import annotations
 
+import re
 from typing import Final
 
 from hli_server.engine.nc import parser as word_parser
@@ -64,6 +65,21 @@ A_STEP: Final = 914021
 A_SUB_END: Final = 914030
 A_MESSAGE: Final = 914031
 A_MAIN_RETURN: Final = 914032
+A_DRIVE_READ: Final = 140032
+"""Warning: error while reading an ident (``#IDENT RD``; DG 265855883)."""
+A_DRIVE_READ_ONLY: Final = 50357
+"""SERCOS parameter: datum not changeable (``#IDENT WR``; DG 257826443)."""
+A_DWELL_RANGE: Final = 20751
+"""``#TIME``: dwell time out of range (DG 252425611)."""
+A_HUEMNOS_TOOL: Final = 20861
+"""A HÜMNOS tool (sister, variant) only with the corresponding tool management (DG 252795531)."""
+A_UNKNOWN_AXIS_NAME: Final = 20797
+"""Unknown axis designation in a command that names axes (DG 252577931)."""
+A_RT_ID: Final = 22003
+"""A realtime cycle without its ID where DEF or SCOPE=GLOBAL needs one (TF5261 562766219)."""
+A_APPROXIMATED: Final = 911041
+"""Warning: a construct that only shapes the path runs approximated within a documented tolerance (once per
+program and construct; docs/nc-language.md, "Refusals and approximations")."""
 A_MSG_VALUES: Final = 20721
 """#MSG: the number of values does not match the format elements (the kernel's ID 20721)."""
 A_MSG_FORMAT: Final = 21232
@@ -379,15 +395,21 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
     "CONTOUR": _kernel("CONTOUR", ("MODE",)),
     "HSC": _SIMULATED,
     "SPLINE": _SIMULATED,
-    "SET": _kernel("SET", ("SPLINE", "SPLINETYPE", "AX")),
+    "SET": _kernel("SET", ("SPLINETYPE", "SPLINE", "ASPLINE", "AX")),
     "CS": _SIMULATED,
     "ACS": _SIMULATED,
     "ROTATION": _SIMULATED,
+    "TIME": _SIMULATED,
+    "AKIMA": _kernel("AKIMA", ("TRANS", "STARTVECTOR", "ENDVECTOR")),
+    "FILTER": _SIMULATED,
+    "RT": _kernel("RT", ("CYCLE",)),
+    "FRC": _SIMULATED,
+    "IDENT": _kernel("IDENT", ("WR", "RD")),
     # kinematic transformations (issue 35, docs/kinematics.md): directives for the decoder
     "KIN": _kernel("KIN", ("ID",)),
     "TRAFO": _SIMULATED,
     "RTCP": _SIMULATED,
-    "TOOL": _kernel("TOOL", ("ORI",)),
+    "TOOL": _kernel("TOOL", ("PREP", "DATA", "LIFE", "ORI")),
     "CYL": _SIMULATED,
     "CAXTRACK": _SIMULATED,
     # the logical-block reader's (nc/reader.py): met here only where they are misplaced
@@ -399,6 +421,28 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
 }
 """Every ``#`` word the front end knows, by its first word (``#CONTROL AREA`` is the word parser's,
 ``nc/parser.py``); any other is alarm 910109."""
+CORNER_AHEAD: Final = re.compile(r"(?<![A-Z0-9_.])G0*30[12](?![0-9.])")
+"""A line that asks for a chamfer or rounding (G301/G302): the motion before it is held back for it."""
+CORNER_LOOK_AHEAD: Final = 16
+"""Lines the interpreter looks past for a G301/G302 after a motion block: blank, comment, control (``$..``)
+and ``#`` command lines (the flow may not go there: holding the motion back is harmless, it only waits for
+the next one)."""
+CORNER_PASSES: Final = re.compile(r"\s*(?:/[0-9]*\s*)?(?:N\s*[0-9]+\s*:?\s*)?[$#]", re.ASCII | re.IGNORECASE)
+"""A control statement or ``#`` command line the look-ahead for G301/G302 passes."""
+RT_FREQUENCIES: Final = ("ONCE", "EDGE", "ALWAYS")
+"""The qualifiers of a realtime cycle's ``$IF`` (TF5261 444686091)."""
+RT_OPERATIONS: Final = ("DEF", "END", "START", "HOLD", "CONTINUE", "ABORT", "DELETE")
+"""``#RT CYCLE``'s keywords (TF5261 562766219, 444681483)."""
+RT_SCOPES: Final = ("BLOCK", "PROG", "GLOBAL")
+FILTER_KEYS: Final = frozenset(("ORDER", "ORDER_TIME", "SHARE", "AX_DEV", "FCUT", "ACC_FACT", "QUALITY"))
+"""``#FILTER [ON|OFF] [ORDER=.. ..]``'s parameters (TF5200 FIR filter, 542033291)."""
+AKIMA_TRANSITIONS: Final = frozenset(("AUTO", "TANGENTIAL", "USER"))
+"""``#AKIMA TRANS [START=.. END=..]``'s transition types (PM 207222923)."""
+IDENT_WORDS: Final = frozenset(("SYN", "NO_WAIT", "SERC", "CAN"))
+"""``#IDENT WR|RD [..]``'s keywords (PM 207352971, 207359627, 207365515): synchronised, no waiting, the
+drive type."""
+IDENT_VALUES: Final = frozenset(("AX", "AXNR", "ID", "VAL", "TYP", "DEC", "P"))
+"""``#IDENT``'s entries with a value (``AX=X`` or ``AX X``, ``ID S-0-0104``, ``VAL 655.35``, ``P=P1``)."""
 _SHOWN_AS: Final = {"FILE": "#FILE NAME", "COMMENT": "#COMMENT BEGIN/END"}
 """How 910109's list writes the commands whose word alone is not how they are written."""
 
@@ -481,8 +525,51 @@ A_CORNER_DEVIATION: Final = 120129
 """The kernel's "corner deviation of polynomial contouring smaller than permissible minimum value"
 (tf5200_diagnosis/264341387.html)."""
 
+# --- axis- and spindle-specific syntax (``X[INDP_SYN ..]``, ``S[M3 REV500]``, ``S1[MC_MoveVelocity ..]``) ---
+AXIS_FUNCTIONS: Final[dict[str, str]] = {
+    "INDP_SYN": "synchronous independent axis motion",
+    "INDP_ASYN": "asynchronous independent axis motion",
+    "INDP": "independent axis motion (realtime cycles)",
+    "OSC": "oscillating axis motion",
+    "COMP": "axis compensation",
+    "DIST_CTRL": "distance control",
+    "OVERRIDE": "programmable axis override",
+    "DYNAMIC": "programmable acceleration overload",
+    "LIFT": "lifting/lowering an axis",
+    "LIFT_START": "lifting an axis",
+    "LIFT_END": "lowering an axis",
+    "SYNC": "synchronising an axis in coordinated motion",
+    "POLY": "axis polynomial",
+}
+"""The additional axis-specific functions ``<axis>[<function> ..]`` (PM 5252363631026771979): each moves an
+axis of the path apart from the path, or changes its dynamics, so the monitors would answer for another
+motion if it were approximated: refused by name with 910110 (docs/nc-language.md)."""
+SPINDLE_WORDS: Final = frozenset(
+    (
+        "REV",
+        "POS",
+        "G74",
+        "G167",
+        "CALLAX",
+        "PUTAX",
+        "GET_DYNAMIC_DATA",
+        "GET_DYNAMIK_DATA",
+        "G130",
+        "G135",
+        "G136",
+        "G137",
+        "FEED_LINK",
+        "OVERRIDE",
+    )
+)
+"""Words of the spindle-specific syntax ``<spindle>[..]`` besides M/H functions and the PLCopen commands
+``MC_..`` (PM 208178187, 208317067)."""
+
 # --- G codes ---------------------------------------------------------------------------------------------
-MOTION_G_CODES: Final[dict[int, str]] = {
+MOTION_G_CODES: Final[dict[int, str]] = {}
+"""G codes of motion functions not simulated (N-08), refused by name with 910110 (none left: the TRC
+selection methods and contour masking are approximated, :data:`TRC_G_CODES`)."""
+TRC_G_CODES: Final[dict[int, str]] = {
     5: "tangential TRC selection/deselection",
     138: "direct TRC selection/deselection",
     141: "TRC contour masking",
@@ -491,7 +578,8 @@ MOTION_G_CODES: Final[dict[int, str]] = {
     238: "TRC selection at an inside corner",
     239: "TRC selection/deselection without a block",
 }
-"""G codes of motion functions not simulated (N-08), refused by name with 910110."""
+"""The TRC selection methods and contour masking (PM 207729163, 206480651): approximated by the indirect
+selection G139 and no masking, with warning 911041 once per program (docs/nc-language.md)."""
 VALUE_G_CODES: Final = frozenset((131, 231, 133, 134, 233, 334, 339))
 """G functions programmed with a value, ``G131=50`` (acceleration and ramp-time weightings)."""
 AXIS_VALUE_G_CODES: Final = frozenset((130, 230, 132, 333, 338))
@@ -507,7 +595,16 @@ contouring): M-20..M-23, docs/nc-language.md "Contouring"."""
 INITIAL_STATE_G_CODES: Final = frozenset((139, 140))
 """G139 (indirect TRC selection/deselection, PM 207729163) and G140 (no contour masking, PM 206480651):
 the kernel's initial states, the ones simulated; programmed, they change nothing."""
+CORNER_G_CODES: Final = frozenset((301, 302))
+"""Chamfers and roundings G301/G302 (PM 206609163): an element of the I word's size inserted in the corner
+(``hli_server/engine/path/corners.py``)."""
 KNOWN_G: Final = (
-    word_parser.KNOWN_G_CODES | EXTRA_G_CODES | UNIT_G_CODES | CONTOUR_G_CODES | INITIAL_STATE_G_CODES
+    word_parser.KNOWN_G_CODES
+    | EXTRA_G_CODES
+    | UNIT_G_CODES
+    | CONTOUR_G_CODES
+    | INITIAL_STATE_G_CODES
+    | CORNER_G_CODES
+    | frozenset(TRC_G_CODES)
 )
 """Every G code simulated: the word parser's (``nc/parser.py``, ``KNOWN_G_CODES``) and the ones above."""

@@ -120,6 +120,7 @@ KNOWN_G_CODES: frozenset[int] = frozenset(
         58,
         59,
         60,
+        74,
         90,
         91,
         92,

@@ -17,6 +17,7 @@ from hli_server.engine.nc.directives import (
     FlushWait,
     Host,
     IterationCapError,
+    Realtime,
 )
 from hli_server.engine.nc.expr import (
     KIND_VA,
@@ -27,6 +28,7 @@ from hli_server.engine.nc.expr import (
     Value,
     as_number,
 )
+from hli_server.engine.nc.language import A_APPROXIMATED
 from hli_server.engine.nc.levels import (
     Frame,
     ProgramResolver,
@@ -72,8 +74,20 @@ class InterpreterState(Env):
         self._param_arrays: dict[tuple[int, tuple[int, ...]], Value] = {}
         self._program_vars: dict[str, Variable] = {}
         self._static_vars: dict[str, Variable] = {}
+        self._drive_parameters: dict[str, int] = {}
+        """``#IDENT WR``: what the simulated drives were given (axis/ident -> the telegram's integer); they
+        keep it across programs, as a drive does."""
         """V.S.: kept across programs and resets (the channel's lifetime)."""
         self._message_file = "message.txt"
+        self._rt_body: list[Stmt] | None = None
+        """The statements of the realtime cycle being defined (``#RT CYCLE`` .. ``#RT CYCLE END``) or None."""
+        self._rt_define: Realtime | None = None
+        """The definition those statements go to."""
+        self._rt_block_scope: dict[int | None, bool] = {}
+        """Realtime cycles valid for the next block (SCOPE=BLOCK): ID -> defined with DEF (then held after
+        the block, else deleted)."""
+        self._approximated: set[str] = set()
+        """Constructs approximated in this program and already said so (warning 911041, once each)."""
         self.iterations = 0
         self.statements = 0
         """Statements run or skipped since the program started (for reports)."""
@@ -107,6 +121,15 @@ class InterpreterState(Env):
     def advance_to(self, line: int) -> None:
         """The batch geometry check ran the main program's lines up to ``line`` (exclusive) itself."""
         self._frames[0].line = line
+
+    def _approximation(self, stmt: Stmt, key: str, message: str) -> None:
+        """Warning 911041 (a construct approximated within a documented tolerance), once per program and
+        ``key``."""
+        if key in self._approximated:
+            return
+        self._approximated.add(key)
+        self._effect()
+        self.host.warn(A_APPROXIMATED, message, stmt.first, stmt.place)
 
     def _effect(self) -> None:
         hook = self.before_effect

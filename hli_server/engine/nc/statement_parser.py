@@ -18,6 +18,7 @@ from typing import Final
 from hli_server.engine.nc import parser as word_parser
 from hli_server.engine.nc.expr import (
     ALARM_EXPRESSION,
+    FUNCTION_ARITY,
     KIND_CYC,
     KIND_P,
     KIND_PP,
@@ -44,6 +45,7 @@ from hli_server.engine.nc.language import (
     A_UNKNOWN_G,
     A_UNKNOWN_WORD,
     ALONE,
+    AXIS_FUNCTIONS,
     C_CASE,
     C_FOR,
     C_GOTO,
@@ -52,6 +54,8 @@ from hli_server.engine.nc.language import (
     CONTROL_WORDS,
     MAX_NAME,
     MAX_STRING,
+    RT_FREQUENCIES,
+    SPINDLE_WORDS,
     VALUE_G_CODES,
 )
 from hli_server.engine.nc.reader import N_HEAD, RawBlock
@@ -64,6 +68,7 @@ from hli_server.engine.nc.statements import (
     Goto,
     Item,
     Stmt,
+    Technology,
     Word,
     Words,
 )
@@ -72,7 +77,15 @@ __all__ = ["ChannelAxes", "StatementParser"]
 
 _PROG_DELIMITERS: Final = frozenset(' \t();"[],#$')
 _M_RETURN_BEFORE = re.compile(r"(?:^|[\s])M0*(?:17|29)[ \t]*$")
+_IMPLICIT_CALL_BEFORE = re.compile(r"(?:^|[\s])G0*(8[0-9]{1,2})[ \t]*$", re.ASCII)
+"""``G80``-``G89``, ``G800``-``G8xx`` right before a ``[``: an implicit subroutine call's parameters."""
 """``M17 [MAIN ..]``: the M17/M29 right before a ``[`` (the parameterised jump)."""
+_SPINDLE_NAME = re.compile(r"S[0-9]*", re.ASCII)
+"""The main spindle ``S`` (P-CHAN-00053's default name) or another spindle ``S1``, ``S2`` ..."""
+_SPINDLE_VALUES: Final = ("REV", "POS", "FEED_LINK", "OVERRIDE", "G136")
+"""Spindle-specific words with a value (``REV500``, ``REV=500``, ``POS 45``)."""
+_VALUE_NAMES: Final = frozenset(("TRUE", "FALSE", "PI", "EXIST", *FUNCTION_ARITY))
+"""Names an address word's value may begin with (``XSIN[30]``, ``FABS[P1]``, ``XPI``)."""
 
 
 class ChannelAxes:
@@ -195,6 +208,13 @@ class StatementParser(HashParser):
                 f"the parameterised jump of M17/M29 ({u[start:].strip()}: PM 206781707) is not "
                 "simulated: see docs/nc-language.md",
             )
+        implicit = _IMPLICIT_CALL_BEFORE.search(u, 0, start) if c == "[" else None
+        if implicit is not None:
+            self.fail(
+                A_NOT_SIMULATED,
+                f"G{implicit[1]}[..]: the implicit subroutine call with parameters (PM 206278923) is not "
+                "simulated: see docs/nc-language.md",
+            )
         if c == "[":
             self.fail(
                 A_UNKNOWN_WORD,
@@ -218,10 +238,117 @@ class StatementParser(HashParser):
             return self.call(start)
         if c == "N":
             word = self.word_at(start)
+            if self.number is None and not u[:start].strip() and self.peek(1) in ("P", "[", "V"):
+                return self.block_number(start)
             if self.number is not None:
                 self.fail(A_BAD_N, f"second block number {word}: N stands once, at the start of the block")
             self.fail(A_BAD_N, f"block number {word} must stand at the start of the block")
+        technology = self.technology(start)
+        if technology is not None:
+            return technology
         return self.address(start)
+
+    def block_number(self, start: int) -> Word:
+        """``NP123``, ``N[P1*100]``, ``NV.L.N`` (PM 206817035: "the block number can be programmed using
+        general mathematical expressions ... rounded off internally and converted into an integer")."""
+        self.pos = start + 1
+        return Word(self.word_at(start), "N", "N", self.word_value(start))
+
+    # --- axis- and spindle-specific syntax -----------------------------------------------------------
+    def technology(self, start: int) -> Item | None:
+        """``<axis>[<function> ..]`` (PM 5252363631026771979) and ``<spindle>[..]`` (PM 208178187,
+        208317067); None where the bracket is an expression (``X[P1+2]``, ``S[P2*10]``)."""
+        u = self.u
+        p = start
+        while p < self.n and u[p] in NAME_CHARS and u[p] != "_":
+            p += 1
+        if p >= self.n or u[p] != "[":
+            return None
+        name = u[start:p]
+        q = p + 1
+        while q < self.n and u[q] in (" ", "\t"):
+            q += 1
+        r = q
+        while r < self.n and u[r] in NAME_CHARS:
+            r += 1
+        first = u[q:r]
+        spindle = _SPINDLE_NAME.fullmatch(name) is not None and name not in self.c.names
+        if name in self.c.names:
+            if first in AXIS_FUNCTIONS or first.startswith("MC_"):
+                what = AXIS_FUNCTIONS.get(first, "PLCopen motion of a path axis")
+                self.fail(
+                    A_NOT_SIMULATED,
+                    f"{name}[{first} ..]: {what} is not simulated: the axis would leave the path the "
+                    "monitors check (docs/nc-language.md, axis-specific syntax)",
+                )
+            if first[:1] in "MH" and first[1:].isdigit():
+                # X[M54=..]: the axis' own M and H functions, accepted as every M/H function is here
+                functions = self.spindle(start, name, p + 1)
+                return Technology(functions.text, name, [], functions.params, [])
+            return None
+        if not spindle or not (
+            first in SPINDLE_WORDS or first.startswith("MC_") or (first[:1] in "MH" and first[1:].isdigit())
+        ):
+            return None
+        return self.spindle(start, name, p + 1)
+
+    def spindle(self, start: int, name: str, body: int) -> Technology:
+        """``S[M3 REV500 M19 POS45 H20]``, ``S2[M4 REV5000]``, ``S1[MC_MoveVelocity Velocity=1333 ..]``: the
+        main spindle's M3/M4/M5 and REV become the block's words (the speed G95 multiplies with); the rest
+        is kept as a :class:`Technology` item, accepted without effect."""
+        self.pos = body
+        self.depth += 1
+        words: list[str] = []
+        params: dict[str, Expr] = {}
+        main: list[Word] = []
+        while self.next_entry(name, ",\\"):
+            c = self.peek()
+            at = self.pos
+            key = next((k for k in _SPINDLE_VALUES if self.u.startswith(k, at)), None)
+            if key is not None and self.peek(len(key)) not in LETTERS and self.peek(len(key)) != "_":
+                self.pos += len(key)
+                self.blanks()
+                if self.peek() == "=":
+                    self.pos += 1
+                value = self.spindle_value(name, key)
+                if key == "REV" and name == "S":
+                    main.append(Word(self.u[at : self.pos], "S", "S", value))
+                    continue
+                params[key] = value
+                words.append(key)
+                continue
+            if c in "MH" and self.peek(1) in DIGITS:
+                self.pos += 1
+                begin = self.pos
+                while self.peek() in DIGITS:
+                    self.pos += 1
+                code = Const(float(int(self.u[begin : self.pos])))
+                self.blanks()
+                if self.peek() == "=" and self.peek(1) != "=":
+                    self.pos += 1
+                    params[f"{self.u[at:begin]}{int(code.value)}="] = self.spindle_value(name, c)
+                elif name == "S" and c == "M" and code.value in (3.0, 4.0, 5.0):
+                    main.append(Word(self.u[at : self.pos].strip(), "M", "M", code))
+                    continue
+                words.append(self.u[at : self.pos].strip())
+                continue
+            key = self.name()
+            if not key:
+                self.fail(A_CONTROL_SYNTAX, f"{name}[..]: unexpected {self.word_at(at)!r}")
+            self.blanks()
+            if self.peek() == "=" and self.peek(1) != "=":
+                self.pos += 1
+                params[key] = self.spindle_value(name, key)
+                continue
+            words.append(key)
+        self.depth -= 1
+        return Technology(self.u[start : self.pos], name, words, params, main)
+
+    def spindle_value(self, name: str, key: str) -> Expr:
+        self.blanks()
+        if self.at_end() or self.peek() in ("]", ","):
+            self.fail(A_CONTROL_SYNTAX, f"{name}[.. {key}]: the value is missing")
+        return self.bracket_value()
 
     # --- address words -----------------------------------------------------------------------------------
     def address(self, start: int) -> Word:
@@ -247,10 +374,8 @@ class StatementParser(HashParser):
             # the circle's radius (G02/G03 X.. Y.. R.., M-08)
             return Word(self.word_at(start), "R", "R", self.word_value(start))
         if letter == "E":
-            self.fail(
-                A_NOT_SIMULATED,
-                f"{self.word_at(start)}: the feed at block end (E) is not simulated: see docs/nc-language.md",
-            )
+            # the feed at block end (PM 206811147): only the velocity at the block's end; approximated
+            return Word(self.word_at(start), "E", "E", self.word_value(start))
         if letter in "FSTDIJK":
             return Word(self.word_at(start), letter, letter, self.word_value(start))
         if letter in self.c.single:
@@ -334,7 +459,25 @@ class StatementParser(HashParser):
             ):
                 return Const(number)
             self.pos = at
+        elif c in LETTERS and not self.value_name():
+            word = self.word_at(start)
+            self.fail(
+                A_UNKNOWN_WORD,
+                f"unknown word {word!r}: {word[0]} takes a number or an expression (a parameter P1, a "
+                "variable V.P.NAME, a function SIN[..], or [..])",
+            )
         return self.expression(stop_at_blank=True)
+
+    def value_name(self) -> bool:
+        """Does the value at the position begin as a value may (``P1``, ``PP2``, ``P[..]``, ``V.``, a
+        function, ``TRUE``, ``PI`` ...)? ``FOO`` is no F word but an unknown word."""
+        c, d = self.peek(), self.peek(1)
+        if (c == "P" and (d in DIGITS or d in ("P", "["))) or (c == "V" and d == "."):
+            return True
+        p = self.pos
+        while p < self.n and self.u[p] in NAME_CHARS:
+            p += 1
+        return self.u[self.pos : p] in _VALUE_NAMES
 
     def at_word(self, start: int) -> Item:
         """``@P1=..`` (a cycle parameter) and the cycle's axes ``@X @Y @Z`` / centre ``@I @J @K``."""
@@ -515,6 +658,13 @@ class StatementParser(HashParser):
             return Control(raw, self.number, keyword, [])
         if keyword == C_FOR:
             return self.for_loop()
+        frequency = ""
+        if keyword == C_IF:
+            frequency = next((w for w in RT_FREQUENCIES if self.keyword(w)), "")
+            if frequency:
+                self.blanks()
+                if self.peek() == "=" and self.peek(1) != "=":
+                    self.pos += 1  # $IF ONCE = <cond>: the page's "[ONCE | EDGE | ALWAYS]=.."
         # a condition (or the $CASE values)
         if self.at_end():
             what = "value" if keyword == C_CASE else "condition"
@@ -544,7 +694,7 @@ class StatementParser(HashParser):
                     f"only the {'value' if keyword == C_CASE else 'condition'} may follow ${keyword}; "
                     "move the rest to the next block",
                 )
-        return Control(raw, self.number, keyword, exprs, goto=goto)
+        return Control(raw, self.number, keyword, exprs, goto=goto, frequency=frequency)
 
     def for_loop(self) -> Stmt:
         """``$FOR P1 = <start>, <end>, <step>`` (manual "Counting loop", 206929163)."""

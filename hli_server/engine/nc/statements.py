@@ -32,6 +32,7 @@ __all__ = [
     "Item",
     "Refused",
     "Stmt",
+    "Technology",
     "VarBlock",
     "Word",
     "Words",
@@ -137,6 +138,23 @@ class Assign(Item):
         self.value = value
 
 
+class Technology(Item):
+    """Spindle-specific syntax the path does not depend on (PM 208178187, 208317067): ``S[M19 POS45]``,
+    ``S2[M4 REV5000]``, ``S1[MC_MoveVelocity Velocity=1333 Direction=1]``. ``target`` is the spindle's
+    name, ``words`` its keywords and M/H functions in order, ``params`` the values by keyword (``REV``,
+    ``VELOCITY``, ...), evaluated and accepted without effect. ``main`` holds the main spindle's ``M3``/
+    ``M4``/``M5`` and ``REV`` as the block's ``M`` and ``S`` words (the speed G95 multiplies with)."""
+
+    def __init__(
+        self, text: str, target: str, words: list[str], params: dict[str, Expr], main: list[Word]
+    ) -> None:
+        super().__init__(text)
+        self.target = target
+        self.words = words
+        self.params = params
+        self.main = main
+
+
 class Call(Item):
     """``L name`` (global), ``LL name`` (local), ``L CYCLE [NAME=.. @P1=..]`` (``cycle``): the last
     item of its block. ``params`` are the cycle's ``@P`` numbers and values. ``L V.E.name`` and ``LL
@@ -192,7 +210,7 @@ class Control(Stmt):
     """A control statement: ``keyword`` (``IF``, ``ENDWHILE``, ... or ``#IF`` for conditional
     interpretation) with its expressions: the condition, the ``$SWITCH`` value, the ``$CASE`` values,
     ``$FOR``'s start, end and step. ``target`` is ``$FOR``'s counter; ``goto`` the jump of
-    ``$IF cond $GOTO ..``."""
+    ``$IF cond $GOTO ..``; ``frequency`` the qualifier of ``$IF ONCE ..``."""
 
     def __init__(
         self,
@@ -202,12 +220,15 @@ class Control(Stmt):
         exprs: list[Expr],
         target: Ref | None = None,
         goto: Goto | None = None,
+        frequency: str = "",
     ) -> None:
         super().__init__(raw, number)
         self.keyword = keyword
         self.exprs = exprs
         self.target = target
         self.goto = goto
+        self.frequency = frequency
+        """``$IF ONCE|EDGE|ALWAYS``: the qualifier of an $IF of a realtime cycle (TF5261), else ""."""
 
 
 class Declaration:

@@ -21,6 +21,8 @@ from hli_server.engine.nc.expr import (
     KIND_MH,
     KIND_P,
     KIND_PP,
+    KIND_RTA,
+    KIND_RTG,
     KIND_VA,
     KIND_VE,
     KIND_VG,
@@ -178,6 +180,8 @@ class VariableAccess(InterpreterState):
                     "are): see docs/nc-language.md",
                 )
             return value
+        if kind in (KIND_RTA, KIND_RTG):
+            raise _realtime_only(ref)
         raise EvalError(ALARM_EXPRESSION, f"{ref.text} cannot be read")
 
     def _axis_variable(self, ref: Ref) -> float:
@@ -321,6 +325,8 @@ class VariableAccess(InterpreterState):
                 number = as_number(value, ref.text)
                 self._pending.append(ToolWrite(self._place_block(frame, stmt), TOOL_WRITES[ref.name], number))
                 return None
+            if kind in (KIND_RTA, KIND_RTG):
+                raise _realtime_only(ref)
             raise EvalError(A_READ_ONLY, f"{ref.text} is read-only")
         except EvalError as exc:
             raise stmt.error(exc.alarm, exc.message) from None
@@ -473,3 +479,12 @@ class VariableAccess(InterpreterState):
         if ref.kind == KIND_CYC:  # in a cycle, or in a program or subroutine that calls one (PM 486123531)
             return frame.cycle_vars
         return frame.locals
+
+
+def _realtime_only(ref: Ref) -> EvalError:
+    """A realtime variable outside a realtime cycle (TF5261: it would flush the channel there)."""
+    return EvalError(
+        A_NOT_SIMULATED,
+        f"{ref.text}: the realtime variables V.RTA. and V.RTG. are read and written here only in a realtime "
+        "cycle (#RT CYCLE .. #RT CYCLE END): see docs/nc-language.md",
+    )

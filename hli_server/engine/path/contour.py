@@ -59,8 +59,9 @@ import math
 from dataclasses import dataclass, replace
 from typing import Final
 
-from hli_server.engine.geometry import ArcSegment, LineSegment, Point, Segment
+from hli_server.engine.geometry import LineSegment, Point, Segment, sub_segment
 from hli_server.engine.nc.blocks import Block
+from hli_server.engine.path.corners import A_NOT_SIMULATED, CornerError, CornerRequest, insert_corner
 
 __all__ = [
     "BSPLINE_PATH_DEV",
@@ -141,31 +142,12 @@ class Piece:
     segment less it: the tool tip); :attr:`tip_end` at its end. A corner is contoured only where the
     length is the same along both blocks (the curve's support points then carry that one length)."""
     tip_end: float = 0.0
+    hold: bool = False
+    """Held back for a chamfer or rounding (G301/G302) at its end that the next block asks for
+    (:meth:`Contour.request_corner`; ``hli_server/engine/path/corners.py``)."""
 
 
 # --- geometry helpers ---------------------------------------------------------------------------------
-def sub_segment(segment: Segment, s0: float, s1: float) -> Segment:
-    """The part of ``segment`` between the path distances ``s0`` and ``s1`` (0 <= s0 < s1 <= length)."""
-    length = segment.length
-    if isinstance(segment, LineSegment):
-        start = segment.start if s0 <= 0.0 else segment.point_at(s0)
-        end = segment.end if s1 >= length else segment.point_at(s1)
-        return LineSegment(start, end)
-    f0 = 0.0 if length <= 0.0 else s0 / length
-    f1 = 1.0 if length <= 0.0 else s1 / length
-    start = segment.start if s0 <= 0.0 else segment.point_at(s0)
-    end = segment.end if s1 >= length else segment.point_at(s1)
-    return ArcSegment(
-        start,
-        end,
-        segment.plane,
-        segment.centre,
-        segment.radius,
-        segment.start_angle + segment.sweep * f0,
-        segment.sweep * (f1 - f0),
-    )
-
-
 def _bezier(ctrl: list[Point], t: float) -> Point:
     u = 1.0 - t
     w = (u**4, 4 * u**3 * t, 6 * u * u * t * t, 4 * u * t**3, t**4)
@@ -240,6 +222,7 @@ class Contour:
 
     def __init__(self) -> None:
         self._held: Piece | None = None
+        self._corner: CornerRequest | None = None
         self.corners = 0
         """Corners contoured since the last reset (diagnostics, benchmarks)."""
 
@@ -247,11 +230,33 @@ class Contour:
     def holding(self) -> bool:
         return self._held is not None
 
+    @property
+    def held_piece(self) -> Piece | None:
+        return self._held
+
+    @property
+    def holding_for_corner(self) -> bool:
+        """A piece is held for a chamfer or rounding the next block may ask for."""
+        return self._held is not None and self._held.hold
+
+    @property
+    def corner_requested(self) -> bool:
+        return self._corner is not None
+
+    def request_corner(self, request: CornerRequest) -> None:
+        """G301/G302 (PM 206609163): insert a chamfer or rounding between the held piece and the next one
+        (a later request before the next motion replaces this one)."""
+        self._corner = request
+
     def reset(self) -> None:
         self._held = None
+        self._corner = None
 
     def flush(self) -> list[Piece]:
+        """The held piece as it is (a marker, an area command, an error or the program's end comes next;
+        a chamfer or rounding asked for has no post-block and is dropped)."""
         held, self._held = self._held, None
+        self._corner = None
         return [] if held is None else [held]
 
     def push(self, piece: Piece) -> list[Piece]:
@@ -260,28 +265,65 @@ class Contour:
         out: list[Piece] = []
         pre = self._held
         self._held = None
+        request = self._corner
+        self._corner = None
         if pre is not None:
-            if (
+            corner: tuple[Piece, list[Piece], Piece] | None = None
+            if request is not None:
+                corner = self._insert(pre, piece, request)
+            elif not (
                 pre.blend is None
                 or piece.rapid
                 or piece.exact_stop
                 or not (pre.tip_start == pre.tip_end == piece.tip_start == piece.tip_end)
             ):
+                corner = self._blend(pre, piece, pre.blend)
+                if corner is not None:
+                    self.corners += 1
+            if corner is None:
                 out.append(pre)
             else:
-                blended = self._blend(pre, piece, pre.blend)
-                if blended is None:
-                    out.append(pre)
-                else:
-                    head, chords, piece = blended
-                    out.append(head)
-                    out.extend(chords)
-                    self.corners += 1
-        if piece.blend is not None and not piece.rapid and not piece.exact_stop:
+                head, middle, piece = corner
+                out.append(head)
+                out.extend(middle)
+        if (piece.blend is not None and not piece.rapid and not piece.exact_stop) or piece.hold:
             self._held = piece
         else:
             out.append(piece)
         return out
+
+    # --- a chamfer or rounding (G301/G302) -------------------------------------------------------------
+    @staticmethod
+    def _insert(pre: Piece, post: Piece, request: CornerRequest) -> tuple[Piece, list[Piece], Piece] | None:
+        """The corner between ``pre`` and ``post`` replaced by the chamfer or rounding of ``request``
+        (the inserted element is the G301/G302 block's, travelled at its feed or the pre-block's and, after
+        a rapid, at rapid); None at a tangential transition. Raises :class:`CornerError`."""
+        if not (pre.tip_start == pre.tip_end == post.tip_start == post.tip_end):
+            raise CornerError(
+                A_NOT_SIMULATED,
+                "a chamfer or rounding (G301/G302) where the tool length in the axis position changes is not "
+                "simulated: program the tool axis before the corner",
+            )
+        result = insert_corner(pre.segment, post.segment, request.kind, request.size)
+        if result is None:
+            return None
+        head_segment, middle, tail_segment = result
+        head = replace(pre, segment=head_segment, blend=None, hold=False, exact_stop=False)
+        feed = pre.feed if request.feed is None else request.feed
+        pieces = [
+            Piece(
+                segment=segment,
+                block=request.block,
+                rapid=pre.rapid,
+                exact_stop=pre.exact_stop,
+                feed=None if pre.rapid else feed,
+                full_length=segment.length,
+                tip_start=pre.tip_end,
+                tip_end=pre.tip_end,
+            )
+            for segment in middle
+        ]
+        return head, pieces, replace(post, segment=tail_segment)
 
     # --- one corner ------------------------------------------------------------------------------------
     def _blend(
