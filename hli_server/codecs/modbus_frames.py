@@ -51,6 +51,7 @@ from typing import Final, NamedTuple
 __all__ = [
     "MAX_ADU",
     "MAX_PDU",
+    "MBAP_SIZE",
     "MBAP_HEADER",
     "ExceptionCode",
     "Frame",
