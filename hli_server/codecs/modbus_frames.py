@@ -51,8 +51,8 @@ from typing import Final, NamedTuple
 __all__ = [
     "MAX_ADU",
     "MAX_PDU",
-    "MBAP_SIZE",
     "MBAP_HEADER",
+    "MBAP_SIZE",
     "ExceptionCode",
     "Frame",
     "FunctionCode",
