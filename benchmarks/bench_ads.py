@@ -27,7 +27,7 @@ Printed: calls/s, latency p50/p99 per server and mode, the CPU time the serving 
 ratio hli-server / reference (the goal: >= 1.0x on both) and hli-server / floor (goal: within
 5 %, >= 0.95), and how the realtime clock fared under the load.
 
-    .venv/bin/python -m benchmarks.bench_ads [--seconds 2] [--rounds 2]
+    .venv/bin/python -m benchmarks.bench_ads [--seconds 2] [--rounds 2] [--runs 3]
 
 Client and servers share the machine's cores: the figures are noisy, the ratio is what to compare.
 """
@@ -442,6 +442,9 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=2.0, help="length of each run [s]")
     parser.add_argument("--rounds", type=int, default=2, help="interleaved rounds per server and mode")
     parser.add_argument(
+        "--runs", type=int, default=1, help="whole runs (fresh servers); the worst is the figure"
+    )
+    parser.add_argument(
         "--clock",
         choices=["realtime", "stepped"],
         default="realtime",
@@ -468,6 +471,32 @@ def main() -> None:
         f"0x{group:X}/{offset} and read_by_name({SYMBOL!r}); {args.rounds} x {args.seconds:g} s per server "
         f"and mode, interleaved; {os.cpu_count()} CPUs shared"
     )
+    worst: dict[str, list[tuple[float, float, float, float]]] = {"raw": [], "by_name": []}
+    timing: Any = None
+    for run in range(args.runs):
+        if args.runs > 1:
+            print(f"--- run {run + 1} of {args.runs}", flush=True)
+        timing = _one_run(args)
+        for mode, figures in timing.pop("_ratios").items():
+            worst[mode].append(figures)
+    if args.runs > 1:
+        for mode, runs in worst.items():
+            rate_ref, rate_floor = min(r[0] for r in runs), min(r[1] for r in runs)
+            p50_ref, p50_floor = min(r[2] for r in runs), min(r[3] for r in runs)
+            print(
+                f"{mode}, worst of {args.runs} runs: hli-server / pyads.testserver {rate_ref:.2f}x "
+                f"({'meets' if rate_ref >= GOAL else 'MISSES'} the goal >= {GOAL:g}x), hli-server / floor "
+                f"{rate_floor:.2f} ({'meets' if rate_floor >= FLOOR_GOAL else 'MISSES'} the goal >= "
+                f"{FLOOR_GOAL:g}); by the median round trip (what the machine's stalls disturb least): "
+                f"{p50_ref:.2f}x and {p50_floor:.2f}"
+            )
+    print_lateness(timing)
+
+
+def _one_run(args: argparse.Namespace) -> Any:
+    """One run: the four servers started, ``args.rounds`` interleaved rounds, the table and the ratios
+    printed; returns the hli-server's timing report with ``_ratios``: mode -> (calls/s / reference,
+    calls/s / floor, the same two by the median round trip)."""
     servers = {"hli-server": Server.start("hli-server", _serve_hli if args.in_process else _serve_hli_run)}
     servers["pyads.testserver"] = Server.start("pyads.testserver", _serve_testserver)
     servers["floor"] = Server.start("floor", _serve_floor_asyncio)
@@ -508,6 +537,7 @@ def main() -> None:
             f"{labels[name]:<42} {mode:<8} {r.rate:>9.0f} {r.percentile(50):>8.1f} {r.percentile(99):>8.1f}"
             f" {cpu:>12.1f}"
         )
+    ratios = {}
     for mode in ("raw", "by_name"):
         ours, ref = results["hli-server", mode], results["pyads.testserver", mode]
         floor, thread = results["floor", mode], results["floor-thread", mode]
@@ -528,7 +558,15 @@ def main() -> None:
             f"{thread.percentile(50):.1f} us: hli-server - asyncio floor "
             f"{ours.percentile(50) - floor.percentile(50):+.1f} us"
         )
-    print_lateness(timing)
+        ratios[mode] = (
+            ratio,
+            to_floor,
+            ref.percentile(50) / ours.percentile(50),
+            floor.percentile(50) / ours.percentile(50),
+        )
+    report = dict(timing or {})
+    report["_ratios"] = ratios
+    return report
 
 
 if __name__ == "__main__":

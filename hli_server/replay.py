@@ -84,6 +84,8 @@ __all__ = [
 CHUNK: Final = 5000
 """Cycles run per step of the stepped clock (the feeder reads that far ahead)."""
 _P2C, _C2P = Direction.PLC_TO_CNC, Direction.CNC_TO_PLC
+_NO_EVENTS: Final[list[Any]] = []
+"""A cycle's events when there were none (never appended to)."""
 
 
 class Verdict(StrEnum):
@@ -619,33 +621,44 @@ class Feeder:
             raise self._failure
         if self._stop_after_cycle:
             raise _StopReplayError
-        events, self._events[:] = list(self._events), []
-        if self.follow and cycle > self.window:
+        own_events = self._events  # the machine's listener appends to this very list
+        events = own_events[:] if own_events else _NO_EVENTS
+        if own_events:
+            own_events.clear()
+        buffer = self._buffer
+        flat = None
+        if buffer and buffer[0]["c"] == cycle and ("o" in buffer[0] or "e" in buffer[0]):
+            record = buffer.popleft()
+            flat = record.get("o")  # a sample of the outputs (the recording's last cycle is one as well)
+            self._expected_events = record.get("e") or _NO_EVENTS
+        elif self._expected_events:
+            self._expected_events = _NO_EVENTS
+        self.report.last_cycle = cycle
+        window = self.window
+        compared = (
+            cycle >= window
+            and packed is not None
+            and (self.every == 1 or not (cycle - window) % self.every or bool(flat))
+        )
+        # the cycle counters the outputs follow are set only where the outputs are compared: every such
+        # cycle sets them before its recorded sample is applied, so skipping the others changes nothing
+        if compared and self.follow and cycle > window:
             own = cycle % CYCLE_MODULUS
             for at in self.follow:
                 self.expected_out[at] = own
                 if self.fast:
                     self.out_structs[at].pack_into(self.expected_bytes, self.offsets[at], own)
-        buffer = self._buffer
-        sampled = False
-        if buffer and buffer[0]["c"] == cycle and ("o" in buffer[0] or "e" in buffer[0]):
-            record = buffer.popleft()
-            flat = record.get("o")
-            if flat:
-                sampled = True  # a sample of the outputs (the recording's last cycle is one as well)
-                self._expect(flat)
-            self._expected_events = record.get("e") or []
-        else:
-            self._expected_events = []
-        self.report.last_cycle = cycle
-        if cycle < self.window or packed is None:
-            return
-        if self.every > 1 and (cycle - self.window) % self.every and not sampled:
-            pass  # not a sample of the outputs: the events alone
+        if flat:
+            self._expect(flat)
+        if not compared:
+            if cycle < window or packed is None:
+                return
         elif self.fast:
+            assert packed is not None
             if packed[8:] != self.expected_bytes:
                 self._compare_values(cycle, packed)
         else:
+            assert packed is not None
             self._compare_values(cycle, packed)
         if self.compare_events and (events or self._expected_events):
             actual = [json.loads(json.dumps(_finite(e.to_json()))) for e in events]

@@ -637,7 +637,8 @@ class ConnectionGate:
     @property
     def quiet(self) -> bool:
         """No fault acts and nothing is held back: the connection may answer straight on ``raw``."""
-        return not self.faults.active and self._held.idle
+        held = self._held
+        return not self.faults.active and not held._held and held.hold_s <= 0 and not held.dropped
 
     def modbus(self, frame: Frame) -> bytes | None:
         """None: serve ``frame``; bytes: the answer the fault gives instead (b"": none, dropped)."""

@@ -90,6 +90,9 @@ from hli_server.adapters.tcp import (
     listen,
 )
 from hli_server.codecs.modbus_frames import (
+    MAX_ADU,
+    MBAP_HEADER,
+    MBAP_SIZE,
     ExceptionCode,
     Frame,
     MbapDecoder,
@@ -142,6 +145,8 @@ ANY_UNIT_IDS: Final = frozenset({0, 255})
 """Unit ids answered besides the configured one: 0 and 255 mean "this device" on Modbus TCP."""
 BATCH: Final = 32
 """Frames answered per turn of one connection before the others (and the clock) get theirs."""
+_MIN_ADU: Final = MBAP_SIZE + 1
+"""The shortest ADU: the MBAP header and a function code (length field 2)."""
 READER_CACHE_SIZE: Final = 4096
 """Compiled readers kept per server (one per distinct read request); cleared when full."""
 
@@ -585,6 +590,8 @@ class _Connection(asyncio.Protocol):
         self._decoder = MbapDecoder()
         self._session = Session()
         self._transport: asyncio.Transport | None = None
+        self._raw: asyncio.Transport | None = None
+        """The socket's own transport (``_transport`` is the fault gate's wrapper of it): the fast path's."""
         self._peer: Any = None
         self._queue: deque[Frame] = deque()
         self._turn: asyncio.Handle | None = None
@@ -614,6 +621,7 @@ class _Connection(asyncio.Protocol):
             return
         self._gate = self._adapter.faults.gate(Door.MODBUS, transport)  # communication faults on demand
         self._transport = self._gate.transport
+        self._raw = transport
         self._server.stats.connections += 1
         logger.debug("Modbus: connection from %s", self._peer)
         self._arm_idle()
@@ -660,11 +668,30 @@ class _Connection(asyncio.Protocol):
         self._frame_timer = asyncio.get_running_loop().call_later(timeout - waited, self._frame_check)
 
     def data_received(self, data: bytes) -> None:
-        transport = self._transport
-        if transport is None or transport.is_closing():
+        raw = self._raw
+        if raw is None or raw.is_closing():
             return
         now = self.last_active = time.monotonic()
         decoder = self._decoder
+        size = len(data)
+        if (  # the fast path: this read is one whole ADU, nothing else waits, no fault acts
+            _MIN_ADU <= size <= MAX_ADU
+            and size == 6 + (data[4] << 8 | data[5])
+            and self._turn is None
+            and not self._queue
+            and not decoder.pending
+            and self._gate.quiet
+        ):
+            self.partial_since = None
+            tid, pid, _, unit = MBAP_HEADER.unpack_from(data)
+            reply = self._server.answer(Frame(tid, pid, unit, data[MBAP_SIZE:]), self._session)
+            if reply:
+                raw.write(reply)
+                self.last_answered = now
+            return
+        transport = self._transport
+        if transport is None or transport.is_closing():
+            return
         self._queue.extend(decoder.feed(data))
         if not decoder.pending:
             self.partial_since = None
@@ -727,7 +754,7 @@ class _Connection(asyncio.Protocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._adapter._forget(self)
-        self._transport = None
+        self._transport = self._raw = None
         self._queue.clear()
         for handle in (self._turn, self._idle, self._frame_timer):
             if handle is not None:

@@ -52,6 +52,7 @@ __all__ = [
     "MAX_ADU",
     "MAX_PDU",
     "MBAP_HEADER",
+    "MBAP_SIZE",
     "ExceptionCode",
     "Frame",
     "FunctionCode",

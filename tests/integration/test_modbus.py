@@ -515,6 +515,57 @@ async def test_pipelined_requests_split_across_writes(raw: Raw, layout: Layout) 
     assert tids == list(range(40))
 
 
+async def test_a_request_read_whole_and_one_read_among_others_get_the_same_answer(
+    raw: Raw, adapter: ModbusAdapter, image: ProcessImage, layout: Layout
+) -> None:
+    """A read that is exactly one ADU is answered on the fast path (``_Connection.data_received``), a
+    read holding more than one through the decoder and the connection's queue: same answers, same
+    counters, whatever the request."""
+    image.write(HOLDING_DINT, -7)
+    image.write(COIL, True)
+    a = addr(layout, HOLDING_DINT)
+    requests = [
+        (1, read_pdu(3, a, 2)),
+        (1, read_pdu(1, addr(layout, COIL), 2)),
+        (1, read_pdu(2, addr(layout, DISCRETE), 1)),
+        (1, read_pdu(4, addr(layout, INPUT_LREAL), 4)),
+        (1, read_pdu(3, a + 1, 2)),  # cuts a DINT: 0x02
+        (1, read_pdu(3, 50, 2)),  # nothing there: 0x02
+        (1, read_pdu(3, a, 0)),  # quantity 0: 0x03
+        (1, b"\x03\x00"),  # truncated: 0x03
+        (1, b"\x2b\x0e\x01\x00"),  # FC 43: 0x01
+        (1, struct.pack(">BHH", 5, addr(layout, COIL), 0x1234)),  # neither ON nor OFF: 0x03
+        (1, b"\x10" + struct.pack(">HHB", a, 2, 4) + struct.pack(">HH", *regs32(-7))),
+        (0, read_pdu(3, a, 2)),  # unit 0: this device
+        (9, read_pdu(3, a, 2)),  # another unit: 0x0B
+    ]
+    probe = adu(999, read_pdu(3, a, 2))
+    whole: list[tuple[int, int, bytes]] = []
+    before = adapter.server.stats.requests, dict(adapter.server.stats.exceptions)
+    for tid, (unit, pdu) in enumerate(requests):
+        await raw.send(adu(tid, pdu, unit))
+        whole.append(await raw.answer())
+    stats = adapter.server.stats
+    requests_whole = stats.requests - before[0]
+    exceptions_whole = {c: n - before[1].get(c, 0) for c, n in stats.exceptions.items()}
+    among: list[tuple[int, int, bytes]] = []
+    for tid, (unit, pdu) in enumerate(requests):
+        await raw.send(adu(tid, pdu, unit) + probe)  # two ADUs in one write: the decoder's path
+        among.append(await raw.answer())
+        assert (await raw.answer())[0] == 999
+    assert among == whole
+    assert [pdu[0] & 0x80 for _, _, pdu in whole] == [0] * 4 + [0x80] * 6 + [0, 0, 0x80]
+    assert requests_whole == len(requests)
+    assert stats.requests - before[0] == 3 * len(requests)  # and the probes
+    assert exceptions_whole == {0x01: 1, 0x02: 2, 0x03: 3, 0x0B: 1}
+    assert {c: n - before[1].get(c, 0) for c, n in stats.exceptions.items()} == {
+        0x01: 2,
+        0x02: 4,
+        0x03: 6,
+        0x0B: 2,
+    }
+
+
 async def test_many_pipelined_requests_from_several_clients(adapter: ModbusAdapter, layout: Layout) -> None:
     request = read_pdu(3, addr(layout, HOLDING_DINT), 4)
 

@@ -791,6 +791,11 @@ def _fast_cases(layout: Layout) -> list[bytes]:
     out = [encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ, 7, f) for f in frames[:4]]
     out += [encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.WRITE, 8, f) for f in frames[4:6]]
     out += [encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ_WRITE, 9, f) for f in frames[6:]]
+    handle = 0x1000_0001  # the first handle of a session: read by it, then released (pyads' read_by_name)
+    by_handle = [ReadRequest(0xF005, handle, 4).encode(), ReadRequest(0xF005, handle, 8).encode()]
+    out += [encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ, 10, f) for f in by_handle]
+    release = WriteRequest(0xF006, 0, struct.pack("<I", handle)).encode()
+    out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.WRITE, 11, release))
     out.append(encode_request(AmsAddress(SERVER, 9999), CLIENT, CommandId.READ, 1, frames[0]))  # no port
     out.append(
         encode_request(AmsAddress(NetId.parse("1.2.3.4.5.6"), 851), CLIENT, CommandId.READ, 1, frames[0])

@@ -131,8 +131,11 @@ class DataService:
         return b"".join(parts)
 
     def read_by_handle(self, session: Session, handle: int, length: int) -> bytes:
-        symbol = self.handle(session, handle)
-        _check_size(symbol, length, "read")
+        symbol = session.handles.get(handle)
+        if symbol is None:
+            symbol = self.handle(session, handle)  # raises 0x710
+        if length != symbol.size:
+            _check_size(symbol, length, "read")
         return self.gather(symbol)
 
     def read_geo(self, session: Session, offset: int, length: int) -> bytes:

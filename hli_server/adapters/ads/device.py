@@ -90,6 +90,13 @@ _FRAME_HEAD: Final = struct.Struct("<HI6sH6sHHHIII")
 """AMS/TCP header and AMS header of one frame (the codec's layout), for :meth:`AdsDevice.handle_frame`."""
 _FAST_COMMANDS: Final = frozenset((CommandId.READ, CommandId.WRITE, CommandId.READ_WRITE))
 _RESPONSE_FLAGS: Final = 0x0005
+_FLAGS: Final = _RESPONSE_FLAGS
+_DATA_REPLY: Final = struct.Struct("<HI6sH6sHHHIIIII")
+"""The frame head, then a Read or ReadWrite reply's result and length (the data follows)."""
+_RESULT_REPLY: Final = struct.Struct("<HI6sH6sHHHIIII")
+"""The frame head, then a Write reply's result."""
+_READ: Final = CommandId.READ
+_WRITE: Final = CommandId.WRITE
 _NO_HEADER: Final = AmsHeader(NetId(bytes(6)), 0, NetId(bytes(6)), 0, 0, 0, 0, 0, 0)
 """The header argument of the data commands in :meth:`AdsDevice.handle_frame` (Read, Write, ReadWrite do
 not read it: they answer from their payload)."""
@@ -283,6 +290,35 @@ class AdsDevice:
             return None
         self.stats.requests += 1
         try:
+            # the canonical shapes of the three commands straight from the frame: no payload copy, no
+            # command method, the reply in one pack (the others take the command methods below)
+            if cmd == _READ:
+                if data_length == 12:
+                    group, offset, size = _U32x3.unpack_from(frame, 38)
+                    serve = table.read.get(group)
+                    if serve is None:
+                        raise table.missing("Read", group)
+                    value = serve(session, offset, size)
+                    n = len(value)
+                    return (
+                        _DATA_REPLY.pack(0, 40 + n, sn, sp, tn, tp, cmd, _FLAGS, 8 + n, 0, invoke, 0, n)
+                        + value
+                    )
+            elif cmd == _WRITE:
+                if data_length >= 12:
+                    group, offset, size = _U32x3.unpack_from(frame, 38)
+                    if size == data_length - 12:
+                        table.write_group(session, group, offset, frame[50:])
+                        return _RESULT_REPLY.pack(0, 36, sn, sp, tn, tp, cmd, _FLAGS, 4, 0, invoke, 0)
+            elif data_length >= 16:  # ReadWrite
+                group, offset, read_length, size = _U32x4.unpack_from(frame, 38)
+                if size == data_length - 16:
+                    value = self._read_write(session, table, group, offset, read_length, frame[54:])
+                    n = len(value)
+                    return (
+                        _DATA_REPLY.pack(0, 40 + n, sn, sp, tn, tp, cmd, _FLAGS, 8 + n, 0, invoke, 0, n)
+                        + value
+                    )
             payload = self._commands[cmd](session, table, _NO_HEADER, frame[38:])
         except AdsError as exc:
             self.stats.count_error(exc.code)
@@ -328,13 +364,20 @@ class AdsDevice:
         if len(data) < 16 or _U32x4.unpack_from(data)[3] != len(data) - 16:
             ReadWriteRequest.decode(data)  # raises the codec's 0x705
         group, offset, read_length, _ = _U32x4.unpack_from(data)
-        value = table.read_write_group(session, group, offset, read_length, data[16:])
+        value = self._read_write(session, table, group, offset, read_length, data[16:])
+        return _RESULT_AND_LENGTH.pack(0, len(value)) + value
+
+    @staticmethod
+    def _read_write(
+        session: Session, table: PortTable, group: int, offset: int, read_length: int, data: bytes
+    ) -> bytes:
+        value = table.read_write_group(session, group, offset, read_length, data)
         if len(value) > read_length:
             raise AdsError(
                 ErrorCode.SIZE_WRONG,
                 f"index group 0x{group:X} answers {len(value)} bytes, the read length is {read_length}",
             )
-        return _RESULT_AND_LENGTH.pack(0, len(value)) + value
+        return value
 
     def add_notification(self, session: Session, table: PortTable, header: AmsHeader, data: bytes) -> bytes:
         request = AddDeviceNotificationRequest.decode(data)

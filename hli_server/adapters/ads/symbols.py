@@ -516,8 +516,10 @@ class SymbolTable:
 
     def find_raw(self, data: bytes) -> Symbol | None:
         """:meth:`find` of a name as a client sends it (NUL-terminated, Windows-1252), cached by its bytes."""
-        if data in self._raw:
-            return self._raw[data]
+        try:
+            return self._raw[data]  # one lookup where the name was seen (a name is asked again and again)
+        except KeyError:
+            pass
         symbol = self.find(decode_name(data))
         if len(self._raw) >= 4096:
             self._raw.clear()
