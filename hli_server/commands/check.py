@@ -44,10 +44,9 @@ from hli_server.engine.program_check import (
     CheckResult,
     ProgramCheck,
 )
-from hli_server.engine.programs import ProgramFile
 from hli_server.scene import build_scene, round_mm, round_numbers
 
-__all__ = ["EXIT_CAPPED", "CheckResult", "DirectoryLibrary", "check", "check_program", "scene_of"]
+__all__ = ["EXIT_CAPPED", "CheckResult", "check", "check_program", "scene_of"]
 
 EXIT_CAPPED = 3
 """Exit code of a check that stopped at its cap: the program did not end."""
@@ -90,49 +89,6 @@ class _Progress:
     def done(self) -> None:
         if self._bar is not None:
             self._bar.close()
-
-
-class DirectoryLibrary:
-    """Global subroutines and cycles from program directories, searched in order (``check``'s own
-    :class:`~hli_server.engine.programs.ProgramLibrary`): a name matches a file exactly, else
-    case-insensitively; a name that leaves its directory (``..``, an absolute path) is not found."""
-
-    def __init__(self, directories: list[Path]) -> None:
-        self.directories = [d.resolve() for d in directories]
-
-    def find(self, name: str) -> ProgramFile | None:
-        for directory in self.directories:
-            path = self._lookup(directory, name)
-            if path is None:
-                continue
-            try:
-                text = path.read_text(encoding="utf-8", errors="strict")
-            except (OSError, UnicodeDecodeError):
-                continue
-            return ProgramFile(name, text, str(path))
-        return None
-
-    @staticmethod
-    def _lookup(directory: Path, name: str) -> Path | None:
-        relative = Path(name.replace("\\", "/"))
-        if relative.is_absolute() or ".." in relative.parts:
-            return None
-        candidate = (directory / relative).resolve()
-        if not candidate.is_relative_to(directory):
-            return None
-        if candidate.is_file():
-            return candidate
-        parent = candidate.parent
-        if not parent.is_dir():
-            return None
-        folded = candidate.name.casefold()
-        for entry in sorted(parent.iterdir()):
-            if entry.name.casefold() == folded and entry.is_file():
-                return entry
-        return None
-
-    def searched(self) -> tuple[str, ...]:
-        return tuple(str(d) for d in self.directories)
 
 
 def check_program(
@@ -326,17 +282,19 @@ def check(
 
     The report goes to stdout (text or JSON); progress, ``plot written: PATH`` and errors to stderr."""
     from hli_server.configuration import ConfigError, load_machine
+    from hli_server.runtime.programs import (
+        ProgramDirectories,
+        cycle_libraries,
+        open_program,
+        read_program_file,
+    )
 
     if plot_path is not None:
         _check_plot_target(plot_path)
     try:
         # a geometry check streams the file (flat memory for programs of millions of blocks); the
-        # full check reads it whole
-        text: str | TextIO = (
-            program.open(encoding="utf-8", errors="strict", newline="")
-            if geometry_only
-            else program.read_text(encoding="utf-8", errors="strict")
-        )
+        # full check reads it whole; UTF-8 or Windows-1252 alike, the name without regard to case
+        text: str | TextIO = open_program(program) if geometry_only else read_program_file(program)
     except (OSError, UnicodeDecodeError) as exc:
         click.echo(f"error: cannot read {program}: {exc}", err=True)
         sys.exit(2)
@@ -349,11 +307,8 @@ def check(
         except OSError as exc:
             click.echo(f"error: cannot read configuration: {exc}", err=True)
             sys.exit(2)
-        library = DirectoryLibrary([program.parent, *program_dirs])
-        cycles = {
-            ch.number: DirectoryLibrary([Path(d) for d in ch.cycle_directories]) for ch in config.channels
-        }
-        machine = Machine(config, programs=library, cycle_programs=cycles)
+        library = ProgramDirectories([program.parent, *program_dirs])
+        machine = Machine(config, programs=library, cycle_programs=cycle_libraries(config))
         try:
             machine.channel(channel)
         except KeyError:

@@ -119,10 +119,13 @@ def program_files(
 ) -> tuple[str, str, dict[str, str], list[Path]]:
     """(text, name, uploaded files, the program file's directory if it is one) of a program given as NC text
     or a path (relative to ``base``, the test file's directory) and its subprograms."""
+    from hli_server.runtime.programs import find_file, read_program_file
+
+    # files are read as the server reads them: UTF-8 or Windows-1252, names without regard to case (N-12)
     directories: list[Path] = []
     if isinstance(program, os.PathLike):
-        path = _relative_to(Path(program), base)
-        text, name = path.read_text(encoding="utf-8"), name or path.name
+        path = find_file(_relative_to(Path(program), base))
+        text, name = read_program_file(path), name or path.name
         directories.append(path.parent)
     else:
         text, name = program, name or "program"
@@ -130,8 +133,8 @@ def program_files(
     items = files.items() if isinstance(files, Mapping) else ((None, f) for f in files)
     for key, value in items:
         if isinstance(value, os.PathLike) or key is None:
-            file = _relative_to(Path(os.fspath(value)), base)
-            uploads[key or file.name] = file.read_text(encoding="utf-8")
+            file = find_file(_relative_to(Path(os.fspath(value)), base))
+            uploads[key or file.name] = read_program_file(file)
         else:
             uploads[key] = value
     return text, name, uploads, directories

@@ -15,6 +15,7 @@ from pydantic import ValidationError
 
 from hli_server.adapters.http.deps import HostDep
 from hli_server.adapters.http.models import CheckBody
+from hli_server.codecs.nc_text import decode_program
 from schemas.results import CheckReport
 
 __all__ = ["router"]
@@ -65,9 +66,9 @@ async def post_check(
             raise RequestValidationError(exc.errors(include_url=False)) from None
     else:
         try:
-            text = raw.decode("utf-8")
-        except UnicodeDecodeError as exc:
-            raise HTTPException(422, f"program text is not UTF-8 (byte {exc.start})") from None
+            text = decode_program(raw)  # UTF-8 (a byte order mark or not) or Windows-1252, as files
+        except UnicodeDecodeError as exc:  # a UTF-16 body cut short
+            raise HTTPException(422, f"program text cannot be read: {exc}") from None
         if not text.strip():
             raise HTTPException(422, "empty program: send the NC text as the body (text/plain)")
         fields: dict[str, Any] = {
