@@ -34,6 +34,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Final, TextIO
 
 from hli_server.codecs.nc_text import EncodingSniffer, decode_program
+from hli_server.configuration.files import find_file
 from hli_server.engine.programs import ProgramFile
 from schemas.config import MachineConfig
 
@@ -62,24 +63,6 @@ _CACHE_FILES: Final = 256
 
 class ProgramNameError(ValueError):
     """A program name that is no plain file name below a program directory (says what and why)."""
-
-
-def find_file(path: str | os.PathLike[str]) -> Path:
-    """``path`` as it is, else the file of its directory whose name matches without regard to case
-    (``UP1.nc`` for ``up1.nc``: the kernel's host is Windows); the path as given when neither is found
-    (opening it then says so)."""
-    file = Path(path)
-    if file.exists():
-        return file
-    folded = file.name.casefold()
-    try:
-        with os.scandir(file.parent) as entries:
-            for entry in entries:
-                if entry.name.casefold() == folded and entry.is_file():
-                    return Path(entry.path)
-    except OSError:
-        pass
-    return file
 
 
 def read_program_file(path: str | os.PathLike[str]) -> str:
@@ -163,21 +146,8 @@ class ProgramDirectories:
     @staticmethod
     def _match(directory: Path, relative: PurePosixPath) -> Path | None:
         """The file of ``relative`` in ``directory``: exact, else each part without regard to case."""
-        exact = directory.joinpath(*relative.parts)
-        if exact.is_file():
-            return exact
-        here = directory
-        for part in relative.parts:
-            try:
-                with os.scandir(here) as entries:
-                    folded = part.casefold()
-                    found = next((Path(e.path) for e in entries if e.name.casefold() == folded), None)
-            except OSError:
-                return None
-            if found is None:
-                return None
-            here = found
-        return here if here.is_file() else None
+        found = find_file(directory.joinpath(*relative.parts))
+        return found if found.is_file() else None
 
     def _read(self, directory: Path, path: Path, name: str) -> str | None:
         try:

@@ -260,7 +260,8 @@ class ProgramResolver:
             raise stmt.error(
                 A_NOT_FOUND,
                 f"{'cycle' if call.cycle else 'global subroutine'} {call.name} not found; searched: "
-                f"{where}{_OUTSIDE if _leaves_directories(call.name) else ''}{self._extension_hint(call.name)}",
+                f"{where}{_OUTSIDE if _leaves_directories(call.name) else ''}"
+                f"{self._extension_hint(call.name)}",
             )
         units = self._global_units(found.name, found.text)
         return Frame("cycle" if call.cycle else "global", units, found.name, units.main(), place)
