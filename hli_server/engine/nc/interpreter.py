@@ -28,6 +28,8 @@ it, no indirection per statement):
 * ``nc/control_flow.py``: ``$IF`` .. ``$ENDFOR``, ``$GOTO``, ``#IF``, and skipping;
 * ``nc/calls.py``: program levels (``L``, ``LL``, ``L CYCLE``; ``nc/levels.py`` finds the program a call
   names), M17/M29/M30/M02;
+* ``nc/implicit.py``: the implicit calls G80..G89 / G800..G839 (the program their channel parameter or
+  ``#FILE NAME [G8xx=..]`` assigns);
 * here: the loop that hands out blocks and directives, and the blocks of words.
 
 Work per cycle is bounded (docs/check.md, "Bad input"): every statement run or skipped spends one unit of
@@ -43,7 +45,6 @@ from typing import TextIO
 
 from hli_server.engine.nc.block_builder import build_block
 from hli_server.engine.nc.blocks import Block, NcError
-from hli_server.engine.nc.calls import ProgramLevels
 from hli_server.engine.nc.directives import (
     PAUSE,
     Directive,
@@ -54,6 +55,7 @@ from hli_server.engine.nc.expr import (
     EvalError,
     Expr,
 )
+from hli_server.engine.nc.implicit import ImplicitCalls
 from hli_server.engine.nc.language import (
     A_CONTROL_SYNTAX,
     A_UNEXPECTED,
@@ -72,6 +74,7 @@ from hli_server.engine.nc.statements import (
     Empty,
     Hash,
     Header,
+    ImplicitCall,
     Refused,
     Stmt,
     VarBlock,
@@ -82,7 +85,7 @@ from hli_server.engine.nc.statements import (
 __all__ = ["STATEMENTS_PER_CYCLE", "Interpreter"]
 
 
-class Interpreter(ProgramLevels):
+class Interpreter(ImplicitCalls):
     """Runs programs for one channel (see the module's description).
 
     ``budget`` is the statements per cycle (None: unbounded, for a geometry check); ``iteration_cap``
@@ -101,6 +104,7 @@ class Interpreter(ProgramLevels):
         self._param_arrays = {}
         self._program_vars = {}
         self._message_file = "message.txt"
+        self._implicit_names = {}
         self.iterations = 0
         self.statements = 0
         self._left = self.budget if self.budget is not None else 0
@@ -238,13 +242,18 @@ class Interpreter(ProgramLevels):
                 self._pending.append(SyncAction(place, action))
         if block is not None and block.m_codes:
             self._program_flow(frame, block)
-            if (frame.returning or self._ended) and (stmt.call is not None or stmt.goto is not None):
+            if (frame.returning or self._ended) and (
+                stmt.call is not None or stmt.goto is not None or stmt.implicit is not None
+            ):
                 raise stmt.error(
                     A_CONTROL_SYNTAX, "a block that ends the program or subroutine calls or jumps"
                 )
         if stmt.call is not None:
             place = block if block is not None else self._place_block(frame, stmt)
             self._call(frame, stmt, stmt.call, place)
+        elif stmt.implicit is not None:
+            place = block if block is not None else self._place_block(frame, stmt)
+            self._implicit_call(frame, stmt, stmt.implicit, place)
         elif stmt.goto is not None:
             self._goto(frame, stmt, stmt.goto)
 
@@ -259,7 +268,7 @@ class Interpreter(ProgramLevels):
             elif isinstance(item, Assign):
                 exprs.append(item.value)
                 exprs.extend(item.target.indices)
-            elif isinstance(item, Call):
+            elif isinstance(item, (Call, ImplicitCall)):
                 exprs.extend(v for _, v in item.params)
                 if item.variable is not None:  # L V.E.name: a synchronous V.E. is read after the flush
                     exprs.append(item.variable)

@@ -74,6 +74,8 @@ class InterpreterState(Env):
         self._static_vars: dict[str, Variable] = {}
         """V.S.: kept across programs and resets (the channel's lifetime)."""
         self._message_file = "message.txt"
+        self._implicit_names: dict[int, str] = {}
+        """G code -> the subprogram ``#FILE NAME [G8xx=".."]`` assigned in this run (nc/implicit.py)."""
         self.iterations = 0
         self.statements = 0
         """Statements run or skipped since the program started (for reports)."""

@@ -29,6 +29,7 @@ __all__ = [
     "Goto",
     "Hash",
     "Header",
+    "ImplicitCall",
     "Item",
     "Refused",
     "Stmt",
@@ -164,6 +165,19 @@ class Call(Item):
         return Call(self.text, self.local, name, self.cycle, self.params)
 
 
+class ImplicitCall(Item):
+    """``G803``, ``G805[10.0, 9.7, , 2.5]``: the implicit call of the subprogram assigned to ``g``
+    (PM 206278923; nc/implicit.py), at the end of its block. ``params`` are the values in brackets as
+    ``@P`` numbers (a gap ``, ,`` leaves its number out); with values the call is a cycle call."""
+
+    def __init__(self, text: str, g: int, params: list[tuple[int, Expr]], bracket: bool) -> None:
+        super().__init__(text)
+        self.g = g
+        self.params = params
+        self.bracket = bracket
+        """Values in brackets were programmed (``G805[]`` too): the call is a cycle call."""
+
+
 class Goto(Item):
     """``$GOTO N<expr>`` (``target`` None, ``number`` the expression) or ``$GOTO [name]``."""
 
@@ -181,11 +195,14 @@ class Words(Stmt):
         self.items = items
         self.call: Call | None = None
         self.goto: Goto | None = None
+        self.implicit: ImplicitCall | None = None
         for item in items:
             if isinstance(item, Call):
                 self.call = item
             elif isinstance(item, Goto):
                 self.goto = item
+            elif isinstance(item, ImplicitCall):
+                self.implicit = item
 
 
 class Control(Stmt):
