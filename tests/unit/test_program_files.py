@@ -41,7 +41,7 @@ LATIN1 = "%umlaut\n; Prüfung der Maße: Fräsen ± 5 °\nN10 G01 X10 F1000\nN20
         (codecs.BOM_UTF8 + TEXT.encode("cp1252"), "cp1252", TEXT),
         (b"; cut \xc3", "cp1252", "; cut Ã"),
     ],
-    ids=["empty", "ascii", "utf-8", "utf-8 bom", "cp1252", "latin-1", "utf-16", "undefined", "bom+1252", "cut"],
+    ids=["empty", "ascii", "utf-8", "bom", "cp1252", "latin-1", "utf-16", "undefined", "bom+1252", "cut"],
 )
 def test_every_encoding_a_windows_shop_writes_reads_alike(data: bytes, encoding: str, text: str) -> None:
     assert program_encoding(data) == encoding
