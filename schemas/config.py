@@ -532,7 +532,7 @@ class KinematicEntry(_Strict):
 
 
 def _implicit(g: int, pid: str) -> str:
-    return f"P-CHAN-{pid} the global subprogram G{g} calls (\"\" none: 20131)"
+    return f'P-CHAN-{pid} the global subprogram G{g} calls ("" none: 20131)'
 
 
 class ChannelConfig(_Strict):
@@ -606,7 +606,7 @@ class ChannelConfig(_Strict):
     g800_prog_file: list[ProgName] = Field(
         default_factory=list,
         max_length=IMPLICIT_G800_COUNT,
-        description="P-CHAN-00187 the global subprograms G800, G801, ... call (index i: G800+i; \"\" none: "
+        description='P-CHAN-00187 the global subprograms G800, G801, ... call (index i: G800+i; "" none: '
         "20131)",
     )
     feedhold_deceleration: float = Field(

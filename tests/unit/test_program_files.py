@@ -131,7 +131,6 @@ def test_a_program_table_entry_is_found_without_regard_to_case(tmp_path: Path) -
         read_program_file(tmp_path / "other.nc")
 
 
-
 MACHINE = """\
 [[axes]]
 number = 1
