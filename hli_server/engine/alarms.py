@@ -531,6 +531,11 @@ _TABLE: tuple[AlarmDef, ...] = (
         "Geometry check stopped at its cap of loop iterations: the program did not end",
         "project (N-10)",
     ),
+    _w(
+        914052,
+        "Check stopped a program that waits on inputs nobody can change (no PLC attached)",
+        "project (N-13)",
+    ),
     # --- the built-in cycles (TF5225 measuring, TF5293 drilling/milling; docs/cycles.md) -------
     _e(
         13100,

@@ -360,6 +360,7 @@ class _Programs:
         max_cycles: int = 10_000_000,
         max_iterations: int = 1_000_000,
         record_path: bool = False,
+        presets: Mapping[str, bool | int | float | str] | None = None,
     ) -> CheckResult:
         """Check a program offline, as ``hli-server check`` and ``POST /api/check`` do: the engine's
         :class:`~hli_server.engine.program_check.ProgramCheck` on a fresh machine of this server's machine
@@ -369,7 +370,10 @@ class _Programs:
         in the directory of a program given by path, then in the server's program directories. Returns
         the :class:`~hli_server.engine.program_check.CheckResult`: ``completed``, ``alarms`` (each with
         ``number``, ``line``, ``block``, ``message``), ``messages`` (``#MSG``), ``final_position``,
-        ``capped``; ``to_json()`` is ``check --format json``'s report."""
+        ``capped``; ``to_json()`` is ``check --format json``'s report. ``presets`` are V.E. values before
+        the start, as the PLC would give them (``{"V.E.PLC_READY": True}``; ``check --set``; a preset that
+        cannot be taken raises InvalidRequestError); a program that waits on inputs nobody changes stops
+        within seconds with ``capped == "waiting"`` and warning 914052."""
         from hli_server.runtime.checks import run_check
 
         text, name, uploads, directories = program_files(program, files, name, self._base)
@@ -385,6 +389,7 @@ class _Programs:
             max_cycles=max_cycles,
             max_iterations=max_iterations,
             record_path=record_path,
+            presets=presets,
         )
 
 

@@ -81,6 +81,7 @@ from hli_server.engine.nc.statements import (
     Word,
     Words,
 )
+from hli_server.engine.nc.waiting import WaitingLoop, state_of, waiting_loop
 
 __all__ = ["STATEMENTS_PER_CYCLE", "Interpreter"]
 
@@ -115,6 +116,15 @@ class Interpreter(ImplicitCalls):
         self._frames = []
         self._pending.clear()
         self._ended = True
+
+    def state(self) -> tuple[object, ...]:
+        """The variables' values, comparable (``nc/waiting.py``): a loop that turns while they stay the
+        same, with nothing moving or emitted, cannot end."""
+        return state_of(self._frames, self._params, self._param_arrays, self._program_vars, self._static_vars)
+
+    def waiting_loop(self) -> WaitingLoop | None:
+        """The loop the program turns in now and the ``V.E.`` variables it reads (``nc/waiting.py``)."""
+        return waiting_loop(self._frames)
 
     def refill(self) -> None:
         """A new cycle: a new budget."""
