@@ -182,7 +182,7 @@ def _text_report(result: CheckResult, program: str) -> str:
     """The report for people: positions and the floats of alarm params rounded to 0.1 µm."""
     lines = []
     if result.capped == "waiting":
-        verdict = f"DID NOT END: stopped at cycle {result.cap}, waiting on inputs nobody changes"
+        verdict = f"DID NOT END: stopped at cycle {result.cap}: its loop turns with nothing changing"
     elif result.capped is not None:
         verdict = f"DID NOT END: stopped at the cap of {result.cap} {result.capped}"
     else:
@@ -386,8 +386,8 @@ def check(
         sys.exit(1)
     if result.capped == "waiting":
         click.echo(
-            f"error: {program} did not end: it waits on inputs nobody changes in an offline check (see the "
-            "warning 914052; --set V.E.NAME=VALUE gives them)",
+            f"error: {program} did not end: its loop turns with nothing changing; warning 914052 names it "
+            "and the V.E. variables it waits on (--set V.E.NAME=VALUE gives them)",
             err=True,
         )
         sys.exit(EXIT_CAPPED)
