@@ -263,3 +263,57 @@ def test_the_lists_entries_are_checked(tmp_path: Path) -> None:
     assert parsed.errors[3] == "ch1.lis:5: g800_prog_file[2]: no value (write `g800_prog_file[2] <value>`)"
     with pytest.raises(ConfigError, match="g800_prog_file"):
         load_machine(machine(tmp_path, "g800_prog_file = [" + ", ".join(['"a.nc"'] * 41) + "]\n"))
+
+
+# --- a machine with stand-ins of its own (tests/data/implicit_calls/README.md) -----------------------------
+STANDINS = Path(__file__).resolve().parents[1] / "data" / "implicit_calls"
+
+
+@pytest.mark.parametrize("mode", [(), ("--geometry-only",)])
+def test_a_dispensing_program_runs_with_the_machine_and_its_stand_ins(mode: tuple[str, ...]) -> None:
+    done = CliRunner().invoke(
+        main,
+        [
+            "check",
+            "--format",
+            "json",
+            *mode,
+            "--config",
+            str(STANDINS / "machine.toml"),
+            "--program-dir",
+            str(STANDINS / "subs"),
+            str(STANDINS / "dispense_squares.nc"),
+        ],
+    )
+    assert done.exit_code == 0, done.output
+    report = json.loads(done.stdout)
+    assert report["completed"] is True
+    assert report["alarms"] == []
+    assert [m["text"] for m in report["messages"]] == ["G801: tool measured"]
+    assert report["final_position"] == {"X": 0.0, "Y": 0.0, "Z": 100.0}  # G800: home
+
+
+def test_the_stand_ins_hand_their_values_to_the_plc() -> None:
+    from hli_server.engine import Machine
+    from hli_server.engine.program_check import ProgramCheck
+    from hli_server.runtime.programs import ProgramDirectories
+
+    machine = Machine(
+        load_machine(STANDINS / "machine.toml"), programs=ProgramDirectories([STANDINS / "subs"])
+    )
+    text = "G805[-7.82, 28.955, 2.87]\nG807[2, 0.3, 0.25]\nM30\n"
+    assert ProgramCheck(machine, 1).run(text).completed
+    external = machine.external
+    assert [external.read("ORIGIN", 1, [i]) for i in range(3)] == [-7.82, 28.955, 2.87]
+    assert [external.read("DELAYS", 1, [i]) for i in range(3)] == [2.0, 0.3, 0.25]
+    # G807 without values: a plain subroutine call (no @P), the mode back to 0
+    assert ProgramCheck(machine, 1).run("G807\nM30\n").completed
+    assert external.read("DELAYS", 1, [0]) == 0.0
+
+
+def test_without_the_machine_the_program_stops_naming_the_g_code() -> None:
+    done = CliRunner().invoke(main, ["check", "--format", "json", str(STANDINS / "dispense_squares.nc")])
+    assert done.exit_code == 1
+    (alarm,) = json.loads(done.stdout)["alarms"]
+    assert (alarm["id"], alarm["line"]) == (20131, 6)
+    assert "G803" in alarm["message"]
