@@ -191,27 +191,20 @@ def machine(tmp_path: Path, channel: str, list_text: str | None = None) -> Path:
     return path
 
 
+def check_with(config: Path, subs: Path, program: Path, *mode: str) -> tuple[int, dict[str, Any]]:
+    """``hli-server check --config CONFIG --program-dir SUBS PROGRAM``, as a user runs it."""
+    args = ["check", "--format", "json", *mode, "--config", str(config), "--program-dir", str(subs)]
+    done = CliRunner().invoke(main, [*args, str(program)])
+    return done.exit_code, json.loads(done.stdout)
+
+
 def check(tmp_path: Path, config: Path, program: str, *mode: str) -> tuple[int, dict[str, Any]]:
     subs = tmp_path / "subs"
     subs.mkdir(exist_ok=True)
     (subs / "SAFE.NC").write_text(SAFE, encoding="utf-8")
     (subs / "origin.nc").write_text(ORIGIN, encoding="utf-8")
     (tmp_path / "main.nc").write_text(program, encoding="utf-8")
-    done = CliRunner().invoke(
-        main,
-        [
-            "check",
-            "--format",
-            "json",
-            *mode,
-            "--config",
-            str(config),
-            "--program-dir",
-            str(subs),
-            str(tmp_path / "main.nc"),
-        ],
-    )
-    return done.exit_code, json.loads(done.stdout)
+    return check_with(config, subs, tmp_path / "main.nc", *mode)
 
 
 PROGRAM = "N10 G01 X1 F6000\nN20 G803\nN30 G805[10, 2.5, 9.7]\nN40 G81\nN50 M30\n"
@@ -271,22 +264,10 @@ STANDINS = Path(__file__).resolve().parents[1] / "data" / "implicit_calls"
 
 @pytest.mark.parametrize("mode", [(), ("--geometry-only",)])
 def test_a_dispensing_program_runs_with_the_machine_and_its_stand_ins(mode: tuple[str, ...]) -> None:
-    done = CliRunner().invoke(
-        main,
-        [
-            "check",
-            "--format",
-            "json",
-            *mode,
-            "--config",
-            str(STANDINS / "machine.toml"),
-            "--program-dir",
-            str(STANDINS / "subs"),
-            str(STANDINS / "dispense_squares.nc"),
-        ],
+    code, report = check_with(
+        STANDINS / "machine.toml", STANDINS / "subs", STANDINS / "dispense_squares.nc", *mode
     )
-    assert done.exit_code == 0, done.output
-    report = json.loads(done.stdout)
+    assert code == 0, report
     assert report["completed"] is True
     assert report["alarms"] == []
     assert [m["text"] for m in report["messages"]] == ["G801: tool measured"]

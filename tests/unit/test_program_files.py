@@ -131,36 +131,17 @@ def test_a_program_table_entry_is_found_without_regard_to_case(tmp_path: Path) -
         read_program_file(tmp_path / "other.nc")
 
 
-MACHINE = """\
-[[axes]]
-number = 1
-name = "X"
-
-[[axes]]
-number = 2
-name = "Y"
-
-[[axes]]
-number = 3
-name = "Z"
-
-[[channels]]
-number = 1
-axes = ["X", "Y", "Z"]
-
-[[channels.programs]]
-number = 1
-name = "part"
-path = "programs/part.nc"
-"""
-
-
 def test_a_machine_files_program_path_matches_without_regard_to_case(tmp_path: Path) -> None:
     from hli_server.configuration import load_machine
 
     (tmp_path / "Programs").mkdir()
     (tmp_path / "Programs" / "PART.NC").write_bytes(TEXT.encode("cp1252"))
-    (tmp_path / "machine.toml").write_text(MACHINE, encoding="utf-8")
+    # a machine of the tests' own, with a program table entry that names its file in other case
+    machine = (Path(__file__).parents[1] / "data" / "implicit_calls" / "machine.toml").read_text(
+        encoding="utf-8"
+    )
+    machine += '\n[[channels.programs]]\nnumber = 1\nname = "part"\npath = "programs/part.nc"\n'
+    (tmp_path / "machine.toml").write_text(machine, encoding="utf-8")
     try:
         config = load_machine(tmp_path / "machine.toml")
     except Exception as exc:  # the test machine itself must load: say why it did not

@@ -53,7 +53,6 @@ from hli_server.engine.nc.directives import (
 from hli_server.engine.nc.expr import (
     ALARM_EXPRESSION,
     EvalError,
-    Expr,
 )
 from hli_server.engine.nc.implicit import ImplicitCalls
 from hli_server.engine.nc.language import (
@@ -68,18 +67,17 @@ from hli_server.engine.nc.source import ProgramText
 from hli_server.engine.nc.state import STATEMENTS_PER_CYCLE
 from hli_server.engine.nc.statements import (
     Assign,
-    Call,
     ConstBlock,
     Control,
     Empty,
     Hash,
     Header,
-    ImplicitCall,
     Refused,
     Stmt,
     VarBlock,
     Word,
     Words,
+    word_expressions,
 )
 from hli_server.engine.nc.waiting import WaitingLoop, state_of, waiting_loop
 
@@ -228,7 +226,7 @@ class Interpreter(ImplicitCalls):
         raise stmt.error(ALARM_EXPRESSION, f"cannot run {stmt.text!r}")  # pragma: no cover
 
     def _words(self, frame: Frame, stmt: Words) -> None:
-        if stmt.sync_reads != 0 and self._needs_flush(frame, stmt, self._word_exprs(stmt)):
+        if stmt.sync_reads != 0 and self._needs_flush(frame, stmt, word_expressions(stmt)):
             self._flush_wait(frame, stmt)
             return
         words: list[tuple[Word, float, float | None]] = []
@@ -266,23 +264,6 @@ class Interpreter(ImplicitCalls):
             self._implicit_call(frame, stmt, stmt.implicit, place)
         elif stmt.goto is not None:
             self._goto(frame, stmt, stmt.goto)
-
-    @staticmethod
-    def _word_exprs(stmt: Words) -> list[Expr]:
-        exprs: list[Expr] = []
-        for item in stmt.items:
-            if isinstance(item, Word):
-                exprs.append(item.value)
-                if item.extra is not None:
-                    exprs.append(item.extra)
-            elif isinstance(item, Assign):
-                exprs.append(item.value)
-                exprs.extend(item.target.indices)
-            elif isinstance(item, (Call, ImplicitCall)):
-                exprs.extend(v for _, v in item.params)
-                if item.variable is not None:  # L V.E.name: a synchronous V.E. is read after the flush
-                    exprs.append(item.variable)
-        return exprs
 
     # --- the block for the decoder ---------------------------------------------------------------------
     def _build(self, frame: Frame, stmt: Stmt, words: list[tuple[Word, float, float | None]]) -> Block:

@@ -37,6 +37,7 @@ __all__ = [
     "Word",
     "Words",
     "control_keyword",
+    "word_expressions",
 ]
 
 _CONTROL_WORD: Final = re.compile(r"\s*(?:/[0-9]*\s*)?(?:N\s*[0-9]+\s*:?\s*)?\$([A-Za-z]+)", re.ASCII)
@@ -203,6 +204,27 @@ class Words(Stmt):
                 self.goto = item
             elif isinstance(item, ImplicitCall):
                 self.implicit = item
+
+
+def word_expressions(stmt: Words) -> list[Expr]:
+    """Every expression a block of words evaluates: word values, assignments (and their targets'
+    indices), a call's parameters."""
+    exprs: list[Expr] = []
+    for item in stmt.items:
+        if isinstance(item, Word):
+            exprs.append(item.value)
+            if item.extra is not None:
+                exprs.append(item.extra)
+        elif isinstance(item, Assign):
+            exprs.append(item.value)
+            exprs.extend(item.target.indices)
+        elif isinstance(item, Call):
+            exprs.extend(v for _, v in item.params)
+            if item.variable is not None:  # L V.E.name: a synchronous V.E. is read after the flush
+                exprs.append(item.variable)
+        elif isinstance(item, ImplicitCall):
+            exprs.extend(v for _, v in item.params)
+    return exprs
 
 
 class Control(Stmt):

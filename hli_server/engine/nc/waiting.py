@@ -14,14 +14,11 @@ from hli_server.engine.nc.expr import KIND_VE, Expr, Ref, Value
 from hli_server.engine.nc.language import END_OF, LOOPS, OPENING
 from hli_server.engine.nc.levels import Frame, OpenBlock
 from hli_server.engine.nc.statements import (
-    Assign,
-    Call,
     Control,
     Hash,
-    ImplicitCall,
     Stmt,
-    Word,
     Words,
+    word_expressions,
 )
 from hli_server.engine.nc.variables import Variable
 
@@ -129,18 +126,9 @@ def _expressions(stmt: Stmt) -> list[Expr]:
         return list(stmt.exprs)
     if isinstance(stmt, Hash):
         return list(stmt.args)
-    exprs: list[Expr] = []
     if isinstance(stmt, Words):
-        for item in stmt.items:
-            if isinstance(item, Word):
-                exprs.append(item.value)
-                if item.extra is not None:
-                    exprs.append(item.extra)
-            elif isinstance(item, Assign):
-                exprs.append(item.value)
-            elif isinstance(item, (Call, ImplicitCall)):
-                exprs.extend(v for _, v in item.params)
-    return exprs
+        return word_expressions(stmt)
+    return []
 
 
 def _ve_names(exprs: list[Expr]) -> list[str]:
