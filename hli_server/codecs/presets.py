@@ -2,10 +2,11 @@
 them (``--set-file``), ``POST /api/check?set=...``. What they do is the engine's
 (:mod:`hli_server.engine.presets`).
 
-A preset names a ``V.E.`` variable as a program writes it - ``V.E.PLC_READY``, ``V.E.POS[1][2]`` (any
-case) - and gives a number (``1``, ``-2.5``, ``1e3``), a boolean (``TRUE``/``FALSE``, any case) or a string
-in double quotes (``"text"``, for a variable that holds one). A file has one ``V.E.NAME = VALUE`` per line;
-``#`` or ``;`` outside a string begins a comment, blank lines are skipped. Sans I/O.
+A preset names a ``V.E.`` variable as a program writes it - ``V.E.PLC_READY``, ``V.E.POS[1][2]``,
+``V.E.UserInteraction.Message`` (any case) - and gives a number (``1``, ``-2.5``, ``1e3``), a boolean
+(``TRUE``/``FALSE``, any case) or a string in double quotes (``"text"``, for a STRING). A file has one
+``V.E.NAME = VALUE`` per line; ``#`` or ``;`` outside a string begins a comment, blank lines are skipped.
+Sans I/O.
 """
 
 from __future__ import annotations
@@ -14,9 +15,10 @@ import math
 import re
 from typing import Final
 
+from schemas.external_types import ELEMENT_PATH_FORMS, element_path
+
 __all__ = ["PresetSyntaxError", "parse_preset", "parse_preset_file", "parse_preset_value"]
 
-_TARGET: Final = re.compile(r"\s*V\.E\.[A-Za-z_][A-Za-z0-9_]*\s*(?:\[\s*[0-9]+\s*\]\s*)*$", re.IGNORECASE)
 _NUMBER: Final = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?$")
 
 
@@ -51,10 +53,8 @@ def parse_preset(text: str) -> tuple[str, bool | int | float | str]:
     target, sep, value = text.partition("=")
     if not sep or not value.strip():
         raise PresetSyntaxError(f"{text!r}: write V.E.NAME=value (V.E.PLC_READY=1)")
-    if _TARGET.match(target) is None:
-        raise PresetSyntaxError(
-            f"{target.strip()!r}: a preset names a V.E. variable (V.E.NAME or V.E.NAME[i])"
-        )
+    if element_path(target) is None:
+        raise PresetSyntaxError(f"{target.strip()!r}: a preset names a V.E. variable ({ELEMENT_PATH_FORMS})")
     return target.strip(), parse_preset_value(value)
 
 

@@ -2,25 +2,23 @@
 is attached to change them (``hli-server check --set V.E.PLC_READY=1``, ``--set-file FILE``, ``POST
 /api/check``'s ``presets``, ``hli.check(presets=...)``; docs/check.md "A program that waits for the PLC").
 
-A preset names a declared ``V.E.`` variable as a program writes it - ``V.E.PLC_READY``, ``V.E.POS[1][2]``
-(case does not matter) - with a number or a boolean (a string for a variable that holds one, once V.E.
-strings exist). Their text form (``--set``, ``--set-file``) is read by :mod:`hli_server.codecs.presets`.
+A preset names a declared ``V.E.`` variable as a program writes it - ``V.E.PLC_READY``, ``V.E.POS[1][2]``,
+``V.E.UserInteraction.Message`` (case does not matter) - with a number, a boolean or, for a STRING, a
+string. Their text form (``--set``, ``--set-file``) is read by :mod:`hli_server.codecs.presets`.
 """
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping
 from typing import Final
 
 from hli_server.engine.external import ExternalValue, ExternalVariableError, ExternalVariables
+from schemas.external_types import ELEMENT_PATH_FORMS, element_path
 
 __all__ = ["MAX_PRESETS", "PresetError", "PresetValue", "apply_presets"]
 
 PresetValue = bool | int | float | str
 
-_TARGET: Final = re.compile(r"\s*V\.E\.([A-Za-z_][A-Za-z0-9_]*)\s*((?:\[\s*[0-9]+\s*\]\s*)*)$", re.IGNORECASE)
-_INDEX: Final = re.compile(r"\[\s*([0-9]+)\s*\]")
 MAX_PRESETS: Final = 4096
 """Presets one check takes at most."""
 
@@ -38,22 +36,18 @@ def apply_presets(external: ExternalVariables, channel: int, presets: Mapping[st
         raise PresetError(f"{len(presets)} presets: at most {MAX_PRESETS}")
     writes: list[tuple[str, ExternalValue, list[int]]] = []
     for target, value in presets.items():
-        found = _TARGET.match(target)
+        found = element_path(target)
         if found is None:
-            raise PresetError(f"{target!r}: a preset names a V.E. variable (V.E.NAME or V.E.NAME[i])")
-        name = found.group(1)
-        index = [int(i) for i in _INDEX.findall(found.group(2))]
+            raise PresetError(f"{target!r}: a preset names a V.E. variable ({ELEMENT_PATH_FORMS})")
+        name, index = found
         spec = external.spec(name, channel)
         if spec is None:
-            raise PresetError(f"V.E.{name} is not declared in the machine file (external_variables)")
-        if isinstance(value, str):
-            # V.E. variables here are numbers and booleans: a string becomes a value with V.E. STRING
-            raise PresetError(f"V.E.{name} is a {spec.type.value}: a string is not a value for it")
+            raise PresetError(str(external.unknown(name, channel)))
         try:
             spec.flat_index(index)
             spec.coerce(value)
         except ExternalVariableError as exc:
             raise PresetError(str(exc)) from None
         writes.append((name, value, index))
-    for name, number, index in writes:
-        external.write(name, channel, number, index)
+    for name, checked, index in writes:
+        external.write(name, channel, checked, index)

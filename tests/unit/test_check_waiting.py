@@ -165,6 +165,9 @@ def test_preset_values(text: str, value: object) -> None:
         ("V.P.X=1", "names a V.E. variable"),
         ("V.E.X=yes", "is no value"),
         ("V.E.X=1e999", "out of range"),
+        ("V.E.A..B=1", "names a V.E. variable"),
+        ("V.E.A[x]=1", "names a V.E. variable"),
+        ("V.E.A.=1", "names a V.E. variable"),
     ],
 )
 def test_malformed_presets_say_why(text: str, why: str) -> None:
@@ -175,11 +178,13 @@ def test_malformed_presets_say_why(text: str, why: str) -> None:
 def test_a_file_of_presets() -> None:
     text = (
         '# the PLC at the start\nV.E.PLC_READY = TRUE   ; released\n\nv.e.POS[1][2]=2.5\nV.E.TEXT = "a;b#c"\n'
+        'V.E.UserInteraction.Message = "Camera at A1"\n'
     )
     assert parse_preset_file(text, "p.txt") == {
         "V.E.PLC_READY": True,
         "v.e.POS[1][2]": 2.5,
         "V.E.TEXT": "a;b#c",
+        "V.E.UserInteraction.Message": "Camera at A1",
     }
     with pytest.raises(PresetSyntaxError, match=r"^p.txt:2: "):
         parse_preset_file("V.E.A=1\nV.E.B\n", "p.txt")
@@ -191,17 +196,46 @@ def test_presets_are_checked_against_the_declarations_before_anything_is_written
             ExternalVarSpec("READY", ExternalType.BOOLEAN),
             ExternalVarSpec("POS", ExternalType.REAL64, (2, 3), channel=1),
             ExternalVarSpec("COUNT", ExternalType.UNS08),
+            ExternalVarSpec("NAME", ExternalType.STRING, string_size=21),
+            # a structure's leaves (V.E.UserInteraction.Message, V.E.curve[i].point[j].X)
+            ExternalVarSpec(
+                "UserInteraction.Message",
+                ExternalType.STRING,
+                string_size=21,
+                levels=(("UserInteraction", 0), ("Message", 0)),
+            ),
+            ExternalVarSpec(
+                "curve.point.X", ExternalType.REAL64, (2, 3), levels=(("curve", 1), ("point", 1), ("X", 0))
+            ),
         ]
     )
-    apply_presets(external, 1, {"V.E.ready": True, "V.E.POS[1][2]": 2.5})
+    apply_presets(
+        external,
+        1,
+        {
+            "V.E.ready": True,
+            "V.E.POS[1][2]": 2.5,
+            "V.E.NAME": "teach.nc",
+            "V.E.UserInteraction.Message": "OK",
+            "V.E.curve[1].point[2].X": 7.5,
+            "V.E.POS[0, 1]": -1,
+        },
+    )
     assert external.read("READY", 1) is True
     assert external.read("POS", 1, [1, 2]) == 2.5
+    assert external.read("POS", 1, [0, 1]) == -1.0
+    assert external.read("NAME", 1) == "teach.nc"
+    assert external.read("UserInteraction.Message", 1) == "OK"
+    assert external.read("curve.point.X", 1, [1, 2]) == 7.5
     for presets, why in (
         ({"V.E.NOPE": 1}, "V.E.NOPE is not declared"),
+        ({"V.E.UserInteraction.Answer": 1}, "has no element Answer"),
         ({"V.E.POS[2][0]": 1}, "index 1 is 2"),
         ({"V.E.POS": 1}, "takes 2 index"),
         ({"V.E.COUNT": 300}, "outside 0 .. 255"),
-        ({"V.E.COUNT": "x"}, "a string is not a value"),
+        ({"V.E.COUNT": "x"}, "is a string"),
+        ({"V.E.NAME": 1}, "is a number"),
+        ({"V.E.NAME": "x" * 21}, "at most 20 characters"),
         ({"V.E.COUNT": 1, "V.E.NOPE": 1}, "V.E.NOPE"),
     ):
         with pytest.raises(PresetError, match=why):
@@ -240,13 +274,57 @@ def test_check_takes_set_and_set_file_a_later_set_wins(tmp_path: Path) -> None:
     [
         (["--set", "V.E.PLC_READY"], "write V.E.NAME=value"),
         (["--set", "V.E.NOPE=1"], "V.E.NOPE is not declared"),
-        (["--set", "V.E.MODE=TRUE", "--set", 'V.E.PLC_READY="x"'], "a string is not a value"),
+        (["--set", "V.E.MODE=TRUE", "--set", 'V.E.PLC_READY="x"'], "is a string"),
     ],
 )
 def test_a_preset_that_cannot_be_taken_is_a_usage_error(tmp_path: Path, args: list[str], why: str) -> None:
     done = invoke(tmp_path, *args)
     assert done.exit_code == 2
     assert why in done.stderr
+
+
+TEACH_IN = """\
+%teach_in
+N10 #MSG ["teach-in file %s", V.E.TEACH_FILE_NAME]
+N20 $WHILE V.E.UserInteraction.Answer == 0   ( the operator clicks OK on the HMI
+N30 $ENDWHILE
+N40 $IF V.E.UserInteraction.Message == "Camera at A1"
+N50   G01 X5 F6000
+N60 $ENDIF
+N70 M30
+"""
+"""A program that reads a V.E. STRING and a structure's members (tests/data/implicit_calls/machine.toml)."""
+STANDIN_MACHINE = Path(__file__).resolve().parents[1] / "data" / "implicit_calls" / "machine.toml"
+
+
+def test_string_and_structure_presets_through_the_command(tmp_path: Path) -> None:
+    program = tmp_path / "teach_in.nc"
+    program.write_text(TEACH_IN, encoding="utf-8")
+    args = ["check", "--format", "json", "--config", str(STANDIN_MACHINE)]
+    presets = [
+        "--set",
+        'V.E.TEACH_FILE_NAME="abc.dat"',
+        "--set",
+        'v.e.userinteraction.message = "Camera at A1"',
+        "--set",
+        "V.E.UserInteraction.Answer=1",
+    ]
+    done = CliRunner().invoke(main, [*args, *presets, str(program)])
+    assert done.exit_code == 0, done.output
+    report = json.loads(done.stdout)
+    assert [m["text"] for m in report["messages"]] == ["teach-in file abc.dat"]
+    assert report["final_position"]["X"] == 5.0
+    # without the operator's answer the program waits on the structure's member: stopped, named
+    done = CliRunner().invoke(main, [*args, *presets[:4], str(program)])
+    assert done.exit_code == 3
+    (alarm,) = json.loads(done.stdout)["alarms"]
+    assert alarm["id"] == 914052
+    assert "waits on V.E.UserInteraction.Answer: its $WHILE loop at N20" in alarm["message"]  # as declared
+    assert alarm["params"]["variables"] == ["V.E.UserInteraction.Answer"]
+    # a text longer than the STRING holds is refused before the program starts
+    done = CliRunner().invoke(main, [*args, "--set", f'V.E.TEACH_FILE_NAME="{"x" * 21}"', str(program)])
+    assert done.exit_code == 2
+    assert "at most 20 characters" in done.stderr
 
 
 class _Terminal(io.StringIO):

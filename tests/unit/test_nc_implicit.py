@@ -290,6 +290,10 @@ def test_the_stand_ins_hand_their_values_to_the_plc() -> None:
     # G807 without values: a plain subroutine call (no @P), the mode back to 0
     assert ProgramCheck(machine, 1).run("G807\nM30\n").completed
     assert external.read("DELAYS", 1, [0]) == 0.0
+    # what the program tells the operator: a structure's VSTRING, for the HMI
+    program = (STANDINS / "dispense_squares.nc").read_text(encoding="utf-8")
+    assert ProgramCheck(machine, 1).run(program).completed
+    assert external.read("UserInteraction.Message", 1) == "Squares done - take the plate, then click OK"
 
 
 def test_without_the_machine_the_program_stops_naming_the_g_code() -> None:

@@ -122,7 +122,7 @@ class Interpreter(ImplicitCalls):
 
     def waiting_loop(self) -> WaitingLoop | None:
         """The loop the program turns in now and the ``V.E.`` variables it reads (``nc/waiting.py``)."""
-        return waiting_loop(self._frames)
+        return waiting_loop(self._frames, self.host.external, self.host.channel_number)
 
     def refill(self) -> None:
         """A new cycle: a new budget."""

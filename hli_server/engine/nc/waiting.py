@@ -9,8 +9,9 @@ nothing else.
 
 from __future__ import annotations
 
+from hli_server.engine.external import ExternalVariables
 from hli_server.engine.nc.blocks import NcError
-from hli_server.engine.nc.expr import KIND_VE, Expr, Ref, Value
+from hli_server.engine.nc.expr import KIND_VE, Expr, Value
 from hli_server.engine.nc.language import END_OF, LOOPS, OPENING
 from hli_server.engine.nc.levels import Frame, OpenBlock
 from hli_server.engine.nc.statements import (
@@ -31,7 +32,8 @@ _LOOP_LINES = 10_000
 class WaitingLoop:
     """The loop a program turns in: ``keyword`` (``WHILE``, ``DO``, ``REPEAT``, ``FOR``, or ``GOTO`` for a
     jump back), its first line and block (``N20`` or ``line 20``), the program it belongs to ("" for the
-    main program) and the ``V.E.`` variables it reads (as written: ``V.E.PLC_READY``), in order."""
+    main program) and the ``V.E.`` variables it reads (as declared: ``V.E.UserInteraction.Answer``; one not
+    declared as written), in order."""
 
     def __init__(self, keyword: str, line: int, place: str, program: str, variables: list[str]) -> None:
         self.keyword = keyword
@@ -73,11 +75,11 @@ def state_of(
     )
 
 
-def waiting_loop(frames: list[Frame]) -> WaitingLoop | None:
+def waiting_loop(frames: list[Frame], external: ExternalVariables, channel: int) -> WaitingLoop | None:
     """The innermost loop of the program levels (from the innermost level out) and the ``V.E.`` variables
-    its statements read: the loop whose head the program is about to run again, else the innermost one
-    open; a jump back with ``$GOTO`` is named by the statement the program is at. None without a
-    program."""
+    its statements read (named as ``external`` declares them for ``channel``): the loop whose head the
+    program is about to run again, else the innermost one open; a jump back with ``$GOTO`` is named by the
+    statement the program is at. None without a program."""
     if not frames:
         return None
     frame = frames[-1]
@@ -86,17 +88,18 @@ def waiting_loop(frames: list[Frame]) -> WaitingLoop | None:
     except NcError:
         here = None
     if isinstance(here, Control) and here.keyword in LOOPS:
-        return _loop(frame, OpenBlock(here.keyword, here.first, here.last + 1))
+        return _loop(frame, OpenBlock(here.keyword, here.first, here.last + 1), external, channel)
     for level in reversed(frames):
         for block in reversed(level.open):
             if block.keyword in LOOPS:
-                return _loop(level, block)
+                return _loop(level, block, external, channel)
     if not isinstance(here, Stmt):
         return None
-    return WaitingLoop("GOTO", here.first, here.place, frame.program, _ve_names(_expressions(here)))
+    names = _ve_names(_expressions(here), external, channel)
+    return WaitingLoop("GOTO", here.first, here.place, frame.program, names)
 
 
-def _loop(frame: Frame, block: OpenBlock) -> WaitingLoop:
+def _loop(frame: Frame, block: OpenBlock, external: ExternalVariables, channel: int) -> WaitingLoop:
     head = frame.units.statement(block.start, frame.program, True)
     place = head.place if isinstance(head, Stmt) else f"line {block.start}"
     exprs: list[Expr] = []
@@ -118,7 +121,7 @@ def _loop(frame: Frame, block: OpenBlock) -> WaitingLoop:
                 depth -= 1
         if depth <= 0:
             break
-    return WaitingLoop(block.keyword, block.start, place, frame.program, _ve_names(exprs))
+    return WaitingLoop(block.keyword, block.start, place, frame.program, _ve_names(exprs, external, channel))
 
 
 def _expressions(stmt: Stmt) -> list[Expr]:
@@ -131,14 +134,11 @@ def _expressions(stmt: Stmt) -> list[Expr]:
     return []
 
 
-def _ve_names(exprs: list[Expr]) -> list[str]:
+def _ve_names(exprs: list[Expr], external: ExternalVariables, channel: int) -> list[str]:
     names: dict[str, None] = {}
     for expr in exprs:
         for ref in expr.references():
             if ref.kind == KIND_VE:
-                names.setdefault(_name(ref), None)
+                spec = external.spec(ref.name, channel)
+                names.setdefault(f"V.E.{spec.name if spec is not None else ref.name}", None)
     return list(names)
-
-
-def _name(ref: Ref) -> str:
-    return f"V.E.{ref.name}"

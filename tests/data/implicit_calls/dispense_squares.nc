@@ -31,6 +31,7 @@ G01 X3.000
 Y3.000
 M161
 G803
+V.E.UserInteraction.Message = "Squares done - take the plate, then click OK"
 G807 ; delays off
 #CONTOUR MODE OFF
 M110=1000
