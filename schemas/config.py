@@ -58,6 +58,11 @@ COLLISION_MODE_BIT = 0x8000
 """P-AXIS-00015 ``kenngr.achs_mode`` bit that switches axis collision monitoring on (FCT-C3)."""
 
 Dint = Annotated[int, Field(ge=DINT_MIN, le=DINT_MAX)]
+ProgName = Annotated[str, Field(max_length=83)]
+"""A program's file name in a channel parameter (PROG_NAME: at most 83 characters; "" for none)."""
+IMPLICIT_G800_COUNT = 40
+"""``g800_prog_file[i]``, i = 0 .. 39 (P-CHAN-00187: G800..G819, or G800..G839 where the application
+has them)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -526,6 +531,10 @@ class KinematicEntry(_Strict):
         return self
 
 
+def _implicit(g: int, pid: str) -> str:
+    return f'P-CHAN-{pid} the global subprogram G{g} calls ("" none: 20131)'
+
+
 class ChannelConfig(_Strict):
     number: int = Field(default=1, ge=1, le=12, description="channel number (gpCh index + 1)")
     name: str = Field(default="Channel 1", description="channel name")
@@ -583,6 +592,22 @@ class ChannelConfig(_Strict):
         le=3,
         description="P-CHAN-00071 acceleration profile at program start: 0 STEP, 1 TRAPEZ, 2 SIN2, 3 HSC "
         "(simulated as TRAPEZ)",
+    )
+    g80_prog_file: ProgName = Field(default="", description=_implicit(80, "00160"))
+    g81_prog_file: ProgName = Field(default="", description=_implicit(81, "00161"))
+    g82_prog_file: ProgName = Field(default="", description=_implicit(82, "00162"))
+    g83_prog_file: ProgName = Field(default="", description=_implicit(83, "00163"))
+    g84_prog_file: ProgName = Field(default="", description=_implicit(84, "00164"))
+    g85_prog_file: ProgName = Field(default="", description=_implicit(85, "00165"))
+    g86_prog_file: ProgName = Field(default="", description=_implicit(86, "00166"))
+    g87_prog_file: ProgName = Field(default="", description=_implicit(87, "00167"))
+    g88_prog_file: ProgName = Field(default="", description=_implicit(88, "00168"))
+    g89_prog_file: ProgName = Field(default="", description=_implicit(89, "00169"))
+    g800_prog_file: list[ProgName] = Field(
+        default_factory=list,
+        max_length=IMPLICIT_G800_COUNT,
+        description='P-CHAN-00187 the global subprograms G800, G801, ... call (index i: G800+i; "" none: '
+        "20131)",
     )
     feedhold_deceleration: float = Field(
         default=1000.0,
@@ -1360,6 +1385,11 @@ CHANNEL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
         ),
         ("tool_ori_cs.axis", "tool_ori_cs_axis", "P-CHAN-00188", "0..3", _CH + "149277323.html", ""),
         ("tool_ori_cs.mode", "tool_ori_cs_mode", "P-CHAN-00189", "0..4", _CH + "347022219.html", ""),
+        *(
+            (f"g8{k}_prog_file", f"g8{k}_prog_file", f"P-CHAN-0016{k}", "-", _CH + "149417611.html", "")
+            for k in range(10)
+        ),
+        ("g800_prog_file[i]", "g800_prog_file", "P-CHAN-00187", "-", _CH + "149419147.html", ""),
         (
             "prog_start.slope.profile",
             "slope_profile",

@@ -32,12 +32,14 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Final, Protocol
 
 __all__ = [
     "ELEMENTARY_TYPES",
+    "ELEMENT_PATH_FORMS",
     "EXTENDED_STRING_SIZE",
     "MAX_NESTING",
     "STRING_SIZE",
@@ -53,6 +55,7 @@ __all__ = [
     "StructureShape",
     "TypeNode",
     "VariableShape",
+    "element_path",
     "leaves",
     "machine_types",
     "resolve_structures",
@@ -418,3 +421,23 @@ def machine_types(config: ExternalShape) -> tuple[dict[str, TypeNode], list[Type
     extended = config.use_extended_string_var
     structures = resolve_structures(config.external_structures, extended=extended)
     return structures, [variable_type(v, structures, extended=extended) for v in config.external_variables]
+
+
+_PATH_LEVEL: Final = r"[A-Za-z_][A-Za-z0-9_]*\s*(?:\[\s*[0-9]+(?:\s*,\s*[0-9]+)*\s*\]\s*)*"
+_ELEMENT_PATH: Final = re.compile(rf"\s*V\.E\.({_PATH_LEVEL}(?:\.\s*{_PATH_LEVEL})*)$", re.IGNORECASE)
+_PATH_INDEX: Final = re.compile(r"\[([^\]]*)\]")
+ELEMENT_PATH_FORMS: Final = "V.E.NAME, V.E.NAME[i], V.E.NAME.ELEMENT"
+"""The forms :func:`element_path` reads, for a message that refuses another."""
+
+
+def element_path(text: str) -> tuple[str, list[int]] | None:
+    """A V.E. element as a program or a preset writes it - ``V.E.PLC_READY``, ``V.E.POS[1][2]`` (or
+    ``[1, 2]``), ``V.E.UserInteraction.Message``, ``V.E.curve[2].point[5].X`` (any case, blanks around
+    the brackets and dots) - as its leaf's name and index: ``("curve.point.X", [2, 5])`` (the indices of
+    all levels in a row, as :attr:`ExternalLeaf.dims`). None for a text of another form."""
+    found = _ELEMENT_PATH.match(text)
+    if found is None:
+        return None
+    path = found.group(1)
+    name = ".".join(level.split("[")[0].strip() for level in path.split("."))
+    return name, [int(i) for group in _PATH_INDEX.findall(path) for i in group.split(",")]

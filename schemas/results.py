@@ -422,8 +422,15 @@ class CheckMessage(TypedDict):
 
 
 class CheckCap(TypedDict):
-    by: Literal["cycles", "iterations"]
-    cap: int
+    by: Annotated[
+        Literal["cycles", "iterations", "waiting"],
+        Field(
+            description="cycles / iterations: the check's cap; waiting: the program waits on inputs nobody "
+            "changes in an offline check (warning 914052 names the loop and its V.E. variables; presets give "
+            "them)"
+        ),
+    ]
+    cap: Annotated[int, Field(description="the cap, or the cycle a waiting program was stopped at")]
 
 
 class CheckReport(TypedDict):
@@ -435,7 +442,7 @@ class CheckReport(TypedDict):
         Field(
             description="ok: ran to its end without an error alarm; stopped: an error alarm stopped it (or "
             "it ended without M30/M02 where that is an error); capped: it did not end within max_cycles / "
-            "max_iterations"
+            "max_iterations, or it waits on inputs nobody changes (capped.by: waiting)"
         ),
     ]
     exit_code: Annotated[

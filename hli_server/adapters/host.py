@@ -497,10 +497,12 @@ class CheckPort(Protocol):
         max_cycles: int = CHECK_MAX_CYCLES,
         max_iterations: int = CHECK_MAX_ITERATIONS,
         timeout_s: float = CHECK_TIMEOUT_S,
+        presets: Mapping[str, bool | int | float | str] | None = None,
     ) -> CheckReport:
         """``check --format json``'s report with ``program``, ``status`` (``ok``, ``stopped``, ``capped``)
-        and ``exit_code``. NotFoundError (channel), InvalidRequestError (files), UnavailableError (busy),
-        CheckTimeoutError (the wall-clock limit)."""
+        and ``exit_code``; ``presets`` are V.E. values before the start (``check --set``). NotFoundError
+        (channel), InvalidRequestError (files, presets), UnavailableError (busy), CheckTimeoutError (the
+        wall-clock limit)."""
         ...
 
 

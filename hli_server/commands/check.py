@@ -32,22 +32,25 @@ from __future__ import annotations
 import json
 import os
 import sys
+import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TextIO
 
 import click
 
+from hli_server.codecs.presets import PresetSyntaxError, parse_preset, parse_preset_file
 from hli_server.engine import Machine
+from hli_server.engine.presets import PresetError, PresetValue
 from hli_server.engine.program_check import (
     DEFAULT_MAX_CYCLES,
     DEFAULT_MAX_ITERATIONS,
     CheckResult,
     ProgramCheck,
 )
-from hli_server.engine.programs import ProgramFile
 from hli_server.scene import build_scene, round_mm, round_numbers
 
-__all__ = ["EXIT_CAPPED", "CheckResult", "DirectoryLibrary", "check", "check_program", "scene_of"]
+__all__ = ["EXIT_CAPPED", "CheckResult", "check", "check_program", "scene_of"]
 
 EXIT_CAPPED = 3
 """Exit code of a check that stopped at its cap: the program did not end."""
@@ -55,12 +58,16 @@ EXIT_CAPPED = 3
 
 class _Progress:
     """Progress of a long check on stderr, only when stderr is a terminal (tqdm): lines of the program
-    done, lines/s, blocks/s and the time left (E-04: programs of millions of blocks)."""
+    done, lines/s, blocks/s and the time left (E-04: programs of millions of blocks); in a full check
+    also the cycles run and the machine time they are, so that the bar moves while a loop turns on one
+    line (N-13)."""
 
     refresh_s = 0.2
     """Least time between two redraws (tqdm's ``mininterval``)."""
 
-    def __init__(self, total_lines: int, enabled: bool) -> None:
+    def __init__(self, total_lines: int, enabled: bool, cycle_s: float = 0.001) -> None:
+        self.cycle_s = cycle_s
+        self._drawn = 0.0
         self._bar: Any = None
         if enabled and sys.stderr.isatty():
             from tqdm import tqdm
@@ -78,61 +85,26 @@ class _Progress:
                 "[{elapsed}<{remaining}, {rate_fmt}{postfix}]",
             )
 
-    def update(self, line: int, blocks: int) -> None:
+    def update(self, line: int, blocks: int, cycles: int = 0) -> None:
         bar = self._bar
-        if bar is None or line <= bar.n:
+        if bar is None:
             return
         elapsed = bar.format_dict["elapsed"]
-        if elapsed > 0.0:
-            bar.set_postfix_str(f"{bar.format_sizeof(blocks / elapsed)} blocks/s", refresh=False)
-        bar.update(line - bar.n)
+        postfix = f"{bar.format_sizeof(blocks / elapsed)} blocks/s" if elapsed > 0.0 else ""
+        if cycles:
+            postfix += f", cycle {bar.format_sizeof(cycles)} ({cycles * self.cycle_s:.0f} s machine time)"
+        bar.set_postfix_str(postfix, refresh=False)
+        if line > bar.n:
+            bar.update(line - bar.n)
+        elif time.monotonic() - self._drawn >= self.refresh_s:
+            bar.refresh()  # a loop on one line: the cycles still move
+        else:
+            return
+        self._drawn = time.monotonic()
 
     def done(self) -> None:
         if self._bar is not None:
             self._bar.close()
-
-
-class DirectoryLibrary:
-    """Global subroutines and cycles from program directories, searched in order (``check``'s own
-    :class:`~hli_server.engine.programs.ProgramLibrary`): a name matches a file exactly, else
-    case-insensitively; a name that leaves its directory (``..``, an absolute path) is not found."""
-
-    def __init__(self, directories: list[Path]) -> None:
-        self.directories = [d.resolve() for d in directories]
-
-    def find(self, name: str) -> ProgramFile | None:
-        for directory in self.directories:
-            path = self._lookup(directory, name)
-            if path is None:
-                continue
-            try:
-                text = path.read_text(encoding="utf-8", errors="strict")
-            except (OSError, UnicodeDecodeError):
-                continue
-            return ProgramFile(name, text, str(path))
-        return None
-
-    @staticmethod
-    def _lookup(directory: Path, name: str) -> Path | None:
-        relative = Path(name.replace("\\", "/"))
-        if relative.is_absolute() or ".." in relative.parts:
-            return None
-        candidate = (directory / relative).resolve()
-        if not candidate.is_relative_to(directory):
-            return None
-        if candidate.is_file():
-            return candidate
-        parent = candidate.parent
-        if not parent.is_dir():
-            return None
-        folded = candidate.name.casefold()
-        for entry in sorted(parent.iterdir()):
-            if entry.name.casefold() == folded and entry.is_file():
-                return entry
-        return None
-
-    def searched(self) -> tuple[str, ...]:
-        return tuple(str(d) for d in self.directories)
 
 
 def check_program(
@@ -146,13 +118,15 @@ def check_program(
     record_path: bool = False,
     progress: bool = False,
     name: str = "check",
+    presets: Mapping[str, PresetValue] | None = None,
 ) -> CheckResult:
     """Run (or interpret and path-check) ``text`` on ``machine`` with the engine's
     :class:`~hli_server.engine.program_check.ProgramCheck`; ``progress`` draws a bar on a terminal.
 
     ``record_path``: keep the path for the picture (``--plot``). ``text`` may be an open text file
-    (``newline=""``): a geometry check then streams it with flat memory (docs/performance.md)."""
-    meter = _Progress(_count_lines(text) if progress else 0, progress)
+    (``newline=""``): a geometry check then streams it with flat memory (docs/performance.md).
+    ``presets``: ``V.E.`` values before the start (:class:`~hli_server.engine.presets.PresetError`)."""
+    meter = _Progress(_count_lines(text) if progress else 0, progress, machine.channel(channel).t_a)
     try:
         return ProgramCheck(
             machine,
@@ -164,6 +138,7 @@ def check_program(
             batch=os.environ.get(BATCH_ENV, "") != "0",
             progress=meter.update,
             name=name,
+            presets=presets,
         ).run(text)
     finally:
         meter.done()
@@ -206,7 +181,9 @@ def batch_in_use(machine: Machine, channel: int, record_path: bool) -> bool:
 def _text_report(result: CheckResult, program: str) -> str:
     """The report for people: positions and the floats of alarm params rounded to 0.1 µm."""
     lines = []
-    if result.capped is not None:
+    if result.capped == "waiting":
+        verdict = f"DID NOT END: stopped at cycle {result.cap}: its loop turns with nothing changing"
+    elif result.capped is not None:
         verdict = f"DID NOT END: stopped at the cap of {result.cap} {result.capped}"
     else:
         verdict = "OK: ran to the end" if result.completed else "STOPPED"
@@ -302,6 +279,21 @@ def scene_of(result: CheckResult) -> dict[str, Any]:
     "after the program's own directory",
 )
 @click.option(
+    "--set",
+    "sets",
+    metavar="V.E.NAME=VALUE",
+    multiple=True,
+    help="a V.E. variable's value before the start, as the PLC would give it (no PLC is attached to a "
+    'check): a number, TRUE/FALSE or "text"; may be given several times',
+)
+@click.option(
+    "--set-file",
+    "set_file",
+    type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    default=None,
+    help="a file of V.E. values, one V.E.NAME = VALUE per line (# or ; begins a comment); --set wins",
+)
+@click.option(
     "--plot",
     "plot_path",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -319,6 +311,8 @@ def check(
     max_cycles: int,
     max_iterations: int,
     program_dirs: tuple[Path, ...],
+    sets: tuple[str, ...],
+    set_file: Path | None,
     plot_path: Path | None,
 ) -> None:
     """Run PROGRAM on the machine and report alarms (exit 0 ok, 1 error alarm, 2 usage/config, 3 the
@@ -326,17 +320,20 @@ def check(
 
     The report goes to stdout (text or JSON); progress, ``plot written: PATH`` and errors to stderr."""
     from hli_server.configuration import ConfigError, load_machine
+    from hli_server.runtime.programs import (
+        ProgramDirectories,
+        cycle_libraries,
+        open_program,
+        read_program_file,
+    )
 
     if plot_path is not None:
         _check_plot_target(plot_path)
+    presets = _presets(sets, set_file)
     try:
         # a geometry check streams the file (flat memory for programs of millions of blocks); the
-        # full check reads it whole
-        text: str | TextIO = (
-            program.open(encoding="utf-8", errors="strict", newline="")
-            if geometry_only
-            else program.read_text(encoding="utf-8", errors="strict")
-        )
+        # full check reads it whole; UTF-8 or Windows-1252 alike, the name without regard to case
+        text: str | TextIO = open_program(program) if geometry_only else read_program_file(program)
     except (OSError, UnicodeDecodeError) as exc:
         click.echo(f"error: cannot read {program}: {exc}", err=True)
         sys.exit(2)
@@ -349,11 +346,8 @@ def check(
         except OSError as exc:
             click.echo(f"error: cannot read configuration: {exc}", err=True)
             sys.exit(2)
-        library = DirectoryLibrary([program.parent, *program_dirs])
-        cycles = {
-            ch.number: DirectoryLibrary([Path(d) for d in ch.cycle_directories]) for ch in config.channels
-        }
-        machine = Machine(config, programs=library, cycle_programs=cycles)
+        library = ProgramDirectories([program.parent, *program_dirs])
+        machine = Machine(config, programs=library, cycle_programs=cycle_libraries(config))
         try:
             machine.channel(channel)
         except KeyError:
@@ -370,9 +364,13 @@ def check(
                 record_path=plot_path is not None,
                 progress=True,
                 name=program.name,
+                presets=presets,
             )
         except (OSError, UnicodeDecodeError) as exc:
             click.echo(f"error: cannot read {program}: {exc}", err=True)
+            sys.exit(2)
+        except PresetError as exc:
+            click.echo(f"error: preset: {exc}", err=True)
             sys.exit(2)
     finally:
         if not isinstance(text, str):
@@ -386,6 +384,13 @@ def check(
         _plot(result, plot_path, str(program))
     if result.stopped_by_error:
         sys.exit(1)
+    if result.capped == "waiting":
+        click.echo(
+            f"error: {program} did not end: its loop turns with nothing changing; warning 914052 names it "
+            "and the V.E. variables it waits on (--set V.E.NAME=VALUE gives them)",
+            err=True,
+        )
+        sys.exit(EXIT_CAPPED)
     if result.capped is not None:
         click.echo(
             f"error: {program} did not end: the check stopped at its cap of {result.cap} {result.capped} "
@@ -394,6 +399,24 @@ def check(
         )
         sys.exit(EXIT_CAPPED)
     sys.exit(0 if result.completed else 1)
+
+
+def _presets(sets: tuple[str, ...], set_file: Path | None) -> dict[str, PresetValue]:
+    """``--set-file`` then each ``--set`` (a later one wins); a malformed one is a usage error (exit 2)."""
+    presets: dict[str, PresetValue] = {}
+    try:
+        if set_file is not None:
+            from hli_server.runtime.programs import read_program_file
+
+            presets.update(parse_preset_file(read_program_file(set_file), str(set_file)))
+        for text in sets:
+            name, value = parse_preset(text)
+            presets[name] = value
+    except PresetSyntaxError as exc:
+        raise click.BadParameter(str(exc), param_hint="'--set'") from None
+    except OSError as exc:
+        raise click.BadParameter(f"cannot read {set_file}: {exc}", param_hint="'--set-file'") from None
+    return presets
 
 
 def _check_plot_target(plot_path: Path) -> None:

@@ -130,6 +130,12 @@ _RANGE_NOTES: dict[tuple[type[BaseModel], str], str] = {
     (ChannelConfig, "messtyp"): "1 ≤ value ≤ 7; G100 takes 1..4",
     (ChannelConfig, "axes"): "names of `[[axes]]`; each axis in one channel",
     (ChannelConfig, "main_axes"): "three different axes of the channel",
+    **{
+        (ChannelConfig, f"g8{k}_prog_file"): f'a file name, at most 83 characters; "": none (G8{k}: 20131)'
+        for k in range(10)
+    },
+    (ChannelConfig, "g800_prog_file"): "up to 40 file names (G800..G839), each at most 83 characters; "
+    '"": none',
     (ChannelConfig, "interpolator_function"): "keywords FCT_IPO_DEFAULT, FCT_LOOK_AHEAD_STANDARD, "
     "FCT_DYN_POS_LIMIT; a list or `A | B`",
     (ChannelConfig, "cycle_directories"): "directories (relative to the machine file), at most 64",
@@ -168,6 +174,8 @@ def _default_text(model: type[BaseModel], field_name: str, info: FieldInfo) -> s
         return "(table)"
     if value is None:
         return "(none)"
+    if value == "":
+        return '""'
     return str(value)
 
 

@@ -17,6 +17,7 @@ from pydantic import BaseModel, ValidationError
 from hli_server.configuration.errors import ConfigError, ConfigFileError, Origin
 from hli_server.configuration.external_lists import parse_external_list
 from hli_server.configuration.fields import _field_problem
+from hli_server.configuration.files import find_file
 from hli_server.configuration.parameter_lists import _display_path, parse_parameter_list
 from hli_server.configuration.tables import _LIST_KEY, _PARAMETERS_OF_MODEL, _TABLES, ListKind, Loc
 from hli_server.configuration.toml_lines import _TomlLines
@@ -294,7 +295,8 @@ class _Loader:
             for p_index, program in enumerate(programs):
                 if not isinstance(program, dict) or not isinstance(program.get("path"), str):
                     continue
-                program_path = self.path.parent / program["path"]
+                # the name without regard to case, as on the kernel's Windows host
+                program_path = find_file(self.path.parent / program["path"])
                 if not program_path.is_file():
                     where = self._origin(("channels", c_index, "programs", p_index, "path")).where()
                     self.errors.append(f"{where}: program file {program_path} not found")

@@ -13,7 +13,16 @@ from pydantic import BaseModel, ConfigDict, TypeAdapter, ValidationError
 
 from hli_server.configuration.errors import Origin
 from hli_server.configuration.fields import _field_problem
-from hli_server.configuration.tables import _CHANNEL_KEY, _GEAR_KEY, _INTEGER, _KIND_NAMES, _TABLES, ListKind
+from hli_server.configuration.tables import (
+    _CHANNEL_KEY,
+    _ELEMENT_KEY,
+    _GEAR_KEY,
+    _INTEGER,
+    _KIND_NAMES,
+    _PAREN_COMMENT,
+    _TABLES,
+    ListKind,
+)
 from schemas.config import AXIS_PARAMETER_ALIASES
 
 
@@ -59,6 +68,8 @@ def parse_parameter_list(
     result = ParameterList(source=source)
     seen: dict[str, int] = {}
     gear_values: dict[str, list[tuple[int, Any, Origin]]] = {}
+    indexed: dict[str, dict[int, Any]] = {}
+    """``g800_prog_file[3] name`` (the table's path ``g800_prog_file[i]``): field -> index -> value."""
     lines = text.splitlines()
     index = 0
     while index < len(lines):
@@ -71,12 +82,16 @@ def parse_parameter_list(
             content = f"{content} {_strip_comment(lines[index]).strip()}"
             index += 1
         key, *rest = content.split(None, 1)
-        raw = rest[0].strip() if rest else ""
+        raw = _PAREN_COMMENT.sub("", rest[0]).strip() if rest else ""
         origin = Origin(source, line_no, key)
         canonical, gear, problem = _canonical_path(key, channel_index)
         if problem:
             result.errors.append(f"{origin.where()}: {problem}")
             continue
+        element: int | None = None
+        element_key = _ELEMENT_KEY.match(canonical)
+        if element_key is not None and f"{element_key[1]}[i]" in by_path:
+            canonical, element = f"{element_key[1]}[i]", int(element_key[2])
         if kind == "axis" and canonical in AXIS_PARAMETER_ALIASES:
             replacement = _display_path(AXIS_PARAMETER_ALIASES[canonical], gear)
             result.warnings.append(
@@ -96,18 +111,33 @@ def parse_parameter_list(
             result.errors.append(f"{origin.where()}: no value (write `{key} <value>`)")
             result.failed.add(info.field)
             continue
-        value, problem = _convert(raw, model.model_fields[info.field].annotation)
-        if problem is None:
+        annotation = model.model_fields[info.field].annotation
+        if element is not None:
+            annotation = typing.get_args(annotation)[0]
+        value, problem = _convert(raw, annotation)
+        if problem is None and element is not None:
+            limit = _max_items(model, info.field)
+            if limit is not None and element >= limit:
+                problem = f"index {element} is out of range: 0 .. {limit - 1}"
+            else:
+                problem = _check_field(model, info.field, [value], raw)
+        elif problem is None:
             problem = _check_field(model, info.field, value, raw)
         if problem is not None:
             result.errors.append(f"{origin.where()}: {problem}")
             result.failed.add(info.field)
             continue
-        if gear is None:
+        if element is not None:
+            indexed.setdefault(info.field, {})[element] = value
+            result.origins.setdefault(info.field, origin)
+        elif gear is None:
             result.values[info.field] = value
             result.origins[info.field] = origin
         else:
             gear_values.setdefault(info.field, []).append((gear, value, origin))
+    for field_name, elements in indexed.items():
+        # the entries not given are "" (not assigned: a G8xx of such an index is 20131)
+        result.values[field_name] = [elements.get(i, "") for i in range(max(elements) + 1)]
     for field_name, entries in gear_values.items():
         entries.sort(key=lambda e: e[0])
         used_stage, used_value, used_origin = entries[0]
@@ -127,6 +157,15 @@ def parse_parameter_list(
                     f"not used (getriebe[{used_stage}] gives {used_value})"
                 )
     return result
+
+
+def _max_items(model: type[BaseModel], field_name: str) -> int | None:
+    """The most elements a list field takes (its ``max_length``), None without a bound."""
+    for meta in model.model_fields[field_name].metadata:
+        limit = getattr(meta, "max_length", None)
+        if isinstance(limit, int):
+            return limit
+    return None
 
 
 def _strip_comment(line: str) -> str:
@@ -171,11 +210,15 @@ def _unknown_parameter(canonical: str, gear: int | None, kind: str) -> str:
 
 def _convert(raw: str, annotation: Any) -> tuple[Any, str | None]:
     """A list value as the field's type: int (decimal/0x hex), bool (0/1), float, str, keywords."""
+    if typing.get_origin(annotation) is typing.Annotated:
+        annotation = typing.get_args(annotation)[0]
     if typing.get_origin(annotation) is list:
         parts = [p.strip() for p in raw.split("|")]
         if any(not p for p in parts):
             return None, f"{raw!r}: empty keyword in a `A | B` list"
         return parts, None
+    if annotation is str and len(raw) >= 2 and raw[0] == raw[-1] == '"':
+        return raw[1:-1], None  # a name in quotes may hold blanks
     if " " in raw or "\t" in raw:
         return None, f"unexpected text after the value: {raw!r}"
     if annotation is bool:

@@ -41,5 +41,9 @@ _KIND_NAMES = {
 }
 _GEAR_KEY = re.compile(r"^getriebe\[(\d+)\]\.(.+)$")
 _CHANNEL_KEY = re.compile(r"^configuration\.channel\[(\d+)\]\.(.+)$")
+_ELEMENT_KEY = re.compile(r"^([a-z0-9_]+)\[(\d{1,4})\]$")
+"""An element of an indexed parameter: ``g800_prog_file[3]`` (the table's path ``g800_prog_file[i]``)."""
+_PAREN_COMMENT = re.compile(r"\s+\([^()]*\)\s*$")
+"""A comment in parentheses after a value, as the kernel's lists write one (``G800.nc (UP at G800)``)."""
 _INTEGER = re.compile(r"^([+-]?)(?:0[xX]([0-9a-fA-F]+)|([0-9]+))$")
 _RANGE_ERRORS = {"greater_than", "greater_than_equal", "less_than", "less_than_equal"}

@@ -221,6 +221,12 @@ _TABLE: tuple[AlarmDef, ...] = (
         replaces=(912002,),
     ),
     # --- the kernel's diagnosis pages: G100 measuring moves (C14-23) --------------------------
+    _e(
+        20131,
+        "Unknown G function (an implicit call G80..G89 / G800..G839 without a subprogram assigned)",
+        "kernel",
+        page="https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/206278923.html",
+    ),
     _e(20138, "G100 is not allowed with the current measuring type", "kernel", page=_DIAG + "250906763.html"),
     _w(
         20685,
@@ -590,6 +596,11 @@ _TABLE: tuple[AlarmDef, ...] = (
         914051,
         "Geometry check stopped at its cap of loop iterations: the program did not end",
         "project (N-10)",
+    ),
+    _w(
+        914052,
+        "Check stopped a program that waits on inputs nobody can change (no PLC attached)",
+        "project (N-13)",
     ),
     # --- the built-in cycles (TF5225 measuring, TF5293 drilling/milling; docs/cycles.md) -------
     _e(

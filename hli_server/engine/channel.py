@@ -131,6 +131,25 @@ class ChannelHost:
             raise _call_error(exc, line, block, name) from None
         return None if blocks is None else StandInRun(name, params, context, line, block, blocks)
 
+    def implicit_program(self, g: int) -> str:
+        """P-CHAN-00160..00169 (G80..G89) and P-CHAN-00187 (G800+i) of the channel (nc/implicit.py)."""
+        config = self._channel.config
+        if 80 <= g <= 89:
+            return (
+                config.g80_prog_file,
+                config.g81_prog_file,
+                config.g82_prog_file,
+                config.g83_prog_file,
+                config.g84_prog_file,
+                config.g85_prog_file,
+                config.g86_prog_file,
+                config.g87_prog_file,
+                config.g88_prog_file,
+                config.g89_prog_file,
+            )[g - 80]
+        files = config.g800_prog_file
+        return files[g - 800] if 0 <= g - 800 < len(files) else ""
+
     def message(self, text: str, save: bool, file: str, program: str, line: int, block: str) -> None:
         ch = self._channel
         m = ch.machine

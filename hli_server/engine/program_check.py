@@ -12,14 +12,19 @@ Two modes:
 
 A program that does not end is stopped at a cap and says so (:attr:`CheckResult.capped`): the full check
 at ``max_cycles`` cycles, the geometry check, which has no cycles, at ``max_iterations`` loop iterations
-and jumps back. The engine does no I/O: the program comes as a string or an open text stream.
+and jumps back. A full check stops sooner a program that waits on inputs nobody can change (N-13): no PLC
+is attached, so a loop that turns while nothing moves, nothing is emitted and no variable changes
+(``$WHILE V.E.PLC_READY == 0``) would turn until the cap; after :data:`WAIT_CYCLES` such cycles it stops
+with warning :data:`ALARM_WAITING`, naming the loop and the ``V.E.`` variables it reads
+(``capped.by == "waiting"``). ``presets`` give those inputs before the start (``engine/presets.py``). The
+engine does no I/O: the program comes as a string or an open text stream.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, TextIO
 
 from hli_server.engine.alarms import Alarm, Severity
@@ -31,13 +36,16 @@ from hli_server.engine.kinematics.transform import Transformation
 from hli_server.engine.machine import Machine
 from hli_server.engine.nc.directives import IterationCapError
 from hli_server.engine.nc.source import ProgramText
+from hli_server.engine.nc.waiting import WaitingLoop
 from hli_server.engine.planner import Marker, MarkerKind, Motion
+from hli_server.engine.presets import PresetValue, apply_presets
 from schemas.events import Event, NcMessage
 from schemas.wire import ProgramState
 
 __all__ = [
     "ALARM_CYCLE_CAP",
     "ALARM_ITERATION_CAP",
+    "ALARM_WAITING",
     "DEFAULT_MAX_CYCLES",
     "DEFAULT_MAX_ITERATIONS",
     "CheckResult",
@@ -53,6 +61,17 @@ ALARM_CYCLE_CAP = 914050
 """Warning: the full check reached its cycle cap; the program had not ended."""
 ALARM_ITERATION_CAP = 914051
 """Warning: the geometry check reached its cap of loop iterations; the program had not ended."""
+ALARM_WAITING = 914052
+"""Warning: the full check stopped a program that waits on inputs nobody can change (N-13)."""
+WAIT_SAMPLE_CYCLES = 1000
+"""Cycles between two looks at whether the program still makes progress."""
+WAIT_CYCLES = 3 * WAIT_SAMPLE_CYCLES
+"""A program whose loop turns this many cycles while nothing moves, nothing is emitted and no variable
+changes is waiting on inputs nobody can change (3 s of machine time at 1 ms; a fraction of a second of
+the check's): it cannot end, since its next statements depend on nothing else."""
+WAIT_MIN_ITERATIONS = 100
+"""Loop iterations (or jumps back) between two looks for the loop to count as turning (a loop that reads
+a synchronous variable waits a cycle per iteration)."""
 _SETTLE_CYCLES = 100_000
 """After an error, cycles the axes get to come to rest before the final position is read."""
 _RESOLUTION = 1e4
@@ -91,7 +110,8 @@ class CheckResult:
         self.stop_point: tuple[float, ...] | None = None
         self.elapsed_s = 0.0
         self.capped: str | None = None
-        """``cycles`` or ``iterations`` when the check stopped at its cap (the program did not end)."""
+        """``cycles`` or ``iterations`` when the check stopped at its cap, ``waiting`` when it stopped a
+        program waiting on inputs nobody can change (the program did not end)."""
         self.cap = 0
         self.kinematics = KinematicReport()
         """What the axes and the tool tip did while a kinematic transformation was on (K-06, K-08)."""
@@ -238,8 +258,10 @@ class ProgramCheck:
     ``batch``: a geometry check may run as a batch (:mod:`hli_server.engine.batch`) where the channel's
     path checks allow it; ``record_path`` keeps the path for a picture (every 10th cycle's setpoints in
     a full check, every block's end, arcs every few degrees, in a geometry check; it turns the batch off);
-    ``progress(line, blocks)`` is called now and then with the main program's line and the blocks
-    decoded."""
+    ``progress(line, blocks, cycles)`` is called now and then with the main program's line, the blocks
+    decoded and the cycles run; ``presets`` are ``V.E.`` values written before the program starts
+    (``engine/presets.py``: :class:`~hli_server.engine.presets.PresetError` from :meth:`run` for one that
+    cannot be taken)."""
 
     def __init__(
         self,
@@ -251,8 +273,9 @@ class ProgramCheck:
         max_iterations: int = DEFAULT_MAX_ITERATIONS,
         record_path: bool = False,
         batch: bool = True,
-        progress: Callable[[int, int], None] | None = None,
+        progress: Callable[[int, int, int], None] | None = None,
         name: str = "check",
+        presets: Mapping[str, PresetValue] | None = None,
     ) -> None:
         self.machine = machine
         self.channel = channel
@@ -263,6 +286,7 @@ class ProgramCheck:
         self.batch = batch
         self.progress = progress
         self.name = name
+        self.presets = dict(presets or {})
 
     def batch_in_use(self) -> bool:
         """Does a geometry check of this channel run as a batch? Not with ``record_path`` (a picture draws
@@ -281,6 +305,7 @@ class ProgramCheck:
         machine = self.machine
         result = CheckResult(machine, self.channel, "geometry" if self.geometry_only else "full")
         ch = machine.channel(self.channel)
+        apply_presets(machine.external, ch.number, self.presets)
         history_start = len(machine.alarm_history)
         if self.record_path:
             result.path.append(tuple(ch.setpoints()))
@@ -321,6 +346,8 @@ class ProgramCheck:
         kin_report = result.kinematics
         main = tuple(ch.axis_names.index(a) for a in ch.config.main_axes)
         switched: Transformation | None = None
+        watch = _WaitWatch(machine, ch, result)
+        stuck = False
         while ch.state in running and machine.cycle < self.max_cycles:
             step(1)
             if record and machine.cycle % 10 == 0:
@@ -337,10 +364,15 @@ class ProgramCheck:
                 kin_report.add(kinematic.kin_id, kinematic.name, axes, kinematic.to_tip(axes), main)
             countdown -= 1
             if countdown <= 0:
-                countdown = 1000
+                countdown = WAIT_SAMPLE_CYCLES
                 if progress is not None:
-                    progress(ch.interpreter.main_line, ch.decoder.blocks_decoded)
-        if ch.state in running:
+                    progress(ch.interpreter.main_line, ch.decoder.blocks_decoded, machine.cycle)
+                if watch.stuck():
+                    stuck = True
+                    break
+        if stuck:
+            self._waiting(ch, result, ch.interpreter.waiting_loop(), watch.since)
+        elif ch.state in running:
             result.capped = "cycles"
             result.cap = self.max_cycles
             machine.raise_alarm(
@@ -363,6 +395,39 @@ class ProgramCheck:
         if record:
             _record(result.path, tuple(ch.setpoints()))
 
+    def _waiting(self, ch: Channel, result: CheckResult, loop: WaitingLoop | None, since: int) -> None:
+        """Stop a program that waits on inputs nobody can change: warning 914052 at its loop."""
+        machine = self.machine
+        result.capped = "waiting"
+        result.cap = machine.cycle
+        still = machine.cycle - since
+        program = f" of {loop.program}" if loop is not None and loop.program else ""
+        if loop is not None and loop.variables:
+            names = ", ".join(loop.variables)
+            sets = " ".join(f"--set {n}=<value>" for n in loop.variables)
+            them = "them" if len(loop.variables) > 1 else "it"
+            what = (
+                f"the program waits on {names}: its {_loop_name(loop.keyword)} at {loop.place}{program} "
+                f"reads {them} and turned {still} cycles with nothing moving and nothing changing; no PLC "
+                f"is attached to an offline check to change {them}: give the PLC's values ({sets}, or "
+                "--set-file)"
+            )
+        elif loop is not None:
+            what = (
+                f"the program does not end: its {_loop_name(loop.keyword)} at {loop.place}{program} turned "
+                f"{still} cycles with nothing moving, nothing emitted and no variable changing"
+            )
+        else:  # pragma: no cover - a program that turns without an open loop jumps back ($GOTO)
+            what = f"the program does not end: it turned {still} cycles with nothing moving or changing"
+        machine.raise_alarm(
+            ALARM_WAITING,
+            ch,
+            what,
+            line=loop.line if loop is not None else None,
+            block=loop.place if loop is not None else None,
+            params={"variables": loop.variables if loop is not None else [], "cycles": still},
+        )
+
     # --- geometry ---------------------------------------------------------------------------------
     def _geometry(self, ch: Channel, text: str | TextIO, result: CheckResult) -> None:
         decoder = ch.decoder
@@ -383,7 +448,7 @@ class ProgramCheck:
                     countdown -= 1
                     if progress is not None and countdown <= 0:
                         countdown = 256
-                        progress(batch.line, decoder.blocks_decoded)
+                        progress(batch.line, decoder.blocks_decoded, 0)
             else:
                 saved = (interpreter.budget, interpreter.iteration_cap)
                 interpreter.budget = None
@@ -395,13 +460,22 @@ class ProgramCheck:
         except IterationCapError as cap:
             result.capped = "iterations"
             result.cap = cap.cap
+            loop = ch.interpreter.waiting_loop()
+            inputs = ""
+            if loop is not None and loop.variables:
+                names = ", ".join(loop.variables)
+                inputs = (
+                    f"; its {_loop_name(loop.keyword)} at {loop.place} reads {names}, which no PLC changes "
+                    f"in an offline check: give the PLC's values with --set {loop.variables[0]}=<value>"
+                )
             self.machine.raise_alarm(
                 ALARM_ITERATION_CAP,
                 ch,
                 f"the geometry check stopped after {cap.cap} loop iterations and jumps back: the program "
-                "had not ended (an endless loop?); raise --max-iterations if it should have",
+                f"had not ended (an endless loop?); raise --max-iterations if it should have{inputs}",
                 line=cap.line,
                 block=cap.place,
+                params={"variables": loop.variables} if loop is not None and loop.variables else None,
             )
         result.blocks = decoder.blocks_decoded
         result.final_position = dict(zip(ch.axis_names, decoder.position, strict=True))
@@ -427,7 +501,7 @@ class ProgramCheck:
                     self._marker(ch, item, result)
             if progress is not None and motions >= next_update:
                 next_update = motions + 4096
-                progress(ch.interpreter.main_line, decoder.blocks_decoded)
+                progress(ch.interpreter.main_line, decoder.blocks_decoded, 0)
 
     @staticmethod
     def _kinematic_motion(ch: Channel, item: Motion, result: CheckResult, record: bool) -> None:
@@ -464,3 +538,56 @@ class ProgramCheck:
             result.completed = True
         elif item.kind == MarkerKind.ERROR:
             ch.raise_decode_error(item)
+
+
+def _loop_name(keyword: str) -> str:
+    return "jump back" if keyword == "GOTO" else f"${keyword} loop"
+
+
+class _WaitWatch:
+    """Looks, every :data:`WAIT_SAMPLE_CYCLES`, whether a running program makes progress: its loop turns
+    (iterations or jumps back) while the path rests, no block is decoded, nothing is emitted (an alarm, a
+    message), and neither its variables nor the ``V.E.`` values change. :meth:`stuck` after
+    :data:`WAIT_CYCLES` of that. Deterministic: cycles, not time."""
+
+    def __init__(self, machine: Machine, ch: Channel, result: CheckResult) -> None:
+        self.machine = machine
+        self.ch = ch
+        self.result = result
+        self.last: tuple[object, ...] | None = None
+        self.iterations = 0
+        self.since = -1
+        """The cycle from which nothing changed (-1: something did at the last look)."""
+
+    def stuck(self) -> bool:
+        ch = self.ch
+        machine = self.machine
+        planner = ch.planner
+        interpreter = ch.interpreter
+        history = machine.alarm_history
+        turning = interpreter.iterations - self.iterations >= WAIT_MIN_ITERATIONS
+        self.iterations = interpreter.iterations
+        resting = (
+            ch.state == ProgramState.RUNNING
+            and planner.current() is None
+            and planner.at_rest
+            and all(a.setpoint_step == 0.0 for a in ch.axes)
+        )
+        if not (turning and resting):
+            self.last = None
+            self.since = -1
+            return False
+        external = machine.external
+        now = (
+            ch.decoder.blocks_decoded,
+            len(history),
+            id(history[-1]) if history else 0,
+            len(self.result.messages),
+            interpreter.state(),
+            tuple(tuple(external.values(spec)) for spec in external),
+        )
+        if now != self.last:
+            self.last = now
+            self.since = machine.cycle
+            return False
+        return machine.cycle - self.since >= WAIT_CYCLES

@@ -70,7 +70,8 @@ def _exit_code(result: CheckResult) -> int:
 
 def check_report(result: CheckResult, program: str) -> CheckReport:
     """The JSON report of ``hli-server check --format json`` with the program's name and the verdict:
-    ``status`` is ``ok``, ``stopped`` (an error alarm, or the program did not end) or ``capped``, and
+    ``status`` is ``ok``, ``stopped`` (an error alarm, or the program did not end) or ``capped`` (at its
+    cap, or waiting on inputs nobody changes: ``capped.by``), and
     ``exit_code`` is what ``check`` would exit with."""
     code = _exit_code(result)
     report = {
@@ -95,13 +96,16 @@ def run_check(
     max_cycles: int = CHECK_MAX_CYCLES,
     max_iterations: int = CHECK_MAX_ITERATIONS,
     record_path: bool = False,
+    presets: Mapping[str, bool | int | float | str] | None = None,
 ) -> CheckResult:
     """Check ``text`` on a fresh machine of ``config`` with the engine's ProgramCheck.
 
-    ``files`` (name -> text) are found by ``L name`` first, then ``directories`` in order.
-    :class:`InvalidRequestError` for a bad file name or too many files, :class:`NotFoundError` for a
-    channel the machine does not have."""
+    ``files`` (name -> text) are found by ``L name`` first, then ``directories`` in order; ``presets``
+    are V.E. values before the start (``check --set``). :class:`InvalidRequestError` for a bad file name,
+    too many files or a preset that cannot be taken, :class:`NotFoundError` for a channel the machine
+    does not have."""
     from hli_server.engine import Machine
+    from hli_server.engine.presets import PresetError
     from hli_server.engine.program_check import ProgramCheck
 
     library = RuntimeLibrary(directories)
@@ -113,7 +117,7 @@ def run_check(
     if channel not in numbers:
         raise NotFoundError(f"no channel {channel} (the machine has {', '.join(map(str, numbers))})")
     machine = Machine(config, programs=library, cycle_programs=cycle_libraries(config))
-    return ProgramCheck(
+    check = ProgramCheck(
         machine,
         channel,
         geometry_only=geometry_only,
@@ -121,7 +125,12 @@ def run_check(
         max_iterations=max_iterations,
         record_path=record_path,
         name=name,
-    ).run(text)
+        presets=presets,
+    )
+    try:
+        return check.run(text)
+    except PresetError as exc:
+        raise InvalidRequestError(f"presets: {exc}") from None
 
 
 # --- the worker process ---------------------------------------------------------------------------
@@ -265,6 +274,7 @@ class ProgramChecker:
         max_cycles: int = CHECK_MAX_CYCLES,
         max_iterations: int = CHECK_MAX_ITERATIONS,
         timeout_s: float = CHECK_TIMEOUT_S,
+        presets: Mapping[str, bool | int | float | str] | None = None,
     ) -> CheckReport:
         """The report of ``text`` (:func:`check_report`). Errors: InvalidRequestError, NotFoundError (the
         request), UnavailableError (too many checks waiting), CheckTimeoutError (the wall-clock limit)."""
@@ -287,6 +297,7 @@ class ProgramChecker:
             "geometry_only": geometry_only,
             "max_cycles": max_cycles,
             "max_iterations": max_iterations,
+            "presets": dict(presets or {}),
         }
         self._waiting += 1
         try:

@@ -16,9 +16,10 @@ What a name may be: a file name, or a path below a directory (``cycles/drill.nc`
 leaves its directory (``..``, an absolute path, a drive letter, a symbolic link that points out of it)
 is never read: :meth:`ProgramDirectories.find` answers None (the interpreter's alarm names every
 directory searched) and logs why. A file larger than :data:`MAX_PROGRAM_BYTES` is refused the same
-way. A name matches exactly, else without regard to case (the kernel's program directories are
-usually on Windows). Text is UTF-8; a file that is not (an old program with umlauts in its
-comments, in Windows-1252) is read as Latin-1, so that no byte is lost.
+way. A name matches exactly, else without regard to case (the kernel's program directories are on
+Windows), and so does a program table entry's path. Text is UTF-8 (with or without a byte order mark)
+or Windows-1252 / Latin-1, read alike (:mod:`hli_server.codecs.nc_text`: an old program with umlauts
+in its comments runs).
 
 Files are read when the interpreter asks and kept (by path, size and modification time) until they
 change, so a program that calls a cycle a thousand times reads it once.
@@ -30,8 +31,10 @@ import logging
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path, PurePosixPath, PureWindowsPath
-from typing import Final
+from typing import Final, TextIO
 
+from hli_server.codecs.nc_text import EncodingSniffer, decode_program
+from hli_server.configuration.files import find_file
 from hli_server.engine.programs import ProgramFile
 from schemas.config import MachineConfig
 
@@ -43,6 +46,8 @@ __all__ = [
     "RuntimeLibrary",
     "check_program_name",
     "cycle_libraries",
+    "find_file",
+    "open_program",
     "read_program_file",
 ]
 
@@ -60,14 +65,32 @@ class ProgramNameError(ValueError):
     """A program name that is no plain file name below a program directory (says what and why)."""
 
 
-def read_program_file(path: str) -> str:
-    """Program table entries given by ``path`` (absolute after loading the configuration) are read
-    when the PLC or the operator selects them. OSError or UnicodeDecodeError on failure."""
-    file = Path(path)
+def read_program_file(path: str | os.PathLike[str]) -> str:
+    """A program file, read whole: program table entries given by ``path`` (absolute after loading the
+    configuration) when the PLC or the operator selects them, and a program a command or a test names.
+    The name matches without regard to case where it does not match exactly (:func:`find_file`); UTF-8
+    or Windows-1252 (:func:`~hli_server.codecs.nc_text.decode_program`). OSError on failure."""
+    file = find_file(path)
     size = file.stat().st_size
     if size > MAX_PROGRAM_BYTES:
         raise OSError(f"{path}: {size} bytes, more than the {MAX_PROGRAM_BYTES} bytes a program may have")
-    return file.read_text(encoding="utf-8")
+    return decode_program(file.read_bytes())
+
+
+def open_program(path: str | os.PathLike[str]) -> TextIO:
+    """A program file opened as text to stream (``check --geometry-only`` of millions of lines, memory
+    flat): one binary pass finds its encoding (:class:`~hli_server.codecs.nc_text.EncodingSniffer`),
+    then it is opened with it, line ends untranslated (``newline=""``, as :class:`ProgramText` reads
+    them). OSError on failure."""
+    file = find_file(path)
+    sniffer = EncodingSniffer()
+    with file.open("rb") as raw:
+        while chunk := raw.read(1 << 20):
+            sniffer.feed(chunk)
+    stream = file.open(encoding=sniffer.encoding(), newline="")
+    if sniffer.skip:
+        stream.read(sniffer.skip)  # a UTF-8 byte order mark before Windows-1252 text: one byte a character
+    return stream
 
 
 def check_program_name(name: str) -> PurePosixPath:
@@ -91,21 +114,14 @@ def check_program_name(name: str) -> PurePosixPath:
     return PurePosixPath(*clean)
 
 
-def _decode(data: bytes, origin: str) -> str:
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError:
-        log.warning("%s is not UTF-8; read as Latin-1 (Windows-1252 programs keep every byte)", origin)
-        return data.decode("latin-1")
-
-
 class ProgramDirectories:
     """Finds programs by name in directories, in order (the kernel's program paths)."""
 
     def __init__(
         self, directories: Iterable[str | os.PathLike[str]], *, max_bytes: int = MAX_PROGRAM_BYTES
     ) -> None:
-        self.directories: tuple[Path, ...] = tuple(Path(d).resolve() for d in directories)
+        # each directory once, in the order first given (the program's own may be given again)
+        self.directories: tuple[Path, ...] = tuple(dict.fromkeys(Path(d).resolve() for d in directories))
         self.max_bytes = max_bytes
         self._cache: dict[Path, tuple[int, int, str]] = {}
 
@@ -130,21 +146,8 @@ class ProgramDirectories:
     @staticmethod
     def _match(directory: Path, relative: PurePosixPath) -> Path | None:
         """The file of ``relative`` in ``directory``: exact, else each part without regard to case."""
-        exact = directory.joinpath(*relative.parts)
-        if exact.is_file():
-            return exact
-        here = directory
-        for part in relative.parts:
-            try:
-                with os.scandir(here) as entries:
-                    folded = part.casefold()
-                    found = next((Path(e.path) for e in entries if e.name.casefold() == folded), None)
-            except OSError:
-                return None
-            if found is None:
-                return None
-            here = found
-        return here if here.is_file() else None
+        found = find_file(directory.joinpath(*relative.parts))
+        return found if found.is_file() else None
 
     def _read(self, directory: Path, path: Path, name: str) -> str | None:
         try:
@@ -177,7 +180,11 @@ class ProgramDirectories:
             return None
         if len(data) > self.max_bytes:  # grew since the stat
             return None
-        text = _decode(data, str(real))
+        try:
+            text = decode_program(data)
+        except UnicodeDecodeError as exc:  # a UTF-16 file cut short
+            log.warning("program %r: %s cannot be read as text: %s", name, real, exc)
+            return None
         if len(self._cache) >= _CACHE_FILES:
             self._cache.clear()
         self._cache[real] = (stat.st_size, stat.st_mtime_ns, text)

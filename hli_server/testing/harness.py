@@ -119,10 +119,13 @@ def program_files(
 ) -> tuple[str, str, dict[str, str], list[Path]]:
     """(text, name, uploaded files, the program file's directory if it is one) of a program given as NC text
     or a path (relative to ``base``, the test file's directory) and its subprograms."""
+    from hli_server.runtime.programs import find_file, read_program_file
+
+    # files are read as the server reads them: UTF-8 or Windows-1252, names without regard to case (N-12)
     directories: list[Path] = []
     if isinstance(program, os.PathLike):
-        path = _relative_to(Path(program), base)
-        text, name = path.read_text(encoding="utf-8"), name or path.name
+        path = find_file(_relative_to(Path(program), base))
+        text, name = read_program_file(path), name or path.name
         directories.append(path.parent)
     else:
         text, name = program, name or "program"
@@ -130,8 +133,8 @@ def program_files(
     items = files.items() if isinstance(files, Mapping) else ((None, f) for f in files)
     for key, value in items:
         if isinstance(value, os.PathLike) or key is None:
-            file = _relative_to(Path(os.fspath(value)), base)
-            uploads[key or file.name] = file.read_text(encoding="utf-8")
+            file = find_file(_relative_to(Path(os.fspath(value)), base))
+            uploads[key or file.name] = read_program_file(file)
         else:
             uploads[key] = value
     return text, name, uploads, directories
@@ -357,6 +360,7 @@ class _Programs:
         max_cycles: int = 10_000_000,
         max_iterations: int = 1_000_000,
         record_path: bool = False,
+        presets: Mapping[str, bool | int | float | str] | None = None,
     ) -> CheckResult:
         """Check a program offline, as ``hli-server check`` and ``POST /api/check`` do: the engine's
         :class:`~hli_server.engine.program_check.ProgramCheck` on a fresh machine of this server's machine
@@ -366,7 +370,10 @@ class _Programs:
         in the directory of a program given by path, then in the server's program directories. Returns
         the :class:`~hli_server.engine.program_check.CheckResult`: ``completed``, ``alarms`` (each with
         ``number``, ``line``, ``block``, ``message``), ``messages`` (``#MSG``), ``final_position``,
-        ``capped``; ``to_json()`` is ``check --format json``'s report."""
+        ``capped``; ``to_json()`` is ``check --format json``'s report. ``presets`` are V.E. values before
+        the start, as the PLC would give them (``{"V.E.PLC_READY": True}``; ``check --set``; a preset that
+        cannot be taken raises InvalidRequestError); a program that waits on inputs nobody changes stops
+        within seconds with ``capped == "waiting"`` and warning 914052."""
         from hli_server.runtime.checks import run_check
 
         text, name, uploads, directories = program_files(program, files, name, self._base)
@@ -382,6 +389,7 @@ class _Programs:
             max_cycles=max_cycles,
             max_iterations=max_iterations,
             record_path=record_path,
+            presets=presets,
         )
 
 

@@ -212,6 +212,72 @@ def test_the_plugin_checks_a_program_file_with_its_neighbours(hli: Harness, tmp_
         hli.check(main, channel=7)
 
 
+# --- the PLC's inputs: presets, and a program that waits on them (N-13) ------------------------------------
+WAITS = (
+    "N10 G90 G00 X0 Y0 Z0\nN20 $WHILE V.E.PLC_READY == 0\nN30 $ENDWHILE\n"
+    "N40 $IF V.E.MODE == 2\nN50 G01 X20 F6000\nN60 $ELSE\nN70 G01 X10 F6000\nN80 $ENDIF\nN90 M30\n"
+)
+
+
+@pytest.mark.slow
+@pytest.mark.req("N-13", "N-10")
+async def test_presets_through_every_door_give_the_same_report(
+    hli: Harness, client: httpx.AsyncClient, tmp_path: Path
+) -> None:
+    # without the PLC's values the program waits: stopped within seconds, naming the variable
+    r = await client.post("/api/check", json={"text": WAITS})
+    report = r.json()
+    assert (report["status"], report["exit_code"], report["capped"]["by"]) == ("capped", 3, "waiting")
+    (alarm,) = report["alarms"]
+    assert (alarm["id"], alarm["line"], alarm["block"]) == (914052, 2, "N20")
+    assert "V.E.PLC_READY" in alarm["message"]
+    waiting = hli.check(WAITS)
+    assert waiting.capped == "waiting"
+    # with them it runs, the same through JSON, a text body with ?set=, the plugin and the command
+    presets = {"V.E.PLC_READY": True, "V.E.MODE": 2}
+    r = await client.post("/api/check", json={"text": WAITS, "presets": presets})
+    json_report = r.json()
+    assert (json_report["status"], json_report["final_position"]["X"]) == ("ok", 20.0)
+    r = await client.post(
+        "/api/check?set=V.E.PLC_READY=TRUE&set=V.E.MODE=2",
+        content=WAITS,
+        headers={"content-type": "text/plain"},
+    )
+    assert _without_time(r.json()) == _without_time(json_report)
+    plugin = hli.check(WAITS, presets=presets)
+    assert _without_time(plugin.to_json()) == _without_time(json_report)
+    cli = _cli_report(tmp_path, WAITS, "--set", "V.E.PLC_READY=TRUE", "--set", "V.E.MODE=2")
+    assert _without_time(cli) == _without_time(json_report)
+    # a preset that cannot be taken is a refused request, and the next is served
+    r = await client.post("/api/check", json={"text": WAITS, "presets": {"V.E.NOPE": 1}})
+    assert r.status_code == 422
+    assert "V.E.NOPE is not declared" in r.json()["detail"]
+    r = await client.post("/api/check?set=V.E.MODE", content=WAITS, headers={"content-type": "text/plain"})
+    assert r.status_code == 422
+    r = await client.post("/api/check", json={"text": WAITS, "presets": {"V.E.MODE": [1]}})
+    assert r.status_code == 422
+    with pytest.raises(Exception, match=r"V\.E\.NOPE is not declared"):
+        hli.check(WAITS, presets={"V.E.NOPE": 1})
+    assert hli.check(WAITS, presets=presets).completed
+
+
+@pytest.mark.req("N-12")
+async def test_a_windows_1252_program_is_read_by_every_door(
+    hli: Harness, client: httpx.AsyncClient, tmp_path: Path
+) -> None:
+    text = "%umlaut\n; Prüfung: Fräsen – 5 €\nN10 G01 X10 F6000\nN20 M30\n"
+    (tmp_path / "UMLAUT.NC").write_bytes(text.encode("cp1252"))
+    assert hli.check(tmp_path / "umlaut.nc").completed  # the name without regard to case, the bytes as cp1252
+    r = await client.post("/api/check", content=text.encode("cp1252"), headers={"content-type": "text/plain"})
+    assert r.json()["status"] == "ok"
+    r = await client.post(
+        "/api/channels/1/program?name=umlaut",
+        content=b"\xef\xbb\xbf" + text.encode("utf-8"),
+        headers={"content-type": "text/plain"},
+    )
+    assert r.status_code == 200, r.text
+
+
 # --- through `hli-server run`: the doors process ----------------------------------------------------------
 @pytest.mark.slow
 @pytest.mark.req("N-10")

@@ -21,8 +21,11 @@ class FakeHost:
         files: Mapping[str, str] | None = None,
         external: list[ExternalVarSpec] | None = None,
         axes: tuple[str, ...] = AXES,
+        implicit: Mapping[int, str] | None = None,
     ) -> None:
         self.channel_number = 1
+        self.implicit = dict(implicit or {})
+        """G code -> program: the channel's P-CHAN-00160..00169 / P-CHAN-00187."""
         self.external = ExternalVariables(external or [])
         self.library = MemoryLibrary(files or {})
         self.messages: list[tuple[str, bool, str, str, int, str]] = []
@@ -35,6 +38,9 @@ class FakeHost:
 
     def searched(self) -> tuple[str, ...]:
         return self.library.searched()
+
+    def implicit_program(self, g: int) -> str:
+        return self.implicit.get(g, "")
 
     def message(self, text: str, save: bool, file: str, program: str, line: int, block: str) -> None:
         self.messages.append((text, save, file, program, line, block))

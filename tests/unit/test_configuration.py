@@ -893,6 +893,10 @@ KERNEL_DEFAULTS: dict[str, object] = {
     "P-AXIS-00532": -1,
     "P-CHAN-00114": 0,
     "P-CHAN-00120": 0,
+    # g80_prog_file .. g89_prog_file, g800_prog_file[i]: "Default value *", "the default value of the variable
+    # is an empty string" (tf5200_channel_parameter 149417611, 149419147)
+    **{f"P-CHAN-0016{k}": "" for k in range(10)},
+    "P-CHAN-00187": [],
     "P-CHAN-00176": 0,
     "P-CHAN-00268": 0,
     "P-CHAN-00442": 0,

@@ -33,7 +33,7 @@ def test_the_requirement_list_has_every_id_once_in_order() -> None:
         + [f"C3-{i:02d}" for i in range(1, 11)]
         + [f"A3-{i:02d}" for i in range(1, 6)]
         + [f"H-{i:02d}" for i in range(1, 13)]
-        + [f"N-{i:02d}" for i in range(1, 11)]
+        + [f"N-{i:02d}" for i in range(1, 14)]
         + [f"B-{i:02d}" for i in range(1, 5)]
     )
     assert ids == expected

@@ -95,7 +95,7 @@ MESSAGES = [
     ("N25 HierStehtIrgendwasKomisches", (910100, ["'HIERSTEHTIRGENDWASKOMISCHES'"], ["'IERSTEHT"])),
     ("FOO X2", (910100, ["unknown word 'FOO'"], ["'OO'", "in an expression"])),
     ("G04 Y2", (20014, ["first main axis"], [])),
-    ("G805[-45.785, 32.720, 2.620]", (910110, ["G805[..]", "implicit subroutine call"], ["label"])),
+    ("G805[-45.785, 32.720, 2.620]", (20131, ["G805", "P-CHAN-00187"], ["label"])),
     ("G01 X1 F100 [LBL]", (910100, ["'[LBL]'", "label"], [])),
     ("#FOO BAR", (910109, ["#FOO", "#TOOL PREP", "#RT CYCLE", "#IDENT WR"], ["#FOO BAR"])),
 ]

@@ -97,6 +97,12 @@ class CheckBody(ProgramBody):
         le=CHECK_MAX_TIMEOUT_S,
         description="wall-clock limit [s]: past it the check is ended and the answer is 504",
     )
+    presets: dict[str, StrictBool | StrictInt | StrictFloat | StrictStr] = Field(
+        default_factory=dict,
+        max_length=4096,
+        description='V.E. values before the start, as the PLC would give them (`{"V.E.PLC_READY": true}`; '
+        "`check --set`): a number or a boolean (a string for a V.E. STRING)",
+    )
 
 
 class SelectBody(_Body):

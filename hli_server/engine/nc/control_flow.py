@@ -166,8 +166,8 @@ class ControlFlow(Effects):
             return
         if keyword == C_ENDWHILE:
             entry = self._top(frame, stmt, C_WHILE)
+            self._iterate(frame, stmt)  # the loop still open if the cap stops it here (nc/waiting.py)
             frame.open.pop()
-            self._iterate(frame, stmt)
             frame.line = entry.start
             return
         if keyword in (C_DO, C_REPEAT):

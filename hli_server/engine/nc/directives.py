@@ -184,6 +184,11 @@ class Host(Protocol):
         """Where :meth:`find_program` looks (for the alarm of a program not found)."""
         ...
 
+    def implicit_program(self, g: int) -> str:
+        """The global subprogram the channel's parameters assign to the implicit call ``G<g>``
+        (P-CHAN-00160..00169 for G80..G89, P-CHAN-00187 for G800..G839; nc/implicit.py), "" for none."""
+        ...
+
     def message(self, text: str, save: bool, file: str, program: str, line: int, block: str) -> None:
         """``#MSG`` (``save``: ``#MSG SAVE`` into ``file``): the channel emits the events."""
         ...

@@ -211,7 +211,11 @@ class Effects(VariableAccess):
             )
             return
         if command == "FILE NAME":
-            self._message_file = stmt.files.get("MSG", self._message_file)
+            for key, name in stmt.files.items():
+                if key == "MSG":
+                    self._message_file = name
+                else:  # G80..G89, G800..G839: the program of the implicit call (nc/implicit.py)
+                    self._implicit_names[int(key[1:])] = name
             if "MSG" in stmt.params:
                 file_name = self._evaluate(stmt, stmt.params["MSG"])
                 if not isinstance(file_name, str):

@@ -26,6 +26,7 @@ from hli_server.engine.nc.language import (
     HASH_COMMANDS,
     IDENT_VALUES,
     IDENT_WORDS,
+    IMPLICIT_G_CODES,
     MAX_NAME,
     MSG_OPTIONS,
     RT_OPERATIONS,
@@ -831,8 +832,8 @@ class HashParser(ExpressionParser):
         return Hash(self.raw, self.number, command, options, [], params=params)
 
     def file_name(self, named: bool = False) -> Stmt:
-        """``#FILE NAME [MSG="report.txt"]`` (207504523; older ``#FILENAME``): the file ``#MSG SAVE``
-        writes to."""
+        """``#FILE NAME [MSG="report.txt" G803="safe.nc"]`` (207504523; older ``#FILENAME``): the file
+        ``#MSG SAVE`` writes to, the programs of the implicit calls G80..G89 / G800..G839 (PM 206278923)."""
         if not named and not self.keyword("NAME"):
             rest = self.word_at(self.pos) if self.pos < self.n else ""
             self.fail(
@@ -871,14 +872,15 @@ class HashParser(ExpressionParser):
                 self.fail(A_CONTROL_SYNTAX, "#FILE NAME: quote not closed")
             value = self.code[self.pos + 1 : close]
             self.pos = close + 1
-            if key != "MSG":
+            implicit = key[:1] == "G" and key[1:].isdigit() and int(key[1:]) in IMPLICIT_G_CODES
+            if key != "MSG" and not implicit:
                 self.fail(
                     A_NOT_SIMULATED,
-                    f"#FILE NAME [{key}=..]: implicit subroutine calls are not simulated; only MSG= (the "
-                    "file of #MSG SAVE) is",
+                    f"#FILE NAME [{key}=..]: not simulated; MSG= (the file of #MSG SAVE) and G80..G89, "
+                    "G800..G839 (the programs of the implicit calls) are",
                 )
             if not value or len(value) > MAX_NAME:
-                self.fail(A_LIMIT, f'#FILE NAME [MSG=".."]: a file name has 1 to {MAX_NAME} characters')
+                self.fail(A_LIMIT, f'#FILE NAME [{key}=".."]: a file name has 1 to {MAX_NAME} characters')
             files[key] = value
         if not self.at_end():
             self.fail(A_CONTROL_SYNTAX, f"{self.word_at(self.pos)!r} after #FILE NAME [..]")

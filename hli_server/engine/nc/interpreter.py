@@ -28,6 +28,8 @@ it, no indirection per statement):
 * ``nc/control_flow.py``: ``$IF`` .. ``$ENDFOR``, ``$GOTO``, ``#IF``, and skipping;
 * ``nc/calls.py``: program levels (``L``, ``LL``, ``L CYCLE``; ``nc/levels.py`` finds the program a call
   names), M17/M29/M30/M02;
+* ``nc/implicit.py``: the implicit calls G80..G89 / G800..G839 (the program their channel parameter or
+  ``#FILE NAME [G8xx=..]`` assigns);
 * here: the loop that hands out blocks and directives, and the blocks of words.
 
 Work per cycle is bounded (docs/check.md, "Bad input"): every statement run or skipped spends one unit of
@@ -43,7 +45,6 @@ from typing import TextIO
 
 from hli_server.engine.nc.block_builder import build_block
 from hli_server.engine.nc.blocks import Block, NcError
-from hli_server.engine.nc.calls import ProgramLevels
 from hli_server.engine.nc.directives import (
     PAUSE,
     Directive,
@@ -53,8 +54,8 @@ from hli_server.engine.nc.directives import (
 from hli_server.engine.nc.expr import (
     ALARM_EXPRESSION,
     EvalError,
-    Expr,
 )
+from hli_server.engine.nc.implicit import ImplicitCalls
 from hli_server.engine.nc.language import (
     A_CONTROL_SYNTAX,
     A_UNEXPECTED,
@@ -72,7 +73,6 @@ from hli_server.engine.nc.source import LineTooLongError, ProgramText
 from hli_server.engine.nc.state import STATEMENTS_PER_CYCLE
 from hli_server.engine.nc.statements import (
     Assign,
-    Call,
     ConstBlock,
     Control,
     Empty,
@@ -84,12 +84,14 @@ from hli_server.engine.nc.statements import (
     VarBlock,
     Word,
     Words,
+    word_expressions,
 )
+from hli_server.engine.nc.waiting import WaitingLoop, state_of, waiting_loop
 
 __all__ = ["STATEMENTS_PER_CYCLE", "Interpreter"]
 
 
-class Interpreter(ProgramLevels):
+class Interpreter(ImplicitCalls):
     """Runs programs for one channel (see the module's description).
 
     ``budget`` is the statements per cycle (None: unbounded, for a geometry check); ``iteration_cap``
@@ -112,6 +114,7 @@ class Interpreter(ProgramLevels):
         self._rt_body = None
         self._rt_define = None
         self._rt_block_scope.clear()
+        self._implicit_names = {}
         self.iterations = 0
         self.statements = 0
         self._left = self.budget if self.budget is not None else 0
@@ -148,6 +151,15 @@ class Interpreter(ProgramLevels):
             if code.strip() and CORNER_PASSES.match(code) is None:
                 return "30" in code and CORNER_AHEAD.search(code.upper()) is not None
         return False
+
+    def state(self) -> tuple[object, ...]:
+        """The variables' values, comparable (``nc/waiting.py``): a loop that turns while they stay the
+        same, with nothing moving or emitted, cannot end."""
+        return state_of(self._frames, self._params, self._param_arrays, self._program_vars, self._static_vars)
+
+    def waiting_loop(self) -> WaitingLoop | None:
+        """The loop the program turns in now and the ``V.E.`` variables it reads (``nc/waiting.py``)."""
+        return waiting_loop(self._frames, self.host.external, self.host.channel_number)
 
     def refill(self) -> None:
         """A new cycle: a new budget."""
@@ -314,7 +326,7 @@ class Interpreter(ProgramLevels):
         raise stmt.error(ALARM_EXPRESSION, f"cannot run {stmt.text!r}")  # pragma: no cover
 
     def _words(self, frame: Frame, stmt: Words) -> None:
-        if stmt.sync_reads != 0 and self._needs_flush(frame, stmt, self._word_exprs(stmt)):
+        if stmt.sync_reads != 0 and self._needs_flush(frame, stmt, word_expressions(stmt)):
             self._flush_wait(frame, stmt)
             return
         words: list[tuple[Word, float, float | None]] = []
@@ -349,35 +361,20 @@ class Interpreter(ProgramLevels):
                 self._pending.append(SyncAction(place, action))
         if block is not None and block.m_codes:
             self._program_flow(frame, block)
-            if (frame.returning or self._ended) and (stmt.call is not None or stmt.goto is not None):
+            if (frame.returning or self._ended) and (
+                stmt.call is not None or stmt.goto is not None or stmt.implicit is not None
+            ):
                 raise stmt.error(
                     A_CONTROL_SYNTAX, "a block that ends the program or subroutine calls or jumps"
                 )
         if stmt.call is not None:
             place = block if block is not None else self._place_block(frame, stmt)
             self._call(frame, stmt, stmt.call, place)
+        elif stmt.implicit is not None:
+            place = block if block is not None else self._place_block(frame, stmt)
+            self._implicit_call(frame, stmt, stmt.implicit, place)
         elif stmt.goto is not None:
             self._goto(frame, stmt, stmt.goto)
-
-    @staticmethod
-    def _word_exprs(stmt: Words) -> list[Expr]:
-        exprs: list[Expr] = []
-        for item in stmt.items:
-            if isinstance(item, Word):
-                exprs.append(item.value)
-                if item.extra is not None:
-                    exprs.append(item.extra)
-            elif isinstance(item, Assign):
-                exprs.append(item.value)
-                exprs.extend(item.target.indices)
-            elif isinstance(item, Call):
-                exprs.extend(v for _, v in item.params)
-                if item.variable is not None:  # L V.E.name: a synchronous V.E. is read after the flush
-                    exprs.append(item.variable)
-            elif isinstance(item, Technology):
-                exprs.extend(item.params.values())
-                exprs.extend(w.value for w in item.main)
-        return exprs
 
     def _technology(
         self, stmt: Stmt, item: Technology, words: list[tuple[Word, float, float | None]]

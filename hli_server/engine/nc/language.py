@@ -43,6 +43,9 @@ A_ENDDO_EXTRA: Final = 20241
 A_COND_FIRST: Final = 20593
 A_GOTO_CHAR: Final = 20839
 A_AFTER_CALL: Final = 21542
+A_UNKNOWN_G_FUNCTION: Final = 20131
+"""The kernel's "Unknown G function": an implicit call G80..G89 / G800..G839 without a subprogram
+assigned (P-CHAN-00160..00169, P-CHAN-00187, ``#FILE NAME [G8xx=..]``; PM 206278923)."""
 # the interpreter's: the kernel's (TF5200 diagnosis) and the project's (914xxx)
 A_STACK_OVERFLOW: Final = 20360
 A_OPEN_VALID: Final = 20375
@@ -608,3 +611,8 @@ KNOWN_G: Final = (
     | frozenset(TRC_G_CODES)
 )
 """Every G code simulated: the word parser's (``nc/parser.py``, ``KNOWN_G_CODES``) and the ones above."""
+IMPLICIT_G_CODES: Final = frozenset(range(80, 90)) | frozenset(range(800, 840))
+"""Implicit subprogram calls (PM 206278923 "Implicit subroutine calls"; N-11): G80..G89 and G800..G839 call
+the global subprogram the channel assigns to them (nc/implicit.py)."""
+MAX_IMPLICIT_PARAMETERS: Final = 50
+"""Values in the brackets of an implicit call, ``G805[v1, v2, , v4]`` (PM 206278923: "a maximum of 50")."""

@@ -260,10 +260,26 @@ class ProgramResolver:
             raise stmt.error(
                 A_NOT_FOUND,
                 f"{'cycle' if call.cycle else 'global subroutine'} {call.name} not found; searched: "
-                f"{where}{_OUTSIDE if _leaves_directories(call.name) else ''}",
+                f"{where}{_OUTSIDE if _leaves_directories(call.name) else ''}"
+                f"{self._extension_hint(call.name)}",
             )
         units = self._global_units(found.name, found.text)
         return Frame("cycle" if call.cycle else "global", units, found.name, units.main(), place)
+
+    def _extension_hint(self, name: str) -> str:
+        """A name without an extension whose ``.nc`` file is there: the kernel calls a global subroutine
+        by its complete file name, extension included (manual "Global subroutines", 206834699), so
+        ``L up1`` does not find ``UP1.nc`` there either; the alarm says what to write."""
+        if "." in name.replace("\\", "/").rsplit("/", 1)[-1]:
+            return ""
+        found = self.host.find_program(name + ".nc")
+        if found is None:
+            return ""
+        file = found.origin.replace("\\", "/").rsplit("/", 1)[-1].removeprefix("upload:")
+        return (
+            f"; {file} is there: a global subroutine is called by its complete file name, extension "
+            f"included (L {name}.nc)"
+        )
 
     def _global_units(self, name: str, text: str) -> Units:
         """The units of global subprogram ``name``: those of an earlier call while its text is the same

@@ -88,6 +88,8 @@ class InterpreterState(Env):
         the block, else deleted)."""
         self._approximated: set[str] = set()
         """Constructs approximated in this program and already said so (warning 911041, once each)."""
+        self._implicit_names: dict[int, str] = {}
+        """G code -> the subprogram ``#FILE NAME [G8xx=".."]`` assigned in this run (nc/implicit.py)."""
         self.iterations = 0
         self.statements = 0
         """Statements run or skipped since the program started (for reports)."""

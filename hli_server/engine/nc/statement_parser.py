@@ -52,6 +52,8 @@ from hli_server.engine.nc.language import (
     C_IF,
     CONDITION_ONLY,
     CONTROL_WORDS,
+    IMPLICIT_G_CODES,
+    MAX_IMPLICIT_PARAMETERS,
     MAX_NAME,
     MAX_STRING,
     RT_FREQUENCIES,
@@ -66,6 +68,7 @@ from hli_server.engine.nc.statements import (
     Declaration,
     Empty,
     Goto,
+    ImplicitCall,
     Item,
     Stmt,
     Technology,
@@ -135,6 +138,7 @@ class StatementParser(HashParser):
     def items(self) -> list[Item]:
         items: list[Item] = []
         seen_call: Call | None = None
+        implicit: ImplicitCall | None = None
         while not self.at_end():
             start = self.pos
             if seen_call is not None:
@@ -146,6 +150,14 @@ class StatementParser(HashParser):
             item = self.item()
             if isinstance(item, Call):
                 seen_call = item
+            if implicit is not None and isinstance(item, (Call, Goto, ImplicitCall)):
+                self.fail(
+                    A_TWICE if isinstance(item, ImplicitCall) else A_AFTER_CALL,
+                    f"{item.text!r} in the block of the implicit call {implicit.text!r}: a block calls one "
+                    "subprogram or jumps, as its last action (G80..G89 and G800..G839 are one G group)",
+                )
+            if isinstance(item, ImplicitCall):
+                implicit = item  # an L call or a $GOTO before it already ended the block
             items.append(item)
             if (
                 isinstance(item, Word)
@@ -208,12 +220,12 @@ class StatementParser(HashParser):
                 f"the parameterised jump of M17/M29 ({u[start:].strip()}: PM 206781707) is not "
                 "simulated: see docs/nc-language.md",
             )
-        implicit = _IMPLICIT_CALL_BEFORE.search(u, 0, start) if c == "[" else None
-        if implicit is not None:
+        before = _IMPLICIT_CALL_BEFORE.search(u, 0, start) if c == "[" else None
+        if before is not None:  # G805 [..]: the call's brackets follow its G code directly
             self.fail(
-                A_NOT_SIMULATED,
-                f"G{implicit[1]}[..]: the implicit subroutine call with parameters (PM 206278923) is not "
-                "simulated: see docs/nc-language.md",
+                A_UNKNOWN_WORD,
+                f"G{before[1]} {self.word_at(start)}: the values of an implicit subroutine call follow its G "
+                f"code without a space (G{before[1]}[..], PM 206278923)",
             )
         if c == "[":
             self.fail(
@@ -236,6 +248,10 @@ class StatementParser(HashParser):
             return self.call(start)
         if c == "L" and self.peek(1) not in LETTERS and self.peek(1) != "":
             return self.call(start)
+        if c == "G":
+            implicit = self.implicit_call(start)
+            if implicit is not None:
+                return implicit
         if c == "N":
             word = self.word_at(start)
             if self.number is None and not u[:start].strip() and self.peek(1) in ("P", "[", "V"):
@@ -520,6 +536,58 @@ class StatementParser(HashParser):
         return Assign(self.u[start : self.pos].strip(), ref, value)
 
     # --- calls -------------------------------------------------------------------------------------------
+    def implicit_call(self, start: int) -> ImplicitCall | None:
+        """``G803``, ``G805[10.0, 9.7, , 2.5]`` (PM 206278923 "Implicit subroutine calls"): the call of the
+        subprogram assigned to G80..G89 / G800..G839, with up to 50 values (REAL expressions) in brackets,
+        a gap marked by ``, ,``; None for any other G word."""
+        u = self.u
+        p = start + 1
+        while p < self.n and u[p] in DIGITS:
+            p += 1
+        digits = u[start + 1 : p]
+        if not digits or len(digits) > 5 or (p < self.n and u[p] in ".="):
+            return None
+        g = int(digits)
+        if g not in IMPLICIT_G_CODES:
+            return None
+        self.pos = p
+        self.blanks()
+        params: list[tuple[int, Expr]] = []
+        bracket = self.peek() == "["
+        if bracket:
+            self.pos += 1
+            self.depth += 1
+            number = 1
+            while True:
+                self.blanks()
+                c = self.peek()
+                if c == "]" and number == 1 and not params:
+                    self.pos += 1
+                    break
+                if c not in (",", "]"):
+                    if self.pos >= self.n:
+                        self.fail(A_CONTROL_SYNTAX, f"G{g}[: ']' missing after the values")
+                    if number > MAX_IMPLICIT_PARAMETERS:
+                        self.fail(
+                            A_LIMIT,
+                            f"G{g}[..]: more than {MAX_IMPLICIT_PARAMETERS} values (PM 206278923: at most "
+                            f"{MAX_IMPLICIT_PARAMETERS})",
+                        )
+                    params.append((number, self.expression(stop_at_blank=False)))
+                    self.blanks()
+                    c = self.peek()
+                if c == ",":
+                    self.pos += 1
+                    number += 1
+                    continue
+                if c == "]":
+                    self.pos += 1
+                    break
+                got = repr(self.word_at(self.pos)) if self.pos < self.n else "the end of the block"
+                self.fail(A_CONTROL_SYNTAX, f"G{g}[..]: expected ',' or ']' after value {number}, got {got}")
+            self.depth -= 1
+        return ImplicitCall(u[start : self.pos].strip(), g, params, bracket)
+
     def call(self, start: int) -> Call:
         local = self.u.startswith("LL", start) and self.peek(2) in (" ", "\t", "")
         self.pos = start + (2 if local else 1)

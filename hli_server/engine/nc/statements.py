@@ -29,6 +29,7 @@ __all__ = [
     "Goto",
     "Hash",
     "Header",
+    "ImplicitCall",
     "Item",
     "Refused",
     "Stmt",
@@ -37,6 +38,7 @@ __all__ = [
     "Word",
     "Words",
     "control_keyword",
+    "word_expressions",
 ]
 
 _CONTROL_WORD: Final = re.compile(r"\s*(?:/[0-9]*\s*)?(?:N\s*[0-9]+\s*:?\s*)?\$([A-Za-z]+)", re.ASCII)
@@ -182,6 +184,19 @@ class Call(Item):
         return Call(self.text, self.local, name, self.cycle, self.params)
 
 
+class ImplicitCall(Item):
+    """``G803``, ``G805[10.0, 9.7, , 2.5]``: the implicit call of the subprogram assigned to ``g``
+    (PM 206278923; nc/implicit.py), at the end of its block. ``params`` are the values in brackets as
+    ``@P`` numbers (a gap ``, ,`` leaves its number out); with values the call is a cycle call."""
+
+    def __init__(self, text: str, g: int, params: list[tuple[int, Expr]], bracket: bool) -> None:
+        super().__init__(text)
+        self.g = g
+        self.params = params
+        self.bracket = bracket
+        """Values in brackets were programmed (``G805[]`` too): the call is a cycle call."""
+
+
 class Goto(Item):
     """``$GOTO N<expr>`` (``target`` None, ``number`` the expression) or ``$GOTO [name]``."""
 
@@ -199,11 +214,38 @@ class Words(Stmt):
         self.items = items
         self.call: Call | None = None
         self.goto: Goto | None = None
+        self.implicit: ImplicitCall | None = None
         for item in items:
             if isinstance(item, Call):
                 self.call = item
             elif isinstance(item, Goto):
                 self.goto = item
+            elif isinstance(item, ImplicitCall):
+                self.implicit = item
+
+
+def word_expressions(stmt: Words) -> list[Expr]:
+    """Every expression a block of words evaluates: word values, assignments (and their targets'
+    indices), a call's parameters."""
+    exprs: list[Expr] = []
+    for item in stmt.items:
+        if isinstance(item, Word):
+            exprs.append(item.value)
+            if item.extra is not None:
+                exprs.append(item.extra)
+        elif isinstance(item, Assign):
+            exprs.append(item.value)
+            exprs.extend(item.target.indices)
+        elif isinstance(item, Call):
+            exprs.extend(v for _, v in item.params)
+            if item.variable is not None:  # L V.E.name: a synchronous V.E. is read after the flush
+                exprs.append(item.variable)
+        elif isinstance(item, ImplicitCall):
+            exprs.extend(v for _, v in item.params)
+        elif isinstance(item, Technology):
+            exprs.extend(item.params.values())
+            exprs.extend(w.value for w in item.main)
+    return exprs
 
 
 class Control(Stmt):

@@ -20,6 +20,7 @@ from hli_server.adapters.http.models import (
     ProgramBody,
     SelectBody,
 )
+from hli_server.codecs.nc_text import decode_program
 from schemas.results import ProbeDeviation, ProgramLoaded, ProgramSelected
 from schemas.wire import Mode
 
@@ -61,9 +62,9 @@ async def post_program(
     else:
         files = {}
         try:
-            text = raw.decode("utf-8")
-        except UnicodeDecodeError as exc:
-            raise HTTPException(422, f"program text is not UTF-8 (byte {exc.start})") from None
+            text = decode_program(raw)  # UTF-8 (a byte order mark or not) or Windows-1252, as files
+        except UnicodeDecodeError as exc:  # a UTF-16 body cut short
+            raise HTTPException(422, f"program text cannot be read: {exc}") from None
         prog_name = name
         if not text.strip():
             raise HTTPException(422, "empty program: send the NC text as the body (text/plain)")

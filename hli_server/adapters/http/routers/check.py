@@ -15,6 +15,8 @@ from pydantic import ValidationError
 
 from hli_server.adapters.http.deps import HostDep
 from hli_server.adapters.http.models import CheckBody
+from hli_server.codecs.nc_text import decode_program
+from hli_server.codecs.presets import PresetSyntaxError, parse_preset
 from schemas.results import CheckReport
 
 __all__ = ["router"]
@@ -32,11 +34,23 @@ _BODY_DOC = {
 }
 
 
+def _presets(texts: list[str]) -> dict[str, bool | int | float | str]:
+    """``?set=V.E.NAME=VALUE`` (repeated), as ``check --set``; a malformed one is 422."""
+    presets: dict[str, bool | int | float | str] = {}
+    for text in texts:
+        try:
+            name, value = parse_preset(text)
+        except PresetSyntaxError as exc:
+            raise HTTPException(422, f"set: {exc}") from None
+        presets[name] = value
+    return presets
+
+
 @router.post(
     "/api/check",
     summary="Check a program offline (as `hli-server check`): JSON {text, name, files, channel, "
-    "geometry_only, max_cycles, max_iterations, timeout_s}, or the NC text as text/plain with those as "
-    "query parameters",
+    "geometry_only, max_cycles, max_iterations, timeout_s, presets}, or the NC text as text/plain with "
+    "those as query parameters (presets as set=V.E.NAME=VALUE, repeated)",
     openapi_extra=_BODY_DOC,
     response_model=CheckReport,
     responses={
@@ -55,6 +69,10 @@ async def post_check(
     max_cycles: Annotated[int | None, Query(ge=1, le=50_000_000)] = None,
     max_iterations: Annotated[int | None, Query(ge=1, le=100_000_000)] = None,
     timeout_s: Annotated[float | None, Query(gt=0, le=600)] = None,
+    set_: Annotated[
+        list[str] | None,
+        Query(alias="set", max_length=4096, description="V.E.NAME=VALUE, as `check --set` (a text body)"),
+    ] = None,
 ) -> CheckReport:
     raw = await request.body()
     content_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
@@ -65,9 +83,9 @@ async def post_check(
             raise RequestValidationError(exc.errors(include_url=False)) from None
     else:
         try:
-            text = raw.decode("utf-8")
-        except UnicodeDecodeError as exc:
-            raise HTTPException(422, f"program text is not UTF-8 (byte {exc.start})") from None
+            text = decode_program(raw)  # UTF-8 (a byte order mark or not) or Windows-1252, as files
+        except UnicodeDecodeError as exc:  # a UTF-16 body cut short
+            raise HTTPException(422, f"program text cannot be read: {exc}") from None
         if not text.strip():
             raise HTTPException(422, "empty program: send the NC text as the body (text/plain)")
         fields: dict[str, Any] = {
@@ -83,6 +101,8 @@ async def post_check(
         ):
             if value is not None:
                 fields[key] = value
+        if set_:
+            fields["presets"] = _presets(set_)
         body = CheckBody(**fields)
     return await host.checker.check(
         body.text,
@@ -93,4 +113,5 @@ async def post_check(
         max_cycles=body.max_cycles,
         max_iterations=body.max_iterations,
         timeout_s=body.timeout_s,
+        presets=body.presets,
     )
