@@ -227,6 +227,12 @@ _TABLE: tuple[AlarmDef, ...] = (
         "kernel",
         page="https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/206278923.html",
     ),
+    _e(
+        21507,
+        "Double programming in #CHANNEL INIT (keywords twice or in invalid combinations)",
+        "kernel",
+        page=_DIAG + "254971531.html",
+    ),
     _e(20138, "G100 is not allowed with the current measuring type", "kernel", page=_DIAG + "250906763.html"),
     _w(
         20685,

@@ -18,6 +18,7 @@ from hli_server.engine.nc.expr_parser import NAME_CHARS, ExpressionParser
 from hli_server.engine.nc.language import (
     A_COMMENT_OPEN,
     A_COND_FIRST,
+    A_CHANNEL_INIT,
     A_CONTROL_SYNTAX,
     A_LIMIT,
     A_NOT_SIMULATED,
@@ -33,6 +34,7 @@ from hli_server.engine.nc.language import (
     RT_SCOPES,
     SLOPE_TYPES,
     UNKNOWN_HASH_HINT,
+    VECTOR_LIMITS,
 )
 from hli_server.engine.nc.statements import Control, Hash, Stmt
 
@@ -126,6 +128,10 @@ class HashParser(ExpressionParser):
             return Hash(self.raw, self.number, "FRC", [], args)
         if command in ("AKIMA TRANS", "AKIMA STARTVECTOR", "AKIMA ENDVECTOR", "SET ASPLINE"):
             return self.akima(command)
+        if command == "VECTOR LIMIT":
+            return self.vector_limit()
+        if command == "CHANNEL INIT":
+            return self.channel_init()
         if command == "COMMENT":
             self.fail(
                 A_COMMENT_OPEN,
@@ -830,6 +836,72 @@ class HashParser(ExpressionParser):
         if inside:
             self.fail(A_CONTROL_SYNTAX, f"#{command}: ']' missing")
         return Hash(self.raw, self.number, command, options, [], params=params)
+
+    def vector_limit(self) -> Stmt:
+        """``#VECTOR LIMIT ON|OFF [ [ACC=..] [DEC=..] [RADIAL_ACC=..] [RADIAL_JERK=..] [JERK=..]
+        [TRANS_ACC=..] [VEL=..] [FEED] [RAPID] ]``, ``#VECTOR LIMIT ON|OFF ALL`` (PM 207477899): a limit
+        with its value, or without one (the channel parameter's default)."""
+        stmt = self.motion_options("VECTOR LIMIT")
+        assert isinstance(stmt, Hash)
+        words = [w for w in stmt.options if w not in ("ON", "OFF")]
+        switch = [w for w in stmt.options if w in ("ON", "OFF")]
+        if len(switch) != 1 or stmt.options[0] not in ("ON", "OFF"):
+            self.fail(A_CONTROL_SYNTAX, "#VECTOR LIMIT: ON or OFF expected (#VECTOR LIMIT ON [VEL=..])")
+        known = (*VECTOR_LIMITS, "FEED", "RAPID", "ALL")
+        for key in [*words, *stmt.params]:
+            if key not in known:
+                self.fail(
+                    A_CONTROL_SYNTAX,
+                    f"#VECTOR LIMIT: unknown keyword {key!r} (ACC, DEC, RADIAL_ACC, RADIAL_JERK, JERK, "
+                    "TRANS_ACC, VEL, FEED, RAPID, ALL)",
+                )
+        for key in stmt.params:
+            if key in ("FEED", "RAPID", "ALL"):
+                self.fail(A_CONTROL_SYNTAX, f"#VECTOR LIMIT: {key} takes no value")
+        if "ALL" in words and (len(words) > 1 or stmt.params):
+            self.fail(A_CONTROL_SYNTAX, "#VECTOR LIMIT ON|OFF ALL stands alone")
+        return stmt
+
+    def channel_init(self) -> Stmt:
+        """``#CHANNEL INIT [CMDPOS|ACTPOS { AX=<name> | AXNR=.. } ]`` (PM 206703627, 206709515): alone in
+        its block; a keyword twice or CMDPOS with ACTPOS is the kernel's 21507."""
+        self.blanks()
+        self.expect("[", "after #CHANNEL INIT (#CHANNEL INIT [CMDPOS])")
+        options: list[str] = []
+        args: list[Expr] = []
+        axes: list[str] = []
+        while self.next_entry("#CHANNEL INIT"):
+            start = self.pos
+            key = self.name()
+            if key in ("CMDPOS", "ACTPOS"):
+                if options:
+                    self.fail(A_CHANNEL_INIT, f"#CHANNEL INIT: {key} after {options[0]} (one of CMDPOS, ACTPOS)")
+                options.append(key)
+                continue
+            if key not in ("AX", "AXNR"):
+                self.fail(
+                    A_CONTROL_SYNTAX,
+                    f"#CHANNEL INIT: unexpected {self.word_at(start)!r} (CMDPOS, ACTPOS, AX=<name>, AXNR=..)",
+                )
+            if not options:
+                self.fail(A_CHANNEL_INIT, f"#CHANNEL INIT: {key} before CMDPOS or ACTPOS")
+            self.blanks()
+            self.expect("=", f"after {key} ({key}=..)")
+            self.blanks()
+            if key == "AX":
+                axis = self.name()
+                if not axis:
+                    self.fail(A_CONTROL_SYNTAX, "#CHANNEL INIT: AX= without an axis name")
+                if axis in axes:
+                    self.fail(A_CHANNEL_INIT, f"#CHANNEL INIT: axis {axis} programmed twice")
+                axes.append(axis)
+            else:
+                args.append(self.bracket_value())
+        if not options:
+            self.fail(A_CONTROL_SYNTAX, "#CHANNEL INIT [..]: CMDPOS or ACTPOS expected")
+        if not self.at_end():
+            self.fail(A_CHANNEL_INIT, f"#CHANNEL INIT must stand alone in its block: {self.word_at(self.pos)!r}")
+        return Hash(self.raw, self.number, "CHANNEL INIT", options + [f"AX:{a}" for a in axes], args)
 
     def file_name(self, named: bool = False) -> Stmt:
         """``#FILE NAME [MSG="report.txt" G803="safe.nc"]`` (207504523; older ``#FILENAME``): the file
