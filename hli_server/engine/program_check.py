@@ -435,6 +435,9 @@ class ProgramCheck:
         source = ProgramText(text, self.name)
         ch.program_name = self.name
         progress = self.progress
+        # #CHANNEL INIT: the axes do not move here; the path's end the decoder keeps is where they would
+        # be (their command positions once the path is at rest)
+        positions, decoder.positions_handler = decoder.positions_handler, None
         try:
             if self.batch_in_use():
                 batch = BatchGeometryCheck(ch)
@@ -477,6 +480,8 @@ class ProgramCheck:
                 block=cap.place,
                 params={"variables": loop.variables} if loop is not None and loop.variables else None,
             )
+        finally:
+            decoder.positions_handler = positions
         result.blocks = decoder.blocks_decoded
         result.final_position = dict(zip(ch.axis_names, decoder.position, strict=True))
 
