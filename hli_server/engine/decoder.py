@@ -31,9 +31,9 @@ from hli_server.engine.kinematics.vectors import sub, unit
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
 from hli_server.engine.nc.directives import (
     PAUSE,
+    ChannelInit,
     ContourDirective,
     CoordinateCommand,
-    ChannelInit,
     Directive,
     FlushStop,
     FlushWait,

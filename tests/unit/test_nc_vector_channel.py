@@ -7,8 +7,7 @@ from __future__ import annotations
 import pytest
 
 from hli_server.engine.nc.directives import ChannelInit, VectorLimit
-from tests.unit.engine_helpers import mill, record_events, start
-from tests.unit.engine_helpers import cycles_until_done
+from tests.unit.engine_helpers import cycles_until_done, mill, record_events, start
 from tests.unit.nc_helpers import error, interpret
 
 pytestmark = pytest.mark.req("N-08")
@@ -143,7 +142,8 @@ def peak_speeds(program: str) -> list[float]:
 
 def test_vel_caps_the_path_velocity_until_off() -> None:
     peaks = peak_speeds(
-        "G01 X20 F3000\nG04 X0.1\n#VECTOR LIMIT ON [VEL=600]\nX40\nG04 X0.1\n#VECTOR LIMIT OFF [VEL]\nX60\nM30\n"
+        "G01 X20 F3000\nG04 X0.1\n#VECTOR LIMIT ON [VEL=600]\nX40\nG04 X0.1\n"
+        "#VECTOR LIMIT OFF [VEL]\nX60\nM30\n"
     )
     assert len(peaks) == 3
     assert peaks[0] == pytest.approx(3000.0, rel=1e-3)

@@ -22,8 +22,8 @@ from hli_server.engine.programs import ProgramFile
 
 __all__ = [
     "PAUSE",
-    "ContourDirective",
     "ChannelInit",
+    "ContourDirective",
     "CoordinateCommand",
     "Directive",
     "FlushStop",

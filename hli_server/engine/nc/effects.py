@@ -353,7 +353,9 @@ class Effects(VariableAccess):
             names.append(name)
         for name in names:
             if self.host.axis_value("ABS", name) is None:
-                raise stmt.error(A_UNKNOWN_AXIS_NAME, f"#CHANNEL INIT AX={name}: no axis {name} in this channel")
+                raise stmt.error(
+                    A_UNKNOWN_AXIS_NAME, f"#CHANNEL INIT AX={name}: no axis {name} in this channel"
+                )
         place = self._place_block(frame, stmt)
         self._pending.append(ChannelInit(place, "ACTPOS" in stmt.options, tuple(names)))
 

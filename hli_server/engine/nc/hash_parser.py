@@ -16,9 +16,9 @@ from hli_server.engine.nc import parser as word_parser
 from hli_server.engine.nc.expr import Const, Expr
 from hli_server.engine.nc.expr_parser import NAME_CHARS, ExpressionParser
 from hli_server.engine.nc.language import (
+    A_CHANNEL_INIT,
     A_COMMENT_OPEN,
     A_COND_FIRST,
-    A_CHANNEL_INIT,
     A_CONTROL_SYNTAX,
     A_LIMIT,
     A_NOT_SIMULATED,
@@ -875,7 +875,9 @@ class HashParser(ExpressionParser):
             key = self.name()
             if key in ("CMDPOS", "ACTPOS"):
                 if options:
-                    self.fail(A_CHANNEL_INIT, f"#CHANNEL INIT: {key} after {options[0]} (one of CMDPOS, ACTPOS)")
+                    self.fail(
+                        A_CHANNEL_INIT, f"#CHANNEL INIT: {key} after {options[0]} (one of CMDPOS, ACTPOS)"
+                    )
                 options.append(key)
                 continue
             if key not in ("AX", "AXNR"):
@@ -900,7 +902,9 @@ class HashParser(ExpressionParser):
         if not options:
             self.fail(A_CONTROL_SYNTAX, "#CHANNEL INIT [..]: CMDPOS or ACTPOS expected")
         if not self.at_end():
-            self.fail(A_CHANNEL_INIT, f"#CHANNEL INIT must stand alone in its block: {self.word_at(self.pos)!r}")
+            self.fail(
+                A_CHANNEL_INIT, f"#CHANNEL INIT must stand alone in its block: {self.word_at(self.pos)!r}"
+            )
         return Hash(self.raw, self.number, "CHANNEL INIT", options + [f"AX:{a}" for a in axes], args)
 
     def file_name(self, named: bool = False) -> Stmt:
