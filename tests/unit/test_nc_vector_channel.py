@@ -170,3 +170,25 @@ def test_channel_init_reads_after_the_path_came_to_rest() -> None:
             seen.append(machine.axes[0].setpoint)
     assert seen == [pytest.approx(12.5, abs=0.01)]  # the message came when the axis had arrived (before: X0)
     assert machine.axes[0].setpoint == pytest.approx(13.5)  # and G91 goes on from there
+
+
+@pytest.mark.parametrize(
+    ("command", "velocity"),
+    [
+        ("#VECTORVEL ON", 2_000_000_000.0),
+        ("#VECTORVEL [5000] ON", 5000.0),
+        ("#VECTORVEL ON [5000]", 5000.0),
+        ("#VECTORVEL OFF", None),
+    ],
+)
+def test_the_older_vectorvel_is_vector_limit_vel(command: str, velocity: float | None) -> None:
+    (limit,) = vector(command)
+    assert (limit.velocity, limit.feed, limit.rapid) == (velocity, True, True)
+
+
+def test_the_older_vectoracc_is_accepted_with_the_warning() -> None:
+    done = interpret("#VECTORACC ON [2700000]\n#VECTORACC OFF\nM30\n")
+    assert done.error is None
+    assert done.warnings == [911041]
+    exc = error("G01 X1 F100\n#VECTORVEL [5000]\nM30\n")
+    assert (exc.alarm, exc.line) == (914015, 2)

@@ -130,6 +130,8 @@ class HashParser(ExpressionParser):
             return self.akima(command)
         if command == "VECTOR LIMIT":
             return self.vector_limit()
+        if command in ("VECTORVEL", "VECTORACC"):
+            return self.vector_old(command)
         if command == "CHANNEL INIT":
             return self.channel_init()
         if command == "COMMENT":
@@ -861,6 +863,36 @@ class HashParser(ExpressionParser):
         if "ALL" in words and (len(words) > 1 or stmt.params):
             self.fail(A_CONTROL_SYNTAX, "#VECTOR LIMIT ON|OFF ALL stands alone")
         return stmt
+
+    def vector_old(self, command: str) -> Stmt:
+        """The older ``#VECTORVEL ON``, ``#VECTORVEL [5000] ON``, ``#VECTORVEL ON [5000]``, ``#VECTORVEL OFF``
+        and ``#VECTORACC ..`` likewise (PM 207477899: replaced by ``#VECTOR LIMIT``, still accepted): read
+        as ``#VECTOR LIMIT ON|OFF [VEL=..]`` / ``[ACC=..]``."""
+        key = "VEL" if command == "VECTORVEL" else "ACC"
+        switch = ""
+        value: Expr | None = None
+        while True:
+            self.blanks()
+            if self.at_end():
+                break
+            if self.peek() == "[" and value is None:
+                self.pos += 1
+                self.blanks()
+                value = self.bracket_value()
+                self.blanks()
+                self.expect("]", f"after the value of #{command} [..]")
+                continue
+            start = self.pos
+            word = self.name()
+            if word in ("ON", "OFF") and not switch:
+                switch = word
+                continue
+            self.fail(A_CONTROL_SYNTAX, f"#{command}: unexpected {self.word_at(start)!r} (ON [<value>], OFF)")
+        if not switch:
+            self.fail(A_CONTROL_SYNTAX, f"#{command}: ON or OFF expected")
+        params: dict[str, Expr] = {key: value} if value is not None else {}
+        options = [switch] if value is not None else [switch, key]
+        return Hash(self.raw, self.number, "VECTOR LIMIT", options, [], params=params)
 
     def channel_init(self) -> Stmt:
         """``#CHANNEL INIT [CMDPOS|ACTPOS { AX=<name> | AXNR=.. } ]`` (PM 206703627, 206709515): alone in

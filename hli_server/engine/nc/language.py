@@ -416,6 +416,8 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
     "RT": _kernel("RT", ("CYCLE",)),
     "FRC": _SIMULATED,
     "VECTOR": _kernel("VECTOR", ("LIMIT",)),
+    "VECTORVEL": _SIMULATED,
+    "VECTORACC": _SIMULATED,
     "CHANNEL": _kernel("CHANNEL", ("INIT",)),
     "IDENT": _kernel("IDENT", ("WR", "RD")),
     # kinematic transformations (issue 35, docs/kinematics.md): directives for the decoder
