@@ -80,3 +80,17 @@ def test_t1_limits_the_path_velocity_to_the_start_ups_vel() -> None:
     assert reduced == pytest.approx(12000.0, rel=2e-3)  # #VECTOR LIMIT ON [VEL=12000]
     assert free > 20000.0  # F30000 and the axes' own limits
     assert messages[-1] == "G01 G90 F5000 X=300.000 Y=250.000 Z=350.000"  # cartesian: TEACH_ACS FALSE
+
+
+def test_the_machine_file_names_the_teach_file_at_start() -> None:
+    """P-EXTV-00013 init: the machine starts with V.E.TEACH_FILE_NAME set, no --set needed for it."""
+    config = ["--config", str(ROBOT / "machine.toml"), "--program-dir", str(ROBOT / "subs")]
+    code, report = check(*config, "--set", "V.E.TEACH_ACS=1")
+    assert code == 0, report
+    assert report["completed"] is True
+    assert [m["text"] for m in report["messages"]] == [
+        "G01 G90 F1000 X=300.000 Y=250.000 Z=350.000 A=10.000 B=80.000 C=-30.000"
+    ]
+    machine = Machine(load_machine(ROBOT / "machine.toml"))
+    assert machine.external.read("TEACH_FILE_NAME", 1) == "teach.nc"
+    assert not machine.alarm_history
