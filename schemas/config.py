@@ -984,10 +984,12 @@ class MachineConfig(_Strict):
     external_structures: list[ExternalStructureConfig] = Field(
         default_factory=list, max_length=256, description="structure types of V.E. variables"
     )
-    external_init: list[Annotated[str, Field(min_length=1, max_length=MAX_EXTERNAL_INIT_LENGTH, pattern=r"^[^\r\n]*$")]] = Field(
+    external_init: list[
+        Annotated[str, Field(min_length=1, max_length=MAX_EXTERNAL_INIT_LENGTH, pattern=r"^[^\r\n]*$")]
+    ] = Field(
         default_factory=list,
         max_length=1024,
-        description="P-EXTV-00013 init: assignments to V.E. variables run in order at the machine's start "
+        description="assignments to V.E. variables run in order at each start of the machine "
         '(`V.E.TEACH_FILE_NAME = "teach.nc"`; values may use other V.E. variables; docs/nc-language.md)',
     )
     use_extended_string_var: bool = Field(

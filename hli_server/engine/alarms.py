@@ -441,7 +441,7 @@ _TABLE: tuple[AlarmDef, ...] = (
     ),
     _w(
         21841,
-        "Variable for initialisation of external variables not permitted (only V.E.; the variable is set to 0)",
+        "Variable for initialisation of external variables not permitted (only V.E.; the variable is 0)",
         "kernel",
         page=_DIAG + "256233611.html",
     ),

@@ -166,4 +166,3 @@ def _zero(store: ExternalVariables, target: Ref, env: Env) -> None:
             store.write(name, channel, spec.zero(), index)
     except (EvalError, ExternalVariableError):
         pass
-

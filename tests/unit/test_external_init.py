@@ -27,7 +27,9 @@ VARIABLES: list[dict[str, Any]] = [
     {"name": "OWN", "type": "UNS16", "channel": 1},
     {"name": "UI", "type": "UI_T"},
 ]
-STRUCTURES = [{"name": "UI_T", "elements": [{"name": "Message", "type": "STRING"}, {"name": "Answer", "type": "SGN32"}]}]
+STRUCTURES = [
+    {"name": "UI_T", "elements": [{"name": "Message", "type": "STRING"}, {"name": "Answer", "type": "SGN32"}]}
+]
 
 
 def machine(*lines: str) -> Machine:
@@ -77,7 +79,9 @@ def test_other_variables_and_order() -> None:
 
 
 def test_a_failed_line_is_21840_and_its_variable_zero() -> None:
-    m = machine("V.E.S32 = 9", "V.E.S32 = 1 / 0", 'V.E.NAME = "this text is longer than twenty"', "V.E.R64 = [1 +")
+    m = machine(
+        "V.E.S32 = 9", "V.E.S32 = 1 / 0", 'V.E.NAME = "this text is longer than twenty"', "V.E.R64 = [1 +"
+    )
     assert m.external.read("S32", 1) == 0  # set to 0, not the 9 of the line before
     assert m.external.read("NAME", 1) == ""
     got = warnings(m)
@@ -87,7 +91,8 @@ def test_a_failed_line_is_21840_and_its_variable_zero() -> None:
         (21840, {"variable": "V.E.R64", "line": 4}),
     ]
     messages = [a.message for a in m.alarm_history]
-    assert "[914001]" in messages[0] and "[21462]" in messages[1]
+    assert "[914001]" in messages[0]
+    assert "[21462]" in messages[1]
     assert not m.active_alarms  # class 2: the machine starts, nothing to acknowledge
     # an undeclared variable, a line that is no assignment
     m = machine("V.E.NOPE = 1", "G01 X10", "V.E.S32 = 3")
@@ -97,7 +102,9 @@ def test_a_failed_line_is_21840_and_its_variable_zero() -> None:
 
 
 def test_only_ve_variables_21841() -> None:
-    m = machine("V.E.R64 = 7", "V.E.R64 = V.A.ABS.X + 1", "V.E.S32 = P1", "V.P.X = 1", "V.E.FLAG = EXIST[V.G.WZR]")
+    m = machine(
+        "V.E.R64 = 7", "V.E.R64 = V.A.ABS.X + 1", "V.E.S32 = P1", "V.P.X = 1", "V.E.FLAG = EXIST[V.G.WZR]"
+    )
     assert warnings(m) == [
         (21841, {"variable": "V.E.R64", "line": 2}),
         (21841, {"variable": "V.E.S32", "line": 3}),
@@ -137,7 +144,8 @@ def test_the_kernels_list_init_lines(tmp_path: Path) -> None:
     (tmp_path / "m.toml").write_text(
         'name = "m"\nexternal_init = ["V.E.COUNT = 1"]\n'
         + "".join(f'[[axes]]\nnumber = {i}\nname = "{a}"\n' for i, a in enumerate("XYZ", 1))
-        + '[[channels]]\nnumber = 1\nname = "c"\naxes = ["X", "Y", "Z"]\nexternal_variables_list = "ve.lis"\n',
+        + '[[channels]]\nnumber = 1\nname = "c"\naxes = ["X", "Y", "Z"]\n'
+        + 'external_variables_list = "ve.lis"\n',
         encoding="utf-8",
     )
     config = load_machine(tmp_path / "m.toml")
