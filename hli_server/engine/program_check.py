@@ -306,7 +306,8 @@ class ProgramCheck:
         result = CheckResult(machine, self.channel, "geometry" if self.geometry_only else "full")
         ch = machine.channel(self.channel)
         apply_presets(machine.external, ch.number, self.presets)
-        history_start = len(machine.alarm_history)
+        # a machine that has not run a cycle: its history is its start's (P-EXTV-00013 init's warnings)
+        history_start = 0 if machine.cycle == 0 else len(machine.alarm_history)
         if self.record_path:
             result.path.append(tuple(ch.setpoints()))
 

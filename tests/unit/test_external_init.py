@@ -4,12 +4,15 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
 import pytest
+from click.testing import CliRunner
 from pydantic import ValidationError
 
+from hli_server.cli import main
 from hli_server.configuration import load_machine
 from hli_server.engine import Machine
 from schemas.config import MachineConfig
@@ -153,3 +156,20 @@ def test_the_kernels_list_init_lines(tmp_path: Path) -> None:
     m = Machine(config)
     assert m.external.read("COUNT", 1) == 3
     assert m.external.read("LABEL", 1) == "n(o"
+
+
+def test_check_reports_the_start_warnings(tmp_path: Path) -> None:
+    robot = Path(__file__).resolve().parents[1] / "data" / "robot"
+    text = (robot / "machine.toml").read_text(encoding="utf-8")
+    bad = text.replace("external_init = [", "external_init = ['V.E.TEACH_ACS = P1', ", 1)
+    assert bad != text
+    (tmp_path / "robot.toml").write_text(bad, encoding="utf-8")
+    done = CliRunner().invoke(
+        main,
+        ["check", "--format", "json", "--config", str(tmp_path / "robot.toml"), "--program-dir",
+         str(robot / "subs"), str(robot / "pick_and_teach.nc")],
+    )  # fmt: skip
+    report = json.loads(done.stdout)
+    assert done.exit_code == 0, report
+    first = report["alarms"][0]
+    assert (first["id"], first["params"]) == (21841, {"variable": "V.E.TEACH_ACS", "line": 1})
