@@ -777,6 +777,8 @@ class AdapterEntry(_Strict):
 
 
 _V_E_NAME = r"^[A-Za-z_][A-Za-z0-9_]{0,19}$"
+MAX_EXTERNAL_INIT_LENGTH = 512
+"""The characters of one ``external_init`` assignment (an NC block's worth; P-EXTV-00013)."""
 """A V.E. name, and each name of a structure's element: at most 20 characters, as the kernel allows."""
 _ACCESS_RIGHTS = Literal["READ_WRITE", "READ_ONLY", "WRITE_ONLY"]
 
@@ -981,6 +983,14 @@ class MachineConfig(_Strict):
     )
     external_structures: list[ExternalStructureConfig] = Field(
         default_factory=list, max_length=256, description="structure types of V.E. variables"
+    )
+    external_init: list[
+        Annotated[str, Field(min_length=1, max_length=MAX_EXTERNAL_INIT_LENGTH, pattern=r"^[^\r\n]*$")]
+    ] = Field(
+        default_factory=list,
+        max_length=1024,
+        description="assignments to V.E. variables run in order at each start of the machine "
+        '(`V.E.TEACH_FILE_NAME = "teach.nc"`; values may use other V.E. variables; docs/nc-language.md)',
     )
     use_extended_string_var: bool = Field(
         default=False,
@@ -1513,9 +1523,17 @@ MACHINE_EXTERNAL_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
             _EXTV + "112451979.html",
             "",
         ),
+        (
+            "init",
+            "external_init",
+            "P-EXTV-00013",
+            "-",
+            _EXTV + "112479371.html",
+            "one assignment a string, in the list's order; a failed one is warning 21840/21841 at start",
+        ),
     )
 )
-"""The general entry of a list of external variables that is a machine-wide field here (N-05)."""
+"""The general entries of a list of external variables that are machine-wide fields here (N-05)."""
 
 EXTERNAL_ELEMENT_PARAMETERS: tuple[ParameterInfo, ...] = _infos(
     (

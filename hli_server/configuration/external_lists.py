@@ -36,7 +36,10 @@ both declare a global variable, identically). What is read:
   must lie below it;
 * accepted without effect, with a warning: ``var[i].byte_offset``, ``.index``, ``.size`` (of a type
   other than VSTRING), ``.create_hmi_interface`` and the general ``check_overlapping_variables``,
-  ``auto_memory_mode``, ``init`` (the image places the variables itself, docs/process-image.md).
+  ``auto_memory_mode`` (the image places the variables itself, docs/process-image.md);
+* ``init`` (P-EXTV-00013, any number of times): the rest of the line is an assignment to a V.E. variable
+  run at the machine's start, in the list's order (a ``( ...)`` after it is a comment); into
+  ``external_init``, after the machine file's own.
 
 Comments: ``#`` to the end of the line, and a ``( ...)`` after the value (the kernel's own examples
 write them so). Every finding names file, line and key.
@@ -57,7 +60,8 @@ _VAR_KEY = re.compile(r"^var\[(\d+)\]\.([A-Za-z_]+)$")
 _STRUCT_KEY = re.compile(r"^struct\[(\d+)\]\.(?:element\[(\d+)\]\.)?([A-Za-z_]+)$")
 _TYPE_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
 _IGNORED_VAR = ("byte_offset", "index", "size", "create_hmi_interface")
-_IGNORED_GENERAL = ("check_overlapping_variables", "auto_memory_mode", "init")
+_IGNORED_GENERAL = ("check_overlapping_variables", "auto_memory_mode")
+_INIT_KEY = "init"
 _EXTENDED_KEY = "use_extended_string_var"
 _COUNT_KEYS = ("number_used_variables", "anzahl_belegt")
 _MAX_INDEX = 214
@@ -76,6 +80,8 @@ class ExternalList:
     structures: list[dict[str, Any]] = field(default_factory=list)
     """``external_structures`` entries (``struct[i]``), with ``structure_origins[k]`` where each was set."""
     structure_origins: list[Origin] = field(default_factory=list)
+    init: list[tuple[str, Origin]] = field(default_factory=list)
+    """The ``init`` assignments (P-EXTV-00013), in the list's order."""
     extended: tuple[bool, Origin] | None = None
     """``use_extended_string_var`` where the list sets it."""
     errors: list[str] = field(default_factory=list)
@@ -104,6 +110,17 @@ def _value(content: str) -> tuple[str, str]:
     return key, rest.split(None, 1)[0] if rest else ""
 
 
+def _without_comment(text: str) -> str:
+    """An NC assignment up to its ``( comment)``: the first ``(`` outside a string."""
+    quoted = False
+    for at, char in enumerate(text):
+        if char == '"':
+            quoted = not quoted
+        elif char == "(" and not quoted:
+            return text[:at]
+    return text
+
+
 def parse_external_list(text: str, *, source: str, channel: int) -> ExternalList:
     """Read one list of external variables of channel ``channel`` (its CHANNEL variables)."""
     result = ExternalList(source)
@@ -123,6 +140,13 @@ def parse_external_list(text: str, *, source: str, channel: int) -> ExternalList
             continue
         key, raw = _value(content)
         origin = Origin(source, line_no, key)
+        if key.lower() == _INIT_KEY:  # may occur several times
+            assignment = _without_comment(content[len(key) :]).strip()
+            if assignment:
+                result.init.append((assignment, origin))
+            else:
+                result.errors.append(f"{origin.where()}: no assignment (write `init V.E.NAME = <value>`)")
+            continue
         if key in seen:
             result.errors.append(f"{origin.where()}: given twice (first in line {seen[key]})")
             continue

@@ -211,6 +211,12 @@ class _Loader:
                 self.origins[("external_variables", position, field_name)] = origin
             self.origins.setdefault(("external_variables", position), origins["name"])
         self._merge_external_structures(parsed.structures, parsed.structure_origins)
+        if parsed.init:
+            lines = self.data.setdefault("external_init", [])
+            if isinstance(lines, list):  # else the machine file's own error says why
+                for assignment, origin in parsed.init:
+                    self.origins[("external_init", len(lines))] = origin
+                    lines.append(assignment)
         if parsed.extended is not None:
             flag, origin = parsed.extended
             given = self.data.get("use_extended_string_var")

@@ -227,6 +227,12 @@ _TABLE: tuple[AlarmDef, ...] = (
         "kernel",
         page="https://infosys.beckhoff.com/content/1033/tf5200_programming_manual/206278923.html",
     ),
+    _e(
+        21507,
+        "Double programming in #CHANNEL INIT (keywords twice or in invalid combinations)",
+        "kernel",
+        page=_DIAG + "254971531.html",
+    ),
     _e(20138, "G100 is not allowed with the current measuring type", "kernel", page=_DIAG + "250906763.html"),
     _w(
         20685,
@@ -427,6 +433,18 @@ _TABLE: tuple[AlarmDef, ...] = (
         page=_DIAG + "250758795.html",
     ),
     _e(21462, "String for variable too long", "kernel", page=_DIAG + "254771339.html"),
+    _w(
+        21840,
+        "External variable could not be initialised (P-EXTV-00013 init; the variable is set to 0)",
+        "kernel",
+        page=_DIAG + "256229259.html",
+    ),
+    _w(
+        21841,
+        "Variable for initialisation of external variables not permitted (only V.E.; the variable is 0)",
+        "kernel",
+        page=_DIAG + "256233611.html",
+    ),
     _e(
         21500,
         "Invalid control blocks pending at local subroutine end",

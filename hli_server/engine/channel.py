@@ -556,6 +556,7 @@ class Channel:
         )
         """The ramp time of the jerk-limited profiles [s]: the longest of the axes' P-AXIS-00195..00198."""
         self.decoder.slope_handler = self.set_slope
+        self.decoder.positions_handler = self.axis_positions
         self.decoder.rotary_axes = frozenset(a.name for a in axes if a.rotary)
         self.jog_guards: list[JogGuard] = []
         self.jog_velocity: list[float] = [0.0] * len(axes)
@@ -827,6 +828,11 @@ class Channel:
         self.kinematic = trafo
         item = self.planner.current()
         self.kinematic_from = item.axes_start() if isinstance(item, Motion) else tuple(self.setpoints())
+
+    def axis_positions(self, actual: bool) -> list[float]:
+        """The axes' command positions, or their actual positions (``#CHANNEL INIT [ACTPOS]``: the position
+        loop's, which a drive fault or the following error can set apart), in machine coordinates."""
+        return [a.actual if actual else a.setpoint for a in self.axes]
 
     def set_slope(self, profile: int | None) -> None:
         """The acceleration profile from now on (``#SLOPE``, M-01..M-03): 0 STEP, 1 TRAPEZ, 2 SIN2,

@@ -31,6 +31,7 @@ from hli_server.engine.kinematics.vectors import sub, unit
 from hli_server.engine.nc.blocks import AreaBegin, AreaCommand, AreaEnd, Block, NcError
 from hli_server.engine.nc.directives import (
     PAUSE,
+    ChannelInit,
     ContourDirective,
     CoordinateCommand,
     Directive,
@@ -41,6 +42,7 @@ from hli_server.engine.nc.directives import (
     Slope,
     SyncAction,
     ToolWrite,
+    VectorLimit,
 )
 from hli_server.engine.nc.kinematic_commands import (
     CaxTrack,
@@ -216,6 +218,12 @@ class ModalState:
     """rpm: the last S word (the command spindle speed G95 multiplies with)."""
     spindle_on: bool = False
     """M3/M4 turn the main spindle on, M5 off (G95 needs it turning: the kernel's ID 60131)."""
+    vector_velocity: float | None = None
+    """mm/min: ``#VECTOR LIMIT ON [VEL=..]``'s path velocity limit (None: none, ``OFF``)."""
+    vector_feed: bool = True
+    """The limit acts on feed blocks (G01/G02/G03; ``#VECTOR LIMIT``'s FEED, or neither keyword)."""
+    vector_rapid: bool = True
+    """The limit acts on rapid blocks (G00; RAPID, or neither keyword)."""
     meas_type: int | None = None
     """The measuring type of G100 selected in the program (the kernel's ``#MEAS MODE [n]``); None: the
     channel's default P-CHAN-00057. ``#MEAS MODE`` sets it (the interpreter's ``MeasMode``)."""
@@ -297,6 +305,9 @@ class Decoder:
         self.blocks_decoded = 0
         self.rotary_axes: frozenset[str] = frozenset()
         """Axes in degrees: G70 does not scale them."""
+        self.positions_handler: Callable[[bool], list[float]] | None = None
+        """The axes' command positions (False) or actual positions (True), machine coordinates
+        (``#CHANNEL INIT``)."""
         self.slope_handler: Callable[[int | None], None] | None = None
         """Switches the acceleration profile (``#SLOPE``: 0..3 as P-CHAN-00071, None: the default)."""
         self.last_centre: dict[str, float] = {}
@@ -363,6 +374,7 @@ class Decoder:
         self.position = list(position)
         if self.modal.feed is None and self.default_feed > 0.0:
             self.modal.feed = self.default_feed  # P-CHAN-00099: the F of a program start without one
+        self.modal.vector_velocity = None  # #VECTOR LIMIT is the program's (a new one starts without)
         self.corner_size = None
         self.motion_unheld = False
         self._approximations.clear()
@@ -470,6 +482,15 @@ class Decoder:
             return [*items, Marker(MarkerKind.ACTION, block, payload=self._end_wait)]
         if isinstance(out, FlushStop):
             return [*items, Marker(MarkerKind.ACTION, block, payload=_nothing)]
+        if isinstance(out, VectorLimit):
+            m = self.modal
+            m.vector_velocity, m.vector_feed, m.vector_rapid = out.velocity, out.feed, out.rapid
+            return items
+        if isinstance(out, ChannelInit):
+            # #CHANNEL INIT: decoding waits for the path, then takes the axes' positions as its own
+            self.waiting = True
+            take = functools.partial(self._channel_init, out.actual, out.axes)
+            return [*items, Marker(MarkerKind.ACTION, block, payload=take)]
         if isinstance(out, Slope):
             # #SLOPE (M-02): the path comes to rest here and the axes with it, then the profile
             # changes (the filter of the new profile starts at rest; docs/nc-language.md)
@@ -874,6 +895,17 @@ class Decoder:
 
     def _end_wait(self) -> None:
         """The path reached a ``#FLUSH WAIT``: decoding goes on."""
+        self.waiting = False
+
+    def _channel_init(self, actual: bool, axes: tuple[str, ...]) -> None:
+        """The path reached a ``#CHANNEL INIT``: the axes' command (or actual) positions become the
+        decoder's (all the channel's axes where none is named), then decoding goes on."""
+        handler = self.positions_handler
+        if handler is not None and not self.transforms_active and self.kin.active is None:
+            positions = handler(actual)
+            for k, name in enumerate(self.axes):
+                if not axes or name in axes:
+                    self.position[k] = positions[k]
         self.waiting = False
 
     # --- the steps of next_items, also driven one by one by the batch geometry check -------------
@@ -1914,6 +1946,9 @@ class Decoder:
         (mm/min) instead of the programmed F where given."""
         length = segment.length
         v = math.inf if rapid else (feed if feed is not None else self.path_feed()) / 60.0
+        m = self.modal
+        if m.vector_velocity is not None and (m.vector_rapid if rapid else m.vector_feed):
+            v = min(v, m.vector_velocity / 60.0)  # #VECTOR LIMIT ON [VEL=..] (PM 207477899)
         a = math.inf
         if isinstance(segment, LineSegment):
             for k, name in enumerate(self.axes):

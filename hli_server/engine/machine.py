@@ -35,6 +35,7 @@ from hli_server.engine.axis import Axis, AxisFaults, check_fault_value
 from hli_server.engine.channel import Channel
 from hli_server.engine.cycles import ProbeDeviation
 from hli_server.engine.external import ExternalVariables, external_specs
+from hli_server.engine.external_init import run_external_init
 from hli_server.engine.hli import AxisHli, ChannelHli, MachineHli
 from hli_server.engine.monitors.base import Monitor, MonitorFactory
 from hli_server.engine.monitors.collision import CollisionMonitor
@@ -137,6 +138,15 @@ class Machine:
         self._after_loop: list[Callable[[], None]] = []
         self._on_alarm: list[Callable[[Alarm], None]] = []
         self._install(DEFAULT_MONITORS if monitors is None else tuple(monitors))
+        # the controller's start: the V.E. variables' init lines (P-EXTV-00013), in order; a failed line
+        # is a warning (the kernel's class-2 21840/21841) and its variable 0, the machine starts
+        for failure in run_external_init(self.external, config.external_init):
+            self.raise_alarm(
+                failure.alarm,
+                None,
+                failure.message,
+                params={"variable": failure.variable, "line": failure.line},
+            )
         self._publish_rows = [
             (axis, hli.ipo_state) for axis, hli in zip(self.axes, self.hli.axes, strict=True)
         ]

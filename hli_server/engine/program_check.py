@@ -306,7 +306,8 @@ class ProgramCheck:
         result = CheckResult(machine, self.channel, "geometry" if self.geometry_only else "full")
         ch = machine.channel(self.channel)
         apply_presets(machine.external, ch.number, self.presets)
-        history_start = len(machine.alarm_history)
+        # a machine that has not run a cycle: its history is its start's (P-EXTV-00013 init's warnings)
+        history_start = 0 if machine.cycle == 0 else len(machine.alarm_history)
         if self.record_path:
             result.path.append(tuple(ch.setpoints()))
 
@@ -435,6 +436,9 @@ class ProgramCheck:
         source = ProgramText(text, self.name)
         ch.program_name = self.name
         progress = self.progress
+        # #CHANNEL INIT: the axes do not move here; the path's end the decoder keeps is where they would
+        # be (their command positions once the path is at rest)
+        positions, decoder.positions_handler = decoder.positions_handler, None
         try:
             if self.batch_in_use():
                 batch = BatchGeometryCheck(ch)
@@ -477,6 +481,8 @@ class ProgramCheck:
                 block=cap.place,
                 params={"variables": loop.variables} if loop is not None and loop.variables else None,
             )
+        finally:
+            decoder.positions_handler = positions
         result.blocks = decoder.blocks_decoded
         result.final_position = dict(zip(ch.axis_names, decoder.position, strict=True))
 

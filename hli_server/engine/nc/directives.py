@@ -22,6 +22,7 @@ from hli_server.engine.programs import ProgramFile
 
 __all__ = [
     "PAUSE",
+    "ChannelInit",
     "ContourDirective",
     "CoordinateCommand",
     "Directive",
@@ -34,6 +35,7 @@ __all__ = [
     "Slope",
     "SyncAction",
     "ToolWrite",
+    "VectorLimit",
 ]
 
 
@@ -80,6 +82,27 @@ class Slope(Directive):
     def __init__(self, block: Block, profile: int | None) -> None:
         super().__init__(block)
         self.profile = profile
+
+
+class VectorLimit(Directive):
+    """``#VECTOR LIMIT ON|OFF [VEL=..]`` (PM 207477899): the path velocity limit [mm/min] of the motion
+    blocks after it (None: no limit, OFF), on feed blocks (``feed``) and rapid blocks (``rapid``)."""
+
+    def __init__(self, block: Block, velocity: float | None, feed: bool, rapid: bool) -> None:
+        super().__init__(block)
+        self.velocity = velocity
+        self.feed = feed
+        self.rapid = rapid
+
+
+class ChannelInit(Directive):
+    """``#CHANNEL INIT [CMDPOS|ACTPOS ..]`` (PM 206703627, 206709515): decoding waits until the path is at
+    rest here, then takes the axes' positions (``axes``; empty: all the channel's) as its own."""
+
+    def __init__(self, block: Block, actual: bool, axes: tuple[str, ...]) -> None:
+        super().__init__(block)
+        self.actual = actual
+        self.axes = axes
 
 
 class CoordinateCommand(Directive):

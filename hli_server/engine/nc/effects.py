@@ -10,6 +10,7 @@ import math
 from hli_server.engine.nc import parser as word_parser
 from hli_server.engine.nc.blocks import Block
 from hli_server.engine.nc.directives import (
+    ChannelInit,
     ContourDirective,
     CoordinateCommand,
     FlushStop,
@@ -18,6 +19,7 @@ from hli_server.engine.nc.directives import (
     Realtime,
     Slope,
     SyncAction,
+    VectorLimit,
 )
 from hli_server.engine.nc.expr import (
     ALARM_TYPE,
@@ -37,6 +39,7 @@ from hli_server.engine.nc.kinematic_commands import (
     TrafoSwitch,
 )
 from hli_server.engine.nc.language import (
+    A_CHANNEL_INIT,
     A_CONTROL_SYNTAX,
     A_CORNER_DEVIATION,
     A_DRIVE_READ,
@@ -64,6 +67,8 @@ from hli_server.engine.nc.language import (
     MAX_NAME,
     MEAS_TYPES,
     SPLINE_WORDS,
+    VECTOR_LIMITS,
+    VECTOR_VELOCITY_DEFAULT,
 )
 from hli_server.engine.nc.levels import (
     Frame,
@@ -263,6 +268,12 @@ class Effects(VariableAccess):
                 "(docs/nc-language.md)",
             )
             return
+        if command == "VECTOR LIMIT":
+            self._vector_limit(frame, stmt)
+            return
+        if command == "CHANNEL INIT":
+            self._channel_init(frame, stmt)
+            return
         if command.startswith(("AKIMA ", "SET ASPLINE")):
             for arg in stmt.args:
                 self._number(stmt, arg, f"a component of #{command}")
@@ -291,6 +302,62 @@ class Effects(VariableAccess):
             self._pending.append(SyncAction(self._place_block(frame, stmt), emit))
             return
         self._emit_message(text, save, file, program, line, label)
+
+    def _vector_limit(self, frame: Frame, stmt: Hash) -> None:
+        """``#VECTOR LIMIT ON|OFF [..]`` (PM 207477899): VEL is simulated (the path velocity of the motion
+        blocks after it, on the blocks FEED/RAPID select: neither keyword, both); the other limits shape
+        only the ramps and are accepted with warning 911041. ON without a value, ON ALL and a bare ON take
+        the channel's default (P-CHAN-00090 vector.velocity); OFF drops the limit."""
+        on = stmt.options[0] == "ON"
+        words = set(stmt.options[1:])
+        bare = not words and not stmt.params
+        every = bare or "ALL" in words
+        for key, expr in stmt.params.items():
+            value = self._number(stmt, expr, f"#VECTOR LIMIT {key}=")
+            if not on:
+                raise stmt.error(A_CONTROL_SYNTAX, f"#VECTOR LIMIT OFF: {key} takes no value with OFF")
+            if not 0.0 < value <= 1e12:
+                raise stmt.error(
+                    A_RANGE, f"#VECTOR LIMIT {key}={format_value(value)}: a limit is positive, at most 1e12"
+                )
+        others = [k for k in VECTOR_LIMITS if k != "VEL" and (k in words or k in stmt.params)]
+        if others or (every and on):
+            self._approximation(
+                stmt,
+                "#VECTOR LIMIT",
+                f"#VECTOR LIMIT {' '.join(others) or 'ALL'}: the path's acceleration, deceleration, jerk and "
+                "radial limits are not simulated: the path keeps the axes' own dynamics (VEL is simulated; "
+                "docs/nc-language.md)",
+            )
+        if not (every or "VEL" in words or "VEL" in stmt.params):
+            return
+        feed = "FEED" in words or "RAPID" not in words
+        rapid = "RAPID" in words or "FEED" not in words
+        velocity: float | None = None
+        if on:
+            vel = stmt.params.get("VEL")
+            velocity = VECTOR_VELOCITY_DEFAULT if vel is None else self._number(stmt, vel, "VEL")
+        self._pending.append(VectorLimit(self._place_block(frame, stmt), velocity, feed, rapid))
+
+    def _channel_init(self, frame: Frame, stmt: Hash) -> None:
+        """``#CHANNEL INIT [CMDPOS|ACTPOS ..]``: decoding waits for the path, then takes its axes'
+        positions (the decoder's ``ChannelInit``); an axis twice is the kernel's 21507."""
+        names = [o[3:] for o in stmt.options if o.startswith("AX:")]
+        for arg in stmt.args:
+            number = self._whole(stmt, arg, "#CHANNEL INIT AXNR=", 1, 65535)
+            name = self.host.axis_name(number - 1)
+            if name is None:
+                raise stmt.error(A_INDEX, f"#CHANNEL INIT AXNR={number}: no axis {number} in this channel")
+            if name in names:
+                raise stmt.error(A_CHANNEL_INIT, f"#CHANNEL INIT: axis {name} programmed twice")
+            names.append(name)
+        for name in names:
+            if self.host.axis_value("ABS", name) is None:
+                raise stmt.error(
+                    A_UNKNOWN_AXIS_NAME, f"#CHANNEL INIT AX={name}: no axis {name} in this channel"
+                )
+        place = self._place_block(frame, stmt)
+        self._pending.append(ChannelInit(place, "ACTPOS" in stmt.options, tuple(names)))
 
     def _emit_message(self, text: str, save: bool, file: str, program: str, line: int, label: str) -> None:
         self._effect()

@@ -16,6 +16,7 @@ from hli_server.engine.nc import parser as word_parser
 from hli_server.engine.nc.expr import Const, Expr
 from hli_server.engine.nc.expr_parser import NAME_CHARS, ExpressionParser
 from hli_server.engine.nc.language import (
+    A_CHANNEL_INIT,
     A_COMMENT_OPEN,
     A_COND_FIRST,
     A_CONTROL_SYNTAX,
@@ -33,6 +34,7 @@ from hli_server.engine.nc.language import (
     RT_SCOPES,
     SLOPE_TYPES,
     UNKNOWN_HASH_HINT,
+    VECTOR_LIMITS,
 )
 from hli_server.engine.nc.statements import Control, Hash, Stmt
 
@@ -126,6 +128,12 @@ class HashParser(ExpressionParser):
             return Hash(self.raw, self.number, "FRC", [], args)
         if command in ("AKIMA TRANS", "AKIMA STARTVECTOR", "AKIMA ENDVECTOR", "SET ASPLINE"):
             return self.akima(command)
+        if command == "VECTOR LIMIT":
+            return self.vector_limit()
+        if command in ("VECTORVEL", "VECTORACC"):
+            return self.vector_old(command)
+        if command == "CHANNEL INIT":
+            return self.channel_init()
         if command == "COMMENT":
             self.fail(
                 A_COMMENT_OPEN,
@@ -830,6 +838,106 @@ class HashParser(ExpressionParser):
         if inside:
             self.fail(A_CONTROL_SYNTAX, f"#{command}: ']' missing")
         return Hash(self.raw, self.number, command, options, [], params=params)
+
+    def vector_limit(self) -> Stmt:
+        """``#VECTOR LIMIT ON|OFF [ [ACC=..] [DEC=..] [RADIAL_ACC=..] [RADIAL_JERK=..] [JERK=..]
+        [TRANS_ACC=..] [VEL=..] [FEED] [RAPID] ]``, ``#VECTOR LIMIT ON|OFF ALL`` (PM 207477899): a limit
+        with its value, or without one (the channel parameter's default)."""
+        stmt = self.motion_options("VECTOR LIMIT")
+        assert isinstance(stmt, Hash)
+        words = [w for w in stmt.options if w not in ("ON", "OFF")]
+        switch = [w for w in stmt.options if w in ("ON", "OFF")]
+        if len(switch) != 1 or stmt.options[0] not in ("ON", "OFF"):
+            self.fail(A_CONTROL_SYNTAX, "#VECTOR LIMIT: ON or OFF expected (#VECTOR LIMIT ON [VEL=..])")
+        known = (*VECTOR_LIMITS, "FEED", "RAPID", "ALL")
+        for key in [*words, *stmt.params]:
+            if key not in known:
+                self.fail(
+                    A_CONTROL_SYNTAX,
+                    f"#VECTOR LIMIT: unknown keyword {key!r} (ACC, DEC, RADIAL_ACC, RADIAL_JERK, JERK, "
+                    "TRANS_ACC, VEL, FEED, RAPID, ALL)",
+                )
+        for key in stmt.params:
+            if key in ("FEED", "RAPID", "ALL"):
+                self.fail(A_CONTROL_SYNTAX, f"#VECTOR LIMIT: {key} takes no value")
+        if "ALL" in words and (len(words) > 1 or stmt.params):
+            self.fail(A_CONTROL_SYNTAX, "#VECTOR LIMIT ON|OFF ALL stands alone")
+        return stmt
+
+    def vector_old(self, command: str) -> Stmt:
+        """The older ``#VECTORVEL ON``, ``#VECTORVEL [5000] ON``, ``#VECTORVEL ON [5000]``, ``#VECTORVEL OFF``
+        and ``#VECTORACC ..`` likewise (PM 207477899: replaced by ``#VECTOR LIMIT``, still accepted): read
+        as ``#VECTOR LIMIT ON|OFF [VEL=..]`` / ``[ACC=..]``."""
+        key = "VEL" if command == "VECTORVEL" else "ACC"
+        switch = ""
+        value: Expr | None = None
+        while True:
+            self.blanks()
+            if self.at_end():
+                break
+            if self.peek() == "[" and value is None:
+                self.pos += 1
+                self.blanks()
+                value = self.bracket_value()
+                self.blanks()
+                self.expect("]", f"after the value of #{command} [..]")
+                continue
+            start = self.pos
+            word = self.name()
+            if word in ("ON", "OFF") and not switch:
+                switch = word
+                continue
+            self.fail(A_CONTROL_SYNTAX, f"#{command}: unexpected {self.word_at(start)!r} (ON [<value>], OFF)")
+        if not switch:
+            self.fail(A_CONTROL_SYNTAX, f"#{command}: ON or OFF expected")
+        params: dict[str, Expr] = {key: value} if value is not None else {}
+        options = [switch] if value is not None else [switch, key]
+        return Hash(self.raw, self.number, "VECTOR LIMIT", options, [], params=params)
+
+    def channel_init(self) -> Stmt:
+        """``#CHANNEL INIT [CMDPOS|ACTPOS { AX=<name> | AXNR=.. } ]`` (PM 206703627, 206709515): alone in
+        its block; a keyword twice or CMDPOS with ACTPOS is the kernel's 21507."""
+        self.blanks()
+        self.expect("[", "after #CHANNEL INIT (#CHANNEL INIT [CMDPOS])")
+        options: list[str] = []
+        args: list[Expr] = []
+        axes: list[str] = []
+        while self.next_entry("#CHANNEL INIT"):
+            start = self.pos
+            key = self.name()
+            if key in ("CMDPOS", "ACTPOS"):
+                if options:
+                    self.fail(
+                        A_CHANNEL_INIT, f"#CHANNEL INIT: {key} after {options[0]} (one of CMDPOS, ACTPOS)"
+                    )
+                options.append(key)
+                continue
+            if key not in ("AX", "AXNR"):
+                self.fail(
+                    A_CONTROL_SYNTAX,
+                    f"#CHANNEL INIT: unexpected {self.word_at(start)!r} (CMDPOS, ACTPOS, AX=<name>, AXNR=..)",
+                )
+            if not options:
+                self.fail(A_CHANNEL_INIT, f"#CHANNEL INIT: {key} before CMDPOS or ACTPOS")
+            self.blanks()
+            self.expect("=", f"after {key} ({key}=..)")
+            self.blanks()
+            if key == "AX":
+                axis = self.name()
+                if not axis:
+                    self.fail(A_CONTROL_SYNTAX, "#CHANNEL INIT: AX= without an axis name")
+                if axis in axes:
+                    self.fail(A_CHANNEL_INIT, f"#CHANNEL INIT: axis {axis} programmed twice")
+                axes.append(axis)
+            else:
+                args.append(self.bracket_value())
+        if not options:
+            self.fail(A_CONTROL_SYNTAX, "#CHANNEL INIT [..]: CMDPOS or ACTPOS expected")
+        if not self.at_end():
+            self.fail(
+                A_CHANNEL_INIT, f"#CHANNEL INIT must stand alone in its block: {self.word_at(self.pos)!r}"
+            )
+        return Hash(self.raw, self.number, "CHANNEL INIT", options + [f"AX:{a}" for a in axes], args)
 
     def file_name(self, named: bool = False) -> Stmt:
         """``#FILE NAME [MSG="report.txt" G803="safe.nc"]`` (207504523; older ``#FILENAME``): the file

@@ -81,6 +81,14 @@ A_UNKNOWN_AXIS_NAME: Final = 20797
 A_RT_ID: Final = 22003
 """A realtime cycle without its ID where DEF or SCOPE=GLOBAL needs one (TF5261 562766219)."""
 A_APPROXIMATED: Final = 911041
+A_CHANNEL_INIT: Final = 21507
+"""The kernel's "double programming in #CHANNEL INIT" (DG 254971531): keywords twice or in invalid
+combinations."""
+VECTOR_LIMITS: Final = ("ACC", "DEC", "RADIAL_ACC", "RADIAL_JERK", "JERK", "TRANS_ACC", "VEL")
+"""``#VECTOR LIMIT ON/OFF [..]``'s limits (PM 207477899); ``VEL`` [mm/min] is simulated, the others are
+accepted with warning 911041."""
+VECTOR_VELOCITY_DEFAULT: Final = 2_000_000_000.0
+"""P-CHAN-00090 vector.velocity's default [mm/min]: ``#VECTOR LIMIT ON [VEL]`` without a value."""
 """Warning: a construct that only shapes the path runs approximated within a documented tolerance (once per
 program and construct; docs/nc-language.md, "Refusals and approximations")."""
 A_MSG_VALUES: Final = 20721
@@ -407,6 +415,10 @@ HASH_COMMANDS: Final[dict[str, HashRule]] = {
     "FILTER": _SIMULATED,
     "RT": _kernel("RT", ("CYCLE",)),
     "FRC": _SIMULATED,
+    "VECTOR": _kernel("VECTOR", ("LIMIT",)),
+    "VECTORVEL": _SIMULATED,
+    "VECTORACC": _SIMULATED,
+    "CHANNEL": _kernel("CHANNEL", ("INIT",)),
     "IDENT": _kernel("IDENT", ("WR", "RD")),
     # kinematic transformations (issue 35, docs/kinematics.md): directives for the decoder
     "KIN": _kernel("KIN", ("ID",)),
