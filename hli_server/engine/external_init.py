@@ -137,12 +137,13 @@ def run_external_init(store: ExternalVariables, lines: Sequence[str]) -> list[In
             value = expr.evaluate(env)
             store.write(name, channel, value, index)
             continue
-        except CompileError as exc:
-            alarm, cause = exc.alarm, exc.message
-        except EvalError as exc:
-            alarm, cause = exc.alarm, exc.message
-        except ExternalVariableError as exc:
-            alarm, cause = exc.alarm, str(exc)
+        # one name per clause: mypyc types a name shared by except clauses as the first clause's class
+        except CompileError as compile_error:
+            alarm, cause = compile_error.alarm, compile_error.message
+        except EvalError as eval_error:
+            alarm, cause = eval_error.alarm, eval_error.message
+        except ExternalVariableError as store_error:
+            alarm, cause = store_error.alarm, str(store_error)
         variable = target.text if target is not None else _target_text(text)
         failures.append(
             InitFailure(

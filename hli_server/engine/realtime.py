@@ -194,9 +194,13 @@ class RealtimeCycles:
                 self.fail(
                     NcError(exc.alarm, cycle.block.line, cycle.block.label, f"#RT CYCLE: {exc.message}")
                 )
-            except ExternalVariableError as exc:
+            except (
+                ExternalVariableError
+            ) as store_error:  # its own name: mypyc types a shared one by the first
                 self.cycles.remove(cycle)
-                self.fail(NcError(A_UNDECLARED, cycle.block.line, cycle.block.label, f"#RT CYCLE: {exc}"))
+                self.fail(
+                    NcError(A_UNDECLARED, cycle.block.line, cycle.block.label, f"#RT CYCLE: {store_error}")
+                )
 
     def _run(self, cycle: RtCycle) -> None:
         body = cycle.body

@@ -115,8 +115,10 @@ class Compiler:
             return stmt
         except NcError as exc:
             return Refused(raw, number, exc)
-        except CompileError as exc:
-            return Refused(raw, number, nc_error(exc.alarm, raw.first, number, exc.message))
+        except CompileError as compile_error:  # its own name: mypyc types a shared one by the first clause
+            return Refused(
+                raw, number, nc_error(compile_error.alarm, raw.first, number, compile_error.message)
+            )
         except RecursionError:
             return Refused(raw, number, nc_error(A_LIMIT, raw.first, number, "expression nested too deeply"))
 

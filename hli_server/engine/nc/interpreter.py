@@ -184,9 +184,9 @@ class Interpreter(ImplicitCalls):
                 if frame is not None and frame.program and not exc.program:
                     exc.program = frame.program
                 raise
-            except EvalError as exc:  # pragma: no cover - every evaluation is inside a statement
+            except EvalError as eval_error:  # pragma: no cover - every evaluation is inside a statement
                 self._ended = True
-                raise NcError(exc.alarm, 0, "line 0", exc.message) from None
+                raise NcError(eval_error.alarm, 0, "line 0", eval_error.message) from None
         if self._rt_block_scope and isinstance(out, Block) and out.axes:
             self._rt_after_block(out)
         return out
