@@ -123,9 +123,17 @@ def hli_url(pytestconfig: pytest.Config) -> str | None:
     from hli_server.testing.remote import worker_url
 
     try:
-        return worker_url(urls, os.environ.get("PYTEST_XDIST_WORKER"))
+        return worker_url(urls, _worker_id(pytestconfig))
     except ValueError as exc:
         raise pytest.UsageError(str(exc)) from None
+
+
+def _worker_id(config: pytest.Config) -> str | None:
+    """This process' pytest-xdist worker ("gw0", ...), None in a run without workers: from xdist's own
+    ``workerinput``, not the environment (a pytest started inside a worker's test inherits its
+    ``PYTEST_XDIST_WORKER`` without being a worker)."""
+    workerinput = getattr(config, "workerinput", None)
+    return str(workerinput["workerid"]) if isinstance(workerinput, dict) else None
 
 
 def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
