@@ -96,6 +96,7 @@ MESSAGES = [
     ("FOO X2", (910100, ["unknown word 'FOO'"], ["'OO'", "in an expression"])),
     ("G04 Y2", (20014, ["first main axis"], [])),
     ("G805[-45.785, 32.720, 2.620]", (20131, ["G805", "P-CHAN-00187"], ["label"])),
+    ("G850[1]", (910102, ["G850[..]", "G800..G839"], ["space", "label"])),
     ("G01 X1 F100 [LBL]", (910100, ["'[LBL]'", "label"], [])),
     ("#FOO BAR", (910109, ["#FOO", "#TOOL PREP", "#RT CYCLE", "#IDENT WR"], ["#FOO BAR"])),
 ]

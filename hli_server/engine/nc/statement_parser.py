@@ -221,11 +221,11 @@ class StatementParser(HashParser):
                 "simulated: see docs/nc-language.md",
             )
         before = _IMPLICIT_CALL_BEFORE.search(u, 0, start) if c == "[" else None
-        if before is not None:  # G805 [..]: the call's brackets follow its G code directly
+        if before is not None:  # G840[..]: brackets after a G code that no implicit call answers to
             self.fail(
-                A_UNKNOWN_WORD,
-                f"G{before[1]} {self.word_at(start)}: the values of an implicit subroutine call follow its G "
-                f"code without a space (G{before[1]}[..], PM 206278923)",
+                A_UNKNOWN_G,
+                f"G{before[1]}[..]: only G80..G89 and G800..G839 are implicit subroutine calls with values "
+                "(PM 206278923)",
             )
         if c == "[":
             self.fail(
