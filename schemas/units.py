@@ -62,9 +62,16 @@ times) finite and meaningful."""
 
 
 def increments_from_mm(value_mm: float) -> int:
-    """mm (or °) -> interface increments (0.1 µm or 0.0001°), rounded to the nearest, clamped to DINT."""
-    inc = round(value_mm * INCREMENTS_PER_MM)
-    return max(DINT_MIN, min(DINT_MAX, inc))
+    """mm (or °) -> interface increments (0.1 µm or 0.0001°), rounded to the nearest (ties to even, as
+    ``round`` rounds), clamped to DINT. Clamped before it is rounded, so that a value whose product
+    overflows to infinity clamps too (``round`` raises there); not a number raises ValueError.
+    (The engine's cycle computes the same without ``round``: ``hli_server/engine/increments.py``.)"""
+    inc = value_mm * INCREMENTS_PER_MM
+    if inc >= DINT_MAX:
+        return DINT_MAX
+    if inc <= DINT_MIN:
+        return DINT_MIN
+    return round(inc)
 
 
 def mm_from_increments(value_inc: int | float) -> float:

@@ -30,18 +30,19 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Final
 
 from schemas.config import AxisConfig, AxisType
 from schemas.units import mm_from_increments, mm_per_min_to_mm_per_s, s_from_us
 
 __all__ = ["DRIVE_SATURATION", "GAIN_FACTOR_MAX", "Axis", "AxisFaults", "DriveParams", "check_fault_value"]
 
-DRIVE_SATURATION = 2.0
+DRIVE_SATURATION: Final = 2.0
 """The drive's speed limit as a multiple of the axis' v_max (project's own: motors are sized with
 margin above the axis' rated speed; the PLC sees the velocity as a DINT in 0.1 µm/s, which the
 configuration's bound on v_max keeps representable at twice v_max)."""
 
-GAIN_FACTOR_MAX = 100.0
+GAIN_FACTOR_MAX: Final = 100.0
 """Largest ``gain_factor``: a hundredfold kv is far beyond any mistuning worth simulating."""
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import Any, ClassVar, Protocol, cast
+from typing import Any, ClassVar, Final, Protocol, cast
 
 from hli_server.engine.axis import Axis
 from hli_server.engine.channel_state import PROGRAM_TRANSITIONS, Cause, ChannelState
@@ -25,6 +25,7 @@ from hli_server.engine.decoder import DecodeError, Decoder
 from hli_server.engine.external import ExternalVariables
 from hli_server.engine.geometry import LineSegment, Point
 from hli_server.engine.hli import AxisHli, ChannelHli
+from hli_server.engine.increments import increments_clamped
 from hli_server.engine.kinematics.configured import data_sets
 from hli_server.engine.kinematics.state import KinematicState
 from hli_server.engine.kinematics.transform import Transformation
@@ -48,27 +49,26 @@ from schemas.events import (
     NcMessage,
     ProgramStateChanged,
 )
-from schemas.units import DINT_MAX, DINT_MIN, INCREMENTS_PER_MM, mm_from_increments, s_from_us
+from schemas.units import mm_from_increments, s_from_us
 from schemas.wire import HoldSource, Mode, ProgramState
 
 __all__ = ["LOOKAHEAD_ITEMS", "Channel", "ChannelHost", "JogGuard", "increments_clamped"]
 
-LOOKAHEAD_ITEMS = 64
+LOOKAHEAD_ITEMS: Final = 64
 """Motion blocks decoded ahead of the interpolator (the look-ahead buffer, P-STUP-00070's size)."""
 
 DRIVE_CYCLE_IDENTS = ("S-0-0001", "S-0-0002")
 """SERCOS idents of the cycle times (µs): NC cycle time TNcyc, communication cycle time tScyc."""
+# enum members the cycle uses, as constants (a compiled module reads a Final name directly; any other
+# module-level name is a dictionary lookup, an enum member an attribute lookup besides, on every use)
+_NO_HOLD: Final = HoldSource.NONE
+_FEEDHOLD: Final = HoldSource.FEEDHOLD
+_MANUAL: Final = Mode.MANUAL
 ALARM_REFUSED = 911021
 """Warning: a command not allowed in this mode or state (the text says which and why)."""
 ALARM_NOT_REFERENCED = 911020
 ALARM_STILL_BRAKING = 911022
 """Warning: program start refused while the channel's axes still brake (after a reset or a stop)."""
-
-
-def increments_clamped(mm: float) -> int:
-    """mm -> 0.1 µm, rounded, clamped to a DINT (as the machine publishes the axes' positions)."""
-    value = round(mm * INCREMENTS_PER_MM)
-    return DINT_MAX if value > DINT_MAX else DINT_MIN if value < DINT_MIN else value
 
 
 class JogGuard(Protocol):
@@ -744,7 +744,7 @@ class Channel:
         for k, direction in self._req_jog.items():
             self._jog_keys[k] = direction
         self._req_jog.clear()
-        self.monitor_holds = HoldSource.NONE
+        self.monitor_holds = _NO_HOLD
 
     def _unit_changed(self, unit: str, previous: int | bool, state: int | bool) -> None:
         if previous == state:
@@ -898,7 +898,7 @@ class Channel:
             self.realtime.run()
         holds = self.monitor_holds
         if self.feedhold_active:  # no Flag union in the common cycle: Python's Flag.__or__ costs a few µs
-            holds |= HoldSource.FEEDHOLD
+            holds |= _FEEDHOLD
         self._set_holds(holds)
         if any(a.referencing for a in self.axes):
             self._reference()
@@ -908,7 +908,7 @@ class Channel:
             self.abort()
             self.aborting = False
             return
-        if self.mode == Mode.MANUAL:
+        if self.mode is _MANUAL:
             self._jog()
             return
         if self.aborting:
@@ -964,7 +964,7 @@ class Channel:
     def _apply(self, point: Point | None) -> None:
         if point is None:
             return
-        for axis, value in zip(self.axes, point, strict=True):
+        for axis, value in zip(self.axes, point):  # noqa: B905 compiled: see geometry.py
             axis.setpoint = value
 
     def _marker(self, marker: Marker) -> None:

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from enum import StrEnum
+from typing import Final
 
 from mypy_extensions import mypyc_attr
 
@@ -65,13 +66,12 @@ class StateTransitionError(RuntimeError):
     """A transition the table does not list: a bug in the engine."""
 
 
-_I, _R, _H, _A, _F = (
-    ProgramState.IDLE,
-    ProgramState.RUNNING,
-    ProgramState.HELD,
-    ProgramState.ABORTED,
-    ProgramState.FINISHED,
-)
+# Final: a compiled module reads these directly (any other module-level name is a dictionary lookup)
+_I: Final = ProgramState.IDLE
+_R: Final = ProgramState.RUNNING
+_H: Final = ProgramState.HELD
+_A: Final = ProgramState.ABORTED
+_F: Final = ProgramState.FINISHED
 
 PROGRAM_TRANSITIONS: dict[tuple[ProgramState, Cause], ProgramState] = {
     (_I, Cause.LOAD): _I,
@@ -140,8 +140,9 @@ class ChannelState:
 
     @property
     def running(self) -> bool:
-        """A program runs (RUNNING or HELD)."""
-        return self._program in PROGRAM_ACTIVE
+        """A program runs (RUNNING or HELD): :data:`PROGRAM_ACTIVE`, asked every cycle."""
+        program = self._program
+        return program is _R or program is _H
 
     def apply(self, cause: Cause) -> ProgramState:
         previous = self._program

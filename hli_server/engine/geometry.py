@@ -3,6 +3,12 @@
 A segment covers all axes of a channel: a point is a tuple with one coordinate per channel axis,
 in the channel's axis order. Lines move every axis linearly; arcs move two plane axes on a circle
 and the others linearly (helix).
+
+``zip`` without ``strict=True`` where the cycle pairs coordinates (``# noqa: B905`` there, here and in the
+monitors): the points and segments of a channel hold one coordinate per axis by construction, and mypyc
+compiles a plain ``zip`` loop into C, but ``zip(..., strict=True)`` into a call of the interpreter's
+``zip`` (an object, an iterator and a tuple per pair: 5 % of the compiled cycle in ``point_at`` alone;
+docs/performance.md).
 """
 
 from __future__ import annotations
@@ -43,13 +49,13 @@ class LineSegment:
         if length <= 0.0:
             return self.end
         f = min(max(s / length, 0.0), 1.0)
-        return tuple([a + (b - a) * f for a, b in zip(self.start, self.end, strict=True)])
+        return tuple([a + (b - a) * f for a, b in zip(self.start, self.end)])  # noqa: B905 compiled: see geometry.py
 
     def direction_at(self, s: float) -> Point:
         length = self.length
         if length <= 0.0:
             return tuple(0.0 for _ in self.start)
-        return tuple((b - a) / length for a, b in zip(self.start, self.end, strict=True))
+        return tuple((b - a) / length for a, b in zip(self.start, self.end))  # noqa: B905 compiled: see geometry.py
 
     def axis_extent(self, index: int) -> tuple[float, float]:
         a, b = self.start[index], self.end[index]
@@ -95,7 +101,7 @@ class ArcSegment:
             return self.end
         i, j = self.plane
         angle = self.start_angle + self.sweep * f
-        p = [a + (b - a) * f for a, b in zip(self.start, self.end, strict=True)]
+        p = [a + (b - a) * f for a, b in zip(self.start, self.end)]  # noqa: B905 compiled: see geometry.py
         p[i] = self.centre[0] + self.radius * math.cos(angle)
         p[j] = self.centre[1] + self.radius * math.sin(angle)
         return tuple(p)
@@ -107,7 +113,7 @@ class ArcSegment:
         f = min(max(s / length, 0.0), 1.0)
         i, j = self.plane
         angle = self.start_angle + self.sweep * f
-        d = [(b - a) / length for a, b in zip(self.start, self.end, strict=True)]
+        d = [(b - a) / length for a, b in zip(self.start, self.end)]  # noqa: B905 compiled: see geometry.py
         k = self.sweep * self.radius / length
         d[i] = -math.sin(angle) * k
         d[j] = math.cos(angle) * k

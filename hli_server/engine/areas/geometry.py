@@ -332,12 +332,12 @@ def point_at(seg: Segment, f: float) -> Point:
     """Point of the path at parameter ``f`` in [0, 1] (arcs: angle and linear axes both linear in f)."""
     s, e = seg.start, seg.end
     if isinstance(seg, LineSegment):
-        return tuple(x + (y - x) * f for x, y in zip(s, e, strict=True))
+        return tuple(x + (y - x) * f for x, y in zip(s, e))  # noqa: B905 compiled: see geometry.py
     if f >= 1.0:
         return e
     i, j = seg.plane
     angle = seg.start_angle + seg.sweep * f
-    p = [x + (y - x) * f for x, y in zip(s, e, strict=True)]
+    p = [x + (y - x) * f for x, y in zip(s, e)]  # noqa: B905 compiled: see geometry.py
     p[i] = seg.centre[0] + seg.radius * math.cos(angle)
     p[j] = seg.centre[1] + seg.radius * math.sin(angle)
     return tuple(p)

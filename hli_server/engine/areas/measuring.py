@@ -395,7 +395,8 @@ class MeasuringMoves(AreaRole):
         touched = False
         if not edge and tag.touch is not None:
             progress = sum(
-                (a.setpoint - o) * d for a, o, d in zip(ch.axes, tag.origin, tag.direction, strict=True)
+                (a.setpoint - o) * d
+                for a, o, d in zip(ch.axes, tag.origin, tag.direction)  # noqa: B905 compiled: see geometry.py
             )
             touched = progress >= tag.touch - EPS
         if not edge and not touched:
@@ -405,7 +406,8 @@ class MeasuringMoves(AreaRole):
             self._latch(tag, tag.touch)
         else:
             along = sum(
-                (a.measured - o) * d for a, o, d in zip(ch.axes, tag.origin, tag.direction, strict=True)
+                (a.measured - o) * d
+                for a, o, d in zip(ch.axes, tag.origin, tag.direction)  # noqa: B905 compiled: see geometry.py
             )
             self._record(tag, {a.name: a.measured for a in ch.axes}, along)
         if tag.to_target:

@@ -29,7 +29,7 @@ were decoded but never reached (program aborted) did not happen.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 from hli_server.engine.areas.common import (
     ALARM_DEFINITION,
@@ -61,6 +61,11 @@ __all__ = [
     "ChannelAreas",
     "channel_areas",
 ]
+
+# enum members the cycle compares with (Final: a compiled module reads them directly)
+_AUTOMATIC: Final = Mode.AUTOMATIC
+_MANUAL: Final = Mode.MANUAL
+_FINISHED: Final = ProgramState.FINISHED
 
 
 class ChannelAreas:
@@ -127,7 +132,7 @@ class ChannelAreas:
         if blocks is not self._blocks_seen:
             self._blocks_seen = blocks
             self.tables.sync_planned()
-        if ch.mode == Mode.AUTOMATIC:
+        if ch.mode is _AUTOMATIC:
             self.measuring.probe_cycle()
         else:
             self.measuring.follow_probe()
@@ -136,7 +141,7 @@ class ChannelAreas:
         ch = self.channel
         tables = self.tables
         pending = tables.pending
-        if pending is not None and ch.state == ProgramState.FINISHED:
+        if pending is not None and ch.state is _FINISHED:
             begin = pending.block
             area_id = pending.begin.area_id
             tables.pending = None
@@ -150,7 +155,7 @@ class ChannelAreas:
             )
         self.manual.announce_stop()
         ch.hli.bahn_state.area_mon_violation_detected_r = tables.violation_auto or (
-            ch.mode == Mode.MANUAL and tables.violation_manual
+            ch.mode is _MANUAL and tables.violation_manual
         )
 
 

@@ -55,7 +55,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from hli_server.engine.channel import Channel
 from hli_server.engine.decoder import DecodeError
@@ -70,8 +70,10 @@ if TYPE_CHECKING:
 
 __all__ = ["CollisionMonitor", "CollisionPair", "MoveApartCheck"]
 
-_EPS = 1e-9
-_ARC_SAMPLES = 64
+_EPS: Final = 1e-9
+_ARC_SAMPLES: Final = 64
+_INCREMENTS_PER_MM: Final = float(INCREMENTS_PER_MM)
+"""The CNC objects' velocity and braking distance are REAL in increments (C3-10)."""
 
 
 @dataclass(slots=True)
@@ -112,6 +114,9 @@ class CollisionMonitor(Monitor):
 
     def __init__(self, machine: MachineView) -> None:
         self.machine = machine
+        self._t_a = machine.t_a
+        """The cycle time [s], read once (a compiled module reads a protocol's attributes through the
+        interpreter)."""
         self.pairs: list[CollisionPair] = []
         by_number = machine.axes_by_number
         for master_cfg, partner_cfg in machine.config.collision_pairs():
@@ -181,7 +186,7 @@ class CollisionMonitor(Monitor):
 
     # --- the cycle -----------------------------------------------------------------------
     def after_interpolation(self) -> None:
-        t = self.machine.t_a
+        t = self._t_a
         for pair in self.pairs:
             self._drive_errors(pair)
             m, p = pair.master, pair.partner
@@ -305,12 +310,12 @@ class CollisionMonitor(Monitor):
 
     def _publish(self) -> None:
         """C3-10: the CNC objects of every collision axis."""
-        t = self.machine.t_a
+        t = self._t_a
         for axis, obj, a, offset, members in self._rows:
             v = (axis.setpoint - axis.prev_setpoint) / t
             obj.active = any(m.referenced and p.referenced for m, p in members)
-            obj.velocity = v * INCREMENTS_PER_MM
-            obj.brake_dist = axis.stop_distance(v, a) * INCREMENTS_PER_MM
+            obj.velocity = v * _INCREMENTS_PER_MM
+            obj.brake_dist = axis.stop_distance(v, a) * _INCREMENTS_PER_MM
             obj.coll_offset = offset
             obj.deceleration = a
             self._last_step[axis.index] = axis.setpoint - axis.prev_setpoint

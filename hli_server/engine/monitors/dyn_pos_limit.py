@@ -56,7 +56,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Final
 
 from hli_server.engine.channel import Channel
 from hli_server.engine.hli import ControlUnitSgn32
@@ -77,12 +77,12 @@ __all__ = [
     "next_state",
 ]
 
-RAMP_SAMPLES = 20
+RAMP_SAMPLES: Final = 20
 """C43-08: points of the braking ramp checked per cycle (FCT-C43 section 2)."""
 
-_EPS = 1e-9
+_EPS: Final = 1e-9
 """mm: positions closer than this to the limit count as on it."""
-_BISECT_STEPS = 48
+_BISECT_STEPS: Final = 48
 
 
 class DplEvent(StrEnum):
@@ -122,7 +122,15 @@ happen in the same cycle: the image shows 1 -> 3 (2 only lives inside that cycle
 both transitions with the same cycle number)."""
 
 
-_INACTIVE, _ACTIVATION, _ACTIVE, _BRAKING, _BRAKE = DynPosLimitState
+# the states and the enum members the cycle compares with, as constants (a compiled module reads a
+# Final name directly; any other module-level name is a dictionary lookup on every use)
+_INACTIVE: Final = DynPosLimitState.INACTIVE
+_ACTIVATION: Final = DynPosLimitState.ACTIVATION
+_ACTIVE: Final = DynPosLimitState.ACTIVE
+_BRAKING: Final = DynPosLimitState.ACTIVE_BRAKING
+_BRAKE: Final = DynPosLimitState.ACTIVE_BRAKE
+_HOLD: Final = HoldSource.DYN_POS_LIMIT
+_AUTOMATIC: Final = Mode.AUTOMATIC
 
 
 def next_state(state: DynPosLimitState, event: DplEvent) -> DynPosLimitState:
@@ -198,7 +206,7 @@ class _Ramp:
         if self._samples is None:
             path = self.path
             points = self._planner.points_at(path)
-            self._samples = [(s, p) for s, p in zip(path, points, strict=True) if p is not None]
+            self._samples = [(s, p) for s, p in zip(path, points) if p is not None]  # noqa: B905 compiled: see geometry.py
         return self._samples
 
 
@@ -240,14 +248,14 @@ class DynPosLimits(Monitor):
                 unit = lim.unit
                 state = lim.state
                 if not unit.enable_w:
-                    if state != _INACTIVE:
+                    if state is not _INACTIVE:
                         self._drop_stop(lim, planner)
                         self._fire(lim, DplEvent.DISABLE)
                     continue
-                if state == _INACTIVE:
+                if state is _INACTIVE:
                     self._fire(lim, DplEvent.ENABLE)
                     continue
-                if state == _ACTIVATION:
+                if state is _ACTIVATION:
                     self._adopt(lim, unit.command_w)
                     self._fire(lim, DplEvent.ADOPTED)
                 elif unit.command_w != lim.command and self._change_due(lim, ch, unit.command_w):
@@ -256,7 +264,7 @@ class DynPosLimits(Monitor):
                 if lim.generation != planner.generation:
                     lim.generation = planner.generation
                     lim.stop_s = None
-                    if lim.state in (_BRAKING, _BRAKE):
+                    if lim.state is _BRAKING or lim.state is _BRAKE:
                         self._fire(lim, DplEvent.RELEASE)
                 if monitoring is None:
                     monitoring = _path_monitored(ch)  # C43-09
@@ -274,7 +282,7 @@ class DynPosLimits(Monitor):
                 if stop_s is not None:
                     planner.stop_points[lim.key] = stop_s
             if any(lim.stop_s is not None for lim in limits):
-                ch.hold(HoldSource.DYN_POS_LIMIT)  # "ein bereichsspezifischer Feedhold" (FCT-C43)
+                ch.hold(_HOLD)  # "ein bereichsspezifischer Feedhold" (FCT-C43)
 
     def after_interpolation(self) -> None:
         for ch, limits in self._effective:
@@ -287,7 +295,7 @@ class DynPosLimits(Monitor):
                     lim.stop_s = None
                     lim.generation = planner.generation
                     self._fire(lim, DplEvent.RELEASE)
-                elif lim.state == _BRAKING and planner.at_rest and planner.s_abs >= lim.stop_s - _EPS:
+                elif lim.state is _BRAKING and planner.at_rest and planner.s_abs >= lim.stop_s - _EPS:
                     self._fire(lim, DplEvent.STANDSTILL)
 
     # --- pieces --------------------------------------------------------------------------
@@ -378,7 +386,7 @@ class DynPosLimits(Monitor):
 def _path_monitored(ch: Channel) -> bool:
     """C43-09: only a running program in automatic mode is looked ahead on."""
     return (
-        ch.mode == Mode.AUTOMATIC
+        ch.mode is _AUTOMATIC
         and ch.program_running
         and not ch.aborting
         and not any(a.stopping for a in ch.axes)

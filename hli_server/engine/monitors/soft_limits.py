@@ -27,6 +27,9 @@ then.
 
 from __future__ import annotations
 
+from typing import Final
+
+from hli_server.engine.axis import Axis
 from hli_server.engine.channel import Channel
 from hli_server.engine.decoder import DecodeError
 from hli_server.engine.geometry import Point, Segment, first_beyond, segment_params
@@ -45,18 +48,23 @@ __all__ = [
     "SoftLimits",
 ]
 
-ALARM_PROGRAMMED_POSITIVE = 120002
-ALARM_PROGRAMMED_NEGATIVE = 120003
-ALARM_ACTUAL_POSITIVE = 70021
-ALARM_ACTUAL_NEGATIVE = 70022
-ALARM_MANUAL_LIMIT = 911013
+ALARM_PROGRAMMED_POSITIVE: Final = 120002
+ALARM_PROGRAMMED_NEGATIVE: Final = 120003
+ALARM_ACTUAL_POSITIVE: Final = 70021
+ALARM_ACTUAL_NEGATIVE: Final = 70022
+ALARM_MANUAL_LIMIT: Final = 911013
 
-_EPS = 1e-9
+_EPS: Final = 1e-9
+_MANUAL: Final = Mode.MANUAL
 
 
 class SoftLimits(Monitor):
     def __init__(self, machine: MachineView) -> None:
         self.machine = machine
+        # the machine's parts as lists of this module's types: the cycle iterates them without the
+        # interpreter (a compiled module reads a protocol's attributes through it)
+        self._axes: list[Axis] = list(machine.axes)
+        self._channels: list[Channel] = list(machine.channels)
         self._tripped: set[str] = set()
         self._warned: dict[str, int] = {}
         """Axes whose stop at a limit P-MANU-00014 has reported: +1 above, -1 below."""
@@ -93,11 +101,11 @@ class SoftLimits(Monitor):
     # --- manual mode ---------------------------------------------------------------------
     def before_interpolation(self) -> None:
         """Note where the axes stood when manual mode was selected (P-AXIS-00137/00138 count from there)."""
-        for ch in self.machine.channels:
+        for ch in self._channels:
             mode = ch.mode
             if mode != self._mode[ch.index]:
                 self._mode[ch.index] = mode
-                if mode == Mode.MANUAL:
+                if mode is _MANUAL:
                     self._origin[ch.index] = ch.setpoints()
 
     def manual_range(self, channel: Channel, k: int) -> tuple[float, float, str, str]:
@@ -162,7 +170,7 @@ class SoftLimits(Monitor):
     # --- actual positions ----------------------------------------------------------------
     def after_interpolation(self) -> None:
         machine = self.machine
-        for axis in machine.axes:
+        for axis in self._axes:
             if not axis.referenced:
                 continue
             pos = axis.measured
