@@ -343,6 +343,8 @@ class Feeder:
         self._events: list[Event] = []
         self._expected_events: list[Any] = []
         self._stop_after_cycle = False
+        self._outputs_asked: tuple[int, bool] = (-1, True)
+        """(cycle, whether its outputs were asked for): the last :meth:`needs_outputs` answer."""
         self._failure: CannotReplayError | SnapshotRestoreError | None = None
 
     # --- set-up ----------------------------------------------------------------------------------
@@ -616,11 +618,35 @@ class Feeder:
     def searched(self) -> tuple[str, ...]:
         return self._searched
 
+    def needs_outputs(self, cycle: int) -> bool:
+        """Whether the runtime packs the CNC->PLC half after ``cycle``: only where :meth:`after_cycle`
+        compares it (a replay's image has no other reader; the runtime packs anyway where a signal recorder
+        or a cycle listener is attached). The half of the other cycles is never looked at: what the engine
+        does does not depend on it, and its V.E. writes still go into the image
+        (``ProcessImage.publish_external``)."""
+        window = self.window
+        needed = cycle >= window and (
+            self.every == 1 or not (cycle - window) % self.every or self._has_sample(cycle)
+        )
+        self._outputs_asked = (cycle, needed)
+        return needed
+
+    def _has_sample(self, cycle: int) -> bool:
+        """A recorded sample of the outputs at ``cycle`` (its record is at the buffer's head then)."""
+        buffer = self._buffer
+        return bool(buffer) and buffer[0]["c"] == cycle and bool(buffer[0].get("o"))
+
     def after_cycle(self, cycle: int, latched: bytes, packed: bytearray | None) -> None:
         if self._failure is not None:
             raise self._failure
         if self._stop_after_cycle:
             raise _StopReplayError
+        if self._outputs_asked == (cycle, False) and not self._events and not self._expected_events:
+            # most cycles: nothing recorded at this cycle, no event, nothing to compare
+            buffer = self._buffer
+            if not buffer or buffer[0]["c"] != cycle:
+                self.report.last_cycle = cycle
+                return
         own_events = self._events  # the machine's listener appends to this very list
         events = own_events[:] if own_events else _NO_EVENTS
         if own_events:
@@ -635,6 +661,8 @@ class Feeder:
             self._expected_events = _NO_EVENTS
         self.report.last_cycle = cycle
         window = self.window
+        # no half: either the runtime was told it need not pack one (needs_outputs), or its publish failed
+        publish_failed = packed is None and self._outputs_asked != (cycle, False)
         compared = (
             cycle >= window
             and packed is not None
@@ -651,7 +679,7 @@ class Feeder:
         if flat:
             self._expect(flat)
         if not compared:
-            if cycle < window or packed is None:
+            if cycle < window or publish_failed:
                 return
         elif self.fast:
             assert packed is not None
@@ -888,6 +916,7 @@ async def _run(
         read_program=feeder.read_file,
     )
     runtime.session = feeder  # type: ignore[assignment]  # the replay's tap: feeds and compares
+    runtime.host.detach_dashboard()  # nobody watches a replay's dashboard
     runtime.machine.programs = feeder  # the subprograms the recorded session found
     # and the cycle files its channels' cycle directories gave (noted in the same stream, find by find)
     runtime.machine.cycle_programs = dict.fromkeys(runtime.machine.cycle_programs, feeder)

@@ -181,6 +181,10 @@ class ProcessImage:
         self._external = ExternalSync(layout, plan.p2c_offset) if layout.external_signals else None
         self._c2p_struct = struct.Struct("<Q" + layout.struct_format(_C2P).removeprefix("<"))
         self._c2p_private = bytearray(self._c2p_struct.size)
+        self._latched: bytes | None = None
+        self._latched_for: MachineHli | None = None
+        """The PLC->CNC half last assigned to the engine's ``_w`` fields, and whose fields: a latch of the
+        same bytes into the same engine assigns nothing (only the projection writes ``_w`` fields)."""
         self._seq = [0, 0]
         self._publish_count = 0
         self._cycle = 0
@@ -369,14 +373,22 @@ class ProcessImage:
     # --- the cycle ---------------------------------------------------------------------------
     def latch_into(self, machine: MachineHli) -> bytes:
         """Copy the PLC->CNC half (one memcpy) and assign it to the engine's ``_w`` fields; returns the
-        bytes latched (what the session recorder keeps, ``hli_server/recording``)."""
+        bytes latched (what the session recorder keeps, ``hli_server/recording``).
+
+        A half equal to the one latched last into the same engine is not assigned again: the ``_w`` fields
+        hold it already, since nothing but this projection writes them (the engine reads them; a PLC
+        writes the image). Most cycles a PLC changes nothing: one comparison instead of some hundred
+        assignments (docs/performance.md)."""
         off = self.plan.p2c_offset
         data = bytes(self._buf[off : off + self.plan.p2c_size])
-        values = self._p2c_struct.unpack_from(data)
-        try:
-            self._projection.unpack[_P2C](machine, values)
-        except (IndexError, AttributeError) as exc:
-            raise diagnose(self.layout, machine, _P2C, exc) from exc
+        if data != self._latched or machine is not self._latched_for:
+            values = self._p2c_struct.unpack_from(data)
+            try:
+                self._projection.unpack[_P2C](machine, values)
+            except (IndexError, AttributeError) as exc:
+                self._latched = self._latched_for = None
+                raise diagnose(self.layout, machine, _P2C, exc) from exc
+            self._latched, self._latched_for = data, machine
         if self._external is not None:
             self._external.latch(data, self._buf)
         return data
@@ -400,6 +412,13 @@ class ProcessImage:
         if commit:
             self._commit(private, cycle)
         return private
+
+    def publish_external(self) -> None:
+        """The NC's V.E. writes into their fields, as :meth:`publish_from` stores them, without packing or
+        publishing the half: a cycle whose outputs nobody reads (a replay's cycle between its
+        comparisons) keeps the V.E. fields as a published cycle would."""
+        if self._external is not None:
+            self._external.publish(self._buf)
 
     def publish_bytes(self, half: bytes | bytearray, cycle: int) -> None:
         """Publish a ready-made CNC->PLC half (replay, tests); same protocol as :meth:`publish_from`."""
@@ -448,6 +467,7 @@ class ProcessImage:
                     "engine's store (init_from(hli, cycle, external=machine.external))"
                 )
             self._external.init(self._buf, external)
+        self._latched = self._latched_for = None  # the next latch assigns the half, whatever it was
         self.publish_from(machine, cycle)
 
     @property

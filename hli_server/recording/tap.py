@@ -403,6 +403,12 @@ class SessionTap:
         the cycle, such as a program file the engine reads, with this cycle)."""
         self._in_cycle = cycle
 
+    def needs_outputs(self, cycle: int) -> bool:
+        """Whether the runtime packs and publishes the CNC->PLC half after ``cycle``: always in a server
+        (its PLC reads every cycle); the replay's feeder, which takes this slot, asks only for the cycles it
+        compares."""
+        return True
+
     def after_cycle(self, cycle: int, latched: bytes, packed: bytearray | None) -> None:
         """The cycle latched ``latched`` and packed ``packed`` (the cycle word, then the half)."""
         self._in_cycle = None

@@ -678,7 +678,10 @@ class Runtime:
                 self._cycle_failed(exc)
         try:
             stalled = self.comm_faults.publish_stalled(machine.cycle)  # a stalled publish, on demand
-            packed = image.publish_from(machine.hli, machine.cycle, commit=not stalled)
+            if self._recorders or self._cycle_listeners or session.needs_outputs(machine.cycle):
+                packed = image.publish_from(machine.hli, machine.cycle, commit=not stalled)
+            elif not stalled:  # nobody reads this cycle's half (a replay between its comparisons)
+                image.publish_external()
         except Exception as exc:
             self._cycle_failed(exc)
         session.after_cycle(machine.cycle, latched, packed)
@@ -856,8 +859,15 @@ class RuntimeHost:
         self._rt = runtime
         self._operator = operator
         # the operator panel's trails follow the cycles, its scenes the events (the dashboard)
-        runtime.on_cycle(operator.recorder.after_cycle)
-        runtime.event_log.subscribe(operator.recorder.on_event)
+        self._dashboard_off = (
+            runtime.on_cycle(operator.recorder.after_cycle),
+            runtime.event_log.subscribe(operator.recorder.on_event),
+        )
+
+    def detach_dashboard(self) -> None:
+        """Draw no trails and count no scene changes from now on: a runtime nobody watches (a replay)."""
+        for off in self._dashboard_off:
+            off()
 
     @property
     def image(self) -> ImagePort:

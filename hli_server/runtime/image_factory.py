@@ -35,6 +35,10 @@ class RuntimeImage(ImagePort, Protocol):
         (the cycle as u64, then the half)."""
         ...
 
+    def publish_external(self) -> None:
+        """The NC's V.E. writes into their fields without publishing the half (a cycle nobody reads)."""
+        ...
+
     def init_from(self, hli: MachineHli, cycle: int, external: ExternalVariables | None = None) -> None:
         """Start-up: the PLC->CNC half takes the engine's ``_w`` values; the CNC->PLC half is published;
         the V.E. fields take the store's values and are kept in step with it from now on (N-05)."""

@@ -230,6 +230,36 @@ def test_the_plc_writes_command_and_enable_and_the_engine_sees_them_at_the_latch
         assert client.publish_count == 1
 
 
+@pytest.mark.req("H-02")
+def test_a_latch_assigns_the_half_only_when_it_changed_or_the_engine_is_another(layout, image):
+    """Only the projection writes the engine's ``_w`` fields: a latch of the bytes latched last into the same
+    engine assigns nothing (a quiet PLC costs one comparison, docs/performance.md); a changed byte assigns
+    the whole half; another engine, or an image set up again (init_from), is assigned in full."""
+    machine = _machine(layout)
+    image.init_from(machine)
+    unit = "gpAx[3]^ipo_mc_control.dyn_pos_limit_high"
+    image.write(f"{unit}.command_w", 1_234_567)
+    assert image.latch_into(machine) == image.latch_into(machine)
+    dpl = machine.axes[3].ipo_mc_control.dyn_pos_limit_high
+    assert dpl.command_w == 1_234_567
+    dpl.command_w = 5  # behind the image's back: no door does this
+    image.latch_into(machine)
+    assert dpl.command_w == 5  # the same half again: not assigned
+    image.write("gpCh[0]^mc_command.mode_w", 1)  # any change: the whole half
+    image.latch_into(machine)
+    assert (dpl.command_w, machine.channels[0].mc_command.mode_w) == (1_234_567, 1)
+    other = _machine(layout)
+    image.latch_into(other)
+    assert other.axes[3].ipo_mc_control.dyn_pos_limit_high.command_w == 1_234_567
+    dpl.command_w = 5
+    image.latch_into(machine)  # latched into `other` last: assigned in full
+    assert dpl.command_w == 1_234_567
+    dpl.command_w = 9
+    image.init_from(machine)  # the image takes the engine's values (9), and the next latch assigns them
+    image.latch_into(machine)
+    assert image.read(f"{unit}.command_w") == dpl.command_w == 9
+
+
 @pytest.mark.req("H-01")
 def test_raw_writes_into_the_plc_half_check_every_value_first(layout, image):
     s = layout.signal("gpCh[0]^bahn_mc_control.override.enable_w")

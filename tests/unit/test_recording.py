@@ -14,6 +14,7 @@ from typing import Any
 import pytest
 
 from hli_server.configuration import load_machine
+from hli_server.image import ProcessImage
 from hli_server.recording.format import FORMAT_VERSION, RecordingError, Records, read_header, read_records
 from hli_server.recording.inspect import summarize, write_csv, write_plot, write_vcd
 from hli_server.recording.tap import RecordingOptions
@@ -582,6 +583,46 @@ async def test_a_difference_between_two_samples_shows_at_the_next_sample(tmp_pat
     assert old.verdict is Verdict.DIFFER
     assert old.first is not None
     assert old.first.cycle == 2
+
+
+async def test_the_replay_packs_the_outputs_only_where_it_compares_them_and_the_events_of_every_cycle(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Between two samples nobody reads a replay's CNC->PLC half: the runtime packs it only at the cycles
+    the replay compares (docs/performance.md, issue 38): the samples of the grid, and the cycles with
+    events (a record of events carries the outputs of its cycle); an event forged off the grid is found
+    at its own cycle."""
+    path = await _recorded(tmp_path, 7)
+    samples = _output_cycles(path)
+    packed_at: list[int] = []
+    publish_from = ProcessImage.publish_from
+
+    def counting(self: ProcessImage, machine: Any, cycle: int, *, commit: bool = True) -> bytearray:
+        packed_at.append(cycle)
+        return publish_from(self, machine, cycle, commit=commit)
+
+    monkeypatch.setattr(ProcessImage, "publish_from", counting)
+    report = await replay(path)
+    assert report.verdict is Verdict.PASS, report.text()
+    assert report.last_cycle == 2100
+    grid = {c for c in range(1, 2101) if (c - 1) % 7 == 0}
+    assert set(samples) <= grid | {2100} | {r["c"] for r in read_records(path) if "e" in r}
+    assert set(packed_at) == {0} | grid | set(samples)  # 0: the start-up's publish; nothing between
+    monkeypatch.undo()
+
+    off_grid = [r["c"] for r in read_records(path) if "e" in r and (r["c"] - 1) % 7]
+    assert off_grid, "the scenario has events off the grid of samples"
+    forged_at = off_grid[-1]
+
+    def forge(record: dict[str, Any]) -> dict[str, Any]:
+        if record.get("c") == forged_at and "e" in record:
+            record["e"] = record["e"][1:]  # one event the engine raises is missing from the recording
+        return record
+
+    forged = await replay(_rewrite(path, forge))
+    assert forged.verdict is Verdict.DIFFER
+    assert forged.first is not None
+    assert (forged.first.cycle, forged.first.signal) == (forged_at, "events")
 
 
 # --------------------------------------------------------------------------------------------
