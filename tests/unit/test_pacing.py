@@ -6,9 +6,13 @@ clock looked; each case is one way a cycle starts late, and the cause the tracer
 
 from __future__ import annotations
 
+import os
+import selectors
+import time
+
 import pytest
 
-from hli_server.runtime.pacing import CAUSES, PacingStats, WaitProbe, summarize
+from hli_server.runtime.pacing import CAUSES, PacingStats, PreciseEpollSelector, WaitProbe, summarize
 
 T_A = 0.001
 
@@ -134,3 +138,34 @@ def test_a_wait_that_returns_late_without_wanting_a_cpu_is_the_timers() -> None:
     assert slow.cause == "timer"
     assert slow.parts["timer"] == pytest.approx(0.001, abs=1e-5)
     assert "resolution" in slow.detail()
+
+
+# --- the precise selector (the realtime clock's loop) ---------------------------------------------------
+
+
+@pytest.mark.req("E-01")
+def test_the_precise_selector_waits_to_its_timeout_and_reports_what_is_ready() -> None:
+    """A timed wait that ends with nothing ready returns no descriptor (and costs one system call, not
+    two); a descriptor that is ready, or becomes ready during the wait, is returned at once, with or
+    without a timeout; the wait is noted for the tracer."""
+    sel = PreciseEpollSelector()
+    r, w = os.pipe()
+    try:
+        sel.register(r, selectors.EVENT_READ, "pipe")
+        began = time.monotonic()
+        assert sel.select(0.002) == []
+        waited = time.monotonic() - began
+        assert waited >= 0.0019
+        assert sel.wait_until == pytest.approx(sel.wait_began + 0.002)
+        os.write(w, b"x")
+        for timeout in (0.5, None, 0):
+            began = time.monotonic()
+            ready = sel.select(timeout)
+            assert [(key.data, events) for key, events in ready] == [("pipe", selectors.EVENT_READ)]
+            assert time.monotonic() - began < 0.25
+        os.read(r, 1)
+        assert sel.select(0) == []
+    finally:
+        sel.close()
+        os.close(r)
+        os.close(w)
