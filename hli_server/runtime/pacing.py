@@ -665,91 +665,145 @@ async def run_realtime(
     ``serve(deadline)``, if given, is called after every wake-up's cycles, with the time (``monotonic``)
     by which it should be done: the work the clock's loop does besides the cycles goes there, where it
     delays no cycle (the requests of the doors process, ``runtime/remote.py``); it returns whether it did
-    any (the tracer then knows when, ``service``)."""
-    t_a = stats.t_a
-    cap = max_catch_up
-    clock = time.monotonic
-    thread = ThreadClock()
-    read = thread.read
-    probe = loop_probe(asyncio.get_running_loop())
-    epoch = clock()
-    done = 0  # cycles run since epoch
-    stats.started_at = epoch
-    cycle = 0
-    last_slip_log = -math.inf
-    slept = epoch
-    at_slept = read()
-    previous = (1.0, 0.0)  # shares of CPU and of run-queue wait in the previous wake-up's work
-    try:
-        while cycles_left() > 0:
-            woke = now = clock()
-            at_woke = read()
-            backlog = int((now - epoch) / t_a) - done
-            if backlog > 0:
-                run = min(backlog, cap, cycles_left())
-                for _ in range(run):
-                    began = clock()
-                    cycle = run_cycle()
-                    done += 1
-                    ended = clock()
-                    due = epoch + done * t_a
-                    lateness = ended - due
-                    stats.record(lateness)
-                    if lateness > stats.explain_above:
-                        stats.explain(
-                            cycle,
-                            lateness,
-                            due=due,
-                            began=began,
-                            ended=ended,
-                            woke=woke,
-                            slept=slept,
-                            at_ended=read(),
-                            at_woke=at_woke,
-                            at_slept=at_slept,
-                            previous=previous,
-                            precise=thread.precise,
-                            probe=probe,
-                        )
-                stats.wakeup(run)
-                if backlog > cap:
-                    dropped = backlog - cap
-                    epoch += dropped * t_a
-                    stats.slipped_cycles += dropped
-                    if now - last_slip_log > 1.0:
-                        last_slip_log = now
-                        logger.warning(
-                            "realtime clock ran %.1f ms late at cycle %d: caught up %d cycles, dropped %d "
-                            "(simulated time now %.3f s behind the wall clock; %d dropped in all)",
-                            backlog * t_a * 1e3,
-                            cycle,
-                            cap,
-                            dropped,
-                            stats.slipped_cycles * t_a,
-                            stats.slipped_cycles,
-                        )
-                after_cycles()
-            if serve is not None:
-                began, at_began = clock(), read()
-                if serve(epoch + (done + 1) * t_a - SERVE_MARGIN_S):
-                    ended, at_served = clock(), read()
-                    wall = ended - began
-                    if wall <= 0:
-                        share = 1.0
-                    elif thread.precise:  # ran or was blocked (serving), as against waiting for a CPU
-                        share = 1.0 - min(1.0, (at_served[1] - at_began[1]) / wall)
-                    else:
-                        share = min(1.0, (at_served[0] - at_began[0]) / wall)
-                    stats.service = (began, ended, share)
-            slept = clock()
-            at_slept = read()
-            span = slept - woke
-            if span > 0:
-                previous = ((at_slept[0] - at_woke[0]) / span, (at_slept[1] - at_woke[1]) / span)
-            delay = epoch + (done + 1) * t_a - slept
-            await asyncio.sleep(delay if delay > 0 else 0)
-    finally:
-        thread.close()
+    any (the tracer then knows when, ``service``).
+
+    Each wake-up is a timer callback of the running loop (``call_at`` the next cycle's due time), not a
+    coroutine that sleeps: one turn of the loop per wake-up, no future and no task step made for it (a
+    sleeping coroutine costs two turns and their system calls every millisecond; docs/performance.md).
+    The loop's clock is ``time.monotonic``, the one the due times are computed with."""
+    pacer = _RealtimePacer(run_cycle, after_cycles, cycles_left, stats, max_catch_up, serve)
+    await pacer.run()
+
+
+class _RealtimePacer:
+    """:func:`run_realtime`'s state between wake-ups; :meth:`wake` is one wake-up."""
+
+    def __init__(
+        self,
+        run_cycle: Callable[[], int],
+        after_cycles: Callable[[], None],
+        cycles_left: Callable[[], int],
+        stats: PacingStats,
+        max_catch_up: int,
+        serve: Callable[[float], bool] | None,
+    ) -> None:
+        self.run_cycle, self.after_cycles, self.cycles_left = run_cycle, after_cycles, cycles_left
+        self.stats, self.cap, self.serve = stats, max_catch_up, serve
+        self.t_a = stats.t_a
+        self.thread = ThreadClock()
+        self.loop = asyncio.get_running_loop()
+        self.probe = loop_probe(self.loop)
+        self.epoch = time.monotonic()
+        self.done = 0  # cycles run since epoch
+        stats.started_at = self.epoch
+        self.cycle = 0
+        self.last_slip_log = -math.inf
+        self.slept = self.epoch
+        self.at_slept = self.thread.read()
+        self.previous = (1.0, 0.0)  # shares of CPU and of run-queue wait in the previous wake-up's work
+        self.finished: asyncio.Future[None] = self.loop.create_future()
+        self.handle: asyncio.Handle | None = None
+
+    async def run(self) -> None:
+        try:
+            if self.cycles_left() > 0:
+                self.handle = self.loop.call_soon(self.wake)
+                await self.finished
+        finally:
+            if self.handle is not None:
+                self.handle.cancel()
+            self.thread.close()
+
+    def wake(self) -> None:
+        """One wake-up: every cycle that is due (at most ``max_catch_up``), the requests between cycles,
+        then the timer for the next cycle's due time."""
+        self.handle = None
+        if self.finished.done():
+            return
+        try:
+            self._wake()
+        except Exception as exc:  # the clock stops; the runtime logs it (Runtime._pacer_done)
+            self.finished.set_exception(exc)
+            return
+        if self.cycles_left() <= 0:
+            self.finished.set_result(None)
+            return
+        due = self.epoch + (self.done + 1) * self.t_a
+        if due > self.slept:
+            self.handle = self.loop.call_at(due, self.wake)
+        else:
+            self.handle = self.loop.call_soon(self.wake)
+
+    def _wake(self) -> None:
+        stats, t_a, clock, read = self.stats, self.t_a, time.monotonic, self.thread.read
+        woke = now = clock()
+        at_woke = read()
+        backlog = int((now - self.epoch) / t_a) - self.done
+        if backlog > 0:
+            cap = self.cap
+            run = min(backlog, cap, self.cycles_left())
+            cycle = self.cycle
+            for _ in range(run):
+                began = clock()
+                cycle = self.run_cycle()
+                self.done += 1
+                ended = clock()
+                due = self.epoch + self.done * t_a
+                lateness = ended - due
+                stats.record(lateness)
+                if lateness > stats.explain_above:
+                    stats.explain(
+                        cycle,
+                        lateness,
+                        due=due,
+                        began=began,
+                        ended=ended,
+                        woke=woke,
+                        slept=self.slept,
+                        at_ended=read(),
+                        at_woke=at_woke,
+                        at_slept=self.at_slept,
+                        previous=self.previous,
+                        precise=self.thread.precise,
+                        probe=self.probe,
+                    )
+            self.cycle = cycle
+            stats.wakeup(run)
+            if backlog > cap:
+                dropped = backlog - cap
+                self.epoch += dropped * t_a
+                stats.slipped_cycles += dropped
+                if now - self.last_slip_log > 1.0:
+                    self.last_slip_log = now
+                    logger.warning(
+                        "realtime clock ran %.1f ms late at cycle %d: caught up %d cycles, dropped %d "
+                        "(simulated time now %.3f s behind the wall clock; %d dropped in all)",
+                        backlog * t_a * 1e3,
+                        cycle,
+                        cap,
+                        dropped,
+                        stats.slipped_cycles * t_a,
+                        stats.slipped_cycles,
+                    )
+            self.after_cycles()
+        serve = self.serve
+        if serve is not None:
+            began, at_began = clock(), read()
+            if serve(self.epoch + (self.done + 1) * t_a - SERVE_MARGIN_S):
+                ended, at_served = clock(), read()
+                wall = ended - began
+                if wall <= 0:
+                    share = 1.0
+                elif self.thread.precise:  # ran or was blocked (serving), as against waiting for a CPU
+                    share = 1.0 - min(1.0, (at_served[1] - at_began[1]) / wall)
+                else:
+                    share = min(1.0, (at_served[0] - at_began[0]) / wall)
+                stats.service = (began, ended, share)
+        self.slept = slept = clock()
+        self.at_slept = at_slept = read()
+        span = slept - woke
+        if span > 0:
+            self.previous = ((at_slept[0] - at_woke[0]) / span, (at_slept[1] - at_woke[1]) / span)
 
 
 async def run_free(
