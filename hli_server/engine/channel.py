@@ -59,11 +59,13 @@ LOOKAHEAD_ITEMS: Final = 64
 
 DRIVE_CYCLE_IDENTS = ("S-0-0001", "S-0-0002")
 """SERCOS idents of the cycle times (µs): NC cycle time TNcyc, communication cycle time tScyc."""
+
 # enum members the cycle uses, as constants (a compiled module reads a Final name directly; any other
 # module-level name is a dictionary lookup, an enum member an attribute lookup besides, on every use)
 _NO_HOLD: Final = HoldSource.NONE
 _FEEDHOLD: Final = HoldSource.FEEDHOLD
 _MANUAL: Final = Mode.MANUAL
+
 ALARM_REFUSED = 911021
 """Warning: a command not allowed in this mode or state (the text says which and why)."""
 ALARM_NOT_REFERENCED = 911020
