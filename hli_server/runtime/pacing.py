@@ -722,10 +722,11 @@ class _RealtimePacer:
             return
         try:
             self._wake()
+            left = self.cycles_left()
         except Exception as exc:  # the clock stops; the runtime logs it (Runtime._pacer_done)
             self.finished.set_exception(exc)
             return
-        if self.cycles_left() <= 0:
+        if left <= 0:
             self.finished.set_result(None)
             return
         due = self.epoch + (self.done + 1) * self.t_a

@@ -6,13 +6,21 @@ clock looked; each case is one way a cycle starts late, and the cause the tracer
 
 from __future__ import annotations
 
+import asyncio
 import os
 import selectors
 import time
 
 import pytest
 
-from hli_server.runtime.pacing import CAUSES, PacingStats, PreciseEpollSelector, WaitProbe, summarize
+from hli_server.runtime.pacing import (
+    CAUSES,
+    PacingStats,
+    PreciseEpollSelector,
+    WaitProbe,
+    run_realtime,
+    summarize,
+)
 
 T_A = 0.001
 
@@ -169,3 +177,68 @@ def test_the_precise_selector_waits_to_its_timeout_and_reports_what_is_ready() -
         sel.close()
         os.close(r)
         os.close(w)
+
+
+# --- the realtime loop ------------------------------------------------------------------------------------
+
+
+@pytest.mark.req("E-01")
+async def test_the_realtime_loop_runs_each_cycle_when_due_serves_between_and_stops_when_told() -> None:
+    """Cycle k is due at epoch + k * T_A: 30 cycles take at least 29 ms; between the wake-ups' cycles the
+    requests are served with a deadline before the next cycle is due; the loop ends when no cycle is
+    left, passes a failing cycle's exception on, and a cancelled loop runs no further cycle."""
+    ran: list[float] = []
+    left = [30]
+    batches: list[int] = []
+    served: list[tuple[float, float]] = []
+
+    def run_cycle() -> int:
+        ran.append(time.monotonic())
+        left[0] -= 1
+        return len(ran)
+
+    def serve(deadline: float) -> bool:
+        served.append((time.monotonic(), deadline))
+        return False
+
+    stats = PacingStats(T_A)
+    await asyncio.wait_for(
+        run_realtime(
+            run_cycle, lambda: batches.append(len(ran)), lambda: left[0], stats, max_catch_up=5, serve=serve
+        ),
+        5,
+    )
+    assert len(ran) == 30
+    assert batches[-1] == 30
+    assert batches == sorted(batches)
+    assert ran[-1] - ran[0] >= 0.029 - 1e-4
+    assert stats.measured == 30
+    assert stats.wakeups >= 6  # at most max_catch_up cycles a wake-up
+    assert served
+    assert all(deadline > at - T_A for at, deadline in served)
+
+    def failing() -> int:
+        raise RuntimeError("a cycle failed")
+
+    with pytest.raises(RuntimeError, match="a cycle failed"):
+        await asyncio.wait_for(
+            run_realtime(failing, lambda: None, lambda: 1, PacingStats(T_A), max_catch_up=5), 5
+        )
+
+    count = [0]
+
+    def counting() -> int:
+        count[0] += 1
+        return count[0]
+
+    task = asyncio.ensure_future(
+        run_realtime(counting, lambda: None, lambda: 1 << 40, PacingStats(T_A), max_catch_up=5)
+    )
+    await asyncio.sleep(0.02)
+    assert count[0] > 0
+    task.cancel()
+    with pytest.raises(asyncio.CancelledError):
+        await task
+    stopped_at = count[0]
+    await asyncio.sleep(0.01)
+    assert count[0] == stopped_at
