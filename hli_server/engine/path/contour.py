@@ -61,7 +61,14 @@ from typing import Final
 
 from hli_server.engine.geometry import LineSegment, Point, Segment, sub_segment
 from hli_server.engine.nc.blocks import Block
-from hli_server.engine.path.corners import A_NOT_SIMULATED, CornerError, CornerRequest, insert_corner
+from hli_server.engine.path.corners import (
+    A_NOT_SIMULATED,
+    CHORD_TOLERANCE,
+    TANGENTIAL,
+    CornerError,
+    CornerRequest,
+    insert_corner,
+)
 
 __all__ = [
     "BSPLINE_PATH_DEV",
@@ -78,13 +85,9 @@ __all__ = [
     "sub_segment",
 ]
 
-CHORD_TOLERANCE: Final = 0.005
-"""mm: the most a support-point chord departs from the contouring curve (project's own, 5 µm)."""
 MAX_SUPPORT_POINTS: Final = 32
 """Most chords per contouring curve (project's own)."""
 _MIN_SUPPORT_POINTS: Final = 4
-_TANGENTIAL: Final = 1e-6
-"""rad: a turn smaller than this is a tangential transition (no contouring)."""
 _KEEP: Final = 1e-6
 """mm: what a shortened block keeps at least (its direction stays defined for the next corner)."""
 _SAMPLES: Final = 32
@@ -337,7 +340,7 @@ class Contour:
         t_out = _unit(s_post.direction_at(0.0))
         cos_turn = max(-1.0, min(1.0, sum(a * b for a, b in zip(t_in, t_out, strict=True))))
         turn = math.acos(cos_turn)
-        if turn < _TANGENTIAL or turn > math.pi - _TANGENTIAL:
+        if turn < TANGENTIAL or turn > math.pi - TANGENTIAL:
             return None  # tangential, or a reversal: the kernel does not contour (475086859)
         # half the block, less a nanometre: a block shortened at both ends keeps a remainder (and its
         # direction) for the next corner

@@ -19,7 +19,8 @@ helices) in one plane: the inserted element is a :class:`~hli_server.engine.geom
 :class:`~hli_server.engine.geometry.ArcSegment`, so the path checks and the planner see the corner as it is
 travelled. A rounding between two lines that span more than one coordinate plane (a corner in space) is
 an arc in their own plane: it is emitted as chords through support points no more than
-:data:`~hli_server.engine.path.contour.CHORD_TOLERANCE` from the arc, as the contouring curves are.
+:data:`CHORD_TOLERANCE` from the arc, as the contouring curves are (``path/contour.py`` uses the
+same).
 """
 
 from __future__ import annotations
@@ -32,18 +33,27 @@ from typing import Final
 from hli_server.engine.geometry import ArcSegment, LineSegment, Point, Segment, arc_from_centre, sub_segment
 from hli_server.engine.nc.blocks import Block
 
-__all__ = ["CHAMFER", "ROUNDING", "CornerError", "CornerRequest", "insert_corner"]
+__all__ = [
+    "CHAMFER",
+    "CHORD_TOLERANCE",
+    "ROUNDING",
+    "TANGENTIAL",
+    "CornerError",
+    "CornerRequest",
+    "insert_corner",
+]
 
 CHAMFER: Final = 301
 ROUNDING: Final = 302
 A_REVERSAL: Final = 916003
 """The inserted element would reverse an element's direction (the kernel's ID is not public)."""
 A_NOT_SIMULATED: Final = 910110
-_TANGENTIAL: Final = 1e-6
-"""rad: a turn smaller than this is tangential: nothing is inserted."""
+TANGENTIAL: Final = 1e-6
+"""rad: a turn smaller than this is tangential: no corner element is inserted, no contouring curve."""
 _EPS: Final = 1e-9
-_CHORD: Final = 0.005
-"""mm: the chords of a rounding in space depart from the arc by at most this (contour.CHORD_TOLERANCE)."""
+CHORD_TOLERANCE: Final = 0.005
+"""mm: the most a chord departs from the curve it stands for: a rounding in space, a contouring curve
+(project's own, 5 µm)."""
 _TAU: Final = 2.0 * math.pi
 
 
@@ -95,9 +105,9 @@ def _lines(
     v = _unit([b - a for a, b in zip(post.start, post.end, strict=True)])
     cos_turn = max(-1.0, min(1.0, sum(a * b for a, b in zip(u, v, strict=True))))
     turn = math.acos(cos_turn)
-    if turn < _TANGENTIAL:
+    if turn < TANGENTIAL:
         return None
-    if turn > math.pi - _TANGENTIAL:
+    if turn > math.pi - TANGENTIAL:
         raise CornerError(
             A_REVERSAL, f"{_what(kind)} at a reversal of the direction: no corner to insert into"
         )
@@ -130,7 +140,7 @@ def _chords_in_space(
     a = [pk - qk for pk, qk in zip(p1, q, strict=True)]
     b = [pk - qk for pk, qk in zip(p2, q, strict=True)]
     phi = turn  # the arc's central angle is the turn of the path
-    step = 2.0 * math.acos(max(-1.0, 1.0 - _CHORD / radius)) if radius > _CHORD else phi
+    step = 2.0 * math.acos(max(-1.0, 1.0 - CHORD_TOLERANCE / radius)) if radius > CHORD_TOLERANCE else phi
     n = max(2, math.ceil(phi / max(step, 1e-6)))
     sin_phi = math.sin(phi)
     points: list[Point] = [p1]
@@ -196,9 +206,9 @@ def _planar(
     t2 = _tangent(post, 0.0, (i, j))
     cross = t1[0] * t2[1] - t1[1] * t2[0]
     turn = math.atan2(abs(cross), t1[0] * t2[0] + t1[1] * t2[1])
-    if turn < _TANGENTIAL:
+    if turn < TANGENTIAL:
         return None
-    if turn > math.pi - _TANGENTIAL:
+    if turn > math.pi - TANGENTIAL:
         raise CornerError(
             A_REVERSAL, f"{_what(kind)} at a reversal of the direction: no corner to insert into"
         )
