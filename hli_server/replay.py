@@ -619,11 +619,11 @@ class Feeder:
         return self._searched
 
     def needs_outputs(self, cycle: int) -> bool:
-        """Whether the runtime packs the CNC->PLC half after ``cycle``: only where :meth:`after_cycle`
-        compares it (a replay's image has no other reader; the runtime packs anyway where a signal recorder
-        or a cycle listener is attached). The half of the other cycles is never looked at: what the engine
-        does does not depend on it, and its V.E. writes still go into the image
-        (``ProcessImage.publish_external``)."""
+        """Whether the runtime packs the CNC->PLC half after ``cycle``: the cycles :meth:`after_cycle`
+        compares, which it takes from this answer. A replay's image has no other reader (the runtime packs
+        anyway where a signal recorder or a cycle listener is attached): the half of the other cycles is
+        never looked at, what the engine does does not depend on it, and its V.E. writes still go into
+        the image (``ProcessImage.publish_external``)."""
         window = self.window
         needed = cycle >= window and (
             self.every == 1 or not (cycle - window) % self.every or self._has_sample(cycle)
@@ -641,7 +641,10 @@ class Feeder:
             raise self._failure
         if self._stop_after_cycle:
             raise _StopReplayError
-        if self._outputs_asked == (cycle, False) and not self._events and not self._expected_events:
+        asked, wanted = self._outputs_asked
+        if asked != cycle:  # the runtime asks before it publishes; anyone else gets the same answer
+            wanted = self.needs_outputs(cycle)
+        if not wanted and not self._events and not self._expected_events:
             # most cycles: nothing recorded at this cycle, no event, nothing to compare
             buffer = self._buffer
             if not buffer or buffer[0]["c"] != cycle:
@@ -661,13 +664,9 @@ class Feeder:
             self._expected_events = _NO_EVENTS
         self.report.last_cycle = cycle
         window = self.window
-        # no half: either the runtime was told it need not pack one (needs_outputs), or its publish failed
-        publish_failed = packed is None and self._outputs_asked != (cycle, False)
-        compared = (
-            cycle >= window
-            and packed is not None
-            and (self.every == 1 or not (cycle - window) % self.every or bool(flat))
-        )
+        # the outputs are compared where needs_outputs asked for them; no half there: the publish failed
+        compared = wanted and packed is not None
+        publish_failed = wanted and packed is None
         # the cycle counters the outputs follow are set only where the outputs are compared: every such
         # cycle sets them before its recorded sample is applied, so skipping the others changes nothing
         if compared and self.follow and cycle > window:

@@ -52,7 +52,7 @@ from schemas.events import (
 from schemas.units import mm_from_increments, s_from_us
 from schemas.wire import HoldSource, Mode, ProgramState
 
-__all__ = ["LOOKAHEAD_ITEMS", "Channel", "ChannelHost", "JogGuard", "increments_clamped"]
+__all__ = ["LOOKAHEAD_ITEMS", "Channel", "ChannelHost", "JogGuard"]
 
 LOOKAHEAD_ITEMS: Final = 64
 """Motion blocks decoded ahead of the interpolator (the look-ahead buffer, P-STUP-00070's size)."""

@@ -19,16 +19,20 @@ from __future__ import annotations
 
 from typing import Final
 
+from schemas.units import DINT_MAX, DINT_MIN, INCREMENTS_PER_MM
+
 __all__ = ["increments_clamped"]
 
 _TIES_TO_EVEN: Final = 6755399441055744.0
 """1.5 * 2**52."""
-_PER_MM: Final = 10000.0
-"""schemas.units.INCREMENTS_PER_MM as a float (the product is the same double either way)."""
-_HIGH: Final = 2147483647.0
-_LOW: Final = -2147483648.0
-_DINT_MAX: Final = 2147483647
-_DINT_MIN: Final = -2147483648
+# the definition's constants as Final names (a compiled module reads a Final name directly, an imported
+# one through the module's dictionary on every use)
+_PER_MM: Final = float(INCREMENTS_PER_MM)
+"""The product is the same double with the int or the float."""
+_DINT_MAX: Final = DINT_MAX
+_DINT_MIN: Final = DINT_MIN
+_HIGH: Final = float(DINT_MAX)
+_LOW: Final = float(DINT_MIN)
 
 
 def increments_clamped(mm: float) -> int:

@@ -400,8 +400,8 @@ class ProcessImage:
         Returns the packed buffer (the cycle as u64, then the half; valid until the next call).
         ``commit=False`` packs without publishing: the readers keep the previous publish (a stalled
         publish, a communication fault), and the NC's V.E. writes wait for the next publish."""
-        if commit and self._external is not None:
-            self._external.publish(self._buf)
+        if commit:
+            self.publish_external()
         private = self._c2p_private
         try:
             self._projection.pack[_C2P](machine, self._c2p_struct.pack_into, private, 0, cycle)

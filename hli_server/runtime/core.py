@@ -678,7 +678,7 @@ class Runtime:
                 self._cycle_failed(exc)
         try:
             stalled = self.comm_faults.publish_stalled(machine.cycle)  # a stalled publish, on demand
-            if self._recorders or self._cycle_listeners or session.needs_outputs(machine.cycle):
+            if session.needs_outputs(machine.cycle) or self._recorders or self._cycle_listeners:
                 packed = image.publish_from(machine.hli, machine.cycle, commit=not stalled)
             elif not stalled:  # nobody reads this cycle's half (a replay between its comparisons)
                 image.publish_external()
