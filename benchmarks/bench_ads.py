@@ -219,7 +219,8 @@ def _canned_reply(frame: bytes) -> bytes:
 
 def _serve_floor_asyncio(conn: Connection) -> None:
     """The floor on the door's own transport stack: the canned replies of :func:`_serve_floor` from an
-    ``asyncio.Protocol`` on asyncio's default loop, as the doors process serves (``asyncio.Runner()``;
+    ``asyncio.Protocol`` on the loop the doors process serves on (``lean_event_loop``: asyncio's selector
+    loop, its turn as Python 3.13 has it;
     asyncio sets TCP_NODELAY on every TCP transport, as the thread floor does by hand). What the door's
     Python costs above the stack is the gap to this floor."""
     import struct
@@ -250,7 +251,9 @@ def _serve_floor_asyncio(conn: Connection) -> None:
         await stop.wait()
         server.close()
 
-    with asyncio.Runner() as runner:
+    from hli_server.runtime.event_loop import lean_event_loop
+
+    with asyncio.Runner(loop_factory=lean_event_loop) as runner:
         runner.run(main())
     conn.send(None)
 

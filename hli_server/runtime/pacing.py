@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import NotRequired, TypedDict
 
+from hli_server.runtime.event_loop import LeanSelectorEventLoop
 from schemas.results import Lateness, PacingSummary, SlowCycleJson, Timing
 
 __all__ = [
@@ -186,7 +187,7 @@ def precise_event_loop() -> asyncio.AbstractEventLoop:
     uses it (``--event-loop select``, the default): the realtime clock's lateness is then the kernel's
     wake-up latency (about 0.1 ms) instead of up to a millisecond."""
     if hasattr(selectors, "EpollSelector"):
-        return asyncio.SelectorEventLoop(PreciseEpollSelector())
+        return LeanSelectorEventLoop(PreciseEpollSelector())
     return asyncio.SelectorEventLoop(selectors.SelectSelector())  # pragma: no cover - not Linux
 
 
@@ -194,7 +195,7 @@ def probed_default_loop() -> asyncio.AbstractEventLoop:
     """asyncio's default loop on Linux (``epoll``, whole-millisecond timeouts) with its waits noted, so
     that the clock's tracer can name the cause of a late cycle there too (``--event-loop default``)."""
     if hasattr(selectors, "EpollSelector"):
-        return asyncio.SelectorEventLoop(ProbedEpollSelector())
+        return LeanSelectorEventLoop(ProbedEpollSelector())
     return asyncio.new_event_loop()  # pragma: no cover - not Linux
 
 
