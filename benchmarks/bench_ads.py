@@ -17,7 +17,7 @@ The client is pyads 3.6 (Beckhoff's AdsLib) in a separate process, one call in f
   round trips each, as pyads does it).
 
 Two more servers, the **floors**, answer every request with a canned reply (no decoding): one on the door's
-own transport stack (an ``asyncio.Protocol`` on asyncio's default loop, as the doors process serves: the
+own transport stack (an ``asyncio.Protocol`` on the doors process' loop, ``runtime.event_loop``: the
 reference of the goal "within 5 % of a canned-reply server", since it differs from the door only in
 what the door does per request), and one with a blocking thread per connection (``sendall`` right after
 ``recv``: what the pyads client itself allows, shown for comparison, a different stack).
@@ -30,6 +30,10 @@ ratio hli-server / reference (the goal: >= 1.0x on both) and hli-server / floor 
     .venv/bin/python -m benchmarks.bench_ads [--seconds 2] [--rounds 2] [--runs 3]
 
 Client and servers share the machine's cores: the figures are noisy, the ratio is what to compare.
+``--placement same`` (or ``cross``) pins the client and each serving process (never the engine's) so that
+every server gets the same placement: on the 2-core benchmark host a round trip within one CPU takes
+about 26 µs and one between the two CPUs 100-150 µs, and where the scheduler happens to put each process
+moves a run's ratios by 10-30 % (docs/performance.md, "third session").
 """
 
 from __future__ import annotations
@@ -359,14 +363,27 @@ def _socket_client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
 CLIENT = ["pyads"]
 
 
-def _client_process(conn: Connection, port: int, mode: str, seconds: float) -> None:
+def _client_process(conn: Connection, port: int, mode: str, seconds: float, cpu: int | None) -> None:
+    if cpu is not None:  # before pyads starts AdsLib's threads: they inherit it
+        os.sched_setaffinity(0, {cpu})
     conn.send((_client if CLIENT[0] == "pyads" else _socket_client)(port, mode, seconds))
 
 
-def _run_client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
+PLACEMENTS = {"free": (None, None), "same": (0, 0), "cross": (0, 1)}
+"""``--placement``: the CPU of the client and of each serving process (None: the scheduler's choice)."""
+
+
+def _pin(pid: int, cpu: int) -> None:
+    """Every thread of ``pid`` on ``cpu`` (threads it starts later inherit it)."""
+    for task in os.listdir(f"/proc/{pid}/task"):
+        with contextlib.suppress(OSError):
+            os.sched_setaffinity(int(task), {cpu})
+
+
+def _run_client(port: int, mode: str, seconds: float, cpu: int | None = None) -> tuple[int, bytes]:
     """One run in a fresh process (AdsLib's router is per process)."""
     parent, child = CTX.Pipe()
-    process = CTX.Process(target=_client_process, args=(child, port, mode, seconds), daemon=True)
+    process = CTX.Process(target=_client_process, args=(child, port, mode, seconds, cpu), daemon=True)
     process.start()
     try:
         if not parent.poll(seconds + 60):
@@ -464,7 +481,20 @@ def main() -> None:
         default="pyads",
         help="pyads (the goal's client) or a plain blocking socket (the servers' share of a round trip)",
     )
+    parser.add_argument(
+        "--placement",
+        choices=sorted(PLACEMENTS),
+        default="free",
+        help="free: the scheduler places client and servers (the goal's figure); same: the client and each "
+        "serving process pinned to CPU 0; cross: the client on CPU 0, the servers on CPU 1 (the engine's "
+        "process is never pinned). On the 2-core benchmark host a round trip between two CPUs costs several "
+        "times one on one CPU, and where the scheduler puts each process moves a run's figures by 10-30 %%",
+    )
     args = parser.parse_args()
+    if args.placement != "free" and not hasattr(os, "sched_setaffinity"):
+        parser.error("--placement same|cross needs os.sched_setaffinity (Linux)")
+    if args.placement == "cross" and len(os.sched_getaffinity(0)) < 2:
+        parser.error("--placement cross needs two CPUs")
     CLOCK[0] = args.clock
     CLIENT[0] = args.client
     group, offset = _address()
@@ -472,7 +502,7 @@ def main() -> None:
         f"{'one pyads ' + __import__('pyads').__version__ if args.client == 'pyads' else 'one plain socket'} "
         f"client, one call in flight; raw read of a DINT at "
         f"0x{group:X}/{offset} and read_by_name({SYMBOL!r}); {args.rounds} x {args.seconds:g} s per server "
-        f"and mode, interleaved; {os.cpu_count()} CPUs shared"
+        f"and mode, interleaved; {os.cpu_count()} CPUs shared; placement {args.placement}"
     )
     worst: dict[str, list[tuple[float, float, float, float]]] = {"raw": [], "by_name": []}
     timing: Any = None
@@ -508,13 +538,18 @@ def _one_run(args: argparse.Namespace) -> Any:
     pids = {
         name: _serving_pids(name, server.process.pid, args.in_process) for name, server in servers.items()
     }
+    client_cpu, server_cpu = PLACEMENTS[args.placement]
+    if server_cpu is not None:  # the serving processes only: the engine's stays where the scheduler puts it
+        for serving in pids.values():
+            for pid in serving:
+                _pin(pid, server_cpu)
     timing: Any = None
     try:
         for _ in range(args.rounds):
             for mode in ("raw", "by_name"):
                 for name, server in servers.items():
                     cpu_before = _cpu_s(pids[name])
-                    calls, raw = _run_client(server.port, mode, args.seconds)
+                    calls, raw = _run_client(server.port, mode, args.seconds, client_cpu)
                     r = results[name, mode]
                     r.cpu_s += _cpu_s(pids[name]) - cpu_before
                     r.seconds += args.seconds
