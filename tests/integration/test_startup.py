@@ -192,6 +192,14 @@ def _group_alive(pgid: int, grace: float) -> list[str]:
         time.sleep(0.05)  # until the group has ended, bounded by the grace above
 
 
+def _signal_masks(pid: int) -> str:
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            return " ".join(line.strip() for line in f if line.startswith(("SigBlk", "SigIgn", "SigCgt")))
+    except OSError:
+        return "(no /proc)"
+
+
 def _wait_for_exec(pid: int) -> None:
     """Until the child runs the command (its command line is no longer this process'), at most 10 s. A
     signal sent between ``fork`` and ``exec`` meets the handlers inherited from this process: Python's
@@ -233,13 +241,22 @@ def test_a_signal_at_any_moment_of_start_up_stops_the_server_cleanly() -> None:
         delay = rng.uniform(0.0, start_up * 1.2)
         sig = signal.SIGTERM if i % 2 == 0 else signal.SIGINT
         name = f"hli_test_sig_{os.getpid()}_{i}"
-        proc = subprocess.Popen(
-            [CLI, "run", "--image-name", name, "--http-port", "0", "--modbus-port", "0", "--ads-port", "0"],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            start_new_session=True,  # its own process group: Ctrl+C reaches the doors process too
-        )
+        # the child starts as from a shell: SIGINT not ignored (an ignored SIGINT is inherited through exec,
+        # and Python then installs no KeyboardInterrupt for it: a Ctrl+C before `run` takes the signal over
+        # would be lost whatever the server does)
+        inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            ports = ["--http-port", "0", "--modbus-port", "0", "--ads-port", "0"]
+            command = ["run", "--image-name", name, *ports]
+            proc = subprocess.Popen(
+                [CLI, *command],
+                stdout=subprocess.PIPE,
+                stderr=subprocess.PIPE,
+                text=True,
+                start_new_session=True,  # its own process group: Ctrl+C reaches the doors process too
+            )
+        finally:
+            signal.signal(signal.SIGINT, inherited if inherited is not None else signal.SIG_DFL)
         _wait_for_exec(proc.pid)
         time.sleep(delay)  # the moment of the signal, seeded, from the exec of the command
         if sig is signal.SIGINT:
@@ -249,9 +266,13 @@ def test_a_signal_at_any_moment_of_start_up_stops_the_server_cleanly() -> None:
         try:
             out, err = proc.communicate(timeout=30)
         except subprocess.TimeoutExpired:
+            masks = _signal_masks(proc.pid)
             os.killpg(proc.pid, signal.SIGKILL)
             out, err = proc.communicate()
-            pytest.fail(f"{sig.name} after {delay:.2f} s: not stopped within 30 s\n{out}\n{err}")
+            pytest.fail(
+                f"{sig.name} after {delay:.2f} s: not stopped within 30 s (the parent's SIGINT handler was "
+                f"{inherited!r}; the server's {masks})\n{out}\n{err}"
+            )
         left = _group_alive(proc.pid, grace=5.0)
         shm_left = Path(f"/dev/shm/{name}").exists()
         for pid in left:  # leave nothing behind even when failing
