@@ -90,6 +90,8 @@ __all__ = ["AdsAdapter", "ServerStats"]
 
 logger = logging.getLogger(__name__)
 
+_monotonic: Final = time.monotonic
+
 FIRST_CLIENT_PORT: Final = 32768
 """AMS ports handed out on 0x1000 port connect when the client asks for any (0)."""
 
@@ -176,6 +178,11 @@ class _Connection(asyncio.Protocol):
         self._eof = False
         self._client_port = 0
         self._admitted: bytes | None = None
+        self._stats = adapter.stats
+        self._fast = False
+        """What :meth:`data_received`'s fast path needs of the connection's state, in one flag (kept by
+        :meth:`_refresh_fast` wherever that state changes): a transport, the admitted NetId, reading not
+        paused, no turn scheduled, nothing buffered in the decoder (so no frame begun)"""
 
     # --- asyncio.Protocol ---------------------------------------------------------------------
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -195,6 +202,7 @@ class _Connection(asyncio.Protocol):
                 host,
             )
             self._transport = None
+            self._fast = False
             transport.abort()
             return
         self._adapter._accept(self)
@@ -203,43 +211,49 @@ class _Connection(asyncio.Protocol):
         self._gate = self._adapter.faults.gate(Door.ADS, transport)  # communication faults on demand
         self._transport = self._gate.transport
         self._raw = transport
+        self._refresh_fast()
         self._adapter.stats.connections += 1
         logger.debug("ADS: connection from %s", self.session.name)
 
     def data_received(self, data: bytes) -> None:
+        if self._fast and 38 <= len(data) <= _FAST_MAX and self._gate.quiet:
+            # the fast path: one Read/Write/ReadWrite in flight, all of it in this read, no fault acting
+            raw: Any = self._raw
+            if raw.is_closing():
+                return
+            admitted: Any = self._admitted  # not None where _fast is set
+            reply = self._device.handle_frame(self.session, data, admitted)
+            if reply is not None:
+                self._stats.turns += 1
+                self.frames += 1
+                self.last_activity = _monotonic()
+                raw.write(reply)
+                return
         transport = self._transport
         if transport is None:
             return
-        raw = self._raw
-        admitted = self._admitted
-        if (  # the fast path: one Read/Write/ReadWrite in flight, all of it in this read, no fault acting
-            admitted is not None
-            and raw is not None
-            and not self._read_paused
-            and not self._scheduled
-            and 38 <= len(data) <= _FAST_MAX
-            and self._gate.quiet
-            and not self._decoder.pending
-        ):
-            if raw.is_closing():
-                return
-            reply = self._device.handle_frame(self.session, data, admitted)
-            if reply is not None:
-                self._adapter.stats.turns += 1
-                self.frames += 1
-                self.last_activity = time.monotonic()
-                self.partial_since = None
-                raw.write(reply)
-                return
         if transport.is_closing():
             return
         if not self._read_paused and not self._scheduled:
             packet = self._decoder.single_frame(data)
             if packet is not None:  # one request in flight, all of it in this read: no buffering
                 self._serve_one(transport, packet)
+                self._refresh_fast()
                 return
         self._decoder.receive_data(data)
         self._serve()
+        self._refresh_fast()
+
+    def _refresh_fast(self) -> None:
+        self._fast = (
+            self._transport is not None
+            and self._raw is not None
+            and self._admitted is not None
+            and not self._read_paused
+            and not self._scheduled
+            and not self._decoder.pending
+            and self.partial_since is None
+        )
 
     def _serve_one(self, transport: asyncio.Transport, packet: AmsPacket) -> None:
         """:meth:`_serve_turn` for a read that is exactly one AMS frame (the decoder holds nothing)."""
@@ -257,6 +271,7 @@ class _Connection(asyncio.Protocol):
     def eof_received(self) -> bool | None:
         """The client sent all it will send: answer what is buffered, then close."""
         self._eof = True
+        self._fast = False
         if not self._scheduled and not self._write_paused and self._transport is not None:
             self._serve()
         return True  # keep the transport open until the answers are written (closed in _serve)
@@ -272,6 +287,7 @@ class _Connection(asyncio.Protocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._transport = None
+        self._fast = False
         self._device.close_session(self.session)
         self._adapter._forget(self)
 
@@ -355,18 +371,21 @@ class _Connection(asyncio.Protocol):
     def _pause_reading(self) -> None:
         if not self._read_paused and self._transport is not None and not self._transport.is_closing():
             self._read_paused = True
+            self._fast = False
             self._adapter.stats.paused_reading += 1
             self._transport.pause_reading()
 
     def _schedule(self) -> None:
         if not self._scheduled:
             self._scheduled = True
+            self._fast = False
             asyncio.get_running_loop().call_soon(self._continue)
 
     def _continue(self) -> None:
         self._scheduled = False
         if self._transport is not None and not self._transport.is_closing():
             self._serve()
+        self._refresh_fast()
 
     def _answer(self, frame: AmsPacket | AmsTcpFrame | OversizeAmsFrame) -> bytes | _Refused | None:
         if isinstance(frame, OversizeAmsFrame):
@@ -458,6 +477,7 @@ class _Connection(asyncio.Protocol):
 
     def abort(self) -> None:
         transport, self._transport = self._transport, None
+        self._fast = False
         if transport is not None:
             transport.abort()
 
