@@ -136,6 +136,10 @@ class DataService:
             symbol = self.handle(session, handle)  # raises 0x710
         if length != symbol.size:
             _check_size(symbol, length, "read")
+        pieces = symbol.pieces
+        if len(pieces) == 1:  # gather's one-piece case, two calls less: a PLC's polling of one value
+            direction, start, end = pieces[0]
+            return (self.c2p() if direction is _C2P else self.p2c())[start:end]
         return self.gather(symbol)
 
     def read_geo(self, session: Session, offset: int, length: int) -> bytes:
@@ -318,7 +322,9 @@ class DataService:
         return symbol
 
     def handle_by_name(self, session: Session, offset: int, read_length: int, data: bytes) -> bytes:
-        symbol = self.symbol(data)
+        symbol = self.symbols.find_raw(data)
+        if symbol is None:
+            symbol = self.symbol(data)  # raises 0x710
         if len(session.handles) >= self.limits.max_handles:
             raise AdsError(
                 ErrorCode.NO_MEMORY,
