@@ -85,6 +85,11 @@ DOORS_NICE = 5
 """The doors process runs this much nicer than the clock's: where both want the CPU, the cycle wins."""
 
 
+_PUBLISH_COUNT_WORD: Final = fmt.OFF_PUBLISH_COUNT // 8
+_CYCLE_WORD: Final = fmt.OFF_CYCLE // 8
+_HEADER_WORDS: Final = max(_PUBLISH_COUNT_WORD, _CYCLE_WORD) + 1
+
+
 class AttachedImage(ImagePort):
     """The image of another process, attached by name (``schemas.image_format``, the format code the
     server's own image and a PLC's ``ImageClient`` share): reads of consistent publishes, PLC writes."""
@@ -96,6 +101,9 @@ class AttachedImage(ImagePort):
         self._layout = segment.layout
         self._name = segment.name
         self._closed = False
+        self._words = segment.buf[: _HEADER_WORDS * 8].cast("Q")
+        """The header's first 64-bit words: the publish counter and the cycle, one aligned load each (a door
+        asks the publish counter at every read, to know whether its copy of the half is still the newest)"""
 
     @classmethod
     def attach(cls, name: str, *, timeout: float = 0.0) -> AttachedImage:
@@ -111,11 +119,13 @@ class AttachedImage(ImagePort):
 
     @property
     def cycle(self) -> int:
-        return fmt.read_u64(self._buf, fmt.OFF_CYCLE)
+        value: int = self._words[_CYCLE_WORD]
+        return value
 
     @property
     def publish_count(self) -> int:
-        return fmt.read_u64(self._buf, fmt.OFF_PUBLISH_COUNT)
+        value: int = self._words[_PUBLISH_COUNT_WORD]
+        return value
 
     @property
     def closed(self) -> bool:
@@ -151,6 +161,7 @@ class AttachedImage(ImagePort):
     def close(self) -> None:
         if not self._closed:
             self._closed = True
+            self._words.release()  # the mapping cannot close while a view of it is held
             self._segment.close()
 
 

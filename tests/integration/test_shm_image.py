@@ -461,3 +461,25 @@ def test_latch_and_publish_fit_easily_in_a_1_ms_cycle(layout, image, capsys):
             f"median {median_us:.1f} µs, p99 {samples[-30] / 1000:.1f} µs"
         )
     assert median_us < 500, "latch+publish take half of a 1 ms cycle"
+
+
+def test_the_doors_attached_image_reads_the_publish_counter_and_the_cycle_as_the_format_does(layout, image):
+    """The doors process reads the two counters through a 64-bit view of the header (one load each):
+    the same values as the format's reader, publish after publish, and the view does not keep the mapping
+    from closing."""
+    from hli_server.runtime.doors import AttachedImage
+
+    attached = AttachedImage.attach(image.name, timeout=5.0)
+    try:
+        half = bytes(layout.size(C2P))
+        seen = []
+        for cycle in (1, 2, 7, 2**40 + 3):
+            image.publish_bytes(half, cycle)
+            seen.append((attached.cycle, attached.publish_count))
+            assert attached.cycle == fmt.read_u64(attached._buf, fmt.OFF_CYCLE) == cycle
+            assert attached.publish_count == fmt.read_u64(attached._buf, fmt.OFF_PUBLISH_COUNT)
+            assert attached.publish_count == image.publish_count
+        assert [c for c, _ in seen] == [1, 2, 7, 2**40 + 3]
+        assert len({p for _, p in seen}) == 4  # each publish counted
+    finally:
+        attached.close()  # raised BufferError while a view of the mapping was held
