@@ -71,6 +71,7 @@ class DataService:
         self.sizes = {d: image.layout.size(d) for d in Direction}
         self._c2p = b""
         self._c2p_count = -1
+        self._c2p_size = self.sizes[_C2P]
         self._geo: dict[int, Signal] = {
             s.ads_offset: s for s in self.layout.signals if s.ads_port == ADS_PORT_GEO
         }
@@ -110,8 +111,16 @@ class DataService:
 
     # --- reads: (session, offset, length) -> bytes ------------------------------------------------
     def read_c2p(self, session: Session, offset: int, length: int) -> bytes:
-        self._check_range(_C2P, ADS_GROUP_CNC_TO_PLC, offset, length)
-        return self.c2p()[offset : offset + length]
+        # the raw read of a PLC's polling: _check_range and c2p inline (one comparison covers both of
+        # _check_range's cases, the length being unsigned; it raises with the precise message)
+        end = offset + length
+        if end > self._c2p_size:
+            self._check_range(_C2P, ADS_GROUP_CNC_TO_PLC, offset, length)
+        count = self.image.publish_count
+        if count != self._c2p_count:
+            self._c2p = self.image.snapshot()[1]
+            self._c2p_count = count
+        return self._c2p[offset:end]
 
     def read_p2c(self, session: Session, offset: int, length: int) -> bytes:
         if offset in self._p2c_strings:  # a STRING read the pyads way (1024 bytes): up to the half's end
