@@ -72,6 +72,7 @@ class DataService:
         self._c2p = b""
         self._c2p_count = -1
         self._c2p_size = self.sizes[_C2P]
+        self._names_seen = self.symbols.names_seen
         self._geo: dict[int, Signal] = {
             s.ads_offset: s for s in self.layout.signals if s.ads_port == ADS_PORT_GEO
         }
@@ -146,9 +147,15 @@ class DataService:
         if length != symbol.size:
             _check_size(symbol, length, "read")
         pieces = symbol.pieces
-        if len(pieces) == 1:  # gather's one-piece case, two calls less: a PLC's polling of one value
+        if len(pieces) == 1:  # gather's one-piece case and c2p inline: a PLC's polling of one value
             direction, start, end = pieces[0]
-            return (self.c2p() if direction is _C2P else self.p2c())[start:end]
+            if direction is not _C2P:
+                return self.p2c()[start:end]
+            count = self.image.publish_count
+            if count != self._c2p_count:
+                self._c2p = self.image.snapshot()[1]
+                self._c2p_count = count
+            return self._c2p[start:end]
         return self.gather(symbol)
 
     def read_geo(self, session: Session, offset: int, length: int) -> bytes:
@@ -331,9 +338,11 @@ class DataService:
         return symbol
 
     def handle_by_name(self, session: Session, offset: int, read_length: int, data: bytes) -> bytes:
-        symbol = self.symbols.find_raw(data)
+        symbol = self._names_seen.get(data)  # a PLC asks the same names again and again
         if symbol is None:
-            symbol = self.symbol(data)  # raises 0x710
+            symbol = self.symbols.find_raw(data)
+            if symbol is None:
+                symbol = self.symbol(data)  # raises 0x710
         if len(session.handles) >= self.limits.max_handles:
             raise AdsError(
                 ErrorCode.NO_MEMORY,
