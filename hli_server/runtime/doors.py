@@ -129,7 +129,10 @@ class AttachedImage(ImagePort):
 
     @property
     def closed(self) -> bool:
-        """True once the server closed the image (it is then unlinked; the mapping stays valid)."""
+        """True once the server closed the image (it is then unlinked; the mapping stays valid), or this
+        process detached it (:meth:`close`: the mapping is gone)."""
+        if self._closed:
+            return True
         flags: int = fmt.HEADER.unpack_from(self._buf, 0)[13]
         return bool(flags & fmt.FLAG_CLOSED)
 

@@ -483,3 +483,4 @@ def test_the_doors_attached_image_reads_the_publish_counter_and_the_cycle_as_the
         assert len({p for _, p in seen}) == 4  # each publish counted
     finally:
         attached.close()  # raised BufferError while a view of the mapping was held
+    assert attached.closed  # detached: said without reading the mapping that is gone
