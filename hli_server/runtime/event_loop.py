@@ -4,9 +4,10 @@ Every turn of asyncio's loop works out how long it may wait for I/O: with a time
 always has one: the doors' idle watch, uvicorn's tick, the realtime clock's next cycle) 3.11 and 3.12 do it
 with ``min(max(0, when - self.time()), MAXIMUM_SELECT_TIMEOUT)``, two builtin calls that cost as much as
 the rest of the turn's bookkeeping. A request/reply door turns the loop once per request: on the 2-core
-benchmark host a pending 1 s timer made a canned-reply ADS server 5-7 % slower than the same server with no
-timer (``bench_ads``'s floor; docs/performance.md, "Speed, round three, third session"). Python 3.13
-computes the same timeout with two comparisons (CPython gh-110733); :class:`LeanSelectorEventLoop` is
+benchmark host a pending 1 s timer made a canned-reply ADS server 3-7 % slower than the same server with no
+timer (``bench_ads``'s floor; docs/performance.md, "Speed, round three, third session"), of which this
+computation is a part. Python 3.13 computes the same timeout with two comparisons;
+:class:`LeanSelectorEventLoop` is
 asyncio's ``SelectorEventLoop`` with that turn on the versions before it, and asyncio's own loop,
 unchanged, from 3.13 on. Behaviour is asyncio's: the same timers, the same order, the same clamping to
 ``MAXIMUM_SELECT_TIMEOUT``.

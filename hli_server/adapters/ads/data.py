@@ -72,7 +72,6 @@ class DataService:
         self._c2p = b""
         self._c2p_count = -1
         self._c2p_size = self.sizes[_C2P]
-        self._names_seen = self.symbols.names_seen
         self._geo: dict[int, Signal] = {
             s.ads_offset: s for s in self.layout.signals if s.ads_port == ADS_PORT_GEO
         }
@@ -112,16 +111,12 @@ class DataService:
 
     # --- reads: (session, offset, length) -> bytes ------------------------------------------------
     def read_c2p(self, session: Session, offset: int, length: int) -> bytes:
-        # the raw read of a PLC's polling: _check_range and c2p inline (one comparison covers both of
-        # _check_range's cases, the length being unsigned; it raises with the precise message)
+        # the raw read of a PLC's polling: one comparison covers both of _check_range's cases (the length
+        # is unsigned); only a read out of range calls it, for its precise error
         end = offset + length
         if end > self._c2p_size:
             self._check_range(_C2P, ADS_GROUP_CNC_TO_PLC, offset, length)
-        count = self.image.publish_count
-        if count != self._c2p_count:
-            self._c2p = self.image.snapshot()[1]
-            self._c2p_count = count
-        return self._c2p[offset:end]
+        return self.c2p()[offset:end]
 
     def read_p2c(self, session: Session, offset: int, length: int) -> bytes:
         if offset in self._p2c_strings:  # a STRING read the pyads way (1024 bytes): up to the half's end
@@ -146,16 +141,6 @@ class DataService:
             symbol = self.handle(session, handle)  # raises 0x710
         if length != symbol.size:
             _check_size(symbol, length, "read")
-        pieces = symbol.pieces
-        if len(pieces) == 1:  # gather's one-piece case and c2p inline: a PLC's polling of one value
-            direction, start, end = pieces[0]
-            if direction is not _C2P:
-                return self.p2c()[start:end]
-            count = self.image.publish_count
-            if count != self._c2p_count:
-                self._c2p = self.image.snapshot()[1]
-                self._c2p_count = count
-            return self._c2p[start:end]
         return self.gather(symbol)
 
     def read_geo(self, session: Session, offset: int, length: int) -> bytes:
@@ -338,11 +323,7 @@ class DataService:
         return symbol
 
     def handle_by_name(self, session: Session, offset: int, read_length: int, data: bytes) -> bytes:
-        symbol = self._names_seen.get(data)  # a PLC asks the same names again and again
-        if symbol is None:
-            symbol = self.symbols.find_raw(data)
-            if symbol is None:
-                symbol = self.symbol(data)  # raises 0x710
+        symbol = self.symbol(data)
         if len(session.handles) >= self.limits.max_handles:
             raise AdsError(
                 ErrorCode.NO_MEMORY,

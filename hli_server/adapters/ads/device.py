@@ -102,14 +102,6 @@ _NO_HEADER: Final = AmsHeader(NetId(bytes(6)), 0, NetId(bytes(6)), 0, 0, 0, 0, 0
 not read it: they answer from their payload)."""
 
 
-def _too_long(group: int, size: int, read_length: int) -> AdsError:
-    """0x705: a ReadWrite answer longer than the read length asked for."""
-    return AdsError(
-        ErrorCode.SIZE_WRONG,
-        f"index group 0x{group:X} answers {size} bytes, the read length is {read_length}",
-    )
-
-
 class AdsDevice:
     """Serves AMS frames from an image; runs the notifications from the cycle (module docstring)."""
 
@@ -316,25 +308,13 @@ class AdsDevice:
                 if data_length >= 12:
                     group, offset, size = _U32x3.unpack_from(frame, 38)
                     if size == data_length - 12:
-                        # PortTable.write_group, one call less
-                        if table.refuse_writes is not None:
-                            table.refuse_writes(session, offset, frame[50:])
-                        write = table.write.get(group)
-                        if write is None:
-                            raise table.missing("Write", group)
-                        write(session, offset, frame[50:])
+                        table.write_group(session, group, offset, frame[50:])
                         return _RESULT_REPLY.pack(0, 36, sn, sp, tn, tp, cmd, _FLAGS, 4, 0, invoke, 0)
             elif data_length >= 16:  # ReadWrite
                 group, offset, read_length, size = _U32x4.unpack_from(frame, 38)
                 if size == data_length - 16:
-                    # _read_write and PortTable.read_write_group, two calls less
-                    read_write = table.read_write.get(group)
-                    if read_write is None:
-                        raise table.missing("ReadWrite", group)
-                    value = read_write(session, offset, read_length, frame[54:])
+                    value = self._read_write(session, table, group, offset, read_length, frame[54:])
                     n = len(value)
-                    if n > read_length:
-                        raise _too_long(group, n, read_length)
                     return (
                         _DATA_REPLY.pack(0, 40 + n, sn, sp, tn, tp, cmd, _FLAGS, 8 + n, 0, invoke, 0, n)
                         + value
@@ -393,7 +373,10 @@ class AdsDevice:
     ) -> bytes:
         value = table.read_write_group(session, group, offset, read_length, data)
         if len(value) > read_length:
-            raise _too_long(group, len(value), read_length)
+            raise AdsError(
+                ErrorCode.SIZE_WRONG,
+                f"index group 0x{group:X} answers {len(value)} bytes, the read length is {read_length}",
+            )
         return value
 
     def add_notification(self, session: Session, table: PortTable, header: AmsHeader, data: bytes) -> bytes:

@@ -291,9 +291,6 @@ class SymbolTable:
         self.upload_info2_long = info2.encode(64)
         self._names: dict[str, Symbol | None] = {}
         self._raw: dict[bytes, Symbol | None] = {}
-        self.names_seen = self._raw
-        """:meth:`find_raw`'s cache, read-only for others: a name's bytes as a client sent it -> its symbol
-        (None: no such symbol, or not seen yet; then ask :meth:`find_raw`)"""
         """names asked for -> their symbol (or None): clients ask the same few names again and again"""
 
     # --- building -----------------------------------------------------------------------------
