@@ -41,11 +41,13 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import functools
 import os
 import signal
 import socket
 import time
 from array import array
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Any
@@ -267,42 +269,33 @@ def _serve_floor_asyncio(conn: Connection) -> None:
 # --------------------------------------------------------------------------------------------
 
 
-def _client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
+def _pyads_call(plc: Any, mode: str) -> Any:
+    """One call of ``mode`` on an open pyads ``Connection``: a raw read (one round trip) or
+    read_by_name (handle, read, release: three, as pyads does it)."""
     import pyads
 
     group, offset = _address()
+    dint = pyads.PLCTYPE_DINT
+    if mode == "raw":
+        return lambda: plc.read(group, offset, dint)
+    return lambda: plc.read_by_name(SYMBOL, dint)
+
+
+def _pyads_open(net_id: str, port: int) -> Any:
+    """A pyads ``Connection`` to the server on ``port`` as AMS NetId ``net_id`` (AdsLib routes by NetId:
+    one process reaches several servers where each has a NetId of its own)."""
+    import pyads
+
     pyads.open_port()
     pyads.set_local_address("10.1.2.3.1.1")
     pyads.close_port()
-    plc = pyads.Connection(SERVER_NET_ID, 851, f"127.0.0.1:{port}")
+    plc = pyads.Connection(net_id, 851, f"127.0.0.1:{port}")
     plc.open()
     plc.set_timeout(2000)
-    dint = pyads.PLCTYPE_DINT
-    if mode == "raw":
-
-        def call() -> Any:
-            return plc.read(group, offset, dint)
-    else:
-
-        def call() -> Any:
-            return plc.read_by_name(SYMBOL, dint)
-
-    for _ in range(200):  # warm up
-        call()
-    latencies = array("Q")
-    ns = time.perf_counter_ns
-    record = latencies.append
-    stop_at = time.perf_counter() + seconds
-    clock = time.perf_counter
-    while clock() < stop_at:
-        t0 = ns()
-        call()
-        record(ns() - t0)
-    plc.close()
-    return len(latencies), latencies.tobytes()
+    return plc
 
 
-def _socket_client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
+def _socket_call(port: int, net_id: str, mode: str) -> tuple[Any, socket.socket]:
     """The same calls from a plain blocking socket (one send, one reply read per request): the
     server's round trip without AdsLib's threads, to tell the server's share from the client's."""
     import struct
@@ -318,10 +311,7 @@ def _socket_client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
     )
 
     group, offset = _address()
-    target, source = (
-        AmsAddress(NetId.parse(SERVER_NET_ID), 851),
-        AmsAddress(NetId.parse("10.1.2.3.1.1"), 30001),
-    )
+    target, source = AmsAddress(NetId.parse(net_id), 851), AmsAddress(NetId.parse("10.1.2.3.1.1"), 30001)
     sock = socket.create_connection(("127.0.0.1", port))
     sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
@@ -347,26 +337,105 @@ def _socket_client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
         exchange(CommandId.READ, ReadRequest(0xF005, handle, 4).encode())
         exchange(CommandId.WRITE, WriteRequest(0xF006, 0, struct.pack("<I", handle)).encode())
 
+    return call, sock
+
+
+def _client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
+    """``--method rounds``: one server for ``seconds``, from this (fresh) process."""
+    if CLIENT[0] == "pyads":
+        plc = _pyads_open(SERVER_NET_ID, port)
+        call, closing = _pyads_call(plc, mode), plc.close
+    else:
+        call, sock = _socket_call(port, SERVER_NET_ID, mode)
+        closing = sock.close
     for _ in range(200):  # warm up
         call()
     latencies = array("Q")
     ns = time.perf_counter_ns
+    record = latencies.append
     stop_at = time.perf_counter() + seconds
-    while time.perf_counter() < stop_at:
+    clock = time.perf_counter
+    while clock() < stop_at:
         t0 = ns()
         call()
-        latencies.append(ns() - t0)
-    sock.close()
+        record(ns() - t0)
+    closing()
     return len(latencies), latencies.tobytes()
+
+
+@dataclass(frozen=True)
+class Target:
+    """A server as the burst client reaches it: its AMS NetId, port and the processes whose CPU is its."""
+
+    name: str
+    net_id: str
+    port: int
+    pids: tuple[int, ...]
+
+
+BURST = {"raw": 100, "by_name": 34}
+"""``--method bursts``: calls per burst (about 3-15 ms each on the benchmark host), per mode."""
+
+
+def _client_bursts(
+    targets: list[Target], mode: str, seconds: float, burst: int
+) -> dict[str, tuple[int, float, float, bytes]]:
+    """``--method bursts``: every server from this one process, one connection each, in bursts of
+    ``burst`` calls taken in turn (the order shifted every turn) until each was measured for
+    ``seconds``: whatever the scheduler and the machine do meanwhile, every server gets its share of it.
+    Per server: calls, seconds measured, CPU seconds of its serving processes during its bursts, and the
+    latencies (ns)."""
+    calls: dict[str, Any] = {}
+    closers = []
+    for t in targets:
+        if CLIENT[0] == "pyads":
+            plc = _pyads_open(t.net_id, t.port)
+            calls[t.name] = _pyads_call(plc, mode)
+            closers.append(plc.close)
+        else:
+            calls[t.name], sock = _socket_call(t.port, t.net_id, mode)
+            closers.append(sock.close)
+    for t in targets:
+        for _ in range(200):  # warm up
+            calls[t.name]()
+    latencies = {t.name: array("Q") for t in targets}
+    measured = dict.fromkeys(calls, 0.0)
+    cpu = dict.fromkeys(calls, 0.0)
+    ns = time.perf_counter_ns
+    turn = 0
+    while min(measured.values()) < seconds:
+        # every server in every position of the turn as often as the others: the order turns by one each
+        # time, and every other turn runs backwards
+        shift = turn % len(targets)
+        order = targets[shift:] + targets[:shift]
+        if turn % 2:
+            order.reverse()
+        turn += 1
+        for t in order:
+            call, record = calls[t.name], latencies[t.name].append
+            cpu_before = _cpu_s(list(t.pids))
+            began = ns()
+            for _ in range(burst):
+                t0 = ns()
+                call()
+                record(ns() - t0)
+            measured[t.name] += (ns() - began) * 1e-9
+            cpu[t.name] += _cpu_s(list(t.pids)) - cpu_before
+    for close in closers:
+        close()
+    return {
+        t.name: (len(latencies[t.name]), measured[t.name], cpu[t.name], latencies[t.name].tobytes())
+        for t in targets
+    }
 
 
 CLIENT = ["pyads"]
 
 
-def _client_process(conn: Connection, port: int, mode: str, seconds: float, cpu: int | None) -> None:
+def _client_process(conn: Connection, work: Callable[[], Any], cpu: int | None) -> None:
     if cpu is not None:  # before pyads starts AdsLib's threads: they inherit it
         os.sched_setaffinity(0, {cpu})
-    conn.send((_client if CLIENT[0] == "pyads" else _socket_client)(port, mode, seconds))
+    conn.send(work())
 
 
 PLACEMENTS = {"free": (None, None), "same": (0, 0), "cross": (0, 1)}
@@ -380,16 +449,16 @@ def _pin(pid: int, cpu: int) -> None:
             os.sched_setaffinity(int(task), {cpu})
 
 
-def _run_client(port: int, mode: str, seconds: float, cpu: int | None = None) -> tuple[int, bytes]:
-    """One run in a fresh process (AdsLib's router is per process)."""
+def _run_client(work: Callable[[], Any], seconds: float, cpu: int | None = None) -> Any:
+    """``work()`` (a client's measurement) in a fresh process (AdsLib's router is per process), its
+    result."""
     parent, child = CTX.Pipe()
-    process = CTX.Process(target=_client_process, args=(child, port, mode, seconds, cpu), daemon=True)
+    process = CTX.Process(target=_client_process, args=(child, work, cpu), daemon=True)
     process.start()
     try:
         if not parent.poll(seconds + 60):
-            raise RuntimeError(f"the pyads client ({mode}, port {port}) did not finish")
-        result: tuple[int, bytes] = parent.recv()
-        return result
+            raise RuntimeError(f"the {CLIENT[0]} client did not finish")
+        return parent.recv()
     finally:
         process.join(10)
         if process.is_alive():
@@ -482,6 +551,20 @@ def main() -> None:
         help="pyads (the goal's client) or a plain blocking socket (the servers' share of a round trip)",
     )
     parser.add_argument(
+        "--method",
+        choices=["bursts", "rounds"],
+        default="bursts",
+        help="bursts: one client process per round reaches every server, in bursts taken in turn (every "
+        "server shares what the machine does meanwhile); rounds: a fresh client process per server and round "
+        "(each placed anew by the scheduler: 10-30 %% of run-to-run spread on the 2-core host)",
+    )
+    parser.add_argument(
+        "--burst",
+        type=int,
+        default=BURST["raw"],
+        help="--method bursts: raw reads per burst (read_by_name: a third as many calls)",
+    )
+    parser.add_argument(
         "--placement",
         choices=sorted(PLACEMENTS),
         default="free",
@@ -502,9 +585,9 @@ def main() -> None:
         f"{'one pyads ' + __import__('pyads').__version__ if args.client == 'pyads' else 'one plain socket'} "
         f"client, one call in flight; raw read of a DINT at "
         f"0x{group:X}/{offset} and read_by_name({SYMBOL!r}); {args.rounds} x {args.seconds:g} s per server "
-        f"and mode, interleaved; {os.cpu_count()} CPUs shared; placement {args.placement}"
+        f"and mode, interleaved ({args.method}); {os.cpu_count()} CPUs shared; placement {args.placement}"
     )
-    worst: dict[str, list[tuple[float, float, float, float]]] = {"raw": [], "by_name": []}
+    worst: dict[str, list[tuple[float, float, float, float, float]]] = {"raw": [], "by_name": []}
     timing: Any = None
     for run in range(args.runs):
         if args.runs > 1:
@@ -516,23 +599,26 @@ def main() -> None:
         for mode, runs in worst.items():
             rate_ref, rate_floor = min(r[0] for r in runs), min(r[1] for r in runs)
             p50_ref, p50_floor = min(r[2] for r in runs), min(r[3] for r in runs)
+            spread = max(abs(1 - r[4]) for r in runs)
             print(
                 f"{mode}, worst of {args.runs} runs: hli-server / pyads.testserver {rate_ref:.2f}x "
                 f"({'meets' if rate_ref >= GOAL else 'MISSES'} the goal >= {GOAL:g}x), hli-server / floor "
                 f"{rate_floor:.2f} ({'meets' if rate_floor >= FLOOR_GOAL else 'MISSES'} the goal >= "
                 f"{FLOOR_GOAL:g}); by the median round trip (what the machine's stalls disturb least): "
-                f"{p50_ref:.2f}x and {p50_floor:.2f}"
+                f"{p50_ref:.2f}x and {p50_floor:.2f}; the control (floor copy / floor) within "
+                f"{spread * 100:.1f} % of 1 in every run"
             )
     print_lateness(timing)
 
 
 def _one_run(args: argparse.Namespace) -> Any:
-    """One run: the four servers started, ``args.rounds`` interleaved rounds, the table and the ratios
-    printed; returns the hli-server's timing report with ``_ratios``: mode -> (calls/s / reference,
-    calls/s / floor, the same two by the median round trip)."""
+    """One run: the servers started, ``args.rounds`` rounds, the table and the ratios printed; returns
+    the hli-server's timing report with ``_ratios``: mode -> (calls/s / reference, calls/s / floor, the
+    same two by the median round trip, the control: floor copy / floor)."""
     servers = {"hli-server": Server.start("hli-server", _serve_hli if args.in_process else _serve_hli_run)}
     servers["pyads.testserver"] = Server.start("pyads.testserver", _serve_testserver)
     servers["floor"] = Server.start("floor", _serve_floor_asyncio)
+    servers["floor-copy"] = Server.start("floor-copy", _serve_floor_asyncio)
     servers["floor-thread"] = Server.start("floor-thread", _serve_floor)
     results = {(s, m): Result() for s in servers for m in ("raw", "by_name")}
     pids = {
@@ -543,13 +629,37 @@ def _one_run(args: argparse.Namespace) -> Any:
         for serving in pids.values():
             for pid in serving:
                 _pin(pid, server_cpu)
+    # the hli-server answers its own NetId; the others answer any: each gets one of its own, so that one
+    # pyads process (AdsLib routes by NetId) reaches them all
+    targets = [
+        Target(name, SERVER_NET_ID if i == 0 else f"127.0.0.{i + 1}.1.1", srv.port, tuple(pids[name]))
+        for i, (name, srv) in enumerate(servers.items())
+    ]
     timing: Any = None
     try:
         for _ in range(args.rounds):
             for mode in ("raw", "by_name"):
+                if args.method == "bursts":
+                    burst = max(1, args.burst if mode == "raw" else args.burst // 3)
+                    measured = _run_client(
+                        functools.partial(_client_bursts, targets, mode, args.seconds, burst),
+                        args.seconds * len(targets),
+                        client_cpu,
+                    )
+                    for name, (calls, seconds, cpu_s, raw) in measured.items():
+                        r = results[name, mode]
+                        r.cpu_s += cpu_s
+                        r.seconds += seconds
+                        r.calls += calls
+                        r.latencies.frombytes(raw)
+                    continue
                 for name, server in servers.items():
                     cpu_before = _cpu_s(pids[name])
-                    calls, raw = _run_client(server.port, mode, args.seconds, client_cpu)
+                    calls, raw = _run_client(
+                        functools.partial(_client, server.port, mode, args.seconds),
+                        args.seconds,
+                        client_cpu,
+                    )
                     r = results[name, mode]
                     r.cpu_s += _cpu_s(pids[name]) - cpu_before
                     r.seconds += args.seconds
@@ -557,15 +667,16 @@ def _one_run(args: argparse.Namespace) -> Any:
                     r.latencies.frombytes(raw)
     finally:
         timing = servers["hli-server"].stop()
-        servers["pyads.testserver"].stop()
-        servers["floor"].stop()
-        servers["floor-thread"].stop()
+        for name, server in servers.items():
+            if name != "hli-server":
+                server.stop()
 
     labels = {
         "hli-server": f"hli-server {'in-process' if args.in_process else 'doors proc.'}, engine "
         f"{'realtime' if args.clock == 'realtime' else 'idle'}",
         "pyads.testserver": "pyads.testserver + AdvancedHandler",
         "floor": "floor: canned replies, asyncio (same stack)",
+        "floor-copy": "the same floor again (the control)",
         "floor-thread": "floor: canned replies, blocking thread",
     }
     print(f"{'server':<42} {'mode':<8} {'calls/s':>9} {'p50 us':>8} {'p99 us':>8} {'CPU us/call':>12}")
@@ -579,6 +690,8 @@ def _one_run(args: argparse.Namespace) -> Any:
     for mode in ("raw", "by_name"):
         ours, ref = results["hli-server", mode], results["pyads.testserver", mode]
         floor, thread = results["floor", mode], results["floor-thread", mode]
+        copy = results["floor-copy", mode]
+        control = copy.rate / floor.rate if floor.rate else 0.0
         ratio = ours.rate / ref.rate if ref.rate else float("inf")
         to_floor = ours.rate / floor.rate if floor.rate else 0.0
         to_thread = ours.rate / thread.rate if thread.rate else 0.0
@@ -596,11 +709,16 @@ def _one_run(args: argparse.Namespace) -> Any:
             f"{thread.percentile(50):.1f} us: hli-server - asyncio floor "
             f"{ours.percentile(50) - floor.percentile(50):+.1f} us"
         )
+        print(  # two identical servers: what this run's method resolves
+            f"{mode}: control: floor copy / floor {control:.3f} (two identical servers: the ratios above are "
+            f"good to about {abs(1 - control) * 100:.1f} %)"
+        )
         ratios[mode] = (
             ratio,
             to_floor,
             ref.percentile(50) / ours.percentile(50),
             floor.percentile(50) / ours.percentile(50),
+            control,
         )
     report = dict(timing or {})
     report["_ratios"] = ratios
