@@ -224,10 +224,10 @@ class _Connection(asyncio.Protocol):
             admitted: Any = self._admitted  # not None where _fast is set
             reply = self._device.handle_frame(self.session, data, admitted)
             if reply is not None:
+                raw.write(reply)  # the answer first: the counters while the client reads it
                 self._stats.turns += 1
                 self.frames += 1
                 self.last_activity = _monotonic()
-                raw.write(reply)
                 return
         transport = self._transport
         if transport is None:
