@@ -1,7 +1,6 @@
 """ADS/TCP: reads per second and latency with one pyads client (H-04).
 
-Two servers, each in its own process, measured in the same run, interleaved (hli-server, reference,
-hli-server, reference, ...) so that a change of load on the shared machine hits both alike:
+The server under test and its references, each in its own process, measured in the same run:
 
 * **hli-server**: ``hli-server run`` with the demo machine, the engine running in real time (T_A = 1 ms,
   every monitor installed), ADS served by the doors process as ``run`` does by default; reads come
@@ -9,31 +8,39 @@ hli-server, reference, ...) so that a change of load on the shared machine hits 
   runtime's event loop, ``--no-doors-process``).
 * **pyads.testserver**: ``AdsTestServer`` with an ``AdvancedHandler`` holding one DINT variable at
   the same index group/offset and name: the reference (no engine).
+* the **floors**, which answer every request with a canned reply (no decoding): one on the door's own
+  transport stack (an ``asyncio.Protocol`` on the doors process' loop, ``runtime.event_loop``: the
+  reference of the goal "within 5 % of a canned-reply server", since it differs from the door only in
+  what the door does per request), **the same floor again** (the control: two identical servers, whose
+  ratio says what the run can resolve), and one with a blocking thread per connection (``sendall`` right
+  after ``recv``: what the pyads client itself allows, shown for comparison, a different stack).
 
-The client is pyads 3.6 (Beckhoff's AdsLib) in a separate process, one call in flight:
+The client is pyads 3.6 (Beckhoff's AdsLib), one call in flight:
 
 * raw reads: ``Connection.read(group, offset, PLCTYPE_DINT)`` (one round trip each);
 * read_by_name: ``Connection.read_by_name(name, PLCTYPE_DINT)`` (handle, read, release: three
   round trips each, as pyads does it).
 
-Two more servers, the **floors**, answer every request with a canned reply (no decoding): one on the door's
-own transport stack (an ``asyncio.Protocol`` on the doors process' loop, ``runtime.event_loop``: the
-reference of the goal "within 5 % of a canned-reply server", since it differs from the door only in
-what the door does per request), and one with a blocking thread per connection (``sendall`` right after
-``recv``: what the pyads client itself allows, shown for comparison, a different stack).
+``--method bursts`` (the default): per round and mode, one client process holds a connection to every
+server (each server has an AMS NetId of its own: AdsLib routes by NetId) and measures them in bursts
+taken in turn (100 raw reads or 33 read_by_name calls, a few milliseconds), the order shifted by one
+every turn and every other turn backwards, until each server was measured for ``--seconds``: where the
+scheduler puts the client, what the engine's process and the host do meanwhile, every server gets its
+share of it. ``--method rounds``: a fresh client process per server and round (one second each), as
+the benchmark measured before the fourth session of issue 38: on the 2-core benchmark host the
+scheduler places each client process anew, a round trip takes about 26 µs within one CPU and 100-150 µs
+across the two, and two identical servers measured this way differ by up to 12 % in a run
+(docs/performance.md, "fourth session").
 
 Printed: calls/s, latency p50/p99 per server and mode, the CPU time the serving process spent per call
-(user + system from ``/proc``, the client excluded: the figure a shared machine disturbs least), the
-ratio hli-server / reference (the goal: >= 1.0x on both) and hli-server / floor (goal: within
-5 %, >= 0.95), and how the realtime clock fared under the load.
+(user + system from ``/proc``, the client excluded), the ratio hli-server / reference (the goal: >= 1.0x
+on both) and hli-server / floor (goal: within 5 %, >= 0.95), the control's ratio, and how the realtime
+clock fared under the load.
 
-    .venv/bin/python -m benchmarks.bench_ads [--seconds 2] [--rounds 2] [--runs 3]
+    .venv/bin/python -m benchmarks.bench_ads [--seconds 2] [--rounds 2] [--runs 3] [--method bursts]
 
-Client and servers share the machine's cores: the figures are noisy, the ratio is what to compare.
-``--placement same`` (or ``cross``) pins the client and each serving process (never the engine's) so that
-every server gets the same placement: on the 2-core benchmark host a round trip within one CPU takes
-about 26 µs and one between the two CPUs 100-150 µs, and where the scheduler happens to put each process
-moves a run's ratios by 10-30 % (docs/performance.md, "third session").
+``--placement same`` (or ``cross``) pins the client and each serving process (never the engine's);
+``--client socket`` replaces pyads with a plain blocking socket (the servers' share of a round trip).
 """
 
 from __future__ import annotations
@@ -373,8 +380,9 @@ class Target:
     pids: tuple[int, ...]
 
 
-BURST = {"raw": 100, "by_name": 34}
-"""``--method bursts``: calls per burst (about 3-15 ms each on the benchmark host), per mode."""
+BURST = 100
+"""``--method bursts``: raw reads per burst (a few milliseconds on the benchmark host); read_by_name's
+bursts have a third as many calls (three round trips each)."""
 
 
 def _client_bursts(
@@ -561,7 +569,7 @@ def main() -> None:
     parser.add_argument(
         "--burst",
         type=int,
-        default=BURST["raw"],
+        default=BURST,
         help="--method bursts: raw reads per burst (read_by_name: a third as many calls)",
     )
     parser.add_argument(
@@ -587,6 +595,12 @@ def main() -> None:
         f"0x{group:X}/{offset} and read_by_name({SYMBOL!r}); {args.rounds} x {args.seconds:g} s per server "
         f"and mode, interleaved ({args.method}); {os.cpu_count()} CPUs shared; placement {args.placement}"
     )
+    if args.client == "socket" and args.placement == "free":
+        print(
+            "note: a plain socket client is one thread: each server's process stays on the CPU the scheduler "
+            "gave it, the client's or the other, and two identical servers can differ by 10-30 % (the "
+            "control says by how much); --placement same holds it equal"
+        )
     worst: dict[str, list[tuple[float, float, float, float, float]]] = {"raw": [], "by_name": []}
     timing: Any = None
     for run in range(args.runs):
