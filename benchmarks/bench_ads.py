@@ -347,14 +347,19 @@ def _socket_call(port: int, net_id: str, mode: str) -> tuple[Any, socket.socket]
     return call, sock
 
 
+def _connect(net_id: str, port: int, mode: str) -> tuple[Any, Callable[[], None]]:
+    """One call of ``mode`` to the server on ``port`` from the ``--client`` (pyads or a plain socket),
+    and how to close its connection."""
+    if CLIENT[0] == "pyads":
+        plc = _pyads_open(net_id, port)
+        return _pyads_call(plc, mode), plc.close
+    call, sock = _socket_call(port, net_id, mode)
+    return call, sock.close
+
+
 def _client(port: int, mode: str, seconds: float) -> tuple[int, bytes]:
     """``--method rounds``: one server for ``seconds``, from this (fresh) process."""
-    if CLIENT[0] == "pyads":
-        plc = _pyads_open(SERVER_NET_ID, port)
-        call, closing = _pyads_call(plc, mode), plc.close
-    else:
-        call, sock = _socket_call(port, SERVER_NET_ID, mode)
-        closing = sock.close
+    call, closing = _connect(SERVER_NET_ID, port, mode)
     for _ in range(200):  # warm up
         call()
     latencies = array("Q")
@@ -396,13 +401,8 @@ def _client_bursts(
     calls: dict[str, Any] = {}
     closers = []
     for t in targets:
-        if CLIENT[0] == "pyads":
-            plc = _pyads_open(t.net_id, t.port)
-            calls[t.name] = _pyads_call(plc, mode)
-            closers.append(plc.close)
-        else:
-            calls[t.name], sock = _socket_call(t.port, t.net_id, mode)
-            closers.append(sock.close)
+        calls[t.name], close = _connect(t.net_id, t.port, mode)
+        closers.append(close)
     for t in targets:
         for _ in range(200):  # warm up
             calls[t.name]()
@@ -646,7 +646,12 @@ def _one_run(args: argparse.Namespace) -> Any:
     # the hli-server answers its own NetId; the others answer any: each gets one of its own, so that one
     # pyads process (AdsLib routes by NetId) reaches them all
     targets = [
-        Target(name, SERVER_NET_ID if i == 0 else f"127.0.0.{i + 1}.1.1", srv.port, tuple(pids[name]))
+        Target(
+            name,
+            SERVER_NET_ID if name == "hli-server" else f"127.0.0.{i + 1}.1.1",
+            srv.port,
+            tuple(pids[name]),
+        )
         for i, (name, srv) in enumerate(servers.items())
     ]
     timing: Any = None

@@ -99,7 +99,7 @@ class DataService:
         pieces = symbol.pieces
         if len(pieces) == 1:
             direction, start, end = pieces[0]
-            return (self.c2p() if direction is _C2P else self.p2c())[start:end]
+            return self.half(direction)[start:end]
         halves: dict[Direction, bytes] = {}
         parts = []
         for direction, start, end in pieces:
@@ -313,13 +313,17 @@ class DataService:
     def symbol(self, data: bytes) -> Symbol:
         symbol = self.symbols.find_raw(data)
         if symbol is None:
-            raise _no_symbol(data)
+            name = decode_name(data)
+            raise AdsError(
+                ErrorCode.SYMBOL_NOT_FOUND,
+                f"no symbol {name[:200]!r}: symbols are the ST paths of `hli-server map` and every level "
+                "above them, e.g. gpAx[0]^ipo_mc_control.dyn_pos_limit_high.command_w or "
+                "gpAx[0]^ipo_mc_control.dyn_pos_limit_high (also spelt gpAx[0].ipo_... and gpAx[0]^.ipo_...)",
+            )
         return symbol
 
     def handle_by_name(self, session: Session, offset: int, read_length: int, data: bytes) -> bytes:
-        symbol = self.symbols.find_raw(data)  # symbol() without its call: a PLC's polling asks this often
-        if symbol is None:
-            raise _no_symbol(data)
+        symbol = self.symbol(data)
         if len(session.handles) >= self.limits.max_handles:
             raise AdsError(
                 ErrorCode.NO_MEMORY,
@@ -336,16 +340,6 @@ class DataService:
         symbol = self.symbol(data)
         _check_size(symbol, read_length, "read")
         return self.gather(symbol)
-
-
-def _no_symbol(data: bytes) -> AdsError:
-    name = decode_name(data)
-    return AdsError(
-        ErrorCode.SYMBOL_NOT_FOUND,
-        f"no symbol {name[:200]!r}: symbols are the ST paths of `hli-server map` and every level "
-        "above them, e.g. gpAx[0]^ipo_mc_control.dyn_pos_limit_high.command_w or "
-        "gpAx[0]^ipo_mc_control.dyn_pos_limit_high (also spelt gpAx[0].ipo_... and gpAx[0]^.ipo_...)",
-    )
 
 
 def _check_size(symbol: Symbol, length: int, what: str) -> None:

@@ -313,16 +313,8 @@ class AdsDevice:
             elif data_length >= 16:  # ReadWrite
                 group, offset, read_length, size = _U32x4.unpack_from(frame, 38)
                 if size == data_length - 16:
-                    # the dispatch of PortTable.read_write_group, as the Read above has read_group's: the
-                    # three requests of pyads' read_by_name come this way (0xF003 here, 0xF005 above,
-                    # 0xF006 below), one call each to the data service
-                    serve_rw = table.read_write.get(group)
-                    if serve_rw is None:
-                        raise table.missing("ReadWrite", group)
-                    value = serve_rw(session, offset, read_length, frame[54:])
+                    value = self._read_write(session, table, group, offset, read_length, frame[54:])
                     n = len(value)
-                    if n > read_length:
-                        raise _answer_too_long(group, n, read_length)
                     return (
                         _DATA_REPLY.pack(0, 40 + n, sn, sp, tn, tp, cmd, _FLAGS, 8 + n, 0, invoke, 0, n)
                         + value
@@ -381,7 +373,10 @@ class AdsDevice:
     ) -> bytes:
         value = table.read_write_group(session, group, offset, read_length, data)
         if len(value) > read_length:
-            raise _answer_too_long(group, len(value), read_length)
+            raise AdsError(
+                ErrorCode.SIZE_WRONG,
+                f"index group 0x{group:X} answers {len(value)} bytes, the read length is {read_length}",
+            )
         return value
 
     def add_notification(self, session: Session, table: PortTable, header: AmsHeader, data: bytes) -> bytes:
@@ -447,11 +442,3 @@ def _bind(
         return method(session, table, offset, read_length, data)
 
     return serve
-
-
-def _answer_too_long(group: int, size: int, read_length: int) -> AdsError:
-    """A ReadWrite whose answer does not fit the read length the client gave (0x705)."""
-    return AdsError(
-        ErrorCode.SIZE_WRONG,
-        f"index group 0x{group:X} answers {size} bytes, the read length is {read_length}",
-    )
