@@ -391,11 +391,9 @@ async def _serve_doors_until(
             # what was built to serve lives as long as the process: out of the collector's full passes
             gc.collect()
             gc.freeze()
-            while not terminated.is_set():  # until the parent says stop, goes away, or closes the image
-                if await loop.run_in_executor(None, conn.poll, 0.2):
-                    break
-                if os.getppid() != parent or image.closed or link.closed:
-                    break
+            await _until_stopped(
+                conn, terminated, lambda: os.getppid() != parent or image.closed or link.closed
+            )
     except Exception as exc:
         _tell(conn, ("error", f"the doors process failed: {exc}"))
         raise
@@ -406,6 +404,28 @@ async def _serve_doors_until(
         await host.close()
         link.close()
         image.close()
+
+
+#: how often the doors process looks whether its parent, the image or the link went away without a word
+#: (the parent's word, and its end of the pipe closing when it dies, wake the process at once)
+WATCH_S: Final = 1.0
+
+
+async def _until_stopped(conn: Connection, terminated: asyncio.Event, gone: Callable[[], bool]) -> None:
+    """Serve until the parent says stop or goes away (its word or the end of its pipe makes ``conn``
+    readable: the loop watches it, no thread polls it), SIGTERM (``terminated``), or ``gone()``.
+
+    No thread, and one wake-up every :data:`WATCH_S`: the thread that polled the pipe five times a second
+    (and woke the serving loop each time) was half the CPU of an idle doors process (docs/performance.md)."""
+    loop = asyncio.get_running_loop()
+    fd = conn.fileno()
+    loop.add_reader(fd, terminated.set)  # what the parent says is "stop"; nothing else comes this way
+    try:
+        while not terminated.is_set() and not gone():
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(terminated.wait(), WATCH_S)
+    finally:
+        loop.remove_reader(fd)
 
 
 def _url(adapter: Adapter) -> str | None:
