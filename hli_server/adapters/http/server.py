@@ -26,12 +26,38 @@ __all__ = ["HttpApiAdapter"]
 logger = logging.getLogger(__name__)
 
 
+#: how often the server's loop looks at its state (uvicorn's own loop: ten times a second)
+TICK_S = 1.0
+
+
 class _Server(uvicorn.Server):
-    """uvicorn without its own signal handling: the runtime owns SIGINT/SIGTERM."""
+    """uvicorn without its own signal handling (the runtime owns SIGINT/SIGTERM), and with its main loop
+    woken once a second instead of ten times: what uvicorn does on a tick (the ``Date`` header renewed once
+    a second, the look at ``should_exit``) needs no more, and :meth:`exit_soon` wakes it at once. An idle
+    server's doors process then wakes a few times a second (docs/performance.md)."""
+
+    def __init__(self, config: uvicorn.Config) -> None:
+        super().__init__(config)
+        self._exit_asked = asyncio.Event()
 
     @contextlib.contextmanager
     def capture_signals(self) -> Generator[None, None, None]:
         yield
+
+    async def main_loop(self) -> None:
+        counter = 0
+        should_exit = await self.on_tick(counter)
+        while not should_exit:
+            # uvicorn counts tenths of a second and renews the Date header at every tenth count
+            counter = (counter + 10) % 864000
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._exit_asked.wait(), TICK_S)
+            should_exit = await self.on_tick(counter)
+
+    def exit_soon(self) -> None:
+        """Stop serving (uvicorn's graceful shutdown follows), now rather than at the next tick."""
+        self.should_exit = True
+        self._exit_asked.set()
 
 
 class HttpApiAdapter:
@@ -109,7 +135,7 @@ class HttpApiAdapter:
         if server is not None:
             abort_stalled(server.server_state.connections)
         if server is not None and task is not None:
-            server.should_exit = True
+            server.exit_soon()
             try:
                 await asyncio.wait_for(asyncio.shield(task), self.graceful_timeout_s + 3.0)
             except TimeoutError:
