@@ -7,10 +7,9 @@ the rest of the turn's bookkeeping. A request/reply door turns the loop once per
 benchmark host a pending 1 s timer made a canned-reply ADS server 3-7 % slower than the same server with no
 timer (``bench_ads``'s floor; docs/performance.md, "Speed, round three, third session"), of which this
 computation is a part. Python 3.13 computes the same timeout with two comparisons;
-:class:`LeanSelectorEventLoop` is
-asyncio's ``SelectorEventLoop`` with that turn on the versions before it, and asyncio's own loop,
-unchanged, from 3.13 on. Behaviour is asyncio's: the same timers, the same order, the same clamping to
-``MAXIMUM_SELECT_TIMEOUT``.
+:class:`LeanSelectorEventLoop` is asyncio's ``SelectorEventLoop`` with that turn on the versions before it,
+and asyncio's own loop, unchanged, from 3.13 on. Behaviour is asyncio's: the same timers, the same order,
+the same clamping to ``MAXIMUM_SELECT_TIMEOUT``.
 """
 
 from __future__ import annotations
