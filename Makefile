@@ -41,11 +41,11 @@ $(NODE_STAMP): $(NODE_DIR)/package-lock.json
 
 node-deps: $(NODE_STAMP)
 
-# rebuild the compiled engine after editing it (an edited engine runs as pure Python until then:
-# hli_server/_compiled.py says so once; sources compiled before come from the build cache, setup.py);
-# HLI_PURE_PYTHON=1 make compile removes the compiled modules
+# rebuild the compiled engine (and the ADS request path) after editing it (an edited source runs as pure
+# Python until then: hli_server/_compiled.py says so once; sources compiled before come from the build
+# cache, setup.py); HLI_PURE_PYTHON=1 make compile removes the compiled modules
 compile: $(TEST_STAMP)
-	find hli_server/engine -name '*.so' -delete
+	find hli_server/engine hli_server/adapters/ads -name '*.so' -delete
 	rm -rf build *__mypyc*.so
 	$(BIN)/python -m pip install --quiet --no-deps -e .
 
@@ -94,4 +94,4 @@ soak: $(TEST_STAMP)
 
 clean:
 	rm -rf $(VENV) .mypy_cache .ruff_cache .pytest_cache build *.egg-info *__mypyc*.so
-	find hli_server/engine -name '*.so' -delete
+	find hli_server/engine hli_server/adapters/ads -name '*.so' -delete

@@ -1,8 +1,8 @@
 """Build: the engine compiled with mypyc where it can be, plain Python everywhere else.
 
 Everything about the package is in ``pyproject.toml``; this file only adds the extension modules. The
-modules of ``hli_server/engine`` (all but ``_compiled.NOT_COMPILED``) are compiled with mypyc, the way
-black and mypy ship themselves, when
+modules of ``hli_server/engine`` (all but ``_compiled.NOT_COMPILED``) and the ADS door's request path
+(``_compiled.ADS_COMPILED``) are compiled with mypyc, the way black and mypy ship themselves, when
 
 * the interpreter is CPython,
 * mypyc can be imported (``pyproject.toml`` puts mypy in the build requirements for CPython),
@@ -21,7 +21,8 @@ again by every install (``make run``'s, ``make test``'s, a user's ``pip install 
 environment). The build keeps what it compiled in a cache directory (:func:`cache_root`: ``HLI_BUILD_CACHE``,
 else ``$XDG_CACHE_HOME/hli-server/engine``, else ``~/.cache/hli-server/engine``; ``HLI_BUILD_CACHE=off``
 turns it off), under a key (:func:`build_key`) made of everything the compiled code depends on: the sources
-mypyc reads (the engine, ``schemas``, ``hli_server/__init__.py`` and ``_compiled.py``, this file), the mypy
+mypyc reads (the engine, the ADS adapter and codec, ``schemas``, ``hli_server/__init__.py`` and
+``_compiled.py``, this file), the mypy
 options of ``pyproject.toml``, the versions of the interpreter, mypy, its runtime library and the libraries
 whose types the engine uses, the compiler and ``CFLAGS``. An install whose key is there copies the
 compiled modules instead of compiling (seconds); any change of the key compiles anew. mypyc runs only when
@@ -51,7 +52,17 @@ from setuptools.command.build_ext import build_ext
 HERE = Path(__file__).parent
 ENGINE = HERE / "hli_server" / "engine"
 GROUP = "hli_server.engine.native"
-"""The group of the compiled modules: its shared library is ``hli_server/engine/native__mypyc...so``."""
+"""The group of the engine's compiled modules (shared library ``hli_server/engine/native__mypyc...so``)."""
+ADS_GROUP = "hli_server.adapters.ads.native"
+"""The group of the ADS request path's (``hli_server/adapters/ads/native__mypyc...so``): a group of its own,
+so that neither calls into the other's shared library."""
+KEY_SOURCES = (
+    ENGINE,
+    HERE / "schemas",
+    HERE / "hli_server" / "adapters" / "ads",
+    HERE / "hli_server" / "codecs" / "ads",
+)
+"""The folders whose sources mypyc reads: what it compiles and what that imports with types it relies on."""
 CACHE_ENV = "HLI_BUILD_CACHE"
 KEEP_BUILDS = 4
 """Compiled builds kept in the cache (the newest; each is some tens of MB)."""
@@ -86,7 +97,7 @@ def cache_root() -> Path | None:
 def build_key() -> str:
     """The key of this build in the cache: a hash of everything the compiled modules depend on."""
     digest = hashlib.sha256()
-    files = {*ENGINE.rglob("*.py"), *(HERE / "schemas").rglob("*.py")}
+    files = {path for folder in KEY_SOURCES for path in folder.rglob("*.py")}
     files |= {HERE / "hli_server" / "__init__.py", HERE / "hli_server" / "_compiled.py", HERE / "setup.py"}
     for path in sorted(files):
         digest.update(path.relative_to(HERE).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
@@ -123,23 +134,32 @@ def _cached(entry: Path) -> dict[str, str] | None:
 
 
 def _mypyc_extensions() -> list[Any]:
-    """The engine's modules, compiled by mypyc (its type check and C code now, the C compiler in
-    ``build_ext``); [] where mypyc fails (a type error: the package installs as pure Python, saying so)."""
+    """The engine's modules and the ADS request path's, compiled by mypyc (its type check and C code now,
+    the C compiler in ``build_ext``); [] where mypyc fails (a type error: the package installs as pure
+    Python, saying so)."""
     compiled = _compiled_module()
     from mypyc.build import mypycify
 
-    sources = sorted(
-        str(p.relative_to(HERE)) for p in ENGINE.rglob("*.py") if p.name not in compiled.NOT_COMPILED
-    )
+    sources = [str(p.relative_to(HERE)) for p in compiled.compiled_sources()]
+    engine = [s for s in sources if s.startswith("hli_server/engine/")]
+    ads = [s for s in sources if s not in engine]
     # IEEE results identical to the interpreter's: no fused multiply-add contracted by the compiler
     os.environ["CFLAGS"] = (os.environ.get("CFLAGS", "") + " -ffp-contract=off").strip()
-    print(f"hli-server: compiling {len(sources)} engine modules with mypyc", file=sys.stderr)
+    print(
+        f"hli-server: compiling {len(engine)} engine modules and {len(ads)} of the ADS door with mypyc",
+        file=sys.stderr,
+    )
     # mypy's options come from pyproject.toml; its override for construct is unused here
-    # the group's shared library inside the package (hli_server/engine/native__mypyc...so), not at the
+    # each group's shared library inside the package (hli_server/engine/native__mypyc...so), not at the
     # top level, where an editable install's finder would not see it from another directory
     try:
         return list(
-            mypycify(["--no-warn-unused-configs", *sources], opt_level="3", debug_level="1", group_name=GROUP)
+            mypycify(
+                ["--no-warn-unused-configs", *sources],
+                opt_level="3",
+                debug_level="1",
+                separate=[(engine, GROUP), (ads, ADS_GROUP)],
+            )
         )
     except (SystemExit, Exception) as exc:  # mypyc exits on a type error: install pure, say so
         print(f"hli-server: engine not compiled (mypyc failed: {exc!r}): pure Python", file=sys.stderr)

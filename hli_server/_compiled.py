@@ -1,20 +1,22 @@
 """Compiled or pure engine: which one this process runs (docs/performance.md "Compiled engine").
 
-``pip install`` compiles the modules of ``hli_server/engine`` with mypyc where a C compiler and the
-Python headers are present (``setup.py``); the same source runs as plain Python everywhere else. The
-compiled modules (``*.so`` beside the ``.py`` files) take precedence on import, so this module decides,
-once, before the first engine module is imported (``hli_server/__init__.py`` calls :func:`select`):
+``pip install`` compiles the modules of ``hli_server/engine`` and the ADS door's request path
+(:data:`ADS_COMPILED`) with mypyc where a C compiler and the Python headers are present (``setup.py``);
+the same source runs as plain Python everywhere else. The compiled modules (``*.so`` beside the ``.py``
+files) take precedence on import, so this module decides, once, before the first of them is imported
+(``hli_server/__init__.py`` calls :func:`select`):
 
 * ``HLI_PURE_PYTHON=1`` (any value but empty or ``0``): pure Python, for debugging (breakpoints,
   tracebacks with lines, profilers that see every function);
 * a compiled module older than its source (an editable install whose ``.py`` was edited after the build:
   the ``.so`` would run the old code), or a source without its compiled module: pure Python for the
-  whole engine, with one warning that says which file and how to rebuild. All or nothing: a pure class
-  cannot inherit from a compiled one, and a half-compiled engine would be neither tested nor measured.
+  whole engine and the ADS request path, with one warning that says which file and how to rebuild. All
+  or nothing: a pure class cannot inherit from a compiled one, a compiled module calls the compiled
+  classes of its group directly, and a half-compiled build would be neither tested nor measured.
 
-Pure Python is chosen by a finder ahead of the standard ones that loads ``hli_server.engine.*`` from the
-``.py`` files. :data:`ENGINE_COMPILED` tells which engine runs (``hli-server version``, the benchmarks,
-the differential test in ``tests/unit/test_compiled_engine.py``).
+Pure Python is chosen by a finder ahead of the standard ones that loads ``hli_server.engine.*`` and the
+modules of :data:`ADS_COMPILED` from the ``.py`` files. :data:`ENGINE_COMPILED` tells which runs
+(``hli-server version``, the benchmarks, the differential tests in ``tests/unit/test_compiled_engine.py``).
 """
 
 from __future__ import annotations
@@ -33,9 +35,11 @@ from pathlib import Path
 from types import ModuleType
 
 __all__ = [
+    "ADS_COMPILED",
     "ENGINE_COMPILED",
     "NOT_COMPILED",
     "PURE_ENV",
+    "compiled_sources",
     "select",
     "stale_modules",
     "stale_notice",
@@ -51,11 +55,29 @@ NOT_COMPILED = ("__init__.py", "blocks.py")
 dataclass' interpreted ``__init__`` (15% of a geometry check); as a plain slots class the parser builds
 it through its slot descriptors, twice as fast (``nc/parser.py``, ``_block_maker``)."""
 
+ADS_COMPILED = ("data.py", "device.py", "session.py", "sums.py", "symbols.py")
+"""The modules of ``hli_server/adapters/ads`` compiled with the engine: the ADS door's request path (the
+device's dispatch, the port tables, the data, symbol and sum services), what every request of a PLC's
+polling runs through. The transport (``server.py``, an ``asyncio.Protocol``), the notifications and the
+rarely asked services stay Python. A compiled request costs about a third of its Python CPU time
+(docs/performance.md, "Compiled engine")."""
+
 _ENGINE = "hli_server.engine"
 _ENGINE_DIR = Path(__file__).with_name("engine")
+_ADS = "hli_server.adapters.ads"
+_ADS_DIR = Path(__file__).parent / "adapters" / "ads"
+_ADS_MODULES = frozenset(f"{_ADS}.{name.removesuffix('.py')}" for name in ADS_COMPILED)
 
 ENGINE_COMPILED = False
-"""True when this process runs the mypyc-compiled engine (set by :func:`select`)."""
+"""True when this process runs the mypyc-compiled modules, the engine and the ADS request path (set by
+:func:`select`)."""
+
+
+def compiled_sources() -> list[Path]:
+    """The sources mypyc compiles (``setup.py`` reads this): the engine's modules but
+    :data:`NOT_COMPILED`, then those of :data:`ADS_COMPILED`."""
+    engine = [p for p in sorted(_ENGINE_DIR.rglob("*.py")) if p.name not in NOT_COMPILED]
+    return engine + [_ADS_DIR / name for name in ADS_COMPILED]
 
 
 def why_not_compilable() -> str | None:
@@ -96,9 +118,7 @@ def stale_modules() -> tuple[list[Path], list[Path]]:
     compiled: list[Path] = []
     checkout = (_ENGINE_DIR.parent.parent / ".git").exists()
     stale: list[Path] = []
-    for source in sorted(_ENGINE_DIR.rglob("*.py")):
-        if source.name in NOT_COMPILED:
-            continue
+    for source in compiled_sources():
         built = _compiled_file(source)
         if built is None:
             stale.append(source)
@@ -110,12 +130,13 @@ def stale_modules() -> tuple[list[Path], list[Path]]:
 
 
 class _PureEngineFinder(importlib.abc.MetaPathFinder):
-    """Finds ``hli_server.engine`` and its modules as ``.py`` files (never the compiled ones)."""
+    """Finds ``hli_server.engine``, its modules and those of :data:`ADS_COMPILED` as ``.py`` files (never
+    the compiled ones)."""
 
     def find_spec(
         self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
     ) -> importlib.machinery.ModuleSpec | None:
-        if fullname != _ENGINE and not fullname.startswith(_ENGINE + "."):
+        if fullname != _ENGINE and not fullname.startswith(_ENGINE + ".") and fullname not in _ADS_MODULES:
             return None
         leaf = fullname.rpartition(".")[2]
         for entry in path or ():
@@ -142,7 +163,7 @@ def stale_notice() -> str | None:
 
 
 def select() -> bool:
-    """Decide compiled or pure for this process (before any engine module is imported)."""
+    """Decide compiled or pure for this process (before any compiled module is imported)."""
     global ENGINE_COMPILED  # noqa: PLW0603 - decided once per process, read by everyone after
     if any(isinstance(f, _PureEngineFinder) for f in sys.meta_path):
         return ENGINE_COMPILED
@@ -153,9 +174,9 @@ def select() -> bool:
         shown = ", ".join(str(p.relative_to(_ENGINE_DIR.parent.parent)) for p in stale[:3])
         more = f" and {len(stale) - 3} more" if len(stale) > 3 else ""
         _STALE_NOTICE = (
-            f"the compiled engine is older than its source ({shown}{more}): the whole engine runs as pure "
-            "Python (slower). Rebuild it with `make compile` (or `pip install -e .`), or set "
-            f"{PURE_ENV}=1 to choose pure Python"
+            f"the compiled engine is older than its source ({shown}{more}): the whole engine and the ADS "
+            "request path run as pure Python (slower). Rebuild it with `make compile` (or "
+            f"`pip install -e .`), or set {PURE_ENV}=1 to choose pure Python"
         )
         warnings.warn(f"hli_server: {_STALE_NOTICE}", RuntimeWarning, stacklevel=2)
     ENGINE_COMPILED = bool(compiled) and not stale and not forced

@@ -75,7 +75,7 @@ def _banner(runtime: Runtime, event_loop: str, guards: list[DoorGuard]) -> None:
         clock += f", priority: {runtime.priority_granted}"
     click.echo(clock + ")")
     notice = stale_notice()
-    if notice is not None:  # an edited engine source: the whole engine runs as pure Python
+    if notice is not None:  # an edited compiled source: the whole engine runs as pure Python
         click.echo(f"  WARNING: {notice}")
     image = runtime.image
     layout = runtime.layout

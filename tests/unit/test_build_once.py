@@ -84,6 +84,8 @@ def test_the_key_changes_with_every_engine_source_and_nothing_else(
     assert load_setup(tree).build_key() == key  # stable
     (tree / "README.md").write_text("another README\n", encoding="utf-8")
     (tree / "plc_clients" / "cli.py").write_text("# not read by mypyc\n", encoding="utf-8")
+    http = tree / "hli_server" / "adapters" / "http" / "server.py"  # another door: not read by mypyc
+    http.write_text(http.read_text(encoding="utf-8") + "\n# an edit\n", encoding="utf-8")
     assert setup.build_key() == key
     engine = tree / "hli_server" / "engine" / "machine.py"
     engine.write_text(engine.read_text(encoding="utf-8") + "\n# an edit\n", encoding="utf-8")
@@ -92,6 +94,11 @@ def test_the_key_changes_with_every_engine_source_and_nothing_else(
     schema = tree / "schemas" / "config.py"
     schema.write_text(schema.read_text(encoding="utf-8") + "\n# an edit\n", encoding="utf-8")
     assert setup.build_key() != edited
+    edited = setup.build_key()
+    codec = tree / "hli_server" / "codecs" / "ads" / "frames.py"  # read by mypyc for the ADS request path
+    codec.write_text(codec.read_text(encoding="utf-8") + "\n# an edit\n", encoding="utf-8")
+    assert setup.build_key() != edited
+    edited = setup.build_key()
     monkeypatch.setenv("CFLAGS", "-O0")
     assert setup.build_key() not in (key, edited)
     monkeypatch.setenv("HLI_BUILD_CACHE", "off")
@@ -112,10 +119,12 @@ def test_a_build_of_the_same_sources_takes_the_compiled_engine_from_the_cache(tm
     setup = load_setup(tree)
     entry = tmp_path / "cache" / setup.build_key()
     entry.mkdir(parents=True)
-    engine = _compiled._ENGINE_DIR
+    root = _compiled._ENGINE_DIR.parent.parent
+    groups = [*_compiled._ENGINE_DIR.glob("native__mypyc*.so"), *_compiled._ADS_DIR.glob("native__mypyc*.so")]
+    assert len(groups) == 2, groups  # the engine's shared library and the ADS request path's
     modules = {}
-    for built in compiled + sorted(engine.glob("native__mypyc*.so")):
-        name = ".".join(built.relative_to(engine.parent.parent).with_suffix("").with_suffix("").parts)
+    for built in compiled + sorted(groups):
+        name = ".".join(built.relative_to(root).with_suffix("").with_suffix("").parts)
         shutil.copyfile(built, entry / f"{name}.so")
         modules[name] = f"{name}.so"
     (entry / "modules.json").write_text(json.dumps(modules), encoding="utf-8")

@@ -179,6 +179,7 @@ class DeviceStats:
     """notifications of a NetId above its share deleted to make room for a newcomer (the budget full)."""
 
     def count_error(self, code: int) -> None:
+        code = int(code)  # the number, not the ErrorCode member: the same keys compiled and pure
         self.errors[code] = self.errors.get(code, 0) + 1
 
 
