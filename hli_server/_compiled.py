@@ -60,8 +60,8 @@ ADS_COMPILED = ("data.py", "device.py", "session.py", "sums.py", "symbols.py")
 device's dispatch, the port tables, the data, symbol and sum services), what every request of a PLC's
 polling runs through. The transport (``server.py``, an ``asyncio.Protocol``), the notifications and the
 rarely asked services stay Python (compiling the transport measured within the benchmark's noise). The
-device answers a raw read or a read_by_name 1.3-1.4x as fast compiled (``benchmarks/bench_ads_device.py``;
-docs/performance.md, "Compiled engine")."""
+device answers a raw read 1.3x, a read_by_name 1.4-1.5x as fast compiled
+(``benchmarks/bench_ads_device.py``; docs/performance.md, "Compiled engine")."""
 
 _ENGINE = "hli_server.engine"
 _ENGINE_DIR = Path(__file__).with_name("engine")
