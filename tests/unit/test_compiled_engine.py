@@ -37,11 +37,17 @@ from schemas.layout import Direction, build_layout
 ROOT = Path(__file__).parents[2]
 
 
-def _run_scenarios(pure: bool) -> subprocess.CompletedProcess[str]:
+def _build_env(pure: bool) -> dict[str, str]:
+    """This process' environment with the pure (``HLI_PURE_PYTHON=1``) or the compiled build chosen."""
     env = dict(os.environ)
     env.pop(compiled.PURE_ENV, None)
     if pure:
         env[compiled.PURE_ENV] = "1"
+    return env
+
+
+def _run_scenarios(pure: bool) -> subprocess.CompletedProcess[str]:
+    env = _build_env(pure)
     code = (
         "import json, sys\n"
         "import hli_server._compiled as c\n"
@@ -280,10 +286,7 @@ def test_the_other_build_of_the_ads_request_path_gives_the_same_replies() -> Non
     import json
 
     other_is_pure = compiled.ENGINE_COMPILED
-    env = dict(os.environ)
-    env.pop(compiled.PURE_ENV, None)
-    if other_is_pure:
-        env[compiled.PURE_ENV] = "1"
+    env = _build_env(other_is_pure)
     code = (
         "import json\n"
         "import hli_server._compiled as c\n"
