@@ -10,36 +10,19 @@ computation is a part. Python 3.13 computes the same timeout with two comparison
 :class:`LeanSelectorEventLoop` is asyncio's ``SelectorEventLoop`` with that turn on the versions before it,
 and asyncio's own loop, unchanged, from 3.13 on. Behaviour is asyncio's: the same timers, the same order,
 the same clamping to ``MAXIMUM_SELECT_TIMEOUT``.
-
-**Far timers wake the loop from a thread** (``untimed_from``; :func:`lean_event_loop`, the doors' loop, sets
-it to :data:`FAR_TIMER_S`). A wait with a timeout costs more than one without, in the kernel and in Python
-(``select.epoll.poll`` with a timeout, ``selectors``' rounding, the clock read that computes it): a
-request/reply ping-pong on one CPU took 0.7-1.5 µs more a turn with a timer pending 100 s away than with
-none (docs/performance.md, issue 38's sixth session). Where the earliest timer is further than
-``untimed_from``, the loop waits without a timeout and a helper thread (:class:`_Alarm`, started at the
-first such timer) wakes it at that timer's time through the loop's self-pipe, as ``call_soon_threadsafe``
-does; the timer then runs in the loop's turn as any other. The loop tells the thread only when the earliest
-timer changes (the doors' periodic looks: once a second), so a turn that serves a request waits untimed and
-computes no timeout. A timer nearer than ``untimed_from`` is waited for as before, with the selector's own
-precision (the realtime clock's loop, :func:`~hli_server.runtime.pacing.precise_event_loop`, leaves it off).
-From 3.13 on asyncio's turn is used unchanged and ``untimed_from`` has no effect.
 """
 
 from __future__ import annotations
 
 import asyncio
 import heapq
-import math
 import selectors
 import sys
-import threading
-import time
 from asyncio import base_events
 from asyncio.log import logger as asyncio_logger
-from collections.abc import Callable
 from typing import Any
 
-__all__ = ["FAR_TIMER_S", "LeanSelectorEventLoop", "lean_event_loop"]
+__all__ = ["LeanSelectorEventLoop", "lean_event_loop"]
 
 _MIN_SCHEDULED = base_events._MIN_SCHEDULED_TIMER_HANDLES  # type: ignore[attr-defined]
 _MIN_CANCELLED_FRACTION = base_events._MIN_CANCELLED_TIMER_HANDLES_FRACTION  # type: ignore[attr-defined]
@@ -48,70 +31,10 @@ _MAX_TIMEOUT = base_events.MAXIMUM_SELECT_TIMEOUT  # type: ignore[attr-defined]
 BACKPORTED = sys.version_info < (3, 13)
 """Whether :class:`LeanSelectorEventLoop` replaces asyncio's turn (3.11, 3.12) or is asyncio's (3.13 on)."""
 
-FAR_TIMER_S = 0.05
-"""A timer further than this is waited for without a timeout, a helper thread waking the loop at its time
-(the doors' loop: their periodic looks are a second apart; the thread's wake-up adds some 0.1 ms)."""
-
-
-class _Alarm:
-    """A thread that calls ``wake`` once the monotonic clock reaches the time it was last armed for."""
-
-    def __init__(self, wake: Callable[[], None]) -> None:
-        self._wake = wake
-        self._cond = threading.Condition(threading.Lock())
-        self._when: float | None = None
-        self._closed = False
-        self._thread: threading.Thread | None = None
-
-    def arm(self, when: float) -> None:
-        with self._cond:
-            self._when = when
-            self._cond.notify()
-        if self._thread is None:
-            self._thread = threading.Thread(target=self._run, name="asyncio-far-timer", daemon=True)
-            self._thread.start()
-
-    def close(self) -> None:
-        with self._cond:
-            self._closed = True
-            self._cond.notify()
-
-    def _run(self) -> None:
-        with self._cond:
-            while not self._closed:
-                when = self._when
-                if when is None:
-                    self._cond.wait()
-                    continue
-                delay = when - time.monotonic()
-                if delay > 0:
-                    self._cond.wait(delay)
-                    continue
-                self._when = None
-                self._wake()
-
 
 class LeanSelectorEventLoop(asyncio.SelectorEventLoop):
-    """``asyncio.SelectorEventLoop`` whose turn computes the I/O timeout as Python 3.13 does, and waits for a
-    timer further than ``untimed_from`` seconds without a timeout, a helper thread waking it (module
+    """``asyncio.SelectorEventLoop`` whose turn computes the I/O timeout as Python 3.13 does (module
     docstring); on 3.13 and later it is asyncio's loop as it is."""
-
-    def __init__(
-        self, selector: selectors.BaseSelector | None = None, *, untimed_from: float | None = None
-    ) -> None:
-        super().__init__(selector)
-        self._untimed_from = math.inf if untimed_from is None else untimed_from
-        self._alarm = _Alarm(self._wake_for_timer)
-        self._alarm_when: float | None = None
-        """the time the alarm thread was last armed for (the earliest timer then)"""
-
-    def _wake_for_timer(self) -> None:
-        loop: Any = self
-        loop._write_to_self()  # call_soon_threadsafe's wake-up (nothing once the loop is closed)
-
-    def close(self) -> None:
-        self._alarm.close()
-        super().close()
 
     if BACKPORTED:
 
@@ -145,20 +68,12 @@ class LeanSelectorEventLoop(asyncio.SelectorEventLoop):
             if loop._ready or loop._stopping:
                 timeout = 0
             elif loop._scheduled:
-                when = loop._scheduled[0]._when
-                if when == self._alarm_when:
-                    timeout = None  # far, and the alarm thread wakes the loop at its time
-                else:
-                    # compute the desired timeout (3.13: two comparisons instead of min(max(...)))
-                    timeout = when - self.time()
-                    if timeout > self._untimed_from:
-                        self._alarm.arm(when)
-                        self._alarm_when = when
-                        timeout = None
-                    elif timeout > _MAX_TIMEOUT:
-                        timeout = _MAX_TIMEOUT
-                    elif timeout < 0:
-                        timeout = 0
+                # compute the desired timeout (3.13: two comparisons instead of min(max(...)))
+                timeout = loop._scheduled[0]._when - self.time()
+                if timeout > _MAX_TIMEOUT:
+                    timeout = _MAX_TIMEOUT
+                elif timeout < 0:
+                    timeout = 0
 
             event_list = loop._selector.select(timeout)
             loop._process_events(event_list)
@@ -200,6 +115,5 @@ class LeanSelectorEventLoop(asyncio.SelectorEventLoop):
 
 
 def lean_event_loop(selector: selectors.BaseSelector | None = None) -> asyncio.AbstractEventLoop:
-    """A :class:`LeanSelectorEventLoop` on ``selector`` (default: the platform's, as asyncio's) that waits for
-    timers further than :data:`FAR_TIMER_S` without a timeout (the doors' loop)."""
-    return LeanSelectorEventLoop(selector, untimed_from=FAR_TIMER_S)
+    """A :class:`LeanSelectorEventLoop` on ``selector`` (default: the platform's, as asyncio's)."""
+    return LeanSelectorEventLoop(selector)

@@ -10,7 +10,6 @@ import logging
 import selectors
 import socket
 import sys
-import threading
 import time
 from asyncio import base_events
 from collections.abc import Callable, Coroutine
@@ -18,7 +17,7 @@ from typing import Any, TypeVar
 
 import pytest
 
-from hli_server.runtime.event_loop import BACKPORTED, FAR_TIMER_S, LeanSelectorEventLoop, lean_event_loop
+from hli_server.runtime.event_loop import BACKPORTED, LeanSelectorEventLoop, lean_event_loop
 from hli_server.runtime.pacing import PreciseEpollSelector, precise_event_loop, probed_default_loop
 
 T = TypeVar("T")
@@ -197,143 +196,3 @@ def test_a_failing_callback_is_reported_and_the_loop_goes_on() -> None:
         return seen
 
     assert run(main) == [ZeroDivisionError, "after"]
-
-
-# --- far timers: waited for untimed, a helper thread wakes the loop (event_loop.py, FAR_TIMER_S) -----------
-
-
-def _run_watched(loop: asyncio.AbstractEventLoop, main: Coroutine[Any, Any, T], limit_s: float = 10.0) -> T:
-    """``main`` on ``loop``; a thread outside the loop stops it after ``limit_s`` (a loop that waits untimed
-    for a timer nobody wakes it for would otherwise wait for ever)."""
-    task = loop.create_task(main)
-    watchdog = threading.Timer(limit_s, loop.call_soon_threadsafe, (task.cancel,))
-    watchdog.start()
-    try:
-        return loop.run_until_complete(task)
-    finally:
-        watchdog.cancel()
-
-
-def _record_timeouts(loop: asyncio.AbstractEventLoop) -> list[float | None]:
-    selector: Any = loop._selector  # type: ignore[attr-defined]
-    seen: list[float | None] = []
-    select = selector.select
-
-    def recording(timeout: float | None = None) -> Any:
-        seen.append(timeout)
-        return select(timeout)
-
-    selector.select = recording
-    return seen
-
-
-@pytest.mark.skipif(not BACKPORTED, reason="from Python 3.13 on asyncio's turn runs unchanged")
-def test_a_far_timer_is_waited_for_without_a_timeout_and_fires_at_its_time() -> None:
-    loop = lean_event_loop()
-    try:
-        timeouts = _record_timeouts(loop)
-
-        async def main() -> float:
-            fired = loop.create_future()
-            start = time.monotonic()
-            loop.call_later(0.3, lambda: fired.set_result(time.monotonic() - start))
-            return await fired
-
-        elapsed = _run_watched(loop, main())
-        assert 0.3 <= elapsed < 0.3 + 0.2  # on time: the helper thread woke the loop
-        assert None in timeouts
-        assert all(t is None or t <= FAR_TIMER_S for t in timeouts)  # never a timed wait for the far timer
-    finally:
-        loop.close()
-
-
-@pytest.mark.skipif(not BACKPORTED, reason="from Python 3.13 on asyncio's turn runs unchanged")
-def test_a_nearer_timer_scheduled_while_a_far_one_is_awaited_fires_first() -> None:
-    loop = lean_event_loop()
-    try:
-
-        async def main() -> list[tuple[str, float]]:
-            done = loop.create_future()
-            start = time.monotonic()
-            out: list[tuple[str, float]] = []
-
-            def note(what: str) -> None:
-                out.append((what, time.monotonic() - start))
-                if what == "far":
-                    done.set_result(None)
-
-            loop.call_later(1.0, note, "far")
-            # from another thread while the loop waits untimed for the far one: it wakes at once, the nearer
-            # timer becomes the earliest and the alarm is armed for it
-            threading.Timer(0.1, loop.call_soon_threadsafe, (loop.call_later, 0.2, note, "near")).start()
-            await done
-            return out
-
-        out = _run_watched(loop, main())
-        assert [what for what, _ in out] == ["near", "far"]
-        assert 0.3 <= out[0][1] < 0.3 + 0.2
-        assert 1.0 <= out[1][1] < 1.0 + 0.2
-    finally:
-        loop.close()
-
-
-@pytest.mark.skipif(not BACKPORTED, reason="from Python 3.13 on asyncio's turn runs unchanged")
-def test_a_cancelled_far_timer_does_not_fire_and_the_next_one_fires_at_its_time() -> None:
-    loop = lean_event_loop()
-    try:
-
-        async def main() -> list[tuple[str, float]]:
-            done = loop.create_future()
-            start = time.monotonic()
-            out: list[tuple[str, float]] = []
-
-            def note(what: str) -> None:
-                out.append((what, time.monotonic() - start))
-                if what == "later":
-                    done.set_result(None)
-
-            first = loop.call_later(0.2, note, "first")
-            loop.call_later(0.5, note, "later")
-            await asyncio.sleep(0.01)  # a near timer: the far one is armed meanwhile
-            first.cancel()
-            await done
-            return out
-
-        out = _run_watched(loop, main())
-        assert [what for what, _ in out] == ["later"]
-        assert 0.5 <= out[0][1] < 0.5 + 0.2
-    finally:
-        loop.close()
-
-
-def test_the_clocks_loop_waits_for_every_timer_with_a_timeout() -> None:
-    """The realtime clock's loop keeps the selector's own precision for every timer (no helper thread)."""
-    loop = precise_event_loop()
-    try:
-        timeouts = _record_timeouts(loop)
-
-        async def main() -> None:
-            await asyncio.sleep(0.1)
-
-        _run_watched(loop, main())
-        assert any(t is not None and t > FAR_TIMER_S for t in timeouts)
-        assert loop._alarm._thread is None  # type: ignore[attr-defined]
-    finally:
-        loop.close()
-
-
-@pytest.mark.skipif(not BACKPORTED, reason="from Python 3.13 on asyncio's turn runs unchanged")
-def test_the_helper_thread_ends_with_its_loop() -> None:
-    loop = lean_event_loop()
-
-    async def main() -> None:
-        await asyncio.sleep(0.1)
-
-    _run_watched(loop, main())
-    alarm: Any = loop._alarm  # type: ignore[attr-defined]
-    thread = alarm._thread
-    assert thread is not None
-    assert thread.is_alive()
-    loop.close()
-    thread.join(5)
-    assert not thread.is_alive()
