@@ -16,7 +16,7 @@ files) take precedence on import, so this module decides, once, before the first
 
 Pure Python is chosen by a finder ahead of the standard ones that loads ``hli_server.engine.*`` and the
 modules of :data:`ADS_COMPILED` from the ``.py`` files. :data:`ENGINE_COMPILED` tells which runs
-(``hli-server version``, the benchmarks, the differential tests in ``tests/unit/test_compiled_engine.py``).
+(a recording's header, the benchmarks, the differential tests in ``tests/unit/test_compiled_engine.py``).
 """
 
 from __future__ import annotations
