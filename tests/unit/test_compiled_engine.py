@@ -90,15 +90,17 @@ def test_the_other_engine_gives_the_recorded_outputs_cycle_for_cycle() -> None:
 
 
 def test_pure_python_can_be_forced_for_debugging() -> None:
-    """HLI_PURE_PYTHON=1 loads every engine module from its .py file (breakpoints, profilers)."""
-    env = dict(os.environ, **{compiled.PURE_ENV: "1"})
+    """HLI_PURE_PYTHON=1 loads every engine module, and the ADS request path's, from its .py file
+    (breakpoints, profilers)."""
+    env = _build_env(pure=True)
     code = (
         "import hli_server._compiled as c, hli_server.engine.machine as m, hli_server.engine.nc.parser as p\n"
-        "print(c.ENGINE_COMPILED, m.__file__.endswith('.py'), p.__file__.endswith('.py'))\n"
+        "import hli_server.adapters.ads.device as d, hli_server.adapters.ads.data as a\n"
+        "print(c.ENGINE_COMPILED, *(x.__file__.endswith('.py') for x in (m, p, d, a)))\n"
     )
     done = _python(code, env, timeout=60)
     assert done.returncode == 0, done.stderr
-    assert done.stdout.split() == ["False", "True", "True"]
+    assert done.stdout.split() == ["False", "True", "True", "True", "True"]
 
 
 def test_an_install_with_a_c_compiler_compiled_the_engine() -> None:
