@@ -22,12 +22,11 @@ environment). The build keeps what it compiled in a cache directory (:func:`cach
 else ``$XDG_CACHE_HOME/hli-server/engine``, else ``~/.cache/hli-server/engine``; ``HLI_BUILD_CACHE=off``
 turns it off), under a key (:func:`build_key`) made of everything the compiled code depends on: the sources
 mypyc reads (the engine, the ADS adapter and codec, ``schemas``, ``hli_server/__init__.py`` and
-``_compiled.py``, this file), the mypy
-options of ``pyproject.toml``, the versions of the interpreter, mypy, its runtime library and the libraries
-whose types the engine uses, the compiler and ``CFLAGS``. An install whose key is there copies the
-compiled modules instead of compiling (seconds); any change of the key compiles anew. mypyc runs only when
-the extension modules are built (:class:`EngineBuildExt`), not each time pip asks this file for metadata
-(three times per install).
+``_compiled.py``, this file), the mypy options of ``pyproject.toml``, the versions of the interpreter, mypy,
+its runtime library and the libraries whose types the engine uses, the compiler and ``CFLAGS``. An install
+whose key is there copies the compiled modules instead of compiling (seconds); any change of the key
+compiles anew. mypyc runs only when the extension modules are built (:class:`EngineBuildExt`), not each
+time pip asks this file for metadata (three times per install).
 """
 
 from __future__ import annotations

@@ -107,10 +107,12 @@ def measure(repeat: int, seconds: float) -> dict[str, object]:
 
 
 def _in_process(pure: bool, repeat: int, seconds: float) -> dict[str, object]:
+    from hli_server._compiled import PURE_ENV
+
     env = dict(os.environ)
-    env.pop("HLI_PURE_PYTHON", None)
+    env.pop(PURE_ENV, None)
     if pure:
-        env["HLI_PURE_PYTHON"] = "1"
+        env[PURE_ENV] = "1"
     code = (
         "import json, sys\n"
         "from benchmarks.bench_ads_device import measure\n"
