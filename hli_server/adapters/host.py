@@ -337,6 +337,11 @@ class ImagePort(Protocol):
     @property
     def publish_count(self) -> int: ...
 
+    def publish_counter(self) -> Callable[[], int]:
+        """:attr:`publish_count` as a function, for a door that asks it at every request (whether its copy
+        of the CNC->PLC half is still the newest): as cheap as the image can make it (no Python frame)."""
+        ...
+
     def read(self, st_path: str) -> Value:
         """A field by ST path: PLC->CNC from the live half, CNC->PLC from the newest publish."""
         ...

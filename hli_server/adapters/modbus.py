@@ -202,6 +202,7 @@ class RegisterMap:
         self._readers: dict[bytes, Reader] = {}
         self._c2p_count = -1
         self._c2p = b""
+        self._publish_count = self.image.publish_counter()
         self.frozen: bytes | None = None
         """The CNC->PLC half the current request is served from when its connection froze one."""
 
@@ -214,7 +215,7 @@ class RegisterMap:
         copy the requesting connection froze (:class:`Session`)."""
         if self.frozen is not None:
             return self.frozen
-        count = self.image.publish_count
+        count = self._publish_count()
         if count != self._c2p_count:
             self._c2p = self.image.snapshot()[1]
             self._c2p_count = count

@@ -39,12 +39,14 @@ every method are the same code):
 
 from __future__ import annotations
 
+import functools
 import logging
+import operator
 import os
 import re
 import secrets
 import struct
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from multiprocessing import shared_memory
 from pathlib import Path
 from types import TracebackType
@@ -73,6 +75,8 @@ IMAGE_NAME_PREFIX: Final = "hli_"
 """Default names start with this (``/dev/shm/hli_...`` on Linux)."""
 
 _NAME_RE: Final = re.compile(r"^[A-Za-z0-9_.-]{1,200}$")
+_PUBLISH_COUNT_OF: Final = operator.attrgetter("_publish_count")
+"""``image._publish_count`` without a Python frame (:meth:`ProcessImage.publish_counter`)."""
 _P2C: Final = Direction.PLC_TO_CNC
 _C2P: Final = Direction.CNC_TO_PLC
 
@@ -490,6 +494,10 @@ class ProcessImage:
     @property
     def publish_count(self) -> int:
         return self._publish_count
+
+    def publish_counter(self) -> Callable[[], int]:
+        counter: Callable[[], int] = functools.partial(_PUBLISH_COUNT_OF, self)
+        return counter
 
     # --- the PLC door (adapters) ---------------------------------------------------------
     def write(self, st_path: str, value: object) -> None:

@@ -22,9 +22,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import gc
 import logging
 import multiprocessing
+import operator
 import os
 import signal
 import socket
@@ -33,7 +35,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
-from typing import TYPE_CHECKING, Any, Final, Protocol
+from typing import TYPE_CHECKING, Any, Final, Protocol, cast
 
 from hli_server.adapters.faults import CommFaults
 from hli_server.adapters.host import (
@@ -126,6 +128,10 @@ class AttachedImage(ImagePort):
     def publish_count(self) -> int:
         value: int = self._words[_PUBLISH_COUNT_WORD]
         return value
+
+    def publish_counter(self) -> Callable[[], int]:
+        counter = functools.partial(operator.getitem, self._words, _PUBLISH_COUNT_WORD)
+        return cast("Callable[[], int]", counter)
 
     @property
     def closed(self) -> bool:

@@ -473,12 +473,14 @@ def test_the_doors_attached_image_reads_the_publish_counter_and_the_cycle_as_the
     try:
         half = bytes(layout.size(C2P))
         seen = []
+        counters = [attached.publish_counter(), image.publish_counter()]  # what the doors ask per request
         for cycle in (1, 2, 7, 2**40 + 3):
             image.publish_bytes(half, cycle)
             seen.append((attached.cycle, attached.publish_count))
             assert attached.cycle == fmt.read_u64(attached._buf, fmt.OFF_CYCLE) == cycle
             assert attached.publish_count == fmt.read_u64(attached._buf, fmt.OFF_PUBLISH_COUNT)
             assert attached.publish_count == image.publish_count
+            assert [counter() for counter in counters] == [image.publish_count] * 2
         assert [c for c, _ in seen] == [1, 2, 7, 2**40 + 3]
         assert len({p for _, p in seen}) == 4  # each publish counted
     finally:

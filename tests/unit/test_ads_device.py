@@ -796,6 +796,14 @@ def _fast_cases(layout: Layout) -> list[bytes]:
     out += [encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ, 10, f) for f in by_handle]
     release = WriteRequest(0xF006, 0, struct.pack("<I", handle)).encode()
     out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.WRITE, 11, release))
+    out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.WRITE, 12, release))  # released: 0x710
+    short = ReadWriteRequest(0xF003, 0, 2, X_POS.encode() + b"\0").encode()  # a handle in 2 bytes: 0x705
+    out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ_WRITE, 13, short))
+    for group in (c2p.image_ads_group, 0xF005):  # the polling groups on port 551: its table answers
+        read = ReadRequest(group, c2p.offset, 4).encode()
+        out.append(encode_request(AmsAddress(SERVER, 551), CLIENT, CommandId.READ, 14, read))
+    out.append(encode_request(AmsAddress(SERVER, 551), CLIENT, CommandId.WRITE, 15, release))
+    out.append(encode_request(AmsAddress(SERVER, 551), CLIENT, CommandId.READ_WRITE, 16, get_handle))
     out.append(encode_request(AmsAddress(SERVER, 9999), CLIENT, CommandId.READ, 1, frames[0]))  # no port
     out.append(
         encode_request(AmsAddress(NetId.parse("1.2.3.4.5.6"), 851), CLIENT, CommandId.READ, 1, frames[0])
@@ -803,6 +811,21 @@ def _fast_cases(layout: Layout) -> list[bytes]:
     out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ_STATE, 1, b""))  # not fast
     out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ, 1, frames[0][:8]))  # short
     return out
+
+
+def test_the_fast_path_calls_the_polling_groups_the_port_table_would(image: ProcessImage) -> None:
+    """``handle_frame`` calls the services of a PLC's polling on port 851 straight (a raw read of the
+    CNC->PLC half, pyads' ``read_by_name``: a handle, a read by it, its release): they must be the
+    methods port 851's table maps those groups to."""
+    from hli_server.adapters.ads import device as device_module
+
+    device = AdsDevice(image, SERVER)
+    table, data = device.ports[851], device.data
+    assert table.read[device_module._C2P_GROUP] == data.read_c2p
+    assert table.read[device_module._BY_HANDLE] == data.read_by_handle
+    assert table.read_write[device_module._HANDLE_BY_NAME] == data.handle_by_name
+    assert table.write[device_module._RELEASE_HANDLE] == data.release_handle
+    assert table.refuse_writes is None
 
 
 @pytest.mark.fuzz

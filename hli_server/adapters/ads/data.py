@@ -71,6 +71,7 @@ class DataService:
         self.sizes = {d: image.layout.size(d) for d in Direction}
         self._c2p = b""
         self._c2p_count = -1
+        self._publish_count = image.publish_counter()
         self._c2p_size = self.sizes[_C2P]
         self._geo: dict[int, Signal] = {
             s.ads_offset: s for s in self.layout.signals if s.ads_port == ADS_PORT_GEO
@@ -83,7 +84,7 @@ class DataService:
     # --- the halves -------------------------------------------------------------------------------
     def c2p(self) -> bytes:
         """The CNC->PLC half of the newest publish (one copy per publish)."""
-        count = self.image.publish_count
+        count = self._publish_count()
         if count != self._c2p_count:
             self._c2p = self.image.snapshot()[1]
             self._c2p_count = count

@@ -88,6 +88,7 @@ _RESULT_AND_LENGTH: Final = struct.Struct("<II")
 _OK: Final = bytes(4)
 _FRAME_HEAD: Final = struct.Struct("<HI6sH6sHHHIII")
 """AMS/TCP header and AMS header of one frame (the codec's layout), for :meth:`AdsDevice.handle_frame`."""
+_FrameHead = tuple[int, int, bytes, int, bytes, int, int, int, int, int, int]
 _FAST_COMMANDS: Final = frozenset((CommandId.READ, CommandId.WRITE, CommandId.READ_WRITE))
 _RESPONSE_FLAGS: Final = 0x0005
 _FLAGS: Final = _RESPONSE_FLAGS
@@ -97,6 +98,17 @@ _RESULT_REPLY: Final = struct.Struct("<HI6sH6sHHHIIII")
 """The frame head, then a Write reply's result."""
 _READ: Final = CommandId.READ
 _WRITE: Final = CommandId.WRITE
+_READ_NO: Final = int(CommandId.READ)
+_WRITE_NO: Final = int(CommandId.WRITE)
+_READ_WRITE_NO: Final = int(CommandId.READ_WRITE)
+"""The three commands of :meth:`AdsDevice.handle_frame` as plain numbers (compared with the frame's)."""
+_C2P_GROUP: Final = int(ADS_GROUP_CNC_TO_PLC)
+_BY_HANDLE: Final = int(IndexGroup.SYM_VALUE_BY_HANDLE)
+_HANDLE_BY_NAME: Final = int(IndexGroup.SYM_HANDLE_BY_NAME)
+_RELEASE_HANDLE: Final = int(IndexGroup.SYM_RELEASE_HANDLE)
+"""The index groups of a PLC's polling (a raw read of the CNC->PLC half; pyads' ``read_by_name``: a handle,
+a read by it, its release), which :meth:`AdsDevice.handle_frame` calls straight on port 851 (the table of
+:meth:`AdsDevice._port_tables` maps them to the same methods: ``test_device_direct_groups``)."""
 _NO_HEADER: Final = AmsHeader(NetId(bytes(6)), 0, NetId(bytes(6)), 0, 0, 0, 0, 0, 0)
 """The header argument of the data commands in :meth:`AdsDevice.handle_frame` (Read, Write, ReadWrite do
 not read it: they answer from their payload)."""
@@ -138,6 +150,7 @@ class AdsDevice:
             first_sample_delay_s=first_sample_delay_s,
         )
         self.ports = self._port_tables()
+        self._hli = self.ports[ADS_PORT_HLI]
         self._commands: dict[int, Callable[[Session, PortTable, AmsHeader, bytes], bytes]] = {
             command: getattr(self, method) for command, method in COMMANDS.items()
         }
@@ -274,10 +287,11 @@ class AdsDevice:
         command, a NetId other than this server's or a source NetId other than ``source``, the admitted
         one, an unknown port, sizes that do not add up): then the caller decodes it and calls
         :meth:`handle`, which answers every such case. Same replies, errors and counters as :meth:`handle`."""
-        reserved, length, tn, tp, sn, sp, cmd, flags, data_length, _, invoke = _FRAME_HEAD.unpack_from(frame)
+        head: _FrameHead = _FRAME_HEAD.unpack_from(frame)  # typed: the compiled build compares plain ints
+        reserved, length, tn, tp, sn, sp, cmd, flags, data_length, _, invoke = head
         if (
             reserved
-            or cmd not in _FAST_COMMANDS
+            or cmd not in (_READ_NO, _WRITE_NO, _READ_WRITE_NO)
             or flags & 0x0001
             or length + 6 != len(frame)
             or data_length + 32 != length
@@ -289,31 +303,44 @@ class AdsDevice:
         if table is None:
             return None
         self.stats.requests += 1
+        direct = table is self._hli
         try:
             # the canonical shapes of the three commands straight from the frame: no payload copy, no
-            # command method, the reply in one pack (the others take the command methods below)
-            if cmd == _READ:
+            # command method, the reply in one pack (the others take the command methods below); a PLC's
+            # polling groups called straight, the others through the port's table
+            if cmd == _READ_NO:
                 if data_length == 12:
                     group, offset, size = _U32x3.unpack_from(frame, 38)
-                    serve = table.read.get(group)
-                    if serve is None:
-                        raise table.missing("Read", group)
-                    value = serve(session, offset, size)
+                    if direct and group == _C2P_GROUP:
+                        value = self.data.read_c2p(session, offset, size)
+                    elif direct and group == _BY_HANDLE:
+                        value = self.data.read_by_handle(session, offset, size)
+                    else:
+                        serve = table.read.get(group)
+                        if serve is None:
+                            raise table.missing("Read", group)
+                        value = serve(session, offset, size)
                     n = len(value)
                     return (
                         _DATA_REPLY.pack(0, 40 + n, sn, sp, tn, tp, cmd, _FLAGS, 8 + n, 0, invoke, 0, n)
                         + value
                     )
-            elif cmd == _WRITE:
+            elif cmd == _WRITE_NO:
                 if data_length >= 12:
                     group, offset, size = _U32x3.unpack_from(frame, 38)
                     if size == data_length - 12:
-                        table.write_group(session, group, offset, frame[50:])
+                        if direct and group == _RELEASE_HANDLE:
+                            self.data.release_handle(session, offset, frame[50:])
+                        else:
+                            table.write_group(session, group, offset, frame[50:])
                         return _RESULT_REPLY.pack(0, 36, sn, sp, tn, tp, cmd, _FLAGS, 4, 0, invoke, 0)
             elif data_length >= 16:  # ReadWrite
                 group, offset, read_length, size = _U32x4.unpack_from(frame, 38)
                 if size == data_length - 16:
-                    value = self._read_write(session, table, group, offset, read_length, frame[54:])
+                    if direct and group == _HANDLE_BY_NAME:
+                        value = self.data.handle_by_name(session, offset, read_length, frame[54:])
+                    else:
+                        value = self._read_write(session, table, group, offset, read_length, frame[54:])
                     n = len(value)
                     return (
                         _DATA_REPLY.pack(0, 40 + n, sn, sp, tn, tp, cmd, _FLAGS, 8 + n, 0, invoke, 0, n)
