@@ -796,7 +796,8 @@ def _fast_cases(layout: Layout) -> list[bytes]:
     out += [encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ, 10, f) for f in by_handle]
     release = WriteRequest(0xF006, 0, struct.pack("<I", handle)).encode()
     out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.WRITE, 11, release))
-    out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.WRITE, 12, release))  # released: 0x710
+    again = encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.WRITE, 12, release)  # released: 0x710
+    out.append(again)
     short = ReadWriteRequest(0xF003, 0, 2, X_POS.encode() + b"\0").encode()  # a handle in 2 bytes: 0x705
     out.append(encode_request(AmsAddress(SERVER, 851), CLIENT, CommandId.READ_WRITE, 13, short))
     for group in (c2p.image_ads_group, 0xF005):  # the polling groups on port 551: its table answers
