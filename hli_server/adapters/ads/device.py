@@ -108,7 +108,7 @@ _HANDLE_BY_NAME: Final = int(IndexGroup.SYM_HANDLE_BY_NAME)
 _RELEASE_HANDLE: Final = int(IndexGroup.SYM_RELEASE_HANDLE)
 """The index groups of a PLC's polling (a raw read of the CNC->PLC half; pyads' ``read_by_name``: a handle,
 a read by it, its release), which :meth:`AdsDevice.handle_frame` calls straight on port 851 (the table of
-:meth:`AdsDevice._port_tables` maps them to the same methods: ``test_device_direct_groups``)."""
+:meth:`AdsDevice._port_tables` maps them to the same methods: tests/unit/test_ads_device.py)."""
 _NO_HEADER: Final = AmsHeader(NetId(bytes(6)), 0, NetId(bytes(6)), 0, 0, 0, 0, 0, 0)
 """The header argument of the data commands in :meth:`AdsDevice.handle_frame` (Read, Write, ReadWrite do
 not read it: they answer from their payload)."""
