@@ -89,15 +89,12 @@ _OK: Final = bytes(4)
 _FRAME_HEAD: Final = struct.Struct("<HI6sH6sHHHIII")
 """AMS/TCP header and AMS header of one frame (the codec's layout), for :meth:`AdsDevice.handle_frame`."""
 _FrameHead = tuple[int, int, bytes, int, bytes, int, int, int, int, int, int]
-_FAST_COMMANDS: Final = frozenset((CommandId.READ, CommandId.WRITE, CommandId.READ_WRITE))
 _RESPONSE_FLAGS: Final = 0x0005
 _FLAGS: Final = _RESPONSE_FLAGS
 _DATA_REPLY: Final = struct.Struct("<HI6sH6sHHHIIIII")
 """The frame head, then a Read or ReadWrite reply's result and length (the data follows)."""
 _RESULT_REPLY: Final = struct.Struct("<HI6sH6sHHHIIII")
 """The frame head, then a Write reply's result."""
-_READ: Final = CommandId.READ
-_WRITE: Final = CommandId.WRITE
 _READ_NO: Final = int(CommandId.READ)
 _WRITE_NO: Final = int(CommandId.WRITE)
 _READ_WRITE_NO: Final = int(CommandId.READ_WRITE)
