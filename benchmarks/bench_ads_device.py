@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import struct
 import subprocess
 import sys
@@ -107,12 +106,8 @@ def measure(repeat: int, seconds: float) -> dict[str, object]:
 
 
 def _in_process(pure: bool, repeat: int, seconds: float) -> dict[str, object]:
-    from hli_server._compiled import PURE_ENV
+    from hli_server._compiled import environment
 
-    env = dict(os.environ)
-    env.pop(PURE_ENV, None)
-    if pure:
-        env[PURE_ENV] = "1"
     code = (
         "import json, sys\n"
         "from benchmarks.bench_ads_device import measure\n"
@@ -121,7 +116,7 @@ def _in_process(pure: bool, repeat: int, seconds: float) -> dict[str, object]:
     done = subprocess.run(
         [sys.executable, "-c", code],
         cwd=ROOT,
-        env=env,
+        env=environment(pure),
         capture_output=True,
         text=True,
         timeout=600,

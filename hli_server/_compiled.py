@@ -40,6 +40,7 @@ __all__ = [
     "NOT_COMPILED",
     "PURE_ENV",
     "compiled_sources",
+    "environment",
     "select",
     "stale_modules",
     "stale_notice",
@@ -48,6 +49,17 @@ __all__ = [
 
 PURE_ENV = "HLI_PURE_PYTHON"
 """Set to 1 to run the engine as pure Python although it is compiled."""
+
+
+def environment(pure: bool) -> dict[str, str]:
+    """This process' environment for a child that runs the pure build (:data:`PURE_ENV` set) or the compiled
+    one (unset): the tests and benchmarks that compare the two."""
+    env = dict(os.environ)
+    env.pop(PURE_ENV, None)
+    if pure:
+        env[PURE_ENV] = "1"
+    return env
+
 
 NOT_COMPILED = ("__init__.py", "blocks.py")
 """Engine files that stay Python where the engine is compiled (``setup.py`` reads this): the packages'

@@ -11,7 +11,6 @@ pure one only, which the suite does anyway.
 from __future__ import annotations
 
 import hashlib
-import os
 import random
 import struct
 import subprocess
@@ -37,17 +36,8 @@ from schemas.layout import Direction, build_layout
 ROOT = Path(__file__).parents[2]
 
 
-def _build_env(pure: bool) -> dict[str, str]:
-    """This process' environment with the pure (``HLI_PURE_PYTHON=1``) or the compiled build chosen."""
-    env = dict(os.environ)
-    env.pop(compiled.PURE_ENV, None)
-    if pure:
-        env[compiled.PURE_ENV] = "1"
-    return env
-
-
 def _run_scenarios(pure: bool) -> subprocess.CompletedProcess[str]:
-    env = _build_env(pure)
+    env = compiled.environment(pure)
     code = (
         "import json, sys\n"
         "import hli_server._compiled as c\n"
@@ -92,7 +82,7 @@ def test_the_other_engine_gives_the_recorded_outputs_cycle_for_cycle() -> None:
 def test_pure_python_can_be_forced_for_debugging() -> None:
     """HLI_PURE_PYTHON=1 loads every engine module, and the ADS request path's, from its .py file
     (breakpoints, profilers)."""
-    env = _build_env(pure=True)
+    env = compiled.environment(pure=True)
     code = (
         "import hli_server._compiled as c, hli_server.engine.machine as m, hli_server.engine.nc.parser as p\n"
         "import hli_server.adapters.ads.device as d, hli_server.adapters.ads.data as a\n"
@@ -288,7 +278,7 @@ def test_the_other_build_of_the_ads_request_path_gives_the_same_replies() -> Non
     import json
 
     other_is_pure = compiled.ENGINE_COMPILED
-    env = _build_env(other_is_pure)
+    env = compiled.environment(other_is_pure)
     code = (
         "import json\n"
         "import hli_server._compiled as c\n"
