@@ -11,7 +11,8 @@ The server under test and its references, each in its own process, measured in t
 * the **floors**, which answer every request with a canned reply (no decoding): one on the door's own
   transport stack (an ``asyncio.Protocol`` on the doors process' loop, ``runtime.event_loop``: the
   reference of the goal "within 5 % of a canned-reply server", since it differs from the door only in
-  what the door does per request), **the same floor again** (the control: two identical servers, whose
+  what the door does per request; its process asks the scheduler for the doors' time slice too,
+  ``runtime.pacing.DOORS_SLICE_NS``), **the same floor again** (the control: two identical servers, whose
   ratio says what the run can resolve), and one with a blocking thread per connection (``sendall`` right
   after ``recv``: what the pyads client itself allows, shown for comparison, a different stack).
 
@@ -234,9 +235,15 @@ def _serve_floor_asyncio(conn: Connection) -> None:
     """The floor on the door's own transport stack: the canned replies of :func:`_serve_floor` from an
     ``asyncio.Protocol`` on the loop the doors process serves on (``lean_event_loop``: asyncio's selector
     loop, its turn as Python 3.13 has it;
-    asyncio sets TCP_NODELAY on every TCP transport, as the thread floor does by hand). What the door's
-    Python costs above the stack is the gap to this floor."""
+    asyncio sets TCP_NODELAY on every TCP transport, as the thread floor does by hand), in a process that
+    asks the scheduler for the doors process' time slice as the doors do (``DOORS_SLICE_NS``: a floor
+    without it would measure the slice, not the door). What the door's Python costs above the stack is the
+    gap to this floor."""
     import struct
+
+    from hli_server.runtime.pacing import DOORS_SLICE_NS, ask_for_time_slice
+
+    ask_for_time_slice(DOORS_SLICE_NS)
 
     class Canned(asyncio.Protocol):
         def connection_made(self, transport: asyncio.BaseTransport) -> None:

@@ -58,9 +58,10 @@ def doors_line(runtime: Runtime) -> str:
     ``Runtime`` built in Python (the test harness) from its own; the banner says which one runs."""
     doors = next((a for a in runtime.adapters if isinstance(a, DoorsProcess)), None)
     if doors is not None:
+        granted = "".join(f", {g}" for g in doors.granted)
         return (
-            f"network doors: served by a second process (pid {doors.pid}), attached to the shared memory "
-            "(--no-doors-process: in the clock's process)"
+            f"network doors: served by a second process (pid {doors.pid}{granted}), attached to the shared "
+            "memory (--no-doors-process: in the clock's process)"
         )
     if runtime.doors_process:
         return "network doors: none that a second process serves (everything runs in the clock's process)"

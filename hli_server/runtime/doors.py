@@ -14,7 +14,8 @@ client: nothing (the same ports, the same answers, the same image).
 * :class:`DoorsHost`: the host of the doors (that image, the remote operator, the mirrored events, the
   remote stepped clock, ``on_cycle`` driven by watching the image's publish counter);
 * :func:`doors_main`: the child process (spawned, so it shares nothing with the parent but the image and
-  the socket), at a lower priority than the clock's (``DOORS_NICE``);
+  the socket), at a lower priority than the clock's (``DOORS_NICE``) and with a longer time slice
+  (``pacing.DOORS_SLICE_NS``);
 * :class:`DoorsProcess`: the parent's handle, an adapter of the runtime whose endpoints are the child's.
 """
 
@@ -54,6 +55,7 @@ from hli_server.adapters.host import (
 from hli_server.adapters.registry import Adapter, create_adapter
 from hli_server.runtime.checks import ProgramChecker
 from hli_server.runtime.event_loop import lean_event_loop
+from hli_server.runtime.pacing import DOORS_SLICE_NS, ask_for_time_slice
 from hli_server.runtime.remote import (
     EngineSide,
     EventMirror,
@@ -325,15 +327,18 @@ def doors_main(plan: DoorsPlan, link: socket.socket, conn: Connection) -> None:
         with contextlib.suppress(OSError):  # the clock's process wins the CPU from its doors
             # (docs/runtime.md)
             os.nice(plan.nice)
+    # a turn of the doors (a request read, answered, its reply written) seldom preempted by the client the
+    # reply wakes (docs/runtime.md); after the nice value, which the request keeps
+    granted = ask_for_time_slice(DOORS_SLICE_NS)
     logging.basicConfig(level=logging.WARNING, format="%(asctime)s %(levelname)s doors %(name)s: %(message)s")
     # asyncio's own loop (its turn as Python 3.13 has it: event_loop.py): the doors need no timer finer than
     # a millisecond, and its one epoll_wait a turn costs less than the precise loop's select-then-epoll
     # (Modbus: about a fifth less CPU per request)
     with asyncio.Runner(loop_factory=lean_event_loop) as runner:
-        runner.run(_serve_doors(plan, link, conn))
+        runner.run(_serve_doors(plan, link, conn, granted))
 
 
-async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -> None:
+async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection, granted: list[str]) -> None:
     loop = asyncio.get_running_loop()
     terminated = asyncio.Event()
     handled = False
@@ -341,7 +346,7 @@ async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -
         loop.add_signal_handler(signal.SIGTERM, terminated.set)
         handled = True
     try:
-        await _serve_doors_until(plan, sock, conn, terminated)
+        await _serve_doors_until(plan, sock, conn, terminated, granted)
     finally:
         # before the loop closes: asyncio's close shuts the signal wake-up pipe first and removes the
         # handler after, so a SIGTERM from the clock's process in between printed "Exception ignored
@@ -352,7 +357,11 @@ async def _serve_doors(plan: DoorsPlan, sock: socket.socket, conn: Connection) -
 
 
 async def _serve_doors_until(
-    plan: DoorsPlan, sock: socket.socket, conn: Connection, terminated: asyncio.Event
+    plan: DoorsPlan,
+    sock: socket.socket,
+    conn: Connection,
+    terminated: asyncio.Event,
+    granted: list[str],
 ) -> None:
     parent = os.getppid()
     loop = asyncio.get_running_loop()
@@ -391,9 +400,8 @@ async def _serve_doors_until(
             started.append(adapter)
         await _first_connections(started)
         # the parent may have gone while the doors started (stopped during its start-up): then stop too
-        if _tell(
-            conn, ("ready", [(a.name, getattr(a, "port", None), a.endpoints(), _url(a)) for a in started])
-        ):
+        doors = [(a.name, getattr(a, "port", None), a.endpoints(), _url(a)) for a in started]
+        if _tell(conn, ("ready", (doors, granted))):
             # what was built to serve lives as long as the process: out of the collector's full passes
             gc.collect()
             gc.freeze()
@@ -499,6 +507,9 @@ class DoorsProcess:
         self.specs = specs
         self.runtime = runtime
         self.doors: dict[str, tuple[int | None, list[str], str | None]] = {}
+        self.granted: list[str] = []
+        """What the operating system granted the doors process, in words
+        (:func:`~hli_server.runtime.pacing.ask_for_time_slice`); empty where it has no such request."""
         self._process: multiprocessing.process.BaseProcess | None = None
         self._conn: Connection | None = None
         self._service: OperatorService | None = None
@@ -568,7 +579,8 @@ class DoorsProcess:
         kind, payload = parent_conn.recv()
         if kind != "ready":
             raise RuntimeError(str(payload))
-        self.doors = {name: (port, lines, url) for name, port, lines, url in payload}
+        doors, self.granted = payload
+        self.doors = {name: (port, lines, url) for name, port, lines, url in doors}
 
     async def stop(self) -> None:
         process, conn = self._process, self._conn

@@ -44,6 +44,7 @@ from schemas.results import Lateness, PacingSummary, SlowCycleJson, Timing
 
 __all__ = [
     "CAUSES",
+    "DOORS_SLICE_NS",
     "FREE_SLICE_S",
     "LOW_LATENCY_SLICE_NS",
     "PRIORITIES",
@@ -59,6 +60,7 @@ __all__ = [
     "ThreadClock",
     "WaitProbe",
     "ask_for_low_latency",
+    "ask_for_time_slice",
     "loop_probe",
     "precise_event_loop",
     "probed_default_loop",
@@ -209,12 +211,28 @@ LOW_LATENCY_SLICE_NS = 100_000
 gets an early deadline, so that it preempts the running task as soon as its timer wakes it; it still gets
 its fair share of the CPU, no more)."""
 
+DOORS_SLICE_NS = 6_000_000
+"""The time slice the doors process asks the scheduler for (Linux 6.12+, EEVDF): longer than the kernel's
+default (0.7 ms times 1 + log2 of the CPUs up to eight: 1.4 ms on two CPUs, 2.8 ms from eight on), so that a
+turn of the doors (read a request, answer it, write the reply) is seldom preempted in the middle by the
+client its reply just woke; the clock still preempts it at once (a realtime policy, or its shorter slice),
+and it still gets its fair share of the CPU, no more (docs/runtime.md, docs/performance.md)."""
+
 
 def ask_for_low_latency() -> list[str]:
     """Ask Linux to run the calling thread (the clock's) soon after its timers fire, without privileges:
     a timer slack of 1 ns instead of 50 µs (``PR_SET_TIMERSLACK``) and a scheduler time slice of
-    :data:`LOW_LATENCY_SLICE_NS` (``sched_setattr``; the thread's nice value is kept). Returns what was
-    granted, in words (nothing where the system does not have it)."""
+    :data:`LOW_LATENCY_SLICE_NS` (:func:`ask_for_time_slice`). Returns what was granted, in words."""
+    slice_ns = int(os.environ.get("HLI_SLICE_NS", LOW_LATENCY_SLICE_NS))
+    return ask_for_time_slice(slice_ns, timer_slack=True)
+
+
+def ask_for_time_slice(slice_ns: int, *, timer_slack: bool = False) -> list[str]:
+    """Ask Linux for a scheduler time slice of ``slice_ns`` for the calling thread (``sched_setattr`` with
+    ``SCHED_OTHER``'s ``sched_runtime``, Linux 6.12+; the thread's nice value is kept; threads and processes
+    started later inherit it) and, with ``timer_slack``, a timer slack of 1 ns (``PR_SET_TIMERSLACK``). No
+    privileges needed. Returns what was granted, in words: nothing where the system does not have it, or
+    the thread runs a realtime policy (which has no slices), or ``HLI_NO_LOW_LATENCY`` is set."""
     if not sys.platform.startswith("linux") or os.environ.get("HLI_NO_LOW_LATENCY"):
         return []
     granted = []
@@ -222,24 +240,33 @@ def ask_for_low_latency() -> list[str]:
         import ctypes
 
         libc = ctypes.CDLL(None, use_errno=True)
-        if int(libc.prctl(29, 1, 0, 0, 0)) == 0:  # PR_SET_TIMERSLACK
+        if timer_slack and int(libc.prctl(29, 1, 0, 0, 0)) == 0:  # PR_SET_TIMERSLACK
             granted.append("timer slack 1 ns")
         if os.sched_getscheduler(0) & ~getattr(os, "SCHED_RESET_ON_FORK", 0) != os.SCHED_OTHER:
             return granted  # a realtime policy has no slices (and sched_setattr would end it)
         nice = os.getpriority(os.PRIO_PROCESS, 0)
         # struct sched_attr (SCHED_ATTR_SIZE_VER1): size, policy SCHED_OTHER, flags, nice, priority,
         # runtime (the slice), deadline, period, util_min, util_max
-        slice_ns = int(os.environ.get("HLI_SLICE_NS", LOW_LATENCY_SLICE_NS))
-        attr = struct.pack("<IIQiIQQQII", 56, 0, 0, nice, 0, slice_ns, 0, 0, 0, 0)
-        syscall = {"x86_64": 314, "aarch64": 274}.get(os.uname().machine)
-        if (
-            syscall is not None
-            and int(libc.syscall(syscall, 0, ctypes.create_string_buffer(attr, 56), 0)) == 0
-        ):
-            granted.append(f"time slice {LOW_LATENCY_SLICE_NS / 1000:g} µs")
+        attr = ctypes.create_string_buffer(
+            struct.pack("<IIQiIQQQII", 56, 0, 0, nice, 0, slice_ns, 0, 0, 0, 0), 56
+        )
+        # sched_setattr, sched_getattr
+        calls = {"x86_64": (314, 315), "aarch64": (274, 275)}.get(os.uname().machine)
+        if calls is not None and int(libc.syscall(calls[0], 0, attr, 0)) == 0:
+            # a kernel before 6.12 accepts the request and ignores the slice; from 6.12 on sched_getattr
+            # reports a SCHED_OTHER thread's slice in sched_runtime (before: 0), clamped to 0.1-100 ms
+            got = ctypes.create_string_buffer(56)
+            if int(libc.syscall(calls[1], 0, got, 56, 0)) == 0:
+                runtime = struct.unpack_from("<Q", got, 24)[0]
+                if runtime:
+                    granted.append(f"time slice {_slice_words(runtime)}")
     except (OSError, AttributeError):  # pragma: no cover - no libc
         pass
     return granted
+
+
+def _slice_words(slice_ns: int) -> str:
+    return f"{slice_ns / 1e6:g} ms" if slice_ns >= 1_000_000 else f"{slice_ns / 1000:g} µs"
 
 
 def raise_priority(priority: str) -> str:

@@ -11,9 +11,11 @@ import time
 import httpx
 import pytest
 
+from hli_server.runtime.pacing import DOORS_SLICE_NS
 from plc_clients.ads import AdsTransport
 from schemas.layout import Layout
 from tests.integration.servers import door_port, read_banner, start_server, stop_server
+from tests.scheduler import custom_slices, shown_slice
 
 pytestmark = [pytest.mark.slow]
 
@@ -79,8 +81,14 @@ def test_the_doors_process_ends_when_the_server_is_killed() -> None:
     try:
         banner = read_banner(proc)
         doors = _pid_of(banner["Modbus TCP"])
-        # the banner says which process serves the doors (run's default differs from Runtime's)
-        assert f"network doors: served by a second process (pid {doors})" in banner["text"]
+        # the banner says which process serves the doors (run's default differs from Runtime's) and what
+        # the operating system granted it
+        line = next(li for li in banner["text"].splitlines() if "network doors:" in li)
+        assert f"network doors: served by a second process (pid {doors}" in line
+        if custom_slices():
+            assert f"(pid {doors}, time slice 6 ms)" in line
+            # the doors' main thread, as the scheduler shows it
+            assert shown_slice(f"/proc/{doors}/sched") == DOORS_SLICE_NS
         proc.send_signal(signal.SIGKILL)
         proc.wait(10)
         deadline = time.monotonic() + 10

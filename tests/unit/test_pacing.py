@@ -9,18 +9,22 @@ from __future__ import annotations
 import asyncio
 import os
 import selectors
+import threading
 import time
 
 import pytest
 
 from hli_server.runtime.pacing import (
     CAUSES,
+    DOORS_SLICE_NS,
     PacingStats,
     PreciseEpollSelector,
     WaitProbe,
+    ask_for_time_slice,
     run_realtime,
     summarize,
 )
+from tests.scheduler import custom_slices, shown_slice
 
 T_A = 0.001
 
@@ -242,3 +246,40 @@ async def test_the_realtime_loop_runs_each_cycle_when_due_serves_between_and_sto
     stopped_at = count[0]
     await asyncio.sleep(0.01)
     assert count[0] == stopped_at
+
+
+def slice_in_a_thread(slice_ns: int) -> tuple[list[str], int, int]:
+    """``ask_for_time_slice`` in a thread of its own (the test process keeps its slice): what it said, the
+    thread's slice as the scheduler shows it, and the slice of a thread that thread started after."""
+    out: list[tuple[list[str], int, int]] = []
+
+    def run() -> None:
+        granted = ask_for_time_slice(slice_ns)
+        child: list[int] = []
+        started = threading.Thread(target=lambda: child.append(shown_slice()))
+        started.start()
+        started.join()
+        out.append((granted, shown_slice(), child[0]))
+
+    t = threading.Thread(target=run)
+    t.start()
+    t.join()
+    return out[0]
+
+
+@pytest.mark.req("E-01")
+@pytest.mark.skipif(not custom_slices(), reason="needs Linux 6.12+ with its scheduler's slices in /proc")
+def test_the_doors_slice_is_granted_inherited_and_said_as_the_kernel_set_it() -> None:
+    granted, mine, childs = slice_in_a_thread(DOORS_SLICE_NS)
+    assert granted == ["time slice 6 ms"]
+    assert mine == childs == DOORS_SLICE_NS  # the threads the doors start later have it too
+    # the kernel clamps a request to 0.1-100 ms: what is said is what it set
+    granted, mine, _ = slice_in_a_thread(50)
+    assert granted == ["time slice 100 µs"]
+    assert mine == 100_000
+
+
+@pytest.mark.req("E-01")
+def test_no_slice_is_asked_for_where_the_user_said_so(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("HLI_NO_LOW_LATENCY", "1")
+    assert ask_for_time_slice(DOORS_SLICE_NS, timer_slack=True) == []
